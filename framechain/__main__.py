@@ -1,0 +1,3 @@
+from framechain.cli.main import main
+
+raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""The analysis room: fault models, attribution, evidence files."""

@@ -1,0 +1,77 @@
+"""The ``framechain`` command: parse, call a library function, render; errors become one line.
+
+Each command lives in its own module of this package with ``register(subparsers)`` and a
+``run(args) -> int``; heavy imports (rerun, matplotlib, readers) happen inside ``run``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+from framechain import __version__
+from framechain.timeline import FramechainError
+
+#: Command modules, in the order ``--help`` lists them.
+COMMANDS = ("info", "tf", "replay", "attribute", "report", "demo", "lab")
+
+EXIT_OK = 0
+EXIT_INPUT_ERROR = 1  # the log, chain or options could not be used: one line on stderr says why
+EXIT_USAGE = 2  # the command line itself is wrong (argparse)
+EXIT_INTERRUPTED = 130
+
+EPILOG = """exit codes:
+  0    success (for attribute: the log was analysed, whatever was found)
+  1    bad input: the log, the chain configuration or an option could not be used (one line on stderr)
+  2    usage error: unknown command or option
+  130  interrupted
+"""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="framechain",
+        description="Log-replay frame-chain debugger: recompute every hop of the pixel-to-world chain "
+        "from a recorded log and name the hop, the fault, its size and the fix.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"framechain {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        module = _command_module(name)
+        if module is not None:
+            module.register(sub)
+    return parser
+
+
+def _command_module(name: str) -> ModuleType | None:
+    try:
+        return importlib.import_module(f"framechain.cli.{name}_cmd")
+    except ModuleNotFoundError as err:
+        if err.name == f"framechain.cli.{name}_cmd":
+            return None  # command not built yet
+        raise
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "run", None):
+        parser.print_help()
+        return EXIT_USAGE
+    try:
+        return int(args.run(args))
+    except FramechainError as err:
+        print(f"framechain {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except KeyboardInterrupt:
+        print("framechain: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,62 @@
+"""The replay room: TransformBuffer (tf2 semantics, vectorised), camera models, the hop-by-hop replay."""
+
+from framechain.replay.buffer import (
+    LATEST,
+    Edge,
+    FramePath,
+    HopSamples,
+    LookupResult,
+    LookupStatus,
+    PathHop,
+    TransformBuffer,
+)
+from framechain.replay.camera import CameraModel
+from framechain.replay.depth import DepthSamples, sample_depth
+from framechain.replay.errors import (
+    CameraModelError,
+    ConnectivityError,
+    ExtrapolationError,
+    FrameGraphError,
+    TransformLookupError,
+)
+from framechain.replay.replay import (
+    REPLAYED,
+    HopName,
+    HopRecordTable,
+    RejectReason,
+    ReplayOptions,
+    ReplayResult,
+    camera_rows_for,
+    compose_rows,
+    replay,
+    transform_points,
+)
+
+__all__ = [
+    "LATEST",
+    "REPLAYED",
+    "CameraModel",
+    "CameraModelError",
+    "ConnectivityError",
+    "DepthSamples",
+    "Edge",
+    "ExtrapolationError",
+    "FrameGraphError",
+    "FramePath",
+    "HopName",
+    "HopRecordTable",
+    "HopSamples",
+    "LookupResult",
+    "LookupStatus",
+    "PathHop",
+    "RejectReason",
+    "ReplayOptions",
+    "ReplayResult",
+    "TransformBuffer",
+    "TransformLookupError",
+    "camera_rows_for",
+    "compose_rows",
+    "replay",
+    "sample_depth",
+    "transform_points",
+]

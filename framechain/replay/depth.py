@@ -1,0 +1,68 @@
+"""Depth at an observation's pixel: the nearest depth frame in time, a robust window median."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.timeline import DepthFrameTable, normalize_frame
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class DepthSamples:
+    """Per observation: depth in metres (NaN: none), the frame used (-1: none) and its stamp."""
+
+    depth_m: FloatArray
+    frame_index: IntArray
+    stamp_ns: IntArray
+
+
+def sample_depth(
+    frames: DepthFrameTable,
+    camera_frame: str,
+    stamps_ns: IntArray,
+    u: FloatArray,
+    v: FloatArray,
+    *,
+    max_gap_ns: int,
+    window: int = 5,
+) -> DepthSamples:
+    """Median of the valid depths (finite, > 0) in a ``window`` x ``window`` box around each pixel.
+
+    The depth frame is the one of ``camera_frame`` (registered depth) nearest in header stamp,
+    within ``max_gap_ns``. Frames are decoded lazily, once each, and only where an observation
+    needs them; the window medians of all observations on one frame are computed together.
+    """
+    n = stamps_ns.shape[0]
+    depth = np.full(n, np.nan)
+    index = np.full(n, -1, dtype=np.int64)
+    stamp = np.zeros(n, dtype=np.int64)
+    mine = np.flatnonzero(frames.frame == normalize_frame(camera_frame))
+    if mine.size == 0 or n == 0:
+        return DepthSamples(depth, index, stamp)
+    order = mine[np.argsort(frames.stamp_ns[mine], kind="stable")]
+    frame_stamps = frames.stamp_ns[order]
+    right = np.clip(np.searchsorted(frame_stamps, stamps_ns), 0, order.size - 1)
+    left = np.clip(right - 1, 0, order.size - 1)
+    pick = np.where(np.abs(frame_stamps[left] - stamps_ns) <= np.abs(frame_stamps[right] - stamps_ns), left, right)
+    near = np.abs(frame_stamps[pick] - stamps_ns) <= max_gap_ns
+    index[near] = order[pick[near]]
+    stamp[near] = frame_stamps[pick[near]]
+    half = window // 2
+    offsets = np.arange(-half, half + 1)
+    for frame_row in np.unique(index[near]):
+        obs = np.flatnonzero(index == frame_row)
+        image = np.asarray(frames.load(int(frame_row)), dtype=np.float64)
+        h, w = image.shape
+        rows = np.clip(np.rint(v[obs]).astype(np.int64)[:, None] + offsets[None, :], 0, h - 1)
+        cols = np.clip(np.rint(u[obs]).astype(np.int64)[:, None] + offsets[None, :], 0, w - 1)
+        patch = image[rows[:, :, None], cols[:, None, :]].reshape(obs.size, -1)
+        patch = np.where(np.isfinite(patch) & (patch > 0), patch, np.nan)
+        valid = np.isfinite(patch).any(axis=1)
+        depth[obs[valid]] = np.nanmedian(patch[valid], axis=1)
+    return DepthSamples(depth, index, stamp)

@@ -1,0 +1,325 @@
+"""The hop-by-hop replay: every observation through pixel_to_camera, camera_to_body, body_to_world.
+
+All hops run on whole arrays of observations. Every observation ends replayed or rejected with
+one :class:`RejectReason`; ``stale`` marks replayed observations whose transform samples lie
+further from the observation stamp than the latency budget. Totals reconcile:
+``replayed + sum(rejected.values()) == total``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import ClassVar
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer, compose
+from framechain.replay.camera import CameraModel
+from framechain.replay.depth import sample_depth
+from framechain.replay.quaternion import quat_rotate
+from framechain.timeline import (
+    CameraTable,
+    ChainFrames,
+    Column,
+    ColumnTable,
+    ObservationTable,
+    Timeline,
+    normalize_frame,
+)
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+class HopName(StrEnum):
+    """The three hops of the chain (DESIGN.md)."""
+
+    PIXEL_TO_CAMERA = "pixel_to_camera"
+    CAMERA_TO_BODY = "camera_to_body"
+    BODY_TO_WORLD = "body_to_world"
+
+
+class RejectReason(StrEnum):
+    """Why an observation was not replayed; stable codes used in every output."""
+
+    NO_CAMERA_INFO = "no_camera_info"
+    OUTSIDE_IMAGE = "outside_image"
+    NO_DEPTH = "no_depth"
+    DEPTH_INVALID = "depth_invalid"  # not finite or not positive
+    MISSING_EDGE = "missing_edge"  # no path between the frames
+    EXTRAPOLATION = "extrapolation"  # outside a transform's recorded span
+
+
+#: Status string of an observation that went through every hop.
+REPLAYED = "replayed"
+
+
+@dataclass(frozen=True)
+class HopRecordTable(ColumnTable):
+    """One row per observation and hop: input, output, transform used, its samples and the gap.
+
+    ``sample_before_ns``/``sample_after_ns`` are the stamps of the samples used on the hop's
+    stalest dynamic edge (for pixel_to_camera: the depth frame's stamp); ``gap_ns`` is the
+    observation stamp minus the nearest of them (0 when every edge is static). ``status`` is
+    ``replayed`` or the rejection reason of the observation.
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "obs_id": Column("i8"),
+        "hop": Column("str"),
+        "from_frame": Column("str"),
+        "to_frame": Column("str"),
+        "stamp_ns": Column("i8"),
+        "input_xyz": Column("f8", (3,)),
+        "output_xyz": Column("f8", (3,)),
+        "translation": Column("f8", (3,)),
+        "quat_xyzw": Column("f8", (4,)),
+        "sample_before_ns": Column("i8"),
+        "sample_after_ns": Column("i8"),
+        "gap_ns": Column("i8"),
+        "stale": Column("bool"),
+        "status": Column("str"),
+    }
+    obs_id: IntArray
+    hop: npt.NDArray[np.str_]
+    from_frame: npt.NDArray[np.str_]
+    to_frame: npt.NDArray[np.str_]
+    stamp_ns: IntArray
+    input_xyz: FloatArray
+    output_xyz: FloatArray
+    translation: FloatArray
+    quat_xyzw: FloatArray
+    sample_before_ns: IntArray
+    sample_after_ns: IntArray
+    gap_ns: IntArray
+    stale: BoolArray
+    status: npt.NDArray[np.str_]
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    """Knobs of one replay. Offsets shift when each transform is looked up (fault models use them).
+
+    ``pose_offset_ns``: body_to_world is looked up at ``stamp + pose_offset_ns``;
+    ``camera_offset_ns``: camera_to_body at ``stamp + camera_offset_ns`` (a wrist camera).
+    ``tolerance_ns`` allows the nearest sample just outside a span (reported as stale).
+    """
+
+    pose_offset_ns: int = 0
+    camera_offset_ns: int = 0
+    tolerance_ns: int = 0
+    depth_window: int = 5
+    max_depth_gap_ns: int = 50_000_000
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """Every observation through the chain, as arrays (one row per observation) and hop records."""
+
+    frames: ChainFrames
+    observations: ObservationTable
+    status: npt.NDArray[np.str_]  # "replayed" or a RejectReason value
+    stale: BoolArray
+    depth_m: FloatArray
+    depth_stamp_ns: IntArray
+    ray: FloatArray  # (N, 3) undistorted [x, y, 1]
+    p_cam: FloatArray  # (N, 3) NaN where rejected
+    p_body: FloatArray
+    p_world: FloatArray
+    body_from_cam: LookupResult
+    world_from_body: LookupResult
+    hops: HopRecordTable
+    latency_budget_ns: int
+    options: ReplayOptions = field(default_factory=ReplayOptions)
+
+    def __len__(self) -> int:
+        return int(self.status.shape[0])
+
+    @property
+    def replayed(self) -> BoolArray:
+        out: BoolArray = self.status == REPLAYED
+        return out
+
+    def counts(self) -> dict[str, object]:
+        """``{"total", "replayed", "rejected": {reason: n}, "stale"}``; the totals reconcile."""
+        reasons, n = np.unique(self.status[~self.replayed], return_counts=True)
+        rejected = {str(r): int(c) for r, c in zip(reasons, n, strict=True)}
+        return {
+            "total": len(self),
+            "replayed": int(self.replayed.sum()),
+            "rejected": rejected,
+            "stale": int((self.stale & self.replayed).sum()),
+        }
+
+
+def camera_rows_for(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> IntArray:
+    """Row of ``cameras`` in force at each stamp for ``frame`` (-1 where there is none).
+
+    The latest CameraInfo at or before the stamp; before the first one, the first (intrinsics
+    rarely change, and a log often starts with the image before the first CameraInfo).
+    """
+    mine = np.flatnonzero(cameras.frame == normalize_frame(frame))
+    if mine.size == 0:
+        return np.full(stamps_ns.shape[0], -1, dtype=np.int64)
+    order = mine[np.argsort(cameras.stamp_ns[mine], kind="stable")]
+    pos = np.searchsorted(cameras.stamp_ns[order], stamps_ns, side="right") - 1
+    return order[np.clip(pos, 0, order.size - 1)].astype(np.int64)
+
+
+def replay(
+    timeline: Timeline,
+    frames: ChainFrames,
+    *,
+    buffer: TransformBuffer | None = None,
+    latency_budget_s: float = 0.02,
+    options: ReplayOptions | None = None,
+    cameras: Mapping[str, CameraModel] | None = None,
+) -> ReplayResult:
+    """Replay every observation of ``timeline`` through the chain ``frames``.
+
+    ``buffer`` defaults to one built from the timeline's transforms (pass it to replay the same
+    log many times); ``cameras`` overrides the recorded intrinsics per frame (fault models).
+    """
+    opts = options or ReplayOptions()
+    buf = buffer if buffer is not None else TransformBuffer.from_timeline(timeline)
+    obs = timeline.observations
+    n = len(obs)
+    status = np.full(n, REPLAYED, dtype=object)
+    budget_ns = round(latency_budget_s * 1e9)
+
+    def reject(mask: BoolArray, reason: RejectReason) -> None:
+        fresh = mask & (status == REPLAYED)
+        status[fresh] = reason.value
+
+    # Hop 1: pixel_to_camera.
+    camera_frame = frames.camera
+    ray = np.full((n, 3), np.nan)
+    inside = np.zeros(n, dtype=bool)
+    if cameras is not None and camera_frame in cameras:
+        models = [cameras[camera_frame]]
+        model_row = np.zeros(n, dtype=np.int64)
+    else:
+        rows = camera_rows_for(timeline.cameras, camera_frame, obs.stamp_ns)
+        reject(rows < 0, RejectReason.NO_CAMERA_INFO)
+        unique_rows = np.unique(rows[rows >= 0])
+        models = [CameraModel.from_table(timeline.cameras, int(r)) for r in unique_rows]
+        model_row = np.searchsorted(unique_rows, rows)
+    for k, model in enumerate(models):
+        sel = (model_row == k) & (status == REPLAYED)
+        if not sel.any():
+            continue
+        inside[sel] = model.inside(obs.u[sel], obs.v[sel])
+        x, y = model.pixel_to_normalized(obs.u[sel], obs.v[sel])
+        ray[sel] = np.stack([x, y, np.ones_like(x)], axis=1)
+    reject(~inside, RejectReason.OUTSIDE_IMAGE)
+
+    depth = obs.depth_m.copy()
+    depth_stamp = np.where(np.isfinite(depth), obs.stamp_ns, 0)
+    need = ~np.isfinite(depth) & (status == REPLAYED)
+    if need.any():
+        sampled = sample_depth(
+            timeline.depth_frames, camera_frame, obs.stamp_ns[need], obs.u[need], obs.v[need],
+            max_gap_ns=opts.max_depth_gap_ns, window=opts.depth_window,
+        )
+        depth[need] = sampled.depth_m
+        depth_stamp[need] = sampled.stamp_ns
+        reject(need & ~np.isfinite(depth) & (depth_stamp == 0), RejectReason.NO_DEPTH)
+    reject(~np.isfinite(depth) | (depth <= 0), RejectReason.DEPTH_INVALID)
+    p_cam = ray * depth[:, None]
+
+    # Hops 2 and 3: transforms at the observation stamp (plus any offset a fault model asks for).
+    body_from_cam = buf.lookup(
+        frames.body, camera_frame, obs.stamp_ns + opts.camera_offset_ns, tolerance_ns=opts.tolerance_ns
+    )
+    world_from_body = buf.lookup(
+        frames.world, frames.body, obs.stamp_ns + opts.pose_offset_ns, tolerance_ns=opts.tolerance_ns
+    )
+    for lookup in (body_from_cam, world_from_body):
+        reject(lookup.status == LookupStatus.NO_PATH, RejectReason.MISSING_EDGE)
+        reject(~lookup.ok, RejectReason.EXTRAPOLATION)
+
+    ok = status == REPLAYED
+    p_cam[~ok] = np.nan
+    p_body = transform_points(body_from_cam.translation, body_from_cam.quat_xyzw, p_cam)
+    p_world = transform_points(world_from_body.translation, world_from_body.quat_xyzw, p_body)
+
+    depth_gap = np.where(depth_stamp > 0, obs.stamp_ns - depth_stamp, 0)
+    gap_cam, before_cam, after_cam = _stalest(body_from_cam, obs.stamp_ns)
+    gap_world, before_world, after_world = _stalest(world_from_body, obs.stamp_ns)
+    stale_cam = np.abs(gap_cam) > budget_ns
+    stale_world = np.abs(gap_world) > budget_ns
+    stale_depth = np.abs(depth_gap) > budget_ns
+    stale = (stale_cam | stale_world | stale_depth | (body_from_cam.status == LookupStatus.NEAREST)
+             | (world_from_body.status == LookupStatus.NEAREST))
+    status_str = status.astype(str)
+
+    hops = HopRecordTable.concat([
+        _hop_rows(obs, HopName.PIXEL_TO_CAMERA, "pixel", camera_frame,
+                  np.stack([obs.u, obs.v, depth], axis=1), p_cam, np.zeros((n, 3)),
+                  np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), depth_stamp, depth_stamp, depth_gap, stale_depth,
+                  status_str),
+        _hop_rows(obs, HopName.CAMERA_TO_BODY, camera_frame, frames.body, p_cam, p_body,
+                  body_from_cam.translation, body_from_cam.quat_xyzw, before_cam, after_cam, gap_cam,
+                  stale_cam, status_str),
+        _hop_rows(obs, HopName.BODY_TO_WORLD, frames.body, frames.world, p_body, p_world,
+                  world_from_body.translation, world_from_body.quat_xyzw, before_world, after_world,
+                  gap_world, stale_world, status_str),
+    ])
+    return ReplayResult(
+        frames=frames, observations=obs, status=status_str, stale=stale & ok, depth_m=depth,
+        depth_stamp_ns=depth_stamp, ray=ray, p_cam=p_cam, p_body=p_body, p_world=p_world,
+        body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops,
+        latency_budget_ns=budget_ns, options=opts,
+    )
+
+
+def _stalest(lookup: LookupResult, stamps_ns: IntArray) -> tuple[IntArray, IntArray, IntArray]:
+    """Per observation: the largest |gap| over the dynamic edges used, and that edge's samples.
+
+    Gaps are taken against the observation stamp, not the shifted time a fault model asked for.
+    """
+    dynamic = [h for h in lookup.hops if not h.hop.is_static]
+    n = stamps_ns.shape[0]
+    if not dynamic:
+        zeros = np.zeros(n, dtype=np.int64)
+        return zeros, zeros.copy(), zeros.copy()
+    before = np.stack([h.stamp_before_ns for h in dynamic])
+    after = np.stack([h.stamp_after_ns for h in dynamic])
+    near = np.where(np.abs(stamps_ns - before) <= np.abs(after - stamps_ns), before, after)
+    gaps = stamps_ns - near
+    k = np.argmax(np.abs(gaps), axis=0)
+    cols = np.arange(n)
+    return gaps[k, cols], before[k, cols], after[k, cols]
+
+
+def _hop_rows(
+    obs: ObservationTable, hop: HopName, from_frame: str, to_frame: str, inp: FloatArray, out: FloatArray,
+    translation: FloatArray, quat: FloatArray, before: IntArray, after: IntArray, gap: IntArray,
+    stale: BoolArray, status: npt.NDArray[np.str_],
+) -> HopRecordTable:
+    n = len(obs)
+    return HopRecordTable(
+        obs_id=obs.obs_id, hop=np.full(n, hop.value), from_frame=np.full(n, from_frame),
+        to_frame=np.full(n, to_frame), stamp_ns=obs.stamp_ns, input_xyz=inp, output_xyz=out,
+        translation=translation, quat_xyzw=quat, sample_before_ns=before, sample_after_ns=after,
+        gap_ns=gap, stale=stale, status=status,
+    )
+
+
+def transform_points(
+    translation: FloatArray, quat_xyzw: FloatArray, points: FloatArray
+) -> FloatArray:
+    """Apply transforms (N, 3)/(N, 4) to points (N, 3): ``T @ p`` row by row, vectorised."""
+    return (quat_rotate(np.asarray(quat_xyzw).T, np.asarray(points).T) + np.asarray(translation).T).T
+
+
+def compose_rows(
+    t_ab: FloatArray, q_ab: FloatArray, t_bc: FloatArray, q_bc: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Row-wise ``T_a_c = T_a_b @ T_b_c`` on (N, 3)/(N, 4) arrays."""
+    t, q = compose(np.asarray(t_ab).T, np.asarray(q_ab).T, np.asarray(t_bc).T, np.asarray(q_bc).T)
+    return t.T, q.T

@@ -1,0 +1,1 @@
+"""Scene generator: simulated episodes with known faults."""

@@ -1,0 +1,1 @@
+"""Sinks: Rerun streams and report rendering."""

@@ -1,0 +1,51 @@
+"""The model room: columnar tables of one log, nothing format-specific; imports nothing else here."""
+
+from framechain.timeline.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
+from framechain.timeline.errors import (
+    ChainConfigError,
+    FramechainError,
+    InvalidCameraError,
+    InvalidTransformError,
+    TimelineError,
+)
+from framechain.timeline.tables import (
+    CameraTable,
+    Column,
+    ColumnTable,
+    DepthFrameTable,
+    DepthLoader,
+    JointStateTable,
+    ObservationTable,
+    PointRole,
+    PointTable,
+    Timeline,
+    TransformTable,
+    normalize_frame,
+    normalize_frames,
+)
+
+__all__ = [
+    "CameraTable",
+    "ChainConfig",
+    "ChainConfigError",
+    "ChainEvidence",
+    "ChainFrames",
+    "ChainTopics",
+    "Column",
+    "ColumnTable",
+    "DepthFrameTable",
+    "DepthLoader",
+    "FramechainError",
+    "HopTopics",
+    "InvalidCameraError",
+    "InvalidTransformError",
+    "JointStateTable",
+    "ObservationTable",
+    "PointRole",
+    "PointTable",
+    "Timeline",
+    "TimelineError",
+    "TransformTable",
+    "normalize_frame",
+    "normalize_frames",
+]

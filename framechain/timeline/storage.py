@@ -1,0 +1,63 @@
+"""Saving a Timeline as Parquet files in a directory, and loading it back losslessly."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from framechain.timeline.errors import TimelineError
+
+if TYPE_CHECKING:
+    from framechain.timeline.tables import Timeline
+
+_FORMAT = "framechain/timeline@1"
+
+
+def save_timeline(timeline: Timeline, directory: str | Path) -> None:
+    """One Parquet file per table; depth pixels as float32 bytes in ``depth_pixels.parquet``."""
+    from framechain.timeline.tables import TABLE_TYPES
+
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    for name in TABLE_TYPES:
+        pq.write_table(getattr(timeline, name).to_arrow(), out / f"{name}.parquet")
+    depth = timeline.depth_frames
+    blobs = [np.ascontiguousarray(depth.load(i), dtype=np.float32).tobytes() for i in range(len(depth))]
+    pq.write_table(pa.table({"pixels_f32": pa.array(blobs, type=pa.binary())}), out / "depth_pixels.parquet")
+    meta = {"format": _FORMAT, "metadata": dict(timeline.metadata)}
+    (out / "timeline.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+
+
+def load_timeline(directory: str | Path) -> Timeline:
+    """Inverse of :func:`save_timeline`; depth pixels are read lazily from their column."""
+    import dataclasses
+
+    from framechain.timeline.tables import TABLE_TYPES, DepthFrameTable, Timeline
+
+    src = Path(directory)
+    header = src / "timeline.json"
+    if not header.is_file():
+        raise TimelineError(f"{src}: not a saved timeline (no timeline.json)")
+    meta = json.loads(header.read_text())
+    if meta.get("format") != _FORMAT:
+        raise TimelineError(f"{src}: unknown timeline format {meta.get('format')!r}")
+    tables: dict[str, Any] = {}
+    for name, cls in TABLE_TYPES.items():
+        tables[name] = cls.from_arrow(pq.read_table(src / f"{name}.parquet"))
+    depth: DepthFrameTable = tables["depth_frames"]
+    if len(depth):
+        pixels = pq.read_table(src / "depth_pixels.parquet").column("pixels_f32")
+        heights, widths = depth.height.copy(), depth.width.copy()
+
+        def load(i: int) -> npt.NDArray[np.float32]:
+            raw = pixels[i].as_py()
+            return np.frombuffer(raw, dtype=np.float32).reshape(int(heights[i]), int(widths[i]))
+
+        tables["depth_frames"] = dataclasses.replace(depth, loader=load)
+    return Timeline(**tables, metadata=meta["metadata"])

@@ -1,0 +1,592 @@
+"""Columnar tables of the timeline model, one per channel kind.
+
+Every table is a frozen dataclass of NumPy arrays of equal length (one row per sample), never a
+list of per-message objects. Times are integer nanoseconds (``*_ns``, int64). Strings are NumPy
+unicode arrays so that they compare vectorised. Each table converts losslessly to and from an
+Arrow table; :class:`Timeline` gathers them and saves them as Parquet.
+
+Conventions: ``T_parent_child`` maps points in the child frame into the parent frame, as a ROS
+``TransformStamped`` with ``header.frame_id = parent`` and ``child_frame_id = child``;
+quaternions are ``quat_xyzw`` (scalar last, as ROS and scipy).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, ClassVar, Self
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+
+from framechain.timeline.errors import InvalidCameraError, InvalidTransformError, TimelineError
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+StrArray = npt.NDArray[np.str_]
+
+#: Quaternions further than this from unit length are rejected rather than normalised.
+QUATERNION_NORM_TOLERANCE = 1e-3
+#: The largest distortion vector kept (OpenCV's 14-coefficient model).
+MAX_DISTORTION_COEFFS = 14
+
+
+class PointRole(StrEnum):
+    """What a logged point is evidence of."""
+
+    HOP_CAMERA = "hop_camera"  # the robot's own camera-frame point for an observation
+    HOP_BODY = "hop_body"  # the robot's own body-frame point
+    HOP_WORLD = "hop_world"  # the robot's own world-frame point
+    TARGET = "target"  # the world-frame target the robot acted on
+    REFERENCE = "reference"  # ground truth (motion capture, surveyed marker)
+
+
+def normalize_frame(name: str) -> str:
+    """Frame names as tf2 keys them: a leading ``/`` is dropped (ROS 1 ``/base_link``)."""
+    return name.lstrip("/")
+
+
+def normalize_frames(names: npt.ArrayLike) -> StrArray:
+    """Vectorised :func:`normalize_frame`."""
+    arr = np.asarray(names, dtype=str)
+    if arr.size == 0:
+        return arr.astype(str)
+    return np.char.lstrip(arr, "/").astype(str)
+
+
+@dataclass(frozen=True)
+class Column:
+    dtype: str  # "f8", "i8", "bool", "str"
+    shape: tuple[int, ...] = ()
+
+
+
+
+
+@dataclass(frozen=True)
+class ColumnTable:
+    """Common machinery: column checks, length, masking, concatenation, Arrow round trip."""
+
+    COLUMNS: ClassVar[dict[str, Column]] = {}
+
+    def __post_init__(self) -> None:
+        n: int | None = None
+        for name, spec in self.COLUMNS.items():
+            value = getattr(self, name)
+            arr = _coerce(value, spec)
+            if arr.shape[1:] != spec.shape:
+                raise TimelineError(
+                    f"{type(self).__name__}.{name}: expected trailing shape {spec.shape}, got {arr.shape[1:]}"
+                )
+            if n is None:
+                n = arr.shape[0]
+            elif arr.shape[0] != n:
+                raise TimelineError(
+                    f"{type(self).__name__}: column {name} has {arr.shape[0]} rows, expected {n}"
+                )
+            object.__setattr__(self, name, arr)
+
+    def __len__(self) -> int:
+        first = next(iter(self.COLUMNS))
+        return int(getattr(self, first).shape[0])
+
+    @classmethod
+    def empty(cls) -> Self:
+        """A table with no rows."""
+        return cls(**{name: _empty(spec) for name, spec in cls.COLUMNS.items()})
+
+    def take(self, index: npt.ArrayLike) -> Self:
+        """Rows selected by a boolean mask or an index array, as a new table."""
+        idx = np.asarray(index)
+        return dataclasses.replace(self, **{name: getattr(self, name)[idx] for name in self.COLUMNS})
+
+    @classmethod
+    def concat(cls, tables: Iterable[Self]) -> Self:
+        """Rows of several tables of this kind, in order."""
+        parts = list(tables)
+        if not parts:
+            return cls.empty()
+        return cls(**{name: np.concatenate([getattr(t, name) for t in parts]) for name in cls.COLUMNS})
+
+    def to_arrow(self) -> pa.Table:
+        """Lossless Arrow table: vector columns become fixed-size lists."""
+        arrays: dict[str, pa.Array] = {}
+        for name, spec in self.COLUMNS.items():
+            arr = getattr(self, name)
+            if spec.shape:
+                width = int(np.prod(spec.shape))
+                flat = pa.array(np.ascontiguousarray(arr).reshape(-1), type=_arrow_type(spec.dtype))
+                arrays[name] = pa.FixedSizeListArray.from_arrays(flat, width)
+            else:
+                arrays[name] = pa.array(arr, type=_arrow_type(spec.dtype))
+        return pa.table(arrays)
+
+    @classmethod
+    def from_arrow(cls, table: pa.Table) -> Self:
+        """Inverse of :meth:`to_arrow`."""
+        missing = [name for name in cls.COLUMNS if name not in table.column_names]
+        if missing:
+            raise TimelineError(f"{cls.__name__}: Arrow table lacks columns {missing}")
+        values: dict[str, Any] = {}
+        for name, spec in cls.COLUMNS.items():
+            col = table.column(name).combine_chunks()
+            if spec.shape:
+                flat = col.flatten().to_numpy(zero_copy_only=False)
+                values[name] = np.asarray(flat).reshape((len(table), *spec.shape))
+            elif spec.dtype == "str":
+                values[name] = np.asarray(col.to_pylist(), dtype=str)
+            else:
+                values[name] = col.to_numpy(zero_copy_only=False)
+        return cls(**values)
+
+    def equals(self, other: object) -> bool:
+        """Exact equality of every column (NaN equal to NaN)."""
+        if type(other) is not type(self):
+            return False
+        for name, spec in self.COLUMNS.items():
+            a, b = getattr(self, name), getattr(other, name)
+            if a.shape != b.shape:
+                return False
+            if spec.dtype == "f8":
+                if not np.array_equal(a, b, equal_nan=True):
+                    return False
+            elif not np.array_equal(a, b):
+                return False
+        return True
+
+
+def _arrow_type(dtype: str) -> pa.DataType:
+    return {"f8": pa.float64(), "i8": pa.int64(), "bool": pa.bool_(), "str": pa.string()}[dtype]
+
+
+def _coerce(value: Any, spec: Column) -> npt.NDArray[Any]:
+    if spec.dtype == "str":
+        arr = np.asarray(value, dtype=str)
+        if arr.ndim == 0:
+            raise TimelineError("a string column must be one-dimensional")
+        return arr
+    np_dtype = {"f8": np.float64, "i8": np.int64, "bool": np.bool_}[spec.dtype]
+    arr = np.asarray(value)
+    if spec.dtype == "i8" and arr.size and arr.dtype.kind == "f":
+        raise TimelineError("times and indices are integer nanoseconds/ids, not floats")
+    arr = arr.astype(np_dtype, copy=False)
+    if arr.ndim == 0:
+        raise TimelineError("a column must have one row per sample")
+    if arr.shape[0] == 0 and arr.ndim == 1 and spec.shape:
+        arr = arr.reshape((0, *spec.shape))
+    return arr
+
+
+def _empty(spec: Column) -> npt.NDArray[Any]:
+    np_dtype: Any = {"f8": np.float64, "i8": np.int64, "bool": np.bool_, "str": str}[spec.dtype]
+    return np.zeros((0, *spec.shape), dtype=np_dtype)
+
+
+@dataclass(frozen=True)
+class TransformTable(ColumnTable):
+    """Transform samples ``T_parent_child`` (one row per TransformStamped).
+
+    ``is_static`` rows come from ``/tf_static`` (latched, timeless in lookups; every sample is
+    kept here). On construction, frame names are normalised, non-finite values are rejected with
+    the edge and stamp named, and quaternions within 1e-3 of unit length are normalised (others
+    rejected).
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "parent": Column("str"),
+        "child": Column("str"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "translation": Column("f8", (3,)),
+        "quat_xyzw": Column("f8", (4,)),
+        "is_static": Column("bool"),
+        "source": Column("str"),
+    }
+    parent: StrArray
+    child: StrArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    translation: FloatArray
+    quat_xyzw: FloatArray
+    is_static: BoolArray
+    source: StrArray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "parent", normalize_frames(self.parent))
+        object.__setattr__(self, "child", normalize_frames(self.child))
+        finite = np.isfinite(self.translation).all(axis=1) & np.isfinite(self.quat_xyzw).all(axis=1)
+        if not finite.all():
+            i = int(np.flatnonzero(~finite)[0])
+            raise self._invalid(i, "translation or rotation is NaN or Inf")
+        norm = np.linalg.norm(self.quat_xyzw, axis=1)
+        bad = np.abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise self._invalid(i, f"quaternion norm {norm[i]:.6g} is not unit (|q| - 1 > 1e-3)")
+        if len(self):
+            object.__setattr__(self, "quat_xyzw", self.quat_xyzw / norm[:, None])
+
+    def _invalid(self, i: int, what: str) -> InvalidTransformError:
+        return InvalidTransformError(
+            str(self.parent[i]), str(self.child[i]), int(self.stamp_ns[i]), what, str(self.source[i])
+        )
+
+    @classmethod
+    def from_rows(
+        cls,
+        parent: npt.ArrayLike,
+        child: npt.ArrayLike,
+        stamp_ns: npt.ArrayLike,
+        translation: npt.ArrayLike,
+        quat_xyzw: npt.ArrayLike,
+        *,
+        log_time_ns: npt.ArrayLike | None = None,
+        is_static: bool | npt.ArrayLike = False,
+        source: str | npt.ArrayLike = "",
+    ) -> TransformTable:
+        """Build from arrays, broadcasting scalar frame names, flags and sources."""
+        stamps = np.atleast_1d(np.asarray(stamp_ns, dtype=np.int64))
+        n = stamps.shape[0]
+        return cls(
+            parent=np.broadcast_to(np.asarray(parent, dtype=str), (n,)).copy(),
+            child=np.broadcast_to(np.asarray(child, dtype=str), (n,)).copy(),
+            stamp_ns=stamps,
+            log_time_ns=stamps if log_time_ns is None else np.broadcast_to(log_time_ns, (n,)).copy(),
+            translation=np.asarray(translation, dtype=float).reshape(n, 3),
+            quat_xyzw=np.asarray(quat_xyzw, dtype=float).reshape(n, 4),
+            is_static=np.broadcast_to(np.asarray(is_static, dtype=bool), (n,)).copy(),
+            source=np.broadcast_to(np.asarray(source, dtype=str), (n,)).copy(),
+        )
+
+
+@dataclass(frozen=True)
+class CameraTable(ColumnTable):
+    """Camera models (one row per CameraInfo): intrinsics ``K`` (3x3) and distortion.
+
+    ``distortion`` is zero-padded to 14 coefficients; ``n_distortion`` says how many the source
+    gave (5 for plumb_bob, 8 for rational_polynomial, 4 for equidistant). ``distortion_model``
+    uses ROS names: ``plumb_bob``, ``rational_polynomial``, ``equidistant`` (or ``none``).
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "frame": Column("str"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "width": Column("i8"),
+        "height": Column("i8"),
+        "K": Column("f8", (3, 3)),
+        "distortion_model": Column("str"),
+        "distortion": Column("f8", (MAX_DISTORTION_COEFFS,)),
+        "n_distortion": Column("i8"),
+        "source": Column("str"),
+    }
+    frame: StrArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    width: IntArray
+    height: IntArray
+    K: FloatArray
+    distortion_model: StrArray
+    distortion: FloatArray
+    n_distortion: IntArray
+    source: StrArray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "frame", normalize_frames(self.frame))
+        usable = np.isfinite(self.K).all(axis=(1, 2)) & self.K.any(axis=(1, 2))
+        if not usable.all():
+            i = int(np.flatnonzero(~usable)[0])
+            raise InvalidCameraError(str(self.frame[i]), "K is all zero or not finite", str(self.source[i]))
+        positive = (self.K[:, 0, 0] > 0) & (self.K[:, 1, 1] > 0)
+        if not positive.all():
+            i = int(np.flatnonzero(~positive)[0])
+            raise InvalidCameraError(
+                str(self.frame[i]),
+                f"focal lengths fx={self.K[i, 0, 0]} fy={self.K[i, 1, 1]} must be positive",
+                str(self.source[i]),
+            )
+
+    @classmethod
+    def from_intrinsics(
+        cls,
+        frame: str,
+        *,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        width: int,
+        height: int,
+        stamp_ns: int = 0,
+        distortion_model: str = "plumb_bob",
+        distortion: npt.ArrayLike = (),
+        source: str = "",
+    ) -> CameraTable:
+        """One camera from its pinhole parameters."""
+        d = np.zeros(MAX_DISTORTION_COEFFS)
+        given = np.asarray(distortion, dtype=float).reshape(-1)
+        d[: given.size] = given
+        return cls(
+            frame=np.array([frame]), stamp_ns=np.array([stamp_ns]), log_time_ns=np.array([stamp_ns]),
+            width=np.array([width]), height=np.array([height]),
+            K=np.array([[[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]]]),
+            distortion_model=np.array([distortion_model]), distortion=d[None, :],
+            n_distortion=np.array([given.size]), source=np.array([source]),
+        )
+
+
+@dataclass(frozen=True)
+class ObservationTable(ColumnTable):
+    """Detections: a pixel ``(u, v)`` in a camera at a stamp, with depth in metres when known.
+
+    ``depth_m`` is NaN when the depth must be sampled from depth frames at replay time.
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "obs_id": Column("i8"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "camera_frame": Column("str"),
+        "u": Column("f8"),
+        "v": Column("f8"),
+        "depth_m": Column("f8"),
+        "label": Column("str"),
+        "score": Column("f8"),
+        "source": Column("str"),
+    }
+    obs_id: IntArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    camera_frame: StrArray
+    u: FloatArray
+    v: FloatArray
+    depth_m: FloatArray
+    label: StrArray
+    score: FloatArray
+    source: StrArray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "camera_frame", normalize_frames(self.camera_frame))
+        if np.unique(self.obs_id).size != len(self):
+            raise TimelineError("ObservationTable: obs_id values must be unique")
+
+
+@dataclass(frozen=True)
+class JointStateTable(ColumnTable):
+    """Joint states in long form: one row per joint per message (messages may name any subset)."""
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "joint": Column("str"),
+        "position": Column("f8"),
+        "velocity": Column("f8"),
+        "effort": Column("f8"),
+        "source": Column("str"),
+    }
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    joint: StrArray
+    position: FloatArray
+    velocity: FloatArray
+    effort: FloatArray
+    source: StrArray
+
+    def wide(self, joints: Iterable[str]) -> tuple[IntArray, FloatArray]:
+        """Positions as ``(stamps, (T, J))`` for the named joints, rows where all are present."""
+        names = list(joints)
+        stamps = np.unique(self.stamp_ns)
+        out = np.full((stamps.size, len(names)), np.nan)
+        row = np.searchsorted(stamps, self.stamp_ns)
+        for j, name in enumerate(names):
+            sel = self.joint == name
+            out[row[sel], j] = self.position[sel]
+        keep = np.isfinite(out).all(axis=1)
+        return stamps[keep], out[keep]
+
+
+@dataclass(frozen=True)
+class PointTable(ColumnTable):
+    """Logged points: the robot's own hop points, the target it acted on, reference truth.
+
+    ``quat_xyzw`` is NaN unless the point came from a pose. ``obs_id`` is -1 when the point is
+    not tied to an observation (it is then matched by stamp).
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "frame": Column("str"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "xyz": Column("f8", (3,)),
+        "quat_xyzw": Column("f8", (4,)),
+        "role": Column("str"),
+        "obs_id": Column("i8"),
+        "source": Column("str"),
+    }
+    frame: StrArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    xyz: FloatArray
+    quat_xyzw: FloatArray
+    role: StrArray
+    obs_id: IntArray
+    source: StrArray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "frame", normalize_frames(self.frame))
+        valid = {r.value for r in PointRole}
+        unknown = set(np.unique(self.role).tolist()) - valid
+        if unknown:
+            raise TimelineError(f"PointTable: unknown roles {sorted(unknown)}; expected {sorted(valid)}")
+
+    def with_role(self, role: PointRole) -> PointTable:
+        """The rows of one role."""
+        return self.take(self.role == role.value)
+
+
+#: Loads depth frame ``i`` of a table as metres, shape (height, width), float32; NaN or 0 = none.
+DepthLoader = Callable[[int], npt.NDArray[np.float32]]
+
+
+@dataclass(frozen=True)
+class DepthFrameTable(ColumnTable):
+    """Depth images: metadata is columnar, pixels are loaded lazily through ``loader``.
+
+    ``encoding`` is the source encoding (``16UC1`` in millimetres, ``32FC1`` in metres,
+    ``compressedDepth``); the loader always returns metres so nothing downstream cares.
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "frame": Column("str"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "width": Column("i8"),
+        "height": Column("i8"),
+        "encoding": Column("str"),
+        "source": Column("str"),
+    }
+    frame: StrArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    width: IntArray
+    height: IntArray
+    encoding: StrArray
+    source: StrArray
+    loader: DepthLoader | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "frame", normalize_frames(self.frame))
+
+    def load(self, index: int) -> npt.NDArray[np.float32]:
+        """Depth frame ``index`` in metres."""
+        if self.loader is None:
+            raise TimelineError("DepthFrameTable has no pixel loader")
+        return self.loader(index)
+
+    def take(self, index: npt.ArrayLike) -> DepthFrameTable:
+        """Rows selected; the loader keeps pointing at the original rows."""
+        rows = np.arange(len(self))[np.asarray(index)]
+        base = self.loader
+        table = super().take(rows)
+        if base is None:
+            return table
+        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])))
+
+    @classmethod
+    def from_arrays(
+        cls, frame: str, stamp_ns: npt.ArrayLike, images_m: npt.NDArray[Any], *, source: str = ""
+    ) -> DepthFrameTable:
+        """In-memory depth frames (N, H, W) in metres: for tests, notebooks and the generator."""
+        images = np.asarray(images_m, dtype=np.float32)
+        stamps = np.asarray(stamp_ns, dtype=np.int64)
+        n, h, w = images.shape
+        return cls(
+            frame=np.full(n, frame), stamp_ns=stamps, log_time_ns=stamps, width=np.full(n, w),
+            height=np.full(n, h), encoding=np.full(n, "32FC1"), source=np.full(n, source),
+            loader=lambda i: images[i],
+        )
+
+    @classmethod
+    def concat(cls, tables: Iterable[DepthFrameTable]) -> DepthFrameTable:
+        parts = list(tables)
+        merged = super().concat(parts)
+        offsets = np.cumsum([0, *[len(t) for t in parts]])
+        loaders = [t.loader for t in parts]
+
+        def load(i: int) -> npt.NDArray[np.float32]:
+            k = int(np.searchsorted(offsets, i, side="right") - 1)
+            inner = loaders[k]
+            if inner is None:
+                raise TimelineError("DepthFrameTable part has no pixel loader")
+            return inner(i - int(offsets[k]))
+
+        return dataclasses.replace(merged, loader=load if parts else None)
+
+
+_TABLES: dict[str, type[ColumnTable]] = {
+    "transforms": TransformTable,
+    "cameras": CameraTable,
+    "observations": ObservationTable,
+    "joint_states": JointStateTable,
+    "points": PointTable,
+    "depth_frames": DepthFrameTable,
+}
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """Everything one log holds that the chain needs, as columnar tables.
+
+    ``metadata`` is JSON-serialisable: source path and format, the log's time span, robot
+    descriptions (URDF text by topic), adapter notes.
+    """
+
+    transforms: TransformTable = field(default_factory=TransformTable.empty)
+    cameras: CameraTable = field(default_factory=CameraTable.empty)
+    observations: ObservationTable = field(default_factory=ObservationTable.empty)
+    joint_states: JointStateTable = field(default_factory=JointStateTable.empty)
+    points: PointTable = field(default_factory=PointTable.empty)
+    depth_frames: DepthFrameTable = field(default_factory=DepthFrameTable.empty)
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def replace(self, **changes: Any) -> Timeline:
+        """A copy with some tables (or metadata) replaced."""
+        return dataclasses.replace(self, **changes)
+
+    def save(self, directory: str | Any) -> None:
+        """Write every table to ``directory/<table>.parquet`` (depth pixels included)."""
+        from framechain.timeline.storage import save_timeline
+
+        save_timeline(self, directory)
+
+    @classmethod
+    def load(cls, directory: str | Any) -> Timeline:
+        """Inverse of :meth:`save`."""
+        from framechain.timeline.storage import load_timeline
+
+        return load_timeline(directory)
+
+    def equals(self, other: Timeline, *, check_depth_pixels: bool = True) -> bool:
+        """Exact equality of every table, the metadata and (optionally) the depth pixels."""
+        for name in _TABLES:
+            if not getattr(self, name).equals(getattr(other, name)):
+                return False
+        if dict(self.metadata) != dict(other.metadata):
+            return False
+        if check_depth_pixels:
+            for i in range(len(self.depth_frames)):
+                if not np.array_equal(self.depth_frames.load(i), other.depth_frames.load(i), equal_nan=True):
+                    return False
+        return True
+
+
+TABLE_TYPES: Mapping[str, type[ColumnTable]] = _TABLES
