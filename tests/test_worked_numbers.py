@@ -29,7 +29,7 @@ def test_design_worked_numbers_through_every_hop() -> None:
     np.testing.assert_allclose(result.p_cam[0], [0.2, -0.1, 2.0], atol=1e-12)
     np.testing.assert_allclose(result.p_body[0], [0.5, -0.1, 2.8], atol=1e-12)
     np.testing.assert_allclose(result.p_world[0], [1.5, 0.4, 2.8], atol=1e-12)
-    assert result.counts() == {"total": 1, "replayed": 1, "rejected": {}, "stale": 0}
+    assert result.counts() == {"total": 1, "replayed": 1, "rejected": {}, "stale": 1}
     hops = result.hops
     assert list(hops.hop) == ["pixel_to_camera", "camera_to_body", "body_to_world"]
     np.testing.assert_allclose(hops.output_xyz[2], [1.5, 0.4, 2.8], atol=1e-12)
