@@ -1,0 +1,106 @@
+"""quaternion.py against scipy's Rotation on random inputs (components first, x y z w)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from core_helpers import assert_same_rotation, random_quats
+from scipy.spatial.transform import Rotation
+
+from framechain.replay.quaternion import (
+    IDENTITY,
+    quat_angle,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_rotate,
+    quat_to_rotvec,
+)
+
+N = 2000
+
+
+def test_multiply_is_scipy_composition(rng: np.random.Generator) -> None:
+    a, b = random_quats(rng, N), random_quats(rng, N)
+    ours = quat_multiply(a.T, b.T).T
+    theirs = (Rotation.from_quat(a) * Rotation.from_quat(b)).as_quat()
+    assert_same_rotation(ours, theirs, atol=1e-15)
+    # The Hamilton product itself, not only the rotation: no sign flips.
+    np.testing.assert_allclose(np.linalg.norm(ours, axis=1), 1.0, atol=1e-15)
+
+
+def test_multiply_broadcasts_one_against_many(rng: np.random.Generator) -> None:
+    a, b = random_quats(rng, 1), random_quats(rng, N)
+    ours = quat_multiply(a.T, b.T).T
+    assert ours.shape == (N, 4)
+    assert_same_rotation(ours, (Rotation.from_quat(a[0]) * Rotation.from_quat(b)).as_quat(), atol=1e-15)
+    np.testing.assert_array_equal(quat_multiply(IDENTITY[:, None], b.T).T, b)
+
+
+def test_conjugate_is_scipy_inverse(rng: np.random.Generator) -> None:
+    q = random_quats(rng, N)
+    qt = q.T.copy()
+    ours = quat_conjugate(qt).T
+    assert_same_rotation(ours, Rotation.from_quat(q).inv().as_quat(), atol=1e-15)
+    np.testing.assert_array_equal(qt, q.T)  # input untouched
+    np.testing.assert_allclose(quat_multiply(qt, ours.T).T, np.tile(IDENTITY, (N, 1)), atol=1e-15)
+
+
+def test_rotate_is_scipy_apply(rng: np.random.Generator) -> None:
+    q, v = random_quats(rng, N), rng.normal(size=(N, 3)) * 10
+    np.testing.assert_allclose(quat_rotate(q.T, v.T).T, Rotation.from_quat(q).apply(v), atol=1e-13)
+    # One rotation, many vectors.
+    np.testing.assert_allclose(quat_rotate(q[0][:, None], v.T).T, Rotation.from_quat(q[0]).apply(v), atol=1e-13)
+
+
+ANGLES = [0.0, 1e-300, 1e-12, 1e-8, 1e-6, 9.9e-7, 1.01e-6, 1e-4, 0.3, 1.0, 3.0, np.pi - 1e-6, np.pi - 1e-9,
+          np.pi]
+
+
+@pytest.mark.parametrize("angle", ANGLES)
+def test_from_rotvec_matches_scipy_at_every_angle(rng: np.random.Generator, angle: float) -> None:
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    rotvec = axes * angle
+    ours = quat_from_rotvec(rotvec.T).T
+    theirs = Rotation.from_rotvec(rotvec).as_quat()
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-15)  # same sign: w = cos(angle/2) >= 0
+
+
+def test_from_rotvec_random(rng: np.random.Generator) -> None:
+    rotvec = rng.normal(size=(N, 3)) * 2
+    np.testing.assert_allclose(
+        quat_from_rotvec(rotvec.T).T, Rotation.from_rotvec(rotvec).as_quat(), rtol=0, atol=1e-15
+    )
+
+
+@pytest.mark.parametrize("angle", [a for a in ANGLES if a < np.pi - 1e-7])
+def test_to_rotvec_matches_scipy_away_from_pi(rng: np.random.Generator, angle: float) -> None:
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    q = Rotation.from_rotvec(axes * angle).as_quat()
+    q[::2] *= -1  # both signs of the same rotation give the same rotation vector
+    ours = quat_to_rotvec(q.T).T
+    np.testing.assert_allclose(ours, Rotation.from_quat(q).as_rotvec(), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(quat_angle(q.T), np.abs(angle), rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("angle", [np.pi - 1e-6, np.pi - 1e-9, np.pi])
+def test_to_rotvec_near_pi_is_the_same_rotation(rng: np.random.Generator, angle: float) -> None:
+    # Near pi, v and -v are (almost) the same rotation: compare rotations and angles, not vectors.
+    axes = rng.normal(size=(200, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    q = Rotation.from_rotvec(axes * angle).as_quat()
+    q[::2] *= -1
+    ours = quat_to_rotvec(q.T).T
+    np.testing.assert_allclose(np.linalg.norm(ours, axis=1), angle, rtol=1e-12)
+    assert_same_rotation(Rotation.from_rotvec(ours).as_quat(), q, atol=1e-12)
+    np.testing.assert_allclose(quat_angle(q.T), angle, rtol=1e-12)
+
+
+def test_rotvec_round_trip_random(rng: np.random.Generator) -> None:
+    q = random_quats(rng, N)
+    back = quat_from_rotvec(quat_to_rotvec(q.T)).T
+    assert_same_rotation(back, q, atol=1e-14)
+    np.testing.assert_allclose(quat_to_rotvec(q.T).T, Rotation.from_quat(q).as_rotvec(), atol=1e-13)
+    np.testing.assert_allclose(quat_angle(q.T), Rotation.from_quat(q).magnitude(), atol=1e-13)
