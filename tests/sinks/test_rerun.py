@@ -1,0 +1,448 @@
+"""The Rerun sink: save an .rrd, read it back with Rerun's own reader, check what it holds."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+from scipy.spatial.transform import Rotation
+
+from framechain.cli.main import main
+from framechain.replay import ReplayResult, replay
+from framechain.sinks.rerun import (
+    FindingView,
+    OutputMode,
+    RerunOptions,
+    RerunTarget,
+    as_run_points,
+    display_available,
+    resolve_target,
+    stream_replay,
+)
+from framechain.timeline import (
+    CameraTable,
+    ChainFrames,
+    DepthFrameTable,
+    ObservationTable,
+    PointTable,
+    Timeline,
+    TransformTable,
+)
+
+T0 = 1_700_000_000_000_000_000
+MS = 1_000_000
+FRAMES = ChainFrames(camera="camera_optical_frame", body="base_link", world="map")
+OPTICAL_QUAT_XYZW = [-0.5, 0.5, -0.5, 0.5]  # camera_link (FLU) -> optical (RDF), REP-103
+MAP_FROM_ODOM_T = np.array([0.5, -0.2, 0.0])
+MAP_FROM_ODOM = Rotation.from_euler("z", 10, degrees=True)
+BODY_OFFSET = np.array([0.05, 0.0, 0.0])  # the robot's body point is off by 5 cm (as-run fault)
+TARGET_OFFSET = np.array([0.0, 0.03, 0.0])
+REFERENCE_POINT = (2.0, 0.5, 0.2)
+
+
+def _scene_timeline() -> Timeline:
+    """A base driving at 0.5 m/s with a slow yaw, a mast camera pitched down 30 deg, depth at 20 Hz.
+
+    Observations: five good ones (depth from images or inline), one outside the image, one after the
+    odometry ends (extrapolation).
+    """
+    stamps = T0 + np.arange(0, 2001, 20) * MS  # odom -> base_link at 50 Hz for 2 s
+    t_s = (stamps - T0) / 1e9
+    yaw = 0.2 * t_s
+    odom_base = TransformTable.from_rows(
+        "odom", "base_link", stamps, np.stack([0.5 * t_s, 0.1 * t_s, np.zeros_like(t_s)], axis=1),
+        Rotation.from_euler("z", yaw[:, None]).as_quat(), log_time_ns=stamps + 3 * MS, source="/tf",
+    )
+    statics = TransformTable.concat([
+        TransformTable.from_rows("map", "odom", [T0], [MAP_FROM_ODOM_T], [MAP_FROM_ODOM.as_quat()],
+                                 is_static=True, source="/tf_static"),
+        TransformTable.from_rows("base_link", "mast_link", [T0], [[0.2, 0.0, 1.2]],
+                                 [Rotation.from_euler("y", 30, degrees=True).as_quat()],
+                                 is_static=True, source="/tf_static"),
+        TransformTable.from_rows("mast_link", "camera_optical_frame", [T0], [[0.05, 0.0, 0.0]],
+                                 [OPTICAL_QUAT_XYZW], is_static=True, source="/tf_static"),
+    ])
+    camera = CameraTable.from_intrinsics(
+        "camera_optical_frame", fx=150, fy=150, cx=80, cy=60, width=160, height=120, stamp_ns=T0,
+    )
+    depth_stamps = T0 + np.arange(0, 2001, 50) * MS
+    yy, xx = np.mgrid[0:120, 0:160]
+    base = (1.5 + 0.002 * xx + 0.001 * yy).astype(np.float32)
+    images = np.stack([base + 0.01 * k for k in range(depth_stamps.size)])
+    depth = DepthFrameTable.from_arrays("camera_optical_frame", depth_stamps, images, source="/depth")
+    obs_stamps = T0 + np.array([200, 500, 800, 1100, 1400, 1700, 2500]) * MS
+    n = obs_stamps.size
+    observations = ObservationTable(
+        obs_id=np.arange(100, 100 + n), stamp_ns=obs_stamps, log_time_ns=obs_stamps + 40 * MS,
+        camera_frame=np.full(n, "camera_optical_frame"),
+        u=np.array([80.0, 95.0, 70.0, 88.0, 400.0, 60.0, 80.0]),
+        v=np.array([60.0, 50.0, 72.0, 66.0, 60.0, 40.0, 60.0]),
+        depth_m=np.array([np.nan, np.nan, 1.8, np.nan, np.nan, 1.6, 1.5]),
+        label=np.full(n, "cup"), score=np.full(n, 0.9), source=np.full(n, "/detections"),
+    )
+    return Timeline(transforms=TransformTable.concat([odom_base, statics]), cameras=camera,
+                    observations=observations, depth_frames=depth, metadata={"source": "test scene"})
+
+
+def _with_as_run(timeline: Timeline, result: ReplayResult) -> Timeline:
+    """The robot's own hop points: camera exact, body (and so world) off by BODY_OFFSET.
+
+    Matched by obs_id for camera and body; by stamp (obs_id -1) for world, which is logged in
+    ``odom`` to exercise the frame conversion; a target off by TARGET_OFFSET, and a reference.
+    """
+    ok = np.flatnonzero(result.replayed)
+    obs = result.observations
+    m = ok.size
+    world = result.p_world[ok] + BODY_OFFSET  # world_from_body here has the base's yaw: keep it simple
+    world_in_odom = MAP_FROM_ODOM.inv().apply(world - MAP_FROM_ODOM_T)
+
+    def rows(frame: str, xyz: Any, role: str, obs_id: Any, stamp_shift_ns: int = 0) -> PointTable:
+        stamps = obs.stamp_ns[ok] + stamp_shift_ns
+        return PointTable(
+            frame=np.full(m, frame), stamp_ns=stamps, log_time_ns=stamps + 5 * MS, xyz=xyz,
+            quat_xyzw=np.full((m, 4), np.nan), role=np.full(m, role), obs_id=obs_id, source=np.full(m, "/debug"),
+        )
+
+    points = PointTable.concat([
+        rows("camera_optical_frame", result.p_cam[ok], "hop_camera", obs.obs_id[ok]),
+        rows("base_link", result.p_body[ok] + BODY_OFFSET, "hop_body", obs.obs_id[ok]),
+        rows("odom", world_in_odom, "hop_world", np.full(m, -1), stamp_shift_ns=200_000),
+        rows("map", result.p_world[ok] + TARGET_OFFSET, "target", obs.obs_id[ok]),
+    ])
+    return timeline.replace(points=points)
+
+
+@dataclass(frozen=True)
+class Scene:
+    timeline: Timeline
+    result: ReplayResult
+    rrd: Path
+    chunks: dict[str, list[tuple[bool, pa.RecordBatch]]]
+
+
+FINDINGS: list[Any] = [
+    {"fault": "latency", "hop": "body_to_world", "estimate": {"offset_s": 0.031}, "share": 0.62,
+     "error_m": 0.024, "evidence": "error grows with speed", "fix": "look the pose up at the image stamp"},
+]
+
+
+def _read(path: Path) -> dict[str, list[tuple[bool, pa.RecordBatch]]]:
+    out: dict[str, list[tuple[bool, pa.RecordBatch]]] = defaultdict(list)
+    for chunk in RrdReader(path).stream():
+        out[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
+    return dict(out)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    timeline = _scene_timeline()
+    first = replay(timeline, FRAMES)
+    timeline = _with_as_run(timeline, first)
+    result = replay(timeline, FRAMES)
+    rrd = tmp_path_factory.mktemp("rerun") / "scene.rrd"
+    outcome = stream_replay(timeline, result, RerunTarget.save(rrd), findings=FINDINGS,
+                            reference_point=REFERENCE_POINT, options=RerunOptions(recording_id="scene"))
+    assert outcome.mode is OutputMode.SAVE
+    assert outcome.path == rrd
+    assert not outcome.fell_back
+    return Scene(timeline, result, rrd, _read(rrd))
+
+
+def _rows(scene: Scene, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
+    """Values of one column of an entity over all its chunks, in log order (by RowId)."""
+    batches = [b for s, b in scene.chunks.get(entity, []) if static is None or s == static]
+    batches = [b for b in batches if column in b.schema.names]
+    if not batches:
+        return []
+    table = pa.Table.from_batches([b.select(["rerun.controls.RowId", column]) for b in batches])
+    order = np.argsort(np.asarray(table.column("rerun.controls.RowId").to_pylist(), dtype=object), kind="stable")
+    values = table.column(column).to_pylist()
+    return [values[i] for i in order]
+
+
+def _times(scene: Scene, entity: str, timeline: str) -> np.ndarray[Any, Any]:
+    rows = _rows(scene, entity, timeline, static=False)
+    if rows and hasattr(rows[0], "value"):
+        return np.array([r.value for r in rows], dtype=np.int64)
+    return np.array([np.datetime64(r, "ns").astype(np.int64) if not isinstance(r, int) else r for r in rows],
+                    dtype=np.int64)
+
+
+def test_scene_replays_as_designed(scene: Scene) -> None:
+    counts = scene.result.counts()
+    assert counts["total"] == 7
+    assert counts["replayed"] == 5
+    assert counts["rejected"] == {"extrapolation": 1, "outside_image": 1}
+
+
+def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
+    for entity in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame",
+                   "/replay/world_from_body", "/replay/body_from_cam", "/camera", "/camera/depth",
+                   "/camera/detections", "/points/recomputed/camera", "/points/recomputed/body",
+                   "/points/recomputed/world", "/points/as_run/camera", "/points/as_run/body",
+                   "/points/as_run/world", "/points/as_run/target", "/points/error/body", "/points/error/world",
+                   "/points/reference/declared", "/points/reference/matched", "/log/findings", "/log/rejected",
+                   "/summary", "/frames/map", "/frames/camera_optical_frame"):
+        assert entity in scene.chunks, entity
+    children = {c[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
+                for c in _rows(scene, e, "Transform3D:child_frame")}
+    parents = {p[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
+               for p in _rows(scene, e, "Transform3D:parent_frame")}
+    assert children == {"base_link", "odom", "mast_link", "camera_optical_frame"}
+    assert parents == {"map", "odom", "base_link", "mast_link"}
+    assert _rows(scene, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
+    assert _rows(scene, "/points/recomputed/camera", "CoordinateFrame:frame") == [["camera_optical_frame@replay"]]
+    assert _rows(scene, "/camera/detections", "CoordinateFrame:frame") == [["camera_optical_frame_image_plane"]]
+    pinhole_parent = _rows(scene, "/camera", "Pinhole:parent_frame")
+    assert pinhole_parent == [["camera_optical_frame"]]
+    assert _rows(scene, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
+    # K is stored column-major.
+    k = np.asarray(_rows(scene, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
+    np.testing.assert_allclose(k, scene.timeline.cameras.K[0])
+
+
+def test_world_points_equal_the_replay(scene: Scene) -> None:
+    ok = np.flatnonzero(scene.result.replayed)
+    logged = np.array([r[0] for r in _rows(scene, "/points/recomputed/world", "Points3D:positions")])
+    np.testing.assert_allclose(logged, scene.result.p_world[ok], rtol=1e-6, atol=1e-6)
+    assert np.array_equal(logged, scene.result.p_world[ok].astype(np.float32))
+    assert np.array_equal(_times(scene, "/points/recomputed/world", "obs_index"), ok)
+    assert np.array_equal(_times(scene, "/points/recomputed/world", "sensor_time"),
+                          scene.result.observations.stamp_ns[ok])
+    assert np.array_equal(_times(scene, "/points/recomputed/world", "log_time"),
+                          scene.result.observations.log_time_ns[ok])
+    body = np.array([r[0] for r in _rows(scene, "/points/recomputed/body", "Points3D:positions")])
+    np.testing.assert_allclose(body, scene.result.p_body[ok], rtol=1e-6, atol=1e-6)
+
+
+def test_as_run_points_are_matched_and_offset(scene: Scene) -> None:
+    ok = np.flatnonzero(scene.result.replayed)
+    as_run_world = np.array([r[0] for r in _rows(scene, "/points/as_run/world", "Points3D:positions")])
+    # Logged in odom, matched by stamp 0.2 ms away, brought back into map.
+    np.testing.assert_allclose(as_run_world, scene.result.p_world[ok] + BODY_OFFSET, atol=1e-5)
+    arrows = np.array([r[0] for r in _rows(scene, "/points/error/body", "Arrows3D:vectors")])
+    np.testing.assert_allclose(arrows, np.tile(BODY_OFFSET, (ok.size, 1)), atol=1e-6)
+    camera = np.array([r[0] for r in _rows(scene, "/points/error/camera", "Arrows3D:vectors")])
+    np.testing.assert_allclose(camera, 0.0, atol=1e-7)  # the camera hop agrees: zero-length arrows
+
+
+def test_used_transforms_logged_at_observation_times(scene: Scene) -> None:
+    ok = np.flatnonzero(scene.result.replayed)
+    t = np.array([r[0] for r in _rows(scene, "/replay/world_from_body", "Transform3D:translation")])
+    np.testing.assert_allclose(t, scene.result.world_from_body.translation[ok], rtol=1e-6, atol=1e-6)
+    q = np.array([r[0] for r in _rows(scene, "/replay/body_from_cam", "Transform3D:quaternion")])
+    dots = np.abs(np.sum(q * scene.result.body_from_cam.quat_xyzw[ok], axis=1))
+    np.testing.assert_allclose(dots, 1.0, atol=1e-6)
+    assert np.array_equal(_times(scene, "/replay/world_from_body", "sensor_time"),
+                          scene.result.observations.stamp_ns[ok])
+    assert _rows(scene, "/replay/world_from_body", "Transform3D:child_frame")[0] == ["base_link@replay"]
+    assert _rows(scene, "/replay/body_from_cam", "Transform3D:parent_frame")[0] == ["base_link@replay"]
+
+
+def test_static_edges_are_static_and_dynamic_edges_bulk(scene: Scene) -> None:
+    for entity in ("/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame"):
+        assert all(static for static, _ in scene.chunks[entity]), entity
+        assert len(_rows(scene, entity, "Transform3D:translation")) == 1
+    assert not any(static for static, _ in scene.chunks["/tf/base_link"])
+    tf = scene.timeline.transforms
+    dynamic = tf.take(tf.child == "base_link")
+    translations = np.array([r[0] for r in _rows(scene, "/tf/base_link", "Transform3D:translation")])
+    assert translations.shape == (len(dynamic), 3)
+    np.testing.assert_allclose(translations, dynamic.translation, rtol=1e-6, atol=1e-6)
+    assert np.array_equal(_times(scene, "/tf/base_link", "sensor_time"), dynamic.stamp_ns)
+    assert np.array_equal(_times(scene, "/tf/base_link", "log_time"), dynamic.log_time_ns)
+
+
+def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> None:
+    result = scene.result
+    ok = np.flatnonzero(result.replayed)
+    for hop in ("pixel_to_camera", "camera_to_body", "body_to_world"):
+        for kind in ("error_mm", "gap_ms"):
+            values = _rows(scene, f"/series/{kind}/{hop}", "Scalars:scalars")
+            assert len(values) == ok.size, (kind, hop)
+            assert np.array_equal(_times(scene, f"/series/{kind}/{hop}", "obs_index"), ok)
+        gaps = np.array([v[0] for v in _rows(scene, f"/series/gap_ms/{hop}", "Scalars:scalars")])
+        sel = (result.hops.hop == hop) & (result.hops.status == "replayed")
+        np.testing.assert_allclose(gaps, result.hops.gap_ns[sel] / 1e6)
+    errors = {hop: np.array([v[0] for v in _rows(scene, f"/series/error_mm/{hop}", "Scalars:scalars")])
+              for hop in ("pixel_to_camera", "camera_to_body", "body_to_world", "target")}
+    np.testing.assert_allclose(errors["pixel_to_camera"], 0.0, atol=1e-9)
+    np.testing.assert_allclose(errors["camera_to_body"], 50.0, atol=1e-6)
+    np.testing.assert_allclose(errors["body_to_world"], 50.0, atol=1e-3)
+    np.testing.assert_allclose(errors["target"], 30.0, atol=1e-6)
+    reference = np.array([v[0] for v in _rows(scene, "/series/error_mm/reference", "Scalars:scalars")])
+    np.testing.assert_allclose(reference, np.linalg.norm(result.p_world[ok] - REFERENCE_POINT, axis=1) * 1e3)
+
+
+def test_text_log_has_findings_rejections_and_summary(scene: Scene) -> None:
+    findings = [r[0] for r in _rows(scene, "/log/findings", "TextLog:text")]
+    assert findings == [FindingView.of(FINDINGS[0]).text()]
+    assert "latency on body_to_world" in findings[0]
+    assert "offset_s=0.031" in findings[0]
+    assert "62% of the error" in findings[0]
+    assert "24.0 mm" in findings[0]
+    rejected = [r[0] for r in _rows(scene, "/log/rejected", "TextLog:text")]
+    assert len(rejected) == 2
+    assert any("outside_image" in r for r in rejected)
+    assert any("extrapolation on body_to_world (map <- base_link)" in r for r in rejected)
+    assert _rows(scene, "/log/rejected", "TextLog:level") == [["WARN"], ["WARN"]]
+    summary = _rows(scene, "/summary", "TextDocument:text")[0][0]
+    assert "| replayed | 5 |" in summary
+    assert "| rejected: extrapolation | 1 |" in summary
+
+
+def test_camera_images_and_detections(scene: Scene) -> None:
+    images = _rows(scene, "/camera/depth", "DepthImage:buffer")
+    ok = scene.result.replayed
+    used = np.unique(scene.result.depth_stamp_ns[ok & ~np.isfinite(scene.result.observations.depth_m)])
+    assert 1 <= len(images) <= len(scene.timeline.depth_frames)
+    assert set(used.tolist()) <= set(_times(scene, "/camera/depth", "sensor_time").tolist())
+    first = np.frombuffer(bytes(images[0][0]), dtype=np.float32)
+    assert first.size == 160 * 120
+    detections = np.array([r[0] for r in _rows(scene, "/camera/detections", "Points2D:positions")])
+    obs = scene.result.observations
+    np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1))
+
+
+def test_depth_frames_are_decimated(tmp_path: Path, scene: Scene) -> None:
+    rrd = tmp_path / "few.rrd"
+    stream_replay(scene.timeline, scene.result, RerunTarget.save(rrd), options=RerunOptions(max_images=2))
+    chunks = [c for c in RrdReader(rrd).stream() if c.entity_path == "/camera/depth" and not c.is_static]
+    assert sum(c.num_rows for c in chunks) == 2
+
+
+def test_blueprint_is_present_with_world_target_frame(scene: Scene) -> None:
+    reader = RrdReader(scene.rrd)
+    assert len(reader.recordings()) == 1
+    blueprints = reader.blueprints()
+    assert len(blueprints) == 1
+    names: dict[str, list[Any]] = defaultdict(list)
+    for chunk in reader.stream(store=blueprints[0]):
+        batch = chunk.to_record_batch()
+        for col in batch.schema.names:
+            names[col].extend(batch.column(col).to_pylist())
+    assert ["map"] in names["SpatialInformation:target_frame"]
+    assert ["camera_optical_frame_image_plane"] in names["SpatialInformation:target_frame"]
+    classes = {c[0] for c in names["ViewBlueprint:class_identifier"]}
+    assert {"3D", "2D", "TimeSeries", "TextLog"} <= classes
+
+
+def test_spawn_without_display_falls_back_to_saving(
+    tmp_path: Path, scene: Scene, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert not display_available()
+    fallback = tmp_path / "fallback.rrd"
+    outcome = stream_replay(scene.timeline, scene.result, RerunTarget.spawn(fallback))
+    assert outcome.mode is OutputMode.SAVE
+    assert outcome.fell_back
+    assert outcome.path == fallback
+    err = capsys.readouterr().err
+    assert "no display" in err
+    assert str(fallback) in err
+    assert "/points/recomputed/world" in {c.entity_path for c in RrdReader(fallback).stream()}
+
+
+def test_resolve_target_keeps_spawn_with_a_display() -> None:
+    target = RerunTarget.spawn("x.rrd")
+    assert resolve_target(target, env={"DISPLAY": ":0"}) == (target, None)
+    assert resolve_target(target, env={"WAYLAND_DISPLAY": "wayland-0"})[0] is target
+    saved, note = resolve_target(target, env={})
+    assert saved.mode is OutputMode.SAVE
+    assert note is not None
+
+
+def test_as_run_matching_by_id_stamp_and_frame() -> None:
+    timeline = _scene_timeline()
+    result = replay(timeline, FRAMES)
+    matched = as_run_points(_with_as_run(timeline, result), result)
+    ok = result.replayed
+    np.testing.assert_allclose(matched.camera[ok], result.p_cam[ok])
+    np.testing.assert_allclose(matched.world[ok], result.p_world[ok] + BODY_OFFSET, atol=1e-9)
+    assert np.isnan(matched.world[~ok]).all()
+    assert np.isnan(matched.reference).all()
+    # Outside the stamp tolerance nothing matches.
+    strict = as_run_points(_with_as_run(timeline, result), result, match_tolerance_ns=100_000)
+    assert np.isnan(strict.world).all()
+    assert np.isfinite(strict.body[ok]).all()  # matched by obs_id, whatever the stamp
+
+
+def test_finding_view_reads_objects_and_mappings() -> None:
+    @dataclass
+    class Finding:
+        fault: str
+        hop: str
+        estimate: Any
+        share: float
+        error_m: float
+        evidence: str
+        fix: str
+
+    text = FindingView.of(Finding("missing_rotation", "camera_to_body", {"angle_deg": 30.0, "axis": "y"}, 0.9,
+                                  0.5, "error grows with depth.", "use the full extrinsic")).text()
+    assert text.startswith("missing_rotation on camera_to_body; estimate angle_deg=30, axis=y; 500.0 mm, 90%")
+    assert text.endswith("Evidence: error grows with depth. Fix: use the full extrinsic.")
+
+
+# ----------------------------------------------------------------------------------------------
+# The command
+
+
+@pytest.fixture
+def saved_timeline(tmp_path: Path, scene: Scene) -> Path:
+    directory = tmp_path / "scene_timeline"
+    scene.timeline.replace(metadata={"chain": {"frames": {"camera": "camera_optical_frame", "body": "base_link",
+                                                          "world": "map"}}}).save(directory)
+    return directory
+
+
+def test_cli_replay_saves_and_prints_counts(
+    saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "cli.rrd"
+    assert main(["replay", str(saved_timeline), "--save", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["counts"] == {"total": 7, "replayed": 5, "rejected": {"extrapolation": 1, "outside_image": 1},
+                                "stale": report["counts"]["stale"]}
+    assert report["output"] == {"mode": "save", "path": str(out), "url": None, "fell_back": False}
+    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
+    entities = {c.entity_path for c in RrdReader(out).stream()}
+    assert "/points/as_run/body" in entities
+
+
+def test_cli_replay_text_output(saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "text.rrd"
+    assert main(["replay", str(saved_timeline), "--save", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "7 total, 5 replayed, 2 rejected" in text
+    assert "extrapolation 1" in text
+    assert "outside_image 1" in text
+    assert str(out) in text
+
+
+def test_cli_replay_spawn_without_display(
+    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["replay", str(saved_timeline), "--spawn", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert "no display" in captured.err
+    assert captured.out == ""
+    assert (tmp_path / "scene_timeline.rrd").is_file()
+
+
+def test_cli_replay_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["replay", str(tmp_path / "missing.mcap"), "--save", str(tmp_path / "x.rrd")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "missing.mcap" in err[0]
