@@ -59,10 +59,16 @@ def sample_depth(
         obs = np.flatnonzero(index == frame_row)
         image = np.asarray(frames.load(int(frame_row)), dtype=np.float64)
         h, w = image.shape
-        rows = np.clip(np.rint(v[obs]).astype(np.int64)[:, None] + offsets[None, :], 0, h - 1)
-        cols = np.clip(np.rint(u[obs]).astype(np.int64)[:, None] + offsets[None, :], 0, w - 1)
-        patch = image[rows[:, :, None], cols[:, None, :]].reshape(obs.size, -1)
-        patch = np.where(np.isfinite(patch) & (patch > 0), patch, np.nan)
+        rows = np.rint(v[obs]).astype(np.int64)[:, None] + offsets[None, :]
+        cols = np.rint(u[obs]).astype(np.int64)[:, None] + offsets[None, :]
+        # Window pixels outside the image do not exist: they must not repeat the border pixels.
+        rows_in = (rows >= 0) & (rows < h)
+        cols_in = (cols >= 0) & (cols < w)
+        patch = image[np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
+        inside = rows_in[:, :, None] & cols_in[:, None, :]
+        patch = patch.reshape(obs.size, -1)
+        good = inside.reshape(obs.size, -1) & np.isfinite(patch) & (patch > 0)
+        patch = np.where(good, patch, np.nan)
         valid = np.isfinite(patch).any(axis=1)
         depth[obs[valid]] = np.nanmedian(patch[valid], axis=1)
     return DepthSamples(depth, index, stamp)

@@ -219,6 +219,8 @@ def replay(
 
     depth = obs.depth_m.copy()
     depth_stamp = np.where(np.isfinite(depth), obs.stamp_ns, 0)
+    # Where the depth came from (the observation or a depth frame); a stamp of 0 is a valid stamp.
+    has_depth_source = np.isfinite(depth)
     need = ~np.isfinite(depth) & (status == REPLAYED)
     if need.any():
         sampled = sample_depth(
@@ -227,7 +229,8 @@ def replay(
         )
         depth[need] = sampled.depth_m
         depth_stamp[need] = sampled.stamp_ns
-        reject(need & ~np.isfinite(depth) & (depth_stamp == 0), RejectReason.NO_DEPTH)
+        has_depth_source[need] = sampled.frame_index >= 0
+        reject(need & ~has_depth_source, RejectReason.NO_DEPTH)
     reject(~np.isfinite(depth) | (depth <= 0), RejectReason.DEPTH_INVALID)
     p_cam = ray * depth[:, None]
 
@@ -247,7 +250,7 @@ def replay(
     p_body = transform_points(body_from_cam.translation, body_from_cam.quat_xyzw, p_cam)
     p_world = transform_points(world_from_body.translation, world_from_body.quat_xyzw, p_body)
 
-    depth_gap = np.where(depth_stamp > 0, obs.stamp_ns - depth_stamp, 0)
+    depth_gap = np.where(has_depth_source, obs.stamp_ns - depth_stamp, 0)
     gap_cam, before_cam, after_cam = _stalest(body_from_cam, obs.stamp_ns)
     gap_world, before_world, after_world = _stalest(world_from_body, obs.stamp_ns)
     stale_cam = np.abs(gap_cam) > budget_ns
