@@ -37,27 +37,43 @@ def tilt_sweep(pitches_deg: Sequence[float], depths_m: Sequence[float]) -> list[
     depth = np.tile(np.asarray(depths_m, dtype=float), len(pitches_deg))
     n = pitch.size
     stamps = np.arange(n, dtype=np.int64) * 1_000_000  # one observation per (pitch, depth), 1 ms apart
-    camera = CameraTable.from_intrinsics("camera_optical_frame", fx=600, fy=600, cx=320, cy=240,
-                                         width=640, height=480)
+    camera = CameraTable.from_intrinsics("camera_optical_frame", fx=600, fy=600, cx=320, cy=240, width=640, height=480)
     observations = ObservationTable(
-        obs_id=np.arange(n), stamp_ns=stamps, log_time_ns=stamps,
-        camera_frame=np.full(n, "camera_optical_frame"), u=np.full(n, 320.0), v=np.full(n, 240.0),
-        depth_m=depth, label=np.full(n, "tilt"), score=np.ones(n), source=np.full(n, "lab"),
+        obs_id=np.arange(n),
+        stamp_ns=stamps,
+        log_time_ns=stamps,
+        camera_frame=np.full(n, "camera_optical_frame"),
+        u=np.full(n, 320.0),
+        v=np.full(n, 240.0),
+        depth_m=depth,
+        label=np.full(n, "tilt"),
+        score=np.ones(n),
+        source=np.full(n, "lab"),
     )
-    fixed = TransformTable.concat([
-        TransformTable.from_rows("map", "base_link", [0], [[0.0, 0.0, 0.0]], [[0, 0, 0, 1.0]], is_static=True),
-        TransformTable.from_rows("camera_link", "camera_optical_frame", [0], [[0.0, 0.0, 0.0]],
-                                 [OPTICAL_FROM_LINK_QUAT_XYZW], is_static=True),
-    ])
+    fixed = TransformTable.concat(
+        [
+            TransformTable.from_rows("map", "base_link", [0], [[0.0, 0.0, 0.0]], [[0, 0, 0, 1.0]], is_static=True),
+            TransformTable.from_rows(
+                "camera_link",
+                "camera_optical_frame",
+                [0],
+                [[0.0, 0.0, 0.0]],
+                [OPTICAL_FROM_LINK_QUAT_XYZW],
+                is_static=True,
+            ),
+        ]
+    )
     frames = ChainFrames(camera="camera_optical_frame", body="base_link", world="map")
     worlds = []
     for mount_pitch in (pitch, np.zeros(n)):  # the full extrinsic, then the one that lost its pitch
         mount = TransformTable.from_rows(
-            "base_link", "camera_link", stamps, np.tile(MOUNT_XYZ, (n, 1)),
+            "base_link",
+            "camera_link",
+            stamps,
+            np.tile(MOUNT_XYZ, (n, 1)),
             Rotation.from_euler("y", mount_pitch[:, None], degrees=True).as_quat(),
         )
-        timeline = Timeline(transforms=TransformTable.concat([fixed, mount]), cameras=camera,
-                            observations=observations)
+        timeline = Timeline(transforms=TransformTable.concat([fixed, mount]), cameras=camera, observations=observations)
         worlds.append(replay(timeline, frames).p_world)
     error = np.linalg.norm(worlds[0] - worlds[1], axis=1)
     return [TiltRow(float(p), float(d), float(e)) for p, d, e in zip(pitch, depth, error, strict=True)]

@@ -1,0 +1,571 @@
+"""Attribution: which hop, which fault, how big, and the fix.
+
+``attribute(timeline, chain)`` is a pure function of its inputs. It replays the log, picks the
+best evidence present (DESIGN.md "Evidence") and explains the error with the fault catalogue:
+
+1. logged hops: the first hop whose logged output departs from the recomputed one (fed with the
+   robot's own logged input) is classified; later hops are checked the same way;
+2. a logged target: fault models are fitted to the raw inputs until they reproduce the target;
+3. reference truth: per-hop corrections that remove the error against the reference are fitted,
+   finding faults in the recorded data itself;
+4. a static target alone: corrections that minimise the spread of its world points.
+
+Models are chosen by forward selection on BIC (the simplest explanation wins), combined faults
+are fitted jointly, shares of the error are Shapley values over the faults found, confidence is
+the BIC posterior weight of the chosen explanation against the alternatives, and intervals come
+from a bootstrap over observations.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
+from framechain.analysis.faults import (
+    Fault,
+    FaultModel,
+    Mode,
+    classify_rotation,
+    models_for,
+    rotation_starts,
+)
+from framechain.analysis.fit import Fit, fit_models, perturbation_of, posterior_weights
+from framechain.analysis.fixes import fix_for
+from framechain.replay import (
+    CameraModel,
+    HopName,
+    ReplayResult,
+    TransformBuffer,
+    camera_rows_for,
+    replay,
+)
+from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
+
+#: A fault must lower the BIC by this much to be reported (strong evidence on Kass-Raftery's scale).
+MIN_BIC_GAIN = 10.0
+#: A hop is divergent when its median departure exceeds this (m).
+HOP_DIVERGENCE_M = 2e-3
+#: Points stamped with the observation's stamp match within this (ns).
+POINT_MATCH_NS = 1_000_000
+#: A reference stream sample matches an observation within this (ns).
+REFERENCE_MATCH_NS = 50_000_000
+MAX_FAULTS = 3
+SCHEMA = "framechain/attribution@1"
+ESTIMATE_KEYS = ("offset_s", "angle_deg", "factor", "scale")
+
+
+class AnalysisError(FramechainError):
+    """The log could not be analysed (nothing replayed, no camera model)."""
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One fault found: the catalogue entry, its size, its share of the error and the fix."""
+
+    fault: Fault
+    hop: HopName
+    estimate: dict[str, Any]
+    interval: dict[str, list[float]]
+    share: float
+    error_m: float
+    confidence: float
+    evidence: str
+    fix: str
+    model: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "fault": self.fault.value,
+            "hop": self.hop.value,
+            "estimate": self.estimate,
+            "interval": self.interval,
+            "share": round(self.share, 4),
+            "error_m": round(self.error_m, 6),
+            "confidence": round(self.confidence, 4),
+            "evidence": self.evidence,
+            "fix": self.fix,
+        }
+
+
+@dataclass(frozen=True)
+class Attribution:
+    """The result of :func:`attribute`: counts, error, findings, and what they were computed from."""
+
+    source: dict[str, Any]
+    config: ChainConfig
+    replay: ReplayResult
+    inputs: ChainInputs
+    metric: Metric
+    error_before: FloatArray  # (N,) per replayed observation, against the evidence
+    error_after: FloatArray  # (N,) once every finding is corrected
+    hop_errors: dict[str, FloatArray]  # hop -> (N,) departure of the logged hop (logged-hops level)
+    evidence_points: FloatArray  # (N, 3) world-frame evidence per replayed observation (NaN: none)
+    corrected_world: FloatArray  # (N, 3) world points with the findings applied
+    findings: tuple[Finding, ...]
+    seed: int
+    notes: tuple[str, ...] = ()
+
+    def counts(self) -> dict[str, Any]:
+        return self.replay.counts()
+
+    def error_summary(self, errors: FloatArray | None = None) -> dict[str, Any]:
+        e = self.error_before if errors is None else errors
+        e = e[np.isfinite(e)]
+        if e.size == 0:
+            return {"metric": self.metric, "median": None, "p95": None, "max": None}
+        return {
+            "metric": self.metric,
+            "median": round(float(np.median(e)), 6),
+            "p95": round(float(np.percentile(e, 95)), 6),
+            "max": round(float(e.max()), 6),
+        }
+
+    @property
+    def verdict(self) -> str:
+        """The answer in one sentence."""
+        summary = self.error_summary()
+        if self.metric == "none":
+            return (
+                "No evidence in this log to measure the chain against (no logged points, reference or static target)."
+            )
+        if not self.findings:
+            return (
+                f"No fault beyond noise: median error {summary['median'] * 1e3:.1f} mm against the "
+                f"{self.metric.replace('_', ' ')}."
+            )
+        top = self.findings[0]
+        more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+        return (
+            f"{top.fault.value} at {top.hop.value} ({_estimate_text(top.estimate)}) explains "
+            f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}."
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The attribution.json contract (schema framechain/attribution@1)."""
+        counts = self.counts()
+        frames = self.config.frames
+        return {
+            "schema": SCHEMA,
+            "source": self.source,
+            "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
+            "observations": counts,
+            "error_m": self.error_summary(),
+            "residual_m": self.error_summary(self.error_after),
+            "verdict": self.verdict,
+            "findings": [f.to_json() for f in self.findings],
+            "notes": list(self.notes),
+        }
+
+
+@dataclass(frozen=True)
+class _PointObjective:
+    """Residual of one hop's output (or the world point) against logged or reference points."""
+
+    stage: Literal["camera", "body", "world"]
+    evidence: FloatArray
+    hop_input: FloatArray | None = None  # the robot's own input to the hop, when logged
+
+    def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
+        if self.stage == "camera":
+            out = hop1(inputs, pert)
+        elif self.stage == "body":
+            p_cam = self.hop_input if self.hop_input is not None else hop1(inputs, pert)
+            out = hop2(inputs, pert, p_cam)
+        elif self.hop_input is not None:
+            out, ok = hop3(inputs, pert, self.hop_input)
+            out[~ok] = np.nan
+        else:
+            out = evaluate(inputs, pert)[2]
+        return out - self.evidence
+
+    def take(self, index: IntArray) -> _PointObjective:
+        return replace(
+            self, evidence=self.evidence[index], hop_input=None if self.hop_input is None else self.hop_input[index]
+        )
+
+
+@dataclass(frozen=True)
+class _SpreadObjective:
+    """Residual of each world point from the centroid of all of them (a static target)."""
+
+    def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
+        p = evaluate(inputs, pert)[2]
+        out: FloatArray = p - np.nanmean(p, axis=0)
+        return out
+
+    def take(self, index: IntArray) -> _SpreadObjective:
+        return self
+
+
+_Objective = _PointObjective | _SpreadObjective
+
+
+@dataclass(frozen=True)
+class _Selected:
+    fit: Fit
+    confidences: tuple[float, ...]
+    alternatives: tuple[str, ...]  # next-best explanation at each step
+    objective: _Objective
+    mode: Mode
+
+
+def attribute(
+    timeline: Timeline,
+    chain: ChainConfig,
+    *,
+    seed: int = 0,
+    bootstrap: int = 30,
+    progress: Callable[[str], None] | None = None,
+) -> Attribution:
+    """Replay ``timeline`` through ``chain`` and attribute its error (a pure function)."""
+    say = progress or (lambda _msg: None)
+    buffer = TransformBuffer.from_timeline(timeline)
+    say("replaying observations")
+    result = replay(timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s)
+    if not result.replayed.any():
+        counts = result.counts()
+        raise AnalysisError(
+            f"no observation of camera {chain.frames.camera!r} could be replayed "
+            f"({counts['total']} total, rejected {counts['rejected']})"
+        )
+    camera = _camera_model(timeline, chain, result)
+    inputs = ChainInputs.from_replay(result, buffer, camera)
+    points = timeline.points
+    matched = {
+        role: _match_points(points.with_role(role), inputs.stamp_ns, POINT_MATCH_NS)
+        for role in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD, PointRole.TARGET)
+    }
+    reference = _reference(points.with_role(PointRole.REFERENCE), inputs.stamp_ns, chain)
+    source = dict(timeline.metadata.get("source", {"path": "", "format": "unknown"}))
+    rng = np.random.default_rng(seed)
+    recomputed_world = evaluate(inputs, Perturbation())[2]
+    notes: list[str] = list(buffer.warnings)
+
+    hops_present = [
+        r
+        for r in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD)
+        if np.isfinite(matched[r]).all(axis=1).any()
+    ]
+    hop_errors: dict[str, FloatArray] = {}
+    selections: list[_Selected] = []
+    metric: Metric
+    if hops_present:
+        metric = "logged_hops"
+        say("comparing the robot's logged hops with the recomputed ones")
+        selections, hop_errors, evidence_world = _hops_level(inputs, matched, say)
+        if not np.isfinite(evidence_world).any():
+            evidence_world = recomputed_world.copy()
+        world_objective: _Objective = _PointObjective("world", evidence_world)
+    elif np.isfinite(matched[PointRole.TARGET]).all(axis=1).any():
+        metric = "target"
+        say("fitting fault models to the logged target")
+        evidence_world = matched[PointRole.TARGET]
+        world_objective = _PointObjective("world", evidence_world)
+        selections = [_select(models_for(inputs), world_objective, inputs, "as_run", say)]
+    elif reference is not None:
+        metric = "reference"
+        say("fitting corrections against the reference")
+        evidence_world = reference
+        world_objective = _PointObjective("world", evidence_world)
+        selections = [_select(models_for(inputs), world_objective, inputs, "correction", say)]
+    elif chain.evidence.static_target:
+        metric = "static_spread"
+        say("minimising the spread of the static target")
+        world_objective = _SpreadObjective()
+        evidence_world = np.tile(np.nanmean(recomputed_world, axis=0), (len(inputs), 1))
+        selections = [_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say)]
+    else:
+        metric = "none"
+        nan = np.full(len(inputs), np.nan)
+        return Attribution(
+            source=source,
+            config=chain,
+            replay=result,
+            inputs=inputs,
+            metric=metric,
+            error_before=nan,
+            error_after=nan,
+            hop_errors={},
+            evidence_points=np.full((len(inputs), 3), np.nan),
+            corrected_world=recomputed_world,
+            findings=(),
+            seed=seed,
+            notes=(*notes, "no evidence: log hop points, a target, a reference or declare a static target"),
+        )
+
+    # Every fault found, with its fitted parameters, as one combined perturbation.
+    found: list[tuple[FaultModel, FloatArray, float, str, _Selected]] = []
+    for sel in selections:
+        for i, (model, x) in enumerate(zip(sel.fit.models, sel.fit.params, strict=True)):
+            found.append((model, x, sel.confidences[i], sel.alternatives[i], sel))
+    error_before = _distances(world_objective(inputs, Perturbation()))
+    combined = perturbation_of([f[0] for f in found], np.concatenate([f[1] for f in found]) if found else np.zeros(0))
+    if metric in ("reference", "static_spread"):
+        # Corrections move the recomputed chain towards the truth.
+        error_after = _distances(world_objective(inputs, combined))
+        corrected_world = evaluate(inputs, combined)[2]
+    else:
+        # As-run faults move the recomputed chain towards what the robot did.
+        error_after = _distances(world_objective(inputs, combined))
+        corrected_world = recomputed_world
+    say("splitting the error among the faults found (Shapley values)")
+    shapley = _shapley(found, world_objective, inputs)
+    total = float(np.nanmedian(error_before)) if np.isfinite(error_before).any() else 0.0
+    findings: list[Finding] = []
+    for k, (model, x, confidence, alternative, sel) in enumerate(found):
+        fault = classify_rotation(model, x, sel.mode, inputs)
+        estimate = model.estimate(x, sel.mode, inputs)
+        interval = _bootstrap(sel, model, inputs, rng, bootstrap, say) if bootstrap else {}
+        share = shapley[k] / total if total > 0 else 0.0
+        findings.append(
+            Finding(
+                fault=fault,
+                hop=model.hop,
+                estimate=estimate,
+                interval=interval,
+                share=float(share),
+                error_m=float(shapley[k]),
+                confidence=float(confidence),
+                evidence=_evidence_sentence(fault, model, metric, estimate, alternative, sel.mode),
+                fix=fix_for(fault, model.hop, estimate, inputs, x, sel.mode),
+                model=model.name,
+            )
+        )
+    findings.sort(key=lambda f: f.share, reverse=True)
+    return Attribution(
+        source=source,
+        config=chain,
+        replay=result,
+        inputs=inputs,
+        metric=metric,
+        error_before=error_before,
+        error_after=error_after,
+        hop_errors=hop_errors,
+        evidence_points=evidence_world,
+        corrected_world=corrected_world,
+        findings=tuple(findings),
+        seed=seed,
+        notes=tuple(notes),
+    )
+
+
+# -- evidence ---------------------------------------------------------------------------------
+def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) -> CameraModel:
+    rows = camera_rows_for(timeline.cameras, chain.frames.camera, result.observations.stamp_ns[result.replayed])
+    rows = rows[rows >= 0]
+    if rows.size == 0:
+        raise AnalysisError(f"no CameraInfo for camera frame {chain.frames.camera!r}")
+    values, counts = np.unique(rows, return_counts=True)
+    return CameraModel.from_table(timeline.cameras, int(values[np.argmax(counts)]))
+
+
+def _match_points(points: PointTable, stamps: IntArray, tolerance_ns: int) -> FloatArray:
+    """Points matched to observation stamps (nearest within the tolerance); NaN where none."""
+    out = np.full((stamps.size, 3), np.nan)
+    if len(points) == 0:
+        return out
+    order = np.argsort(points.stamp_ns, kind="stable")
+    s = points.stamp_ns[order]
+    right = np.clip(np.searchsorted(s, stamps), 0, s.size - 1)
+    left = np.clip(right - 1, 0, s.size - 1)
+    pick = np.where(np.abs(s[left] - stamps) <= np.abs(s[right] - stamps), left, right)
+    ok = np.abs(s[pick] - stamps) <= tolerance_ns
+    out[ok] = points.xyz[order[pick[ok]]]
+    return out
+
+
+def _reference(points: PointTable, stamps: IntArray, chain: ChainConfig) -> FloatArray | None:
+    if len(points):
+        matched = _match_points(points, stamps, REFERENCE_MATCH_NS)
+        if np.isfinite(matched).all(axis=1).any():
+            return matched
+    if chain.evidence.reference_point is not None:
+        return np.tile(np.asarray(chain.evidence.reference_point, dtype=float), (stamps.size, 1))
+    return None
+
+
+def _distances(residuals: FloatArray) -> FloatArray:
+    out: FloatArray = np.linalg.norm(residuals, axis=1)
+    return out
+
+
+# -- the levels -------------------------------------------------------------------------------
+def _hops_level(
+    inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Callable[[str], None]
+) -> tuple[list[_Selected], dict[str, FloatArray], FloatArray]:
+    """Logged hops: each hop fed with the robot's own input, compared with its own output."""
+    logged_cam = matched[PointRole.HOP_CAMERA]
+    logged_body = matched[PointRole.HOP_BODY]
+    logged_world = matched[PointRole.HOP_WORLD]
+    recomputed_cam, recomputed_body, _ = evaluate(inputs, Perturbation())
+    plan: list[tuple[HopName, _PointObjective]] = []
+    if np.isfinite(logged_cam).all(axis=1).any():
+        plan.append((HopName.PIXEL_TO_CAMERA, _PointObjective("camera", logged_cam)))
+    if np.isfinite(logged_body).all(axis=1).any():
+        cam_in = np.where(np.isfinite(logged_cam), logged_cam, recomputed_cam)
+        plan.append((HopName.CAMERA_TO_BODY, _PointObjective("body", logged_body, cam_in)))
+    if np.isfinite(logged_world).all(axis=1).any():
+        body_in = np.where(np.isfinite(logged_body), logged_body, recomputed_body)
+        plan.append((HopName.BODY_TO_WORLD, _PointObjective("world", logged_world, body_in)))
+    selections: list[_Selected] = []
+    hop_errors: dict[str, FloatArray] = {}
+    for hop, objective in plan:
+        departure = _distances(objective(inputs, Perturbation()))
+        hop_errors[hop.value] = departure
+        if not np.nanmedian(departure) > HOP_DIVERGENCE_M:
+            continue
+        say(f"classifying the departure at {hop.value}")
+        sel = _select(models_for(inputs, (hop,)), objective, inputs, "as_run", say)
+        if sel.fit.models:
+            selections.append(sel)
+    return selections, hop_errors, logged_world
+
+
+def _select(
+    models: Sequence[FaultModel],
+    objective: _Objective,
+    inputs: ChainInputs,
+    mode: Mode,
+    say: Callable[[str], None],
+) -> _Selected:
+    """Forward selection on BIC: add the fault that explains most while it clearly pays for itself."""
+    current = fit_models([], objective, inputs)
+    confidences: list[float] = []
+    alternatives: list[str] = []
+    while len(current.models) < MAX_FAULTS:
+        used = {m.family for m in current.models}
+        candidates = [m for m in models if m.family not in used]
+        if not candidates:
+            break
+        base = current.perturbation()
+        quick: list[tuple[Fit, FaultModel]] = []
+        for candidate in candidates:  # each candidate alone on top of the faults already found
+            model = (
+                replace(candidate, starts=rotation_starts(inputs, mode)) if candidate.name.startswith("rotation")
+                else candidate
+            )
+            quick.append((fit_models([model], objective, inputs, base=base), model))
+        quick.sort(key=lambda item: item[0].bic)
+        if current.models:  # refit the best few jointly with what was found before
+            x_prev = np.concatenate(current.params)
+            joint = []
+            for fit, model in quick[:3]:
+                x_start = np.concatenate([x_prev, fit.params[0]])
+                joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
+            joint.sort(key=lambda item: item[0].bic)
+            best_fit, best_model = joint[0]
+        else:
+            best_fit, best_model = quick[0][0], quick[0][1]
+        if current.bic - best_fit.bic < MIN_BIC_GAIN:
+            break
+        say(f"found {best_model.name}")
+        bics = [best_fit.bic, current.bic] + [f.bic for f, m in quick if m.name != best_model.name]
+        confidences.append(float(posterior_weights(bics)[0]))
+        runner_up = next((m.name for f, m in quick if m.name != best_model.name), "none")
+        alternatives.append(runner_up)
+        current = best_fit if current.models else fit_models([best_model], objective, inputs)
+    return _Selected(
+        fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode
+    )
+
+
+# -- shares, intervals, sentences ---------------------------------------------------------------
+def _shapley(
+    found: Sequence[tuple[FaultModel, FloatArray, float, str, _Selected]], objective: _Objective, inputs: ChainInputs
+) -> list[float]:
+    """Shapley values of the median error explained, over the faults found (2^k replays)."""
+    k = len(found)
+    if k == 0:
+        return []
+    cache: dict[frozenset[int], float] = {}
+
+    def error(subset: frozenset[int]) -> float:
+        if subset not in cache:
+            chosen = [found[i] for i in sorted(subset)]
+            pert = perturbation_of(
+                [c[0] for c in chosen], np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
+            )
+            cache[subset] = float(np.nanmedian(_distances(objective(inputs, pert))))
+        return cache[subset]
+
+    values = []
+    for i in range(k):
+        others = [j for j in range(k) if j != i]
+        phi = 0.0
+        for size in range(k):
+            weight = math.factorial(size) * math.factorial(k - size - 1) / math.factorial(k)
+            for subset in itertools.combinations(others, size):
+                s = frozenset(subset)
+                phi += weight * (error(s) - error(s | {i}))
+        values.append(phi)
+    return values
+
+
+def _bootstrap(
+    sel: _Selected,
+    model: FaultModel,
+    inputs: ChainInputs,
+    rng: np.random.Generator,
+    draws: int,
+    say: Callable[[str], None],
+) -> dict[str, list[float]]:
+    """95% intervals of the model's scalar estimates over observation resamples."""
+    if model.n_params == 0:
+        return {}
+    say(f"bootstrapping {model.name} ({draws} resamples)")
+    x_fit = np.concatenate(sel.fit.params)
+    index = [m.name for m in sel.fit.models].index(model.name)
+    samples: dict[str, list[float]] = {}
+    n = len(inputs)
+    for _ in range(draws):
+        idx = rng.integers(0, n, n)
+        refit = fit_models(sel.fit.models, sel.objective.take(idx), inputs.take(idx), x_start=x_fit, grid=False)
+        est = model.estimate(refit.params[index], sel.mode, inputs)
+        for key in ESTIMATE_KEYS:
+            if key in est:
+                samples.setdefault(key, []).append(float(est[key]))
+    return {
+        k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)] for k, v in samples.items()
+    }
+
+
+def _estimate_text(estimate: Mapping[str, Any]) -> str:
+    parts = []
+    for key, value in estimate.items():
+        if key == "offset_s":
+            parts.append(f"{value * 1e3:+.1f} ms")
+        elif key == "angle_deg":
+            parts.append(f"{value:.2f} deg")
+        elif key in ("factor", "scale"):
+            parts.append(f"x{value:.4g}")
+        elif key in ("used", "hop"):
+            parts.append(str(value))
+        elif key == "permutation":
+            parts.append(f"axes {value}")
+    return ", ".join(parts)
+
+
+def _evidence_sentence(
+    fault: Fault, model: FaultModel, metric: Metric, estimate: Mapping[str, Any], alternative: str, mode: Mode
+) -> str:
+    where = {
+        "logged_hops": f"the robot's logged {model.hop.value.split('_to_')[-1]} points depart from the recomputed hop",
+        "target": "the logged target is reproduced from the raw inputs",
+        "reference": "the error against the reference vanishes",
+        "static_spread": "the static target's world points collapse to one point",
+    }[metric]
+    side = "recorded data" if mode == "correction" else "chain that produced the evidence"
+    return (
+        f"With {fault.value} ({_estimate_text(estimate)}) in the {side}, {where}; next-best explanation: {alternative}."
+    )

@@ -1,0 +1,198 @@
+"""The chain as a function of its faults: recompute every hop under a perturbation, vectorised.
+
+A :class:`Perturbation` says how the chain that produced some points differs from the recorded
+one: intrinsics scaled, depth scaled, the camera-to-body rotation changed, replaced or permuted,
+a transform inverted, the pose looked up at another time or in another world frame. Fault
+models (``faults.py``) are small functions from parameters to a Perturbation; fitting them is
+evaluating :func:`evaluate` many times on whole arrays of observations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+from framechain.replay import CameraModel, ReplayResult, TransformBuffer, transform_points
+from framechain.replay.buffer import compose_hops, invert
+from framechain.timeline import ChainFrames
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: camera_link (FLU) -> optical frame (RDF), REP-103: the rotation of a level, unpitched camera.
+OPTICAL_QUAT_XYZW = np.array([-0.5, 0.5, -0.5, 0.5])
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """How a chain differs from the recorded one (defaults: not at all)."""
+
+    focal_scale: float = 1.0  # fx, fy used = s * fx, fy
+    principal_scale: float = 1.0  # cx, cy used = s * cx, cy (another resolution scales both)
+    depth_factor: float = 1.0  # depth_used = factor * depth
+    rotvec_body: FloatArray = field(default_factory=lambda: np.zeros(3))  # R_bc' = exp(rotvec) R_bc
+    replace_quat_bc: FloatArray | None = None  # R_bc' = this rotation (a rotation that was dropped)
+    permutation: FloatArray | None = None  # R_bc' = R_bc P: camera-frame axes permuted / flipped
+    invert_camera: bool = False  # T_bc' = inv(T_bc)
+    invert_edge: str | None = None  # one recorded edge of the camera path (named by child) inverted
+    camera_offset_s: float = 0.0  # camera_to_body looked up at tau + offset (a moving camera)
+    pose_offset_s: float = 0.0  # body_to_world looked up at tau + offset
+    invert_pose: bool = False  # T_wb' = inv(T_wb)
+    world: str | None = None  # another world frame (odom for map)
+
+
+@dataclass(frozen=True)
+class ChainInputs:
+    """The replayed observations with everything a perturbed recomputation needs."""
+
+    obs_id: IntArray
+    stamp_ns: IntArray
+    u: FloatArray
+    v: FloatArray
+    depth_m: FloatArray
+    camera: CameraModel
+    t_bc: FloatArray  # (N, 3) recorded T_body_cam at tau
+    q_bc: FloatArray  # (N, 4)
+    t_wb: FloatArray  # (N, 3) recorded T_world_body at tau
+    q_wb: FloatArray
+    buffer: TransformBuffer
+    frames: ChainFrames
+    camera_is_dynamic: bool
+
+    def __len__(self) -> int:
+        return int(self.stamp_ns.shape[0])
+
+    @classmethod
+    def from_replay(cls, result: ReplayResult, buffer: TransformBuffer, camera: CameraModel) -> ChainInputs:
+        ok = result.replayed
+        path = buffer.path(result.frames.body, result.frames.camera)
+        return cls(
+            obs_id=result.observations.obs_id[ok],
+            stamp_ns=result.observations.stamp_ns[ok],
+            u=result.observations.u[ok],
+            v=result.observations.v[ok],
+            depth_m=result.depth_m[ok],
+            camera=camera,
+            t_bc=result.body_from_cam.translation[ok],
+            q_bc=result.body_from_cam.quat_xyzw[ok],
+            t_wb=result.world_from_body.translation[ok],
+            q_wb=result.world_from_body.quat_xyzw[ok],
+            buffer=buffer,
+            frames=result.frames,
+            camera_is_dynamic=any(not h.is_static for h in path.hops),
+        )
+
+    def take(self, index: npt.ArrayLike) -> ChainInputs:
+        """A subset of observations (bootstrap resamples)."""
+        i = np.asarray(index)
+        return replace(
+            self,
+            obs_id=self.obs_id[i],
+            stamp_ns=self.stamp_ns[i],
+            u=self.u[i],
+            v=self.v[i],
+            depth_m=self.depth_m[i],
+            t_bc=self.t_bc[i],
+            q_bc=self.q_bc[i],
+            t_wb=self.t_wb[i],
+            q_wb=self.q_wb[i],
+        )
+
+    @cached_property
+    def ray(self) -> FloatArray:
+        """Undistorted rays [x, y, 1] through the recorded intrinsics."""
+        x, y = self.camera.pixel_to_normalized(self.u, self.v)
+        return np.stack([x, y, np.ones_like(x)], axis=1)
+
+    def canonical_quat_bc(self) -> FloatArray | None:
+        """R_body_cam with the mount's rotation dropped: only the optical convention left.
+
+        None when the camera frame is not an optical frame under a camera link (nothing to drop).
+        """
+        path = self.buffer.path(self.frames.body, self.frames.camera)
+        if not path.connected or not path.hops:
+            return None
+        first = path.hops[0]  # the edge whose child is the camera frame
+        if first.inverse or first.child != self.frames.camera:
+            return None
+        edge = self.buffer.edges[first.child]
+        if not edge.is_static or edge.translation[0].any():
+            return np.array([0.0, 0.0, 0.0, 1.0])
+        return np.asarray(edge.quat_xyzw[0], dtype=float)
+
+    def world_from_body(
+        self, offset_s: float, world: str | None
+    ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
+        """T_world_body at tau + offset in ``world`` (default: the chain's), and which times were usable."""
+        if offset_s == 0.0 and (world is None or world == self.frames.world):
+            return self.t_wb, self.q_wb, np.ones(len(self), dtype=bool)
+        times = self.stamp_ns + round(offset_s * 1e9)
+        lookup = self.buffer.lookup(world or self.frames.world, self.frames.body, times)
+        return lookup.translation, lookup.quat_xyzw, lookup.ok
+
+    def body_from_camera(self, offset_s: float, invert_edge: str | None = None) -> tuple[FloatArray, FloatArray]:
+        """T_body_cam at tau + offset, optionally with one edge of its path taken the wrong way round."""
+        if invert_edge is not None:
+            path = self.buffer.path(self.frames.body, self.frames.camera)
+            times = self.stamp_ns + round(offset_s * 1e9)
+            samples = []
+            for hop in path.hops:
+                sample = self.buffer.sample(hop, times)
+                if hop.child == invert_edge:
+                    sample = replace(sample, hop=replace(hop, inverse=not hop.inverse))
+                samples.append(sample)
+            t, q = compose_hops(tuple(samples), len(self))
+            return t.T, q.T
+        if offset_s == 0.0 or not self.camera_is_dynamic:
+            return self.t_bc, self.q_bc
+        lookup = self.buffer.lookup(self.frames.body, self.frames.camera, self.stamp_ns + round(offset_s * 1e9))
+        return lookup.translation, lookup.quat_xyzw
+
+
+def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
+    """pixel_to_camera under the perturbation: (N, 3) camera-frame points."""
+    ray = inputs.ray
+    if pert.focal_scale != 1.0 or pert.principal_scale != 1.0:
+        k = inputs.camera.K.copy()
+        k[:2, :2] *= pert.focal_scale
+        k[:2, 2] *= pert.principal_scale
+        model = replace(inputs.camera, K=k)
+        x, y = model.pixel_to_normalized(inputs.u, inputs.v)
+        ray = np.stack([x, y, np.ones_like(x)], axis=1)
+    return ray * (inputs.depth_m * pert.depth_factor)[:, None]
+
+
+def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
+    """camera_to_body under the perturbation."""
+    t_bc, q_bc = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge)
+    if pert.replace_quat_bc is not None:
+        q_bc = np.broadcast_to(pert.replace_quat_bc, q_bc.shape)
+    rot = Rotation.from_quat(q_bc)
+    if pert.permutation is not None:
+        p_cam = p_cam @ pert.permutation.T
+    if np.any(pert.rotvec_body):
+        rot = Rotation.from_rotvec(pert.rotvec_body) * rot
+    out: FloatArray = rot.inv().apply(p_cam - t_bc) if pert.invert_camera else rot.apply(p_cam) + t_bc
+    return out
+
+
+def hop3(inputs: ChainInputs, pert: Perturbation, p_body: FloatArray) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """body_to_world under the perturbation, and which observations had a pose at the shifted time."""
+    t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world)
+    if pert.invert_pose:
+        t_inv, q_inv = invert(t_wb.T, q_wb.T)
+        t_wb, q_wb = t_inv.T, q_inv.T
+    return transform_points(t_wb, q_wb, p_body), ok
+
+
+def evaluate(inputs: ChainInputs, pert: Perturbation) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """All three hops under the perturbation: (p_cam, p_body, p_world), NaN where a pose is missing."""
+    p_cam = hop1(inputs, pert)
+    p_body = hop2(inputs, pert, p_cam)
+    p_world, ok = hop3(inputs, pert, p_body)
+    p_world[~ok] = np.nan
+    return p_cam, p_body, p_world

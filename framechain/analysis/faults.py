@@ -1,0 +1,316 @@
+"""The fault catalogue as small composable models over the vectorised chain.
+
+A :class:`FaultModel` maps a parameter vector to a change of the chain (a Perturbation). Models
+in one ``family`` change the same thing (the camera-to-body rotation, say) and never combine.
+Each model turns fitted parameters into the catalogue's estimate, either as fitted
+(``mode="as_run"``: the parameters describe the chain that produced the evidence, as when the
+robot's logged points are compared with the recorded data) or inverted (``mode="correction"``: the
+parameters correct the recorded data towards the truth, so the fault is their inverse).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from enum import StrEnum
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.chain_model import ChainInputs, Perturbation
+from framechain.replay import HopName
+
+FloatArray = npt.NDArray[np.float64]
+Mode = Literal["as_run", "correction"]
+
+#: Below this angle two rotations are "the same" when naming missing_rotation (degrees).
+SAME_ROTATION_DEG = 0.5
+
+
+class Fault(StrEnum):
+    """The fault catalogue (DESIGN.md); values are the ``fault`` strings of attribution.json."""
+
+    LATENCY = "latency"
+    AXIS_FLIP = "axis_flip"
+    MISSING_ROTATION = "missing_rotation"
+    ROTATION_ERROR = "rotation_error"
+    DEPTH_SCALE = "depth_scale"
+    INTRINSICS = "intrinsics"
+    WRONG_WORLD_FRAME = "wrong_world_frame"
+    INVERTED_TRANSFORM = "inverted_transform"
+
+
+@dataclass(frozen=True)
+class FaultModel:
+    """One fault hypothesis: its parameters, bounds, and what it does to the chain."""
+
+    name: str  # unique label, e.g. "axis_flip[0,1,2|+,-,+]"
+    fault: Fault
+    hop: HopName
+    family: str
+    x0: tuple[float, ...]
+    lower: tuple[float, ...]
+    upper: tuple[float, ...]
+    x_scale: tuple[float, ...]
+    apply: Callable[[Perturbation, FloatArray], Perturbation]
+    estimate: Callable[[FloatArray, Mode, ChainInputs], dict[str, Any]]
+    #: extra BIC penalty for a discrete choice among many variants (log of their number)
+    choice_penalty: float = 0.0
+    #: extra starting points for the local fit (multi-start)
+    starts: tuple[tuple[float, ...], ...] = ()
+
+    @property
+    def n_params(self) -> int:
+        return len(self.x0)
+
+
+def _latency(hop: HopName) -> FaultModel:
+    camera = hop == HopName.CAMERA_TO_BODY
+
+    def apply(p: Perturbation, x: FloatArray) -> Perturbation:
+        return replace(p, camera_offset_s=float(x[0])) if camera else replace(p, pose_offset_s=float(x[0]))
+
+    return FaultModel(
+        name=f"latency[{hop.value}]",
+        fault=Fault.LATENCY,
+        hop=hop,
+        family=f"time:{hop.value}",
+        x0=(0.0,),
+        lower=(-0.3,),
+        upper=(0.3,),
+        x_scale=(0.01,),
+        apply=apply,
+        estimate=lambda x, mode, inputs: {"offset_s": round(float(x[0]), 6)},
+    )
+
+
+def _rotation() -> FaultModel:
+    def apply(p: Perturbation, x: FloatArray) -> Perturbation:
+        return replace(p, rotvec_body=np.asarray(x, dtype=float))
+
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+        rotvec = np.asarray(x, dtype=float) if mode == "as_run" else -np.asarray(x, dtype=float)
+        angle = float(np.linalg.norm(rotvec))
+        axis = rotvec / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
+        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) for a in axis]}
+
+    return FaultModel(
+        name="rotation[camera_to_body]",
+        fault=Fault.ROTATION_ERROR,
+        hop=HopName.CAMERA_TO_BODY,
+        family="camera_rotation",
+        x0=(0.0, 0.0, 0.0),
+        lower=(-np.pi,) * 3,
+        upper=(np.pi,) * 3,
+        x_scale=(0.05,) * 3,
+        apply=apply,
+        estimate=estimate,
+    )
+
+
+def _signed_permutations() -> list[FloatArray]:
+    out = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            m = np.zeros((3, 3))
+            m[np.arange(3), perm] = signs
+            if not np.array_equal(m, np.eye(3)):
+                out.append(m)
+    return out
+
+
+def _axis_flip(perm: FloatArray) -> FaultModel:
+    label = ",".join(
+        f"{'+' if row[np.argmax(np.abs(row))] > 0 else '-'}{'xyz'[np.argmax(np.abs(row))]}" for row in perm
+    )
+
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+        used = perm if mode == "as_run" else perm.T
+        return {"permutation": used.astype(int).tolist()}
+
+    return FaultModel(
+        name=f"axis_flip[{label}]",
+        fault=Fault.AXIS_FLIP,
+        hop=HopName.CAMERA_TO_BODY,
+        family="camera_rotation",
+        x0=(),
+        lower=(),
+        upper=(),
+        x_scale=(),
+        apply=lambda p, x: replace(p, permutation=perm),
+        estimate=estimate,
+        choice_penalty=float(np.log(47.0)),
+    )
+
+
+def _inverted(hop: HopName) -> FaultModel:
+    camera = hop == HopName.CAMERA_TO_BODY
+
+    def apply(p: Perturbation, x: FloatArray) -> Perturbation:
+        return replace(p, invert_camera=True) if camera else replace(p, invert_pose=True)
+
+    return FaultModel(
+        name=f"inverted[{hop.value}]",
+        fault=Fault.INVERTED_TRANSFORM,
+        hop=hop,
+        family="camera_rotation" if camera else f"pose_invert:{hop.value}",
+        x0=(),
+        lower=(),
+        upper=(),
+        x_scale=(),
+        apply=apply,
+        estimate=lambda x, mode, inputs: {"hop": hop.value},
+    )
+
+
+def _inverted_edge(parent: str, child: str) -> FaultModel:
+    """One recorded edge of the camera path published the wrong way round (T_a_b for T_b_a)."""
+    return FaultModel(
+        name=f"inverted[{parent}->{child}]",
+        fault=Fault.INVERTED_TRANSFORM,
+        hop=HopName.CAMERA_TO_BODY,
+        family="camera_rotation",
+        x0=(),
+        lower=(),
+        upper=(),
+        x_scale=(),
+        apply=lambda p, x: replace(p, invert_edge=child),
+        estimate=lambda x, mode, inputs: {"hop": HopName.CAMERA_TO_BODY.value, "edge": [parent, child]},
+    )
+
+
+def _depth_scale() -> FaultModel:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+        factor = float(x[0]) if mode == "as_run" else 1.0 / float(x[0])
+        return {"factor": round(factor, 6)}
+
+    return FaultModel(
+        name="depth_scale",
+        fault=Fault.DEPTH_SCALE,
+        hop=HopName.PIXEL_TO_CAMERA,
+        family="depth",
+        x0=(1.0,),
+        lower=(1e-4,),
+        upper=(1e4,),
+        x_scale=(0.01,),
+        apply=lambda p, x: replace(p, depth_factor=float(x[0])),
+        estimate=estimate,
+        starts=((0.001,), (1000.0,), (0.5,), (2.0,)),
+    )
+
+
+def _intrinsics(variant: Literal["resolution", "focal"]) -> FaultModel:
+    """K of another resolution (focal length and principal point scale) or another lens (focal only)."""
+
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+        scale = float(x[0]) if mode == "as_run" else 1.0 / float(x[0])
+        return {"scale": round(scale, 6), "variant": variant}
+
+    def apply(p: Perturbation, x: FloatArray) -> Perturbation:
+        s = float(x[0])
+        return replace(p, focal_scale=s, principal_scale=s if variant == "resolution" else 1.0)
+
+    return FaultModel(
+        name=f"intrinsics[{variant}]",
+        fault=Fault.INTRINSICS,
+        hop=HopName.PIXEL_TO_CAMERA,
+        family="intrinsics",
+        x0=(1.0,),
+        lower=(0.05,),
+        upper=(20.0,),
+        x_scale=(0.01,),
+        apply=apply,
+        estimate=estimate,
+        starts=((0.5,), (2.0,), (1.5,), (0.75,)),
+    )
+
+
+def _wrong_world(alternative: str, configured: str) -> FaultModel:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+        return {
+            "used": alternative if mode == "as_run" else configured,
+            "meant": configured if mode == "as_run" else alternative,
+        }
+
+    return FaultModel(
+        name=f"wrong_world_frame[{alternative}]",
+        fault=Fault.WRONG_WORLD_FRAME,
+        hop=HopName.BODY_TO_WORLD,
+        family="world_frame",
+        x0=(),
+        lower=(),
+        upper=(),
+        x_scale=(),
+        apply=lambda p, x: replace(p, world=alternative),
+        estimate=estimate,
+    )
+
+
+def world_alternatives(inputs: ChainInputs) -> list[str]:
+    """The other REP-105 world frames the body can be looked up in (map <-> odom)."""
+    frames = set(inputs.buffer.frames)
+    configured = inputs.frames.world
+    out: list[str] = []
+    for name in ("map", "odom", "odom_combined", "world"):
+        if name != configured and name in frames and inputs.buffer.path(name, inputs.frames.body).connected:
+            out.append(name)
+    return out
+
+
+def models_for(
+    inputs: ChainInputs, hops: tuple[HopName, ...] | None = None, *, blind: bool = False
+) -> list[FaultModel]:
+    """Every fault hypothesis that applies to this chain (optionally only at some hops).
+
+    ``blind`` drops the world-frame swap: the spread of a static target cannot say which world
+    frame was meant (map and odom differ by a slow drift that moves every point alike).
+    """
+    out: list[FaultModel] = [
+        _depth_scale(),
+        _intrinsics("resolution"),
+        _intrinsics("focal"),
+        _rotation(),
+        _latency(HopName.BODY_TO_WORLD),
+    ]
+    if inputs.camera_is_dynamic:
+        out.append(_latency(HopName.CAMERA_TO_BODY))
+    out += [_axis_flip(p) for p in _signed_permutations()]
+    out += [_inverted(HopName.CAMERA_TO_BODY), _inverted(HopName.BODY_TO_WORLD)]
+    camera_path = inputs.buffer.path(inputs.frames.body, inputs.frames.camera)
+    if len(camera_path.hops) > 1:
+        out += [_inverted_edge(h.parent, h.child) for h in camera_path.hops]
+    if not blind:
+        out += [_wrong_world(alt, inputs.frames.world) for alt in world_alternatives(inputs)]
+    if hops is not None:
+        out = [m for m in out if m.hop in hops]
+    return out
+
+
+def classify_rotation(model: FaultModel, x: FloatArray, mode: Mode, inputs: ChainInputs) -> Fault:
+    """rotation_error or missing_rotation: is the rotation that was used the mount-less one?"""
+    if model.fault != Fault.ROTATION_ERROR:
+        return model.fault
+    canonical = inputs.canonical_quat_bc()
+    if canonical is None:
+        return Fault.ROTATION_ERROR
+    recorded = Rotation.from_quat(inputs.q_bc[0])
+    used = Rotation.from_rotvec(x) * recorded if mode == "as_run" else recorded
+    angle = np.rad2deg((used * Rotation.from_quat(canonical).inv()).magnitude())
+    change = np.rad2deg(np.linalg.norm(x))
+    if angle < SAME_ROTATION_DEG and change > SAME_ROTATION_DEG:
+        return Fault.MISSING_ROTATION
+    return Fault.ROTATION_ERROR
+
+
+def rotation_starts(inputs: ChainInputs, mode: Mode) -> tuple[tuple[float, ...], ...]:
+    """Multi-start points for the rotation fit: none, and the rotation that drops the mount."""
+    canonical = inputs.canonical_quat_bc()
+    starts: list[tuple[float, ...]] = []
+    recorded = Rotation.from_quat(inputs.q_bc[0])
+    for target in ([canonical] if canonical is not None else []) + [np.array([0.0, 0.0, 0.0, 1.0])]:
+        delta = (Rotation.from_quat(target) * recorded.inv()).as_rotvec()
+        starts.append(tuple(float(v) for v in (delta if mode == "as_run" else -delta)))
+    return tuple(starts)
