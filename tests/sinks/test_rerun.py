@@ -304,8 +304,13 @@ def test_camera_images_and_detections(scene: Scene) -> None:
     used = np.unique(scene.result.depth_stamp_ns[ok & ~np.isfinite(scene.result.observations.depth_m)])
     assert 1 <= len(images) <= len(scene.timeline.depth_frames)
     assert set(used.tolist()) <= set(_times(scene, "/camera/depth", "sensor_time").tolist())
-    first = np.frombuffer(bytes(images[0][0]), dtype=np.float32)
+    first = np.frombuffer(bytes(images[0][0]), dtype=np.uint16)  # millimetres
     assert first.size == 160 * 120
+    assert _rows(scene, "/camera/depth", "DepthImage:meter")[0] == [1000.0]
+    first_stamp = _times(scene, "/camera/depth", "sensor_time")[0]
+    row = int(np.flatnonzero(scene.timeline.depth_frames.stamp_ns == first_stamp)[0])
+    expected = scene.timeline.depth_frames.load(row)
+    np.testing.assert_allclose(first.reshape(120, 160) / 1000.0, expected, atol=5e-4)
     detections = np.array([r[0] for r in _rows(scene, "/camera/detections", "Points2D:positions")])
     obs = scene.result.observations
     np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1))
