@@ -1,1 +1,41 @@
-"""Adapters: robot logs (MCAP, ROS 1 bag, ROS 2 bag, LeRobot) into the Timeline."""
+"""Adapters: robot logs (MCAP, ROS 1 bag, ROS 2 bag; LeRobot via its own module) into the Timeline.
+
+``open_log(path, chain)`` picks the reader by content and decodes only the topics the chain
+needs; ``scan_log(path)`` says what a log holds from its index; ``write_log`` writes a Timeline
+back with the real writers (test fixtures in every container); ``suggest_chain`` proposes a
+chain configuration from what a log holds.
+"""
+
+from framechain.adapters.api import LogAdapter, detect, open_log, register_adapter, scan_log
+from framechain.adapters.errors import (
+    AdapterError,
+    CorruptLogError,
+    EmptyLogError,
+    SchemaError,
+    UnsupportedLogError,
+)
+from framechain.adapters.info import EdgeInfo, frame_tree, suggest_chain
+from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.adapters.writer import CONTAINERS, canonical_order, write_log
+
+__all__ = [
+    "CONTAINERS",
+    "AdapterError",
+    "CorruptLogError",
+    "EdgeInfo",
+    "EmptyLogError",
+    "LoadedLog",
+    "LogAdapter",
+    "LogInfo",
+    "SchemaError",
+    "TopicInfo",
+    "UnsupportedLogError",
+    "canonical_order",
+    "detect",
+    "frame_tree",
+    "open_log",
+    "register_adapter",
+    "scan_log",
+    "suggest_chain",
+    "write_log",
+]

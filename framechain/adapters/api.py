@@ -1,0 +1,196 @@
+"""``open_log`` and ``scan_log``: pick the reader by content, decode only what the chain needs."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Protocol
+
+from framechain.adapters.collect import Collector
+from framechain.adapters.errors import AdapterError, EmptyLogError, UnsupportedLogError
+from framechain.adapters.kinds import Kind, normalize_msgtype, select_topics
+from framechain.adapters.mcap_log import MCAP_MAGIC, McapLog, fetch_from_mcap
+from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.rosbag_log import RosbagsLog, fetch_from_bag
+from framechain.timeline import ChainConfig
+
+ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+#: Logs with more messages than this get a progress bar when ``progress=True``.
+PROGRESS_MIN_MESSAGES = 20_000
+
+
+class LogAdapter(Protocol):
+    """An extension point: another layout (e.g. LeRobot) registers itself with :func:`register_adapter`."""
+
+    name: str
+
+    def probe(self, path: Path) -> bool: ...
+
+    def open(self, path: Path, chain: ChainConfig | None, *, progress: bool = False) -> LoadedLog: ...
+
+    def scan(self, path: Path) -> LogInfo: ...
+
+
+_ADAPTERS: list[LogAdapter] = []
+
+
+def register_adapter(adapter: LogAdapter) -> None:
+    """Add a reader for another layout; it is asked (``probe``) before the built-in ones."""
+    if all(a.name != adapter.name for a in _ADAPTERS):
+        _ADAPTERS.append(adapter)
+
+
+def _plugin_for(path: Path) -> LogAdapter | None:
+    return next((a for a in _ADAPTERS if a.probe(path)), None)
+
+
+def detect(path: str | Path) -> tuple[str, Path, list[str]]:
+    """(format, path to open, notes) by content: ``mcap``, ``rosbag1`` or ``rosbag2``."""
+    p = Path(path)
+    if not p.exists():
+        raise AdapterError(p, "no such file or directory")
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return "rosbag2", p, []
+        if (p / "meta" / "info.json").is_file():
+            raise UnsupportedLogError(
+                p, "a LeRobot dataset, not a log: read an episode with "
+                "framechain.adapters.lerobot.open_dataset(path, episode=..., robot=robot.yaml)",
+            )
+        storage = sorted(p.glob("*.db3")) + sorted(p.glob("*.mcap"))
+        if len(storage) == 1:
+            fmt, target, notes = detect(storage[0])
+            note = f"the directory has no metadata.yaml; read its only storage file {storage[0].name} directly"
+            return fmt, target, [note, *notes]
+        if storage:
+            raise UnsupportedLogError(
+                p, f"not a ROS 2 bag: metadata.yaml is missing and there are {len(storage)} storage files "
+                f"({', '.join(s.name for s in storage[:4])}); open one of them directly",
+            )
+        raise UnsupportedLogError(p, "a directory that is not a bag (no metadata.yaml, .db3 or .mcap inside)")
+    if p.name == "metadata.yaml":
+        return "rosbag2", p.parent, []
+    with p.open("rb") as f:
+        head = f.read(16)
+    if not head:
+        raise EmptyLogError(p, "the file is empty (0 bytes)")
+    if head.startswith(MCAP_MAGIC):
+        return "mcap", p, []
+    if head.startswith(ROSBAG1_MAGIC):
+        if p.suffix != ".bag":
+            raise UnsupportedLogError(p, "a ROS 1 bag whose name does not end in .bag; rename it to *.bag")
+        return "rosbag1", p, []
+    if head.startswith(b"#ROSBAG V"):
+        version = head.split(b"\n")[0].decode("ascii", "replace")
+        raise UnsupportedLogError(p, f"ROS 1 bag format {version!r} is not supported (only V2.0)")
+    if head.startswith(SQLITE_MAGIC):
+        return "rosbag2", p, []
+    raise UnsupportedLogError(p, "not a log framechain can read (expected MCAP, a ROS 1 bag or a ROS 2 bag)")
+
+
+@contextmanager
+def _source(fmt: str, target: Path) -> Iterator[McapLog | RosbagsLog]:
+    src: McapLog | RosbagsLog = McapLog(target) if fmt == "mcap" else RosbagsLog(target)
+    try:
+        yield src
+    finally:
+        src.close()
+
+
+def _fetcher(fmt: str, target: Path) -> Callable[[str, int, int], Any]:
+    fn = fetch_from_mcap if fmt == "mcap" else fetch_from_bag
+    return functools.partial(fn, target)
+
+
+def scan_log(path: str | Path) -> LogInfo:
+    """What a log holds (format, span, topics with types, counts, rates) from its index."""
+    p = Path(path)
+    plugin = _plugin_for(p)
+    if plugin is not None:
+        return plugin.scan(p)
+    fmt, target, notes = detect(p)
+    with _source(fmt, target) as src:
+        return src.info().with_notes(notes)
+
+
+def open_log(path: str | Path, chain: ChainConfig | None = None, *, progress: bool = False) -> LoadedLog:
+    """Read a log into the Timeline: only the topics ``chain`` needs (all it understands if None).
+
+    Every table comes in log-time order (ties: by topic, then file order). Depth pixels stay in
+    the log until :meth:`DepthFrameTable.load` asks for a frame.
+    """
+    p = Path(path)
+    plugin = _plugin_for(p)
+    if plugin is not None:
+        return plugin.open(p, chain, progress=progress)
+    fmt, target, notes = detect(p)
+    col = Collector(str(p), chain)
+    with _source(fmt, target) as src:
+        info = src.info().with_notes(notes)
+        types = {t.name: normalize_msgtype(t.msgtype) for t in info.topics}
+        selected = select_topics(types, chain)
+        if chain is not None:
+            _check_chain_topics(p, chain, types)
+        total = sum(t.count for t in info.topics if t.name in selected)
+        with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
+            src.read(selected, col, advance)
+        info = info.with_notes(src.notes)
+    col.notes[:0] = notes
+    if chain is not None and chain.topics.detections_table:
+        from framechain.adapters.side_table import read_side_table, resolve_side_table
+
+        table_path = resolve_side_table(chain.topics.detections_table, p)
+        col.add_side_detections(read_side_table(table_path), table_path.name)
+    metadata: dict[str, Any] = {
+        "source_path": str(p), "format": info.format, "container": info.container,
+        "start_ns": info.start_ns, "end_ns": info.end_ns,
+    }
+    timeline, found = col.build(_fetcher(fmt, target), metadata)
+    info = info.with_notes(found)
+    timeline = timeline.replace(metadata={**timeline.metadata, "notes": list(info.notes)})
+    if chain is not None and chain.topics.camera_info and not len(timeline.cameras):
+        bad = [n for n in info.notes if chain.topics.camera_info in n]
+        if bad:
+            raise AdapterError(p, bad[0].split(": ", 1)[-1] + "; no usable camera model",
+                               topic=chain.topics.camera_info)
+    return LoadedLog(timeline=timeline, info=info, decoded_topics={t: k.value for t, k in selected.items()})
+
+
+def _check_chain_topics(path: Path, chain: ChainConfig, types: dict[str, str]) -> None:
+    t = chain.topics
+    wanted = [
+        (t.camera_info, "camera_info"), (t.detections, "detections"), (t.depth, "depth"),
+        (t.pixel_points, "pixel_points"), (t.odometry, "odometry"),
+        *((topic, f"evidence {role}") for topic, role in chain.evidence_topics().items()),
+    ]
+    for topic, slot in wanted:
+        if topic and topic not in types:
+            near = sorted(types)[:8]
+            raise AdapterError(
+                path, f"the chain's {slot} topic is not in the log (topics: {', '.join(near)}"
+                f"{', ...' if len(types) > 8 else ''})", topic=topic,
+            )
+
+
+@contextmanager
+def _progress(enabled: bool, total: int, label: str) -> Iterator[Callable[[int], None] | None]:
+    if not enabled:
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(
+        TextColumn(f"reading {label}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+        console=Console(file=sys.stderr), transient=True,
+    ) as bar:
+        task = bar.add_task("read", total=total)
+        yield lambda n: bar.advance(task, n)
+
+
+def kinds_of(loaded: LoadedLog) -> dict[str, Kind]:
+    return {t: Kind(k) for t, k in loaded.decoded_topics.items()}

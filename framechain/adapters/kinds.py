@@ -1,0 +1,122 @@
+"""Message kinds framechain understands, and which topics of a log feed which table."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from framechain.timeline import ChainConfig
+
+
+class Kind(StrEnum):
+    """What a topic's messages become in the Timeline."""
+
+    TF = "tf"  # tf2_msgs/TFMessage, tf/tfMessage, foxglove.FrameTransforms
+    TRANSFORM = "transform"  # geometry_msgs/TransformStamped, foxglove.FrameTransform
+    CAMERA_INFO = "camera_info"  # sensor_msgs/CameraInfo, foxglove.CameraCalibration
+    DEPTH = "depth"  # sensor_msgs/Image (16UC1, 32FC1), CompressedImage (compressedDepth)
+    DETECTIONS = "detections"  # vision_msgs/Detection2DArray
+    DETECTION = "detection"  # vision_msgs/Detection2D
+    PIXEL_POINT = "pixel_point"  # geometry_msgs/PointStamped holding (u, v, depth)
+    POINT = "point"  # PointStamped, PoseStamped, TransformStamped as logged evidence
+    ODOMETRY = "odometry"  # nav_msgs/Odometry
+    JOINT_STATE = "joint_state"  # sensor_msgs/JointState
+    URDF = "urdf"  # std_msgs/String robot description
+    RS_EXTRINSIC = "rs_extrinsic"  # librealsense geometry_msgs/Transform on .../tf/<ref>
+    RS_DEPTH_UNITS = "rs_depth_units"  # librealsense option Depth_Units (std_msgs/Float32)
+
+
+def normalize_msgtype(name: str) -> str:
+    """``tf2_msgs/msg/TFMessage`` and ``tf2_msgs/TFMessage`` both become ``tf2_msgs/TFMessage``."""
+    return name.replace("/msg/", "/")
+
+
+_BY_TYPE: dict[str, Kind] = {
+    "tf2_msgs/TFMessage": Kind.TF,
+    "tf/tfMessage": Kind.TF,
+    "foxglove.FrameTransforms": Kind.TF,
+    "foxglove.FrameTransform": Kind.TRANSFORM,
+    "geometry_msgs/TransformStamped": Kind.TRANSFORM,
+    "sensor_msgs/CameraInfo": Kind.CAMERA_INFO,
+    "foxglove.CameraCalibration": Kind.CAMERA_INFO,
+    "vision_msgs/Detection2DArray": Kind.DETECTIONS,
+    "vision_msgs/Detection2D": Kind.DETECTION,
+    "nav_msgs/Odometry": Kind.ODOMETRY,
+    "sensor_msgs/JointState": Kind.JOINT_STATE,
+}
+
+_POINT_TYPES = frozenset({"geometry_msgs/PointStamped", "geometry_msgs/PoseStamped", "geometry_msgs/TransformStamped"})
+_IMAGE_TYPES = frozenset({"sensor_msgs/Image", "sensor_msgs/CompressedImage"})
+
+
+def is_realsense_layout(topics: dict[str, str]) -> bool:
+    """A librealsense recording (``/file_version`` and ``/device_0/...`` topics)."""
+    return "/file_version" in topics and any(t.startswith("/device_") for t in topics)
+
+
+def _looks_depth(topic: str, msgtype: str) -> bool:
+    low = topic.lower()
+    if msgtype == "sensor_msgs/CompressedImage":
+        return "compresseddepth" in low
+    return "depth" in low and "color" not in low.rsplit("/", 3)[-1]
+
+
+def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str, Kind]:
+    """Topic -> kind for the topics to decode; every other topic is skipped without decoding.
+
+    ``topics`` maps topic name to message type. With a chain, only the topics it names plus the
+    frame tree (/tf, /tf_static), joint states and robot descriptions are read; without one,
+    every topic of a kind framechain understands (evidence points need a chain to give them a
+    role, so they are read only when the chain names them).
+    """
+    norm = {name: normalize_msgtype(t) for name, t in topics.items()}
+    realsense = is_realsense_layout(norm)
+    out: dict[str, Kind] = {}
+    named: dict[str, Kind] = {}
+    if chain is not None:
+        t = chain.topics
+        for topic, kind in (
+            (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.odometry, Kind.ODOMETRY),
+            (t.pixel_points, Kind.PIXEL_POINT),
+        ):
+            if topic:
+                named[topic] = kind
+        if t.detections:
+            named[t.detections] = Kind.DETECTIONS
+        for topic in chain.evidence_topics():
+            named[topic] = Kind.POINT
+    for name, msgtype in norm.items():
+        if name in named:
+            kind = named[name]
+            if kind == Kind.DETECTIONS and msgtype == "vision_msgs/Detection2D":
+                kind = Kind.DETECTION
+            out[name] = kind
+            continue
+        kind_or_none = _BY_TYPE.get(msgtype)
+        if realsense:
+            if msgtype == "geometry_msgs/Transform" and "/tf/" in name:
+                out[name] = Kind.RS_EXTRINSIC
+                continue
+            if name.endswith("/option/Depth_Units/value"):
+                out[name] = Kind.RS_DEPTH_UNITS
+                continue
+        if msgtype == "std_msgs/String" and name.rstrip("/").endswith("robot_description"):
+            out[name] = Kind.URDF
+            continue
+        if chain is not None:
+            # With a chain: the frame tree and joints always; other kinds only where named (or
+            # where the chain leaves the slot empty, so the tree stays complete).
+            if kind_or_none in (Kind.TF, Kind.TRANSFORM, Kind.JOINT_STATE) or (
+                (kind_or_none == Kind.ODOMETRY and not chain.topics.odometry)
+                or (kind_or_none == Kind.CAMERA_INFO and (realsense or not chain.topics.camera_info))
+            ):
+                out[name] = kind_or_none
+            continue
+        if kind_or_none is not None:
+            out[name] = kind_or_none
+        elif msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
+            out[name] = Kind.DEPTH
+    return out
+
+
+def point_types() -> frozenset[str]:
+    return _POINT_TYPES

@@ -1,0 +1,399 @@
+"""Standalone MCAP files: ROS 2 (cdr), ROS 1 (ros1) and Foxglove (protobuf, JSON) encodings.
+
+Reading goes chunk by chunk through the chunk index, so topics nobody asked for are skipped
+without decompression where the index allows, every chunk's CRC is checked, and a corrupt chunk
+is skipped and counted (from its message index) instead of ending the read. A file whose footer
+or summary is missing (a recording cut short) is salvaged by a linear scan of its records: every
+complete message before the cut is recovered and counted.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from framechain.adapters.collect import Collector
+from framechain.adapters.decoders import (
+    Decoder,
+    DecoderBuildError,
+    json_decoder,
+    protobuf_decoder,
+    ros_decoder,
+    typestore_from_idl,
+    typestore_from_msg,
+)
+from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.kinds import Kind, normalize_msgtype
+from framechain.adapters.model import LogInfo, TopicInfo
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
+
+ProgressFn = Callable[[int], None]
+
+
+@dataclass
+class _Channel:
+    id: int
+    topic: str
+    encoding: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+
+
+class McapLog:
+    """One MCAP file opened for reading (a context manager)."""
+
+    def __init__(self, path: Path) -> None:
+        from mcap.exceptions import McapError
+
+        self.path = path
+        self._f = path.open("rb")
+        self.notes: list[str] = []
+        head = self._f.read(8)
+        if head != MCAP_MAGIC:
+            self._f.close()
+            raise CorruptLogError(path, "not an MCAP file (bad magic at the start)")
+        self._f.seek(0)
+        self.summary: Any = None
+        self.truncated = False
+        self.channels: dict[int, _Channel] = {}
+        self._counts: Counter[int] = Counter()
+        self._first: dict[int, int] = {}
+        self._last: dict[int, int] = {}
+        self._lost: Counter[int] = Counter()
+        self.profile = ""
+        try:
+            from mcap.reader import SeekingReader
+
+            reader = SeekingReader(self._f)
+            self.profile = reader.get_header().profile
+            self.summary = reader.get_summary()
+        except (McapError, struct.error, ValueError, OSError):
+            self.truncated = True
+            self.summary = None
+        if self.summary is not None:
+            for cid, ch in self.summary.channels.items():
+                self.channels[cid] = self._channel(ch, self.summary.schemas.get(ch.schema_id))
+        self._decoders: dict[int, Decoder] = {}
+        self._scanned = False
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._f.close()
+
+    @staticmethod
+    def _channel(ch: Any, schema: Any) -> _Channel:
+        if schema is None:
+            return _Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
+        return _Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
+
+    # -- what the file holds --------------------------------------------------------------
+    @property
+    def indexed(self) -> bool:
+        return self.summary is not None and bool(self.summary.chunk_indexes)
+
+    def info(self) -> LogInfo:
+        stats = self.summary.statistics if self.summary is not None else None
+        if stats is not None and self.indexed:
+            counts = dict(stats.channel_message_counts)
+            start, end = int(stats.message_start_time), int(stats.message_end_time)
+        else:
+            if not self._scanned:
+                for _ in self._linear(wanted=None):
+                    pass
+            counts = dict(self._counts)
+            start = min(self._first.values(), default=0)
+            end = max(self._last.values(), default=0)
+        duration = max(end - start, 0) * 1e-9
+        topics: dict[str, TopicInfo] = {}
+        for cid, ch in sorted(self.channels.items()):
+            n = int(counts.get(cid, 0))
+            if ch.topic in topics:  # several channels of one topic
+                prev = topics[ch.topic]
+                n += prev.count
+            rate = (n - 1) / duration if n > 1 and duration > 0 else 0.0
+            topics[ch.topic] = TopicInfo(ch.topic, self._msgtype(ch), n, rate, ch.encoding)
+        total = sum(t.count for t in topics.values())
+        if total == 0 and not self.truncated:
+            raise EmptyLogError(self.path, "the MCAP file holds no messages")
+        encodings = sorted({c.encoding for c in self.channels.values()})
+        container = f"mcap ({', '.join(encodings) or 'no channels'})"
+        return LogInfo(format="mcap", path=self.path, start_ns=start, end_ns=end,
+                       topics=tuple(sorted(topics.values(), key=lambda t: t.name)), notes=tuple(self.notes),
+                       container=container, message_count=total)
+
+    @staticmethod
+    def _msgtype(ch: _Channel) -> str:
+        return ch.schema_name or "(no schema)"
+
+    # -- decoding -----------------------------------------------------------------------------
+    def decoder(self, cid: int) -> Decoder:
+        if cid in self._decoders:
+            return self._decoders[cid]
+        ch = self.channels[cid]
+        try:
+            dec = self._build_decoder(ch)
+        except DecoderBuildError as err:
+            raise SchemaError(self.path, str(err), topic=ch.topic) from err
+        self._decoders[cid] = dec
+        return dec
+
+    def _build_decoder(self, ch: _Channel) -> Decoder:
+        if not ch.schema_name:
+            raise DecoderBuildError(f"no schema for message encoding {ch.encoding!r}; the message type is unknown")
+        text = ch.schema_data.decode("utf-8", "replace")
+        if ch.encoding == "cdr" and ch.schema_encoding == "ros2msg":
+            return ros_decoder(typestore_from_msg(ch.schema_name, text), ch.schema_name, ros1=False)
+        if ch.encoding == "cdr" and ch.schema_encoding == "ros2idl":
+            return ros_decoder(typestore_from_idl(text), ch.schema_name, ros1=False)
+        if ch.encoding == "ros1" and ch.schema_encoding == "ros1msg":
+            return ros_decoder(typestore_from_msg(ch.schema_name, text), ch.schema_name, ros1=True)
+        if ch.encoding == "protobuf" and ch.schema_encoding == "protobuf":
+            return protobuf_decoder(ch.schema_name, ch.schema_data)
+        if ch.encoding == "json":
+            return json_decoder()
+        raise DecoderBuildError(
+            f"message encoding {ch.encoding!r} with schema encoding {ch.schema_encoding!r} is not supported "
+            "(expected cdr/ros2msg, ros1/ros1msg, protobuf or json)"
+        )
+
+    # -- reading ----------------------------------------------------------------------------------
+    def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
+        """Decode the selected topics into the collector."""
+        if self.indexed:
+            wanted = {cid for cid, ch in self.channels.items() if ch.topic in selected}
+            messages: Iterator[Any] = self._indexed(wanted)
+        else:
+            messages = self._linear(wanted=selected)
+        handlers: dict[int, Callable[[str, int, Any], None] | None] = {}
+        failures: Counter[int] = Counter()
+        first_error: dict[int, str] = {}
+        done = 0
+        for msg in messages:
+            cid = msg.channel_id
+            if cid not in handlers:
+                ch = self.channels.get(cid)
+                kind = selected.get(ch.topic) if ch else None
+                handlers[cid] = None
+                if ch is not None and kind is not None:
+                    fox = ch.schema_name.startswith("foxglove.")
+                    if fox and kind not in _FOXGLOVE_KINDS:
+                        continue
+                    try:
+                        self.decoder(cid)
+                    except SchemaError as err:
+                        col.notes.append(f"{err.what.rstrip('.')}: topic {ch.topic} skipped")
+                        continue
+                    handlers[cid] = col.handler(kind, foxglove=fox)
+            handler = handlers[cid]
+            if handler is None:
+                continue
+            ch = self.channels[cid]
+            try:
+                decoded = self._decoders[cid](msg.data)
+                handler(ch.topic, msg.log_time, decoded)
+            except Exception as err:  # one undecodable message must not end the read
+                failures[cid] += 1
+                first_error.setdefault(cid, f"{type(err).__name__}: {err}")
+            done += 1
+            if progress is not None and done % 4096 == 0:
+                progress(4096)
+        for cid, n in failures.items():
+            col.notes.append(
+                f"topic {self.channels[cid].topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
+                f"({first_error[cid]}); skipped"
+            )
+        col.notes.extend(n for n in self.notes if n not in col.notes)
+
+    def _indexed(self, wanted: set[int]) -> Iterator[Any]:
+        from mcap.records import Chunk
+
+        for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            if ci.message_index_offsets and not (set(ci.message_index_offsets) & wanted):
+                continue
+            self._f.seek(ci.chunk_start_offset + 1 + 8)
+            try:
+                from mcap.data_stream import ReadDataStream
+
+                chunk = Chunk.read(ReadDataStream(self._f))
+                records = _chunk_records(chunk)
+            except Exception as err:
+                self._note_bad_chunk(ci.chunk_start_offset, err, self._index_counts(ci))
+                continue
+            for rec in records:
+                if rec.channel_id in wanted:
+                    yield rec
+
+    def _index_counts(self, ci: Any) -> Counter[int]:
+        """Messages per channel in a chunk, from the message index records that follow it."""
+        from mcap.records import MessageIndex
+        from mcap.stream_reader import StreamReader
+
+        counts: Counter[int] = Counter()
+        if not ci.message_index_length:
+            return counts
+        try:
+            self._f.seek(ci.chunk_start_offset + ci.chunk_length)
+            blob = self._f.read(ci.message_index_length)
+            for rec in StreamReader(io.BytesIO(blob), skip_magic=True).records:
+                if isinstance(rec, MessageIndex):
+                    counts[rec.channel_id] += len(rec.records)
+        except Exception:
+            return counts
+        return counts
+
+    def _note_bad_chunk(self, offset: int, err: Exception, counts: Counter[int] | None) -> None:
+        from mcap.exceptions import CRCValidationError
+
+        what = "CRC mismatch" if isinstance(err, CRCValidationError) else f"unreadable ({type(err).__name__})"
+        if counts:
+            per_topic: Counter[str] = Counter()
+            for cid, n in counts.items():
+                per_topic[self.channels[cid].topic if cid in self.channels else f"channel {cid}"] += n
+            lost = sum(per_topic.values())
+            detail = ", ".join(f"{t} {n}" for t, n in sorted(per_topic.items()))
+            self.notes.append(
+                f"chunk at byte {offset}: {what}; skipped, {lost} message{'s' if lost != 1 else ''} lost ({detail})"
+            )
+        else:
+            self.notes.append(f"chunk at byte {offset}: {what}; skipped, its messages are lost (count unknown)")
+
+    def _linear(self, wanted: dict[str, Kind] | None) -> Iterator[Any]:
+        """Every record in file order; stops cleanly at a cut, skips corrupt chunks."""
+        from mcap.records import Channel, Chunk, Message, Schema
+        from mcap.stream_reader import StreamReader
+
+        schemas: dict[int, Any] = {}
+        self._f.seek(0)
+        reader = StreamReader(self._f, skip_magic=False, emit_chunks=True)
+        recovered = 0
+        counting = not self._scanned
+        records = reader.records
+        cut = False
+        while True:
+            try:
+                rec = next(records)
+            except StopIteration:
+                break
+            except Exception:
+                cut = True
+                break
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                if rec.id not in self.channels:
+                    self.channels[rec.id] = self._channel(rec, schemas.get(rec.schema_id))
+            elif isinstance(rec, Chunk):
+                offset = self._f.tell()
+                try:
+                    inner = _chunk_records(rec, keep_all=True)
+                except Exception as err:
+                    self._note_bad_chunk(offset, err, None)
+                    continue
+                for r in inner:
+                    if isinstance(r, Schema):
+                        schemas[r.id] = r
+                    elif isinstance(r, Channel):
+                        if r.id not in self.channels:
+                            self.channels[r.id] = self._channel(r, schemas.get(r.schema_id))
+                    elif isinstance(r, Message):
+                        recovered += 1
+                        if counting:
+                            self._count(r)
+                        if wanted is None:
+                            continue
+                        ch = self.channels.get(r.channel_id)
+                        if ch is not None and ch.topic in wanted:
+                            yield r
+            elif isinstance(rec, Message):
+                recovered += 1
+                if counting:
+                    self._count(rec)
+                if wanted is not None:
+                    ch = self.channels.get(rec.channel_id)
+                    if ch is not None and ch.topic in wanted:
+                        yield rec
+        if counting:
+            self._scanned = True
+            if self.truncated and cut:
+                self.notes.append(
+                    f"the file is truncated (no footer or summary; the recording was cut short): recovered "
+                    f"{recovered} complete message{'s' if recovered != 1 else ''} before the cut by a linear scan"
+                )
+            elif self.truncated:
+                self.notes.append(
+                    f"the file has no footer or summary: read {recovered} message{'s' if recovered != 1 else ''} "
+                    "by a linear scan"
+                )
+
+    def _count(self, msg: Any) -> None:
+        cid = msg.channel_id
+        self._counts[cid] += 1
+        t = int(msg.log_time)
+        if cid not in self._first or t < self._first[cid]:
+            self._first[cid] = t
+        if cid not in self._last or t > self._last[cid]:
+            self._last[cid] = t
+
+    # -- lazy fetch --------------------------------------------------------------------------------
+    def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        """The decoded message of ``topic`` at ``log_time_ns`` (the ordinal-th of equal times)."""
+        cids = {cid for cid, ch in self.channels.items() if ch.topic == topic}
+        seen = 0
+        if self.indexed:
+            chunks = [
+                ci for ci in self.summary.chunk_indexes
+                if ci.message_start_time <= log_time_ns <= ci.message_end_time
+                and (not ci.message_index_offsets or set(ci.message_index_offsets) & cids)
+            ]
+            stream: Iterator[Any] = (
+                rec for ci in sorted(chunks, key=lambda c: c.chunk_start_offset) for rec in self._chunk_at(ci)
+            )
+        else:
+            stream = self._linear(wanted={topic: Kind.DEPTH})
+        for rec in stream:
+            if rec.channel_id in cids and rec.log_time == log_time_ns:
+                if seen == ordinal:
+                    return self.decoder(rec.channel_id)(rec.data)
+                seen += 1
+        raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
+
+    def _chunk_at(self, ci: Any) -> list[Any]:
+        from mcap.data_stream import ReadDataStream
+        from mcap.records import Chunk
+
+        self._f.seek(ci.chunk_start_offset + 1 + 8)
+        return _chunk_records(Chunk.read(ReadDataStream(self._f)))
+
+
+def _chunk_records(chunk: Any, *, keep_all: bool = False) -> list[Any]:
+    """Records of a chunk with its CRC checked; messages only unless ``keep_all``."""
+    from mcap.records import Message
+    from mcap.stream_reader import breakup_chunk
+
+    records = breakup_chunk(chunk, validate_crc=True)
+    if keep_all:
+        return list(records)
+    return [r for r in records if isinstance(r, Message)]
+
+
+def fetch_from_mcap(path: Path, topic: str, log_time_ns: int, ordinal: int) -> Any:
+    """Re-open the file and fetch one message (the depth loader's entry point)."""
+    with McapLog(path) as log:
+        return log.fetch(topic, log_time_ns, ordinal)
+
+
+def mcap_topic_types(log: McapLog) -> dict[str, str]:
+    return {ch.topic: normalize_msgtype(ch.schema_name) for ch in log.channels.values() if ch.schema_name}

@@ -1,0 +1,172 @@
+"""ROS 1 bags (format 2.0, plain, bz2 or lz4 chunks) and ROS 2 bags (a directory with
+metadata.yaml and .db3 or .mcap storage, uncompressed or zstd per file or per message, or a bare
+.db3), read with rosbags. Type definitions come from the bag itself."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from framechain.adapters.collect import Collector
+from framechain.adapters.decoders import Decoder, ros_decoder
+from framechain.adapters.errors import AdapterError, CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.kinds import Kind
+from framechain.adapters.model import LogInfo, TopicInfo
+
+ProgressFn = Callable[[int], None]
+
+
+def _default_typestore(ros1: bool) -> Any:
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if not ros1:
+        return get_typestore(Stores.ROS2_HUMBLE)
+    store = get_typestore(Stores.ROS1_NOETIC)
+    # ROS1_NOETIC has no tf2_msgs; its md5 with this text is the real one (94810edd...).
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return store
+
+
+def _explain(path: Path, err: Exception) -> AdapterError:
+    text = " ".join(str(a) for a in err.args) or type(err).__name__
+    low = text.lower()
+    if "index" in low and ("not indexed" in low or "reindex" in low or "index" in low):
+        return CorruptLogError(
+            path, f"the ROS 1 bag has no index (the recording was not closed cleanly): {text}; "
+            "run `rosbag reindex` on it and retry",
+        )
+    if "metadata" in low:
+        return CorruptLogError(path, f"the ROS 2 bag's metadata.yaml cannot be used: {text}")
+    if "hash mismatch" in low or "type" in low and "definition" in low:
+        return SchemaError(path, f"message definitions in the bag are inconsistent: {text}")
+    return CorruptLogError(path, f"cannot be read as a bag: {text}")
+
+
+class RosbagsLog:
+    """A ROS 1 or ROS 2 bag opened with rosbags' AnyReader (a context manager)."""
+
+    def __init__(self, path: Path) -> None:
+        from rosbags.highlevel import AnyReader
+
+        self.path = path
+        self.ros1 = path.suffix == ".bag"
+        self.notes: list[str] = []
+        try:
+            self.reader = AnyReader([path], default_typestore=_default_typestore(self.ros1))
+            self.reader.open()
+        except FileNotFoundError as err:
+            raise AdapterError(path, f"not found ({err})") from err
+        except Exception as err:
+            raise _explain(path, err) from err
+        self._decoders: dict[str, Decoder] = {}
+
+    def __enter__(self) -> RosbagsLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self.reader.stack is not None:
+            self.reader.close()
+
+    # -- what the bag holds ------------------------------------------------------------------------
+    def info(self) -> LogInfo:
+        r = self.reader
+        counts: Counter[str] = Counter()
+        types: dict[str, str] = {}
+        for c in r.connections:
+            counts[c.topic] += int(c.msgcount)
+            types.setdefault(c.topic, c.msgtype)
+        total = sum(counts.values())
+        if total == 0:
+            raise EmptyLogError(self.path, "the bag holds no messages")
+        start, end = int(r.start_time), int(r.end_time) - 1
+        duration = max(end - start, 0) * 1e-9
+        topics = tuple(
+            TopicInfo(t, types[t], n, (n - 1) / duration if n > 1 and duration > 0 else 0.0,
+                      "ros1" if self.ros1 else "cdr")
+            for t, n in sorted(counts.items())
+        )
+        return LogInfo(format="rosbag1" if self.ros1 else "rosbag2", path=self.path, start_ns=start, end_ns=end,
+                       topics=topics, notes=tuple(self.notes), container=self._container(),
+                       message_count=total)
+
+    def _container(self) -> str:
+        if self.ros1:
+            return "rosbag1"
+        reader = self.reader.readers[0]
+        if self.path.is_dir():
+            storage = "mcap" if any(self.path.glob("*.mcap")) else "sqlite3"
+        else:
+            storage = "mcap" if self.path.suffix == ".mcap" else "sqlite3"
+        parts = [storage]
+        mode = getattr(reader, "compression_mode", None)
+        if mode:
+            parts.append(f"{getattr(reader, 'compression_format', '')} per {mode}")
+        return f"rosbag2 ({', '.join(parts)})"
+
+    # -- decoding ---------------------------------------------------------------------------------
+    def decoder(self, msgtype: str, topic: str) -> Decoder:
+        if msgtype not in self._decoders:
+            store = self.reader.typestore
+            if msgtype not in store.types:
+                raise SchemaError(self.path, f"no definition for message type {msgtype}", topic=topic)
+            self._decoders[msgtype] = ros_decoder(store, msgtype, ros1=self.ros1)
+        return self._decoders[msgtype]
+
+    def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
+        conns = [c for c in self.reader.connections if c.topic in selected]
+        if not conns:
+            return
+        handlers: dict[int, tuple[Decoder, Callable[[str, int, Any], None]] | None] = {}
+        for c in conns:
+            handler = col.handler(selected[c.topic])
+            try:
+                handlers[c.id] = (self.decoder(c.msgtype, c.topic), handler) if handler is not None else None
+            except SchemaError as err:
+                col.notes.append(f"{err.what}: topic {c.topic} skipped")
+                handlers[c.id] = None
+        failures: Counter[str] = Counter()
+        first_error: dict[str, str] = {}
+        done = 0
+        try:
+            for conn, t, raw in self.reader.messages(connections=conns):
+                entry = handlers.get(conn.id)
+                if entry is None:
+                    continue
+                try:
+                    entry[1](conn.topic, t, entry[0](raw))
+                except Exception as err:  # one undecodable message must not end the read
+                    failures[conn.topic] += 1
+                    first_error.setdefault(conn.topic, f"{type(err).__name__}: {err}")
+                done += 1
+                if progress is not None and done % 4096 == 0:
+                    progress(4096)
+        except Exception as err:
+            if isinstance(err, AdapterError):
+                raise
+            col.notes.append(f"reading stopped early ({_explain(self.path, err).what}); the data before it is kept")
+        for topic, n in failures.items():
+            col.notes.append(
+                f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded ({first_error[topic]}); skipped"
+            )
+
+    # -- lazy fetch ---------------------------------------------------------------------------------
+    def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        conns = [c for c in self.reader.connections if c.topic == topic]
+        seen = 0
+        for conn, t, raw in self.reader.messages(connections=conns, start=log_time_ns, stop=log_time_ns + 1):
+            if t != log_time_ns:
+                continue
+            if seen == ordinal:
+                return self.decoder(conn.msgtype, topic)(raw)
+            seen += 1
+        raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
+
+
+def fetch_from_bag(path: Path, topic: str, log_time_ns: int, ordinal: int) -> Any:
+    with RosbagsLog(path) as log:
+        return log.fetch(topic, log_time_ns, ordinal)
