@@ -275,6 +275,37 @@ def resolve_target(target: RerunTarget, *, env: Mapping[str, str] | None = None)
     return target, None
 
 
+#: Where ``connect_grpc(None)`` sends: Rerun's default local viewer.
+DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
+
+
+def _check_listening(url: str | None, *, timeout_s: float = 2.0) -> None:
+    """Fail at once when nothing listens at the URL's host and port.
+
+    Rerun's client otherwise retries for about 11 s before its flush fails.
+    """
+    import socket
+    from urllib.parse import urlsplit
+
+    full = url or DEFAULT_GRPC_URL
+    try:
+        parts = urlsplit(full)
+        host = parts.hostname
+        port = parts.port or (443 if parts.scheme.endswith("https") else 9876)
+    except ValueError as err:
+        raise RerunSinkError(f"not a Rerun gRPC URL: {full!r} (expected rerun+http://HOST:PORT/proxy)") from err
+    if not parts.scheme.startswith("rerun") or not host:
+        raise RerunSinkError(f"not a Rerun gRPC URL: {full!r} (expected rerun+http://HOST:PORT/proxy)")
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            pass
+    except OSError as err:
+        raise RerunSinkError(
+            f"no Rerun viewer listening at {full} ({err.strerror or err}); start one with `rerun` "
+            "or use --save FILE.rrd"
+        ) from err
+
+
 # ----------------------------------------------------------------------------------------------
 # Public entry points
 
@@ -316,6 +347,7 @@ def stream_replay(
             chosen.path.parent.mkdir(parents=True, exist_ok=True)
             rec.save(chosen.path, default_blueprint=blueprint)
         elif chosen.mode is OutputMode.CONNECT:
+            _check_listening(chosen.url)
             rec.connect_grpc(chosen.url, default_blueprint=blueprint)
         else:
             try:

@@ -3,7 +3,14 @@
 from __future__ import annotations
 
 import json
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,6 +27,7 @@ from framechain.sinks.rerun import (
     FindingView,
     OutputMode,
     RerunOptions,
+    RerunSinkError,
     RerunTarget,
     as_run_points,
     display_available,
@@ -398,6 +406,83 @@ def test_finding_view_reads_objects_and_mappings() -> None:
 
 
 # ----------------------------------------------------------------------------------------------
+# Connect: a headless Rerun gRPC server that saves what it receives (no viewer, no display)
+
+
+@dataclass(frozen=True)
+class GrpcServer:
+    url: str
+    rrd: Path
+    process: subprocess.Popen[bytes]
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+@pytest.fixture
+def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
+    exe = shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
+    if exe is None:
+        pytest.skip("the rerun executable is not installed")
+    port = _free_port()
+    rrd = tmp_path / "received.rrd"
+    process = subprocess.Popen([exe, "--serve-grpc", "--port", str(port), "--save", str(rrd)],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            with socket.socket() as sock:
+                if sock.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.1)
+        else:
+            pytest.fail("the Rerun gRPC server did not start")
+        yield GrpcServer(f"rerun+http://127.0.0.1:{port}/proxy", rrd, process)
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _received_entities(server: GrpcServer) -> set[str]:
+    deadline = time.monotonic() + 10
+    entities: set[str] = set()
+    while time.monotonic() < deadline:
+        if server.rrd.is_file() and server.rrd.stat().st_size:
+            entities = {c.entity_path for c in RrdReader(server.rrd).stream()}
+            if "/summary" in entities:
+                break
+        time.sleep(0.2)
+    return entities
+
+
+# The server's file is a stream without footer; Rerun's reader says so and scans the whole file.
+@pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
+def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer) -> None:
+    outcome = stream_replay(scene.timeline, scene.result, RerunTarget.connect(grpc_server.url))
+    assert outcome.mode is OutputMode.CONNECT
+    assert outcome.url == grpc_server.url
+    assert outcome.path is None
+    entities = _received_entities(grpc_server)
+    assert {"/points/recomputed/world", "/tf/base_link", "/summary"} <= entities
+
+
+def test_connect_to_nothing_fails_at_once(scene: Scene) -> None:
+    url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"
+    with pytest.raises(RerunSinkError, match="no Rerun viewer listening at rerun"):
+        stream_replay(scene.timeline, scene.result, RerunTarget.connect(url), options=RerunOptions())
+    with pytest.raises(RerunSinkError, match="not a Rerun gRPC URL"):
+        stream_replay(scene.timeline, scene.result, RerunTarget.connect("http://"))
+
+
+# ----------------------------------------------------------------------------------------------
 # The command
 
 
@@ -451,3 +536,13 @@ def test_cli_replay_bad_input_is_one_line(tmp_path: Path, capsys: pytest.Capture
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert "missing.mcap" in err[0]
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
+def test_cli_replay_connect(
+    saved_timeline: Path, grpc_server: GrpcServer, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["replay", str(saved_timeline), "--connect", grpc_server.url, "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["output"] == {"mode": "connect", "path": None, "url": grpc_server.url, "fell_back": False}
+    assert "/points/as_run/world" in _received_entities(grpc_server)
