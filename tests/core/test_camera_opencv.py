@@ -108,7 +108,8 @@ def test_from_table_keeps_model_and_coefficients() -> None:
         distortion_model="rational_polynomial", distortion=DISTORTIONS["rational_polynomial"],
     )
     camera = CameraModel.from_table(table)
-    assert camera.frame == "cam" and camera.distortion_model == "rational_polynomial"
+    assert camera.frame == "cam"
+    assert camera.distortion_model == "rational_polynomial"
     np.testing.assert_array_equal(camera.distortion, DISTORTIONS["rational_polynomial"])
     np.testing.assert_array_equal(camera.K, K)
     assert (camera.width, camera.height) == (W, H)

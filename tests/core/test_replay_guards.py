@@ -82,7 +82,8 @@ def test_every_guard_and_the_totals_reconcile() -> None:
     # Replayed rows carry points; rejected rows carry NaN, never a made-up point.
     ok = result.replayed
     assert np.isfinite(result.p_world[ok]).all()
-    assert np.isnan(result.p_world[~ok]).all() and np.isnan(result.p_cam[~ok]).all()
+    assert np.isnan(result.p_world[~ok]).all()
+    assert np.isnan(result.p_cam[~ok]).all()
     np.testing.assert_allclose(result.p_world[0], [2.0 + 0.5, -0.1, 2.8], atol=1e-12)
     # The stale observation is still replayed, with the interpolated pose.
     np.testing.assert_allclose(result.p_world[8], [2.5 + 0.3, 0.0, 1.8], atol=1e-12)
@@ -209,7 +210,8 @@ def test_hop_records_three_rows_per_observation_with_frames_samples_and_gaps() -
     for hop, (src, dst) in zip(HopName, [("pixel", "cam"), ("cam", "base"), ("base", "map")], strict=True):
         sel = hops.take(hops.hop == hop.value)
         assert sel.obs_id.tolist() == [100, 101, 102]
-        assert sel.from_frame.tolist() == [src] * 3 and sel.to_frame.tolist() == [dst] * 3
+        assert sel.from_frame.tolist() == [src] * 3
+        assert sel.to_frame.tolist() == [dst] * 3
         assert sel.stamp_ns.tolist() == [r[0] for r in rows]
         assert sel.status.tolist() == [REPLAYED, REPLAYED, "extrapolation"]
     world = hops.take(hops.hop == HopName.BODY_TO_WORLD.value)
@@ -221,7 +223,8 @@ def test_hop_records_three_rows_per_observation_with_frames_samples_and_gaps() -
     np.testing.assert_allclose(world.input_xyz[:2], result.p_body[:2])
     np.testing.assert_allclose(world.output_xyz[:2], result.p_world[:2])
     body = hops.take(hops.hop == HopName.CAMERA_TO_BODY.value)
-    assert body.gap_ns.tolist() == [0, 0, 0] and not body.stale.any()  # static mount
+    assert body.gap_ns.tolist() == [0, 0, 0]
+    assert not body.stale.any()
     np.testing.assert_allclose(body.translation, np.tile([0.3, 0.0, 0.8], (3, 1)))
     np.testing.assert_allclose(body.input_xyz[:2], result.p_cam[:2])
     pix = hops.take(hops.hop == HopName.PIXEL_TO_CAMERA.value)
@@ -237,7 +240,8 @@ def test_pose_offset_shifts_the_lookup_but_gaps_stay_against_the_observation() -
     result = replay(timeline, FRAMES, options=ReplayOptions(pose_offset_ns=-400 * MS))
     np.testing.assert_allclose(result.p_world[0], [1.6 + 0.3, 0.0, 1.8], atol=1e-12)
     world = result.hops.take(result.hops.hop == HopName.BODY_TO_WORLD.value)
-    assert world.sample_before_ns.tolist() == [S] and world.sample_after_ns.tolist() == [2 * S]
+    assert world.sample_before_ns.tolist() == [S]
+    assert world.sample_after_ns.tolist() == [2 * S]
     assert world.gap_ns.tolist() == [0]
 
 
@@ -246,4 +250,5 @@ def test_tiny_inputs(n: int) -> None:
     rows = [(2 * S, 320.0, 240.0, 1.0)][:n]
     obs = observations(rows) if rows else ObservationTable.empty()
     result = replay(Timeline(transforms=transforms(), cameras=camera(), observations=obs), FRAMES)
-    assert result.counts()["total"] == n and len(result.hops) == 3 * n
+    assert result.counts()["total"] == n
+    assert len(result.hops) == 3 * n

@@ -95,7 +95,8 @@ def test_parquet_round_trip_is_lossless_for_every_table(tmp_path: Path, rng: np.
                 assert x.tolist() == y.tolist(), (name, column)
     for i in range(len(original.depth_frames)):
         px, py = original.depth_frames.load(i), loaded.depth_frames.load(i)
-        assert py.dtype == np.float32 and px.shape == py.shape
+        assert py.dtype == np.float32
+        assert px.shape == py.shape
         assert px.tobytes() == py.tobytes()
     assert dict(loaded.metadata) == dict(original.metadata)
     assert loaded.transforms.child.tolist()[-1] == "caméra_optical"
@@ -149,8 +150,9 @@ def test_depth_take_and_concat_keep_pointing_at_the_right_pixels(rng: np.random.
 def test_columns_must_have_equal_lengths() -> None:
     with pytest.raises(TimelineError, match="column log_time_ns has 1 rows, expected 2"):
         TransformTable(parent=np.array(["a", "a"]), child=np.array(["b", "b"]), stamp_ns=np.array([1, 2]),
-                       log_time_ns=np.array([1]), translation=np.zeros((2, 3)), quat_xyzw=np.tile([0, 0, 0, 1.0], (2, 1)),
-                       is_static=np.zeros(2, bool), source=np.array(["", ""]))
+                       log_time_ns=np.array([1]), translation=np.zeros((2, 3)),
+                       quat_xyzw=np.tile([0, 0, 0, 1.0], (2, 1)), is_static=np.zeros(2, bool),
+                       source=np.array(["", ""]))
 
 
 def test_vector_columns_must_have_their_shape() -> None:
