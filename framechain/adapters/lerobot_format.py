@@ -40,7 +40,7 @@ import pyarrow.compute as pc
 import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
-from framechain.timeline import FramechainError
+from framechain.adapters.errors import AdapterError
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -63,13 +63,11 @@ __all__ = [
 ]
 
 
-class DatasetError(FramechainError):
+class DatasetError(AdapterError):
     """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency."""
 
     def __init__(self, path: str | Path, what: str) -> None:
-        self.path = str(path)
-        self.what = what
-        super().__init__(f"{path}: {what}")
+        super().__init__(path, what)
 
 
 class Layout(StrEnum):

@@ -8,11 +8,13 @@ Python call per frame:
   every frame (origin @ motion), the rows a Timeline stores;
 - :meth:`RobotModel.link_poses` chains them from the root, ``T_root_link`` per link.
 
-Chaining does not multiply ``(T, 4, 4)`` stacks (NumPy's batched 4x4 matmul costs about 180 ns a
-product). A revolute joint's local rotation is ``R0 @ Rot(a, q) = P + cos(q) Q + sin(q) S`` with
-constant ``P = R0 a a^T``, ``Q = R0 (I - a a^T)``, ``S = R0 [a]_x``; so the parent pose times the
-joint is one BLAS product ``R_parent @ [P | Q | S | p0]`` over all frames at once, followed by
-two scaled additions. A 6-joint arm chains at several million configurations a second
+Chaining does not multiply ``(T, 4, 4)`` stacks: NumPy's batched 4x4 matmul costs about 180 ns a
+product, and BLAS products of tall ``(3T, 3)`` stacks stall when the cores are shared. Poses are
+kept as structure-of-arrays, a unit quaternion (four ``(T,)`` arrays) and a translation (three),
+and a revolute joint's local rotation is ``q0 (x) (a sin(q/2), cos(q/2)) = cos(q/2) q0 +
+sin(q/2) (q0 (x) a)`` with constant ``q0`` (the origin's rotation) and ``q0 (x) a``; so one joint
+costs about seventy element-wise passes over the frames and no Python per frame. Matrices are
+built once at the end. A 6-joint arm chains at a few million configurations a second
 (``benchmarks/bench_fk.py``).
 
 Conventions: ``T_a_b`` maps points in frame b into frame a; joint positions are SI (radians for
@@ -33,6 +35,9 @@ import numpy.typing as npt
 from framechain.timeline import FramechainError
 
 FloatArray = npt.NDArray[np.float64]
+
+#: Frames per block in :meth:`RobotModel.fk_path`.
+FK_BLOCK = 8192
 
 __all__ = [
     "Joint",
@@ -98,8 +103,14 @@ class _Step:
     """A joint's constants for the chained product (see the module docstring)."""
 
     joint: Joint
-    #: revolute: [P | Q | S | p0] (3x10); prismatic: [R0 | p0 | R0 a] (3x5); fixed: [R0 | p0] (3x4)
-    block: FloatArray
+    q0: tuple[float, float, float, float]  # rotation of the origin, xyzw
+    t0: tuple[float, float, float]  # translation of the origin
+    qa: tuple[float, float, float, float]  # revolute: q0 (x) (axis, 0); else zeros
+    d: tuple[float, float, float]  # prismatic: R0 @ axis, the direction of travel in the parent
+
+
+Quat = tuple["FloatArray | float", "FloatArray | float", "FloatArray | float", "FloatArray | float"]
+Vec = tuple["FloatArray | float", "FloatArray | float", "FloatArray | float"]
 
 
 class RobotModel:
@@ -139,7 +150,7 @@ class RobotModel:
         self.actuated: tuple[str, ...] = tuple(j.name for j in joints if j.moves and j.mimic is None)
         #: Every link, root first, parents before children.
         self.links: tuple[str, ...] = (self.root, *[j.child for j in self._topological()])
-        self._steps = {j.name: _Step(j, _block(j)) for j in joints}
+        self._steps = {j.name: _step(j) for j in joints}
 
     # ----------------------------------------------------------------------------- construction
 
@@ -296,20 +307,35 @@ class RobotModel:
 
     # ----------------------------------------------------------------------------- kinematics
 
+    def joint_poses(
+        self, q: Mapping[str, npt.ArrayLike] | npt.ArrayLike, *, joints: Iterable[str] | None = None,
+        default: float | None = None,
+    ) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """Local ``T_parent_child`` of each joint as ``(translation (T, 3), quat_xyzw (T, 4))``.
+
+        Fixed joints (and moving joints without positions) give one row.
+        """
+        pos = self.positions(q, default=default)
+        names = list(self.joints) if joints is None else list(joints)
+        out: dict[str, tuple[FloatArray, FloatArray]] = {}
+        for name in names:
+            step = self._steps[self._joint(name).name]
+            quat, trans = _local(step, pos.get(name))
+            m = max(np.size(c) for c in (*quat, *trans))
+            out[name] = (_stack(trans, m), _stack(quat, m))
+        return out
+
     def joint_transforms(
         self, q: Mapping[str, npt.ArrayLike] | npt.ArrayLike, *, joints: Iterable[str] | None = None,
         default: float | None = None,
     ) -> dict[str, FloatArray]:
         """Local ``T_parent_child`` of each joint at every frame, ``(T, 4, 4)`` (fixed: ``(1, 4, 4)``)."""
         pos = self.positions(q, default=default)
-        n = next(iter(pos.values())).shape[0] if pos else 1
         names = list(self.joints) if joints is None else list(joints)
         out: dict[str, FloatArray] = {}
         for name in names:
-            step = self._steps[self._joint(name).name]
-            theta = pos.get(name)
-            R, p = _chain(None, None, step, theta, 1 if theta is None else n)
-            out[name] = _homogeneous(R, p)
+            quat, trans = _local(self._steps[self._joint(name).name], pos.get(name))
+            out[name] = _homogeneous(quat, trans)
         return out
 
     def link_poses(
@@ -322,24 +348,20 @@ class RobotModel:
         wanted = list(self.links) if links is None else list(links)
         for link in wanted:
             self._check_link(link)
-        cache: dict[str, tuple[FloatArray | None, FloatArray | None]] = {self.root: (None, None)}
+        identity: tuple[Quat, Vec] = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+        cache: dict[str, tuple[Quat, Vec]] = {self.root: identity}
 
-        def pose(link: str) -> tuple[FloatArray | None, FloatArray | None]:
-            if link in cache:
-                return cache[link]
-            joint = self._by_child[link]
-            R_parent, p_parent = pose(joint.parent)
-            theta = pos.get(joint.name)
-            cache[link] = _chain(R_parent, p_parent, self._steps[joint.name], theta, n)
+        def pose(link: str) -> tuple[Quat, Vec]:
+            if link not in cache:
+                joint = self._by_child[link]
+                parent = pose(joint.parent)
+                cache[link] = _compose(parent, _local(self._steps[joint.name], pos.get(joint.name)))
             return cache[link]
 
         out: dict[str, FloatArray] = {}
         for link in wanted:
-            R, p = pose(link)
-            if R is None or p is None:
-                out[link] = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
-            else:
-                out[link] = _homogeneous(np.broadcast_to(R, (n, 3, 3)), np.broadcast_to(p, (n, 3)))
+            quat, trans = pose(link)
+            out[link] = np.broadcast_to(_homogeneous(quat, trans), (n, 4, 4)).copy()
         return out
 
     def fk(
@@ -349,69 +371,110 @@ class RobotModel:
         return self.link_poses(q, links=[link], default=default)[link]
 
     def fk_path(self, q: npt.ArrayLike, path: Sequence[Joint]) -> tuple[FloatArray, FloatArray]:
-        """Chain the given joints with positions ``q`` (T, len(path)) (0 columns for fixed ones).
+        """Chain the given joints with positions ``q`` (T, len(path)) (columns of fixed joints ignored).
 
-        Returns ``(R, p)``, ``(T, 3, 3)`` and ``(T, 3)``: the hot path the benchmark measures.
+        Returns ``(translation (T, 3), quat_xyzw (T, 4))`` of ``T_start_end``: the hot path the
+        benchmark measures (mimic relations are not applied here).
         """
         arr = np.asarray(q, dtype=float)
         n = arr.shape[0]
-        R: FloatArray | None = None
-        p: FloatArray | None = None
-        for i, joint in enumerate(path):
-            R, p = _chain(R, p, self._steps[joint.name], arr[:, i] if joint.moves else None, n)
-        if R is None or p is None:
-            return np.broadcast_to(np.eye(3), (n, 3, 3)).copy(), np.zeros((n, 3))
-        return np.broadcast_to(R, (n, 3, 3)), np.broadcast_to(p, (n, 3))
+        trans = np.empty((n, 3))
+        quat = np.empty((n, 4))
+        # Blocks small enough that the ~30 intermediate arrays stay in cache.
+        for lo in range(0, max(n, 1), FK_BLOCK):
+            block = arr[lo:lo + FK_BLOCK].T
+            m = block.shape[1]
+            acc: tuple[Quat, Vec] = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+            for i, joint in enumerate(path):
+                acc = _compose(acc, _local(self._steps[joint.name], block[i] if joint.moves else None))
+            trans[lo:lo + m] = _stack(acc[1], m)
+            quat[lo:lo + m] = _stack(acc[0], m)
+        return trans, quat
 
 
-def _skew(a: FloatArray) -> FloatArray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-
-
-def _block(joint: Joint) -> FloatArray:
+def _step(joint: Joint) -> _Step:
     R0 = joint.origin[:3, :3]
-    p0 = joint.origin[:3, 3:4]
+    q0 = _quat_from_matrix(R0)
     a = joint.axis
-    if joint.type in (JointType.REVOLUTE, JointType.CONTINUOUS):
-        aa = np.outer(a, a)
-        return np.hstack([R0 @ aa, R0 @ (np.eye(3) - aa), R0 @ _skew(a), p0])
+    qa = _qmul(q0, (float(a[0]), float(a[1]), float(a[2]), 0.0))
+    d = R0 @ a
+    t0 = joint.origin[:3, 3]
+    return _Step(
+        joint, q0, (float(t0[0]), float(t0[1]), float(t0[2])),
+        tuple(float(x) for x in qa) if joint.type in (JointType.REVOLUTE, JointType.CONTINUOUS)  # type: ignore[arg-type]
+        else (0.0, 0.0, 0.0, 0.0),
+        (float(d[0]), float(d[1]), float(d[2])) if joint.type is JointType.PRISMATIC else (0.0, 0.0, 0.0),
+    )
+
+
+def _quat_from_matrix(R: FloatArray) -> tuple[float, float, float, float]:
+    from scipy.spatial.transform import Rotation
+
+    x, y, z, w = Rotation.from_matrix(R).as_quat()
+    return float(x), float(y), float(z), float(w)
+
+
+def _local(step: _Step, theta: FloatArray | None) -> tuple[Quat, Vec]:
+    """The joint's local ``(quat_xyzw, translation)`` at ``theta`` (constants when it has none)."""
+    joint = step.joint
+    if theta is None or not joint.moves:
+        return step.q0, step.t0
     if joint.type is JointType.PRISMATIC:
-        return np.hstack([R0, p0, (R0 @ a)[:, None]])
-    return np.hstack([R0, p0])
+        d, t0 = step.d, step.t0
+        return step.q0, (t0[0] + theta * d[0], t0[1] + theta * d[1], t0[2] + theta * d[2])
+    half = 0.5 * theta
+    c, s = np.cos(half), np.sin(half)
+    q0, qa = step.q0, step.qa
+    return (c * q0[0] + s * qa[0], c * q0[1] + s * qa[1], c * q0[2] + s * qa[2], c * q0[3] + s * qa[3]), step.t0
 
 
-def _chain(
-    R_parent: FloatArray | None, p_parent: FloatArray | None, step: _Step, theta: FloatArray | None, n: int
-) -> tuple[FloatArray, FloatArray]:
-    """``T_root_child = T_root_parent @ origin @ motion(theta)``, vectorised over frames.
-
-    ``R_parent``/``p_parent`` None means the identity (the root). A fixed joint, or a moving one
-    given no positions, returns a (1, ...) stack when its parent is the root.
-    """
-    joint, block = step.joint, step.block
-    if R_parent is None or p_parent is None:
-        X = block[None, :, :]  # (1, 3, k)
-        base_p = np.zeros((1, 3))
-    else:
-        m = R_parent.shape[0]
-        X = (R_parent.reshape(m * 3, 3) @ block).reshape(m, 3, block.shape[1])
-        base_p = p_parent
-    if not joint.moves:
-        return X[:, :, 0:3], base_p + X[:, :, 3]
-    if theta is None:
-        theta = np.zeros(n)
-    if joint.type is JointType.PRISMATIC:
-        return X[:, :, 0:3], base_p + X[:, :, 3] + theta[:, None] * X[:, :, 4]
-    c = np.cos(theta)[:, None, None]
-    s = np.sin(theta)[:, None, None]
-    R = X[:, :, 0:3] + c * X[:, :, 3:6] + s * X[:, :, 6:9]
-    return R, base_p + X[:, :, 9]
+def _qmul(a: Quat, b: Quat) -> Quat:
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
-def _homogeneous(R: FloatArray, p: FloatArray) -> FloatArray:
-    n = max(R.shape[0], p.shape[0])
+def _rotate(q: Quat, v: Vec) -> Vec:
+    """``R(q) v`` for a unit quaternion: ``v + w t + q_v x t`` with ``t = 2 q_v x v``."""
+    x, y, z, w = q
+    vx, vy, vz = v
+    tx = 2.0 * (y * vz - z * vy)
+    ty = 2.0 * (z * vx - x * vz)
+    tz = 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
+
+
+def _compose(parent: tuple[Quat, Vec], child: tuple[Quat, Vec]) -> tuple[Quat, Vec]:
+    """``T_a_c = T_a_b @ T_b_c`` on structure-of-arrays poses."""
+    qp, tp = parent
+    qc, tc = child
+    r = _rotate(qp, tc)
+    return _qmul(qp, qc), (tp[0] + r[0], tp[1] + r[1], tp[2] + r[2])
+
+
+def _stack(parts: tuple[FloatArray | float, ...], n: int) -> FloatArray:
+    return np.stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in parts], axis=1)
+
+
+def _homogeneous(quat: Quat, trans: Vec) -> FloatArray:
+    n = max(np.size(c) for c in (*quat, *trans))
+    x, y, z, w = (np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in quat)
     out = np.zeros((n, 4, 4))
-    out[:, :3, :3] = R
-    out[:, :3, 3] = p
+    out[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[:, 0, 1] = 2.0 * (x * y - z * w)
+    out[:, 0, 2] = 2.0 * (x * z + y * w)
+    out[:, 1, 0] = 2.0 * (x * y + z * w)
+    out[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[:, 1, 2] = 2.0 * (y * z - x * w)
+    out[:, 2, 0] = 2.0 * (x * z - y * w)
+    out[:, 2, 1] = 2.0 * (y * z + x * w)
+    out[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    for i in range(3):
+        out[:, i, 3] = trans[i]
     out[:, 3, 3] = 1.0
     return out
