@@ -452,7 +452,8 @@ def _select(
         quick: list[tuple[Fit, FaultModel]] = []
         for candidate in candidates:  # each candidate alone on top of the faults already found
             model = (
-                replace(candidate, starts=rotation_starts(inputs, mode)) if candidate.name.startswith("rotation")
+                replace(candidate, starts=rotation_starts(inputs, mode))
+                if candidate.name.startswith("rotation")
                 else candidate
             )
             quick.append((fit_models([model], objective, inputs, base=base), model))

@@ -110,8 +110,14 @@ def fit_models(
     best: tuple[float, FloatArray] | None = None
     for start in starts:
         result = least_squares(
-            fun, np.clip(start, lower, upper), bounds=(lower, upper), x_scale=scale, method="trf", max_nfev=200,
-            xtol=1e-10, ftol=1e-10,
+            fun,
+            np.clip(start, lower, upper),
+            bounds=(lower, upper),
+            x_scale=scale,
+            method="trf",
+            max_nfev=200,
+            xtol=1e-10,
+            ftol=1e-10,
         )
         cost = float(2.0 * result.cost)
         if best is None or cost < best[0]:

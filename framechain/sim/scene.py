@@ -2,7 +2,7 @@
 
 The base orbits the object (up to about 1 m/s and 0.8 rad/s) while its heading wobbles, so the
 object moves across the image and the robot's speed varies. It publishes what a real robot
-records: ``/tf`` (map -> odom drifting slowly at 10 Hz, odom -> base_link at 100 Hz),
+records: ``/tf`` (map -> odom drifting slowly at 50 Hz, odom -> base_link at 100 Hz),
 ``/tf_static`` (the mast mount, pitched down, and the REP-103 optical rotation), CameraInfo,
 depth (inline or as images) and detections at 30 Hz with pixel and depth noise, and the evidence
 topics of the chosen evidence level.
@@ -115,7 +115,7 @@ class SceneSpec:
     duration_s: float = 10.0
     camera_rate_hz: float = 30.0
     odom_rate_hz: float = 100.0
-    drift_rate_hz: float = 10.0
+    drift_rate_hz: float = 50.0
     width: int = 640
     height: int = 480
     focal_px: float = 600.0
@@ -187,7 +187,7 @@ def generate(spec: SceneSpec) -> Scene:
         return pos, Rotation.from_euler("z", heading[:, None]).as_quat()
 
     def drift(t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """T_map_odom: linear in time (so tf2 interpolation of the 10 Hz samples is exact)."""
+        """T_map_odom: linear in time (so tf2 interpolation between its samples is exact)."""
         trans = np.stack([0.20 + 0.010 * t_s, -0.10 + 0.006 * t_s, np.zeros_like(t_s)], 1)
         return trans, Rotation.from_euler("z", (0.02 + 0.002 * t_s)[:, None]).as_quat()
 

@@ -1,0 +1,72 @@
+"""``framechain attribute``: name the hop, the fault, its size and the fix."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from framechain.cli.common import add_log_arguments, print_findings, print_suggested_chain, progress_reporter
+from framechain.timeline import FramechainError
+
+FORMATS = ("json", "md", "html")
+
+
+def register(sub: Any) -> None:
+    parser = sub.add_parser(
+        "attribute",
+        help="which hop, which fault, how big, and the fix",
+        description="Replay LOG, pick the best evidence present (logged hops, target, reference, static target), "
+        "fit the fault catalogue and write DIR/attribution.json, evidence.parquet, inputs.json and reports. "
+        "Exit 0 when the log could be analysed, whatever was found.",
+    )
+    add_log_arguments(parser)
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    parser.add_argument("--format", default="json,md", help="comma-separated: json, md, html (default json,md)")
+    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    parser.add_argument("--bootstrap", type=int, default=30, help="bootstrap resamples for intervals (default 30)")
+    parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
+    parser.set_defaults(run=run)
+
+
+def parse_formats(text: str) -> list[str]:
+    formats = [f.strip() for f in text.split(",") if f.strip()]
+    unknown = sorted(set(formats) - set(FORMATS))
+    if unknown or not formats:
+        raise FramechainError(f"--format: unknown {unknown or text!r}; choose from {', '.join(FORMATS)}")
+    return formats
+
+
+def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
+    from framechain.analysis.evidence import write_attribution
+    from framechain.pipeline import attribute_log
+
+    formats = default_formats or parse_formats(args.format)
+    with progress_reporter(args.quiet or args.json, "attributing") as progress:
+        run_, result = attribute_log(
+            args.log,
+            args.chain,
+            seed=args.seed,
+            bootstrap=args.bootstrap,
+            episode=args.episode,
+            robot=args.robot,
+            progress=progress,
+        )
+    if run_.chain_suggested:
+        print_suggested_chain(run_.chain, args.quiet or args.json)
+    out = Path(args.out)
+    paths = write_attribution(result, out)
+    report_formats = [f for f in formats if f in ("md", "html")]
+    if report_formats:
+        from framechain.sinks.report import render_report
+
+        paths.update(render_report(result, out, formats=report_formats))
+    if args.json:
+        print(json.dumps(result.to_json(), indent=2))
+        return 0
+    if not args.quiet:
+        print_findings(result)
+        for name, path in paths.items():
+            print(f"{name}: {path}")
+    return 0

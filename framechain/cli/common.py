@@ -1,0 +1,80 @@
+"""Options and rendering shared by the commands that read a log."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+
+def add_log_arguments(parser: argparse.ArgumentParser) -> None:
+    """LOG, --chain, and the LeRobot options, the same for every command that reads a log."""
+    parser.add_argument(
+        "log",
+        metavar="LOG",
+        help="MCAP file, ROS 1 .bag, ROS 2 bag directory (or bare .db3/.mcap), LeRobot dataset "
+        "directory, or a saved timeline directory",
+    )
+    parser.add_argument(
+        "--chain",
+        metavar="CHAIN.yaml",
+        help="chain configuration (frames, topics, evidence); default: the one `framechain info "
+        "LOG --chain` suggests, printed",
+    )
+    parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+    parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+
+
+@contextmanager
+def progress_reporter(quiet: bool, label: str) -> Iterator[Callable[[str], None] | None]:
+    """A rich status line on stderr that follows the analysis steps (None when quiet)."""
+    if quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+
+    console = Console(stderr=True)
+    with console.status(label) as status:
+        yield lambda message: status.update(f"{label}: {message}")
+
+
+def print_suggested_chain(chain: Any, quiet: bool) -> None:
+    """Say which configuration was used when none was given (stderr, so --json stays clean)."""
+    if quiet:
+        return
+    from rich.console import Console
+
+    console = Console(stderr=True)
+    console.print("[dim]no --chain given; using the suggested configuration (edit it and pass --chain):[/dim]")
+    console.print(chain.to_yaml().rstrip(), markup=False, highlight=False)
+
+
+def print_findings(result: Any) -> None:
+    """The verdict, the findings table and the counts, with rich."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = Console()
+    console.print(f"[bold]{result.verdict}[/bold]")
+    counts = result.counts()
+    console.print(
+        f"observations: {counts['total']} total, {counts['replayed']} replayed, "
+        f"rejected {counts['rejected'] or 'none'}, {counts['stale']} stale"
+    )
+    if not result.findings:
+        return
+    table = Table()
+    for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
+        table.add_column(col, overflow="fold")
+    from framechain.sinks.report import _estimate, _interval
+
+    for i, f in enumerate(result.findings, start=1):
+        table.add_row(
+            str(i), f.fault.value, f.hop.value, _estimate(f), _interval(f), f"{f.share:.0%}", f"{f.confidence:.2f}"
+        )
+    console.print(table)
+    for i, f in enumerate(result.findings, start=1):
+        console.print(f"fix {i}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
