@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 from collections.abc import Mapping
@@ -54,6 +53,10 @@ def register(sub: Any) -> None:
     parser.add_argument("--quiet", "-q", action="store_true", help="print nothing but errors and notes")
     parser.add_argument("--json", action="store_true", help="print counts and the output as one JSON object")
     parser.set_defaults(run=run)
+
+
+#: Message types a robot logs its own points (hop points, targets, references) with.
+_POINT_TYPES = frozenset({"PointStamped", "PoseStamped"})
 
 
 @dataclass(frozen=True)
@@ -107,21 +110,21 @@ def _load(path: Path, chain_path: str | None, *, quiet: bool) -> _Loaded:
     if path.is_dir() and (path / "timeline.json").is_file():
         timeline = Timeline.load(path)
         return _Loaded(timeline, chain or _chain_for_timeline(timeline), "timeline")
-    adapters = importlib.import_module("framechain.adapters")
-    open_log = getattr(adapters, "open_log", None)
-    suggest_chain = getattr(adapters, "suggest_chain", None)
-    if open_log is None or suggest_chain is None:
-        raise FramechainError(f"{path}: reading robot logs needs framechain.adapters.open_log, not in this build; "
-                              "pass a saved Timeline directory")
+    from framechain.adapters import open_log, suggest_chain
+
     loaded = open_log(path, chain, progress=not quiet)
+    timeline = loaded.timeline
+    notes = list(loaded.info.notes)
     if chain is None:
         chain = suggest_chain(loaded)
-        if not isinstance(chain, ChainConfig):
-            chain = getattr(chain, "chain", chain)
-    assert isinstance(chain, ChainConfig)
-    info = loaded.info
-    return _Loaded(loaded.timeline, chain, str(getattr(info, "format", "log")),
-                   tuple(str(n) for n in getattr(info, "notes", ())))
+        # Without a chain the log does not say which topic holds which hop's point: leave them out.
+        timeline = timeline.replace(points=type(timeline.points).empty())
+        topics = sorted(t.name for t in loaded.info.topics
+                        if t.msgtype.rsplit("/", 1)[-1] in _POINT_TYPES and t.name not in chain.evidence_topics())
+        if topics:
+            notes.append(f"point topics {', '.join(topics)} not used as evidence: name their roles "
+                         "(evidence: hops, target, reference) in CHAIN.yaml and pass --chain")
+    return _Loaded(timeline, chain, loaded.info.format, tuple(notes))
 
 
 def _chain_for_timeline(timeline: Timeline) -> ChainConfig:

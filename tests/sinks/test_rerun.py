@@ -163,9 +163,12 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     return Scene(timeline, result, rrd, _read(rrd))
 
 
-def _rows(scene: Scene, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
+Chunks = dict[str, list[tuple[bool, pa.RecordBatch]]]
+
+
+def _rows(chunks: Chunks, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
     """Values of one column of an entity over all its chunks, in log order (by RowId)."""
-    batches = [b for s, b in scene.chunks.get(entity, []) if static is None or s == static]
+    batches = [b for s, b in chunks.get(entity, []) if static is None or s == static]
     batches = [b for b in batches if column in b.schema.names]
     if not batches:
         return []
@@ -175,8 +178,8 @@ def _rows(scene: Scene, entity: str, column: str, *, static: bool | None = None)
     return [values[i] for i in order]
 
 
-def _times(scene: Scene, entity: str, timeline: str) -> np.ndarray[Any, Any]:
-    rows = _rows(scene, entity, timeline, static=False)
+def _times(chunks: Chunks, entity: str, timeline: str) -> np.ndarray[Any, Any]:
+    rows = _rows(chunks, entity, timeline, static=False)
     if rows and hasattr(rows[0], "value"):
         return np.array([r.value for r in rows], dtype=np.int64)
     return np.array([np.datetime64(r, "ns").astype(np.int64) if not isinstance(r, int) else r for r in rows],
@@ -200,72 +203,73 @@ def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
                    "/summary", "/frames/map", "/frames/camera_optical_frame"):
         assert entity in scene.chunks, entity
     children = {c[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
-                for c in _rows(scene, e, "Transform3D:child_frame")}
+                for c in _rows(scene.chunks, e, "Transform3D:child_frame")}
     parents = {p[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
-               for p in _rows(scene, e, "Transform3D:parent_frame")}
+               for p in _rows(scene.chunks, e, "Transform3D:parent_frame")}
     assert children == {"base_link", "odom", "mast_link", "camera_optical_frame"}
     assert parents == {"map", "odom", "base_link", "mast_link"}
-    assert _rows(scene, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
-    assert _rows(scene, "/points/recomputed/camera", "CoordinateFrame:frame") == [["camera_optical_frame@replay"]]
-    assert _rows(scene, "/camera/detections", "CoordinateFrame:frame") == [["camera_optical_frame_image_plane"]]
-    pinhole_parent = _rows(scene, "/camera", "Pinhole:parent_frame")
+    assert _rows(scene.chunks, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
+    camera_frame = _rows(scene.chunks, "/points/recomputed/camera", "CoordinateFrame:frame")
+    assert camera_frame == [["camera_optical_frame@replay"]]
+    assert _rows(scene.chunks, "/camera/detections", "CoordinateFrame:frame") == [["camera_optical_frame_image_plane"]]
+    pinhole_parent = _rows(scene.chunks, "/camera", "Pinhole:parent_frame")
     assert pinhole_parent == [["camera_optical_frame"]]
-    assert _rows(scene, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
+    assert _rows(scene.chunks, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
     # K is stored column-major.
-    k = np.asarray(_rows(scene, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
+    k = np.asarray(_rows(scene.chunks, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
     np.testing.assert_allclose(k, scene.timeline.cameras.K[0])
 
 
 def test_world_points_equal_the_replay(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    logged = np.array([r[0] for r in _rows(scene, "/points/recomputed/world", "Points3D:positions")])
+    logged = np.array([r[0] for r in _rows(scene.chunks, "/points/recomputed/world", "Points3D:positions")])
     np.testing.assert_allclose(logged, scene.result.p_world[ok], rtol=1e-6, atol=1e-6)
     assert np.array_equal(logged, scene.result.p_world[ok].astype(np.float32))
-    assert np.array_equal(_times(scene, "/points/recomputed/world", "obs_index"), ok)
-    assert np.array_equal(_times(scene, "/points/recomputed/world", "sensor_time"),
+    assert np.array_equal(_times(scene.chunks, "/points/recomputed/world", "obs_index"), ok)
+    assert np.array_equal(_times(scene.chunks, "/points/recomputed/world", "sensor_time"),
                           scene.result.observations.stamp_ns[ok])
-    assert np.array_equal(_times(scene, "/points/recomputed/world", "log_time"),
+    assert np.array_equal(_times(scene.chunks, "/points/recomputed/world", "log_time"),
                           scene.result.observations.log_time_ns[ok])
-    body = np.array([r[0] for r in _rows(scene, "/points/recomputed/body", "Points3D:positions")])
+    body = np.array([r[0] for r in _rows(scene.chunks, "/points/recomputed/body", "Points3D:positions")])
     np.testing.assert_allclose(body, scene.result.p_body[ok], rtol=1e-6, atol=1e-6)
 
 
 def test_as_run_points_are_matched_and_offset(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    as_run_world = np.array([r[0] for r in _rows(scene, "/points/as_run/world", "Points3D:positions")])
+    as_run_world = np.array([r[0] for r in _rows(scene.chunks, "/points/as_run/world", "Points3D:positions")])
     # Logged in odom, matched by stamp 0.2 ms away, brought back into map.
     np.testing.assert_allclose(as_run_world, scene.result.p_world[ok] + BODY_OFFSET, atol=1e-5)
-    arrows = np.array([r[0] for r in _rows(scene, "/points/error/body", "Arrows3D:vectors")])
+    arrows = np.array([r[0] for r in _rows(scene.chunks, "/points/error/body", "Arrows3D:vectors")])
     np.testing.assert_allclose(arrows, np.tile(BODY_OFFSET, (ok.size, 1)), atol=1e-6)
-    camera = np.array([r[0] for r in _rows(scene, "/points/error/camera", "Arrows3D:vectors")])
+    camera = np.array([r[0] for r in _rows(scene.chunks, "/points/error/camera", "Arrows3D:vectors")])
     np.testing.assert_allclose(camera, 0.0, atol=1e-7)  # the camera hop agrees: zero-length arrows
 
 
 def test_used_transforms_logged_at_observation_times(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    t = np.array([r[0] for r in _rows(scene, "/replay/world_from_body", "Transform3D:translation")])
+    t = np.array([r[0] for r in _rows(scene.chunks, "/replay/world_from_body", "Transform3D:translation")])
     np.testing.assert_allclose(t, scene.result.world_from_body.translation[ok], rtol=1e-6, atol=1e-6)
-    q = np.array([r[0] for r in _rows(scene, "/replay/body_from_cam", "Transform3D:quaternion")])
+    q = np.array([r[0] for r in _rows(scene.chunks, "/replay/body_from_cam", "Transform3D:quaternion")])
     dots = np.abs(np.sum(q * scene.result.body_from_cam.quat_xyzw[ok], axis=1))
     np.testing.assert_allclose(dots, 1.0, atol=1e-6)
-    assert np.array_equal(_times(scene, "/replay/world_from_body", "sensor_time"),
+    assert np.array_equal(_times(scene.chunks, "/replay/world_from_body", "sensor_time"),
                           scene.result.observations.stamp_ns[ok])
-    assert _rows(scene, "/replay/world_from_body", "Transform3D:child_frame")[0] == ["base_link@replay"]
-    assert _rows(scene, "/replay/body_from_cam", "Transform3D:parent_frame")[0] == ["base_link@replay"]
+    assert _rows(scene.chunks, "/replay/world_from_body", "Transform3D:child_frame")[0] == ["base_link@replay"]
+    assert _rows(scene.chunks, "/replay/body_from_cam", "Transform3D:parent_frame")[0] == ["base_link@replay"]
 
 
 def test_static_edges_are_static_and_dynamic_edges_bulk(scene: Scene) -> None:
     for entity in ("/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame"):
         assert all(static for static, _ in scene.chunks[entity]), entity
-        assert len(_rows(scene, entity, "Transform3D:translation")) == 1
+        assert len(_rows(scene.chunks, entity, "Transform3D:translation")) == 1
     assert not any(static for static, _ in scene.chunks["/tf/base_link"])
     tf = scene.timeline.transforms
     dynamic = tf.take(tf.child == "base_link")
-    translations = np.array([r[0] for r in _rows(scene, "/tf/base_link", "Transform3D:translation")])
+    translations = np.array([r[0] for r in _rows(scene.chunks, "/tf/base_link", "Transform3D:translation")])
     assert translations.shape == (len(dynamic), 3)
     np.testing.assert_allclose(translations, dynamic.translation, rtol=1e-6, atol=1e-6)
-    assert np.array_equal(_times(scene, "/tf/base_link", "sensor_time"), dynamic.stamp_ns)
-    assert np.array_equal(_times(scene, "/tf/base_link", "log_time"), dynamic.log_time_ns)
+    assert np.array_equal(_times(scene.chunks, "/tf/base_link", "sensor_time"), dynamic.stamp_ns)
+    assert np.array_equal(_times(scene.chunks, "/tf/base_link", "log_time"), dynamic.log_time_ns)
 
 
 def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> None:
@@ -273,53 +277,53 @@ def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> N
     ok = np.flatnonzero(result.replayed)
     for hop in ("pixel_to_camera", "camera_to_body", "body_to_world"):
         for kind in ("error_mm", "gap_ms"):
-            values = _rows(scene, f"/series/{kind}/{hop}", "Scalars:scalars")
+            values = _rows(scene.chunks, f"/series/{kind}/{hop}", "Scalars:scalars")
             assert len(values) == ok.size, (kind, hop)
-            assert np.array_equal(_times(scene, f"/series/{kind}/{hop}", "obs_index"), ok)
-        gaps = np.array([v[0] for v in _rows(scene, f"/series/gap_ms/{hop}", "Scalars:scalars")])
+            assert np.array_equal(_times(scene.chunks, f"/series/{kind}/{hop}", "obs_index"), ok)
+        gaps = np.array([v[0] for v in _rows(scene.chunks, f"/series/gap_ms/{hop}", "Scalars:scalars")])
         sel = (result.hops.hop == hop) & (result.hops.status == "replayed")
         np.testing.assert_allclose(gaps, result.hops.gap_ns[sel] / 1e6)
-    errors = {hop: np.array([v[0] for v in _rows(scene, f"/series/error_mm/{hop}", "Scalars:scalars")])
+    errors = {hop: np.array([v[0] for v in _rows(scene.chunks, f"/series/error_mm/{hop}", "Scalars:scalars")])
               for hop in ("pixel_to_camera", "camera_to_body", "body_to_world", "target")}
     np.testing.assert_allclose(errors["pixel_to_camera"], 0.0, atol=1e-9)
     np.testing.assert_allclose(errors["camera_to_body"], 50.0, atol=1e-6)
     np.testing.assert_allclose(errors["body_to_world"], 50.0, atol=1e-3)
     np.testing.assert_allclose(errors["target"], 30.0, atol=1e-6)
-    reference = np.array([v[0] for v in _rows(scene, "/series/error_mm/reference", "Scalars:scalars")])
+    reference = np.array([v[0] for v in _rows(scene.chunks, "/series/error_mm/reference", "Scalars:scalars")])
     np.testing.assert_allclose(reference, np.linalg.norm(result.p_world[ok] - REFERENCE_POINT, axis=1) * 1e3)
 
 
 def test_text_log_has_findings_rejections_and_summary(scene: Scene) -> None:
-    findings = [r[0] for r in _rows(scene, "/log/findings", "TextLog:text")]
+    findings = [r[0] for r in _rows(scene.chunks, "/log/findings", "TextLog:text")]
     assert findings == [FindingView.of(FINDINGS[0]).text()]
     assert "latency on body_to_world" in findings[0]
     assert "offset_s=0.031" in findings[0]
     assert "62% of the error" in findings[0]
     assert "24.0 mm" in findings[0]
-    rejected = [r[0] for r in _rows(scene, "/log/rejected", "TextLog:text")]
+    rejected = [r[0] for r in _rows(scene.chunks, "/log/rejected", "TextLog:text")]
     assert len(rejected) == 2
     assert any("outside_image" in r for r in rejected)
     assert any("extrapolation on body_to_world (map <- base_link)" in r for r in rejected)
-    assert _rows(scene, "/log/rejected", "TextLog:level") == [["WARN"], ["WARN"]]
-    summary = _rows(scene, "/summary", "TextDocument:text")[0][0]
+    assert _rows(scene.chunks, "/log/rejected", "TextLog:level") == [["WARN"], ["WARN"]]
+    summary = _rows(scene.chunks, "/summary", "TextDocument:text")[0][0]
     assert "| replayed | 5 |" in summary
     assert "| rejected: extrapolation | 1 |" in summary
 
 
 def test_camera_images_and_detections(scene: Scene) -> None:
-    images = _rows(scene, "/camera/depth", "DepthImage:buffer")
+    images = _rows(scene.chunks, "/camera/depth", "DepthImage:buffer")
     ok = scene.result.replayed
     used = np.unique(scene.result.depth_stamp_ns[ok & ~np.isfinite(scene.result.observations.depth_m)])
     assert 1 <= len(images) <= len(scene.timeline.depth_frames)
-    assert set(used.tolist()) <= set(_times(scene, "/camera/depth", "sensor_time").tolist())
+    assert set(used.tolist()) <= set(_times(scene.chunks, "/camera/depth", "sensor_time").tolist())
     first = np.frombuffer(bytes(images[0][0]), dtype=np.uint16)  # millimetres
     assert first.size == 160 * 120
-    assert _rows(scene, "/camera/depth", "DepthImage:meter")[0] == [1000.0]
-    first_stamp = _times(scene, "/camera/depth", "sensor_time")[0]
+    assert _rows(scene.chunks, "/camera/depth", "DepthImage:meter")[0] == [1000.0]
+    first_stamp = _times(scene.chunks, "/camera/depth", "sensor_time")[0]
     row = int(np.flatnonzero(scene.timeline.depth_frames.stamp_ns == first_stamp)[0])
     expected = scene.timeline.depth_frames.load(row)
     np.testing.assert_allclose(first.reshape(120, 160) / 1000.0, expected, atol=5e-4)
-    detections = np.array([r[0] for r in _rows(scene, "/camera/detections", "Points2D:positions")])
+    detections = np.array([r[0] for r in _rows(scene.chunks, "/camera/detections", "Points2D:positions")])
     obs = scene.result.observations
     np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1))
 
@@ -546,3 +550,55 @@ def test_cli_replay_connect(
     report = json.loads(capsys.readouterr().out)
     assert report["output"] == {"mode": "connect", "path": None, "url": grpc_server.url, "fell_back": False}
     assert "/points/as_run/world" in _received_entities(grpc_server)
+
+
+def test_cli_replay_reads_a_recorded_log(
+    scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from framechain.adapters import write_log
+    from framechain.timeline import ChainConfig
+
+    chain = ChainConfig.from_dict({
+        "frames": {"camera": "camera_optical_frame", "body": "base_link", "world": "map"},
+        "topics": {"camera_info": "/camera/camera_info", "detections": "/detections",
+                   "depth": "/camera/depth/image_rect_raw"},
+        "evidence": {"hops": {"camera": "/debug/point_camera", "body": "/debug/point_body",
+                              "world": "/debug/point_world"}, "target": "/grasp_target"},
+    })
+    log = write_log(scene.timeline, tmp_path / "scene.mcap", container="mcap-ros2", chain=chain)
+    chain_file = tmp_path / "chain.yaml"
+    chain_file.write_text(chain.to_yaml())
+    out = tmp_path / "mcap.rrd"
+    assert main(["replay", str(log), "--chain", str(chain_file), "--save", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["source"] == "mcap"
+    assert report["counts"]["replayed"] == 5
+    assert report["entities"]["/series/error_mm/camera_to_body"] == 5  # as-run matched by stamp
+    # Without --chain the frames are suggested and the unnamed evidence topics are left out, with a note.
+    assert main(["replay", str(log), "--save", str(tmp_path / "nochain.rrd"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
+    assert any("not used" in note for note in report["notes"])
+    assert "/series/error_mm/camera_to_body" not in report["entities"]
+
+
+def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A real TurtleBot 4 Nav2 MCAP (sim-time header stamps): every edge on its /tf/<child> entity."""
+    from framechain.adapters import open_log
+
+    log = realdata / "evo" / "nav2_turtlebot.mcap"
+    out = tmp_path / "nav2.rrd"
+    assert main(["replay", str(log), "--save", str(out), "--quiet"]) == 0
+    assert capsys.readouterr().out == ""
+    tf = open_log(log).timeline.transforms
+    chunks = _read(out)
+    for child in np.unique(tf.child).tolist():
+        entity = f"/tf/{child}"
+        rows = tf.take(tf.child == child)
+        if rows.is_static.all():
+            assert all(static for static, _ in chunks[entity]), entity
+            continue
+        translations = np.array([r[0] for r in _rows(chunks, entity, "Transform3D:translation")])
+        order = np.argsort(rows.stamp_ns, kind="stable")
+        np.testing.assert_allclose(translations, rows.translation[order], rtol=1e-6, atol=1e-6)
+        assert np.array_equal(_times(chunks, entity, "sensor_time"), rows.stamp_ns[order])
