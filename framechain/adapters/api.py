@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
@@ -117,8 +117,14 @@ def scan_log(path: str | Path) -> LogInfo:
         return src.info().with_notes(notes)
 
 
-def open_log(path: str | Path, chain: ChainConfig | None = None, *, progress: bool = False) -> LoadedLog:
+def open_log(
+    path: str | Path, chain: ChainConfig | None = None, *, progress: bool = False,
+    kinds: Collection[str] | None = None,
+) -> LoadedLog:
     """Read a log into the Timeline: only the topics ``chain`` needs (all it understands if None).
+
+    ``kinds`` narrows further to some message kinds (:class:`Kind` values, e.g. ``{"tf"}``);
+    ``progress`` shows a progress bar on stderr for large logs.
 
     Every table comes in log-time order (ties: by topic, then file order). Depth pixels stay in
     the log until :meth:`DepthFrameTable.load` asks for a frame.
@@ -133,6 +139,9 @@ def open_log(path: str | Path, chain: ChainConfig | None = None, *, progress: bo
         info = src.info().with_notes(notes)
         types = {t.name: normalize_msgtype(t.msgtype) for t in info.topics}
         selected = select_topics(types, chain)
+        if kinds is not None:
+            wanted = {Kind(k) for k in kinds}
+            selected = {t: k for t, k in selected.items() if k in wanted}
         if chain is not None:
             _check_chain_topics(p, chain, types)
         total = sum(t.count for t in info.topics if t.name in selected)
@@ -192,5 +201,5 @@ def _progress(enabled: bool, total: int, label: str) -> Iterator[Callable[[int],
         yield lambda n: bar.advance(task, n)
 
 
-def kinds_of(loaded: LoadedLog) -> dict[str, Kind]:
-    return {t: Kind(k) for t, k in loaded.decoded_topics.items()}
+#: The kinds that make the frame tree (what ``framechain tf`` reads).
+TREE_KINDS = frozenset({Kind.TF.value, Kind.TRANSFORM.value, Kind.ODOMETRY.value, Kind.RS_EXTRINSIC.value})

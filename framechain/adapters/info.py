@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from framechain.adapters.collect import CLOCK_GAP_NOTE_S
 from framechain.adapters.model import LoadedLog
 from framechain.timeline import (
     ChainConfig,
@@ -38,6 +39,8 @@ class EdgeInfo:
     delay_p95_s: float | None
     delay_max_s: float | None
     sources: tuple[str, ...]
+    #: Header stamps and log times are in different clocks (sim time, an unsynchronised sensor).
+    clocks_differ: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -45,6 +48,7 @@ class EdgeInfo:
             "rate_hz": self.rate_hz, "first_stamp_ns": self.first_stamp_ns, "last_stamp_ns": self.last_stamp_ns,
             "span_s": (self.last_stamp_ns - self.first_stamp_ns) * 1e-9, "delay_mean_s": self.delay_mean_s,
             "delay_p95_s": self.delay_p95_s, "delay_max_s": self.delay_max_s, "sources": list(self.sources),
+            "clocks_differ": self.clocks_differ,
         }
 
 
@@ -65,13 +69,15 @@ def frame_tree(transforms: TransformTable) -> list[EdgeInfo]:
         n = int(rows.size)
         span = int(stamps[-1] - stamps[0])
         rate = (n - 1) / (span * 1e-9) if n > 1 and span > 0 and not static else 0.0
+        differ = False
         if static:
             mean = p95 = mx = None
         else:
             delay = (transforms.log_time_ns[rows] - transforms.stamp_ns[rows]) * 1e-9
             mean, p95, mx = float(delay.mean()), float(np.percentile(delay, 95)), float(delay.max())
+            differ = abs(float(np.median(delay))) > CLOCK_GAP_NOTE_S
         out.append(EdgeInfo(parent, child, static, n, rate, int(stamps[0]), int(stamps[-1]), mean, p95, mx,
-                            tuple(sorted(set(transforms.source[rows].tolist())))))
+                            tuple(sorted(set(transforms.source[rows].tolist()))), differ))
     return out
 
 

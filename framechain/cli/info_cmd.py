@@ -1,0 +1,145 @@
+"""``framechain info LOG [--json] [--chain]``: what a log holds, its frame tree and a chain to start from."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from framechain.adapters import EdgeInfo, LoadedLog
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser(
+        "info",
+        help="format, topics, frame tree, cameras and a suggested chain of a log",
+        description="Read a log (MCAP, ROS 1 bag, ROS 2 bag) and show its format and span, the topics with "
+        "types, counts and rates, the frame tree (parent, child, static or dynamic, rate, span, and the delay "
+        "between header stamp and log time per edge), the cameras, and a suggested chain configuration.",
+    )
+    p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a bare .db3")
+    out = p.add_mutually_exclusive_group()
+    out.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
+    out.add_argument("--chain", action="store_true",
+                     help="print only the suggested chain configuration as YAML (framechain info LOG --chain > chain.yaml)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from framechain.adapters import frame_tree, open_log, suggest_chain
+
+    loaded = open_log(args.log, progress=sys.stderr.isatty() and not args.json)
+    chain = suggest_chain(loaded)
+    edges = frame_tree(loaded.timeline.transforms)
+    if args.chain:
+        print(_chain_yaml(loaded, chain.to_yaml(), edges), end="")
+        return 0
+    if args.json:
+        print(json.dumps(_as_json(loaded, edges, chain.to_dict()), indent=2))
+        return 0
+    _render(loaded, edges, chain.to_yaml())
+    return 0
+
+
+def _chain_yaml(loaded: LoadedLog, text: str, edges: list[EdgeInfo]) -> str:
+    frames = {e.parent for e in edges} | {e.child for e in edges}
+    frames |= set(loaded.timeline.cameras.frame.tolist())
+    header = [f"# chain suggested by `framechain info` from {loaded.info.path}; edit before use"]
+    from framechain.adapters import suggest_chain
+
+    chain = suggest_chain(loaded).frames
+    missing = [f"{slot}={name}" for slot, name in (("camera", chain.camera), ("body", chain.body),
+                                                   ("world", chain.world)) if name not in frames]
+    if missing:
+        header.append(f"# frames not in this log: {', '.join(missing)}")
+    return "\n".join(header) + "\n" + text
+
+
+def _as_json(loaded: LoadedLog, edges: list[EdgeInfo], chain: dict[str, Any]) -> dict[str, Any]:
+    cams = loaded.timeline.cameras
+    cameras = []
+    for frame in dict.fromkeys(cams.frame.tolist()):
+        i = int(list(cams.frame).index(frame))
+        cameras.append({
+            "frame": frame, "topic": str(cams.source[i]), "width": int(cams.width[i]), "height": int(cams.height[i]),
+            "fx": float(cams.K[i, 0, 0]), "fy": float(cams.K[i, 1, 1]), "cx": float(cams.K[i, 0, 2]),
+            "cy": float(cams.K[i, 1, 2]), "distortion_model": str(cams.distortion_model[i]),
+            "distortion": cams.distortion[i, : int(cams.n_distortion[i])].tolist(),
+            "count": int((cams.frame == frame).sum()),
+        })
+    return {**loaded.info.to_dict(), "edges": [e.to_dict() for e in edges], "cameras": cameras,
+            "suggested_chain": chain}
+
+
+def _ms(value: float | None) -> str:
+    return "-" if value is None else f"{value * 1e3:.1f}"
+
+
+def _edge_label(e: EdgeInfo) -> str:
+    if e.is_static:
+        return f"[bold]{e.child}[/]  [dim]static[/] [dim]({', '.join(e.sources)})[/]"
+    span = (e.last_stamp_ns - e.first_stamp_ns) * 1e-9
+    if e.clocks_differ:
+        delay = (f"[yellow]stamps and log times in different clocks (log - stamp = {e.delay_mean_s or 0.0:.1f} s; "
+                 "see notes)[/]")
+    else:
+        delay = f"delay mean {_ms(e.delay_mean_s)} ms, p95 {_ms(e.delay_p95_s)} ms, max {_ms(e.delay_max_s)} ms"
+    return (f"[bold]{e.child}[/]  [cyan]{e.rate_hz:.1f} Hz[/], {e.count} samples over {span:.2f} s; {delay} "
+            f"[dim]({', '.join(e.sources)})[/]")
+
+
+def _render(loaded: LoadedLog, edges: list[EdgeInfo], chain_yaml: str) -> None:
+    from rich.console import Console
+    from rich.markup import escape
+    from rich.table import Table
+    from rich.tree import Tree
+
+    from framechain.adapters.info import children_of, tree_roots
+
+    console = Console()
+    info = loaded.info
+    console.print(f"[bold]{escape(str(info.path))}[/]")
+    console.print(f"  format     {info.container or info.format}")
+    console.print(f"  duration   {info.duration_s:.3f} s  (log time {info.start_ns * 1e-9:.3f} .. {info.end_ns * 1e-9:.3f})")
+    console.print(f"  messages   {info.message_count}")
+    topics = Table(title="Topics", title_justify="left")
+    for col, justify in (("topic", "left"), ("type", "left"), ("count", "right"), ("rate (Hz)", "right"),
+                         ("read as", "left")):
+        topics.add_column(col, justify=justify)  # type: ignore[arg-type]
+    for t in info.topics:
+        topics.add_row(escape(t.name), escape(t.msgtype), str(t.count), f"{t.rate_hz:.1f}",
+                       loaded.decoded_topics.get(t.name, "[dim]-[/]"))
+    console.print(topics)
+    if edges:
+        kids = children_of(edges)
+        tree = Tree("[bold]Frame tree[/] (parent -> child; delay = log time - header stamp)")
+
+        def add(node: Tree, frame: str, depth: int) -> None:
+            for e in sorted(kids.get(frame, []), key=lambda e: e.child):
+                branch = node.add(_edge_label(e))
+                if depth < 64:
+                    add(branch, e.child, depth + 1)
+
+        for root in tree_roots(edges):
+            add(tree.add(f"[bold]{escape(root)}[/]"), root, 0)
+        console.print(tree)
+    else:
+        console.print("[yellow]No transforms (/tf, /tf_static, TransformStamped, Odometry) in this log.[/]")
+    cams = loaded.timeline.cameras
+    if len(cams):
+        table = Table(title="Cameras", title_justify="left")
+        for col in ("frame", "topic", "size", "fx", "fy", "cx", "cy", "distortion"):
+            table.add_column(col)
+        for frame in dict.fromkeys(cams.frame.tolist()):
+            i = int(list(cams.frame).index(frame))
+            K = cams.K[i]
+            table.add_row(escape(frame), escape(str(cams.source[i])), f"{cams.width[i]}x{cams.height[i]}",
+                          f"{K[0, 0]:.2f}", f"{K[1, 1]:.2f}", f"{K[0, 2]:.2f}", f"{K[1, 2]:.2f}",
+                          f"{cams.distortion_model[i]} ({int(cams.n_distortion[i])})")
+        console.print(table)
+    for note in info.notes:
+        console.print(f"[yellow]note:[/] {escape(note)}")
+    console.print("[bold]Suggested chain[/] (framechain info LOG --chain > chain.yaml):")
+    console.print(escape(chain_yaml), highlight=False)
