@@ -1,0 +1,165 @@
+"""Attribution against scenes with known injected faults, at every evidence level.
+
+The truth is what the generator injected (an independent value); assertions compare the top
+finding's fault, hop and estimate with it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.attribute import attribute
+from framechain.analysis.faults import Fault
+from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+
+LEVELS_AS_RUN = ("hops", "target")
+LEVELS_DATA = ("reference", "static")
+
+# (kind, params, expected estimate key, expected value) for faults in the robot's computation.
+ROBOT_FAULTS: list[tuple[FaultKind, dict[str, Any], str, float]] = [
+    (FaultKind.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
+    (FaultKind.LATENCY, {"offset_s": 0.045}, "offset_s", 0.045),
+    (FaultKind.MISSING_ROTATION, {}, "angle_deg", 30.0),
+    (FaultKind.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
+    (FaultKind.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
+    (FaultKind.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
+    (FaultKind.AXIS_FLIP, {"permutation": [[1, 0, 0], [0, -1, 0], [0, 0, 1]]}, "", 0.0),
+    (FaultKind.WRONG_WORLD_FRAME, {}, "", 0.0),
+    (FaultKind.INVERTED_TRANSFORM, {"hop": "camera_to_body"}, "", 0.0),
+    (FaultKind.INVERTED_TRANSFORM, {"hop": "body_to_world"}, "", 0.0),
+]
+# Faults in the recorded data: found against a reference or by the static target's spread.
+DATA_FAULTS: list[tuple[FaultKind, dict[str, Any], str, float]] = [
+    (FaultKind.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
+    (FaultKind.MISSING_ROTATION, {}, "angle_deg", 30.0),
+    (FaultKind.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
+    (FaultKind.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
+    (FaultKind.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
+]
+TOLERANCE = {"offset_s": 0.002, "angle_deg": 0.5, "factor": 0.01, "scale": 0.01}
+
+
+def _scene(evidence: str, faults: tuple[InjectedFault, ...], seed: int = 3) -> Any:
+    return generate(SceneSpec(seed=seed, duration_s=6.0, evidence=evidence, faults=faults))  # type: ignore[arg-type]
+
+
+def _check_top(result: Any, fault: InjectedFault, key: str, value: float) -> None:
+    assert result.findings, f"nothing found for {fault}"
+    top = result.findings[0]
+    assert (top.fault.value, top.hop.value) == (fault.kind.value, fault.hop), [
+        (f.fault.value, f.hop.value, f.estimate) for f in result.findings]
+    if key:
+        rel = key in ("factor", "scale")
+        error = abs(top.estimate[key] - value) / (abs(value) if rel else 1.0)
+        assert error <= TOLERANCE[key], (top.estimate, value)
+
+
+@pytest.mark.parametrize("level", LEVELS_AS_RUN)
+@pytest.mark.parametrize(("kind", "params", "key", "value"), ROBOT_FAULTS,
+                         ids=[f"{k.value}-{i}" for i, (k, *_rest) in enumerate(ROBOT_FAULTS)])
+def test_robot_fault_found_from_logged_points(level: str, kind: FaultKind, params: dict[str, Any], key: str,
+                                              value: float) -> None:
+    fault = InjectedFault(kind, "robot", params)
+    scene = _scene(level, (fault,))
+    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    _check_top(result, fault, key, value)
+    assert result.metric == ("logged_hops" if level == "hops" else "target")
+
+
+@pytest.mark.parametrize("level", LEVELS_DATA)
+@pytest.mark.parametrize(("kind", "params", "key", "value"), DATA_FAULTS,
+                         ids=[f"{k.value}-{i}" for i, (k, *_rest) in enumerate(DATA_FAULTS)])
+def test_data_fault_found_against_reference_or_spread(level: str, kind: FaultKind, params: dict[str, Any],
+                                                      key: str, value: float) -> None:
+    fault = InjectedFault(kind, "data", params)
+    scene = _scene(level, (fault,))
+    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    _check_top(result, fault, key, value)
+
+
+def test_recorded_axis_flip_and_inverted_mount_found_against_reference() -> None:
+    flip = InjectedFault(FaultKind.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
+    result = attribute(_scene("reference", (flip,)).timeline, _scene("reference", (flip,)).chain, bootstrap=0)
+    assert (result.findings[0].fault, result.findings[0].estimate["permutation"]) == (
+        Fault.AXIS_FLIP, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]])
+    inverted = InjectedFault(FaultKind.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
+    scene = _scene("reference", (inverted,))
+    top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
+    assert top.fault == Fault.INVERTED_TRANSFORM
+    assert top.estimate["edge"] == ["base_link", "camera_link"]
+
+
+@pytest.mark.parametrize("level", ("hops", "target", "reference", "static"))
+def test_clean_log_has_no_finding(level: str) -> None:
+    for seed in (1, 2):
+        scene = _scene(level, (), seed=seed)
+        result = attribute(scene.timeline, scene.chain, bootstrap=0)
+        assert [f for f in result.findings if f.share > 0.1] == []
+        assert result.verdict.startswith("No fault beyond noise")
+
+
+@pytest.mark.parametrize("level", ("hops", "target", "reference"))
+def test_combined_missing_rotation_and_latency(level: str) -> None:
+    where = "data" if level == "reference" else "robot"
+    faults = (InjectedFault(FaultKind.MISSING_ROTATION, where),
+              InjectedFault(FaultKind.LATENCY, where, {"offset_s": -0.03}))
+    scene = _scene(level, faults)
+    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    by_fault = {f.fault: f for f in result.findings}
+    assert set(by_fault) == {Fault.MISSING_ROTATION, Fault.LATENCY}
+    assert abs(by_fault[Fault.MISSING_ROTATION].estimate["angle_deg"] - 30.0) < 0.5
+    assert abs(by_fault[Fault.LATENCY].estimate["offset_s"] + 0.03) < 0.002
+    # Shares add up to the explained error and are sorted largest first.
+    shares = [f.share for f in result.findings]
+    assert shares == sorted(shares, reverse=True)
+    assert 0.9 < sum(shares) <= 1.0 + 1e-6
+
+
+def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
+    faults = (InjectedFault(FaultKind.DEPTH_SCALE, "robot", {"factor": 0.9}),
+              InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": 0.02}))
+    scene = _scene("target", faults)
+    found = {f.fault: f.estimate for f in attribute(scene.timeline, scene.chain, bootstrap=0).findings}
+    assert abs(found[Fault.DEPTH_SCALE]["factor"] - 0.9) < 0.009
+    assert abs(found[Fault.LATENCY]["offset_s"] - 0.02) < 0.002
+
+
+def test_missing_rotation_fix_names_the_corrected_mount() -> None:
+    scene = _scene("hops", (InjectedFault(FaultKind.MISSING_ROTATION, "robot"),))
+    top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
+    # The mount is pitched 30 deg about y: rpy = (0, 0.5236, 0) rad, independent of the code under test.
+    rpy = Rotation.from_euler("y", 30, degrees=True).as_euler("xyz")
+    assert f'rpy="{rpy[0]:.5f} {rpy[1]:.5f} {rpy[2]:.5f}"' in top.fix
+    assert "--frame-id base_link --child-frame-id camera_link" in top.fix
+    assert top.estimate["axis"] == pytest.approx([0.0, -1.0, 0.0], abs=1e-3)
+
+
+def test_bootstrap_interval_covers_the_injected_latency() -> None:
+    fault = InjectedFault(FaultKind.LATENCY, "data", {"offset_s": -0.03})
+    scene = _scene("reference", (fault,))
+    top = attribute(scene.timeline, scene.chain, bootstrap=20, seed=5).findings[0]
+    lo, hi = top.interval["offset_s"]
+    assert lo <= -0.03 <= hi
+    assert hi - lo < 0.01
+
+
+def test_attribution_json_contract() -> None:
+    scene = _scene("hops", (InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": -0.03}),))
+    doc = attribute(scene.timeline, scene.chain, bootstrap=0).to_json()
+    assert doc["schema"] == "framechain/attribution@1"
+    assert set(doc["frames"]) == {"camera", "body", "world"}
+    obs = doc["observations"]
+    assert obs["replayed"] + sum(obs["rejected"].values()) == obs["total"]
+    assert doc["error_m"]["metric"] == "logged_hops"
+    finding = doc["findings"][0]
+    assert set(finding) >= {"fault", "hop", "estimate", "share", "error_m", "confidence", "evidence", "fix"}
+    assert finding["fault"] in {f.value for f in Fault}
+    assert finding["hop"] in {"pixel_to_camera", "camera_to_body", "body_to_world"}
+    # The world error of a 30 ms pose latency is about speed * 30 ms: check against the generator's truth.
+    errors = np.linalg.norm(scene.robot_world - attribute(scene.timeline, scene.chain, bootstrap=0).corrected_world,
+                            axis=1)
+    assert doc["error_m"]["median"] == pytest.approx(float(np.median(errors)), abs=1e-6)  # JSON keeps micrometres
