@@ -5,38 +5,39 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from framechain.timeline import ChainConfig, ChainFrames, FramechainError
+from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter
 
 if TYPE_CHECKING:
+    from framechain.pipeline import LoadedRun
     from framechain.replay import ReplayResult
     from framechain.sinks.rerun import RerunOutcome, RerunTarget
-    from framechain.timeline import Timeline
 
 DESCRIPTION = """\
 Replay every observation of LOG through the chain (pixel -> camera -> body -> world) and stream
 it to Rerun: the frame tree over time, the camera as a pinhole with its depth frames and
 detections, each hop's point recomputed and as the robot logged it, error arrows, per-hop error
-and time-gap series, rejected observations and a summary, with a default layout.
+and time-gap series, rejected observations and a summary, in a default layout. With
+--attribute, the findings of `framechain attribute` are added to the text log.
 
-LOG is a robot log (MCAP, ROS 1 bag, ROS 2 bag directory) or a saved Timeline directory.
-Without --chain the chain is suggested from the log (as `framechain info` shows it).
-Output: --save FILE.rrd (works without a viewer), --connect URL (a running viewer, e.g.
-rerun+http://127.0.0.1:9876/proxy), or --spawn (a local viewer). Without an option the viewer
+Output: --save FILE.rrd (no viewer needed), --connect URL (a running viewer, e.g.
+rerun+http://127.0.0.1:9876/proxy), or --spawn (a local viewer). Without one of them the viewer
 is spawned when a display is available, otherwise the recording is saved to ./<LOG name>.rrd.
---spawn without a display (DISPLAY and WAYLAND_DISPLAY unset) says so and saves instead.
+--spawn without a display (DISPLAY and WAYLAND_DISPLAY unset) says so on stderr and saves.
 """
 
 EPILOG = """\
 exit codes:
-  0    the replay was written (whatever it found)
+  0    the recording was written (whatever the replay found)
   1    bad input: the log, the chain or the output could not be used (one line on stderr)
   2    usage error
 """
+
+#: Message types a robot logs its own points (hop points, targets, references) with.
+_POINT_TYPES = frozenset({"PointStamped", "PoseStamped"})
 
 
 def register(sub: Any) -> None:
@@ -44,56 +45,67 @@ def register(sub: Any) -> None:
         "replay", help="replay the chain of a log and stream it to Rerun (.rrd, viewer)",
         description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("log", metavar="LOG", help="robot log, or a saved Timeline directory")
-    parser.add_argument("--chain", metavar="CHAIN.yaml", help="chain configuration (default: suggested from LOG)")
+    add_log_arguments(parser)
     out = parser.add_mutually_exclusive_group()
-    out.add_argument("--spawn", action="store_true", help="start a local Rerun viewer (falls back to saving)")
+    out.add_argument("--spawn", action="store_true", help="start a local Rerun viewer (saves when there is no display)")
     out.add_argument("--connect", metavar="URL", help="send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     out.add_argument("--save", metavar="FILE.rrd", help="write a recording file (no viewer needed)")
-    parser.add_argument("--quiet", "-q", action="store_true", help="print nothing but errors and notes")
+    parser.add_argument("--attribute", action="store_true", help="also attribute the error and log the findings")
+    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed of --attribute (default 0)")
+    parser.add_argument("--max-images", type=int, default=60, metavar="N",
+                        help="depth frames logged at most, nearest the observations (default 60)")
     parser.add_argument("--json", action="store_true", help="print counts and the output as one JSON object")
     parser.set_defaults(run=run)
 
 
-#: Message types a robot logs its own points (hop points, targets, references) with.
-_POINT_TYPES = frozenset({"PointStamped", "PoseStamped"})
-
-
-@dataclass(frozen=True)
-class _Loaded:
-    timeline: Timeline
-    chain: ChainConfig
-    source: str  # "timeline" or the adapter's format
-    notes: tuple[str, ...] = ()
-
-
 def run(args: argparse.Namespace) -> int:
+    from framechain.pipeline import load_log
     from framechain.replay import replay
-    from framechain.sinks.rerun import RerunOptions, RerunTarget, display_available, stream_replay
+    from framechain.sinks.rerun import RerunOptions, stream_replay
 
-    path = Path(args.log)
-    loaded = _load(path, args.chain, quiet=args.quiet or args.json)
-    result = replay(loaded.timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
-    default_file = Path.cwd() / f"{_log_name(path)}.rrd"
-    target: RerunTarget
-    if args.save:
-        target = RerunTarget.save(args.save)
-    elif args.connect:
-        target = RerunTarget.connect(args.connect)
-    elif args.spawn or display_available():
-        target = RerunTarget.spawn(default_file)
-    else:
-        target = RerunTarget.save(default_file)
-    outcome = stream_replay(
-        loaded.timeline, result, target, reference_point=loaded.chain.evidence.reference_point,
-        options=RerunOptions(recording_name=path.name),
-        notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
-    )
+    quiet = args.quiet or args.json
+    findings: Sequence[object] = ()
+    with progress_reporter(quiet, "replaying") as progress:
+        loaded = load_log(args.log, args.chain, episode=args.episode, robot=args.robot, progress=not quiet)
+        notes = list(loaded.notes)
+        timeline = loaded.timeline
+        if loaded.chain_suggested and loaded.info is not None:
+            notes.extend(_unused_point_topics(loaded))
+        if args.attribute:
+            from framechain.analysis.attribute import attribute
+
+            attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
+            result, findings = attribution.replay, attribution.findings
+        else:
+            result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+        if progress is not None:
+            progress("writing the Rerun recording")
+        outcome = stream_replay(
+            timeline, result, _target(args, loaded.path), findings=findings,
+            reference_point=loaded.chain.evidence.reference_point,
+            options=RerunOptions(recording_name=loaded.path.name, max_images=args.max_images),
+            notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
+        )
+    if loaded.chain_suggested:
+        print_suggested_chain(loaded.chain, quiet)
     if args.json:
-        print(json.dumps(_report(path, loaded, result, outcome)))
+        print(json.dumps(_report(loaded, result, outcome, notes, findings)))
     elif not args.quiet:
-        _print_text(path, loaded, result, outcome)
+        _print_text(loaded, result, outcome, notes, findings)
     return 0
+
+
+def _target(args: argparse.Namespace, log: Path) -> RerunTarget:
+    from framechain.sinks.rerun import RerunTarget, display_available
+
+    default_file = Path.cwd() / f"{_log_name(log)}.rrd"
+    if args.save:
+        return RerunTarget.save(args.save)
+    if args.connect:
+        return RerunTarget.connect(args.connect)
+    if args.spawn or display_available():
+        return RerunTarget.spawn(default_file)
+    return RerunTarget.save(default_file)
 
 
 def _log_name(path: Path) -> str:
@@ -101,90 +113,65 @@ def _log_name(path: Path) -> str:
     return name.removesuffix(path.suffix) if path.is_file() else name
 
 
-def _load(path: Path, chain_path: str | None, *, quiet: bool) -> _Loaded:
-    from framechain.timeline import Timeline
-
-    chain = ChainConfig.from_yaml(chain_path) if chain_path else None
-    if not path.exists():
-        raise FramechainError(f"{path}: no such file or directory")
-    if path.is_dir() and (path / "timeline.json").is_file():
-        timeline = Timeline.load(path)
-        return _Loaded(timeline, chain or _chain_for_timeline(timeline), "timeline")
-    from framechain.adapters import open_log, suggest_chain
-
-    loaded = open_log(path, chain, progress=not quiet)
-    timeline = loaded.timeline
-    notes = list(loaded.info.notes)
-    if chain is None:
-        chain = suggest_chain(loaded)
-        # Without a chain the log does not say which topic holds which hop's point: leave them out.
-        timeline = timeline.replace(points=type(timeline.points).empty())
-        topics = sorted(t.name for t in loaded.info.topics
-                        if t.msgtype.rsplit("/", 1)[-1] in _POINT_TYPES and t.name not in chain.evidence_topics())
-        if topics:
-            notes.append(f"point topics {', '.join(topics)} not used as evidence: name their roles "
-                         "(evidence: hops, target, reference) in CHAIN.yaml and pass --chain")
-    return _Loaded(timeline, chain, loaded.info.format, tuple(notes))
+def _unused_point_topics(loaded: LoadedRun) -> list[str]:
+    """Without a chain the log does not say which topic holds which hop's point: say so."""
+    topics = sorted(t.name for t in getattr(loaded.info, "topics", ())
+                    if str(t.msgtype).rsplit("/", 1)[-1] in _POINT_TYPES
+                    and t.name not in loaded.chain.evidence_topics())
+    if not topics:
+        return []
+    return [f"point topics {', '.join(topics)} not used as evidence: name their roles "
+            "(evidence: hops, target, reference) in CHAIN.yaml and pass --chain"]
 
 
-def _chain_for_timeline(timeline: Timeline) -> ChainConfig:
-    """A saved Timeline's own chain (``metadata["chain"]``), else frames guessed from its tables."""
-    import numpy as np
+def _report(
+    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[object]
+) -> dict[str, Any]:
+    from framechain.sinks.rerun import FindingView
 
-    raw = timeline.metadata.get("chain")
-    if isinstance(raw, Mapping):
-        return ChainConfig.from_dict(raw, where="timeline metadata chain")
-    frames = set(timeline.transforms.parent.tolist()) | set(timeline.transforms.child.tolist())
-    cameras = timeline.observations.camera_frame
-    if cameras.size:
-        names, counts = np.unique(cameras, return_counts=True)
-        camera = str(names[int(np.argmax(counts))])
-    elif len(timeline.cameras):
-        camera = str(timeline.cameras.frame[0])
-    else:
-        camera = ChainFrames().camera
-    body = next((b for b in ("base_link", "base_footprint") if b in frames), ChainFrames().body)
-    world = next((w for w in ("map", "odom") if w in frames), ChainFrames().world)
-    return ChainConfig(frames=ChainFrames(camera=camera, body=body, world=world))
-
-
-def _report(path: Path, loaded: _Loaded, result: ReplayResult, outcome: RerunOutcome) -> dict[str, Any]:
     frames = loaded.chain.frames
     return {
-        "log": str(path),
-        "source": loaded.source,
+        "log": str(loaded.path),
+        "source": str(getattr(loaded.info, "format", "timeline")),
         "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
+        "chain_suggested": loaded.chain_suggested,
         "latency_budget_s": loaded.chain.latency_budget_s,
         "counts": result.counts(),
+        "findings": [FindingView.of(f).text() for f in findings],
         "output": {
             "mode": outcome.mode.value, "path": None if outcome.path is None else str(outcome.path),
             "url": outcome.url, "fell_back": outcome.fell_back,
         },
-        "notes": [*loaded.notes, *outcome.notes],
+        "notes": [*notes, *outcome.notes],
         "entities": dict(outcome.rows),
     }
 
 
-def _print_text(path: Path, loaded: _Loaded, result: ReplayResult, outcome: RerunOutcome) -> None:
+def _print_text(
+    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[object]
+) -> None:
+    from framechain.sinks.rerun import FindingView
+
     frames = loaded.chain.frames
     counts = result.counts()
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
-    n_rejected = sum(rejected.values())
     detail = ", ".join(f"{reason} {n}" for reason, n in sorted(rejected.items()))
-    print(f"log           {path} ({loaded.source})")
+    source = getattr(loaded.info, "format", "timeline")
+    print(f"log           {loaded.path} ({source})")
     print(f"chain         {frames.camera} -> {frames.body} -> {frames.world} "
           f"(latency budget {loaded.chain.latency_budget_s * 1e3:g} ms)")
-    line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {n_rejected} rejected"
+    line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {sum(rejected.values())} rejected"
     if detail:
         line += f" ({detail})"
-    line += f", {counts['stale']} stale"
-    print(line)
-    for note in loaded.notes:
+    print(f"{line}, {counts['stale']} stale")
+    for note in notes:
         print(f"note          {note}")
+    for i, finding in enumerate(findings, start=1):
+        print(f"finding {i}     {FindingView.of(finding).text()}")
     if outcome.path is not None:
         print(f"rerun         saved {outcome.path} (open with: rerun {outcome.path})")
-    elif outcome.mode.value == "connect":
-        print(f"rerun         sent to {outcome.url or 'the default viewer'}")
+    elif outcome.url is not None:
+        print(f"rerun         sent to {outcome.url}")
     else:
         print("rerun         sent to a spawned viewer")

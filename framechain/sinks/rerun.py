@@ -181,6 +181,7 @@ class FindingView:
     fault: str
     hop: str
     estimate: Any = None
+    interval: Any = None  # {key: [low, high]} for estimate keys
     share: float | None = None
     error_m: float | None = None
     confidence: float | None = None
@@ -207,7 +208,8 @@ class FindingView:
             return None if value is None else float(value)
 
         return cls(
-            fault=str(get("fault") or "unknown"), hop=str(get("hop") or ""), estimate=get("estimate"),
+            fault=_enum_text(get("fault") or "unknown"), hop=_enum_text(get("hop") or ""),
+            estimate=get("estimate"), interval=get("interval"),
             share=number("share"), error_m=number("error_m"), confidence=number("confidence"),
             evidence=str(get("evidence") or ""), fix=str(get("fix") or ""),
         )
@@ -219,7 +221,10 @@ class FindingView:
             head += f" on {_enum_text(self.hop)}"
         parts = [head]
         if self.estimate is not None:
-            parts.append(f"estimate {_format_estimate(self.estimate)}")
+            estimate = f"estimate {_format_estimate(self.estimate)}"
+            if isinstance(self.interval, Mapping) and self.interval:
+                estimate += f" (95% interval {_format_estimate(self.interval)})"
+            parts.append(estimate)
         size = []
         if self.error_m is not None:
             size.append(f"{self.error_m * 1e3:.1f} mm")

@@ -460,7 +460,10 @@ def _received_entities(server: GrpcServer) -> set[str]:
     entities: set[str] = set()
     while time.monotonic() < deadline:
         if server.rrd.is_file() and server.rrd.stat().st_size:
-            entities = {c.entity_path for c in RrdReader(server.rrd).stream()}
+            try:
+                entities = {c.entity_path for c in RrdReader(server.rrd).stream()}
+            except RuntimeError:  # the server is still writing the last message
+                entities = set()
             if "/summary" in entities:
                 break
         time.sleep(0.2)
@@ -602,3 +605,19 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
         order = np.argsort(rows.stamp_ns, kind="stable")
         np.testing.assert_allclose(translations, rows.translation[order], rtol=1e-6, atol=1e-6)
         assert np.array_equal(_times(chunks, entity, "sensor_time"), rows.stamp_ns[order])
+
+
+def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+
+    generated = generate(SceneSpec(duration_s=2.0, width=160, height=120, focal_px=150.0,
+                                   faults=(InjectedFault(FaultKind.MISSING_ROTATION),)))
+    directory = tmp_path / "episode"
+    generated.timeline.replace(metadata={"chain": generated.chain.to_dict()}).save(directory)
+    out = tmp_path / "attributed.rrd"
+    assert main(["replay", str(directory), "--attribute", "--save", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["findings"]
+    assert report["findings"][0].startswith("missing_rotation on camera_to_body")
+    logged = [r[0] for r in _rows(_read(out), "/log/findings", "TextLog:text")]
+    assert logged == report["findings"]
