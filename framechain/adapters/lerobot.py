@@ -128,7 +128,8 @@ def open_dataset(
     chain = cfg.chain_frames(root=model.root) if cfg.cameras else None
     metadata: dict[str, Any] = {
         "format": FORMAT,
-        "source": str(Path(path).resolve()),
+        "source": {"path": str(Path(path).resolve()), "format": FORMAT, "episode": episode},
+        "source_path": str(Path(path).resolve()),
         "codebase_version": reader.version,
         "robot_type": reader.robot_type,
         "episode": episode,
