@@ -143,7 +143,7 @@ def open_log(
             wanted = {Kind(k) for k in kinds}
             selected = {t: k for t, k in selected.items() if k in wanted}
         if chain is not None:
-            _check_chain_topics(p, chain, types)
+            notes.extend(_check_chain_topics(chain, types))
         total = sum(t.count for t in info.topics if t.name in selected)
         with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
             src.read(selected, col, advance)
@@ -169,20 +169,16 @@ def open_log(
     return LoadedLog(timeline=timeline, info=info, decoded_topics={t: k.value for t, k in selected.items()})
 
 
-def _check_chain_topics(path: Path, chain: ChainConfig, types: dict[str, str]) -> None:
+def _check_chain_topics(chain: ChainConfig, types: dict[str, str]) -> list[str]:
+    """A note per topic the chain names that the log does not have."""
     t = chain.topics
     wanted = [
         (t.camera_info, "camera_info"), (t.detections, "detections"), (t.depth, "depth"),
         (t.pixel_points, "pixel_points"), (t.odometry, "odometry"),
         *((topic, f"evidence {role}") for topic, role in chain.evidence_topics().items()),
     ]
-    for topic, slot in wanted:
-        if topic and topic not in types:
-            near = sorted(types)[:8]
-            raise AdapterError(
-                path, f"the chain's {slot} topic is not in the log (topics: {', '.join(near)}"
-                f"{', ...' if len(types) > 8 else ''})", topic=topic,
-            )
+    return [f"topic {topic}: named by the chain as {slot} but not in the log" for topic, slot in wanted
+            if topic and topic not in types]
 
 
 @contextmanager

@@ -255,7 +255,7 @@ class McapLog:
         return counts
 
     def _note_bad_chunk(self, offset: int, err: Exception, counts: Counter[int] | None) -> None:
-        from mcap.exceptions import CRCValidationError
+        from mcap.stream_reader import CRCValidationError
 
         what = "CRC mismatch" if isinstance(err, CRCValidationError) else f"unreadable ({type(err).__name__})"
         if counts:

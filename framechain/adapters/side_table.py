@@ -17,12 +17,13 @@ from framechain.adapters.errors import AdapterError
 
 
 def resolve_side_table(name: str, log_path: Path) -> Path:
-    """The side table's path: as given, else relative to the log's directory."""
+    """The side table's path: as given, else beside the log (inside a bag directory, or next to it)."""
     p = Path(name).expanduser()
     if p.is_file() or p.is_absolute():
         return p
-    base = log_path if log_path.is_dir() else log_path.parent
-    return base / p
+    candidates = [log_path / p] if log_path.is_dir() else []
+    candidates.append(log_path.parent / p)
+    return next((c for c in candidates if c.is_file()), candidates[-1])
 
 
 def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
