@@ -52,8 +52,8 @@ def register(sub: Any) -> None:
     out.add_argument("--save", metavar="FILE.rrd", help="write a recording file (no viewer needed)")
     parser.add_argument("--attribute", action="store_true", help="also attribute the error and log the findings")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed of --attribute (default 0)")
-    parser.add_argument("--max-images", type=int, default=60, metavar="N",
-                        help="depth frames logged at most, nearest the observations (default 60)")
+    parser.add_argument("--max-images", type=int, default=30, metavar="N",
+                        help="depth frames logged at most, nearest the observations (default 30)")
     parser.add_argument("--json", action="store_true", help="print counts and the output as one JSON object")
     parser.set_defaults(run=run)
 

@@ -132,7 +132,7 @@ class RerunOptions:
     recording_id: str | None = None
     recording_name: str | None = None
     #: At most this many depth frames are logged (the ones nearest observations, decimated evenly).
-    max_images: int = 60
+    max_images: int = 30
     #: A depth frame within this of an observation stamp is logged with it.
     image_window_ns: int = 50_000_000
     #: As-run points without an ``obs_id`` match the observation with the nearest stamp within this.
@@ -738,8 +738,8 @@ def _log_depth(
 ) -> None:
     """Depth frames of the chain camera near observations, decimated to ``max_images``.
 
-    Logged as uint16 millimetres (``meter=1000``): a VGA frame is 0.6 MB, so the default cap of 60
-    keeps a recording under about 40 MB.
+    Logged as uint16 millimetres (``meter=1000``): a VGA frame is 0.6 MB, so the default cap of 30
+    keeps a recording under about 20 MB; lazily decoded frames cost about 70 ms each from an MCAP.
     """
     import rerun as rr
 

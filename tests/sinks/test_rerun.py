@@ -328,6 +328,21 @@ def test_camera_images_and_detections(scene: Scene) -> None:
     np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1))
 
 
+def _rerun_exe() -> str | None:
+    return shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
+
+
+def test_rerun_verifies_the_recording(scene: Scene) -> None:
+    """Rerun's own `rrd verify`: every component decodes and the footer is well formed."""
+    exe = _rerun_exe()
+    if exe is None:
+        pytest.skip("the rerun executable is not installed")
+    done = subprocess.run([exe, "rrd", "verify", "--check-footers", "true", str(scene.rrd)],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "verified without error" in done.stdout + done.stderr
+
+
 def test_depth_frames_are_decimated(tmp_path: Path, scene: Scene) -> None:
     rrd = tmp_path / "few.rrd"
     stream_replay(scene.timeline, scene.result, RerunTarget.save(rrd), options=RerunOptions(max_images=2))
@@ -429,7 +444,7 @@ def _free_port() -> int:
 
 @pytest.fixture
 def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
-    exe = shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
+    exe = _rerun_exe()
     if exe is None:
         pytest.skip("the rerun executable is not installed")
     port = _free_port()
