@@ -82,13 +82,14 @@ def open_dataset(
     sources = list(cfg.detections)
     if detections is not None:
         sources.append(DetectionSource(table=Path(detections)))
+    names = reader.names(cfg.state_feature)
+    cfg.check_names(names)
     for cam in cfg.cameras.values():
         if cam.video_key is not None:
             feat = reader.feature(cam.video_key)
             if not feat.is_video and feat.dtype != "image":
                 raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
                                        f"{feat.dtype} feature, not video or image")
-    names = reader.names(cfg.state_feature)
     columns = [cfg.state_feature]
     columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
     columns += [s.feature for s in sources if s.feature is not None]

@@ -254,17 +254,22 @@ class RobotConfig:
         if self.chain_body is not None and self.chain_body != self.world_frame and not model.has_link(self.chain_body):
             raise RobotConfigError(self.source, f"chain.body {self.chain_body!r} is not a URDF link")
 
+    def check_names(self, names: Sequence[str]) -> None:
+        """Every mapped state name is one of the dataset's ``names`` (raises, listing them)."""
+        known = set(names)
+        missing = [m.state for m in self.joints if m.state not in known]
+        if missing:
+            raise RobotConfigError(
+                self.source, f"state names {missing} are not in {self.state_feature}; it has {list(names)}"
+            )
+
     def joint_positions(
         self, model: RobotModel, values: npt.ArrayLike, names: Sequence[str]
     ) -> dict[str, FloatArray]:
         """``(T, n)`` dataset state vectors with column ``names`` -> ``{joint: (T,)}`` in SI units."""
         arr = np.asarray(values, dtype=float)
+        self.check_names(names)
         index = {n: i for i, n in enumerate(names)}
-        missing = [m.state for m in self.joints if m.state not in index]
-        if missing:
-            raise RobotConfigError(
-                self.source, f"state names {missing} are not in {self.state_feature}; it has {list(names)}"
-            )
         out: dict[str, FloatArray] = {}
         for m in self.joints:
             lower, upper = model.limits(m.joint)

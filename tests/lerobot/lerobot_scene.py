@@ -103,11 +103,19 @@ def flange_from_optical() -> FloatArray:
     return link @ homogeneous(LINK_FROM_OPTICAL, (0.0, 0.0, 0.0))
 
 
-def base_from_link_truth(link: str, t_s: npt.ArrayLike) -> FloatArray:
-    """(T, 4, 4) ``T_base_link`` from yourdfpy at times ``t_s`` (arm joints only; gripper at its value)."""
+def base_from_link_truth(link: str, t_s: npt.ArrayLike, *, stored: bool = False) -> FloatArray:
+    """(T, 4, 4) ``T_base_link`` from yourdfpy at times ``t_s``.
+
+    ``stored``: use the joint values as the dataset stores them (float32 degrees and percent),
+    for comparisons at the frames themselves; otherwise the continuous motion.
+    """
     urdf = _urdf()
-    q = arm_q_rad(t_s)
-    g = gripper_pct(t_s) / 100.0 * FINGER_UPPER_M
+    if stored:
+        state = state_vectors(t_s).astype(np.float32).astype(np.float64)
+        q, g = state[:, :6] * np.pi / 180.0, state[:, 6] / 100.0 * FINGER_UPPER_M
+    else:
+        q = arm_q_rad(t_s)
+        g = gripper_pct(t_s) / 100.0 * FINGER_UPPER_M
     out = np.empty((q.shape[0], 4, 4))
     for i in range(q.shape[0]):
         cfg = dict(zip(ARM_JOINTS, q[i], strict=True))
@@ -117,8 +125,8 @@ def base_from_link_truth(link: str, t_s: npt.ArrayLike) -> FloatArray:
     return out
 
 
-def base_from_optical_truth(t_s: npt.ArrayLike) -> FloatArray:
-    out: FloatArray = base_from_link_truth("flange_link", t_s) @ flange_from_optical()
+def base_from_optical_truth(t_s: npt.ArrayLike, *, stored: bool = False) -> FloatArray:
+    out: FloatArray = base_from_link_truth("flange_link", t_s, stored=stored) @ flange_from_optical()
     return out
 
 
@@ -254,15 +262,16 @@ def write_robot_yaml(
 
 
 def write_detection_table(
-    path: Path, dataset: ArmDataset, episode: int, *, by: str = "frame_index", other_episode: int | None = None
+    path: Path, dataset: ArmDataset, episode: int, *, by: str = "frame_index", other_episode: int | None = None,
+    frames: npt.ArrayLike | None = None,
 ) -> int:
-    """A side table of the target's detections in ``episode`` (every second frame); returns the row count."""
+    """A side table of the target's detections in ``episode`` (default every second frame); returns its rows."""
     import pyarrow as pa
     import pyarrow.csv as pacsv
     import pyarrow.parquet as pq
 
     t = dataset.timestamps[episode]
-    frames = np.arange(0, t.size, 2)
+    frames = np.arange(0, t.size, 2) if frames is None else np.asarray(frames)
     u, v, z = project_truth(t[frames] + dataset.camera_delay_s)
     cols: dict[str, Any] = {
         "episode_index": np.full(frames.size, episode), "camera": ["wrist"] * frames.size,

@@ -113,7 +113,8 @@ def test_errors_name_file_and_inconsistency(arm_dataset: ArmDataset, tmp_path: P
     data_file.unlink()
     with pytest.raises(DatasetError, match=r"data file of episode 2 is missing") as err:
         DatasetReader(root).read(2, [])
-    assert isinstance(err.value, AdapterError) and isinstance(err.value, FramechainError)
+    assert isinstance(err.value, AdapterError)
+    assert isinstance(err.value, FramechainError)
     assert str(data_file) in str(err.value)
 
 
@@ -151,7 +152,8 @@ def test_timestamps_going_backwards_and_notes(tmp_path: Path) -> None:
     root = write_lerobot_dataset(tmp_path / "bad", [EpisodeData({"observation.state": state_vectors(t)},
                                                                 timestamp_s=t_bad)],
                                  features=spec, fps=FPS, version="v2.1")
-    with pytest.raises(DatasetError, match=r"timestamps of episode 0 do not increase at frame 5 \(0.133333 s then 0.100000 s\)"):
+    with pytest.raises(DatasetError, match=r"timestamps of episode 0 do not increase at frame 5 "
+                                           r"\(0.133333 s then 0.100000 s\)"):
         DatasetReader(root).read(0, [])
     # Timestamps offset by one frame: loads, with a note; strict refuses.
     root2 = write_lerobot_dataset(tmp_path / "offset", [EpisodeData({"observation.state": state_vectors(t)},
@@ -198,7 +200,8 @@ def test_unitree_v21_nested_names(unitree: Path) -> None:
     assert len(reader.episodes()) == 100
     names = reader.names("observation.state")
     assert len(names) == 26
-    assert names[0] == "kLeftShoulderPitch" and names[-1] == "kRightHandThumbRotation"
+    assert names[0] == "kLeftShoulderPitch"
+    assert names[-1] == "kRightHandThumbRotation"
     lengths = {json.loads(line)["episode_index"]: json.loads(line)["length"]
                for line in (unitree / "meta" / "episodes.jsonl").read_text().splitlines() if line}
     frames = reader.read(3, ["observation.state", "action"])

@@ -119,7 +119,8 @@ def _limits_from_xml(path: Path) -> dict[str, tuple[float, float]]:
 def test_so101_degrees_and_gripper_range_match_yourdfpy(so101_urdf: Path, rng: np.random.Generator) -> None:
     cfg = RobotConfig.from_mapping(
         {"urdf": str(so101_urdf), "default_unit": "deg",
-         "joints": {**{f"{j}.pos": j for j in SO101_JOINTS[:5]}, "gripper.pos": {"joint": "gripper", "unit": "range_0_100"}}},
+         "joints": {**{f"{j}.pos": j for j in SO101_JOINTS[:5]},
+                    "gripper.pos": {"joint": "gripper", "unit": "range_0_100"}}},
         source="so101",
     )
     model = cfg.model()
