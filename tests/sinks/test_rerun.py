@@ -636,3 +636,30 @@ def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.C
     assert report["findings"][0].startswith("missing_rotation on camera_to_body")
     logged = [r[0] for r in _rows(_read(out), "/log/findings", "TextLog:text")]
     assert logged == report["findings"]
+
+
+def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scene) -> None:
+    empty = Timeline()
+    outcome = stream_replay(empty, replay(empty, FRAMES), RerunTarget.save(tmp_path / "empty.rrd"))
+    assert outcome.rows["/summary"] == 1
+    # Observations without any transform: all rejected (missing edge), each a text log entry.
+    blind = scene.timeline.replace(transforms=TransformTable.empty())
+    result = replay(blind, FRAMES)
+    assert not result.replayed.any()
+    out = tmp_path / "blind.rrd"
+    outcome = stream_replay(blind, result, RerunTarget.save(out), findings=FINDINGS)
+    chunks = _read(out)
+    assert len(_rows(chunks, "/log/rejected", "TextLog:text")) == len(result)
+    assert "/points/recomputed/world" not in chunks
+    assert "/series/gap_ms/body_to_world" not in chunks
+
+
+def test_cli_replay_without_output_option_saves_when_headless(
+    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["replay", str(saved_timeline)]) == 0
+    out = capsys.readouterr().out
+    assert f"saved {tmp_path / 'scene_timeline.rrd'}" in out
