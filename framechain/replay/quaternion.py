@@ -85,3 +85,88 @@ def quat_angle(q: FloatArray) -> FloatArray:
     """Rotation angle in radians, in [0, pi], of quaternions (4, ...)."""
     out: FloatArray = 2.0 * np.arctan2(np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2), np.abs(q[3]))
     return out
+
+
+# -- in-place kernels for the lookup hot path -------------------------------------------------------
+# Components are passed one by one so that constants can be Python floats (broadcast for free) and
+# outputs can be rows of preallocated buffers: no temporaries beyond the two scratch rows given.
+Component = FloatArray | float
+Vec3 = tuple[Component, Component, Component]
+Quat4 = tuple[Component, Component, Component, Component]
+
+
+def quat_multiply_into(
+    a: Quat4,
+    b: Quat4,
+    out: FloatArray,
+    scratch: FloatArray,
+    *,
+    conjugate_a: bool = False,
+) -> None:
+    """``out[:] = a * b`` (or ``conj(a) * b``) for (x, y, z, w) components; ``out`` (4, N), ``scratch`` (2, N).
+
+    ``out`` must not share memory with ``a`` or ``b``.
+    """
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    t1, t2 = scratch[0], scratch[1]
+    # out_k = aw * b_k +/- (vector part of a times b), the sign flipping for the conjugate.
+    for k, (p, q, r, s, u, v) in enumerate(
+        ((ax, bw, ay, bz, az, by), (ay, bw, az, bx, ax, bz), (az, bw, ax, by, ay, bx))
+    ):
+        np.multiply(p, q, out=t1)  # a_k bw + a_(k+1) b_(k+2) - a_(k+2) b_(k+1)
+        np.multiply(r, s, out=t2)
+        t1 += t2
+        np.multiply(u, v, out=t2)
+        t1 -= t2
+        row = out[k]
+        np.multiply(aw, (bx, by, bz)[k], out=row)
+        if conjugate_a:
+            np.subtract(row, t1, out=row)
+        else:
+            row += t1
+    w = out[3]
+    np.multiply(ax, bx, out=t1)
+    np.multiply(ay, by, out=t2)
+    t1 += t2
+    np.multiply(az, bz, out=t2)
+    t1 += t2
+    np.multiply(aw, bw, out=w)
+    if conjugate_a:
+        w += t1
+    else:
+        w -= t1
+
+
+def quat_rotate_into(
+    q: Quat4,
+    v: Vec3,
+    out: FloatArray,
+    scratch: FloatArray,
+    *,
+    conjugate_q: bool = False,
+) -> None:
+    """``out[:] = q v q*`` (or by ``conj(q)``): ``v + 2w (u x v) + 2 u x (u x v)``; ``scratch`` (5, N).
+
+    ``out`` (3, N) must not share memory with ``q`` or ``v``.
+    """
+    ux, uy, uz, w = q
+    vx, vy, vz = v
+    cx, cy, cz, t1, t2 = scratch[0], scratch[1], scratch[2], scratch[3], scratch[4]
+    for row, (p, r, s, u) in zip((cx, cy, cz), ((uy, vz, uz, vy), (uz, vx, ux, vz), (ux, vy, uy, vx)), strict=True):
+        np.multiply(p, r, out=row)  # (u x v), one component per row
+        np.multiply(s, u, out=t1)
+        np.subtract(row, t1, out=row)
+    for k, (vk, p, r, s, u, ck) in enumerate(
+        ((vx, uy, cz, uz, cy, cx), (vy, uz, cx, ux, cz, cy), (vz, ux, cy, uy, cx, cz))
+    ):
+        np.multiply(p, r, out=t1)  # (u x c)_k
+        np.multiply(s, u, out=t2)
+        t1 -= t2
+        np.multiply(w, ck, out=t2)
+        if conjugate_q:  # conj(q): the vector part u changes sign, so the w (u x v) term does
+            t1 -= t2
+        else:
+            t1 += t2
+        t1 *= 2.0
+        np.add(t1, vk, out=out[k])

@@ -425,3 +425,52 @@ def test_per_hop_samples_are_the_same_in_chunked_lookups(rng: np.random.Generato
             np.testing.assert_array_equal(hb.stamp_after_ns[sl], hs.stamp_after_ns)
             np.testing.assert_array_equal(hb.weight[sl], hs.weight)
             np.testing.assert_array_equal(hb.status[sl], hs.status)
+
+
+# -- stamp layouts the index must get right -------------------------------------------------------
+EPOCH = 1_763_800_000 * S  # unix time in ns: beyond float64's exact integers
+
+
+@pytest.mark.parametrize("layout", ["uniform", "jittered", "bursty", "two"])
+def test_sample_index_is_exact_for_every_stamp_layout(rng: np.random.Generator, layout: str) -> None:
+    if layout == "uniform":
+        stamps = EPOCH + np.arange(500) * 10_000_000
+    elif layout == "jittered":
+        stamps = EPOCH + np.arange(500) * 10_000_000 + rng.integers(-4_000_000, 4_000_000, 500)
+    elif layout == "bursty":  # bursts of samples 1 ns apart, long gaps between them
+        stamps = EPOCH + np.concatenate([b * S + np.arange(40) for b in range(12)])
+    else:
+        stamps = EPOCH + np.array([0, 1])
+    stamps = np.unique(stamps)
+    n = stamps.size
+    edge = RefEdge("a", "b", stamps, rng.normal(size=(n, 3)), random_quats(rng, n))
+    buf = buffer_of(edge)
+    pick = rng.choice(n, size=min(n, 60), replace=False)
+    times = np.concatenate([
+        stamps[pick], stamps[pick] - 1, stamps[pick] + 1, [stamps[0], stamps[-1], stamps[0] - 1, stamps[-1] + 1],
+        rng.integers(stamps[0], stamps[-1], size=60, endpoint=True),
+    ])
+    result = buf.lookup("a", "b", times)
+    hop = result.hops[0]
+    for i, t in enumerate(times.tolist()):
+        status, expected = reference_lookup([edge], "a", "b", t)
+        assert result.status[i] == status, t
+        if status != 0:
+            continue
+        np.testing.assert_allclose(result.matrix()[i], expected, atol=1e-9)
+        j = int(np.searchsorted(stamps, t, side="right")) - 1
+        assert hop.stamp_before_ns[i] == stamps[j]
+        assert hop.stamp_after_ns[i] == (stamps[j] if stamps[j] == t else stamps[j + 1])
+
+
+def test_extreme_times_extrapolate_without_overflow() -> None:
+    buf = buffer_of(two_sample_edge())
+    big = np.iinfo(np.int64)
+    times = np.array([big.min, big.min + 1, -1, big.max - 1, big.max], dtype=np.int64)
+    result = buf.lookup("a", "b", times)
+    assert result.status.tolist() == [PAST, PAST, PAST, FUTURE, FUTURE]
+    assert np.isnan(result.translation).all()
+    hop = result.hops[0]
+    assert hop.stamp_before_ns.tolist() == [0, 0, 0, 10 * S, 10 * S]
+    assert hop.stamp_after_ns.tolist() == hop.stamp_before_ns.tolist()
+    np.testing.assert_array_equal(hop.weight, 0.0)
