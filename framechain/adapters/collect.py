@@ -212,7 +212,7 @@ class Collector:
         self.rs_extrinsics[topic] = (tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w, float(log_ns))
 
     def rs_depth_units(self, topic: str, log_ns: int, msg: Any) -> None:
-        sensor = topic.split("/option/")[0]
+        sensor = topic.split("/option/", maxsplit=1)[0]
         self.depth_scale[sensor] = float(msg.data)
 
     # -- cameras ----------------------------------------------------------------------------
@@ -352,7 +352,8 @@ class Collector:
 
         meta = depth_metadata(msg)
         if meta is None:
-            self.skipped[(topic, f"encoding {getattr(msg, 'encoding', getattr(msg, 'format', '?'))!r} is not depth")] += 1
+            encoding = getattr(msg, "encoding", getattr(msg, "format", "?"))
+            self.skipped[(topic, f"encoding {encoding!r} is not depth")] += 1
             return
         width, height, encoding = meta
         key = (topic, log_ns)
@@ -422,7 +423,8 @@ class Collector:
             for t in np.unique(topic[dup]).tolist():
                 sel = dup & (topic == t)
                 self.notes.append(
-                    f"topic {t}: odometry edge {parent[sel][0]} -> {child[sel][0]} is also on /tf; the /tf samples are used"
+                    f"topic {t}: odometry edge {parent[sel][0]} -> {child[sel][0]} is also on /tf; "
+                    "the /tf samples are used"
                 )
             keep &= ~dup
             # Two odometry topics for one child: keep the one with most samples.
@@ -471,7 +473,8 @@ class Collector:
             for name, count in Counter(k[1:][back].tolist()).items():
                 p, c = name.split("\x1f")
                 self.notes.append(
-                    f"edge {p} -> {c}: header stamps go backwards {count} time{'s' if count != 1 else ''} in log order; "
+                    f"edge {p} -> {c}: header stamps go backwards {count} time{'s' if count != 1 else ''} "
+                    "in log order; "
                     "samples are ordered by stamp for lookups"
                 )
 
@@ -530,7 +533,8 @@ class Collector:
         vals = np.asarray(self.pt_vals, dtype=np.float64).reshape(-1, 7)
         topics = np.asarray(self.pt_topic, dtype=str)
         roles = np.asarray([self.roles.get(t, "reference") for t in self.pt_topic], dtype=str)
-        table = PointTable(frame=np.asarray(self.pt_frame, dtype=str), stamp_ns=np.asarray(self.pt_stamp, dtype=np.int64),
+        table = PointTable(frame=np.asarray(self.pt_frame, dtype=str),
+                           stamp_ns=np.asarray(self.pt_stamp, dtype=np.int64),
                            log_time_ns=np.asarray(self.pt_log, dtype=np.int64), xyz=vals[:, :3], quat_xyzw=vals[:, 3:],
                            role=roles, obs_id=np.full(n, -1, dtype=np.int64), source=topics)
         return table.take(_canonical(table.log_time_ns, table.source))

@@ -81,7 +81,7 @@ def _decode_compressed_depth(data: bytes, fmt: str, units_m: float) -> npt.NDArr
     with Image.open(io.BytesIO(data[_COMPRESSED_DEPTH_HEADER:])) as img:
         values = np.asarray(img, dtype=np.uint16) if img.mode.startswith("I") else np.asarray(img)
     values = values.astype(np.float32)
-    if fmt.split(";")[0].strip() == "32FC1":
+    if fmt.split(";", maxsplit=1)[0].strip() == "32FC1":
         # image_transport: inverse depth quantised as value = quant_a / depth + quant_b.
         out = np.full(values.shape, np.nan, dtype=np.float32)
         ok = values > 0

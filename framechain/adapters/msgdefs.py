@@ -55,7 +55,8 @@ def typestore(*, ros1: bool, layout: DetectionLayout = "ros2") -> Any:
     types: dict[str, Any] = {}
     if ros1:
         types.update(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    defs = {"ros2": _ROS1_VISION_ROS2 if ros1 else VISION_ROS2, "ros2-old": VISION_ROS2_OLD, "ros1": VISION_ROS1}[layout]
+    layouts = {"ros2": _ROS1_VISION_ROS2 if ros1 else VISION_ROS2, "ros2-old": VISION_ROS2_OLD, "ros1": VISION_ROS1}
+    defs = layouts[layout]
     for name, text in defs.items():
         types.update(get_types_from_msg(text, name))
     store.register(types)

@@ -34,10 +34,10 @@ def stream_frame(topic: str) -> str | None:
 def apply_realsense_layout(col: Collector) -> None:
     """Rename frames after their streams and turn the recorded extrinsics into static edges."""
     col.depth_rows = [
-        ((stream_frame(r[6]) or r[0]), *r[1:]) for r in col.depth_rows  # type: ignore[misc]
+        ((stream_frame(r[6]) or r[0]), *r[1:]) for r in col.depth_rows
     ]
     col.cam_rows = [
-        ((stream_frame(r[6]) or r[0]), *r[1:]) for r in col.cam_rows  # type: ignore[misc]
+        ((stream_frame(r[6]) or r[0]), *r[1:]) for r in col.cam_rows
     ]
     if not col.rs_extrinsics:
         return

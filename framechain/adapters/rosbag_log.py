@@ -39,7 +39,7 @@ def _explain(path: Path, err: Exception) -> AdapterError:
         )
     if "metadata" in low:
         return CorruptLogError(path, f"the ROS 2 bag's metadata.yaml cannot be used: {text}")
-    if "hash mismatch" in low or "type" in low and "definition" in low:
+    if "hash mismatch" in low or ("type" in low and "definition" in low):
         return SchemaError(path, f"message definitions in the bag are inconsistent: {text}")
     return CorruptLogError(path, f"cannot be read as a bag: {text}")
 
@@ -151,7 +151,8 @@ class RosbagsLog:
             col.notes.append(f"reading stopped early ({_explain(self.path, err).what}); the data before it is kept")
         for topic, n in failures.items():
             col.notes.append(
-                f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded ({first_error[topic]}); skipped"
+                f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
+                f"({first_error[topic]}); skipped"
             )
 
     # -- lazy fetch ---------------------------------------------------------------------------------

@@ -68,7 +68,9 @@ def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
     missing = [name for name, c in (("frame", frame), ("u", u), ("v", v)) if c is None]
     if missing:
         raise AdapterError(path, f"detections side table lacks columns {missing}; has {table.column_names}")
-    assert frame is not None and u is not None and v is not None
+    assert frame is not None
+    assert u is not None
+    assert v is not None
     depth = col("depth", "depth_m")
     depth_m = np.full(n, np.nan) if depth is None else np.asarray(depth, dtype=np.float64)
     depth_m = np.where(np.isfinite(depth_m) & (depth_m > 0), depth_m, np.nan)

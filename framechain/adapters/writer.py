@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from framechain.adapters.errors import AdapterError
 from framechain.adapters.msgdefs import typestore
-from framechain.timeline import ChainConfig, ColumnTable, Timeline
+from framechain.timeline import ChainConfig, Timeline
 
 CONTAINERS = ("mcap-ros2", "mcap-ros1", "rosbag1", "rosbag2-sqlite", "rosbag2-mcap")
 DEFAULT_TOPICS = {
@@ -48,7 +48,7 @@ def canonical_order(timeline: Timeline) -> Timeline:
     """Every table in the order :func:`open_log` returns rows: log time, then topic, then row order."""
     changes: dict[str, Any] = {}
     for name in ("transforms", "cameras", "observations", "joint_states", "points", "depth_frames"):
-        table: ColumnTable = getattr(timeline, name)
+        table: Any = getattr(timeline, name)
         changes[name] = table.take(np.lexsort((table.source, table.log_time_ns))) if len(table) else table
     return timeline.replace(**changes)
 
@@ -197,10 +197,10 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
     out: list[_Out] = []
     tf = timeline.transforms
     for g in _groups([tf.stamp_ns, tf.log_time_ns, tf.is_static]):
-        rows = [(str(tf.parent[i]), str(tf.child[i]), int(tf.stamp_ns[i]), tf.translation[i], tf.quat_xyzw[i])
-                for i in g.tolist()]
+        tf_rows = [(str(tf.parent[i]), str(tf.child[i]), int(tf.stamp_ns[i]), tf.translation[i], tf.quat_xyzw[i])
+                   for i in g.tolist()]
         topic = "/tf_static" if bool(tf.is_static[g[0]]) else "/tf"
-        out.append(_Out(int(tf.log_time_ns[g[0]]), topic, "tf2_msgs/msg/TFMessage", b.tf_message(rows)))
+        out.append(_Out(int(tf.log_time_ns[g[0]]), topic, "tf2_msgs/msg/TFMessage", b.tf_message(tf_rows)))
     cams = timeline.cameras
     cam_topic = chain.topics.camera_info or DEFAULT_TOPICS["camera_info"]
     for i in range(len(cams)):
@@ -210,11 +210,11 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
     obs = timeline.observations
     det_topic = chain.topics.detections or DEFAULT_TOPICS["detections"]
     for g in _groups([obs.stamp_ns, obs.log_time_ns, obs.camera_frame]):
-        rows = [(int(obs.obs_id[i]), float(obs.u[i]), float(obs.v[i]), float(obs.depth_m[i]), str(obs.label[i]),
-                 float(obs.score[i])) for i in g.tolist()]
+        det_rows = [(int(obs.obs_id[i]), float(obs.u[i]), float(obs.v[i]), float(obs.depth_m[i]),
+                     str(obs.label[i]), float(obs.score[i])) for i in g.tolist()]
         i0 = int(g[0])
         out.append(_Out(int(obs.log_time_ns[i0]), det_topic, "vision_msgs/msg/Detection2DArray",
-                        b.detections(int(obs.stamp_ns[i0]), str(obs.camera_frame[i0]), rows)))
+                        b.detections(int(obs.stamp_ns[i0]), str(obs.camera_frame[i0]), det_rows)))
     depth = timeline.depth_frames
     depth_topic = chain.topics.depth or DEFAULT_TOPICS["depth"]
     for i in range(len(depth)):
@@ -229,9 +229,9 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
         if missing:
             raise AdapterError("write_log", f"points with roles {missing} have no evidence topic in the chain")
         for topic in sorted(set(topics.tolist())):
-            rows = np.flatnonzero(topics == topic)
-            posed = bool(np.isfinite(pts.quat_xyzw[rows]).all())
-            for i in rows.tolist():
+            sel = np.flatnonzero(topics == topic)
+            posed = bool(np.isfinite(pts.quat_xyzw[sel]).all())
+            for i in sel.tolist():
                 if posed:
                     msg = b.pose_stamped(str(pts.frame[i]), int(pts.stamp_ns[i]), pts.xyz[i], pts.quat_xyzw[i])
                     kind = "geometry_msgs/msg/PoseStamped"
@@ -279,7 +279,6 @@ def write_log(
     messages = _messages(canonical_order(timeline), chain, b, depth_encoding)
     writers: dict[str, Callable[[Path, list[_Out], _Builder, str | None], None]] = {
         "mcap-ros2": _write_mcap_ros2, "mcap-ros1": _write_mcap_ros1, "rosbag1": _write_rosbag1,
-        "rosbag2-sqlite": _write_rosbag2, "rosbag2-mcap": _write_rosbag2,
     }
     if container.startswith("rosbag2"):
         _write_rosbag2(target, messages, b, compression, mcap=container == "rosbag2-mcap")
@@ -311,7 +310,7 @@ def _write_mcap_ros2(path: Path, messages: list[_Out], b: _Builder, compression:
                 schemas[m.msgtype] = writer.register_msgdef(m.msgtype, text)
             writer.write_message(m.topic, schemas[m.msgtype], _to_plain(m.msg), log_time=m.log_time_ns,
                                  publish_time=m.log_time_ns)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
 
 
 def _write_mcap_ros1(path: Path, messages: list[_Out], b: _Builder, compression: str | None) -> None:
@@ -337,7 +336,7 @@ def _write_mcap_ros1(path: Path, messages: list[_Out], b: _Builder, compression:
         writer = Writer(f)
         for m in messages:
             writer.write_message(m.topic, wrap(m), log_time=m.log_time_ns, publish_time=m.log_time_ns)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
 
 
 def _write_rosbag1(path: Path, messages: list[_Out], b: _Builder, compression: str | None) -> None:

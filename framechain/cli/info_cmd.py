@@ -23,7 +23,8 @@ def register(sub: Any) -> None:
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
     out.add_argument("--chain", action="store_true",
-                     help="print only the suggested chain configuration as YAML (framechain info LOG --chain > chain.yaml)")
+                     help="print only the suggested chain configuration as YAML "
+                     "(framechain info LOG --chain > chain.yaml)")
     p.set_defaults(run=run)
 
 
@@ -102,7 +103,8 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], chain_yaml: str) -> None:
     info = loaded.info
     console.print(f"[bold]{escape(str(info.path))}[/]")
     console.print(f"  format     {info.container or info.format}")
-    console.print(f"  duration   {info.duration_s:.3f} s  (log time {info.start_ns * 1e-9:.3f} .. {info.end_ns * 1e-9:.3f})")
+    span = f"log time {info.start_ns * 1e-9:.3f} .. {info.end_ns * 1e-9:.3f}"
+    console.print(f"  duration   {info.duration_s:.3f} s  ({span})")
     console.print(f"  messages   {info.message_count}")
     topics = Table(title="Topics", title_justify="left")
     for col, justify in (("topic", "left"), ("type", "left"), ("count", "right"), ("rate (Hz)", "right"),

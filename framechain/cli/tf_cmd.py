@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     loaded = open_log(args.log, kinds=TREE_KINDS, progress=sys.stderr.isatty() and not (args.json or args.csv))
     transforms = loaded.timeline.transforms
     if not len(transforms):
-        raise FramechainError(f"{args.log}: no transforms in this log (no /tf, /tf_static, TransformStamped or Odometry)")
+        raise FramechainError(
+            f"{args.log}: no transforms in this log (no /tf, /tf_static, TransformStamped or Odometry)")
     buffer = TransformBuffer(transforms)
     dynamic = ~transforms.is_static
     log_start = int(transforms.stamp_ns[dynamic].min()) if dynamic.any() else 0
@@ -144,7 +145,8 @@ def _series(args: argparse.Namespace, buffer: TransformBuffer, log_start: int) -
         times = times[(times >= first) & (times <= last)]
         if times.size == 0:
             spans = "; ".join(f"{e.parent} -> {e.child} {e.first_ns * 1e-9:.3f}..{e.last_ns * 1e-9:.3f} s" for e in dyn)
-            raise FramechainError(f"the dynamic edges of {args.source} -> {args.target} never overlap in time ({spans})")
+            raise FramechainError(
+                f"the dynamic edges of {args.source} -> {args.target} never overlap in time ({spans})")
     else:
         times = np.array([0], dtype=np.int64)
     result = buffer.lookup(args.target, args.source, times)

@@ -25,7 +25,7 @@ CHAIN = ChainConfig.from_dict({
 })
 #: Camera 0.3 m ahead of and 0.8 m above base_link, optical axes (REP-103: x right, y down, z forward).
 OPTICAL_Q = np.array([-0.5, 0.5, -0.5, 0.5])
-K = dict(fx=600.0, fy=600.0, cx=320.0, cy=240.0)
+K = {"fx": 600.0, "fy": 600.0, "cx": 320.0, "cy": 240.0}
 W, H = 64, 48
 
 

@@ -100,7 +100,8 @@ def test_rosbag1_without_index(tmp_path: Path, written: dict[str, Path]) -> None
     with pytest.raises(CorruptLogError) as err:
         open_log(bag)
     assert str(bag) in str(err.value)
-    assert "no index" in str(err.value) and "rosbag reindex" in str(err.value)
+    assert "no index" in str(err.value)
+    assert "rosbag reindex" in str(err.value)
 
 
 def test_unknown_schema_encoding_is_named(tmp_path: Path) -> None:
@@ -130,7 +131,7 @@ def test_missing_metadata_yaml_reads_the_storage_file(tmp_path: Path, written: d
     assert len(loaded.timeline.transforms) == 52
     assert any("no metadata.yaml" in n for n in loaded.info.notes)
     (bag / "second.db3").write_bytes((next(bag.glob("*.db3"))).read_bytes())
-    with pytest.raises(UnsupportedLogError, match="metadata.yaml is missing and there are 2 storage files"):
+    with pytest.raises(UnsupportedLogError, match=r"metadata\.yaml is missing and there are 2 storage files"):
         open_log(bag)
 
 
@@ -180,23 +181,28 @@ def test_stamps_backwards_nan_transform_and_zero_k(tmp_path: Path) -> None:
     notes = " | ".join(loaded.info.notes)
     assert "topic /tf: 1 transform odom -> base_link with translation or rotation NaN or Inf dropped" in notes
     assert "topic /camera/color/camera_info: 1 CameraInfo with K all zero" in notes
-    assert len(loaded.timeline.transforms) == 3 and len(loaded.timeline.cameras) == 0
+    assert len(loaded.timeline.transforms) == 3
+    assert len(loaded.timeline.cameras) == 0
     clean = open_log(path)
     assert "edge odom -> base_link: header stamps go backwards 1 time in log order" in " ".join(clean.info.notes)
     # With a chain that needs that camera, the zero K is an error naming file and topic.
     with pytest.raises(AdapterError) as err:
         open_log(bad, CHAIN)
-    assert str(bad) in str(err.value) and "/camera/color/camera_info" in str(err.value)
+    assert str(bad) in str(err.value)
+    assert "/camera/color/camera_info" in str(err.value)
 
 
 def test_cli_reports_one_line_and_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (tmp_path / "dir").mkdir()
     assert main(["info", str(tmp_path / "dir")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("framechain info: error:") and "not a bag" in err[0]
+    assert len(err) == 1
+    assert err[0].startswith("framechain info: error:")
+    assert "not a bag" in err[0]
     log = _tf_log(tmp_path / "t.mcap")
     assert main(["tf", str(log), "odom", "camera"]) == 1
     assert "frame 'camera' does not exist" in capsys.readouterr().err
     assert main(["tf", str(log), "odom", "base_link", "--at", "100"]) == 1
     err2 = capsys.readouterr().err
-    assert "extrapolate into the future on edge odom -> base_link" in err2 and "recorded from" in err2
+    assert "extrapolate into the future on edge odom -> base_link" in err2
+    assert "recorded from" in err2

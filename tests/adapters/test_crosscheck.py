@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adapter_scene import CHAIN, K, OPTICAL_Q, T0, body_pose
+from adapter_scene import CHAIN, OPTICAL_Q, T0, K, body_pose
 from scipy.spatial.transform import Rotation
 
 from framechain.adapters import open_log, write_log
@@ -67,7 +67,7 @@ def test_replay_from_a_log_recovers_the_world_points(tmp_path: Path) -> None:
     z = rng.uniform(1.0, 3.0, n)
     # Truth by independent maths: pinhole, then scipy rotations, pose at the observation stamp.
     p_cam = np.column_stack([(np.rint(u) - K["cx"]) * z / K["fx"], (np.rint(v) - K["cy"]) * z / K["fy"], z])
-    p_body = Rotation.from_quat(OPTICAL_Q).apply(p_cam) + [0.3, 0.0, 0.8]
+    p_body = Rotation.from_quat(OPTICAL_Q).apply(p_cam) + np.array([0.3, 0.0, 0.8])
     bx, bq = body_pose((obs_t - T0) * 1e-9)
     truth = Rotation.from_quat(bq).apply(p_body) + bx
     images = np.zeros((n, h, w), dtype=np.float32)
@@ -97,12 +97,15 @@ def test_info_terminal_output_and_chain_yaml(written: dict[str, Path], capsys: p
         assert text in out
     assert main(["info", str(written["rosbag2-mcap"]), "--chain"]) == 0
     chain = ChainConfig.from_dict(__import__("yaml").safe_load(capsys.readouterr().out))
-    assert chain.frames.camera == "camera_optical_frame" and chain.frames.world == "map"
-    assert chain.topics.detections == "/detections" and chain.topics.depth == "/camera/depth/image_rect_raw"
+    assert chain.frames.camera == "camera_optical_frame"
+    assert chain.frames.world == "map"
+    assert chain.topics.detections == "/detections"
+    assert chain.topics.depth == "/camera/depth/image_rect_raw"
     assert main(["info", str(written["rosbag2-mcap"]), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     odom = next(e for e in info["edges"] if e["child"] == "base_link")
-    assert odom["count"] == 40 and odom["rate_hz"] == pytest.approx(20.0)
+    assert odom["count"] == 40
+    assert odom["rate_hz"] == pytest.approx(20.0)
     # Scene delays: log time = stamp + 1..5 ms.
     assert 1e-3 <= odom["delay_mean_s"] <= odom["delay_p95_s"] <= odom["delay_max_s"] < 5e-3
 
@@ -122,7 +125,8 @@ def test_tf_command_at_json_csv_and_series(written: dict[str, Path], capsys: pyt
     assert r["path"] == ["camera_optical_frame", "camera_link", "base_link", "odom"]
     assert r["stamp_ns"] == T0 + 125_000_000
     dyn = next(h for h in r["hops"] if not h["static"])
-    assert dyn["stamps_ns"] == [T0 + 100_000_000, T0 + 150_000_000] and dyn["weight"] == pytest.approx(0.5)
+    assert dyn["stamps_ns"] == [T0 + 100_000_000, T0 + 150_000_000]
+    assert dyn["weight"] == pytest.approx(0.5)
     np.testing.assert_allclose(r["rpy_deg"], Rotation.from_quat(r["quat_xyzw"]).as_euler("xyz", degrees=True))
     assert main(["tf", log, "odom", "camera_optical_frame", "--at", "0.125", "--csv"]) == 0
     rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
@@ -131,7 +135,9 @@ def test_tf_command_at_json_csv_and_series(written: dict[str, Path], capsys: pyt
     series = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
     # map->odom sampled every 0.2 s over 0..1.8 s, odom->base_link every 0.05 s: the union in the common span.
     assert len(series) == 37
-    assert int(series[0]["stamp_ns"]) == T0 and int(series[-1]["stamp_ns"]) == T0 + 1_800_000_000
+    assert int(series[0]["stamp_ns"]) == T0
+    assert int(series[-1]["stamp_ns"]) == T0 + 1_800_000_000
     assert main(["tf", log, "base_link", "camera_optical_frame"]) == 0
     text = capsys.readouterr().out
-    assert "Translation: [0.300000, 0.000000, 0.800000]" in text and "Matrix" in text
+    assert "Translation: [0.300000, 0.000000, 0.800000]" in text
+    assert "Matrix" in text

@@ -87,21 +87,23 @@ def test_foxglove_protobuf_and_json(tmp_path: Path) -> None:
     cam = tf.take(tf.child == "camera")
     np.testing.assert_allclose(cam.quat_xyzw, np.tile([-0.5, 0.5, -0.5, 0.5], (3, 1)))
     assert cam.source.tolist() == ["/tf_json"] * 3
-    assert len(tl.cameras) == 1 and tl.cameras.K[0, 1, 1] == 610.0 and tl.cameras.n_distortion[0] == 5
+    assert len(tl.cameras) == 1
+    assert tl.cameras.K[0, 1, 1] == 610.0
+    assert tl.cameras.n_distortion[0] == 5
 
 
 def _write_bag(path: Path, ros1: bool, layout: str, topic: str, msgtype: str, msgs: list[tuple[int, Any]]) -> Path:
-    from rosbags.rosbag1 import Writer as W1
-    from rosbags.rosbag2 import Writer as W2
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Writer as Writer2
 
     ts = typestore(ros1=ros1, layout=layout)  # type: ignore[arg-type]
     if ros1:
-        with W1(path) as w:
+        with Writer1(path) as w:
             c = w.add_connection(topic, msgtype, typestore=ts)
             for t, m in msgs:
                 w.write(c, t, bytes(ts.serialize_ros1(m, msgtype)))
     else:
-        with W2(path, version=9) as w:
+        with Writer2(path, version=9) as w:
             c = w.add_connection(topic, msgtype, typestore=ts)
             for t, m in msgs:
                 w.write(c, t, bytes(ts.serialize_cdr(m, msgtype)))
@@ -137,9 +139,12 @@ def test_older_detection_layouts(layout: str, tmp_path: Path) -> None:
     chain = ChainConfig.from_dict({"topics": {"detections": "/dets"}})
     obs = open_log(path, chain).timeline.observations
     assert (obs.u[0], obs.v[0], obs.depth_m[0]) == (312.0, 204.0, 1.5)
-    assert obs.stamp_ns[0] == T0 + 5 and obs.log_time_ns[0] == T0 + 10
-    assert obs.label[0] == ("7" if ros1 else "cup") and obs.score[0] == 0.9
-    assert obs.obs_id[0] == 42 and obs.camera_frame[0] == "cam_optical"
+    assert obs.stamp_ns[0] == T0 + 5
+    assert obs.log_time_ns[0] == T0 + 10
+    assert obs.label[0] == ("7" if ros1 else "cup")
+    assert obs.score[0] == 0.9
+    assert obs.obs_id[0] == 42
+    assert obs.camera_frame[0] == "cam_optical"
 
 
 def test_pixel_points_side_table_points_odometry_urdf(tmp_path: Path) -> None:
@@ -187,14 +192,18 @@ def test_pixel_points_side_table_points_odometry_urdf(tmp_path: Path) -> None:
     px_row = int(np.flatnonzero(obs.source == "/pixels")[0])
     assert (obs.u[px_row], obs.v[px_row], obs.depth_m[px_row]) == (380.0, 210.0, 2.0)
     side = int(np.flatnonzero(obs.source == "dets.csv")[0])
-    assert obs.stamp_ns[side] == 1_700_000_000_500_000_000 and np.isnan(obs.depth_m[side])
+    assert obs.stamp_ns[side] == 1_700_000_000_500_000_000
+    assert np.isnan(obs.depth_m[side])
     assert (obs.u[side], obs.v[side], obs.label[side]) == (100.5, 50.25, "box")
     pts = tl.points
-    assert pts.role.tolist() == ["reference"] and pts.frame.tolist() == ["map"]
+    assert pts.role.tolist() == ["reference"]
+    assert pts.frame.tolist() == ["map"]
     np.testing.assert_allclose(pts.quat_xyzw[0], [0, 0, np.sin(0.2), np.cos(0.2)])
     odom = tl.transforms
-    assert odom.parent.tolist() == ["odom"] * 3 and odom.child.tolist() == ["base_link"] * 3
-    assert np.array_equal(odom.translation[:, 0], [0.0, 1.0, 2.0]) and odom.source[0] == "/odom"
+    assert odom.parent.tolist() == ["odom"] * 3
+    assert odom.child.tolist() == ["base_link"] * 3
+    assert np.array_equal(odom.translation[:, 0], [0.0, 1.0, 2.0])
+    assert odom.source[0] == "/odom"
     assert tl.metadata["robot_description"] == {"/robot_description": "<robot name='r'/>"}
 
 

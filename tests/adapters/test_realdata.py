@@ -43,10 +43,12 @@ def test_turtlebot_sim_time_is_pointed_out(realdata: Path, capsys: pytest.Captur
     info = _info_json(realdata / "evo/nav2_turtlebot.mcap", capsys)
     assert len(info["edges"]) == 33
     by = {(e["parent"], e["child"]): e for e in info["edges"]}
-    assert by[("map", "odom")]["clocks_differ"] and not by[("map", "odom")]["static"]
+    assert by[("map", "odom")]["clocks_differ"]
+    assert not by[("map", "odom")]["static"]
     assert by[("oakd_rgb_camera_frame", "oakd_rgb_camera_optical_frame")]["static"]
     note = next(n for n in info["notes"] if n.startswith("topic /tf:"))
-    assert "simulation time" in note and "wall clock" in note
+    assert "simulation time" in note
+    assert "wall clock" in note
     assert info["suggested_chain"]["frames"] == {"camera": "oakd_rgb_camera_optical_frame", "body": "base_link",
                                                  "world": "map"}
     # /odom duplicates the /tf edge odom -> base_link: one source, not two parents.
@@ -74,7 +76,8 @@ def test_realsense_depth_pixel_into_colour_camera(realdata: Path) -> None:
     tl = loaded.timeline
     depth_frame, color_frame = "device_0/sensor_0/Depth_0", "device_0/sensor_1/Color_0"
     assert sorted(tl.cameras.frame.tolist()) == [depth_frame, color_frame]
-    assert len(tl.depth_frames) == 6 and set(tl.depth_frames.frame.tolist()) == {depth_frame}
+    assert len(tl.depth_frames) == 6
+    assert set(tl.depth_frames.frame.tolist()) == {depth_frame}
     image = tl.depth_frames.load(0)
     assert image.shape == (480, 640)
     valid = image[(image > 0) & np.isfinite(image)]
@@ -116,7 +119,8 @@ def test_franka_ros1_ros2_and_urdf_forward_kinematics(realdata: Path) -> None:
     for link in ("panda_link4", "panda_hand", "panda_hand_tcp"):
         l1 = b1.lookup("panda_link0", link, stamps)
         l2 = b2.lookup("panda_link0", link, stamps)
-        assert l1.ok.all() and l2.ok.all()
+        assert l1.ok.all()
+        assert l2.ok.all()
         np.testing.assert_allclose(l1.matrix(), l2.matrix(), atol=1e-12)
         for i in range(stamps.size):
             robot.update_cfg(dict(zip(names, q[i], strict=True)))
@@ -128,4 +132,5 @@ def test_legacy_tf_on_two_connections(realdata: Path) -> None:
     loaded = open_log(realdata / "turtlesim/example.bag")
     assert loaded.decoded_topics["/tf"] == "tf"
     tf = loaded.timeline.transforms
-    assert int((tf.child == "turtle1").sum()) == 1344 and int((tf.child == "turtle2").sum()) == 1344
+    assert int((tf.child == "turtle1").sum()) == 1344
+    assert int((tf.child == "turtle2").sum()) == 1344

@@ -100,7 +100,7 @@ def test_16uc1_quantises_to_millimetres(scene: Timeline, tmp_path: Path) -> None
 def test_depth_frames_are_decoded_lazily_and_only_where_needed(
     written: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import framechain.adapters.api as api
+    from framechain.adapters import api
 
     calls: list[tuple[str, int]] = []
     real = api._fetcher
@@ -134,7 +134,8 @@ def test_only_the_chain_topics_are_decoded(written: dict[str, Path]) -> None:
     chain = ChainConfig.from_dict({"topics": {"camera_info": "/camera/color/camera_info"}})
     loaded = open_log(written["mcap-ros2"], chain)
     assert set(loaded.decoded_topics) == {"/tf", "/tf_static", "/camera/color/camera_info", "/joint_states"}
-    assert len(loaded.timeline.observations) == 0 and len(loaded.timeline.depth_frames) == 0
+    assert len(loaded.timeline.observations) == 0
+    assert len(loaded.timeline.depth_frames) == 0
     assert len(loaded.timeline.transforms) == 52
 
 
