@@ -5,7 +5,8 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
 - ``/tf/<child>``: the log's frame tree, one entity per child frame, ``Transform3D`` with
   ``parent_frame``/``child_frame`` (``T_parent_child``); static edges once as static data,
   dynamic edges in bulk at their header stamps.
-- ``/frames/<frame>``: axes and the name of every frame (static).
+- ``/frames/<frame>``: axes and the name of every frame (static); ``/frames/replay/<frame>`` for
+  the replay's frames below.
 - ``/replay/world_from_body`` and ``/replay/body_from_cam``: the transforms the replay actually
   used for each observation, at that observation's time, between the world frame and the
   frames ``<body>@replay`` and ``<camera>@replay``. Rerun resolves transforms at the cursor
@@ -648,7 +649,10 @@ def _log_frame_tree(
         rows[entity] = int(use.size)
     names.update({frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX})
     for name in sorted(names):
-        entity = f"/frames/{_entity_part(name)}"
+        if name.endswith(REPLAY_FRAME_SUFFIX):
+            entity = f"/frames/replay/{_entity_part(name.removesuffix(REPLAY_FRAME_SUFFIX))}"
+        else:
+            entity = f"/frames/{_entity_part(name)}"
         rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=True),
                 static=True)
         rows[entity] = 1

@@ -200,7 +200,8 @@ def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
                    "/points/recomputed/world", "/points/as_run/camera", "/points/as_run/body",
                    "/points/as_run/world", "/points/as_run/target", "/points/error/body", "/points/error/world",
                    "/points/reference/declared", "/points/reference/matched", "/log/findings", "/log/rejected",
-                   "/summary", "/frames/map", "/frames/camera_optical_frame"):
+                   "/summary", "/frames/map", "/frames/camera_optical_frame", "/frames/replay/base_link",
+                   "/frames/replay/camera_optical_frame"):
         assert entity in scene.chunks, entity
     children = {c[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
                 for c in _rows(scene.chunks, e, "Transform3D:child_frame")}
@@ -209,6 +210,7 @@ def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
     assert children == {"base_link", "odom", "mast_link", "camera_optical_frame"}
     assert parents == {"map", "odom", "base_link", "mast_link"}
     assert _rows(scene.chunks, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
+    assert _rows(scene.chunks, "/frames/replay/base_link", "CoordinateFrame:frame") == [["base_link@replay"]]
     camera_frame = _rows(scene.chunks, "/points/recomputed/camera", "CoordinateFrame:frame")
     assert camera_frame == [["camera_optical_frame@replay"]]
     assert _rows(scene.chunks, "/camera/detections", "CoordinateFrame:frame") == [["camera_optical_frame_image_plane"]]
