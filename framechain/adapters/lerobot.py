@@ -41,11 +41,20 @@ import pyarrow.parquet as pq
 from scipy.spatial.transform import Rotation
 
 from framechain.adapters.calibration import CameraCalibration
-from framechain.adapters.lerobot_format import DatasetError, DatasetReader, EpisodeFrames, is_lerobot_dataset
+from framechain.adapters.errors import AdapterError
+from framechain.adapters.lerobot_format import (
+    DatasetError,
+    DatasetReader,
+    EpisodeFrames,
+    Layout,
+    is_lerobot_dataset,
+)
+from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.adapters.robot import RobotModel
 from framechain.adapters.robot_config import DetectionSource, RobotConfig, RobotConfigError
 from framechain.timeline import (
     CameraTable,
+    ChainConfig,
     DepthFrameTable,
     JointStateTable,
     ObservationTable,
@@ -59,7 +68,7 @@ IntArray = npt.NDArray[np.int64]
 #: ``Timeline.metadata["format"]`` of a LeRobot episode.
 FORMAT = "lerobot"
 
-__all__ = ["FORMAT", "camera_stamps_ns", "is_lerobot_dataset", "open_dataset"]
+__all__ = ["FORMAT", "LeRobotAdapter", "camera_stamps_ns", "is_lerobot_dataset", "open_dataset", "scan_dataset"]
 
 
 def open_dataset(
@@ -126,7 +135,7 @@ def open_dataset(
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
     zeroed = [j for j in model.actuated if j not in driven and j not in held]
-    chain = cfg.chain_frames(root=model.root) if cfg.cameras else None
+    chain = cfg.chain_config(root=model.root) if cfg.cameras else None
     metadata: dict[str, Any] = {
         "format": FORMAT,
         "source": {"path": str(Path(path).resolve()), "format": FORMAT, "episode": episode},
@@ -155,7 +164,9 @@ def open_dataset(
             }
             for name, cam in cfg.cameras.items()
         },
-        "chain_frames": None if chain is None else {"camera": chain.camera, "body": chain.body, "world": chain.world},
+        "chain_frames": None if chain is None else {"camera": chain.frames.camera, "body": chain.frames.body,
+                                                    "world": chain.frames.world},
+        "chain": None if chain is None else chain.to_dict(),
         "notes": list(reader.notes),
     }
     return Timeline(transforms=transforms, cameras=cameras, observations=observations,
@@ -382,3 +393,59 @@ def _depth_frames(
 def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     path = frames.episode.video_files.get(key) if key is not None else None
     return None if path is None else str(path)
+
+
+def scan_dataset(path: str | Path) -> LogInfo:
+    """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes."""
+    reader = DatasetReader(path)
+    total = reader.info.get("total_frames")
+    frames = int(total) if isinstance(total, int) else 0
+    longest = max(reader.lengths().values(), default=0)
+    topics = tuple(
+        TopicInfo(name=key, msgtype=f"lerobot/{feat.dtype}{list(feat.shape)}", count=frames, rate_hz=reader.fps,
+                  encoding="video" if feat.is_video else "parquet")
+        for key, feat in reader.features.items()
+    )
+    layout = "one episode per file" if reader.layout is Layout.V2 else "episodes share files"
+    return LogInfo(
+        format="lerobot", path=Path(path), start_ns=0, end_ns=round(max(longest - 1, 0) / reader.fps * 1e9),
+        topics=topics, notes=tuple(reader.notes), message_count=frames,
+        container=f"lerobot {reader.version} ({len(reader.episodes())} episodes, {layout}, {reader.fps:g} fps)",
+    )
+
+
+class LeRobotAdapter:
+    """The :class:`framechain.adapters.LogAdapter` of LeRobot dataset directories.
+
+    ``open(path, chain)`` takes the episode and the robot configuration from ``chain.robot``:
+    ``{"episode": N, "config": "robot.yaml"}``, or the robot.yaml keys inline plus ``episode``.
+    Register it with ``framechain.adapters.register_adapter(LeRobotAdapter())``.
+    """
+
+    name = "lerobot"
+
+    def probe(self, path: Path) -> bool:
+        return is_lerobot_dataset(path)
+
+    def scan(self, path: Path) -> LogInfo:
+        return scan_dataset(path)
+
+    def open(self, path: Path, chain: ChainConfig | None, *, progress: bool = False) -> LoadedLog:
+        section = dict(chain.robot) if chain is not None and chain.robot else {}
+        episode = section.pop("episode", None)
+        if isinstance(episode, bool) or not isinstance(episode, int):
+            raise AdapterError(path, "a LeRobot dataset needs an episode: chain robot section {episode: N, "
+                               "config: robot.yaml} (framechain ... --episode N --robot robot.yaml)")
+        config = section.pop("config", None)
+        robot: RobotConfig | Path
+        if config is not None:
+            robot = Path(str(config))
+        elif "urdf" in section:
+            robot = RobotConfig.from_mapping(section, base_dir=Path.cwd(), source="chain robot section")
+        else:
+            raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
+                               "{episode: N, config: robot.yaml}")
+        timeline = open_dataset(path, episode=episode, robot=robot)
+        info = scan_dataset(path).with_notes(list(timeline.metadata.get("notes", [])))
+        decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
+        return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)

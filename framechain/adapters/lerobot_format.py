@@ -294,6 +294,15 @@ class DatasetReader:
         """Episode indices, ascending."""
         return list(self._episode_ids)
 
+    def lengths(self) -> dict[int, int]:
+        """Declared frame count of every episode (episodes.jsonl or the episodes parquet)."""
+        if self.layout is Layout.V2:
+            return {e: int(row["length"]) for e, row in sorted(self._episodes_v2.items())}
+        files = self._episodes_files_v3()
+        table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index", "length"])
+        pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
+        return {int(e): int(n) for e, n in sorted(pairs)}
+
     def _read_tasks(self) -> dict[int, str]:
         jsonl = self.root / "meta" / "tasks.jsonl"
         parquet = self.root / "meta" / "tasks.parquet"

@@ -22,7 +22,11 @@ The file (or the ``robot:`` section of CHAIN.yaml, whose paths resolve against C
                                       #   camera, u, v[, depth_m, label, score]
       - feature: observation.detection.wrist   # per-frame [u, v] or [u, v, depth_m]; NaN = none
         camera: wrist
-    chain: {camera: wrist, body: base_link}    # optional: the chain's camera (name) and body frame
+    chain:                            # optional: how to replay and attribute (as CHAIN.yaml)
+      camera: wrist                   # the camera (name); default the first one
+      body: base_link                 # the body frame; default the URDF root
+      latency_budget_s: 0.02
+      evidence: {reference_point: [0.4, 0.1, 0.02], static_target: true}   # CHAIN.yaml evidence
 
 Units (``unit``): ``rad`` and ``m`` as recorded; ``deg``; ``mm``; ``range_0_100`` maps 0..100 to the
 joint's [lower, upper] limits (LeRobot's gripper); ``range_m100_100`` maps -100..100 to [lower,
@@ -46,7 +50,7 @@ from scipy.spatial.transform import Rotation
 
 from framechain.adapters.calibration import CalibrationError, CameraCalibration, load_calibration
 from framechain.adapters.robot import RobotModel, RobotModelError
-from framechain.timeline import ChainFrames, FramechainError
+from framechain.timeline import ChainConfig, ChainConfigError, ChainFrames, FramechainError
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -133,6 +137,9 @@ class RobotConfig:
     detections: tuple[DetectionSource, ...] = ()
     chain_camera: str | None = None
     chain_body: str | None = None
+    latency_budget_s: float | None = None
+    #: The chain's evidence, as the ``evidence`` mapping of CHAIN.yaml (checked when read).
+    evidence: Mapping[str, Any] | None = None
     source: str = ""
 
     # ------------------------------------------------------------------------------------ reading
@@ -197,18 +204,28 @@ class RobotConfig:
                 raise RobotConfigError(source, f"cameras.{name} must be a file path or a mapping")
         detections = _detections(raw.get("detections"), base, source, cameras)
         chain = raw.get("chain") or {}
-        if not isinstance(chain, Mapping) or set(chain) - {"camera", "body"}:
-            raise RobotConfigError(source, "chain may only give camera (a camera name) and body (a link)")
+        chain_keys = {"camera", "body", "latency_budget_s", "evidence"}
+        if not isinstance(chain, Mapping) or set(chain) - chain_keys:
+            raise RobotConfigError(source, f"chain may only give {sorted(chain_keys)}")
         chain_camera = None if chain.get("camera") is None else str(chain["camera"])
         if chain_camera is not None and chain_camera not in cameras:
             raise RobotConfigError(source, f"chain.camera {chain_camera!r} is not one of the cameras {sorted(cameras)}")
+        evidence = chain.get("evidence")
+        budget = chain.get("latency_budget_s")
+        try:  # the same checks as CHAIN.yaml
+            ChainConfig.from_dict({k: v for k, v in (("evidence", evidence), ("latency_budget_s", budget))
+                                   if v is not None}, where=f"{source}: chain")
+        except ChainConfigError as err:
+            raise RobotConfigError(source, str(err).split(": ", 1)[-1]) from err
         return cls(
             urdf=urdf, joints=joints, cameras=cameras,
             state_feature=str(raw.get("state_feature", "observation.state")),
             world_frame=str(raw.get("world_frame", "world")).lstrip("/"),
             world_from_base_translation=translation, world_from_base_quat_xyzw=quat, hold=hold,
             detections=detections, chain_camera=chain_camera,
-            chain_body=None if chain.get("body") is None else str(chain["body"]), source=source,
+            chain_body=None if chain.get("body") is None else str(chain["body"]),
+            latency_budget_s=None if budget is None else float(budget),
+            evidence=None if evidence is None else dict(evidence), source=source,
         )
 
     # ------------------------------------------------------------------------------------ using
@@ -290,6 +307,22 @@ class RobotConfig:
         if body is None:
             body = root if root is not None else RobotModel.from_urdf(self.urdf).root
         return ChainFrames(camera=self.cameras[name].optical_frame, body=body, world=self.world_frame)
+
+
+    def chain_config(self, camera: str | None = None, *, root: str | None = None) -> ChainConfig:
+        """The chain configuration to replay and attribute an episode with (frames, evidence, budget).
+
+        Its ``robot`` section points back at this file (``config``) when it was read from one.
+        """
+        frames = self.chain_frames(camera, root=root)
+        raw: dict[str, Any] = {"frames": {"camera": frames.camera, "body": frames.body, "world": frames.world}}
+        if self.evidence is not None:
+            raw["evidence"] = dict(self.evidence)
+        if self.latency_budget_s is not None:
+            raw["latency_budget_s"] = self.latency_budget_s
+        if Path(self.source).is_file():
+            raw["robot"] = {"config": str(Path(self.source).resolve())}
+        return ChainConfig.from_dict(raw, where=f"{self.source}: chain")
 
 
 def _resolve(value: Any, base: Path) -> Path:

@@ -227,6 +227,7 @@ def write_robot_yaml(
     timing: dict[str, Any] | None = None,
     detections: list[dict[str, Any]] | None = None,
     depth_camera: bool = False,
+    chain: dict[str, Any] | None = None,
 ) -> Path:
     """robot.yaml + calib/wrist.yaml for the arm in ``folder``; returns the robot.yaml path."""
     calib: dict[str, Any] = {
@@ -256,6 +257,8 @@ def write_robot_yaml(
     }
     if detections is not None:
         cfg["detections"] = detections
+    if chain is not None:
+        cfg["chain"] = chain
     path = folder / "robot.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
     return path
