@@ -151,6 +151,7 @@ class ArmDataset:
     lengths: tuple[int, ...]
     camera_delay_s: float
     timestamps: tuple[FloatArray, ...]  # per episode, frame times (s) as written
+    camera_times: tuple[FloatArray, ...] = ()  # per episode, when the camera took each frame (s)
 
 
 def write_arm_dataset(
@@ -163,13 +164,17 @@ def write_arm_dataset(
     detection_feature: bool = False,
     episodes_per_file: int | None = None,
     depth: bool = False,
+    jitter_s: float = 0.0,
+    seed: int = 0,
 ) -> ArmDataset:
     """Write the arm dataset; each episode starts at a different phase of the motion.
 
     The camera takes frame k at ``t_k + camera_delay_s``; with ``camera_timestamp_column`` that
     time is recorded in ``observation.images.wrist.timestamp``. The detection feature holds
-    (u, v, depth) of the target at the camera's true time.
+    (u, v, depth) of the target at the camera's true time. ``jitter_s`` makes the recording
+    variable-rate: frame times and each camera frame's delay wander by up to that much (seeded).
     """
+    rng = np.random.default_rng(seed)
     features: dict[str, FeatureSpec] = {
         "observation.state": FeatureSpec("float32", (7,), STATE_NAMES),
         "action": FeatureSpec("float32", (7,), STATE_NAMES),
@@ -186,10 +191,14 @@ def write_arm_dataset(
         features["observation.depth.wrist"] = FeatureSpec("uint16", (DEPTH_H, DEPTH_W), ["height", "width"])
     episodes = []
     stamps = []
+    camera_times = []
     for e, n in enumerate(lengths):
         t = episode_times(e, n)
+        if jitter_s:
+            t = np.cumsum(np.r_[0.0, 1.0 / FPS + rng.uniform(-jitter_s, jitter_s, n - 1)])
+            t = t.astype(np.float32).astype(np.float64)
         frames: dict[str, Any] = {"observation.state": state_vectors(t), "action": state_vectors(t + 0.05)}
-        t_cam = t + camera_delay_s
+        t_cam = t + camera_delay_s + (rng.uniform(-jitter_s, jitter_s, n) if jitter_s else 0.0)
         if camera_timestamp_column:
             frames["observation.images.wrist.timestamp"] = t_cam
         if detection_feature or depth:
@@ -201,11 +210,12 @@ def write_arm_dataset(
             if depth:
                 frames["observation.depth.wrist"] = np.broadcast_to(
                     np.round(z * 1000.0)[:, None, None], (n, DEPTH_H, DEPTH_W)).astype(np.uint16)
-        episodes.append(EpisodeData(frames, task=f"reach {e % 2}"))
+        episodes.append(EpisodeData(frames, task=f"reach {e % 2}", timestamp_s=t if jitter_s else None))
         stamps.append(t)
+        camera_times.append(t_cam)
     write_lerobot_dataset(root, episodes, features=features, fps=FPS, version=version,
                           episodes_per_file=episodes_per_file)
-    return ArmDataset(root, tuple(lengths), camera_delay_s, tuple(stamps))
+    return ArmDataset(root, tuple(lengths), camera_delay_s, tuple(stamps), tuple(camera_times))
 
 
 #: Depth images of the depth test (a small camera keeps the Parquet small).
@@ -275,7 +285,8 @@ def write_detection_table(
 
     t = dataset.timestamps[episode]
     frames = np.arange(0, t.size, 2) if frames is None else np.asarray(frames)
-    u, v, z = project_truth(t[frames] + dataset.camera_delay_s)
+    t_cam = dataset.camera_times[episode] if dataset.camera_times else t + dataset.camera_delay_s
+    u, v, z = project_truth(t_cam[frames])
     cols: dict[str, Any] = {
         "episode_index": np.full(frames.size, episode), "camera": ["wrist"] * frames.size,
         "u": u, "v": v, "depth_m": z, "label": ["cup"] * frames.size, "score": np.full(frames.size, 0.9),
@@ -283,7 +294,7 @@ def write_detection_table(
     if by == "frame_index":
         cols["frame_index"] = frames
     else:
-        cols["timestamp"] = t[frames] + dataset.camera_delay_s
+        cols["timestamp"] = t_cam[frames]
     table = pa.table(cols)
     if other_episode is not None:  # rows of another episode that must be filtered out
         extra = table.slice(0, 3).set_column(0, "episode_index", pa.array(np.full(3, other_episode)))

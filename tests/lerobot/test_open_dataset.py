@@ -143,6 +143,27 @@ def test_injected_camera_latency_is_the_gap_per_observation(tmp_path: Path, how:
     assert err.max() < 2e-4
 
 
+def test_variable_rate_state_and_camera_times(tmp_path: Path) -> None:
+    ds = write_arm_dataset(tmp_path / "ds", version="v2.1", lengths=(60,), camera_delay_s=0.01,
+                           camera_timestamp_column=True, jitter_s=0.006, seed=3)
+    frames = np.arange(2, 58, 3)
+    write_detection_table(tmp_path / "det.parquet", ds, 0, frames=frames)
+    robot = write_robot_yaml(tmp_path, timing={"timestamp_column": "observation.images.wrist.timestamp"},
+                             detections=[{"table": "det.parquet"}])
+    tl = open_dataset(ds.root, episode=0, robot=robot)
+    assert any("variable rate" in note for note in tl.metadata["notes"])
+    state_ns = np.round(ds.timestamps[0] * 1e9).astype(np.int64)
+    cam_ns = np.round(ds.camera_times[0] * 1e9).astype(np.int64)
+    np.testing.assert_array_equal(np.unique(tl.joint_states.stamp_ns), state_ns)
+    np.testing.assert_array_equal(tl.observations.stamp_ns, cam_ns[frames])
+    np.testing.assert_array_equal(tl.observations.log_time_ns, state_ns[frames])
+    result = replay(tl, FRAMES, latency_budget_s=0.02)
+    # The hop gap is against the nearest joint-state sample, whichever frame it belongs to.
+    nearest = np.abs(cam_ns[frames][:, None] - state_ns[None, :]).argmin(axis=1)
+    np.testing.assert_array_equal(_hop_gaps(result, HopName.CAMERA_TO_BODY), cam_ns[frames] - state_ns[nearest])
+    assert np.linalg.norm(result.p_world - target_world(), axis=1).max() < 3e-4
+
+
 def test_unrecorded_camera_latency_is_attributed(tmp_path: Path) -> None:
     attribute = pytest.importorskip("framechain.analysis.attribute").attribute
     delay = 0.04
