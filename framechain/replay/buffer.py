@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Final, overload
+from typing import Any, Final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -526,8 +526,8 @@ _IDENTITY_STEP: tuple[Vec3, Quat4] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
 
 
 # Columns of an interpolant's rows (one row per sample; row i describes samples i and i + 1).
-_SPAN, _T, _STEP, _Q, _QN, _HALF, _SIN, _COS = 0, slice(1, 4), slice(4, 7), slice(7, 11), slice(11, 15), 15, 16, 17
-_N_COLS = 18
+_T, _STEP, _Q, _QN, _HALF, _SIN = slice(0, 3), slice(3, 6), slice(6, 10), slice(10, 14), 14, 15
+_N_COLS = 16  # 128 bytes: two cache lines per gathered row
 
 
 @dataclass(frozen=True)
@@ -574,16 +574,14 @@ class _Interpolant:
         rel = quat_multiply(quat_conjugate(quat), quat_next)  # q_i^-1 q_(i+1), w >= 0
         half = np.maximum(np.arctan2(np.sqrt(rel[0] ** 2 + rel[1] ** 2 + rel[2] ** 2), np.abs(rel[3])),
                           _MIN_HALF_ANGLE)
-        rows = np.zeros((m, _N_COLS))
-        rows[:, _SPAN] = 1.0
-        rows[:-1, _SPAN] = np.diff(stamps).astype(np.float64)
+        rows = _aligned_empty((m, _N_COLS), np.float64)
+        rows[...] = 0.0
         rows[:, _T] = trans.T
         rows[:-1, _STEP] = np.diff(trans, axis=1).T
         rows[:, _Q] = quat.T
         rows[:, _QN] = quat_next.T
         rows[:, _HALF] = half
         rows[:, _SIN] = np.sin(half)
-        rows[:, _COS] = np.cos(half)
         first, last = int(stamps[0]), int(stamps[-1])
         buckets: IntArray | None = None
         origin, scale, top, steps = float(first), 0.0, 0.0, 0
@@ -598,7 +596,8 @@ class _Interpolant:
             steps = int((highest - lowest).max())
             if steps <= _MAX_BUCKET_STEPS:
                 ext = np.concatenate([[_INT64_MIN], stamps, np.full(steps + 1, _INT64_MAX)])
-                buckets = np.empty((n_buckets + 1, steps + 3), dtype=np.int64)
+                buckets = _aligned_empty((n_buckets + 1, 4 if steps <= 1 else 8), np.int64)  # 32 or 64 bytes
+                buckets[...] = 0
                 buckets[:, 0] = lowest
                 for j in range(steps + 2):
                     buckets[:, 1 + j] = ext[lowest + 1 + j]
@@ -626,7 +625,7 @@ class _Interpolant:
         np.clip(f, 0.0, self.bucket_top, out=f)
         probe = ws.i[0]
         np.copyto(probe, f, casting="unsafe")
-        width = self.bucket_steps + 3
+        width = self.buckets.shape[1]
         rows = ws.bucket_rows(width)
         np.take(self.buckets, probe, axis=0, out=rows, mode="clip")
         count = ws.i[1]
@@ -654,10 +653,15 @@ class _Interpolant:
             out.before[past] = self.first_ns
         g = ws.gathered
         np.take(self.rows, lo, axis=0, out=g, mode="clip")
-        dt = ws.i[1]
+        dt, span = ws.i[1], ws.i[0]
         np.subtract(t, out.before, out=dt)
+        np.subtract(out.after, out.before, out=span)  # > 0 inside the span (the newest: int64 max - stamp)
         weight = out.weight
-        np.divide(dt, g[:, _SPAN], out=weight)
+        if outside:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                np.divide(dt, span, out=weight)
+        else:
+            np.divide(dt, span, out=weight)
         if outside:
             future = t > self.last_ns
             out.status[past] = LookupStatus.EXTRAPOLATED_PAST
@@ -670,23 +674,28 @@ class _Interpolant:
         np.copyto(out.after, out.before, where=ws.mask)  # exact hits and single samples: one stamp
         f1, f2, f3 = ws.f[0], ws.f[1], ws.f[2]
         for k in range(3):
-            np.multiply(g[:, 4 + k], weight, out=f1)
-            np.add(g[:, 1 + k], f1, out=out.translation[k])
+            np.multiply(g[:, 3 + k], weight, out=f1)
+            np.add(g[:, k], f1, out=out.translation[k])
         np.multiply(g[:, _HALF], weight, out=f1)
         np.sin(f1, out=f2)
-        if self.small_steps:  # cos = sqrt(1 - sin^2), exact to an ulp while cos >= cos(pi/4)
+        sin_half = g[:, _SIN]
+        if self.small_steps:  # cos = sqrt(1 - sin^2): exact to an ulp while the angle is below pi/4
             np.multiply(f2, f2, out=f3)
             np.subtract(1.0, f3, out=f3)
-            np.sqrt(f3, out=f3)
+            np.sqrt(f3, out=f3)  # cos(w W)
+            np.multiply(sin_half, sin_half, out=f1)
+            np.subtract(1.0, f1, out=f1)
+            np.sqrt(f1, out=f1)  # cos W
         else:
             np.cos(f1, out=f3)
-        np.divide(f2, g[:, _SIN], out=f2)  # b
-        np.multiply(g[:, _COS], f2, out=f1)
-        np.subtract(f3, f1, out=f3)  # a
+            np.cos(g[:, _HALF], out=f1)
+        np.divide(f2, sin_half, out=f2)  # b
+        f1 *= f2
+        np.subtract(f3, f1, out=f3)  # a = cos(w W) - cos W b
         for k in range(4):
             row = out.quat[k]
-            np.multiply(g[:, 7 + k], f3, out=row)
-            np.multiply(g[:, 11 + k], f2, out=f1)
+            np.multiply(g[:, 6 + k], f3, out=row)
+            np.multiply(g[:, 10 + k], f2, out=f1)
             row += f1
         if not outside:
             return False
@@ -695,6 +704,16 @@ class _Interpolant:
             out.translation[:, bad] = np.nan
             out.quat[:, bad] = np.nan
         return True
+
+
+def _aligned_empty(shape: tuple[int, int], dtype: type[np.generic], align: int = 64) -> npt.NDArray[Any]:
+    """An uninitialised C-ordered array whose data starts on a cache-line boundary."""
+    itemsize = np.dtype(dtype).itemsize
+    count = shape[0] * shape[1]
+    raw = np.empty(count + align // itemsize, dtype=dtype)
+    skip = (-raw.ctypes.data % align) // itemsize
+    out: npt.NDArray[Any] = raw[skip : skip + count].reshape(shape)
+    return out
 
 
 def _bucket(t: IntArray, origin: float, scale: float, top: float) -> IntArray:
@@ -750,7 +769,7 @@ class _Workspace:
             self._f = np.empty((_SCRATCH_ROWS, size))
             self._i = np.empty((3, size), dtype=np.int64)
             self._mask = np.empty(size, dtype=bool)
-            self._gathered = np.empty((size, _N_COLS))
+            self._gathered = _aligned_empty((size, _N_COLS), np.float64)
             self._buckets: dict[int, IntArray] = {}
             self.arange = np.arange(size, dtype=np.int64)
         else:
@@ -766,7 +785,7 @@ class _Workspace:
         """A (size, width) block for gathered bucket rows."""
         block = self._buckets.get(width)
         if block is None:
-            block = self._buckets[width] = np.empty((self._gathered.shape[0], width), dtype=np.int64)
+            block = self._buckets[width] = _aligned_empty((self._gathered.shape[0], width), np.int64)
         return block[: self.size]
 
     def sized(self, size: int) -> _Workspace:
