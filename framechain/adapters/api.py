@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-import functools
 import sys
+import weakref
 from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -12,9 +12,9 @@ from typing import Any, Protocol
 from framechain.adapters.collect import Collector
 from framechain.adapters.errors import AdapterError, EmptyLogError, UnsupportedLogError
 from framechain.adapters.kinds import Kind, normalize_msgtype, select_topics
-from framechain.adapters.mcap_log import MCAP_MAGIC, McapLog, fetch_from_mcap
+from framechain.adapters.mcap_log import MCAP_MAGIC, McapLog
 from framechain.adapters.model import LoadedLog, LogInfo
-from framechain.adapters.rosbag_log import RosbagsLog, fetch_from_bag
+from framechain.adapters.rosbag_log import RosbagsLog
 from framechain.timeline import ChainConfig
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
@@ -101,9 +101,28 @@ def _source(fmt: str, target: Path) -> Iterator[McapLog | RosbagsLog]:
         src.close()
 
 
+class _KeptOpenFetcher:
+    """Fetches messages lazily from one log, keeping the reader (and its decoders) open between calls.
+
+    Depth frames are fetched one at a time as observations need them; re-opening the file and
+    rebuilding its decoders for every frame cost 50 ms a frame. The reader closes with this object.
+    """
+
+    def __init__(self, fmt: str, target: Path) -> None:
+        self._fmt = fmt
+        self._target = target
+        self._log: McapLog | RosbagsLog | None = None
+        self._finalizer: weakref.finalize[Any, Any] | None = None
+
+    def __call__(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        if self._log is None:
+            self._log = McapLog(self._target) if self._fmt == "mcap" else RosbagsLog(self._target)
+            self._finalizer = weakref.finalize(self, self._log.close)
+        return self._log.fetch(topic, log_time_ns, ordinal)
+
+
 def _fetcher(fmt: str, target: Path) -> Callable[[str, int, int], Any]:
-    fn = fetch_from_mcap if fmt == "mcap" else fetch_from_bag
-    return functools.partial(fn, target)
+    return _KeptOpenFetcher(fmt, target)
 
 
 def scan_log(path: str | Path) -> LogInfo:

@@ -371,11 +371,20 @@ class McapLog:
         raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
 
     def _chunk_at(self, ci: Any) -> list[Any]:
+        """The messages of a chunk; the last few stay decompressed (neighbouring frames share chunks)."""
         from mcap.data_stream import ReadDataStream
         from mcap.records import Chunk
 
+        cache: dict[int, list[Any]] = self.__dict__.setdefault("_chunk_cache", {})
+        key = int(ci.chunk_start_offset)
+        if key in cache:
+            return cache[key]
         self._f.seek(ci.chunk_start_offset + 1 + 8)
-        return _chunk_records(Chunk.read(ReadDataStream(self._f)))
+        records = _chunk_records(Chunk.read(ReadDataStream(self._f)))
+        if len(cache) >= 4:
+            cache.pop(next(iter(cache)))
+        cache[key] = records
+        return records
 
 
 def _chunk_records(chunk: Any, *, keep_all: bool = False) -> list[Any]:
@@ -387,12 +396,6 @@ def _chunk_records(chunk: Any, *, keep_all: bool = False) -> list[Any]:
     if keep_all:
         return list(records)
     return [r for r in records if isinstance(r, Message)]
-
-
-def fetch_from_mcap(path: Path, topic: str, log_time_ns: int, ordinal: int) -> Any:
-    """Re-open the file and fetch one message (the depth loader's entry point)."""
-    with McapLog(path) as log:
-        return log.fetch(topic, log_time_ns, ordinal)
 
 
 def mcap_topic_types(log: McapLog) -> dict[str, str]:

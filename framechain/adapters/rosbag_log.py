@@ -166,8 +166,3 @@ class RosbagsLog:
                 return self.decoder(conn.msgtype, topic)(raw)
             seen += 1
         raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
-
-
-def fetch_from_bag(path: Path, topic: str, log_time_ns: int, ordinal: int) -> Any:
-    with RosbagsLog(path) as log:
-        return log.fetch(topic, log_time_ns, ordinal)

@@ -95,7 +95,7 @@ def _rotation() -> FaultModel:
         rotvec = np.asarray(x, dtype=float) if mode == "as_run" else -np.asarray(x, dtype=float)
         angle = float(np.linalg.norm(rotvec))
         axis = rotvec / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
-        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) for a in axis]}
+        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) + 0.0 for a in axis]}
 
     return FaultModel(
         name="rotation[camera_to_body]",

@@ -159,7 +159,8 @@ def _estimate(f: Finding) -> str:
         if key == "offset_s":
             parts.append(f"offset {float(value) * 1e3:+.1f} ms")
         elif key == "angle_deg":
-            parts.append(f"{float(value):.2f} deg about {[round(a, 3) for a in f.estimate.get('axis', [])]}")
+            axis = [round(float(a), 3) + 0.0 for a in f.estimate.get("axis", [])]  # + 0.0 drops negative zeros
+            parts.append(f"{float(value):.2f} deg about {axis}")
         elif key in ("factor", "scale"):
             parts.append(f"{key} {float(value):.4g}")
         elif key in ("used", "meant", "hop", "variant"):
@@ -175,9 +176,11 @@ def _interval(f: Finding) -> str:
     out = []
     for key, (lo, hi) in f.interval.items():
         if key == "offset_s":
-            out.append(f"{lo * 1e3:+.1f} .. {hi * 1e3:+.1f} ms")
+            out.append(f"{lo * 1e3:+.2f} .. {hi * 1e3:+.2f} ms")
+        elif key == "angle_deg":
+            out.append(f"{lo:.3f} .. {hi:.3f} deg")
         else:
-            out.append(f"{lo:.4g} .. {hi:.4g}")
+            out.append(f"{lo:.5f} .. {hi:.5f}")
     return "; ".join(out) or "-"
 
 

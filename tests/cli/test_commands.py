@@ -1,0 +1,159 @@
+"""The command line: exit codes, one-line errors, and the main jobs end to end on real written logs."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from framechain.cli.main import main
+from framechain.sim.logs import write_scene
+from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def latency_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A small MCAP written with the real writer: 40 ms pose latency, robot's hop points logged."""
+    out = tmp_path_factory.mktemp("latency")
+    spec = SceneSpec(seed=11, duration_s=4.0, width=320, height=240, focal_px=300.0, depth_images=True,
+                     evidence="hops", faults=(InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": -0.04}),))
+    scene = generate(spec)
+    log = write_scene(scene, out / "episode.mcap")
+    chain = out / "chain.yaml"
+    chain.write_text(scene.chain.to_yaml())
+    return log, chain
+
+
+def test_help_lists_commands_and_exit_codes(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    for command in ("info", "tf", "replay", "attribute", "report", "demo", "lab"):
+        assert command in text
+    assert "exit codes" in text and "bad input" in text
+
+
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.startswith("framechain ")
+
+
+def test_lab_tilt_numbers(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lab", "tilt", "--max-pitch", "5", "--depths", "0.5,1", "--json"]) == 0
+    rows = {(r["pitch_deg"], r["depth_m"]): r["error_m"] for r in json.loads(capsys.readouterr().out)}
+    # A point straight ahead at depth Z swings by the chord 2 Z sin(pitch / 2) when the pitch is lost.
+    assert rows[(1.0, 0.5)] == pytest.approx(2 * 0.5 * math.sin(math.radians(0.5)), rel=1e-9)
+    assert rows[(5.0, 1.0)] == pytest.approx(2 * 1.0 * math.sin(math.radians(2.5)), rel=1e-9)
+    assert 0.0086 < rows[(1.0, 0.5)] < 0.0088 and 0.086 < rows[(5.0, 1.0)] < 0.088
+
+
+def test_lab_tilt_bad_depths_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["lab", "tilt", "--depths", "x"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--depths" in err
+
+
+def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    out = tmp_path / "out"
+    assert main(["attribute", str(log), "--chain", str(chain), "--out", str(out), "--format", "json,md",
+                 "--bootstrap", "5", "-q"]) == 0
+    doc = json.loads((out / "attribution.json").read_text())
+    assert doc["source"]["format"] == "mcap" and doc["source"]["path"] == str(log)
+    top = doc["findings"][0]
+    assert (top["fault"], top["hop"]) == ("latency", "body_to_world")
+    assert top["estimate"]["offset_s"] == pytest.approx(-0.04, abs=0.002)
+    counts = doc["observations"]
+    assert counts["replayed"] + sum(counts["rejected"].values()) == counts["total"]
+    table = pq.read_table(out / "evidence.parquet")
+    assert table.num_rows == 3 * counts["total"]  # one row per observation and hop
+    assert set(table.column("hop").to_pylist()) == {"pixel_to_camera", "camera_to_body", "body_to_world"}
+    inputs = json.loads((out / "inputs.json").read_text())
+    assert inputs["latency_budget_s"] == 0.02 and inputs["metric"]["name"] == "logged_hops"
+    assert (out / "report.md").read_text().startswith("# framechain report")
+    assert not (out / "report.html").exists()
+
+
+def test_attribute_without_chain_prints_the_suggestion(latency_log: tuple[Path, Path], tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    log, _ = latency_log
+    assert main(["attribute", str(log), "--out", str(tmp_path / "o"), "--bootstrap", "0", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["frames"]["camera"] == "camera_optical_frame"
+
+
+def test_unknown_chain_key_is_one_line_error(latency_log: tuple[Path, Path], tmp_path: Path,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    log, _ = latency_log
+    bad = tmp_path / "chain.yaml"
+    bad.write_text("frames: {camera: c, body: b, world: w}\nevidence: {tagret: /x}\n")
+    assert main(["attribute", str(log), "--chain", str(bad), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "tagret" in err and str(bad) in err
+
+
+def test_missing_log_is_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["attribute", str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "nope.mcap" in err
+
+
+def test_report_html_is_self_contained(latency_log: tuple[Path, Path], tmp_path: Path) -> None:
+    log, chain = latency_log
+    out = tmp_path / "report"
+    assert main(["report", str(log), "--chain", str(chain), "--out", str(out), "--bootstrap", "5", "-q"]) == 0
+    page = (out / "report.html").read_text()
+    assert "latency at body_to_world" in page  # the verdict comes first
+    assert page.count("data:image/png;base64,") == 4
+    assert "http://" not in page and "https://" not in page and "<script" not in page
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
+def test_report_renders_in_headless_chromium(latency_log: tuple[Path, Path], tmp_path: Path) -> None:
+    log, chain = latency_log
+    out = tmp_path / "report"
+    assert main(["report", str(log), "--chain", str(chain), "--out", str(out), "--bootstrap", "0", "-q"]) == 0
+    png = tmp_path / "page.png"
+    assert CHROMIUM is not None
+    subprocess.run(
+        [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync",
+         f"--user-data-dir={tmp_path / 'profile'}", "--hide-scrollbars", "--window-size=1200,2400",
+         f"--screenshot={png}", (out / "report.html").as_uri()],
+        check=True, capture_output=True, timeout=120,
+    )
+    import matplotlib.image
+
+    image = matplotlib.image.imread(png)
+    assert image.shape[0] == 2400 and image.shape[1] == 1200
+    # The embedded plots rendered: the page is not blank white, and it has the plots' colours.
+    rgb = image[..., :3]
+    assert (rgb < 0.95).mean() > 0.05
+    blue = (rgb[..., 2] > 0.6) & (rgb[..., 0] < 0.3)
+    assert blue.sum() > 200
+
+
+def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--json", "--seed", "3"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    found = {f["fault"]: f["estimate"] for f in doc["findings"]}
+    assert found["missing_rotation"]["angle_deg"] == pytest.approx(30.0, abs=0.5)
+    assert found["latency"]["offset_s"] == pytest.approx(-0.03, abs=0.002)
+    assert doc["findings"][0]["fault"] == "missing_rotation"  # sorted by share
+    for name in ("episode.mcap", "chain.yaml", "attribution.json", "evidence.parquet", "report.html", "report.md",
+                 "episode.rrd"):
+        assert (out / name).exists(), name
+    assert np.isclose(sum(f["share"] for f in doc["findings"]), 1.0, atol=0.05)
