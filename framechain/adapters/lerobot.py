@@ -105,9 +105,10 @@ def open_dataset(
     for cam in cfg.cameras.values():
         if cam.depth is not None:
             feat = reader.feature(cam.depth.feature)
-            if feat.is_video:
-                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is a video: "
-                                   "framechain does not decode videos; store depth as an array feature (H, W)")
+            if feat.is_video or feat.dtype == "image":
+                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is "
+                                   f"{'a video' if feat.is_video else 'an encoded image'}: framechain does not "
+                                   "decode images; store depth as an array feature (height, width)")
             columns.append(cam.depth.feature)
     frames = reader.read(episode, list(dict.fromkeys(columns)))
     state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)

@@ -48,8 +48,8 @@ import numpy.typing as npt
 import yaml
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.calibration import CalibrationError, CameraCalibration, load_calibration
-from framechain.adapters.robot import RobotModel, RobotModelError
+from framechain.adapters.calibration import CameraCalibration, load_calibration
+from framechain.adapters.robot import RobotModel
 from framechain.timeline import ChainConfig, ChainConfigError, ChainFrames, FramechainError
 
 FloatArray = npt.NDArray[np.float64]
@@ -413,7 +413,3 @@ def _detections(
         else:
             out.append(DetectionSource(table=_resolve(item["table"], base), camera=camera))
     return tuple(out)
-
-
-# Re-exported for callers that catch configuration problems as one family.
-ConfigErrors = (RobotConfigError, CalibrationError, RobotModelError)

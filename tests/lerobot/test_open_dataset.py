@@ -279,6 +279,11 @@ def test_configuration_errors(arm_dataset: ArmDataset, tmp_path: Path) -> None:
     with pytest.raises(RobotConfigError, match=r"state names \['elbow.pos'\] are not in observation.state; "
                                                r"it has \['shoulder_pan.pos'"):
         open_dataset(arm_dataset.root, episode=0, robot=RobotConfig.from_mapping(renamed, base_dir=tmp_path))
+    calib = yaml.safe_load((tmp_path / "calib" / "wrist.yaml").read_text())
+    video_depth = {**raw, "cameras": {"wrist": {**calib, "depth": {"feature": "observation.images.wrist"}}}}
+    with pytest.raises(DatasetError, match=r"depth feature 'observation.images.wrist' of camera 'wrist' is a "
+                                           r"video: framechain does not decode images"):
+        open_dataset(arm_dataset.root, episode=0, robot=RobotConfig.from_mapping(video_depth, base_dir=tmp_path))
     with pytest.raises(DatasetError, match=r"no feature 'observation.joint_pos'"):
         open_dataset(arm_dataset.root, episode=0,
                      robot=RobotConfig.from_mapping({**raw, "state_feature": "observation.joint_pos"},
