@@ -38,7 +38,6 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-from scipy.spatial.transform import Rotation
 
 from framechain.adapters.calibration import CameraCalibration
 from framechain.adapters.errors import AdapterError
@@ -189,13 +188,6 @@ def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArr
     return out
 
 
-def _rows(
-    parent: str, child: str, stamps: IntArray, M: FloatArray, *, static: bool, source: str
-) -> TransformTable:
-    quat = Rotation.from_matrix(M[:, :3, :3]).as_quat()
-    return TransformTable.from_rows(parent, child, stamps, M[:, :3, 3], quat, is_static=static, source=source)
-
-
 def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
     return TransformTable.from_rows(
         cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
@@ -210,19 +202,20 @@ def _joint_edges(
     given: dict[str, FloatArray] = dict(q)
     for name, value in cfg.hold.items():
         given[name] = np.full(n, value)
-    local = model.joint_transforms(given, default=0.0)
+    local = model.joint_poses(given, default=0.0)
     dynamic = set(q)
     for joint in model.joints.values():
         if joint.mimic is not None and joint.mimic.joint in dynamic:
             dynamic.add(joint.name)
     out: list[TransformTable] = []
     for name, joint in model.joints.items():
-        M = local[name]
+        translation, quat = local[name]
         if name in dynamic:
-            out.append(_rows(joint.parent, joint.child, stamps, M, static=False, source=f"{source}->{name}"))
-        else:
-            out.append(_rows(joint.parent, joint.child, np.zeros(1, dtype=np.int64), M[:1], static=True,
-                             source=f"{model.source}:{name}"))
+            out.append(TransformTable.from_rows(joint.parent, joint.child, stamps, translation, quat,
+                                                source=f"{source}->{name}"))
+        else:  # fixed, held or left at zero: one timeless sample
+            out.append(TransformTable.from_rows(joint.parent, joint.child, [0], translation[:1], quat[:1],
+                                                is_static=True, source=f"{model.source}:{name}"))
     return out
 
 
