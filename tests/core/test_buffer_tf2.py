@@ -245,6 +245,10 @@ def test_extrapolation_both_ways_is_reported_and_never_clamped() -> None:
     assert np.isfinite(result.translation[2:]).all()
     assert np.isnan(result.matrix()[:2, :3]).all()
     assert result.hops[0].status.tolist() == [PAST, FUTURE, 0, 0]
+    # The hop's own samples are not usable there either: NaN, not the clamped end sample.
+    assert np.isnan(result.hops[0].translation[:2]).all()
+    assert np.isnan(result.hops[0].quat_xyzw[:2]).all()
+    assert np.isfinite(result.hops[0].translation[2:]).all()
     with pytest.raises(ExtrapolationError, match="into the past") as err:
         result.raise_for_status()
     assert (err.value.parent, err.value.child, err.value.stamp_ns) == ("a", "b", -1)
