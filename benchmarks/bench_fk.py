@@ -32,7 +32,7 @@ N_PIN = 50_000
 FloatArray = npt.NDArray[np.float64]
 
 
-def _best_of(fn: Callable[[], object], repeats: int = 3) -> float:
+def _best_of(fn: Callable[[], object], repeats: int = 5) -> float:
     best = float("inf")
     for _ in range(repeats):
         start = time.perf_counter()

@@ -351,7 +351,7 @@ class RobotModel:
         wanted = list(self.links) if links is None else list(links)
         for link in wanted:
             self._check_link(link)
-        identity: tuple[Quat, Vec] = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+        identity: tuple[Quat, Vec] = (_IDENTITY_Q, _ZERO_T)
         cache: dict[str, tuple[Quat, Vec]] = {self.root: identity}
 
         def pose(link: str) -> tuple[Quat, Vec]:
@@ -370,8 +370,19 @@ class RobotModel:
     def fk(
         self, q: Mapping[str, npt.ArrayLike] | npt.ArrayLike, link: str, *, default: float | None = None
     ) -> FloatArray:
-        """``T_root_link`` at every frame, ``(T, 4, 4)``."""
-        return self.link_poses(q, links=[link], default=default)[link]
+        """``T_root_link`` at every frame, ``(T, 4, 4)`` (chained in cache-sized blocks)."""
+        pos = self.positions(q, default=default)
+        n = next(iter(pos.values())).shape[0] if pos else 1
+        path = self.path_joints(link)
+        out = np.empty((n, 4, 4))
+        for lo in range(0, n, FK_BLOCK):
+            hi = min(lo + FK_BLOCK, n)
+            acc: tuple[Quat, Vec] = (_IDENTITY_Q, _ZERO_T)
+            for joint in path:
+                theta = pos.get(joint.name)
+                acc = _compose(acc, _local(self._steps[joint.name], None if theta is None else theta[lo:hi]))
+            out[lo:hi] = _homogeneous(*acc, n=hi - lo)
+        return out
 
     def fk_path(self, q: npt.ArrayLike, path: Sequence[Joint]) -> tuple[FloatArray, FloatArray]:
         """Chain the given joints with positions ``q`` (T, len(path)) (columns of fixed joints ignored).
@@ -387,7 +398,7 @@ class RobotModel:
         for lo in range(0, max(n, 1), FK_BLOCK):
             block = arr[lo:lo + FK_BLOCK].T
             m = block.shape[1]
-            acc: tuple[Quat, Vec] = ((0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0))
+            acc: tuple[Quat, Vec] = (_IDENTITY_Q, _ZERO_T)
             for i, joint in enumerate(path):
                 acc = _compose(acc, _local(self._steps[joint.name], block[i] if joint.moves else None))
             trans[lo:lo + m] = _stack(acc[1], m)
@@ -452,10 +463,16 @@ def _rotate(q: Quat, v: Vec) -> Vec:
     return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
 
 
+_IDENTITY_Q: Quat = (0.0, 0.0, 0.0, 1.0)
+_ZERO_T: Vec = (0.0, 0.0, 0.0)
+
+
 def _compose(parent: tuple[Quat, Vec], child: tuple[Quat, Vec]) -> tuple[Quat, Vec]:
     """``T_a_c = T_a_b @ T_b_c`` on structure-of-arrays poses."""
     qp, tp = parent
     qc, tc = child
+    if qp is _IDENTITY_Q and tp is _ZERO_T:  # the root: nothing to compose
+        return child
     r = _rotate(qp, tc)
     return _qmul(qp, qc), (tp[0] + r[0], tp[1] + r[1], tp[2] + r[2])
 
@@ -464,8 +481,8 @@ def _stack(parts: tuple[FloatArray | float, ...], n: int) -> FloatArray:
     return np.stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in parts], axis=1)
 
 
-def _homogeneous(quat: Quat, trans: Vec) -> FloatArray:
-    n = max(np.size(c) for c in (*quat, *trans))
+def _homogeneous(quat: Quat, trans: Vec, *, n: int | None = None) -> FloatArray:
+    n = max(np.size(c) for c in (*quat, *trans)) if n is None else n
     x, y, z, w = (np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in quat)
     out = np.zeros((n, 4, 4))
     out[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
