@@ -221,7 +221,7 @@ def replay(
     depth_stamp = np.where(np.isfinite(depth), obs.stamp_ns, 0)
     # Where the depth came from (the observation or a depth frame); a stamp of 0 is a valid stamp.
     has_depth_source = np.isfinite(depth)
-    need = ~np.isfinite(depth) & (status == REPLAYED)
+    need = np.isnan(depth) & (status == REPLAYED)  # NaN: not given, sample it; +-Inf is given and invalid
     if need.any():
         sampled = sample_depth(
             timeline.depth_frames, camera_frame, obs.stamp_ns[need], obs.u[need], obs.v[need],

@@ -58,6 +58,7 @@ CASES: list[tuple[str, tuple[int, float, float, float]]] = [
     ("no_depth", (2 * S, 320.0, 240.0, np.nan)),
     ("depth_invalid", (2 * S, 320.0, 240.0, 0.0)),
     ("depth_invalid", (2 * S, 320.0, 240.0, -1.5)),
+    ("depth_invalid", (2 * S, 320.0, 240.0, np.inf)),  # given, but not finite (NaN alone means "not given")
     ("extrapolation", (20 * S, 320.0, 240.0, 2.0)),
     ("extrapolation", (-S, 320.0, 240.0, 2.0)),
     ("replayed", (2 * S + 500 * MS, 320.0, 240.0, 1.0)),  # stale: 0.5 s from the nearest pose sample
@@ -71,14 +72,14 @@ def test_every_guard_and_the_totals_reconcile() -> None:
     assert result.status.tolist() == [reason for reason, _ in CASES]
     counts = result.counts()
     assert counts == {
-        "total": 9, "replayed": 2, "stale": 1,
-        "rejected": {"outside_image": 2, "no_depth": 1, "depth_invalid": 2, "extrapolation": 2},
+        "total": 10, "replayed": 2, "stale": 1,
+        "rejected": {"outside_image": 2, "no_depth": 1, "depth_invalid": 3, "extrapolation": 2},
     }
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
     assert counts["replayed"] + sum(rejected.values()) == counts["total"] == len(obs)
     assert set(rejected) <= {r.value for r in RejectReason}
-    assert result.stale.tolist() == [False] * 8 + [True]
+    assert result.stale.tolist() == [False] * 9 + [True]
     # Replayed rows carry points; rejected rows carry NaN, never a made-up point.
     ok = result.replayed
     assert np.isfinite(result.p_world[ok]).all()
@@ -86,7 +87,7 @@ def test_every_guard_and_the_totals_reconcile() -> None:
     assert np.isnan(result.p_cam[~ok]).all()
     np.testing.assert_allclose(result.p_world[0], [2.0 + 0.5, -0.1, 2.8], atol=1e-12)
     # The stale observation is still replayed, with the interpolated pose.
-    np.testing.assert_allclose(result.p_world[8], [2.5 + 0.3, 0.0, 1.8], atol=1e-12)
+    np.testing.assert_allclose(result.p_world[9], [2.5 + 0.3, 0.0, 1.8], atol=1e-12)
 
 
 def test_the_first_failing_guard_names_the_reason() -> None:
