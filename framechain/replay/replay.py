@@ -232,7 +232,7 @@ def replay(
         has_depth_source[need] = sampled.frame_index >= 0
         reject(need & ~has_depth_source, RejectReason.NO_DEPTH)
     reject(~np.isfinite(depth) | (depth <= 0), RejectReason.DEPTH_INVALID)
-    p_cam = ray * depth[:, None]
+    p_cam = ray * np.where(np.isfinite(depth), depth, np.nan)[:, None]  # (0 * Inf would warn)
 
     # Hops 2 and 3: transforms at the observation stamp (plus any offset a fault model asks for).
     body_from_cam = buf.lookup(
