@@ -151,9 +151,13 @@ class CameraModel:
 
     # -- point -> pixel ---------------------------------------------------------------------
     def project(self, points_cam: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """Pixels ``(u, v)`` of camera-frame points (N, 3) with the distortion applied."""
+        """Pixels ``(u, v)`` of camera-frame points (N, 3) with the distortion applied.
+
+        Points not in front of the camera (z <= 0, or not finite) have no pixel: NaN.
+        """
         p = np.asarray(points_cam, dtype=float).reshape(-1, 3)
-        x, y = p[:, 0] / p[:, 2], p[:, 1] / p[:, 2]
+        z = np.where(p[:, 2] > 0, p[:, 2], np.nan)
+        x, y = p[:, 0] / z, p[:, 1] / z
         if self.is_distorted and self.distortion_model == "equidistant":
             r = np.sqrt(x * x + y * y)
             theta = np.arctan(r)

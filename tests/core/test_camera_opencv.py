@@ -125,3 +125,12 @@ def test_inside_uses_pixel_edges() -> None:
     u = np.array([-0.5, -0.51, W - 0.5, W - 0.51, 10.0, 10.0])
     v = np.array([10.0, 10.0, 10.0, 10.0, H - 0.5, -0.5])
     assert camera.inside(u, v).tolist() == [True, False, False, True, False, True]
+
+
+@pytest.mark.parametrize("model", ["none", *sorted(DISTORTIONS)])
+def test_points_not_in_front_of_the_camera_have_no_pixel(model: str) -> None:
+    camera = CameraModel("cam", K, W, H, model, DISTORTIONS.get(model, np.zeros(0)))
+    u, v = camera.project([[0.1, 0.2, 0.0], [0.1, 0.2, -1.0], [0.0, 0.0, 0.0], [0.1, 0.2, 1.0]])
+    assert np.isnan(u[:3]).all()
+    assert np.isnan(v[:3]).all()
+    assert np.isfinite([u[3], v[3]]).all()
