@@ -31,7 +31,18 @@ def save_timeline(timeline: Timeline, directory: str | Path) -> None:
     blobs = [np.ascontiguousarray(depth.load(i), dtype=np.float32).tobytes() for i in range(len(depth))]
     pq.write_table(pa.table({"pixels_f32": pa.array(blobs, type=pa.binary())}), out / "depth_pixels.parquet")
     meta = {"format": _FORMAT, "metadata": dict(timeline.metadata)}
-    (out / "timeline.json").write_text(json.dumps(meta, indent=2, sort_keys=True))
+    try:
+        text = json.dumps(meta, indent=2, sort_keys=True, default=_json_scalar, allow_nan=True)
+    except (TypeError, ValueError) as err:
+        raise TimelineError(f"timeline metadata must be JSON-serialisable: {err}") from err
+    (out / "timeline.json").write_text(text)
+
+
+def _json_scalar(value: Any) -> Any:
+    """NumPy scalars (an adapter's ``np.int64`` stamp) as the Python numbers they equal."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"object of type {type(value).__name__} is not JSON serialisable")
 
 
 def load_timeline(directory: str | Path) -> Timeline:

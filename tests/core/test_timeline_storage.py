@@ -224,3 +224,19 @@ def test_joint_states_wide_keeps_rows_where_all_joints_are_present() -> None:
     stamps, wide = joints.wide(["a", "b"])
     assert stamps.tolist() == [1, 3]
     np.testing.assert_array_equal(wide, [[0.1, 0.2], [0.5, 0.4]])
+
+
+def test_metadata_numpy_scalars_are_saved_as_numbers(tmp_path: Path) -> None:
+    original = Timeline(metadata={"n": np.int64(3), "x": np.float64(0.5), "ok": np.bool_(True), "nan": float("nan")})
+    original.save(tmp_path)
+    loaded = Timeline.load(tmp_path).metadata
+    assert loaded["n"] == 3
+    assert type(loaded["n"]) is int
+    assert loaded["x"] == 0.5
+    assert loaded["ok"] is True
+    assert np.isnan(loaded["nan"])
+
+
+def test_metadata_that_is_not_json_is_a_timeline_error(tmp_path: Path) -> None:
+    with pytest.raises(TimelineError, match="JSON-serialisable"):
+        Timeline(metadata={"array": np.zeros(3)}).save(tmp_path)
