@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/framechain lab tilt
+	$(VENV)/bin/framechain demo --out demo
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check framechain tests benchmarks
@@ -20,7 +20,7 @@ lint: $(STAMP)
 	$(VENV)/bin/lint-imports
 
 test: lint
-	$(PY) -m pytest -q -n 2
+	$(PY) -m pytest -q -n 2 --nbmake tests notebooks
 
 bench: $(STAMP)
 	$(PY) benchmarks/run.py
