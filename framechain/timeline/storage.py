@@ -28,7 +28,16 @@ def save_timeline(timeline: Timeline, directory: str | Path) -> None:
     for name in TABLE_TYPES:
         pq.write_table(getattr(timeline, name).to_arrow(), out / f"{name}.parquet")
     depth = timeline.depth_frames
-    blobs = [np.ascontiguousarray(depth.load(i), dtype=np.float32).tobytes() for i in range(len(depth))]
+    blobs = []
+    for i in range(len(depth)):
+        image = np.ascontiguousarray(depth.load(i), dtype=np.float32)
+        expected = (int(depth.height[i]), int(depth.width[i]))
+        if image.shape != expected:
+            raise TimelineError(
+                f"depth frame {i} ({depth.frame[i]} at {int(depth.stamp_ns[i])} ns) is {image.shape}, "
+                f"its row says height x width {expected}"
+            )
+        blobs.append(image.tobytes())
     pq.write_table(pa.table({"pixels_f32": pa.array(blobs, type=pa.binary())}), out / "depth_pixels.parquet")
     meta = {"format": _FORMAT, "metadata": dict(timeline.metadata)}
     try:

@@ -240,3 +240,11 @@ def test_metadata_numpy_scalars_are_saved_as_numbers(tmp_path: Path) -> None:
 def test_metadata_that_is_not_json_is_a_timeline_error(tmp_path: Path) -> None:
     with pytest.raises(TimelineError, match="JSON-serialisable"):
         Timeline(metadata={"array": np.zeros(3)}).save(tmp_path)
+
+
+def test_depth_pixels_must_match_the_declared_size(tmp_path: Path) -> None:
+    table = DepthFrameTable.from_arrays("cam", [5], np.ones((1, 4, 6)))
+    wrong = DepthFrameTable(**{**{c: getattr(table, c) for c in table.COLUMNS}, "width": np.array([7])},
+                            loader=table.loader)
+    with pytest.raises(TimelineError, match=r"depth frame 0 \(cam at 5 ns\) is \(4, 6\)"):
+        Timeline(depth_frames=wrong).save(tmp_path)
