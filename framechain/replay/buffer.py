@@ -505,7 +505,8 @@ class TransformBuffer:
         return self.lookup(target, source, times).ok
 
 
-#: Times per chunk of a lookup: the chunk's scratch rows stay in the L2 cache.
+#: Times per chunk of a lookup: big enough that NumPy's per-call cost vanishes, small enough that
+#: the chunk's scratch rows stay in cache.
 _CHUNK = 1 << 14
 #: Bucket index: buckets per sample, and the most samples a refinement may step over before a
 #: plain binary search is cheaper (irregular stamps).
@@ -534,13 +535,14 @@ _N_COLS = 16  # 128 bytes: two cache lines per gathered row
 class _Interpolant:
     """Tables of one dynamic edge for the lookup hot path, laid out for random access.
 
-    ``rows`` (m, 18) holds per sample ``i``: the span to sample ``i + 1`` (ns, float), translation,
-    the step to the next translation, the quaternion, the next quaternion on the short arc, and the
-    half-angle ``W`` between them with its sine and cosine. The last row stands for the newest
-    sample itself with a zero step, so an exact hit on it needs no special case. One row per time is
-    gathered (a few cache lines, not one miss per column). Slerp is ``q(w) = a q_i + b q_(i+1)``
+    ``rows`` (m, 16) holds per sample ``i``: the translation, the step to the next translation, the
+    quaternion, the next quaternion on the short arc, the half-angle ``W`` between them and its sine.
+    The last row stands for the newest sample itself with a zero step, so an exact hit on it needs
+    no special case. One 128-byte row per time is gathered (two cache lines, not a miss per column:
+    random query times make these gathers the main cost). Slerp is ``q(w) = a q_i + b q_(i+1)``
     with ``b = sin(w W) / sin W`` and ``a = cos(w W) - cos W b``: at ``w = 0`` exactly ``q_i``, so an
-    exact stamp returns the sample bit for bit.
+    exact stamp returns the sample bit for bit. The weight is ``(t - t_i) / (t_(i+1) - t_i)`` in
+    integer nanoseconds, as tf2.
 
     The sample at or before each time comes from buckets of equal width over the recorded span:
     ``buckets`` row ``k`` holds the index ``j`` of the last sample before bucket ``k`` and the stamps of
@@ -552,9 +554,9 @@ class _Interpolant:
     stamps: IntArray  # (m,)
     first_ns: int
     last_ns: int
-    rows: FloatArray  # (m, 18)
+    rows: FloatArray  # (m, 16), 64-byte aligned
     stamps_padded: IntArray  # (m + 2,) int64 min, the stamps, int64 max
-    buckets: IntArray | None  # (n_buckets + 1, steps + 3), None: binary search
+    buckets: IntArray | None  # (n_buckets + 1, 4 or 8), 64-byte aligned; None: binary search
     bucket_origin: float
     bucket_scale: float
     bucket_top: float
