@@ -21,10 +21,14 @@ def discover(name_filter: str = "") -> list[Path]:
 
 
 def run(path: Path) -> None:
-    spec = importlib.util.spec_from_file_location(f"benchmarks.{path.stem}", path)
+    """Import one benchmark module by its own name (process pools can pickle its functions) and run it."""
+    if str(path.parent) not in sys.path:
+        sys.path.insert(0, str(path.parent))
+    spec = importlib.util.spec_from_file_location(path.stem, path)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot load {path}")
     module = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = module
     spec.loader.exec_module(module)
     main = getattr(module, "main", None)
     if not callable(main):
