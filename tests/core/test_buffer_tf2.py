@@ -121,8 +121,11 @@ def test_static_only_path_latest_is_ok() -> None:
 
 
 # -- chains --------------------------------------------------------------------------------------
-def five_frame_chain(rng: np.random.Generator) -> list[RefEdge]:
-    """map -> odom (dynamic) -> base (dynamic) -> arm (dynamic, 30 Hz) -> cam (static)."""
+def five_edge_chain(rng: np.random.Generator) -> list[RefEdge]:
+    """Six frames, five edges: map -> odom (1 Hz) -> base (100 Hz) -> arm (static) -> cam_link (30 Hz) -> cam.
+
+    cam_link -> cam is the static REP-103 optical rotation.
+    """
     def dyn(parent: str, child: str, stamps: np.ndarray) -> RefEdge:
         n = stamps.size
         return RefEdge(parent, child, stamps, rng.normal(size=(n, 3)), random_quats(rng, n))
@@ -136,8 +139,8 @@ def five_frame_chain(rng: np.random.Generator) -> list[RefEdge]:
     ]
 
 
-def test_chain_of_five_frames_mixing_static_and_dynamic_edges(rng: np.random.Generator) -> None:
-    edges = five_frame_chain(rng)
+def test_chain_of_five_edges_mixing_static_and_dynamic(rng: np.random.Generator) -> None:
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     times = np.concatenate([rng.integers(0, 10 * S, size=200), [0, S // 2, 9 * S, 10 * S, 11 * S, -1]])
     result = buf.lookup("map", "cam", times)
@@ -154,7 +157,7 @@ def test_chain_of_five_frames_mixing_static_and_dynamic_edges(rng: np.random.Gen
 
 
 def test_inverse_lookup_is_the_inverse_matrix(rng: np.random.Generator) -> None:
-    edges = five_frame_chain(rng)
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     times = rng.integers(S, 9 * S, size=100)
     forward = buf.lookup("map", "cam", times).matrix()
@@ -181,7 +184,7 @@ def test_lookup_between_sibling_branches_goes_through_the_common_ancestor(rng: n
 
 
 def test_time_travel_equals_two_plain_lookups_composed_by_hand(rng: np.random.Generator) -> None:
-    edges = five_frame_chain(rng)
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     t_cam = rng.integers(S, 8 * S, size=50)
     t_world = t_cam + rng.integers(-S // 2, S // 2, size=50)
@@ -198,7 +201,7 @@ def test_time_travel_equals_two_plain_lookups_composed_by_hand(rng: np.random.Ge
 
 
 def test_time_travel_reports_extrapolation_of_either_side(rng: np.random.Generator) -> None:
-    buf = buffer_of(*five_frame_chain(rng))
+    buf = buffer_of(*five_edge_chain(rng))
     good, late = np.array([2 * S, 2 * S]), np.array([2 * S, 20 * S])
     result = buf.lookup("base", late, "cam", good, "map")
     assert result.status.tolist() == [LookupStatus.OK, LookupStatus.EXTRAPOLATED_FUTURE]
@@ -208,7 +211,7 @@ def test_time_travel_reports_extrapolation_of_either_side(rng: np.random.Generat
 
 
 def test_latest_is_the_latest_common_time_of_the_path(rng: np.random.Generator) -> None:
-    edges = five_frame_chain(rng)
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     path = buf.path("map", "cam")
     last = min(int(e.stamps[-1]) for e in edges if not e.is_static)
@@ -224,7 +227,7 @@ def test_latest_is_the_latest_common_time_of_the_path(rng: np.random.Generator) 
 
 
 def test_latest_is_explicit_not_zero(rng: np.random.Generator) -> None:
-    buf = buffer_of(*five_frame_chain(rng))
+    buf = buffer_of(*five_edge_chain(rng))
     at_zero = buf.lookup("map", "cam", [0])
     assert at_zero.status.tolist() == [LookupStatus.EXTRAPOLATED_PAST]  # arm edge starts at 0.5 s
     assert repr(LATEST) == "LATEST"
@@ -379,7 +382,7 @@ def test_nan_or_inf_is_rejected_naming_edge_and_stamp(where: str, bad: float) ->
 
 # -- per-hop samples -----------------------------------------------------------------------------
 def test_per_hop_sample_stamps_weights_and_gaps(rng: np.random.Generator) -> None:
-    edges = five_frame_chain(rng)
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     t = 2 * S + 250_000_000  # odom->base samples every 10 ms from 3 ms; map->odom every 1 s
     result = buf.lookup("map", "cam", [t])
@@ -415,7 +418,7 @@ def test_per_hop_sample_stamps_weights_and_gaps(rng: np.random.Generator) -> Non
 
 def test_per_hop_samples_are_the_same_in_chunked_lookups(rng: np.random.Generator) -> None:
     # More times than one internal chunk: results must not depend on how the times are split.
-    edges = five_frame_chain(rng)
+    edges = five_edge_chain(rng)
     buf = buffer_of(*edges)
     times = rng.integers(-S, 12 * S, size=150_000)
     big = buf.lookup("map", "cam", times)
