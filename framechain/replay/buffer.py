@@ -291,8 +291,6 @@ class TransformBuffer:
                 source=",".join(edge_sources), delta_rotvec=delta,
                 translation_soa=np.ascontiguousarray(table.translation[rows].T), quat_soa=q_soa,
             )
-            if not is_static:
-                self._interpolants[child] = _Interpolant.of(self._edges[child])
         self._check_acyclic()
 
     def _check_acyclic(self) -> None:
@@ -359,13 +357,20 @@ class TransformBuffer:
         return min(lasts) if lasts else 0
 
     # -- sampling along a path --------------------------------------------------------------
+    def _interpolant(self, child: str) -> _Interpolant:
+        """The hot-path tables of a dynamic edge, built on its first lookup (about 190 bytes a sample)."""
+        interp = self._interpolants.get(child)
+        if interp is None:
+            interp = self._interpolants[child] = _Interpolant.of(self._edges[child])
+        return interp
+
     def sample(self, hop: PathHop, times_ns: IntArray, *, tolerance_ns: int = 0) -> HopSamples:
         """Interpolate one edge ``T_parent_child`` at every time (tf2 cache semantics)."""
         edge = self._edges[hop.child]
         t = np.asarray(times_ns, dtype=np.int64)
         if edge.is_static:
             return _static_samples(hop, edge, t)
-        interp = self._interpolants[hop.child]
+        interp = self._interpolant(hop.child)
         out = _HopBuffers(t.shape[0])
         work = _Workspace(min(t.shape[0], _CHUNK))
         for k in range(0, t.shape[0], _CHUNK):
@@ -444,7 +449,7 @@ class TransformBuffer:
                 quat_xyzw=np.full((n, 4), np.nan), status=np.full(n, LookupStatus.NO_PATH, dtype=np.uint8),
                 hops=(), path=path,
             )
-        dynamic = [(hop, self._interpolants[hop.child]) for hop in path.hops if not hop.is_static]
+        dynamic = [(hop, self._interpolant(hop.child)) for hop in path.hops if not hop.is_static]
         buffers = [_HopBuffers(n) for _ in dynamic]
         plan = self._plan(path)
         translation = np.empty((3, n))
