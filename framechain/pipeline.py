@@ -52,39 +52,48 @@ def load_log(
     if (target / "timeline.json").is_file():
         timeline = Timeline.load(target)
         stored = timeline.metadata.get("chain")
-        suggested = config is None
-        if config is None:
-            if not isinstance(stored, dict):
-                raise FramechainError(f"{target}: a saved timeline without a chain needs --chain CHAIN.yaml")
-            config = ChainConfig.from_dict(stored, where=f"{target}/timeline.json")
-        return LoadedRun(path=target, timeline=timeline, chain=config, chain_suggested=suggested)
-    if (target / "meta" / "info.json").is_file():
-        from framechain.adapters.lerobot import open_dataset
-
-        if episode is None:
-            raise FramechainError(f"{target}: a LeRobot dataset needs --episode N")
-        robot_config = robot or (config.robot.get("config") if config and config.robot else None)
-        if robot_config is None:
-            raise FramechainError(f"{target}: a LeRobot dataset needs --robot robot.yaml (URDF, joints, cameras)")
-        timeline = open_dataset(target, episode=episode, robot=Path(str(robot_config)))
-        stored = timeline.metadata.get("chain")
-        if config is None and isinstance(stored, dict):
-            return LoadedRun(target, timeline, ChainConfig.from_dict(stored), chain_suggested=True)
-        if config is None:
-            raise FramechainError(f"{target}: give --chain CHAIN.yaml to name the camera, body and world frames")
-        return LoadedRun(target, timeline, config, chain_suggested=False)
+        if config is None and not isinstance(stored, dict):
+            raise FramechainError(f"{target}: a saved timeline without a chain needs --chain CHAIN.yaml")
+        chosen = config or ChainConfig.from_dict(stored, where=f"{target}/timeline.json")  # type: ignore[arg-type]
+        return LoadedRun(path=target, timeline=timeline, chain=chosen, chain_suggested=config is None)
+    if adapters.LeRobotAdapter().probe(target):
+        return _load_lerobot(target, config, chain, episode=episode, robot=robot)
     loaded = adapters.open_log(target, config, progress=progress)
     suggested = config is None
     if config is None:
         config = adapters.suggest_chain(loaded)
-    return LoadedRun(
-        path=target,
-        timeline=loaded.timeline,
-        chain=config,
-        chain_suggested=suggested,
-        info=loaded.info,
-        notes=list(getattr(loaded.info, "notes", [])),
-    )
+    return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=suggested,
+                     info=loaded.info, notes=list(getattr(loaded.info, "notes", [])))
+
+
+def _load_lerobot(
+    target: Path, config: ChainConfig | None, chain_arg: ChainConfig | str | Path | None, *,
+    episode: int | None, robot: str | Path | None,
+) -> LoadedRun:
+    """A LeRobot episode: the robot section comes from --episode/--robot or the chain's ``robot:``."""
+    from framechain import adapters
+
+    section: dict[str, Any] = dict(config.robot) if config is not None and config.robot else {}
+    if episode is not None:
+        section["episode"] = episode
+    if robot is not None:
+        section["config"] = str(Path(robot).resolve())
+    elif "config" in section and isinstance(chain_arg, str | Path):
+        # robot.yaml named in CHAIN.yaml resolves against the CHAIN.yaml's folder.
+        section["config"] = str((Path(chain_arg).resolve().parent / str(section["config"])).resolve())
+    if "episode" not in section:
+        raise FramechainError(f"{target}: a LeRobot dataset needs --episode N")
+    if "config" not in section and "urdf" not in section:
+        raise FramechainError(f"{target}: a LeRobot dataset needs --robot robot.yaml (URDF, joints, cameras)")
+    loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=section))
+    suggested = config is None
+    if config is None:
+        stored = loaded.timeline.metadata.get("chain")
+        if not isinstance(stored, dict):
+            raise FramechainError(f"{target}: give --chain CHAIN.yaml to name the camera, body and world frames")
+        config = ChainConfig.from_dict(stored, where=f"{target} (suggested by robot.yaml)")
+    return LoadedRun(path=target, timeline=loaded.timeline, chain=replace(config, robot=section),
+                     chain_suggested=suggested, info=loaded.info, notes=list(loaded.info.notes))
 
 
 def attribute_log(

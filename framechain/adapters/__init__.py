@@ -15,8 +15,11 @@ from framechain.adapters.errors import (
     UnsupportedLogError,
 )
 from framechain.adapters.info import EdgeInfo, frame_tree, suggest_chain
+from framechain.adapters.lerobot import LeRobotAdapter, open_dataset, scan_dataset
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.adapters.writer import CONTAINERS, canonical_order, write_log
+
+register_adapter(LeRobotAdapter())
 
 __all__ = [
     "CONTAINERS",
@@ -24,6 +27,7 @@ __all__ = [
     "CorruptLogError",
     "EdgeInfo",
     "EmptyLogError",
+    "LeRobotAdapter",
     "LoadedLog",
     "LogAdapter",
     "LogInfo",
@@ -33,8 +37,10 @@ __all__ = [
     "canonical_order",
     "detect",
     "frame_tree",
+    "open_dataset",
     "open_log",
     "register_adapter",
+    "scan_dataset",
     "scan_log",
     "suggest_chain",
     "write_log",

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from framechain.replay import CameraModel, ReplayResult, TransformBuffer, transform_points
+from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
 from framechain.replay.buffer import compose_hops, invert
 from framechain.timeline import ChainFrames
 
@@ -134,23 +134,37 @@ class ChainInputs:
         lookup = self.buffer.lookup(world or self.frames.world, self.frames.body, times)
         return lookup.translation, lookup.quat_xyzw, lookup.ok
 
-    def body_from_camera(self, offset_s: float, invert_edge: str | None = None) -> tuple[FloatArray, FloatArray]:
-        """T_body_cam at tau + offset, optionally with one edge of its path taken the wrong way round."""
+    def body_from_camera(
+        self, offset_s: float, invert_edge: str | None = None
+    ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
+        """T_body_cam at tau + offset (one edge of its path taken the wrong way round, if named).
+
+        Also says which observations had a transform at that time (a shifted time can fall outside
+        a moving camera's recorded span); those rows are identity and must be masked by the caller.
+        """
+        ok = np.ones(len(self), dtype=bool)
         if invert_edge is not None:
             path = self.buffer.path(self.frames.body, self.frames.camera)
             times = self.stamp_ns + round(offset_s * 1e9)
             samples = []
             for hop in path.hops:
                 sample = self.buffer.sample(hop, times)
+                ok &= sample.status <= LookupStatus.NEAREST
                 if hop.child == invert_edge:
                     sample = replace(sample, hop=replace(hop, inverse=not hop.inverse))
                 samples.append(sample)
             t, q = compose_hops(tuple(samples), len(self))
-            return t.T, q.T
-        if offset_s == 0.0 or not self.camera_is_dynamic:
-            return self.t_bc, self.q_bc
-        lookup = self.buffer.lookup(self.frames.body, self.frames.camera, self.stamp_ns + round(offset_s * 1e9))
-        return lookup.translation, lookup.quat_xyzw
+            t_bc, q_bc = t.T, q.T
+        elif offset_s == 0.0 or not self.camera_is_dynamic:
+            return self.t_bc, self.q_bc, ok
+        else:
+            lookup = self.buffer.lookup(self.frames.body, self.frames.camera, self.stamp_ns + round(offset_s * 1e9))
+            t_bc, q_bc, ok = lookup.translation, lookup.quat_xyzw, lookup.ok
+        if not ok.all():
+            t_bc, q_bc = t_bc.copy(), q_bc.copy()
+            t_bc[~ok] = 0.0
+            q_bc[~ok] = [0.0, 0.0, 0.0, 1.0]
+        return t_bc, q_bc, ok
 
 
 def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
@@ -168,7 +182,7 @@ def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
 
 def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
     """camera_to_body under the perturbation."""
-    t_bc, q_bc = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge)
+    t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge)
     if pert.replace_quat_bc is not None:
         q_bc = np.broadcast_to(pert.replace_quat_bc, q_bc.shape)
     rot = Rotation.from_quat(q_bc)
@@ -177,6 +191,7 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
     if np.any(pert.rotvec_body):
         rot = Rotation.from_rotvec(pert.rotvec_body) * rot
     out: FloatArray = rot.inv().apply(p_cam - t_bc) if pert.invert_camera else rot.apply(p_cam) + t_bc
+    out[~ok] = np.nan  # no camera pose at the shifted time
     return out
 
 

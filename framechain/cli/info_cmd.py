@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -19,7 +20,10 @@ def register(sub: Any) -> None:
         "types, counts and rates, the frame tree (parent, child, static or dynamic, rate, span, and the delay "
         "between header stamp and log time per edge), the cameras, and a suggested chain configuration.",
     )
-    p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a bare .db3")
+    p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory, a bare .db3, or a LeRobot "
+                   "dataset directory (with --episode and --robot for its frame tree)")
+    p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+    p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     out = p.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
     out.add_argument("--chain", action="store_true",
@@ -29,19 +33,43 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.adapters import frame_tree, open_log, suggest_chain
+    from framechain.adapters import LeRobotAdapter, LoadedLog, frame_tree, open_log, suggest_chain
+    from framechain.timeline import ChainConfig, FramechainError
 
-    loaded = open_log(args.log, progress=sys.stderr.isatty() and not args.json)
-    chain = suggest_chain(loaded)
+    chain: ChainConfig | None
+    if LeRobotAdapter().probe(Path(args.log)) and (args.episode is not None or args.robot is not None):
+        from framechain.pipeline import load_log
+
+        run_ = load_log(args.log, episode=args.episode, robot=args.robot)
+        loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
+        chain = run_.chain
+    elif LeRobotAdapter().probe(Path(args.log)):
+        loaded = _dataset_summary(args.log)
+        chain = None
+    else:
+        loaded = open_log(args.log, progress=sys.stderr.isatty() and not args.json)
+        chain = suggest_chain(loaded)
     edges = frame_tree(loaded.timeline.transforms)
     if args.chain:
+        if chain is None:
+            raise FramechainError(f"{args.log}: a LeRobot dataset's chain comes from --episode N --robot robot.yaml")
         print(_chain_yaml(loaded, chain.to_yaml(), edges), end="")
         return 0
     if args.json:
-        print(json.dumps(_as_json(loaded, edges, chain.to_dict()), indent=2))
+        print(json.dumps(_as_json(loaded, edges, chain.to_dict() if chain else {}), indent=2))
         return 0
-    _render(loaded, edges, chain.to_yaml())
+    _render(loaded, edges, chain.to_yaml() if chain else "")
     return 0
+
+
+def _dataset_summary(path: str) -> LoadedLog:
+    """A LeRobot dataset without --episode/--robot: what its metadata says, no frame tree."""
+    from framechain.adapters import LoadedLog, scan_log
+    from framechain.timeline import Timeline
+
+    info = scan_log(path)
+    note = "pass --episode N --robot robot.yaml to see the frame tree that forward kinematics gives"
+    return LoadedLog(timeline=Timeline(), info=info.with_notes([note]), decoded_topics={})
 
 
 def _chain_yaml(loaded: LoadedLog, text: str, edges: list[EdgeInfo]) -> str:
@@ -143,5 +171,6 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], chain_yaml: str) -> None:
         console.print(table)
     for note in info.notes:
         console.print(f"[yellow]note:[/] {escape(note)}")
-    console.print("[bold]Suggested chain[/] (framechain info LOG --chain > chain.yaml):")
-    console.print(escape(chain_yaml), highlight=False)
+    if chain_yaml:
+        console.print("[bold]Suggested chain[/] (framechain info LOG --chain > chain.yaml):")
+        console.print(escape(chain_yaml), highlight=False)
