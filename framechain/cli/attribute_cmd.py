@@ -23,7 +23,7 @@ def register(sub: Any) -> None:
     )
     add_log_arguments(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    parser.add_argument("--format", default="json,md", help="comma-separated: json, md, html (default json,md)")
+    parser.add_argument("--format", default="json,md,html", help="comma-separated: json, md, html (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     parser.add_argument("--bootstrap", type=int, default=30, help="bootstrap resamples for intervals (default 30)")
     parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
