@@ -117,7 +117,7 @@ def main() -> None:
     fc_wall, fc_cpu = best_rates(lambda: buffer.lookup(TARGET, SOURCE, times_ns), N_QUERIES, repeats=7)
     pt_wall, pt_cpu = best_rates(
         lambda: tm.get_transform_at_time(SOURCE, TARGET, times_s),  # type: ignore[attr-defined]
-        N_QUERIES, repeats=2,
+        N_QUERIES, repeats=3,
     )
     n_samples = RATE_HZ * DURATION_S
     print(f"   6-frame tree, 2 dynamic edges x {n_samples} samples ({RATE_HZ} Hz, {DURATION_S} s), "
