@@ -22,12 +22,13 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.attribute import attribute
-from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+from framechain.replay.catalogue import Fault
+from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 LEVELS = ("hops", "target", "reference", "static")
-AS_RUN_KINDS = list(FaultKind)
-DATA_KINDS = [FaultKind.LATENCY, FaultKind.MISSING_ROTATION, FaultKind.ROTATION_ERROR, FaultKind.DEPTH_SCALE,
-              FaultKind.INTRINSICS]
+AS_RUN_KINDS = list(Fault)
+DATA_KINDS = [Fault.LATENCY, Fault.MISSING_ROTATION, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE,
+              Fault.INTRINSICS]
 PROPER_FLIPS = [[[-1, 0, 0], [0, -1, 0], [0, 0, 1]], [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
                 [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]]
 ANY_FLIPS = [*PROPER_FLIPS, [[1, 0, 0], [0, -1, 0], [0, 0, 1]], [[0, 0, 1], [1, 0, 0], [0, 1, 0]]]
@@ -35,37 +36,37 @@ ANY_FLIPS = [*PROPER_FLIPS, [[1, 0, 0], [0, -1, 0], [0, 0, 1]], [[0, 0, 1], [1, 
 
 def random_fault(rng: np.random.Generator, level: str) -> InjectedFault:
     where = "data" if level in ("reference", "static") else "robot"
-    kind = FaultKind(rng.choice([k.value for k in (DATA_KINDS if where == "data" else AS_RUN_KINDS)]))
+    kind = Fault(rng.choice([k.value for k in (DATA_KINDS if where == "data" else AS_RUN_KINDS)]))
     sign = float(rng.choice([-1.0, 1.0]))
     params: dict[str, Any] = {}
-    if kind == FaultKind.LATENCY:
+    if kind == Fault.LATENCY:
         params["offset_s"] = round(sign * float(rng.uniform(0.01, 0.08)), 4)
-    elif kind == FaultKind.ROTATION_ERROR:
+    elif kind == Fault.ROTATION_ERROR:
         axis = rng.normal(size=3)
         params.update(angle_deg=float(rng.uniform(1.0, 6.0)), axis=(axis / np.linalg.norm(axis)).tolist())
-    elif kind == FaultKind.DEPTH_SCALE:
+    elif kind == Fault.DEPTH_SCALE:
         params["factor"] = float(1.0 + sign * rng.uniform(0.03, 0.15))
-    elif kind == FaultKind.INTRINSICS:
+    elif kind == Fault.INTRINSICS:
         params["scale"] = float(rng.choice([0.5, 0.75, 1.5, 2.0]))
-    elif kind == FaultKind.AXIS_FLIP:
+    elif kind == Fault.AXIS_FLIP:
         options = PROPER_FLIPS if where == "data" else ANY_FLIPS
         params["permutation"] = options[int(rng.integers(len(options)))]
-    elif kind == FaultKind.INVERTED_TRANSFORM:
+    elif kind == Fault.INVERTED_TRANSFORM:
         params["hop"] = "camera_to_body" if where == "data" else str(rng.choice(["camera_to_body", "body_to_world"]))
     return InjectedFault(kind, where, params)  # type: ignore[arg-type]
 
 
 def expected_estimate(fault: InjectedFault) -> tuple[str, float] | None:
     p = fault.params
-    if fault.kind == FaultKind.LATENCY:
+    if fault.kind == Fault.LATENCY:
         return "offset_s", float(p["offset_s"])
-    if fault.kind == FaultKind.ROTATION_ERROR:
+    if fault.kind == Fault.ROTATION_ERROR:
         return "angle_deg", float(p["angle_deg"])
-    if fault.kind == FaultKind.MISSING_ROTATION:
+    if fault.kind == Fault.MISSING_ROTATION:
         return "angle_deg", 30.0
-    if fault.kind == FaultKind.DEPTH_SCALE:
+    if fault.kind == Fault.DEPTH_SCALE:
         return "factor", float(p["factor"])
-    if fault.kind == FaultKind.INTRINSICS:
+    if fault.kind == Fault.INTRINSICS:
         return "scale", float(p["scale"])
     return None
 
@@ -124,8 +125,9 @@ def main() -> None:
                 worst[r["estimate_key"]] = max(worst[r["estimate_key"]], r["estimate_error"])
         est = ", ".join(f"{k} within limit {np.mean(v):.1%} (worst {worst[k]:.4g})" for k, v in sorted(within.items()))
         target = 0.80 if level == "static" else 0.95
+        seconds = float(np.median([r["seconds"] for r in rows]))
         print(f"  {level:9s} top finding right {right:.1%} (target {target:.0%}); clean without a finding above "
-              f"0.1 share {1 - fp:.1%} (target 98%); {est}; median {np.median([r['seconds'] for r in rows]):.2f} s/scene")
+              f"0.1 share {1 - fp:.1%} (target 98%); {est}; median {seconds:.2f} s/scene")
         wrong = defaultdict(int)
         for r in rows:
             if not r["right"]:

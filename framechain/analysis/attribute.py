@@ -28,14 +28,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
-from framechain.analysis.faults import (
-    Fault,
-    FaultModel,
-    Mode,
-    classify_rotation,
-    models_for,
-    rotation_starts,
-)
+from framechain.analysis.faults import FaultModel, Mode, classify_rotation, models_for, rotation_starts
 from framechain.analysis.fit import Fit, fit_models, perturbation_of, posterior_weights
 from framechain.analysis.fixes import fix_for
 from framechain.replay import (
@@ -46,6 +39,7 @@ from framechain.replay import (
     camera_rows_for,
     replay,
 )
+from framechain.replay.catalogue import Fault
 from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
 
 FloatArray = npt.NDArray[np.float64]

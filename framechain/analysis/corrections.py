@@ -14,8 +14,8 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import Attribution
-from framechain.analysis.faults import Fault
 from framechain.analysis.fixes import corrected_mount
+from framechain.replay.catalogue import Fault
 from framechain.timeline import DepthFrameTable, Timeline, TransformTable
 
 FloatArray = npt.NDArray[np.float64]

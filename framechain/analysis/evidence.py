@@ -19,9 +19,9 @@ import pyarrow.parquet as pq
 from framechain import __version__
 from framechain.analysis.attribute import Attribution, Finding
 from framechain.analysis.chain_model import Perturbation, evaluate
-from framechain.analysis.faults import Fault
 from framechain.analysis.fit import perturbation_of
 from framechain.replay import HopName
+from framechain.replay.catalogue import Fault
 
 FloatArray = npt.NDArray[np.float64]
 

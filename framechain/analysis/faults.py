@@ -13,7 +13,6 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from enum import StrEnum
 from typing import Any, Literal
 
 import numpy as np
@@ -22,25 +21,13 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.replay import HopName
+from framechain.replay.catalogue import Fault
 
 FloatArray = npt.NDArray[np.float64]
 Mode = Literal["as_run", "correction"]
 
 #: Below this angle two rotations are "the same" when naming missing_rotation (degrees).
 SAME_ROTATION_DEG = 0.5
-
-
-class Fault(StrEnum):
-    """The fault catalogue (DESIGN.md); values are the ``fault`` strings of attribution.json."""
-
-    LATENCY = "latency"
-    AXIS_FLIP = "axis_flip"
-    MISSING_ROTATION = "missing_rotation"
-    ROTATION_ERROR = "rotation_error"
-    DEPTH_SCALE = "depth_scale"
-    INTRINSICS = "intrinsics"
-    WRONG_WORLD_FRAME = "wrong_world_frame"
-    INVERTED_TRANSFORM = "inverted_transform"
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,9 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.faults import Fault, Mode
+from framechain.analysis.faults import Mode
 from framechain.replay import HopName
+from framechain.replay.catalogue import Fault
 
 FloatArray = npt.NDArray[np.float64]
 

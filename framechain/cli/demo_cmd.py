@@ -52,34 +52,35 @@ def register(sub: Any) -> None:
 
 
 def parse_fault(text: str) -> Any:
-    from framechain.sim.scene import FaultKind, InjectedFault
+    from framechain.replay.catalogue import Fault
+    from framechain.sim.scene import InjectedFault
 
     where = "robot"
     if text.endswith("@data"):
         text, where = text[: -len("@data")], "data"
     kind_text, _, value = text.partition(":")
     try:
-        kind = FaultKind(kind_text)
+        kind = Fault(kind_text)
     except ValueError as err:
         raise FramechainError(
-            f"--fault: unknown fault {kind_text!r}; choose from {', '.join(k.value for k in FaultKind)}"
+            f"--fault: unknown fault {kind_text!r}; choose from {', '.join(k.value for k in Fault)}"
         ) from err
     try:
         number = float(value) if value else None
     except ValueError as err:
         raise FramechainError(f"--fault {text}: {value!r} is not a number") from err
     params: dict[str, Any] = {}
-    if kind == FaultKind.LATENCY:
+    if kind == Fault.LATENCY:
         params["offset_s"] = number if number is not None else -0.03
-    elif kind == FaultKind.ROTATION_ERROR:
+    elif kind == Fault.ROTATION_ERROR:
         params.update(angle_deg=number if number is not None else 3.0, axis=[0.0, 1.0, 0.0])
-    elif kind == FaultKind.DEPTH_SCALE:
+    elif kind == Fault.DEPTH_SCALE:
         params["factor"] = number if number is not None else 1.05
-    elif kind == FaultKind.INTRINSICS:
+    elif kind == Fault.INTRINSICS:
         params["scale"] = number if number is not None else 2.0
-    elif kind == FaultKind.AXIS_FLIP:
+    elif kind == Fault.AXIS_FLIP:
         params["permutation"] = [[1, 0, 0], [0, -1, 0], [0, 0, -1]]
-    elif kind == FaultKind.INVERTED_TRANSFORM:
+    elif kind == Fault.INVERTED_TRANSFORM:
         params["hop"] = "camera_to_body"
     return InjectedFault(kind, where, params)  # type: ignore[arg-type]
 

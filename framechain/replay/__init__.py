@@ -11,6 +11,7 @@ from framechain.replay.buffer import (
     TransformBuffer,
 )
 from framechain.replay.camera import CameraModel
+from framechain.replay.catalogue import FAULT_HOPS, Fault
 from framechain.replay.depth import DepthSamples, sample_depth
 from framechain.replay.errors import (
     CameraModelError,
@@ -33,6 +34,7 @@ from framechain.replay.replay import (
 )
 
 __all__ = [
+    "FAULT_HOPS",
     "LATEST",
     "REPLAYED",
     "CameraModel",
@@ -41,6 +43,7 @@ __all__ = [
     "DepthSamples",
     "Edge",
     "ExtrapolationError",
+    "Fault",
     "FrameGraphError",
     "FramePath",
     "HopName",

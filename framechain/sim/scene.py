@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from enum import StrEnum
 from typing import Any, Literal
 
 import numpy as np
@@ -25,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from framechain.replay import TransformBuffer
 from framechain.replay.camera import CameraModel
+from framechain.replay.catalogue import FAULT_HOPS, Fault
 from framechain.replay.replay import compose_rows, transform_points
 from framechain.timeline import (
     CameraTable,
@@ -58,19 +58,6 @@ Evidence = Literal["hops", "target", "reference", "static"]
 Where = Literal["robot", "data"]
 
 
-class FaultKind(StrEnum):
-    """The fault catalogue of DESIGN.md."""
-
-    LATENCY = "latency"
-    AXIS_FLIP = "axis_flip"
-    MISSING_ROTATION = "missing_rotation"
-    ROTATION_ERROR = "rotation_error"
-    DEPTH_SCALE = "depth_scale"
-    INTRINSICS = "intrinsics"
-    WRONG_WORLD_FRAME = "wrong_world_frame"
-    INVERTED_TRANSFORM = "inverted_transform"
-
-
 @dataclass(frozen=True)
 class InjectedFault:
     """One fault and where it lives. Parameters by kind:
@@ -84,27 +71,17 @@ class InjectedFault:
     inverted_transform ``hop`` (camera_to_body or body_to_world).
     """
 
-    kind: FaultKind
+    kind: Fault
     where: Where = "robot"
     params: dict[str, Any] = field(default_factory=dict)
 
     @property
     def hop(self) -> str:
-        if self.kind == FaultKind.INVERTED_TRANSFORM:
+        if self.kind == Fault.INVERTED_TRANSFORM:
             return str(self.params.get("hop", "camera_to_body"))
-        return FAULT_HOPS[self.kind]
+        return FAULT_HOPS[self.kind].value
 
 
-FAULT_HOPS: dict[FaultKind, str] = {
-    FaultKind.LATENCY: "body_to_world",
-    FaultKind.AXIS_FLIP: "camera_to_body",
-    FaultKind.MISSING_ROTATION: "camera_to_body",
-    FaultKind.ROTATION_ERROR: "camera_to_body",
-    FaultKind.DEPTH_SCALE: "pixel_to_camera",
-    FaultKind.INTRINSICS: "pixel_to_camera",
-    FaultKind.WRONG_WORLD_FRAME: "body_to_world",
-    FaultKind.INVERTED_TRANSFORM: "camera_to_body",
-}
 
 
 @dataclass(frozen=True)
@@ -327,24 +304,24 @@ def generate(spec: SceneSpec) -> Scene:
 def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
     p = fault.params
     kind = fault.kind
-    if kind == FaultKind.LATENCY:
+    if kind == Fault.LATENCY:
         return replace(params, pose_offset_ns=round(float(p["offset_s"]) * 1e9))
-    if kind == FaultKind.ROTATION_ERROR:
+    if kind == Fault.ROTATION_ERROR:
         error = Rotation.from_rotvec(np.deg2rad(float(p["angle_deg"])) * _unit(p.get("axis", (0, 0, 1))))
         return replace(params, mount_quat=(error * Rotation.from_quat(truth.mount_quat)).as_quat())
-    if kind == FaultKind.MISSING_ROTATION:
+    if kind == Fault.MISSING_ROTATION:
         return replace(params, mount_quat=np.array([0.0, 0.0, 0.0, 1.0]))
-    if kind == FaultKind.AXIS_FLIP:
+    if kind == Fault.AXIS_FLIP:
         return replace(params, cam_permutation=np.asarray(p["permutation"], dtype=float))
-    if kind == FaultKind.DEPTH_SCALE:
+    if kind == Fault.DEPTH_SCALE:
         return replace(params, depth_factor=float(p["factor"]))
-    if kind == FaultKind.INTRINSICS:
+    if kind == Fault.INTRINSICS:
         k = truth.K.copy()
         k[:2, :] *= float(p["scale"])  # the K of another resolution: focal and principal point scale
         return replace(params, K=k)
-    if kind == FaultKind.WRONG_WORLD_FRAME:
+    if kind == Fault.WRONG_WORLD_FRAME:
         return replace(params, world="odom")
-    if kind == FaultKind.INVERTED_TRANSFORM:
+    if kind == Fault.INVERTED_TRANSFORM:
         if fault.hop == "body_to_world":
             return replace(params, invert_pose=True)
         return replace(params, invert_camera=True)
@@ -353,15 +330,15 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
 
 def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
     """A fault in the recorded data: what the log says differs from what the robot used."""
-    if fault.kind == FaultKind.AXIS_FLIP:
+    if fault.kind == Fault.AXIS_FLIP:
         # A recorded rotation can only permute axes properly (det +1): the optical edge published wrong.
         perm = np.asarray(fault.params["permutation"], dtype=float)
         if not np.isclose(np.linalg.det(perm), 1.0):
             raise ValueError("a recorded axis flip must be a proper rotation (det +1)")
         wrong = Rotation.from_quat(truth.optical_quat) * Rotation.from_matrix(perm)
         return replace(params, optical_quat=wrong.as_quat())
-    if fault.kind == FaultKind.WRONG_WORLD_FRAME or (
-        fault.kind == FaultKind.INVERTED_TRANSFORM and fault.hop == "body_to_world"
+    if fault.kind == Fault.WRONG_WORLD_FRAME or (
+        fault.kind == Fault.INVERTED_TRANSFORM and fault.hop == "body_to_world"
     ):
         raise ValueError(f"{fault.kind.value} at {fault.hop} is a fault of the robot's computation only")
     return _inject(params, fault, truth)

@@ -13,32 +13,32 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import attribute
-from framechain.analysis.faults import Fault
-from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+from framechain.replay.catalogue import Fault
+from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 LEVELS_AS_RUN = ("hops", "target")
 LEVELS_DATA = ("reference", "static")
 
 # (kind, params, expected estimate key, expected value) for faults in the robot's computation.
-ROBOT_FAULTS: list[tuple[FaultKind, dict[str, Any], str, float]] = [
-    (FaultKind.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
-    (FaultKind.LATENCY, {"offset_s": 0.045}, "offset_s", 0.045),
-    (FaultKind.MISSING_ROTATION, {}, "angle_deg", 30.0),
-    (FaultKind.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
-    (FaultKind.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
-    (FaultKind.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
-    (FaultKind.AXIS_FLIP, {"permutation": [[1, 0, 0], [0, -1, 0], [0, 0, 1]]}, "", 0.0),
-    (FaultKind.WRONG_WORLD_FRAME, {}, "", 0.0),
-    (FaultKind.INVERTED_TRANSFORM, {"hop": "camera_to_body"}, "", 0.0),
-    (FaultKind.INVERTED_TRANSFORM, {"hop": "body_to_world"}, "", 0.0),
+ROBOT_FAULTS: list[tuple[Fault, dict[str, Any], str, float]] = [
+    (Fault.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
+    (Fault.LATENCY, {"offset_s": 0.045}, "offset_s", 0.045),
+    (Fault.MISSING_ROTATION, {}, "angle_deg", 30.0),
+    (Fault.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
+    (Fault.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
+    (Fault.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
+    (Fault.AXIS_FLIP, {"permutation": [[1, 0, 0], [0, -1, 0], [0, 0, 1]]}, "", 0.0),
+    (Fault.WRONG_WORLD_FRAME, {}, "", 0.0),
+    (Fault.INVERTED_TRANSFORM, {"hop": "camera_to_body"}, "", 0.0),
+    (Fault.INVERTED_TRANSFORM, {"hop": "body_to_world"}, "", 0.0),
 ]
 # Faults in the recorded data: found against a reference or by the static target's spread.
-DATA_FAULTS: list[tuple[FaultKind, dict[str, Any], str, float]] = [
-    (FaultKind.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
-    (FaultKind.MISSING_ROTATION, {}, "angle_deg", 30.0),
-    (FaultKind.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
-    (FaultKind.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
-    (FaultKind.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
+DATA_FAULTS: list[tuple[Fault, dict[str, Any], str, float]] = [
+    (Fault.LATENCY, {"offset_s": -0.03}, "offset_s", -0.03),
+    (Fault.MISSING_ROTATION, {}, "angle_deg", 30.0),
+    (Fault.ROTATION_ERROR, {"angle_deg": 3.0, "axis": [0, 0, 1]}, "angle_deg", 3.0),
+    (Fault.DEPTH_SCALE, {"factor": 1.05}, "factor", 1.05),
+    (Fault.INTRINSICS, {"scale": 2.0}, "scale", 2.0),
 ]
 TOLERANCE = {"offset_s": 0.002, "angle_deg": 0.5, "factor": 0.01, "scale": 0.01}
 
@@ -61,7 +61,7 @@ def _check_top(result: Any, fault: InjectedFault, key: str, value: float) -> Non
 @pytest.mark.parametrize("level", LEVELS_AS_RUN)
 @pytest.mark.parametrize(("kind", "params", "key", "value"), ROBOT_FAULTS,
                          ids=[f"{k.value}-{i}" for i, (k, *_rest) in enumerate(ROBOT_FAULTS)])
-def test_robot_fault_found_from_logged_points(level: str, kind: FaultKind, params: dict[str, Any], key: str,
+def test_robot_fault_found_from_logged_points(level: str, kind: Fault, params: dict[str, Any], key: str,
                                               value: float) -> None:
     fault = InjectedFault(kind, "robot", params)
     scene = _scene(level, (fault,))
@@ -73,7 +73,7 @@ def test_robot_fault_found_from_logged_points(level: str, kind: FaultKind, param
 @pytest.mark.parametrize("level", LEVELS_DATA)
 @pytest.mark.parametrize(("kind", "params", "key", "value"), DATA_FAULTS,
                          ids=[f"{k.value}-{i}" for i, (k, *_rest) in enumerate(DATA_FAULTS)])
-def test_data_fault_found_against_reference_or_spread(level: str, kind: FaultKind, params: dict[str, Any],
+def test_data_fault_found_against_reference_or_spread(level: str, kind: Fault, params: dict[str, Any],
                                                       key: str, value: float) -> None:
     fault = InjectedFault(kind, "data", params)
     scene = _scene(level, (fault,))
@@ -82,18 +82,18 @@ def test_data_fault_found_against_reference_or_spread(level: str, kind: FaultKin
 
 
 def test_recorded_axis_flip_and_inverted_mount_found_against_reference() -> None:
-    flip = InjectedFault(FaultKind.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
+    flip = InjectedFault(Fault.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
     result = attribute(_scene("reference", (flip,)).timeline, _scene("reference", (flip,)).chain, bootstrap=0)
     assert (result.findings[0].fault, result.findings[0].estimate["permutation"]) == (
         Fault.AXIS_FLIP, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]])
-    inverted = InjectedFault(FaultKind.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
+    inverted = InjectedFault(Fault.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
     scene = _scene("reference", (inverted,))
     top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
     assert top.fault == Fault.INVERTED_TRANSFORM
     assert top.estimate["edge"] == ["base_link", "camera_link"]
 
 
-@pytest.mark.parametrize("level", ("hops", "target", "reference", "static"))
+@pytest.mark.parametrize("level", ["hops", "target", "reference", "static"])
 def test_clean_log_has_no_finding(level: str) -> None:
     for seed in (1, 2):
         scene = _scene(level, (), seed=seed)
@@ -102,11 +102,11 @@ def test_clean_log_has_no_finding(level: str) -> None:
         assert result.verdict.startswith("No fault beyond noise")
 
 
-@pytest.mark.parametrize("level", ("hops", "target", "reference"))
+@pytest.mark.parametrize("level", ["hops", "target", "reference"])
 def test_combined_missing_rotation_and_latency(level: str) -> None:
     where = "data" if level == "reference" else "robot"
-    faults = (InjectedFault(FaultKind.MISSING_ROTATION, where),
-              InjectedFault(FaultKind.LATENCY, where, {"offset_s": -0.03}))
+    faults = (InjectedFault(Fault.MISSING_ROTATION, where),
+              InjectedFault(Fault.LATENCY, where, {"offset_s": -0.03}))
     scene = _scene(level, faults)
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
     by_fault = {f.fault: f for f in result.findings}
@@ -120,8 +120,8 @@ def test_combined_missing_rotation_and_latency(level: str) -> None:
 
 
 def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
-    faults = (InjectedFault(FaultKind.DEPTH_SCALE, "robot", {"factor": 0.9}),
-              InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": 0.02}))
+    faults = (InjectedFault(Fault.DEPTH_SCALE, "robot", {"factor": 0.9}),
+              InjectedFault(Fault.LATENCY, "robot", {"offset_s": 0.02}))
     scene = _scene("target", faults)
     found = {f.fault: f.estimate for f in attribute(scene.timeline, scene.chain, bootstrap=0).findings}
     assert abs(found[Fault.DEPTH_SCALE]["factor"] - 0.9) < 0.009
@@ -129,7 +129,7 @@ def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
 
 
 def test_missing_rotation_fix_names_the_corrected_mount() -> None:
-    scene = _scene("hops", (InjectedFault(FaultKind.MISSING_ROTATION, "robot"),))
+    scene = _scene("hops", (InjectedFault(Fault.MISSING_ROTATION, "robot"),))
     top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
     # The mount is pitched 30 deg about y: rpy = (0, 0.5236, 0) rad, independent of the code under test.
     rpy = Rotation.from_euler("y", 30, degrees=True).as_euler("xyz")
@@ -139,7 +139,7 @@ def test_missing_rotation_fix_names_the_corrected_mount() -> None:
 
 
 def test_bootstrap_interval_covers_the_injected_latency() -> None:
-    fault = InjectedFault(FaultKind.LATENCY, "data", {"offset_s": -0.03})
+    fault = InjectedFault(Fault.LATENCY, "data", {"offset_s": -0.03})
     scene = _scene("reference", (fault,))
     top = attribute(scene.timeline, scene.chain, bootstrap=20, seed=5).findings[0]
     lo, hi = top.interval["offset_s"]
@@ -148,7 +148,7 @@ def test_bootstrap_interval_covers_the_injected_latency() -> None:
 
 
 def test_attribution_json_contract() -> None:
-    scene = _scene("hops", (InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": -0.03}),))
+    scene = _scene("hops", (InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),))
     doc = attribute(scene.timeline, scene.chain, bootstrap=0).to_json()
     assert doc["schema"] == "framechain/attribution@1"
     assert set(doc["frames"]) == {"camera", "body", "world"}

@@ -7,13 +7,14 @@ import pytest
 
 from framechain.analysis.attribute import attribute
 from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
-from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+from framechain.replay.catalogue import Fault
+from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 
 def test_three_recorded_faults_corrected_then_clean() -> None:
-    faults = (InjectedFault(FaultKind.MISSING_ROTATION, "data"),
-              InjectedFault(FaultKind.LATENCY, "data", {"offset_s": -0.03}),
-              InjectedFault(FaultKind.DEPTH_SCALE, "data", {"factor": 1.05}))
+    faults = (InjectedFault(Fault.MISSING_ROTATION, "data"),
+              InjectedFault(Fault.LATENCY, "data", {"offset_s": -0.03}),
+              InjectedFault(Fault.DEPTH_SCALE, "data", {"factor": 1.05}))
     scene = generate(SceneSpec(seed=4, duration_s=6.0, evidence="reference", depth_images=True, width=320,
                                height=240, focal_px=300.0, faults=faults))
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
@@ -31,6 +32,6 @@ def test_three_recorded_faults_corrected_then_clean() -> None:
 
 def test_robot_side_findings_are_not_applied_to_the_log() -> None:
     scene = generate(SceneSpec(seed=4, duration_s=4.0, evidence="target",
-                               faults=(InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": -0.03}),)))
+                               faults=(InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),)))
     with pytest.raises(NothingToCorrectError):
         apply_corrections(scene.timeline, attribute(scene.timeline, scene.chain, bootstrap=0))

@@ -13,8 +13,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from framechain.cli.main import main
+from framechain.replay.catalogue import Fault
 from framechain.sim.logs import write_scene
-from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -24,7 +25,7 @@ def latency_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """A small MCAP written with the real writer: 40 ms pose latency, robot's hop points logged."""
     out = tmp_path_factory.mktemp("latency")
     spec = SceneSpec(seed=11, duration_s=4.0, width=320, height=240, focal_px=300.0, depth_images=True,
-                     evidence="hops", faults=(InjectedFault(FaultKind.LATENCY, "robot", {"offset_s": -0.04}),))
+                     evidence="hops", faults=(InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.04}),))
     scene = generate(spec)
     log = write_scene(scene, out / "episode.mcap")
     chain = out / "chain.yaml"
@@ -39,7 +40,8 @@ def test_help_lists_commands_and_exit_codes(capsys: pytest.CaptureFixture[str]) 
     text = capsys.readouterr().out
     for command in ("info", "tf", "replay", "attribute", "report", "demo", "lab"):
         assert command in text
-    assert "exit codes" in text and "bad input" in text
+    assert "exit codes" in text
+    assert "bad input" in text
 
 
 def test_version(capsys: pytest.CaptureFixture[str]) -> None:
@@ -54,13 +56,15 @@ def test_lab_tilt_numbers(capsys: pytest.CaptureFixture[str]) -> None:
     # A point straight ahead at depth Z swings by the chord 2 Z sin(pitch / 2) when the pitch is lost.
     assert rows[(1.0, 0.5)] == pytest.approx(2 * 0.5 * math.sin(math.radians(0.5)), rel=1e-9)
     assert rows[(5.0, 1.0)] == pytest.approx(2 * 1.0 * math.sin(math.radians(2.5)), rel=1e-9)
-    assert 0.0086 < rows[(1.0, 0.5)] < 0.0088 and 0.086 < rows[(5.0, 1.0)] < 0.088
+    assert 0.0086 < rows[(1.0, 0.5)] < 0.0088
+    assert 0.086 < rows[(5.0, 1.0)] < 0.088
 
 
 def test_lab_tilt_bad_depths_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["lab", "tilt", "--depths", "x"]) == 1
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "--depths" in err
+    assert len(err.splitlines()) == 1
+    assert "--depths" in err
 
 
 def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path: Path,
@@ -70,7 +74,8 @@ def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path:
     assert main(["attribute", str(log), "--chain", str(chain), "--out", str(out), "--format", "json,md",
                  "--bootstrap", "5", "-q"]) == 0
     doc = json.loads((out / "attribution.json").read_text())
-    assert doc["source"]["format"] == "mcap" and doc["source"]["path"] == str(log)
+    assert doc["source"]["format"] == "mcap"
+    assert doc["source"]["path"] == str(log)
     top = doc["findings"][0]
     assert (top["fault"], top["hop"]) == ("latency", "body_to_world")
     assert top["estimate"]["offset_s"] == pytest.approx(-0.04, abs=0.002)
@@ -80,7 +85,8 @@ def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path:
     assert table.num_rows == 3 * counts["total"]  # one row per observation and hop
     assert set(table.column("hop").to_pylist()) == {"pixel_to_camera", "camera_to_body", "body_to_world"}
     inputs = json.loads((out / "inputs.json").read_text())
-    assert inputs["latency_budget_s"] == 0.02 and inputs["metric"]["name"] == "logged_hops"
+    assert inputs["latency_budget_s"] == 0.02
+    assert inputs["metric"]["name"] == "logged_hops"
     assert (out / "report.md").read_text().startswith("# framechain report")
     assert not (out / "report.html").exists()
 
@@ -101,13 +107,15 @@ def test_unknown_chain_key_is_one_line_error(latency_log: tuple[Path, Path], tmp
     assert main(["attribute", str(log), "--chain", str(bad), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert "tagret" in err and str(bad) in err
+    assert "tagret" in err
+    assert str(bad) in err
 
 
 def test_missing_log_is_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["attribute", str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "nope.mcap" in err
+    assert len(err.splitlines()) == 1
+    assert "nope.mcap" in err
 
 
 def test_report_html_is_self_contained(latency_log: tuple[Path, Path], tmp_path: Path) -> None:
@@ -117,7 +125,9 @@ def test_report_html_is_self_contained(latency_log: tuple[Path, Path], tmp_path:
     page = (out / "report.html").read_text()
     assert "latency at body_to_world" in page  # the verdict comes first
     assert page.count("data:image/png;base64,") == 4
-    assert "http://" not in page and "https://" not in page and "<script" not in page
+    assert "http://" not in page
+    assert "https://" not in page
+    assert "<script" not in page
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
@@ -137,7 +147,8 @@ def test_report_renders_in_headless_chromium(latency_log: tuple[Path, Path], tmp
     import matplotlib.image
 
     image = matplotlib.image.imread(png)
-    assert image.shape[0] == 2400 and image.shape[1] == 1200
+    assert image.shape[0] == 2400
+    assert image.shape[1] == 1200
     # The embedded plots rendered: the page is not blank white, and it has the plots' colours.
     rgb = image[..., :3]
     assert (rgb < 0.95).mean() > 0.05

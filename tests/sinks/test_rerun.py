@@ -625,10 +625,11 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
 
 
 def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from framechain.sim.scene import FaultKind, InjectedFault, SceneSpec, generate
+    from framechain.replay.catalogue import Fault
+    from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
     generated = generate(SceneSpec(duration_s=2.0, width=160, height=120, focal_px=150.0,
-                                   faults=(InjectedFault(FaultKind.MISSING_ROTATION),)))
+                                   faults=(InjectedFault(Fault.MISSING_ROTATION),)))
     directory = tmp_path / "episode"
     generated.timeline.replace(metadata={"chain": generated.chain.to_dict()}).save(directory)
     out = tmp_path / "attributed.rrd"
