@@ -46,6 +46,7 @@ class HopName(StrEnum):
 class RejectReason(StrEnum):
     """Why an observation was not replayed; stable codes used in every output."""
 
+    OTHER_CAMERA = "other_camera"  # detected in another camera (one with its own CameraInfo)
     NO_CAMERA_INFO = "no_camera_info"
     OUTSIDE_IMAGE = "outside_image"
     NO_DEPTH = "no_depth"
@@ -195,8 +196,13 @@ def replay(
         fresh = mask & (status == REPLAYED)
         status[fresh] = reason.value
 
-    # Hop 1: pixel_to_camera.
+    # An observation of another camera of this log is not this chain's to replay.
     camera_frame = frames.camera
+    other_cameras = set(np.unique(timeline.cameras.frame).tolist()) - {camera_frame}
+    if other_cameras:
+        reject(np.isin(obs.camera_frame, sorted(other_cameras)), RejectReason.OTHER_CAMERA)
+
+    # Hop 1: pixel_to_camera.
     ray = np.full((n, 3), np.nan)
     inside = np.zeros(n, dtype=bool)
     if cameras is not None and camera_frame in cameras:

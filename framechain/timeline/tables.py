@@ -228,8 +228,13 @@ class TransformTable(ColumnTable):
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise self._invalid(i, f"quaternion norm {norm[i]:.6g} is not unit (|q| - 1 > 1e-3)")
-        if len(self):
-            object.__setattr__(self, "quat_xyzw", self.quat_xyzw / norm[:, None])
+        # Normalise only what is off unit by more than rounding, so a table built from a saved one
+        # is bit-identical (dividing a unit quaternion by its computed norm moves it by an ulp).
+        off = np.abs(norm - 1.0) > 4 * np.finfo(np.float64).eps
+        if off.any():
+            quat = self.quat_xyzw.copy()
+            quat[off] /= norm[off, None]
+            object.__setattr__(self, "quat_xyzw", quat)
 
     def _invalid(self, i: int, what: str) -> InvalidTransformError:
         return InvalidTransformError(

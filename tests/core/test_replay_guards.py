@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -253,3 +255,45 @@ def test_tiny_inputs(n: int) -> None:
     result = replay(Timeline(transforms=transforms(), cameras=camera(), observations=obs), FRAMES)
     assert result.counts()["total"] == n
     assert len(result.hops) == 3 * n
+
+
+def test_observations_of_another_camera_are_rejected_and_counted() -> None:
+    """A second camera with its own CameraInfo: its detections are not replayed through this chain."""
+    import dataclasses
+
+    from framechain.replay import replay
+    from framechain.timeline import CameraTable, ChainFrames, ObservationTable, Timeline, TransformTable
+
+    cams = CameraTable.concat([
+        CameraTable.from_intrinsics("front_optical", fx=500, fy=500, cx=320, cy=240, width=640, height=480),
+        CameraTable.from_intrinsics("rear_optical", fx=500, fy=500, cx=320, cy=240, width=640, height=480),
+    ])
+    tf = TransformTable.concat([
+        TransformTable.from_rows("map", "base_link", [0], [[0.0, 0.0, 0.0]], [[0, 0, 0, 1.0]], is_static=True),
+        *[TransformTable.from_rows("base_link", cam, [0], [[0.0, 0.0, 1.0]], [[0, 0, 0, 1.0]], is_static=True)
+          for cam in ("front_optical", "rear_optical")],
+    ])
+    n = 5
+    frames = np.array(["front_optical", "rear_optical", "rear_optical", "", "front_optical"])
+    obs = ObservationTable(obs_id=np.arange(n), stamp_ns=np.arange(n), log_time_ns=np.arange(n), camera_frame=frames,
+                           u=np.full(n, 320.0), v=np.full(n, 240.0), depth_m=np.full(n, 2.0), label=np.full(n, ""),
+                           score=np.ones(n), source=np.full(n, ""))
+    result = replay(Timeline(transforms=tf, cameras=cams, observations=obs),
+                    ChainFrames(camera="front_optical", body="base_link", world="map"))
+    assert result.counts() == {"total": 5, "replayed": 3, "rejected": {"other_camera": 2}, "stale": 0}
+    assert list(result.status) == ["replayed", "other_camera", "other_camera", "replayed", "replayed"]
+    # A frame name the log has no camera for is read as this chain's camera (a naming mismatch, not a camera).
+    renamed = dataclasses.replace(obs, camera_frame=np.full(n, "front_camera_link"))
+    assert replay(Timeline(transforms=tf, cameras=cams, observations=renamed),
+                  ChainFrames(camera="front_optical", body="base_link", world="map")).counts()["replayed"] == 5
+
+
+def test_saved_and_reloaded_transforms_are_bit_identical(tmp_path: Path) -> None:
+    from framechain.timeline import Timeline, TransformTable
+
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(50, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    table = TransformTable.from_rows("a", "b", np.arange(50), rng.normal(size=(50, 3)), q)
+    Timeline(transforms=table).save(tmp_path / "t")
+    assert Timeline.load(tmp_path / "t").transforms.equals(table)
