@@ -8,7 +8,7 @@ one, >= 80% blind; latency within 2 ms, rotations within 0.5 deg, scales within 
 clean scenes without a finding above a 0.1 share.
 
     python benchmarks/run.py attribution            # N = 200 per level
-    FRAMECHAIN_BENCH_SCENES=40 python benchmarks/run.py attribution
+    FRAMECHAIN_BENCH_SCENES=40 FRAMECHAIN_BENCH_LEVELS=reference,static python benchmarks/run.py attribution
 """
 
 from __future__ import annotations
@@ -104,15 +104,16 @@ def one_case(args: tuple[str, int, bool]) -> dict[str, Any]:
 
 def main() -> None:
     n = int(os.environ.get("FRAMECHAIN_BENCH_SCENES", "200"))
-    cases = [(level, seed, False) for level in LEVELS for seed in range(n)]
-    cases += [(level, 50_000 + seed, True) for level in LEVELS for seed in range(max(n // 2, 1))]
+    levels = [lv for lv in os.environ.get("FRAMECHAIN_BENCH_LEVELS", ",".join(LEVELS)).split(",") if lv in LEVELS]
+    cases = [(level, seed, False) for level in levels for seed in range(n)]
+    cases += [(level, 50_000 + seed, True) for level in levels for seed in range(max(n // 2, 1))]
     started = time.perf_counter()
     with ProcessPoolExecutor(max_workers=min(2, os.cpu_count() or 1)) as pool:
         results = list(pool.map(one_case, cases, chunksize=4))
     wall = time.perf_counter() - started
     print(f"attribution accuracy: {n} faulted + {max(n // 2, 1)} clean scenes per level, {wall:.0f} s wall")
     limits = {"offset_s": 0.002, "angle_deg": 0.5, "factor": 0.01, "scale": 0.01}
-    for level in LEVELS:
+    for level in levels:
         rows = [r for r in results if r["level"] == level and not r["clean"]]
         clean = [r for r in results if r["level"] == level and r["clean"]]
         right = np.mean([r["right"] for r in rows])

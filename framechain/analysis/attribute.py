@@ -38,6 +38,7 @@ from framechain.replay import (
     TransformBuffer,
     camera_rows_for,
     replay,
+    transform_points,
 )
 from framechain.replay.catalogue import Fault
 from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
@@ -169,6 +170,7 @@ class _PointObjective:
     stage: Literal["camera", "body", "world"]
     evidence: FloatArray
     hop_input: FloatArray | None = None  # the robot's own input to the hop, when logged
+    weighting: _RayWeighting | None = None
 
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         if self.stage == "camera":
@@ -181,25 +183,50 @@ class _PointObjective:
             out[~ok] = np.nan
         else:
             out = evaluate(inputs, pert)[2]
-        return out - self.evidence
+        residual = out - self.evidence
+        return residual if self.weighting is None else self.weighting.apply(residual)
 
     def take(self, index: IntArray) -> _PointObjective:
         return replace(
-            self, evidence=self.evidence[index], hop_input=None if self.hop_input is None else self.hop_input[index]
+            self, evidence=self.evidence[index], hop_input=None if self.hop_input is None else self.hop_input[index],
+            weighting=None if self.weighting is None else self.weighting.take(index),
         )
+
+
+@dataclass(frozen=True)
+class _RayWeighting:
+    """Whitening of world residuals whose noise is larger along the viewing ray (depth noise).
+
+    Depth noise moves a point along its ray, pixel noise across it; with the along-ray component
+    scaled by ``weight = sigma_across / sigma_along`` the residuals are (close to) isotropic, which
+    is what least squares assumes: a feasible generalised least-squares step.
+    """
+
+    rays_world: FloatArray  # (N, 3) unit viewing directions in the world frame
+    weight: float
+
+    def apply(self, residual: FloatArray) -> FloatArray:
+        along = np.einsum("ij,ij->i", np.nan_to_num(residual), self.rays_world)
+        out: FloatArray = residual + (self.weight - 1.0) * along[:, None] * self.rays_world
+        return out
+
+    def take(self, index: IntArray) -> _RayWeighting:
+        return replace(self, rays_world=self.rays_world[index])
 
 
 @dataclass(frozen=True)
 class _SpreadObjective:
     """Residual of each world point from the centroid of all of them (a static target)."""
 
+    weighting: _RayWeighting | None = None
+
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         p = evaluate(inputs, pert)[2]
         out: FloatArray = p - np.nanmean(p, axis=0)
-        return out
+        return out if self.weighting is None else self.weighting.apply(out)
 
     def take(self, index: IntArray) -> _SpreadObjective:
-        return self
+        return self if self.weighting is None else replace(self, weighting=self.weighting.take(index))
 
 
 _Objective = _PointObjective | _SpreadObjective
@@ -272,13 +299,15 @@ def attribute(
         say("fitting corrections against the reference")
         evidence_world = reference
         world_objective = _PointObjective("world", evidence_world)
-        selections = [_select(models_for(inputs), world_objective, inputs, "correction", say)]
+        selections = [_reweighted(_select(models_for(inputs), world_objective, inputs, "correction", say), inputs)]
     elif chain.evidence.static_target:
         metric = "static_spread"
         say("minimising the spread of the static target")
         world_objective = _SpreadObjective()
         evidence_world = np.tile(np.nanmean(recomputed_world, axis=0), (len(inputs), 1))
-        selections = [_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say)]
+        selections = [
+            _reweighted(_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say), inputs)
+        ]
     else:
         metric = "none"
         nan = np.full(len(inputs), np.nan)
@@ -473,6 +502,32 @@ def _select(
     return _Selected(
         fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode
     )
+
+
+def _reweighted(sel: _Selected, inputs: ChainInputs) -> _Selected:
+    """Refit the chosen faults with residuals whitened along the viewing rays (noisy evidence only).
+
+    The selection is kept; only the parameters (and their bootstrap) use the weighted residuals.
+    """
+    if not sel.fit.models or all(m.n_params == 0 for m in sel.fit.models):
+        return sel
+    residual = sel.objective(inputs, sel.fit.perturbation())
+    rays = transform_points(np.zeros_like(inputs.t_wb), inputs.q_wb,
+                            transform_points(np.zeros_like(inputs.t_bc), inputs.q_bc, inputs.ray))
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    finite = np.isfinite(residual).all(axis=1)
+    if finite.sum() < 10:
+        return sel
+    along = np.einsum("ij,ij->i", residual[finite], rays[finite])
+    across = residual[finite] - along[:, None] * rays[finite]
+    sigma_along = float(np.sqrt(np.mean(along**2)))
+    sigma_across = float(np.sqrt(np.mean(np.sum(across**2, axis=1)) / 2.0))
+    if sigma_along <= 0 or sigma_across <= 0:
+        return sel
+    weight = float(np.clip(sigma_across / sigma_along, 0.05, 1.0))
+    objective = replace(sel.objective, weighting=_RayWeighting(rays, weight))
+    refit = fit_models(sel.fit.models, objective, inputs, x_start=np.concatenate(sel.fit.params), grid=False)
+    return replace(sel, fit=refit, objective=objective)
 
 
 # -- shares, intervals, sentences ---------------------------------------------------------------
