@@ -34,8 +34,9 @@ class Perturbation:
     focal_scale: float = 1.0  # fx, fy used = s * fx, fy
     principal_scale: float = 1.0  # cx, cy used = s * cx, cy (another resolution scales both)
     depth_factor: float = 1.0  # depth_used = factor * depth
-    rotvec_body: FloatArray = field(default_factory=lambda: np.zeros(3))  # R_bc' = exp(rotvec) R_bc
-    replace_quat_bc: FloatArray | None = None  # R_bc' = this rotation (a rotation that was dropped)
+    #: the camera mount's rotation changed: R_parent_link' = R_parent_link exp(rotvec_mount), the rotation
+    #: vector in the mount's link frame (constant for a camera on a moving arm)
+    rotvec_mount: FloatArray = field(default_factory=lambda: np.zeros(3))
     permutation: FloatArray | None = None  # R_bc' = R_bc P: camera-frame axes permuted / flipped
     invert_camera: bool = False  # T_bc' = inv(T_bc)
     invert_edge: str | None = None  # one recorded edge of the camera path (named by child) inverted
@@ -43,6 +44,41 @@ class Perturbation:
     pose_offset_s: float = 0.0  # body_to_world looked up at tau + offset
     invert_pose: bool = False  # T_wb' = inv(T_wb)
     world: str | None = None  # another world frame (odom for map)
+
+
+@dataclass(frozen=True)
+class Mount:
+    """The static edge a camera hangs from (parent -> link) and the link -> camera rotation.
+
+    For a ROS camera, ``base_link -> camera_link`` with the REP-103 optical rotation below it; for
+    a wrist camera, ``flange -> wrist_link``; for a camera frame published directly, the camera's
+    own edge (``link`` is then the camera frame and ``q_link_cam`` the identity).
+    """
+
+    parent: str
+    link: str
+    q_link_cam: FloatArray
+    t_parent_link: FloatArray  # the recorded mount
+    q_parent_link: FloatArray
+
+
+def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
+    """The camera's mount on the path from ``camera`` up to ``body`` (None when there is no static one)."""
+    path = buffer.path(body, camera)
+    if not path.connected or not path.hops or path.hops[0].inverse:
+        return None
+    edges = buffer.edges
+    first = edges[path.hops[0].child]
+    if not first.is_static:
+        return None
+    is_optical = Rotation.from_quat(first.quat_xyzw[0]) * Rotation.from_quat(OPTICAL_QUAT_XYZW).inv()
+    if len(path.hops) > 1 and not path.hops[1].inverse and np.rad2deg(is_optical.magnitude()) < 1.0:
+        mount = edges[path.hops[1].child]
+        if mount.is_static:
+            return Mount(mount.parent, mount.child, first.quat_xyzw[0].copy(), mount.translation[0].copy(),
+                         mount.quat_xyzw[0].copy())
+    return Mount(first.parent, first.child, np.array([0.0, 0.0, 0.0, 1.0]), first.translation[0].copy(),
+                 first.quat_xyzw[0].copy())
 
 
 @dataclass(frozen=True)
@@ -108,21 +144,10 @@ class ChainInputs:
         x, y = self.camera.pixel_to_normalized(self.u, self.v)
         return np.stack([x, y, np.ones_like(x)], axis=1)
 
-    def canonical_quat_bc(self) -> FloatArray | None:
-        """R_body_cam with the mount's rotation dropped: only the optical convention left.
-
-        None when the camera frame is not an optical frame under a camera link (nothing to drop).
-        """
-        path = self.buffer.path(self.frames.body, self.frames.camera)
-        if not path.connected or not path.hops:
-            return None
-        first = path.hops[0]  # the edge whose child is the camera frame
-        if first.inverse or first.child != self.frames.camera:
-            return None
-        edge = self.buffer.edges[first.child]
-        if not edge.is_static or edge.translation[0].any():
-            return np.array([0.0, 0.0, 0.0, 1.0])
-        return np.asarray(edge.quat_xyzw[0], dtype=float)
+    @cached_property
+    def mount(self) -> Mount | None:
+        """The camera's static mount, where mount rotation errors are expressed and fixed."""
+        return find_mount(self.buffer, self.frames.body, self.frames.camera)
 
     def world_from_body(
         self, offset_s: float, world: str | None
@@ -183,13 +208,14 @@ def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
 def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
     """camera_to_body under the perturbation."""
     t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge)
-    if pert.replace_quat_bc is not None:
-        q_bc = np.broadcast_to(pert.replace_quat_bc, q_bc.shape)
     rot = Rotation.from_quat(q_bc)
     if pert.permutation is not None:
         p_cam = p_cam @ pert.permutation.T
-    if np.any(pert.rotvec_body):
-        rot = Rotation.from_rotvec(pert.rotvec_body) * rot
+    if np.any(pert.rotvec_mount):
+        # R_bc' = R_bc R_cam_link exp(x) R_link_cam = R_bc exp(R_cam_link x)
+        q_link_cam = inputs.mount.q_link_cam if inputs.mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
+        rotvec_cam = Rotation.from_quat(q_link_cam).inv().apply(pert.rotvec_mount)
+        rot = rot * Rotation.from_rotvec(rotvec_cam)
     out: FloatArray = rot.inv().apply(p_cam - t_bc) if pert.invert_camera else rot.apply(p_cam) + t_bc
     out[~ok] = np.nan  # no camera pose at the shifted time
     return out

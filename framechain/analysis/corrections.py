@@ -36,8 +36,12 @@ def apply_corrections(timeline: Timeline, result: Attribution) -> Timeline:
     for finding in result.findings:
         e = finding.estimate
         if finding.fault in (Fault.MISSING_ROTATION, Fault.ROTATION_ERROR):
-            rotvec = -np.deg2rad(float(e["angle_deg"])) * np.asarray(e["axis"], dtype=float)  # undo the fault
-            parent, child, xyz, rpy = corrected_mount(result.inputs, rotvec, "correction")
+            # The estimate is the faulty (recorded) mount relative to the right one: undo it.
+            rotvec = -np.deg2rad(float(e["angle_deg"])) * np.asarray(e["axis"], dtype=float)
+            mount = corrected_mount(result.inputs, rotvec, "correction")
+            if mount is None:
+                raise NothingToCorrectError("the camera hangs from no static mount edge to correct")
+            parent, child, xyz, rpy = mount
             out = _replace_static_edge(out, parent, child, xyz, Rotation.from_euler("xyz", rpy).as_quat())
         elif finding.fault == Fault.LATENCY:
             # The pose at tau + offset explains the detection: the camera's clock is off by the offset,

@@ -76,13 +76,17 @@ def _latency(hop: HopName) -> FaultModel:
 
 def _rotation() -> FaultModel:
     def apply(p: Perturbation, x: FloatArray) -> Perturbation:
-        return replace(p, rotvec_body=np.asarray(x, dtype=float))
+        return replace(p, rotvec_mount=np.asarray(x, dtype=float))
 
     def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
-        rotvec = np.asarray(x, dtype=float) if mode == "as_run" else -np.asarray(x, dtype=float)
+        # The faulty mount relative to the correct one, axis in the mount's link frame.
+        _fault, faulty = rotation_verdict(x, mode, inputs)
+        rotvec = np.asarray(x, dtype=float) if faulty == "as_run" else -np.asarray(x, dtype=float)
         angle = float(np.linalg.norm(rotvec))
         axis = rotvec / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
-        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) + 0.0 for a in axis]}
+        frame = inputs.mount.link if inputs.mount is not None else inputs.frames.camera
+        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) + 0.0 for a in axis],
+                "axis_frame": frame, "faulty": "recorded data" if faulty == "recorded" else "as run"}
 
     return FaultModel(
         name="rotation[camera_to_body]",
@@ -276,28 +280,40 @@ def models_for(
     return out
 
 
+def rotation_verdict(x: FloatArray, mode: Mode, inputs: ChainInputs) -> tuple[Fault, Literal["as_run", "recorded"]]:
+    """missing_rotation or rotation_error, and which side's mount is wrong.
+
+    A mount whose rotation is (nearly) none while the other side's is not lost its rotation: the
+    robot's (as run) when the fitted mount is bare, the log's when the recorded one is.
+    """
+    mount = inputs.mount
+    change = float(np.rad2deg(np.linalg.norm(x)))
+    recorded_side: Literal["as_run", "recorded"] = "recorded" if mode == "correction" else "as_run"
+    if mount is None or change <= SAME_ROTATION_DEG:
+        return Fault.ROTATION_ERROR, recorded_side
+    recorded = Rotation.from_quat(mount.q_parent_link)
+    if mode == "as_run" and np.rad2deg((recorded * Rotation.from_rotvec(x)).magnitude()) < SAME_ROTATION_DEG:
+        return Fault.MISSING_ROTATION, "as_run"
+    if np.rad2deg(recorded.magnitude()) < SAME_ROTATION_DEG:
+        return Fault.MISSING_ROTATION, "recorded"
+    return Fault.ROTATION_ERROR, recorded_side
+
+
 def classify_rotation(model: FaultModel, x: FloatArray, mode: Mode, inputs: ChainInputs) -> Fault:
-    """rotation_error or missing_rotation: is the rotation that was used the mount-less one?"""
+    """The catalogue entry of a fitted model (rotation fits split into missing_rotation / rotation_error)."""
     if model.fault != Fault.ROTATION_ERROR:
         return model.fault
-    canonical = inputs.canonical_quat_bc()
-    if canonical is None:
-        return Fault.ROTATION_ERROR
-    recorded = Rotation.from_quat(inputs.q_bc[0])
-    used = Rotation.from_rotvec(x) * recorded if mode == "as_run" else recorded
-    angle = np.rad2deg((used * Rotation.from_quat(canonical).inv()).magnitude())
-    change = np.rad2deg(np.linalg.norm(x))
-    if angle < SAME_ROTATION_DEG and change > SAME_ROTATION_DEG:
-        return Fault.MISSING_ROTATION
-    return Fault.ROTATION_ERROR
+    return rotation_verdict(x, mode, inputs)[0]
 
 
 def rotation_starts(inputs: ChainInputs, mode: Mode) -> tuple[tuple[float, ...], ...]:
-    """Multi-start points for the rotation fit: none, and the rotation that drops the mount."""
-    canonical = inputs.canonical_quat_bc()
+    """Multi-start points for the rotation fit: none, the mount's rotation dropped, all rotation dropped."""
     starts: list[tuple[float, ...]] = []
-    recorded = Rotation.from_quat(inputs.q_bc[0])
-    for target in ([canonical] if canonical is not None else []) + [np.array([0.0, 0.0, 0.0, 1.0])]:
-        delta = (Rotation.from_quat(target) * recorded.inv()).as_rotvec()
-        starts.append(tuple(float(v) for v in (delta if mode == "as_run" else -delta)))
+    mount = inputs.mount
+    if mount is not None and mode == "as_run":
+        starts.append(tuple(float(v) for v in Rotation.from_quat(mount.q_parent_link).inv().as_rotvec()))
+    q_link_cam = mount.q_link_cam if mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
+    # R_bc exp(R_cam_link x) = I  ->  x = R_link_cam rotvec(R_bc^-1)
+    lost_all = Rotation.from_quat(q_link_cam).apply(Rotation.from_quat(inputs.q_bc[0]).inv().as_rotvec())
+    starts.append(tuple(float(v) for v in (lost_all if mode == "as_run" else -lost_all)))
     return tuple(starts)

@@ -10,32 +10,28 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.faults import Mode
+from framechain.analysis.faults import Mode, rotation_verdict
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
 
 FloatArray = npt.NDArray[np.float64]
 
 
-def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str, str, FloatArray, FloatArray]:
-    """The camera mount as it should be: (parent, child, xyz, rpy in radians).
+def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str, str, FloatArray, FloatArray] | None:
+    """The camera mount edge as it should be: (parent, link, xyz, rpy in radians), or None without a mount.
 
-    The mount is the edge above the optical frame when the camera frame hangs from a camera link
-    by a pure rotation (the REP-103 optical edge); otherwise the body-to-camera transform itself.
-    As-run faults keep the recorded rotation (the robot should use it); corrections apply ``x``.
+    The edge is the static one the camera hangs from, in its own parent frame (``base_link ->
+    camera_link``, ``mast -> camera_link``, ``flange -> wrist_link``), so the fix never gives a
+    frame a second parent. When the robot's mount was wrong the recorded one is right; when the
+    recorded one was wrong, the fitted rotation corrects it.
     """
-    recorded = Rotation.from_quat(inputs.q_bc[0])
-    right = recorded if mode == "as_run" else Rotation.from_rotvec(x) * recorded
-    t_bc = inputs.t_bc[0]
-    path = inputs.buffer.path(inputs.frames.body, inputs.frames.camera)
-    first = path.hops[0] if path.hops else None
-    if first is not None and not first.inverse and first.child == inputs.frames.camera:
-        edge = inputs.buffer.edges[first.child]
-        if edge.is_static and not edge.translation[0].any():
-            link_from_optical = Rotation.from_quat(edge.quat_xyzw[0])
-            mount = right * link_from_optical.inv()
-            return inputs.frames.body, edge.parent, t_bc, mount.as_euler("xyz")
-    return inputs.frames.body, inputs.frames.camera, t_bc, right.as_euler("xyz")
+    mount = inputs.mount
+    if mount is None:
+        return None
+    _fault, faulty = rotation_verdict(x, mode, inputs)
+    recorded = Rotation.from_quat(mount.q_parent_link)
+    right = recorded if faulty == "as_run" else recorded * Rotation.from_rotvec(x)
+    return mount.parent, mount.link, mount.t_parent_link, right.as_euler("xyz")
 
 
 def _origin(xyz: FloatArray, rpy: FloatArray) -> str:
@@ -55,13 +51,25 @@ def fix_for(
     """One actionable sentence for a finding."""
     frames = inputs.frames
     if fault in (Fault.MISSING_ROTATION, Fault.ROTATION_ERROR):
-        parent, child, xyz, rpy = corrected_mount(inputs, x, mode)
-        lead = (
-            "Use the full recorded extrinsic (rotation included) in the robot's camera-to-body step"
-            if mode == "as_run"
-            else "Correct the camera mount calibration"
-        )
-        return f"{lead}: {parent} -> {child} {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
+        mount = corrected_mount(inputs, x, mode)
+        if mount is None:
+            return (f"Correct the camera-to-body rotation by {estimate['angle_deg']:.2f} deg about "
+                    f"{estimate['axis']} ({estimate['axis_frame']} frame).")
+        parent, child, xyz, rpy = mount
+        if estimate.get("faulty") == "as run" and fault == Fault.ROTATION_ERROR:
+            # Logged points against the log cannot say which of the two mounts is the calibrated one.
+            used = Rotation.from_quat(inputs.mount.q_parent_link) * Rotation.from_rotvec(x)  # type: ignore[union-attr]
+            return (f"The robot's mount and the recorded {parent} -> {child} differ by {estimate['angle_deg']:.2f} deg; "
+                    f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
+                    f"used {_origin(xyz, used.as_euler('xyz'))}: keep the calibrated one in both (a reference or a "
+                    f"static target in the log tells which).")
+        if estimate.get("faulty") == "as run":
+            lead = (f"The robot's camera-to-body step used a wrong mount; use the recorded {parent} -> {child} "
+                    f"(rotation included)")
+        else:
+            lost = " has no rotation" if fault == Fault.MISSING_ROTATION else " is off"
+            lead = f"The recorded mount {parent} -> {child}{lost}; publish (or calibrate to) the corrected one"
+        return f"{lead}: {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
     if fault == Fault.LATENCY:
         offset_ms = float(estimate["offset_s"]) * 1e3
         if hop == HopName.CAMERA_TO_BODY:
@@ -80,6 +88,10 @@ def fix_for(
             f"that time, waiting for the transform) instead of the pose {abs(offset_ms):.1f} ms "
             f"{'older' if offset_ms < 0 else 'newer'} that was used."
         )
+    if fault == Fault.AXIS_FLIP and mode == "correction":
+        return (f"The recorded rotation above {frames.camera} permutes its axes as {estimate['permutation']}: "
+                f"publish the REP-103 optical rotation (q_xyzw -0.5 0.5 -0.5 0.5, rpy -pi/2 0 -pi/2) from the camera "
+                f"link to {frames.camera}.")
     if fault == Fault.AXIS_FLIP:
         return (
             f"Transform the point from {frames.camera} (x right, y down, z forward, the detection's header.frame_id), "
@@ -89,6 +101,14 @@ def fix_for(
         factor = float(estimate["factor"])
         hint = " (16UC1 depth is millimetres: multiply by 0.001)" if 500 < factor < 2000 else ""
         return f"Scale depth by {1.0 / factor:.6g} before back-projecting{hint}."
+    if fault == Fault.INTRINSICS and mode == "correction":
+        scale = float(estimate["scale"])
+        cam = inputs.camera
+        principal = estimate.get("variant") == "resolution"
+        cx, cy = (cam.cx / scale, cam.cy / scale) if principal else (cam.cx, cam.cy)
+        return (f"The recorded CameraInfo's K is that of another {'resolution' if principal else 'lens'} "
+                f"(focal length x{scale:.4g}); the K that fits is fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, "
+                f"cx {cx:.1f}, cy {cy:.1f}: publish the calibration of the stream the detections came from.")
     if fault == Fault.INTRINSICS:
         scale = float(estimate["scale"])
         return (
@@ -99,6 +119,10 @@ def fix_for(
         return (
             f"Transform into {estimate['meant']!r}, not {estimate['used']!r}: the error follows the map <-> odom drift."
         )
+    if fault == Fault.INVERTED_TRANSFORM and "edge" in estimate:
+        parent, child = estimate["edge"]
+        return (f"The edge {parent} -> {child} is recorded inverted (T_{child}_{parent} where T_{parent}_{child} is "
+                f"meant): publish it the other way round (invert its translation and rotation).")
     if fault == Fault.INVERTED_TRANSFORM:
         if hop == HopName.CAMERA_TO_BODY:
             return (
