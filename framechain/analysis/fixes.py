@@ -59,7 +59,8 @@ def fix_for(
         if estimate.get("faulty") == "as run" and fault == Fault.ROTATION_ERROR:
             # Logged points against the log cannot say which of the two mounts is the calibrated one.
             used = Rotation.from_quat(inputs.mount.q_parent_link) * Rotation.from_rotvec(x)  # type: ignore[union-attr]
-            return (f"The robot's mount and the recorded {parent} -> {child} differ by {estimate['angle_deg']:.2f} deg; "
+            angle = float(estimate["angle_deg"])
+            return (f"The robot's mount and the recorded {parent} -> {child} differ by {angle:.2f} deg; "
                     f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
                     f"used {_origin(xyz, used.as_euler('xyz'))}: keep the calibrated one in both (a reference or a "
                     f"static target in the log tells which).")
