@@ -56,6 +56,8 @@ POINT_MATCH_NS = 1_000_000
 #: A reference stream sample matches an observation within this (ns).
 REFERENCE_MATCH_NS = 50_000_000
 MAX_FAULTS = 3
+#: A median error above this with no finding is called unexplained, not noise (m).
+UNEXPLAINED_M = 0.02
 SCHEMA = "framechain/attribution@1"
 ESTIMATE_KEYS = ("offset_s", "angle_deg", "factor", "scale")
 
@@ -110,6 +112,8 @@ class Attribution:
     findings: tuple[Finding, ...]
     seed: int
     notes: tuple[str, ...] = ()
+    #: where the error is measured: the world point, or the deepest hop the robot logged
+    stage: str = "world"
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
@@ -118,9 +122,10 @@ class Attribution:
         e = self.error_before if errors is None else errors
         e = e[np.isfinite(e)]
         if e.size == 0:
-            return {"metric": self.metric, "median": None, "p95": None, "max": None}
+            return {"metric": self.metric, "stage": self.stage, "median": None, "p95": None, "max": None}
         return {
             "metric": self.metric,
+            "stage": self.stage,
             "median": round(float(np.median(e)), 6),
             "p95": round(float(np.percentile(e, 95)), 6),
             "max": round(float(e.max()), 6),
@@ -169,20 +174,23 @@ class _PointObjective:
 
     stage: Literal["camera", "body", "world"]
     evidence: FloatArray
-    hop_input: FloatArray | None = None  # the robot's own input to the hop, when logged
+    hop_input: FloatArray | None = None  # the robot's own logged point of an earlier stage
+    input_stage: Literal["camera", "body"] | None = None  # which stage ``hop_input`` is the output of
     weighting: _RayWeighting | None = None
 
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         if self.stage == "camera":
             out = hop1(inputs, pert)
-        elif self.stage == "body":
-            p_cam = self.hop_input if self.hop_input is not None else hop1(inputs, pert)
-            out = hop2(inputs, pert, p_cam)
-        elif self.hop_input is not None:
-            out, ok = hop3(inputs, pert, self.hop_input)
-            out[~ok] = np.nan
         else:
-            out = evaluate(inputs, pert)[2]
+            p_cam = self.hop_input if self.input_stage == "camera" else None
+            p_body = self.hop_input if self.input_stage == "body" else None
+            if p_body is None:
+                p_body = hop2(inputs, pert, p_cam if p_cam is not None else hop1(inputs, pert))
+            if self.stage == "body":
+                out = p_body
+            else:
+                out, ok = hop3(inputs, pert, p_body)
+                out[~ok] = np.nan
         residual = out - self.evidence
         return residual if self.weighting is None else self.weighting.apply(residual)
 
@@ -239,6 +247,7 @@ class _Selected:
     alternatives: tuple[str, ...]  # next-best explanation at each step
     objective: _Objective
     mode: Mode
+    inputs: ChainInputs  # the observations the fit used (those with evidence)
 
 
 def attribute(
@@ -268,11 +277,13 @@ def attribute(
         for role in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD, PointRole.TARGET)
     }
     reference = _reference(points.with_role(PointRole.REFERENCE), inputs.stamp_ns, chain)
+    matching_notes = _matching_notes(points, matched, inputs.stamp_ns)
     source = dict(timeline.metadata.get("source", {"path": "", "format": "unknown"}))
     rng = np.random.default_rng(seed)
     recomputed_world = evaluate(inputs, Perturbation())[2]
-    notes: list[str] = list(buffer.warnings)
+    notes: list[str] = [*buffer.warnings, *matching_notes]
 
+    stage = "world"
     hops_present = [
         r
         for r in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD)
@@ -284,10 +295,10 @@ def attribute(
     if hops_present:
         metric = "logged_hops"
         say("comparing the robot's logged hops with the recomputed ones")
-        selections, hop_errors, evidence_world = _hops_level(inputs, matched, say)
-        if not np.isfinite(evidence_world).any():
-            evidence_world = recomputed_world.copy()
-        world_objective: _Objective = _PointObjective("world", evidence_world)
+        selections, hop_errors, deepest = _hops_level(inputs, matched, say)
+        world_objective: _Objective = deepest
+        evidence_world = deepest.evidence if deepest.stage == "world" else np.full((len(inputs), 3), np.nan)
+        stage = deepest.stage
     elif np.isfinite(matched[PointRole.TARGET]).all(axis=1).any():
         metric = "target"
         say("fitting fault models to the logged target")
@@ -299,14 +310,14 @@ def attribute(
         say("fitting corrections against the reference")
         evidence_world = reference
         world_objective = _PointObjective("world", evidence_world)
-        selections = [_reweighted(_select(models_for(inputs), world_objective, inputs, "correction", say), inputs)]
+        selections = [_reweighted(_select(models_for(inputs), world_objective, inputs, "correction", say))]
     elif chain.evidence.static_target:
         metric = "static_spread"
         say("minimising the spread of the static target")
         world_objective = _SpreadObjective()
         evidence_world = np.tile(np.nanmean(recomputed_world, axis=0), (len(inputs), 1))
         selections = [
-            _reweighted(_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say), inputs)
+            _reweighted(_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say))
         ]
     else:
         metric = "none"
@@ -349,8 +360,10 @@ def attribute(
     for k, (model, x, confidence, alternative, sel) in enumerate(found):
         fault = classify_rotation(model, x, sel.mode, inputs)
         estimate = model.estimate(x, sel.mode, inputs)
-        interval = _bootstrap(sel, model, inputs, rng, bootstrap, say) if bootstrap else {}
-        share = shapley[k] / total if total > 0 else 0.0
+        interval = _bootstrap(sel, model, rng, bootstrap, say) if bootstrap else {}
+        if shapley[k] < 0:  # it makes the median error worse given the others: it explains none of it
+            notes.append(f"{model.name}: its Shapley share is {shapley[k] * 1e3:.1f} mm (negative); reported as 0")
+        share = max(shapley[k], 0.0) / total if total > 0 else 0.0
         findings.append(
             Finding(
                 fault=fault,
@@ -358,7 +371,7 @@ def attribute(
                 estimate=estimate,
                 interval=interval,
                 share=float(share),
-                error_m=float(shapley[k]),
+                error_m=float(max(shapley[k], 0.0)),
                 confidence=float(confidence),
                 evidence=_evidence_sentence(fault, model, metric, estimate, alternative, sel.mode),
                 fix=fix_for(fault, model.hop, estimate, inputs, x, sel.mode),
@@ -380,6 +393,7 @@ def attribute(
         findings=tuple(findings),
         seed=seed,
         notes=tuple(notes),
+        stage=stage,
     )
 
 
@@ -394,18 +408,57 @@ def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) 
 
 
 def _match_points(points: PointTable, stamps: IntArray, tolerance_ns: int) -> FloatArray:
-    """Points matched to observation stamps (nearest within the tolerance); NaN where none."""
+    """Points matched to observations by stamp (nearest within the tolerance); NaN where none.
+
+    Several observations at one stamp (several detections in one image) take the points of that
+    stamp in order: the k-th detection of an image the k-th point logged for it.
+    """
     out = np.full((stamps.size, 3), np.nan)
-    if len(points) == 0:
+    if len(points) == 0 or stamps.size == 0:
         return out
-    order = np.argsort(points.stamp_ns, kind="stable")
-    s = points.stamp_ns[order]
-    right = np.clip(np.searchsorted(s, stamps), 0, s.size - 1)
-    left = np.clip(right - 1, 0, s.size - 1)
-    pick = np.where(np.abs(s[left] - stamps) <= np.abs(s[right] - stamps), left, right)
-    ok = np.abs(s[pick] - stamps) <= tolerance_ns
-    out[ok] = points.xyz[order[pick[ok]]]
+    order = np.lexsort((points.log_time_ns, points.stamp_ns))
+    point_stamps = points.stamp_ns[order]
+    group_stamps, group_start, group_size = np.unique(point_stamps, return_index=True, return_counts=True)
+    right = np.clip(np.searchsorted(group_stamps, stamps), 0, group_stamps.size - 1)
+    left = np.clip(right - 1, 0, group_stamps.size - 1)
+    group = np.where(np.abs(group_stamps[left] - stamps) <= np.abs(group_stamps[right] - stamps), left, right)
+    rank = _rank_within_equal(stamps)
+    ok = (np.abs(group_stamps[group] - stamps) <= tolerance_ns) & (rank < group_size[group])
+    out[ok] = points.xyz[order[group_start[group[ok]] + rank[ok]]]
     return out
+
+
+def _rank_within_equal(values: IntArray) -> IntArray:
+    """For each element, how many earlier elements have the same value (0 for the first)."""
+    order = np.argsort(values, kind="stable")
+    sorted_values = values[order]
+    starts = np.flatnonzero(np.r_[True, sorted_values[1:] != sorted_values[:-1]])
+    run = np.repeat(starts, np.diff(np.r_[starts, sorted_values.size]))
+    rank = np.empty_like(values)
+    rank[order] = np.arange(values.size) - run
+    return rank
+
+
+def _matching_notes(points: PointTable, matched: Mapping[PointRole, FloatArray], stamps: IntArray) -> list[str]:
+    """Say when logged evidence did not line up with the observations (it is then not used)."""
+    notes = []
+    for role, values in matched.items():
+        table = points.with_role(role)
+        if len(table) == 0:
+            continue
+        used = int(np.isfinite(values).all(axis=1).sum())
+        if used < min(len(table), stamps.size):
+            topics = ", ".join(sorted(set(table.source.tolist()) - {""})) or role.value
+            gaps = np.abs(table.stamp_ns[:, None] - stamps[None, : min(stamps.size, 2000)]).min(axis=1)
+            notes.append(
+                f"{role.value} points on {topics}: {used} of {stamps.size} observations matched a point stamped within "
+                f"{POINT_MATCH_NS / 1e6:g} ms of the detection's stamp (median offset of the points "
+                f"{np.median(gaps) / 1e6:.1f} ms); log them with the detection's header.stamp"
+            )
+    if np.unique(stamps).size < stamps.size:
+        notes.append(f"{stamps.size - np.unique(stamps).size} observations share a stamp with another; logged points "
+                     "were matched to them in order within each stamp")
+    return notes
 
 
 def _reference(points: PointTable, stamps: IntArray, chain: ChainConfig) -> FloatArray | None:
@@ -426,33 +479,40 @@ def _distances(residuals: FloatArray) -> FloatArray:
 # -- the levels -------------------------------------------------------------------------------
 def _hops_level(
     inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Callable[[str], None]
-) -> tuple[list[_Selected], dict[str, FloatArray], FloatArray]:
-    """Logged hops: each hop fed with the robot's own input, compared with its own output."""
-    logged_cam = matched[PointRole.HOP_CAMERA]
-    logged_body = matched[PointRole.HOP_BODY]
-    logged_world = matched[PointRole.HOP_WORLD]
-    recomputed_cam, recomputed_body, _ = evaluate(inputs, Perturbation())
-    plan: list[tuple[HopName, _PointObjective]] = []
-    if np.isfinite(logged_cam).all(axis=1).any():
-        plan.append((HopName.PIXEL_TO_CAMERA, _PointObjective("camera", logged_cam)))
-    if np.isfinite(logged_body).all(axis=1).any():
-        cam_in = np.where(np.isfinite(logged_cam), logged_cam, recomputed_cam)
-        plan.append((HopName.CAMERA_TO_BODY, _PointObjective("body", logged_body, cam_in)))
-    if np.isfinite(logged_world).all(axis=1).any():
-        body_in = np.where(np.isfinite(logged_body), logged_body, recomputed_body)
-        plan.append((HopName.BODY_TO_WORLD, _PointObjective("world", logged_world, body_in)))
+) -> tuple[list[_Selected], dict[str, FloatArray], _PointObjective]:
+    """Logged hops: each logged stage fed with the robot's own logged input, compared with its output.
+
+    A stage whose input was not logged is fed from the raw inputs, and the faults of every hop
+    upstream of it are candidates. Returns the selections, each logged hop's departure, and the
+    objective of the deepest logged stage (what the error is measured against).
+    """
+    stages = (
+        ("camera", HopName.PIXEL_TO_CAMERA, matched[PointRole.HOP_CAMERA]),
+        ("body", HopName.CAMERA_TO_BODY, matched[PointRole.HOP_BODY]),
+        ("world", HopName.BODY_TO_WORLD, matched[PointRole.HOP_WORLD]),
+    )
     selections: list[_Selected] = []
     hop_errors: dict[str, FloatArray] = {}
-    for hop, objective in plan:
+    previous: FloatArray | None = None  # the last logged stage's points: the next stage's input
+    previous_stage: Literal["camera", "body"] | None = None
+    upstream: list[HopName] = []
+    deepest: _PointObjective | None = None
+    for stage, hop, logged in stages:
+        upstream.append(hop)
+        if not np.isfinite(logged).all(axis=1).any():
+            continue
+        objective = _PointObjective(stage, logged, previous, previous_stage)  # type: ignore[arg-type]
         departure = _distances(objective(inputs, Perturbation()))
         hop_errors[hop.value] = departure
-        if not np.nanmedian(departure) > HOP_DIVERGENCE_M:
-            continue
-        say(f"classifying the departure at {hop.value}")
-        sel = _select(models_for(inputs, (hop,)), objective, inputs, "as_run", say)
-        if sel.fit.models:
-            selections.append(sel)
-    return selections, hop_errors, logged_world
+        if np.nanmedian(departure) > HOP_DIVERGENCE_M:
+            say(f"classifying the departure at {hop.value}")
+            sel = _select(models_for(inputs, tuple(upstream)), objective, inputs, "as_run", say)
+            if sel.fit.models:
+                selections.append(sel)
+        previous, previous_stage, upstream, deepest = logged, stage, [], objective  # type: ignore[assignment]
+    assert deepest is not None  # the caller checked that some hop was logged
+    # The deepest stage, fed from the raw inputs, is what the robot's chain did end to end.
+    return selections, hop_errors, _PointObjective(deepest.stage, deepest.evidence)
 
 
 def _select(
@@ -462,7 +522,13 @@ def _select(
     mode: Mode,
     say: Callable[[str], None],
 ) -> _Selected:
-    """Forward selection on BIC: add the fault that explains most while it clearly pays for itself."""
+    """Forward selection on BIC: add the fault that explains most while it clearly pays for itself.
+
+    Only observations with evidence take part (an unmatched point is no evidence, not an error).
+    """
+    rows = np.flatnonzero(np.isfinite(objective(inputs, Perturbation())).all(axis=1))
+    if rows.size < len(inputs):
+        objective, inputs = objective.take(rows), inputs.take(rows)
     current = fit_models([], objective, inputs)
     confidences: list[float] = []
     alternatives: list[str] = []
@@ -500,17 +566,19 @@ def _select(
         alternatives.append(runner_up)
         current = best_fit if current.models else fit_models([best_model], objective, inputs)
     return _Selected(
-        fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode
+        fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode,
+        inputs=inputs,
     )
 
 
-def _reweighted(sel: _Selected, inputs: ChainInputs) -> _Selected:
+def _reweighted(sel: _Selected) -> _Selected:
     """Refit the chosen faults with residuals whitened along the viewing rays (noisy evidence only).
 
     The selection is kept; only the parameters (and their bootstrap) use the weighted residuals.
     """
     if not sel.fit.models or all(m.n_params == 0 for m in sel.fit.models):
         return sel
+    inputs = sel.inputs
     residual = sel.objective(inputs, sel.fit.perturbation())
     rays = transform_points(np.zeros_like(inputs.t_wb), inputs.q_wb,
                             transform_points(np.zeros_like(inputs.t_bc), inputs.q_bc, inputs.ray))
@@ -565,7 +633,6 @@ def _shapley(
 def _bootstrap(
     sel: _Selected,
     model: FaultModel,
-    inputs: ChainInputs,
     rng: np.random.Generator,
     draws: int,
     say: Callable[[str], None],
@@ -577,6 +644,7 @@ def _bootstrap(
     x_fit = np.concatenate(sel.fit.params)
     index = [m.name for m in sel.fit.models].index(model.name)
     samples: dict[str, list[float]] = {}
+    inputs = sel.inputs
     n = len(inputs)
     for _ in range(draws):
         idx = rng.integers(0, n, n)
