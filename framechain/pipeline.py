@@ -62,6 +62,8 @@ def load_log(
     suggested = config is None
     if config is None:
         config = adapters.suggest_chain(loaded)
+        if config.evidence_topics():  # read again, now with the evidence topics the suggestion found
+            loaded = adapters.open_log(target, config, progress=progress)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=suggested,
                      info=loaded.info, notes=list(getattr(loaded.info, "notes", [])))
 

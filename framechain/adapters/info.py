@@ -15,6 +15,7 @@ from framechain.timeline import (
     ChainEvidence,
     ChainFrames,
     ChainTopics,
+    HopTopics,
     Timeline,
     TransformTable,
 )
@@ -134,8 +135,7 @@ def suggest_chain(loaded: LoadedLog) -> ChainConfig:
     elif "odom" in frames:
         world = "odom"
     else:
-        roots = tree_roots(frame_tree(tl.transforms))
-        world = roots[0] if roots else ChainFrames().world
+        world = _root_of(tl.transforms, body) or (tree_roots(frame_tree(tl.transforms)) or [ChainFrames().world])[0]
     depth_topics = sorted(t for t, k in kinds.items() if k == "depth")
     depth_topic: str | None = None
     if depth_topics:
@@ -152,5 +152,43 @@ def suggest_chain(loaded: LoadedLog) -> ChainConfig:
             camera_info=camera_topic, detections=det_topics[0] if det_topics else None, depth=depth_topic,
             odometry=odom_topics[0] if odom_topics else None,
         ),
-        evidence=ChainEvidence(),
+        evidence=_suggest_evidence(loaded),
+    )
+
+
+def _root_of(transforms: TransformTable, frame: str) -> str | None:
+    """The root of the tree ``frame`` belongs to (None when the frame is in no edge)."""
+    parent = dict(zip(transforms.child.tolist(), transforms.parent.tolist(), strict=True))
+    if frame not in parent and frame not in set(parent.values()):
+        return None
+    seen = {frame}
+    while frame in parent and parent[frame] not in seen:
+        frame = parent[frame]
+        seen.add(frame)
+    return frame
+
+
+_POINT_TYPES = ("geometry_msgs/msg/PointStamped", "geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/TransformStamped")
+
+
+def _suggest_evidence(loaded: LoadedLog) -> ChainEvidence:
+    """Evidence topics guessed from names: the robot's hop points, a target, a reference."""
+    points = [t.name for t in loaded.info.topics if t.msgtype in _POINT_TYPES]
+
+    def pick(*words: str, also: tuple[str, ...] = ()) -> str | None:
+        for name in sorted(points):
+            low = name.lower()
+            if any(w in low for w in words) and all(a in low for a in also):
+                return name
+        return None
+
+    hops = HopTopics(
+        camera=pick("camera", "cam", also=("point",)),
+        body=pick("body", "base", also=("point",)),
+        world=pick("world", "map", also=("point",)),
+    )
+    return ChainEvidence(
+        hops=hops,
+        target=pick("target", "goal", "grasp"),
+        reference=pick("mocap", "reference", "ground_truth", "groundtruth", "vicon", "optitrack"),
     )

@@ -263,6 +263,10 @@ def attribute(
     buffer = TransformBuffer.from_timeline(timeline)
     say("replaying observations")
     result = replay(timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s)
+    if len(result) == 0:
+        where = f" on {chain.topics.detections}" if chain.topics.detections else ""
+        raise AnalysisError(f"the log has no detections{where} to replay (nothing to attribute); check the chain's "
+                            "detections topic")
     if not result.replayed.any():
         counts = result.counts()
         raise AnalysisError(

@@ -43,6 +43,8 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     from framechain.pipeline import attribute_log
 
     formats = default_formats or parse_formats(args.format)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)  # fail on an unwritable --out before the analysis, not after
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         run_, result = attribute_log(
             args.log,
@@ -55,7 +57,6 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
         )
     if run_.chain_suggested:
         print_suggested_chain(run_.chain, args.quiet or args.json)
-    out = Path(args.out)
     paths = write_attribution(result, out)
     report_formats = [f for f in formats if f in ("md", "html")]
     if report_formats:
@@ -65,8 +66,7 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0
-    if not args.quiet:
-        print_findings(result)
-        for name, path in paths.items():
-            print(f"{name}: {path}")
+    print_findings(result)
+    for name, path in paths.items():
+        print(f"{name}: {path}")
     return 0

@@ -25,7 +25,8 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
-    parser.add_argument("-q", "--quiet", action="store_true", help="no progress output")
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress output and no suggested chain (results are still printed)")
 
 
 @contextmanager

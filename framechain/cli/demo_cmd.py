@@ -46,7 +46,7 @@ def register(sub: Any) -> None:
     )
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--no-rrd", action="store_true", help="skip the Rerun recording")
-    parser.add_argument("-q", "--quiet", action="store_true")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress output (results are still printed)")
     parser.add_argument("--json", action="store_true", help="print attribution.json")
     parser.set_defaults(run=run)
 
@@ -139,11 +139,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0
-    if not args.quiet:
-        injected = ", ".join(f"{f.kind.value}{' ' + str(f.params) if f.params else ''} ({f.where})" for f in faults)
-        print(f"injected: {injected}")
-        print_findings(result)
-        for name, path in paths.items():
-            print(f"{name}: {path}")
-        print(f"done in {time.perf_counter() - started:.1f} s; open {paths['html']} or `rerun {paths.get('rrd', '')}`")
+    injected = ", ".join(f"{f.kind.value}{' ' + str(f.params) if f.params else ''} ({f.where})" for f in faults)
+    print(f"injected: {injected}")
+    print_findings(result)
+    for name, path in paths.items():
+        print(f"{name}: {path}")
+    print(f"done in {time.perf_counter() - started:.1f} s; open {paths['html']} or `rerun {paths.get('rrd', '')}`")
     return 0

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -67,6 +68,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.run(args))
     except FramechainError as err:
         print(f"framechain {args.command}: error: {err}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except BrokenPipeError:
+        # The reader went away (`framechain tf ... | head`): not an error of ours; stop quietly.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
+    except OSError as err:  # a path the user gave cannot be read or written
+        where = f": {err.filename}" if err.filename else ""
+        print(f"framechain {args.command}: error: {err.strerror or err}{where}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except KeyboardInterrupt:
         print("framechain: interrupted", file=sys.stderr)

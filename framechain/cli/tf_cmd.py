@@ -8,7 +8,7 @@ import json
 import sys
 from typing import TYPE_CHECKING, Any
 
-from framechain.timeline import FramechainError
+from framechain.timeline import FramechainError, format_stamp
 
 if TYPE_CHECKING:
     import numpy as np
@@ -51,6 +51,8 @@ def parse_stamp(text: str, log_start_ns: int) -> int:
         seconds = Decimal(text.strip())
     except InvalidOperation as err:
         raise FramechainError(f"--at: expected seconds (e.g. 1700000000.25 or 12.5), got {text!r}") from err
+    if not seconds.is_finite() or abs(seconds) > Decimal("9e9"):
+        raise FramechainError(f"--at: {text!r} is not a time in seconds within the span of an int64 nanosecond stamp")
     ns = int(seconds * 1_000_000_000)
     return ns if seconds >= Decimal(EPOCH_THRESHOLD_S) else log_start_ns + ns
 
@@ -174,7 +176,7 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     from rich.table import Table
 
     console = Console()
-    console.print(f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/] at stamp {r['stamp_ns'] * 1e-9:.9f} s "
+    console.print(f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/] at stamp {format_stamp(r['stamp_ns'])} s "
                   f"({r['t_rel_s']:+.6f} s from the first stamp)")
     t, q, rpy = r["translation"], r["quat_xyzw"], r["rpy_deg"]
     console.print(f"- Translation: [{t[0]:.6f}, {t[1]:.6f}, {t[2]:.6f}]")
@@ -190,6 +192,6 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     for h in r["hops"]:
         arrow = f"{h['child']} <- {h['parent']}" if h["inverse"] else f"{h['parent']} -> {h['child']}"
         kind = "static" if h["static"] else "dynamic"
-        stamps = ", ".join(f"{s * 1e-9:.9f}" for s in h["stamps_ns"])
+        stamps = ", ".join(format_stamp(s) for s in h["stamps_ns"])
         table.add_row(escape(arrow), kind, stamps, "-" if h["static"] else f"{h['weight']:.3f}")
     console.print(table)

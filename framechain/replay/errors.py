@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from framechain.timeline import FramechainError
+from framechain.timeline import FramechainError, format_stamp
 
 
 class TransformLookupError(FramechainError):
@@ -28,8 +28,8 @@ class ExtrapolationError(TransformLookupError):
         self.last_ns = last_ns
         direction = "into the past" if stamp_ns < first_ns else "into the future"
         super().__init__(
-            f"lookup at {stamp_ns * 1e-9:.9f} s would extrapolate {direction} on edge {parent} -> {child}, "
-            f"recorded from {first_ns * 1e-9:.9f} s to {last_ns * 1e-9:.9f} s"
+            f"lookup at {format_stamp(stamp_ns)} s would extrapolate {direction} on edge {parent} -> {child}, "
+            f"recorded from {format_stamp(first_ns)} s to {format_stamp(last_ns)} s"
         )
 
 

@@ -33,6 +33,7 @@ from framechain.timeline import (
     ChainFrames,
     ChainTopics,
     DepthFrameTable,
+    FramechainError,
     HopTopics,
     ObservationTable,
     PointRole,
@@ -56,6 +57,10 @@ REFERENCE_TOPIC = "/mocap/target"
 
 Evidence = Literal["hops", "target", "reference", "static"]
 Where = Literal["robot", "data"]
+
+
+class SceneError(FramechainError):
+    """A scene that cannot be generated as asked (a fault where it cannot live)."""
 
 
 @dataclass(frozen=True)
@@ -325,7 +330,7 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
         if fault.hop == "body_to_world":
             return replace(params, invert_pose=True)
         return replace(params, invert_camera=True)
-    raise ValueError(f"unknown fault {kind}")
+    raise SceneError(f"unknown fault {kind}")
 
 
 def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
@@ -334,13 +339,13 @@ def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams
         # A recorded rotation can only permute axes properly (det +1): the optical edge published wrong.
         perm = np.asarray(fault.params["permutation"], dtype=float)
         if not np.isclose(np.linalg.det(perm), 1.0):
-            raise ValueError("a recorded axis flip must be a proper rotation (det +1)")
+            raise SceneError("a recorded axis flip must be a proper rotation (det +1)")
         wrong = Rotation.from_quat(truth.optical_quat) * Rotation.from_matrix(perm)
         return replace(params, optical_quat=wrong.as_quat())
     if fault.kind == Fault.WRONG_WORLD_FRAME or (
         fault.kind == Fault.INVERTED_TRANSFORM and fault.hop == "body_to_world"
     ):
-        raise ValueError(f"{fault.kind.value} at {fault.hop} is a fault of the robot's computation only")
+        raise SceneError(f"{fault.kind.value} at {fault.hop} is a fault of the robot's computation only; drop @data")
     return _inject(params, fault, truth)
 
 

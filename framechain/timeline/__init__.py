@@ -20,6 +20,7 @@ from framechain.timeline.tables import (
     PointTable,
     Timeline,
     TransformTable,
+    format_stamp,
     normalize_frame,
     normalize_frames,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "Timeline",
     "TimelineError",
     "TransformTable",
+    "format_stamp",
     "normalize_frame",
     "normalize_frames",
 ]

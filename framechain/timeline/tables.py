@@ -45,6 +45,13 @@ class PointRole(StrEnum):
     REFERENCE = "reference"  # ground truth (motion capture, surveyed marker)
 
 
+def format_stamp(stamp_ns: int) -> str:
+    """Integer nanoseconds as seconds with all nine decimals exact (float seconds lose the last digits)."""
+    sign = "-" if stamp_ns < 0 else ""
+    whole, frac = divmod(abs(int(stamp_ns)), 1_000_000_000)
+    return f"{sign}{whole}.{frac:09d}"
+
+
 def normalize_frame(name: str) -> str:
     """Frame names as tf2 keys them: a leading ``/`` is dropped (ROS 1 ``/base_link``)."""
     return name.lstrip("/")

@@ -97,6 +97,9 @@ def test_attribute_without_chain_prints_the_suggestion(latency_log: tuple[Path, 
     assert main(["attribute", str(log), "--out", str(tmp_path / "o"), "--bootstrap", "0", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["frames"]["camera"] == "camera_optical_frame"
+    # The suggestion found the robot's /debug/point_* topics, so the latency is found without a chain file.
+    assert doc["error_m"]["metric"] == "logged_hops"
+    assert (doc["findings"][0]["fault"], doc["findings"][0]["hop"]) == ("latency", "body_to_world")
 
 
 def test_unknown_chain_key_is_one_line_error(latency_log: tuple[Path, Path], tmp_path: Path,
@@ -168,3 +171,32 @@ def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
                  "episode.rrd"):
         assert (out / name).exists(), name
     assert np.isclose(sum(f["share"] for f in doc["findings"]), 1.0, atol=0.05)
+
+
+def test_unwritable_out_fails_before_the_analysis(latency_log: tuple[Path, Path], tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    assert main(["attribute", str(log), "--chain", str(chain), "--out", str(blocker / "out"), "-q"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert str(blocker) in err
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--fault", "wrong_world_frame@data"],
+    ["demo", "--fault", "no_such_fault"],
+])
+def test_bad_demo_faults_are_one_line(argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([*argv, "--out", str(tmp_path / "d")]) == 1
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("at", ["nan", "inf", "1e20", "soon"])
+def test_tf_bad_at_is_one_line(latency_log: tuple[Path, Path], at: str, capsys: pytest.CaptureFixture[str]) -> None:
+    log, _ = latency_log
+    assert main(["tf", str(log), "map", "base_link", "--at", at]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "--at" in err

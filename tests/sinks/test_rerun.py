@@ -594,12 +594,12 @@ def test_cli_replay_reads_a_recorded_log(
     assert report["source"] == "mcap"
     assert report["counts"]["replayed"] == 5
     assert report["entities"]["/series/error_mm/camera_to_body"] == 5  # as-run matched by stamp
-    # Without --chain the frames are suggested and the unnamed evidence topics are left out, with a note.
+    # Without --chain the frames are suggested, and so are the robot's hop-point topics (found by name).
     assert main(["replay", str(log), "--save", str(tmp_path / "nochain.rrd"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
-    assert any("not used" in note for note in report["notes"])
-    assert "/series/error_mm/camera_to_body" not in report["entities"]
+    assert not any("not used" in note for note in report["notes"])
+    assert report["entities"]["/series/error_mm/camera_to_body"] == 5
 
 
 def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
