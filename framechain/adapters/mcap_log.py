@@ -364,7 +364,10 @@ class McapLog:
         else:
             stream = self._linear(wanted={topic: Kind.DEPTH})
         for rec in stream:
-            if rec.channel_id in cids and rec.log_time == log_time_ns:
+            # A linear scan meets the channel records on the way: look the topic up as it goes.
+            channel = self.channels.get(rec.channel_id)
+            if (rec.channel_id in cids or (channel is not None and channel.topic == topic)) \
+                    and rec.log_time == log_time_ns:
                 if seen == ordinal:
                     return self.decoder(rec.channel_id)(rec.data)
                 seen += 1
