@@ -52,12 +52,11 @@ import numpy.typing as npt
 import yaml
 from scipy.spatial.transform import Rotation
 
-from framechain.timeline import CameraTable, FramechainError
+from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, CameraTable, FramechainError
 
 FloatArray = npt.NDArray[np.float64]
 
 #: camera_link (FLU) -> optical frame (RDF), REP-103: roll = -pi/2, yaw = -pi/2.
-OPTICAL_FROM_LINK_QUAT_XYZW: tuple[float, float, float, float] = (-0.5, 0.5, -0.5, 0.5)
 
 __all__ = [
     "OPTICAL_FROM_LINK_QUAT_XYZW",

@@ -41,6 +41,7 @@ from framechain.replay import (
     transform_points,
 )
 from framechain.replay.catalogue import Fault
+from framechain.replay.stamps import nearest
 from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
 
 FloatArray = npt.NDArray[np.float64]
@@ -423,9 +424,7 @@ def _match_points(points: PointTable, stamps: IntArray, tolerance_ns: int) -> Fl
     order = np.lexsort((points.log_time_ns, points.stamp_ns))
     point_stamps = points.stamp_ns[order]
     group_stamps, group_start, group_size = np.unique(point_stamps, return_index=True, return_counts=True)
-    right = np.clip(np.searchsorted(group_stamps, stamps), 0, group_stamps.size - 1)
-    left = np.clip(right - 1, 0, group_stamps.size - 1)
-    group = np.where(np.abs(group_stamps[left] - stamps) <= np.abs(group_stamps[right] - stamps), left, right)
+    group = nearest(group_stamps, stamps)
     rank = _rank_within_equal(stamps)
     ok = (np.abs(group_stamps[group] - stamps) <= tolerance_ns) & (rank < group_size[group])
     out[ok] = points.xyz[order[group_start[group[ok]] + rank[ok]]]

@@ -18,13 +18,11 @@ from scipy.spatial.transform import Rotation
 
 from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
 from framechain.replay.buffer import compose_hops, invert
-from framechain.timeline import ChainFrames
+from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, ChainFrames
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-#: camera_link (FLU) -> optical frame (RDF), REP-103: the rotation of a level, unpitched camera.
-OPTICAL_QUAT_XYZW = np.array([-0.5, 0.5, -0.5, 0.5])
 
 
 @dataclass(frozen=True)
@@ -71,7 +69,7 @@ def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
     first = edges[path.hops[0].child]
     if not first.is_static:
         return None
-    is_optical = Rotation.from_quat(first.quat_xyzw[0]) * Rotation.from_quat(OPTICAL_QUAT_XYZW).inv()
+    is_optical = Rotation.from_quat(first.quat_xyzw[0]) * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
     if len(path.hops) > 1 and not path.hops[1].inverse and np.rad2deg(is_optical.magnitude()) < 1.0:
         mount = edges[path.hops[1].child]
         if mount.is_static:

@@ -17,10 +17,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import replay
-from framechain.timeline import CameraTable, ChainFrames, ObservationTable, Timeline, TransformTable
+from framechain.timeline import (
+    OPTICAL_FROM_LINK_QUAT_XYZW,
+    CameraTable,
+    ChainFrames,
+    ObservationTable,
+    Timeline,
+    TransformTable,
+)
 
-#: camera_link (x forward, y left, z up) to its optical frame (x right, y down, z forward), REP-103.
-OPTICAL_FROM_LINK_QUAT_XYZW = (-0.5, 0.5, -0.5, 0.5)
 MOUNT_XYZ = (0.30, 0.0, 0.80)
 
 

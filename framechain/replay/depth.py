@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from framechain.replay.stamps import nearest
 from framechain.timeline import DepthFrameTable, normalize_frame
 
 FloatArray = npt.NDArray[np.float64]
@@ -47,9 +48,7 @@ def sample_depth(
         return DepthSamples(depth, index, stamp)
     order = mine[np.argsort(frames.stamp_ns[mine], kind="stable")]
     frame_stamps = frames.stamp_ns[order]
-    right = np.clip(np.searchsorted(frame_stamps, stamps_ns), 0, order.size - 1)
-    left = np.clip(right - 1, 0, order.size - 1)
-    pick = np.where(np.abs(frame_stamps[left] - stamps_ns) <= np.abs(frame_stamps[right] - stamps_ns), left, right)
+    pick = nearest(frame_stamps, stamps_ns)
     near = np.abs(frame_stamps[pick] - stamps_ns) <= max_gap_ns
     index[near] = order[pick[near]]
     stamp[near] = frame_stamps[pick[near]]

@@ -23,10 +23,12 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import TransformBuffer
+from framechain.replay.buffer import invert
 from framechain.replay.camera import CameraModel
 from framechain.replay.catalogue import FAULT_HOPS, Fault
 from framechain.replay.replay import compose_rows, transform_points
 from framechain.timeline import (
+    OPTICAL_FROM_LINK_QUAT_XYZW,
     CameraTable,
     ChainConfig,
     ChainEvidence,
@@ -46,7 +48,6 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 #: camera_link (FLU) -> optical frame (RDF), REP-103.
-OPTICAL_QUAT_XYZW = np.array([-0.5, 0.5, -0.5, 0.5])
 START_NS = 1_700_000_000_000_000_000
 TOPICS = ChainTopics(
     camera_info="/camera/color/camera_info", detections="/detections", depth="/camera/depth/image_rect_raw"
@@ -142,7 +143,7 @@ class _ChainParams:
     K: FloatArray
     depth_factor: float = 1.0
     mount_quat: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
-    optical_quat: FloatArray = field(default_factory=OPTICAL_QUAT_XYZW.copy)
+    optical_quat: FloatArray = field(default_factory=lambda: np.array(OPTICAL_FROM_LINK_QUAT_XYZW))
     cam_permutation: FloatArray = field(default_factory=_identity3)
     pose_offset_ns: int = 0
     world: str = "map"
@@ -362,8 +363,9 @@ def _unit(axis: Sequence[float]) -> FloatArray:
 
 
 def _invert_rows(t: FloatArray, q: FloatArray) -> tuple[FloatArray, FloatArray]:
-    inv = Rotation.from_quat(q).inv()
-    return -inv.apply(t), inv.as_quat()
+    """Row-wise inverse of (N, 3)/(N, 4) transforms (the replay's components-first inverse)."""
+    t_inv, q_inv = invert(np.asarray(t, dtype=float).T, np.asarray(q, dtype=float).T)
+    return t_inv.T, q_inv.T
 
 
 def _pixel_to_camera(K: FloatArray, u: FloatArray, v: FloatArray, depth: FloatArray) -> FloatArray:

@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer, transform_points
+from framechain.replay.stamps import nearest
 from framechain.timeline import (
     ChainFrames,
     FramechainError,
@@ -548,12 +549,8 @@ def _match_to_observations(
     if free.size:
         by_stamp = np.argsort(obs.stamp_ns, kind="stable")
         stamps = obs.stamp_ns[by_stamp]
-        right = np.clip(np.searchsorted(stamps, points.stamp_ns[free]), 0, n - 1)
-        left = np.clip(right - 1, 0, n - 1)
-        d_left = np.abs(stamps[left] - points.stamp_ns[free])
-        d_right = np.abs(stamps[right] - points.stamp_ns[free])
-        pick = np.where(d_left <= d_right, left, right)
-        gap = np.minimum(d_left, d_right)
+        pick = nearest(stamps, points.stamp_ns[free])
+        gap = np.abs(stamps[pick] - points.stamp_ns[free])
         ok = gap <= tolerance_ns
         target[free[ok]] = by_stamp[pick[ok]]
         dt[free[ok]] = gap[ok]
@@ -756,9 +753,7 @@ def _log_depth(
     stamps = depth.stamp_ns[mine]
     # The frame each observation used (or the nearest within the window when depth came with it).
     want = np.where(result.depth_stamp_ns > 0, result.depth_stamp_ns, obs.stamp_ns)
-    right = np.clip(np.searchsorted(stamps, want), 0, mine.size - 1)
-    left = np.clip(right - 1, 0, mine.size - 1)
-    pick = np.where(np.abs(stamps[left] - want) <= np.abs(stamps[right] - want), left, right)
+    pick = nearest(stamps, want)
     near = np.abs(stamps[pick] - want) <= opts.image_window_ns
     chosen = np.unique(mine[pick[near]])
     if chosen.size > opts.max_images:

@@ -1,6 +1,7 @@
 """The model room: columnar tables of one log, nothing format-specific; imports nothing else here."""
 
 from framechain.timeline.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
+from framechain.timeline.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.timeline.errors import (
     ChainConfigError,
     FramechainError,
@@ -26,6 +27,7 @@ from framechain.timeline.tables import (
 )
 
 __all__ = [
+    "OPTICAL_FROM_LINK_QUAT_XYZW",
     "CameraTable",
     "ChainConfig",
     "ChainConfigError",
