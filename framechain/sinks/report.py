@@ -82,7 +82,7 @@ def make_figures(result: Attribution) -> list[Figure]:
         ax.plot(t, errors * 1e3, lw=1, label=f"{hop} (logged vs recomputed)")
     ax.plot(t, result.error_before * 1e3, lw=1.4, color="k", label=f"world error ({result.metric.replace('_', ' ')})")
     if result.findings:
-        ax.plot(t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label="after the fixes")
+        ax.plot(t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label=_after_label(result))
     ax.set_xlabel("time since first observation (s)")
     ax.set_ylabel("error (mm)")
     ax.grid(True, alpha=0.3)
@@ -93,7 +93,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     ax.scatter(speed, result.error_before * 1e3, s=8, alpha=0.6, label="as recorded")
     if result.findings:
-        ax.scatter(speed, result.error_after * 1e3, s=8, alpha=0.6, color="tab:green", label="after the fixes")
+        ax.scatter(speed, result.error_after * 1e3, s=8, alpha=0.6, color="tab:green", label=_after_label(result))
     ax.set_xlabel("robot speed (m/s)")
     ax.set_ylabel("error (mm)")
     ax.set_title("A latency grows with speed", fontsize=9)
@@ -134,6 +134,13 @@ def make_figures(result: Attribution) -> list[Figure]:
             ax.legend(fontsize=7)
             figures.append(_png(fig, "sensitivity", f"How fast {top.fault.value} hurts on this episode"))
     return figures
+
+
+def _after_label(result: Attribution) -> str:
+    """What the second error curve is: corrected data, or what the findings leave unexplained."""
+    if result.metric in ("reference", "static_spread"):
+        return "after correcting the recorded data"
+    return "left unexplained by the findings"
 
 
 def _recomputed_world(result: Attribution) -> FloatArray:
@@ -248,7 +255,8 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "## Error",
         "",
         f"Against the {s['metric'].replace('_', ' ')}: median {_mm(s['median'])}, p95 {_mm(s['p95'])}, "
-        f"max {_mm(s['max'])}; after the fixes: median {_mm(result.error_summary(result.error_after)['median'])}.",
+        f"max {_mm(s['max'])}; {_after_label(result)}: "
+        f"median {_mm(result.error_summary(result.error_after)['median'])}.",
         "",
     ]
     for fig in figures:
@@ -290,7 +298,7 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     counts = result.counts()
     parts.append(
         f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {_mm(s['median'])}, "
-        f"p95 {_mm(s['p95'])}, max {_mm(s['max'])}; after the fixes: median "
+        f"p95 {_mm(s['p95'])}, max {_mm(s['max'])}; {_after_label(result)}: median "
         f"{_mm(result.error_summary(result.error_after)['median'])}. Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
