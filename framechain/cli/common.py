@@ -58,7 +58,7 @@ def print_findings(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    console = Console(width=None if sys.stdout.isatty() else 120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
     counts = result.counts()
     console.print(

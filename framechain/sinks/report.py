@@ -166,8 +166,9 @@ def _estimate(f: Finding) -> str:
         if key == "offset_s":
             parts.append(f"offset {float(value) * 1e3:+.1f} ms")
         elif key == "angle_deg":
-            axis = [round(float(a), 3) + 0.0 for a in f.estimate.get("axis", [])]  # + 0.0 drops negative zeros
-            parts.append(f"{float(value):.2f} deg about {axis}")
+            frame = f.estimate.get("axis_frame", "")
+            parts.append(f"{float(value):.2f} deg about {_axis_text(f.estimate.get('axis', []))}"
+                         + (f" of {frame}" if frame else ""))
         elif key in ("factor", "scale"):
             parts.append(f"{key} {float(value):.4g}")
         elif key in ("used", "meant", "hop", "variant"):
@@ -177,6 +178,15 @@ def _estimate(f: Finding) -> str:
         elif key == "edge":
             parts.append(f"edge {value[0]} -> {value[1]}")
     return "; ".join(parts)
+
+
+def _axis_text(axis: Sequence[float]) -> str:
+    """A principal axis by name (-y), any other as a rounded vector."""
+    a = np.asarray(axis, dtype=float)
+    if a.size == 3 and np.max(np.abs(a)) > 0.999:
+        k = int(np.argmax(np.abs(a)))
+        return f"{'+' if a[k] > 0 else '-'}{'xyz'[k]}"
+    return str([round(float(v), 3) + 0.0 for v in a])  # + 0.0 drops negative zeros
 
 
 def _interval(f: Finding) -> str:
