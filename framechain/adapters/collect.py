@@ -99,6 +99,7 @@ class Collector:
         self.chain = chain
         self.roles = chain.evidence_topics() if chain else {}
         self.notes: list[str] = []
+        self.depth_from_pose: dict[str, int] = {}  # detections whose hypothesis pose carried a depth, by topic
         # transforms: per row
         self.tf_parent: list[str] = []
         self.tf_child: list[str] = []
@@ -275,6 +276,7 @@ class Collector:
             z = float(r0.pose.pose.position.z)
             if math.isfinite(z) and z > 0:
                 depth = z
+                self.depth_from_pose[topic] = self.depth_from_pose.get(topic, 0) + 1
         self.obs_id_text.append(str(ident))
         self.obs_stamp.append(stamp)
         self.obs_log.append(log_ns)
@@ -388,6 +390,11 @@ class Collector:
             apply_realsense_layout(self)
         for (topic, what), count in sorted(self.skipped.items()):
             self.notes.append(f"topic {topic}: {what} ({count} message{'s' if count != 1 else ''})")
+        for topic, count in sorted(self.depth_from_pose.items()):
+            self.notes.append(
+                f"topic {topic}: {count} detections carry a depth in results[0].pose.pose.position.z; it is used as "
+                "the z-depth in the camera frame instead of sampling the depth image"
+            )
         transforms = self._transforms()
         cameras = self._cameras()
         observations = self._observations()

@@ -35,7 +35,12 @@ def assert_same(got: Timeline, expected: Timeline, *, depth_atol: float = 1e-6) 
 def test_every_container_gives_the_same_timeline(container: str, written: dict[str, Path], scene: Timeline) -> None:
     loaded = open_log(written[container], CHAIN)
     assert_same(loaded.timeline, scene)
-    assert loaded.info.notes == ()
+    # The only note: the scene's known depths travel in the detections' hypothesis pose, and the reader says so.
+    n_known = int(np.isfinite(scene.observations.depth_m).sum())
+    assert loaded.info.notes == (
+        f"topic /detections: {n_known} detections carry a depth in results[0].pose.pose.position.z; it is used as the "
+        "z-depth in the camera frame instead of sampling the depth image",
+    )
     assert loaded.timeline.metadata["source_path"] == str(written[container])
 
 
