@@ -55,24 +55,26 @@ def evidence_table(result: Attribution) -> pa.Table:
     table = hops.to_arrow()
     n_rows = len(hops)
     evidence = np.full((n_rows, 3), np.nan)
-    error = np.full(n_rows, np.nan)
-    error_after = np.full(n_rows, np.nan)
+    hop_error = np.full(n_rows, np.nan)  # the hop's own departure (logged against recomputed)
+    chain_error = np.full(n_rows, np.nan)  # on body_to_world rows: the whole chain against the evidence
+    chain_error_after = np.full(n_rows, np.nan)
     replayed_ids = result.inputs.obs_id
-    row_of = {int(o): i for i, o in enumerate(replayed_ids)}
-    for r in range(n_rows):  # 3 rows per observation; a dictionary join, not a per-hop computation
-        i = row_of.get(int(hops.obs_id[r]))
-        if i is None:
-            continue
-        hop = str(hops.hop[r])
-        if hop == HopName.BODY_TO_WORLD.value:
-            evidence[r] = result.evidence_points[i]
-            error[r] = result.error_before[i]
-            error_after[r] = result.error_after[i]
-        elif hop in result.hop_errors:
-            error[r] = result.hop_errors[hop][i]
+    order = np.argsort(replayed_ids)
+    pos = np.clip(np.searchsorted(replayed_ids[order], hops.obs_id), 0, max(replayed_ids.size - 1, 0))
+    found = replayed_ids.size > 0
+    row = order[pos] if found else pos
+    matched = (replayed_ids[row] == hops.obs_id) if found else np.zeros(n_rows, dtype=bool)
+    world = matched & (hops.hop == HopName.BODY_TO_WORLD.value)
+    evidence[world] = result.evidence_points[row[world]]
+    chain_error[world] = result.error_before[row[world]]
+    chain_error_after[world] = result.error_after[row[world]]
+    for hop, departure in result.hop_errors.items():
+        sel = matched & (hops.hop == hop)
+        hop_error[sel] = departure[row[sel]]
     table = table.append_column("evidence_xyz", pa.FixedSizeListArray.from_arrays(pa.array(evidence.reshape(-1)), 3))
-    table = table.append_column("error_m", pa.array(error))
-    table = table.append_column("error_after_m", pa.array(error_after))
+    table = table.append_column("hop_error_m", pa.array(hop_error))
+    table = table.append_column("chain_error_m", pa.array(chain_error))
+    table = table.append_column("chain_error_after_m", pa.array(chain_error_after))
     return table.append_column("metric", pa.array([result.metric] * n_rows))
 
 

@@ -24,6 +24,9 @@ from framechain.timeline import CameraTable
 FloatArray = npt.NDArray[np.float64]
 
 _N_COEFFS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4, "none": 0}
+# librealsense's "Inverse Brown Conrady" is deprojected by current rsutil.h with the same iteration
+# OpenCV uses to undistort plumb_bob (older copies applied the polynomial in closed form instead);
+# the D435 samples carry zero coefficients, where every reading agrees.
 _ALIASES = {"": "none", "brown_conrady": "plumb_bob", "brown conrady": "plumb_bob",
             "inverse brown conrady": "plumb_bob", "fisheye": "equidistant", "kannala_brandt": "equidistant"}
 
