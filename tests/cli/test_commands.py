@@ -87,9 +87,9 @@ def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path:
     # Only the pose was late: the first two hops agree with the robot, the last one carries the whole error.
     frame = table.to_pandas()
     upstream = frame[frame.hop != "body_to_world"]
-    assert float(upstream.hop_error_m.max()) < 1e-9
+    assert float(upstream.hop_error_m.max()) < 1e-6  # float32 depth pixels in the log: sub-micrometre
     last = frame[frame.hop == "body_to_world"]
-    np.testing.assert_allclose(last.hop_error_m, last.chain_error_m, atol=1e-9)
+    np.testing.assert_allclose(last.hop_error_m, last.chain_error_m, atol=1e-6)
     assert float(last.hop_error_m.median()) > 0.005
     inputs = json.loads((out / "inputs.json").read_text())
     assert inputs["latency_budget_s"] == 0.02
