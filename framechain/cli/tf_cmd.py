@@ -176,8 +176,11 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     from rich.table import Table
 
     console = Console()
-    console.print(f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/] at stamp {format_stamp(r['stamp_ns'])} s "
-                  f"({r['t_rel_s']:+.6f} s from the first stamp)")
+    name = f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/]"
+    if all(h["static"] for h in r["hops"]):
+        console.print(f"{name}: every edge of the path is static (timeless, from /tf_static)")
+    else:
+        console.print(f"{name} at stamp {format_stamp(r['stamp_ns'])} s ({r['t_rel_s']:+.6f} s from the first stamp)")
     t, q, rpy = r["translation"], r["quat_xyzw"], r["rpy_deg"]
     console.print(f"- Translation: [{t[0]:.6f}, {t[1]:.6f}, {t[2]:.6f}]")
     console.print(f"- Rotation: in Quaternion (xyzw) [{q[0]:.6f}, {q[1]:.6f}, {q[2]:.6f}, {q[3]:.6f}]")
