@@ -38,12 +38,13 @@ class FaultModel:
     fault: Fault
     hop: HopName
     family: str
-    x0: tuple[float, ...]
-    lower: tuple[float, ...]
-    upper: tuple[float, ...]
-    x_scale: tuple[float, ...]
     apply: Callable[[Perturbation, FloatArray], Perturbation]
     estimate: Callable[[FloatArray, Mode, ChainInputs], dict[str, Any]]
+    #: parameter start, bounds and scale; empty for a model with no parameters (a discrete choice)
+    x0: tuple[float, ...] = ()
+    lower: tuple[float, ...] = ()
+    upper: tuple[float, ...] = ()
+    x_scale: tuple[float, ...] = ()
     #: extra BIC penalty for a discrete choice among many variants (log of their number)
     choice_penalty: float = 0.0
     #: extra starting points for the local fit (multi-start)
@@ -127,10 +128,6 @@ def _axis_flip(perm: FloatArray) -> FaultModel:
         fault=Fault.AXIS_FLIP,
         hop=HopName.CAMERA_TO_BODY,
         family="camera_rotation",
-        x0=(),
-        lower=(),
-        upper=(),
-        x_scale=(),
         apply=lambda p, x: replace(p, permutation=perm),
         estimate=estimate,
         choice_penalty=float(np.log(47.0)),
@@ -148,10 +145,6 @@ def _inverted(hop: HopName) -> FaultModel:
         fault=Fault.INVERTED_TRANSFORM,
         hop=hop,
         family="camera_rotation" if camera else f"pose_invert:{hop.value}",
-        x0=(),
-        lower=(),
-        upper=(),
-        x_scale=(),
         apply=apply,
         estimate=lambda x, mode, inputs: {"hop": hop.value},
     )
@@ -164,10 +157,6 @@ def _inverted_edge(parent: str, child: str) -> FaultModel:
         fault=Fault.INVERTED_TRANSFORM,
         hop=HopName.CAMERA_TO_BODY,
         family="camera_rotation",
-        x0=(),
-        lower=(),
-        upper=(),
-        x_scale=(),
         apply=lambda p, x: replace(p, invert_edge=child),
         estimate=lambda x, mode, inputs: {"hop": HopName.CAMERA_TO_BODY.value, "edge": [parent, child]},
     )
@@ -231,10 +220,6 @@ def _wrong_world(alternative: str, configured: str) -> FaultModel:
         fault=Fault.WRONG_WORLD_FRAME,
         hop=HopName.BODY_TO_WORLD,
         family="world_frame",
-        x0=(),
-        lower=(),
-        upper=(),
-        x_scale=(),
         apply=lambda p, x: replace(p, world=alternative),
         estimate=estimate,
     )
