@@ -42,10 +42,6 @@ class Fit:
     bic: float
     distances: FloatArray  # (N,) |residual| per observation
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(m.name for m in self.models)
-
     def perturbation(self, base: Perturbation | None = None) -> Perturbation:
         pert = base or Perturbation()
         for model, x in zip(self.models, self.params, strict=True):

@@ -85,13 +85,6 @@ class CameraModel:
     def is_distorted(self) -> bool:
         return self.distortion_model != "none" and bool(np.any(self.distortion))
 
-    def scaled(self, focal_scale: float) -> CameraModel:
-        """The same camera with focal lengths multiplied by ``focal_scale`` (principal point kept)."""
-        k = self.K.copy()
-        k[0, 0] *= focal_scale
-        k[1, 1] *= focal_scale
-        return CameraModel(self.frame, k, self.width, self.height, self.distortion_model, self.distortion)
-
     def inside(self, u: FloatArray, v: FloatArray) -> npt.NDArray[np.bool_]:
         """Pixels within the image (pixel centres at integers, edges at -0.5 and size - 0.5)."""
         return (u >= -0.5) & (u < self.width - 0.5) & (v >= -0.5) & (v < self.height - 0.5)
