@@ -316,6 +316,11 @@ class TransformBuffer:
         """Edges keyed by child frame."""
         return dict(self._edges)
 
+    def parent_of(self, frame: str) -> str | None:
+        """The parent of ``frame`` in the tree (None for a root or an unknown frame)."""
+        edge = self._edges.get(normalize_frame(frame))
+        return edge.parent if edge else None
+
     def _ancestors(self, frame: str) -> list[str]:
         chain = [frame]
         while chain[-1] in self._edges:
