@@ -8,11 +8,11 @@ table. Every command of the CLI loads through :func:`load_log`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import astuple, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from framechain.analysis.attribute import Attribution, attribute
+from framechain.analysis.attribute import AnalysisError, Attribution, attribute
 from framechain.timeline import ChainConfig, FramechainError, Timeline
 
 
@@ -110,7 +110,16 @@ def attribute_log(
 ) -> tuple[LoadedRun, Attribution]:
     """Load and attribute one log: ``(run, attribution)``."""
     run = load_log(path, chain, episode=episode, robot=robot, progress=progress is not None)
-    result = attribute(run.timeline, run.chain, seed=seed, bootstrap=bootstrap, progress=progress)
+    try:
+        result = attribute(run.timeline, run.chain, seed=seed, bootstrap=bootstrap, progress=progress)
+    except AnalysisError as err:
+        # Nothing to analyse is often explained by what the reader noticed (an undecodable topic).
+        named = [t for t in astuple(run.chain.topics) if t]
+        why = [n for n in run.notes if any(n.startswith(f"topic {t}:") for t in named)]
+        raise AnalysisError(f"{run.path}: {err}" + "".join(f"; {n}" for n in why)) from err
+    # What the reader noticed (a topic the chain names but the log lacks, undecodable messages)
+    # travels with the result into every output.
+    result = replace(result, notes=(*run.notes, *(n for n in result.notes if n not in run.notes)))
     source = dict(result.source)
     source.setdefault("path", str(run.path))
     if run.info is not None:

@@ -79,8 +79,8 @@ class McapLog:
             self.truncated = True
             self.summary = None
         if self.summary is not None:
-            for cid, ch in self.summary.channels.items():
-                self.channels[cid] = self._channel(ch, self.summary.schemas.get(ch.schema_id))
+            for _cid, ch in self.summary.channels.items():
+                self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
         self._decoders: dict[int, Decoder] = {}
         self._scanned = False
 
@@ -93,11 +93,18 @@ class McapLog:
     def close(self) -> None:
         self._f.close()
 
-    @staticmethod
-    def _channel(ch: Any, schema: Any) -> _Channel:
+    def _add_channel(self, ch: Any, schema: Any) -> None:
+        """Keep a channel, and say at once when its messages cannot be decoded whatever they hold."""
         if schema is None:
-            return _Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
-        return _Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
+            channel = _Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
+        else:
+            channel = _Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
+        self.channels[ch.id] = channel
+        problem = _undecodable(channel)
+        if problem:
+            note = f"topic {channel.topic}: {problem}; its messages are not read"
+            if note not in self.notes:
+                self.notes.append(note)
 
     # -- what the file holds --------------------------------------------------------------
     @property
@@ -151,8 +158,9 @@ class McapLog:
         return dec
 
     def _build_decoder(self, ch: _Channel) -> Decoder:
-        if not ch.schema_name:
-            raise DecoderBuildError(f"no schema for message encoding {ch.encoding!r}; the message type is unknown")
+        problem = _undecodable(ch)
+        if problem:
+            raise DecoderBuildError(problem)
         text = ch.schema_data.decode("utf-8", "replace")
         if ch.encoding == "cdr" and ch.schema_encoding == "ros2msg":
             return ros_decoder(typestore_from_msg(ch.schema_name, text), ch.schema_name, ros1=False)
@@ -162,12 +170,7 @@ class McapLog:
             return ros_decoder(typestore_from_msg(ch.schema_name, text), ch.schema_name, ros1=True)
         if ch.encoding == "protobuf" and ch.schema_encoding == "protobuf":
             return protobuf_decoder(ch.schema_name, ch.schema_data)
-        if ch.encoding == "json":
-            return json_decoder()
-        raise DecoderBuildError(
-            f"message encoding {ch.encoding!r} with schema encoding {ch.schema_encoding!r} is not supported "
-            "(expected cdr/ros2msg, ros1/ros1msg, protobuf or json)"
-        )
+        return json_decoder()  # the only encoding left that _undecodable lets through
 
     # -- reading ----------------------------------------------------------------------------------
     def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
@@ -294,7 +297,7 @@ class McapLog:
                 schemas[rec.id] = rec
             elif isinstance(rec, Channel):
                 if rec.id not in self.channels:
-                    self.channels[rec.id] = self._channel(rec, schemas.get(rec.schema_id))
+                    self._add_channel(rec, schemas.get(rec.schema_id))
             elif isinstance(rec, Chunk):
                 offset = self._f.tell()
                 try:
@@ -307,7 +310,7 @@ class McapLog:
                         schemas[r.id] = r
                     elif isinstance(r, Channel):
                         if r.id not in self.channels:
-                            self.channels[r.id] = self._channel(r, schemas.get(r.schema_id))
+                            self._add_channel(r, schemas.get(r.schema_id))
                     elif isinstance(r, Message):
                         recovered += 1
                         if counting:
@@ -403,3 +406,19 @@ def _chunk_records(chunk: Any, *, keep_all: bool = False) -> list[Any]:
 
 def mcap_topic_types(log: McapLog) -> dict[str, str]:
     return {ch.topic: normalize_msgtype(ch.schema_name) for ch in log.channels.values() if ch.schema_name}
+
+
+#: (message encoding, schema encoding) pairs with a decoder; JSON needs no schema to be read.
+_DECODABLE = {("cdr", "ros2msg"), ("cdr", "ros2idl"), ("ros1", "ros1msg"), ("protobuf", "protobuf")}
+
+
+def _undecodable(ch: _Channel) -> str:
+    """Why a channel's messages cannot be decoded ('' when they can)."""
+    if ch.encoding == "json":
+        return ""
+    if not ch.schema_name:
+        return f"no schema for message encoding {ch.encoding!r}, so the message type is unknown"
+    if (ch.encoding, ch.schema_encoding) not in _DECODABLE:
+        return (f"message encoding {ch.encoding!r} with schema encoding {ch.schema_encoding!r} ({ch.schema_name}) "
+                "is not supported (cdr/ros2msg, cdr/ros2idl, ros1/ros1msg, protobuf or json)")
+    return ""

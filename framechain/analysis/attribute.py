@@ -132,6 +132,31 @@ class Attribution:
             "max": round(float(e.max()), 6),
         }
 
+    def hop_summary(self) -> list[dict[str, Any]]:
+        """One row per hop: its own departure where the robot logged it, the time gaps of the samples
+        it used (observation stamp minus the nearest sample of its stalest edge), stale count, and
+        the error the findings put on it."""
+        records = self.replay.hops
+        replayed = records.status == "replayed"
+        rows = []
+        for hop in HopName:
+            sel = replayed & (records.hop == hop.value)
+            gaps_ms = np.abs(records.gap_ns[sel]) * 1e-6
+            departure = self.hop_errors.get(hop.value)
+            dep = departure[np.isfinite(departure)] if departure is not None else np.zeros(0)
+            rows.append({
+                "hop": hop.value,
+                "departure_m": None if dep.size == 0 else {
+                    "median": round(float(np.median(dep)), 6), "p95": round(float(np.percentile(dep, 95)), 6),
+                    "max": round(float(dep.max()), 6)},
+                "gap_ms": None if gaps_ms.size == 0 else {
+                    "median": round(float(np.median(gaps_ms)), 3), "max": round(float(gaps_ms.max()), 3)},
+                "stale": int(records.stale[sel].sum()),
+                "attributed_m": round(sum(f.error_m for f in self.findings if f.hop == hop), 6),
+                "faults": [f.fault.value for f in self.findings if f.hop == hop],
+            })
+        return rows
+
     @property
     def verdict(self) -> str:
         """The answer in one sentence."""
@@ -165,6 +190,7 @@ class Attribution:
             "residual_m": self.error_summary(self.error_after),
             "verdict": self.verdict,
             "findings": [f.to_json() for f in self.findings],
+            "hops": self.hop_summary(),
             "notes": list(self.notes),
         }
 

@@ -54,9 +54,11 @@ def print_suggested_chain(chain: Any, quiet: bool) -> None:
 
 
 def print_findings(result: Any) -> None:
-    """The verdict, the findings table and the counts, with rich."""
+    """The verdict, the counts, the findings, the per-hop summary, the fixes and the notes, with rich."""
     from rich.console import Console
     from rich.table import Table
+
+    from framechain.sinks.report import HOP_COLUMNS, estimate_text, hop_rows, interval_text
 
     console = Console(width=None if sys.stdout.isatty() else 120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
@@ -65,17 +67,21 @@ def print_findings(result: Any) -> None:
         f"observations: {counts['total']} total, {counts['replayed']} replayed, "
         f"rejected {counts['rejected'] or 'none'}, {counts['stale']} stale"
     )
-    if not result.findings:
-        return
-    table = Table()
-    for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
-        table.add_column(col, overflow="fold")
-    from framechain.sinks.report import _estimate, _interval
-
-    for i, f in enumerate(result.findings, start=1):
-        table.add_row(
-            str(i), f.fault.value, f.hop.value, _estimate(f), _interval(f), f"{f.share:.0%}", f"{f.confidence:.2f}"
-        )
-    console.print(table)
+    if result.findings:
+        table = Table()
+        for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
+            table.add_column(col, overflow="fold")
+        for i, f in enumerate(result.findings, start=1):
+            table.add_row(str(i), f.fault.value, f.hop.value, estimate_text(f), interval_text(f), f"{f.share:.0%}",
+                          f"{f.confidence:.2f}")
+        console.print(table)
+    hops = Table()
+    for col in HOP_COLUMNS:
+        hops.add_column(col, overflow="fold")
+    for row in hop_rows(result):
+        hops.add_row(*row)
+    console.print(hops)
     for i, f in enumerate(result.findings, start=1):
         console.print(f"fix {i}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
+    for note in result.notes:
+        console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)

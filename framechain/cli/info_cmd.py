@@ -29,6 +29,7 @@ def register(sub: Any) -> None:
     out.add_argument("--chain", action="store_true",
                      help="print only the suggested chain configuration as YAML "
                      "(framechain info LOG --chain > chain.yaml)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
     p.set_defaults(run=run)
 
 
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         loaded = _dataset_summary(args.log)
         chain = None
     else:
-        loaded = open_log(args.log, progress=sys.stderr.isatty() and not args.json)
+        loaded = open_log(args.log, progress=sys.stderr.isatty() and not (args.json or args.quiet))
         chain = suggest_chain(loaded)
     edges = frame_tree(loaded.timeline.transforms)
     if args.chain:

@@ -12,6 +12,7 @@ import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import Any
 
 from framechain import __version__
 from framechain.timeline import FramechainError
@@ -46,7 +47,28 @@ def build_parser() -> argparse.ArgumentParser:
         module = _command_module(name)
         if module is not None:
             module.register(sub)
+    _add_exit_codes(sub)
     return parser
+
+
+class _KeepLaidOutText(argparse.HelpFormatter):
+    """Wrap one-paragraph descriptions; keep text laid out in lines (the exit-code table) as it is."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        if "\n" in text.strip("\n"):
+            return "".join(indent + line for line in text.splitlines(keepends=True))
+        return super()._fill_text(text, width, indent)
+
+
+def _add_exit_codes(sub: Any) -> None:
+    """Every command's --help ends with the exit codes (a command may give its own, more precise)."""
+    for command in sub.choices.values():
+        if command.epilog is None:
+            command.epilog = EPILOG
+            command.formatter_class = _KeepLaidOutText
+        for action in command._actions:  # nested commands (`lab tilt`)
+            if isinstance(action, argparse._SubParsersAction):
+                _add_exit_codes(action)
 
 
 def _command_module(name: str) -> ModuleType | None:

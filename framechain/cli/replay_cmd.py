@@ -20,8 +20,8 @@ DESCRIPTION = """\
 Replay every observation of LOG through the chain (pixel -> camera -> body -> world) and stream
 it to Rerun: the frame tree over time, the camera as a pinhole with its depth frames and
 detections, each hop's point recomputed and as the robot logged it, error arrows, per-hop error
-and time-gap series, rejected observations and a summary, in a default layout. With
---attribute, the findings of `framechain attribute` are added to the text log.
+and time-gap series, rejected observations, the findings of `framechain attribute` and a
+summary, in a default layout (--no-attribute skips the fit and logs the replay alone).
 
 Output: --save FILE.rrd (no viewer needed), --connect URL (a running viewer, e.g.
 rerun+http://127.0.0.1:9876/proxy), or --spawn (a local viewer). Without one of them the viewer
@@ -50,8 +50,9 @@ def register(sub: Any) -> None:
     out.add_argument("--spawn", action="store_true", help="start a local Rerun viewer (saves when there is no display)")
     out.add_argument("--connect", metavar="URL", help="send to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     out.add_argument("--save", metavar="FILE.rrd", help="write a recording file (no viewer needed)")
-    parser.add_argument("--attribute", action="store_true", help="also attribute the error and log the findings")
-    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed of --attribute (default 0)")
+    parser.add_argument("--attribute", action=argparse.BooleanOptionalAction, default=True,
+                        help="attribute the error and log the findings (default: on)")
+    parser.add_argument("--seed", type=int, default=0, help="bootstrap seed of the attribution (default 0)")
     parser.add_argument("--max-images", type=int, default=30, metavar="N",
                         help="depth frames logged at most, nearest the observations (default 30)")
     parser.add_argument("--json", action="store_true", help="print counts and the output as one JSON object")
@@ -71,13 +72,13 @@ def run(args: argparse.Namespace) -> int:
         timeline = loaded.timeline
         if loaded.chain_suggested and loaded.info is not None:
             notes.extend(_unused_point_topics(loaded))
-        if args.attribute:
+        result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+        if args.attribute and result.replayed.any():
             from framechain.analysis.attribute import attribute
 
             attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
             result, findings = attribution.replay, attribution.findings
-        else:
-            result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+            notes.extend(n for n in attribution.notes if n not in notes)
         if progress is not None:
             progress("writing the Rerun recording")
         outcome = stream_replay(

@@ -40,6 +40,7 @@ def register(sub: Any) -> None:
     fmt = p.add_mutually_exclusive_group()
     fmt.add_argument("--json", action="store_true", help="print JSON")
     fmt.add_argument("--csv", action="store_true", help="print CSV")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
     p.set_defaults(run=run)
 
 
@@ -64,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from framechain.adapters.api import TREE_KINDS
     from framechain.replay import LATEST, TransformBuffer
 
-    loaded = open_log(args.log, kinds=TREE_KINDS, progress=sys.stderr.isatty() and not (args.json or args.csv))
+    show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
+    loaded = open_log(args.log, kinds=TREE_KINDS, progress=show_progress)
     transforms = loaded.timeline.transforms
     if not len(transforms):
         raise FramechainError(
@@ -114,9 +116,12 @@ def _record(result: LookupResult, i: int, log_start: int) -> dict[str, Any]:
             "stamps_ns": [before] if h.hop.is_static or before == after else [before, after],
             "weight": float(h.weight[i]),
         })
+    # A path of static edges only is timeless (tf2 stamps it 0): say so rather than print a stamp.
+    timeless = all(h.hop.is_static for h in result.hops)
     return {
-        "target": result.target, "source": result.source, "stamp_ns": stamp,
-        "t_rel_s": (stamp - log_start) * 1e-9,
+        "target": result.target, "source": result.source, "timeless": timeless,
+        "stamp_ns": None if timeless else stamp,
+        "t_rel_s": None if timeless else (stamp - log_start) * 1e-9,
         "translation": [float(x) for x in result.translation[i]], "quat_xyzw": [float(x) for x in q],
         "rpy_deg": [float(x) for x in _rpy_deg(q)], "path": list(result.path.frames), "hops": hops,
     }
@@ -126,7 +131,8 @@ _CSV_HEADER = ["stamp_ns", "t_rel_s", "x", "y", "z", "qx", "qy", "qz", "qw", "ro
 
 
 def _csv_row(r: dict[str, Any]) -> list[Any]:
-    return [r["stamp_ns"], f"{r['t_rel_s']:.9f}", *(repr(x) for x in r["translation"]),
+    stamp = ["", ""] if r["timeless"] else [r["stamp_ns"], f"{r['t_rel_s']:.9f}"]
+    return [*stamp, *(repr(x) for x in r["translation"]),
             *(repr(x) for x in r["quat_xyzw"]), *(f"{x:.6f}" for x in r["rpy_deg"])]
 
 
@@ -158,14 +164,16 @@ def _series(args: argparse.Namespace, buffer: TransformBuffer, log_start: int) -
     if args.json:
         print(json.dumps({
             "target": result.target, "source": result.source, "path": list(result.path.frames),
-            "stamp_ns": result.times_ns.tolist(), "translation": result.translation.tolist(),
+            "timeless": not dyn, "stamp_ns": None if not dyn else result.times_ns.tolist(),
+            "translation": result.translation.tolist(),
             "quat_xyzw": result.quat_xyzw.tolist(), "rpy_deg": rpy.tolist(),
         }))
         return 0
     writer = csv.writer(sys.stdout)
     writer.writerow(_CSV_HEADER)
     for i in range(len(result)):
-        writer.writerow([int(result.times_ns[i]), f"{t_rel[i]:.9f}", *(repr(float(x)) for x in result.translation[i]),
+        stamp = [int(result.times_ns[i]), f"{t_rel[i]:.9f}"] if dyn else ["", ""]  # timeless: no stamp
+        writer.writerow([*stamp, *(repr(float(x)) for x in result.translation[i]),
                          *(repr(float(x)) for x in result.quat_xyzw[i]), *(f"{x:.6f}" for x in rpy[i])])
     return 0
 
@@ -177,7 +185,7 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
 
     console = Console()
     name = f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/]"
-    if all(h["static"] for h in r["hops"]):
+    if r["timeless"]:
         console.print(f"{name}: every edge of the path is static (timeless, from /tf_static)")
     else:
         console.print(f"{name} at stamp {format_stamp(r['stamp_ns'])} s ({r['t_rel_s']:+.6f} s from the first stamp)")

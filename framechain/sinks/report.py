@@ -78,9 +78,11 @@ def make_figures(result: Attribution) -> list[Figure]:
     t = (inputs.stamp_ns - inputs.stamp_ns.min()) * 1e-9 if len(inputs) else np.zeros(0)
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
-    for hop, errors in result.hop_errors.items():
-        ax.plot(t, errors * 1e3, lw=1, label=f"{hop} (logged vs recomputed)")
-    ax.plot(t, result.error_before * 1e3, lw=1.4, color="k", label=f"world error ({result.metric.replace('_', ' ')})")
+    # The world error goes underneath, wide and pale, so a hop that carries all of it stays visible.
+    ax.plot(t, result.error_before * 1e3, lw=4, color="k", alpha=0.25,
+            label=f"world error ({result.metric.replace('_', ' ')})")
+    for (hop, errors), style in zip(result.hop_errors.items(), ("-", "--", ":"), strict=False):
+        ax.plot(t, errors * 1e3, lw=1.2, ls=style, label=f"{hop} (logged vs recomputed)")
     if result.findings:
         ax.plot(t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label=_after_label(result))
     ax.set_xlabel("time since first observation (s)")
@@ -160,7 +162,7 @@ def _png(fig: Any, name: str, caption: str) -> Figure:
 
 
 # -- text -------------------------------------------------------------------------------------
-def _estimate(f: Finding) -> str:
+def estimate_text(f: Finding) -> str:
     parts = []
     for key, value in f.estimate.items():
         if key == "offset_s":
@@ -189,7 +191,7 @@ def _axis_text(axis: Sequence[float]) -> str:
     return str([round(float(v), 3) + 0.0 for v in a])  # + 0.0 drops negative zeros
 
 
-def _interval(f: Finding) -> str:
+def interval_text(f: Finding) -> str:
     out = []
     for key, (lo, hi) in f.interval.items():
         if key == "offset_s":
@@ -199,6 +201,26 @@ def _interval(f: Finding) -> str:
         else:
             out.append(f"{lo:.5f} .. {hi:.5f}")
     return "; ".join(out) or "-"
+
+
+HOP_COLUMNS = ("hop", "own departure med / p95 / max", "sample gap med / max", "stale", "attributed to it")
+
+
+def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
+    """The per-hop summary as text cells (the CLI, Markdown and HTML share it)."""
+    rows: list[tuple[str, ...]] = []
+    for r in result.hop_summary():
+        dep = r["departure_m"]
+        gap = r["gap_ms"]
+        faults = f" ({', '.join(r['faults'])})" if r["faults"] else ""
+        rows.append((
+            r["hop"],
+            "not logged" if dep is None else f"{_mm(dep['median'])} / {_mm(dep['p95'])} / {_mm(dep['max'])}",
+            "-" if gap is None else f"{gap['median']:.1f} / {gap['max']:.1f} ms",
+            str(r["stale"]),
+            f"{_mm(r['attributed_m'])}{faults}",
+        ))
+    return rows
 
 
 def _provenance(result: Attribution) -> list[tuple[str, str]]:
@@ -254,7 +276,7 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         ]
         for f in result.findings:
             lines.append(
-                f"| {f.fault.value} | {f.hop.value} | {_estimate(f)} | {_interval(f)} | {f.share:.0%} | "
+                f"| {f.fault.value} | {f.hop.value} | {estimate_text(f)} | {interval_text(f)} | {f.share:.0%} | "
                 f"{f.error_m * 1e3:.1f} | {f.confidence:.2f} | {f.fix.replace('|', '/')} |"
             )
         lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
@@ -268,7 +290,15 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         f"max {_mm(s['max'])}; {_after_label(result)}: "
         f"median {_mm(result.error_summary(result.error_after)['median'])}.",
         "",
+        "### Per hop",
+        "",
+        "| " + " | ".join(HOP_COLUMNS) + " |",
+        "| " + " | ".join("---" for _ in HOP_COLUMNS) + " |",
+        *("| " + " | ".join(row) + " |" for row in hop_rows(result)),
+        "",
     ]
+    if result.notes:
+        lines += ["## Notes", "", *(f"- {n.replace('|', '/')}" for n in result.notes), ""]
     for fig in figures:
         lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
     lines += ["## Provenance", "", "| | |", "| --- | --- |"]
@@ -298,8 +328,8 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         )
         for f in result.findings:
             parts.append(
-                f"<tr><td><b>{e(f.fault.value)}</b></td><td>{e(f.hop.value)}</td><td>{e(_estimate(f))}</td>"
-                f"<td>{e(_interval(f))}</td><td>{f.share:.0%}</td><td>{f.error_m * 1e3:.1f} mm</td>"
+                f"<tr><td><b>{e(f.fault.value)}</b></td><td>{e(f.hop.value)}</td><td>{e(estimate_text(f))}</td>"
+                f"<td>{e(interval_text(f))}</td><td>{f.share:.0%}</td><td>{f.error_m * 1e3:.1f} mm</td>"
                 f"<td>{f.confidence:.2f}</td><td>{e(f.evidence)}</td><td>{_code(f.fix)}</td></tr>"
             )
         parts.append("</table>")
@@ -312,6 +342,11 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         f"{_mm(result.error_summary(result.error_after)['median'])}. Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
+    parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")
+    parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in hop_rows(result)]
+    parts.append("</table>")
+    if result.notes:
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in result.notes) + "</ul>")
     parts.append("<div class='plots'>")
     for fig in figures:
         data = base64.b64encode(fig.png).decode("ascii")

@@ -121,6 +121,43 @@ def test_unknown_schema_encoding_is_named(tmp_path: Path) -> None:
     info = {t.name: t.msgtype for t in loaded.info.topics}
     assert info == {"/thing": "my.Thing", "/tf": "(no schema)"}
     assert len(loaded.timeline.transforms) == 0
+    assert loaded.info.notes == (
+        "topic /thing: message encoding 'flatbuffer' with schema encoding 'flatbuffer' (my.Thing) is not supported "
+        "(cdr/ros2msg, cdr/ros2idl, ros1/ros1msg, protobuf or json); its messages are not read",
+        "topic /tf: no schema for message encoding 'cdr', so the message type is unknown; its messages are not read",
+    )
+
+
+def test_schemaless_detections_topic_explains_the_failure(tmp_path: Path, written: dict[str, Path],
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """The chain names /detections, but the file stores it without a schema: say that, not just 'no detections'."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    path = tmp_path / "schemaless.mcap"
+    with written["mcap-ros2"].open("rb") as src, path.open("wb") as dst:
+        reader = make_reader(src)
+        summary = reader.get_summary()
+        assert summary is not None
+        w = Writer(dst)
+        w.start(profile="ros2")
+        schema_ids = {sid: w.register_schema(sc.name, sc.encoding, sc.data) for sid, sc in summary.schemas.items()}
+        channel_ids = {
+            cid: w.register_channel(ch.topic, ch.message_encoding,
+                                    0 if ch.topic == CHAIN.topics.detections else schema_ids[ch.schema_id])
+            for cid, ch in summary.channels.items()
+        }
+        for _, channel, message in reader.iter_messages():
+            w.add_message(channel_ids[channel.id], log_time=message.log_time, publish_time=message.publish_time,
+                          data=message.data)
+        w.finish()
+    chain = tmp_path / "chain.yaml"
+    chain.write_text(CHAIN.to_yaml())
+    assert main(["attribute", str(path), "--chain", str(chain), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert str(path) in err
+    assert f"topic {CHAIN.topics.detections}: no schema for message encoding 'cdr'" in err
 
 
 def test_missing_metadata_yaml_reads_the_storage_file(tmp_path: Path, written: dict[str, Path]) -> None:

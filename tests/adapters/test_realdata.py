@@ -39,6 +39,33 @@ def test_info_reads_real_logs(name: str, realdata: Path, capsys: pytest.CaptureF
     assert edges == TREES[name]
 
 
+#: Every ROS log in realdata, including those checked more closely below.
+ALL_ROS_LOGS = [*sorted(TREES), "evo/nav2_turtlebot.mcap", "husky_localization/test1_old_stereo_wheel.bag",
+                "franka_tf/rosbagFrankaPanda.bag", "franka_tf/ros2_bag", "realsense_d435/test_rs.bag"]
+
+
+@pytest.mark.parametrize("name", ALL_ROS_LOGS)
+def test_info_reads_every_ros_log(name: str, realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    info = _info_json(realdata / name, capsys)
+    # Every topic is listed with its type, and the counts are those of the file, not of what was kept.
+    assert info["topics"]
+    assert all(t["msgtype"] and t["count"] > 0 for t in info["topics"])
+
+
+def test_tf_static_path_is_timeless(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = str(realdata / "evo/tf_example.bag")
+    assert main(["tf", log, "base_footprint", "base_link", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["timeless"] is True
+    assert record["stamp_ns"] is None
+    assert record["t_rel_s"] is None
+    assert main(["tf", log, "odom", "base_link", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["timeless"] is False
+    assert record["stamp_ns"] > 1_700_000_000 * 10**9
+    assert record["t_rel_s"] >= 0
+
+
 def test_turtlebot_sim_time_is_pointed_out(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
     info = _info_json(realdata / "evo/nav2_turtlebot.mcap", capsys)
     assert len(info["edges"]) == 33

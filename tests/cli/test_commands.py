@@ -44,6 +44,17 @@ def test_help_lists_commands_and_exit_codes(capsys: pytest.CaptureFixture[str]) 
     assert "bad input" in text
 
 
+@pytest.mark.parametrize("command", [["info"], ["tf"], ["replay"], ["attribute"], ["report"], ["demo"], ["lab"],
+                                     ["lab", "tilt"]])
+def test_every_command_documents_its_exit_codes(command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main([*command, "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    assert "exit codes:" in text
+    assert "\n  1    bad input" in text  # laid out as a table, not wrapped into the prose
+
+
 def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["--version"])
@@ -94,8 +105,29 @@ def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path:
     inputs = json.loads((out / "inputs.json").read_text())
     assert inputs["latency_budget_s"] == 0.02
     assert inputs["metric"]["name"] == "logged_hops"
-    assert (out / "report.md").read_text().startswith("# framechain report")
+    report = (out / "report.md").read_text()
+    assert report.startswith("# framechain report")
     assert not (out / "report.html").exists()
+    # The per-hop summary names where the error sits: the world hop departs by the chain error.
+    hops = {r["hop"]: r for r in doc["hops"]}
+    assert hops["body_to_world"]["departure_m"]["median"] == pytest.approx(float(last.hop_error_m.median()), abs=1e-6)
+    assert hops["camera_to_body"]["departure_m"]["max"] < 1e-6
+    assert hops["body_to_world"]["faults"] == ["latency"]
+    assert "### Per hop" in report
+    assert f"| body_to_world | {hops['body_to_world']['departure_m']['median'] * 1e3:.1f} mm" in report
+
+
+def test_a_chain_topic_missing_from_the_log_is_a_note(latency_log: tuple[Path, Path], tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    typo = tmp_path / "chain.yaml"
+    typo.write_text(chain.read_text().replace("/debug/point_body", "/debug/point_bdy"))
+    out = tmp_path / "out"
+    assert main(["attribute", str(log), "--chain", str(typo), "--out", str(out), "--bootstrap", "0"]) == 0
+    note = "topic /debug/point_bdy: named by the chain as evidence hop_body but not in the log"
+    assert f"note: {note}" in capsys.readouterr().out
+    assert note in json.loads((out / "attribution.json").read_text())["notes"]
+    assert note in (out / "report.md").read_text()
 
 
 def test_attribute_without_chain_prints_the_suggestion(latency_log: tuple[Path, Path], tmp_path: Path,
@@ -198,6 +230,16 @@ def test_unwritable_out_fails_before_the_analysis(latency_log: tuple[Path, Path]
 def test_bad_demo_faults_are_one_line(argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([*argv, "--out", str(tmp_path / "d")]) == 1
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_info_and_tf_take_quiet(latency_log: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    log, _ = latency_log
+    assert main(["info", str(log), "--json", "-q"]) == 0
+    assert json.loads(capsys.readouterr().out)["format"] == "mcap"
+    assert main(["tf", str(log), "map", "base_link", "--csv", "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("stamp_ns,t_rel_s,x,y,z")
+    assert err == ""
 
 
 @pytest.mark.parametrize("at", ["nan", "inf", "1e20", "soon"])

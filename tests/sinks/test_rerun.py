@@ -633,12 +633,16 @@ def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.C
     directory = tmp_path / "episode"
     generated.timeline.replace(metadata={"chain": generated.chain.to_dict()}).save(directory)
     out = tmp_path / "attributed.rrd"
-    assert main(["replay", str(directory), "--attribute", "--save", str(out), "--json"]) == 0
+    assert main(["replay", str(directory), "--save", str(out), "--json"]) == 0  # attribution is on by default
     report = json.loads(capsys.readouterr().out)
     assert report["findings"]
     assert report["findings"][0].startswith("missing_rotation on camera_to_body")
     logged = [r[0] for r in _rows(_read(out), "/log/findings", "TextLog:text")]
     assert logged == report["findings"]
+    plain = tmp_path / "plain.rrd"
+    assert main(["replay", str(directory), "--no-attribute", "--save", str(plain), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["findings"] == []
+    assert "/log/findings" not in _read(plain)
 
 
 def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scene) -> None:
