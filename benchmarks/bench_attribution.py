@@ -27,8 +27,10 @@ from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 LEVELS = ("hops", "target", "reference", "static")
 AS_RUN_KINDS = list(Fault)
+# Every fault the recorded data itself can carry (wrong_world_frame and an inverted pose are the
+# robot's mistakes only: the generator refuses them in the data).
 DATA_KINDS = [Fault.LATENCY, Fault.MISSING_ROTATION, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE,
-              Fault.INTRINSICS]
+              Fault.INTRINSICS, Fault.AXIS_FLIP, Fault.INVERTED_TRANSFORM]
 PROPER_FLIPS = [[[-1, 0, 0], [0, -1, 0], [0, 0, 1]], [[1, 0, 0], [0, -1, 0], [0, 0, -1]],
                 [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]]
 ANY_FLIPS = [*PROPER_FLIPS, [[1, 0, 0], [0, -1, 0], [0, 0, 1]], [[0, 0, 1], [1, 0, 0], [0, 1, 0]]]

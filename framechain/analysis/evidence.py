@@ -35,16 +35,22 @@ METRICS = {
 
 
 def write_attribution(result: Attribution, out_dir: str | Path) -> dict[str, Path]:
-    """Write attribution.json, evidence.parquet and inputs.json into ``out_dir``."""
+    """Write attribution.json, evidence.parquet, samples.parquet and inputs.json into ``out_dir``.
+
+    evidence.parquet: one row per observation and hop; samples.parquet: one row per observation,
+    hop and edge, with the stamps of the transform samples used and the gap to each.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
         "attribution": out / "attribution.json",
         "evidence": out / "evidence.parquet",
+        "samples": out / "samples.parquet",
         "inputs": out / "inputs.json",
     }
     paths["attribution"].write_text(json.dumps(result.to_json(), indent=2) + "\n")
     pq.write_table(evidence_table(result), paths["evidence"])
+    pq.write_table(result.replay.samples.to_arrow(), paths["samples"])
     paths["inputs"].write_text(json.dumps(inputs_record(result), indent=2) + "\n")
     return paths
 

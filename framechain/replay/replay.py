@@ -102,6 +102,43 @@ class HopRecordTable(ColumnTable):
 
 
 @dataclass(frozen=True)
+class HopSampleTable(ColumnTable):
+    """One row per observation, hop and edge of the hop's path: the transform samples it used.
+
+    ``HopRecordTable`` keeps the stalest edge of a hop; this keeps every edge (map -> odom and
+    odom -> base_link both, for a body_to_world hop), with the gap from the observation stamp to
+    each of the two samples interpolated between (``gap_*_ns = observation stamp - sample stamp``;
+    static edges are timeless: their gaps are 0). Rows of rejected observations are kept, with
+    ``status`` saying why, so the table joins the hop records on ``(obs_id, hop)``.
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "obs_id": Column("i8"),
+        "hop": Column("str"),
+        "parent": Column("str"),
+        "child": Column("str"),
+        "static": Column("bool"),
+        "sample_before_ns": Column("i8"),
+        "sample_after_ns": Column("i8"),
+        "weight": Column("f8"),
+        "gap_before_ns": Column("i8"),
+        "gap_after_ns": Column("i8"),
+        "status": Column("str"),
+    }
+    obs_id: IntArray
+    hop: npt.NDArray[np.str_]
+    parent: npt.NDArray[np.str_]
+    child: npt.NDArray[np.str_]
+    static: BoolArray
+    sample_before_ns: IntArray
+    sample_after_ns: IntArray
+    weight: FloatArray
+    gap_before_ns: IntArray
+    gap_after_ns: IntArray
+    status: npt.NDArray[np.str_]
+
+
+@dataclass(frozen=True)
 class ReplayOptions:
     """Knobs of one replay. Offsets shift when each transform is looked up (fault models use them).
 
@@ -134,6 +171,7 @@ class ReplayResult:
     body_from_cam: LookupResult
     world_from_body: LookupResult
     hops: HopRecordTable
+    samples: HopSampleTable
     latency_budget_ns: int
     options: ReplayOptions = field(default_factory=ReplayOptions)
 
@@ -278,12 +316,35 @@ def replay(
                   world_from_body.translation, world_from_body.quat_xyzw, before_world, after_world,
                   gap_world, stale_world, status_str),
     ])
+    samples = HopSampleTable.concat([
+        _sample_rows(obs, HopName.CAMERA_TO_BODY, body_from_cam, status_str),
+        _sample_rows(obs, HopName.BODY_TO_WORLD, world_from_body, status_str),
+    ])
     return ReplayResult(
         frames=frames, observations=obs, status=status_str, stale=stale & ok, depth_m=depth,
         depth_stamp_ns=depth_stamp, ray=ray, p_cam=p_cam, p_body=p_body, p_world=p_world,
-        body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops,
+        body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops, samples=samples,
         latency_budget_ns=budget_ns, options=opts,
     )
+
+
+def _sample_rows(
+    obs: ObservationTable, hop: HopName, lookup: LookupResult, status: npt.NDArray[np.str_]
+) -> HopSampleTable:
+    """Every edge of ``lookup``'s path, for every observation (edge-major, as lookups keep them)."""
+    n = len(obs)
+    tables = []
+    for h in lookup.hops:
+        static = h.hop.is_static
+        zeros = np.zeros(n, dtype=np.int64)
+        tables.append(HopSampleTable(
+            obs_id=obs.obs_id, hop=np.full(n, hop.value), parent=np.full(n, h.hop.parent),
+            child=np.full(n, h.hop.child), static=np.full(n, static), sample_before_ns=h.stamp_before_ns,
+            sample_after_ns=h.stamp_after_ns, weight=h.weight,
+            gap_before_ns=zeros if static else obs.stamp_ns - h.stamp_before_ns,
+            gap_after_ns=zeros if static else obs.stamp_ns - h.stamp_after_ns, status=status,
+        ))
+    return HopSampleTable.concat(tables) if tables else HopSampleTable.empty()
 
 
 def _stalest(lookup: LookupResult, stamps_ns: IntArray) -> tuple[IntArray, IntArray, IntArray]:

@@ -81,13 +81,15 @@ def test_data_fault_found_against_reference_or_spread(level: str, kind: Fault, p
     _check_top(result, fault, key, value)
 
 
-def test_recorded_axis_flip_and_inverted_mount_found_against_reference() -> None:
+@pytest.mark.parametrize("level", LEVELS_DATA)
+def test_recorded_axis_flip_and_inverted_mount(level: str) -> None:
     flip = InjectedFault(Fault.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
-    result = attribute(_scene("reference", (flip,)).timeline, _scene("reference", (flip,)).chain, bootstrap=0)
+    scene = _scene(level, (flip,))
+    result = attribute(scene.timeline, scene.chain, bootstrap=0)
     assert (result.findings[0].fault, result.findings[0].estimate["permutation"]) == (
         Fault.AXIS_FLIP, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]])
     inverted = InjectedFault(Fault.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
-    scene = _scene("reference", (inverted,))
+    scene = _scene(level, (inverted,))
     top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
     assert top.fault == Fault.INVERTED_TRANSFORM
     assert top.estimate["edge"] == ["base_link", "camera_link"]

@@ -102,6 +102,15 @@ def test_attribute_writes_the_contract(latency_log: tuple[Path, Path], tmp_path:
     last = frame[frame.hop == "body_to_world"]
     np.testing.assert_allclose(last.hop_error_m, last.chain_error_m, atol=1e-6)
     assert float(last.hop_error_m.median()) > 0.005
+    # Every edge's samples: the demo chain has a static mount and map -> odom -> base_link.
+    samples = pq.read_table(out / "samples.parquet").to_pandas()
+    assert len(samples) == counts["total"] * samples.groupby(["hop", "parent", "child"]).ngroups
+    world_edges = samples[samples.hop == "body_to_world"]
+    assert set(zip(world_edges.parent, world_edges.child, strict=True)) == {("map", "odom"), ("odom", "base_link")}
+    joined = world_edges.merge(last[["obs_id", "stamp_ns"]], on="obs_id")
+    np.testing.assert_array_equal(joined.gap_before_ns + joined.sample_before_ns, joined.stamp_ns)
+    assert (joined.sample_before_ns <= joined.stamp_ns).all()
+    assert (joined.stamp_ns <= joined.sample_after_ns).all()
     inputs = json.loads((out / "inputs.json").read_text())
     assert inputs["latency_budget_s"] == 0.02
     assert inputs["metric"]["name"] == "logged_hops"

@@ -237,6 +237,41 @@ def test_hop_records_three_rows_per_observation_with_frames_samples_and_gaps() -
     assert result.counts()["stale"] == 1
 
 
+def test_hop_samples_keep_every_edge_and_the_gap_to_each_sample() -> None:
+    """map -> odom at 1 Hz and odom -> base at 10 Hz: both edges' samples and gaps, hand-worked."""
+    stamps_odom = np.arange(0, 11) * S
+    stamps_base = np.arange(0, 101) * 100 * MS
+    tf = TransformTable.concat([
+        TransformTable.from_rows("map", "odom", stamps_odom, np.zeros((11, 3)), np.tile(IDENT, (11, 1))),
+        TransformTable.from_rows("odom", "base", stamps_base, np.zeros((101, 3)), np.tile(IDENT, (101, 1))),
+        TransformTable.from_rows("base", "cam", [0], [[0.3, 0.0, 0.8]], [IDENT], is_static=True),
+    ])
+    rows = [(2 * S + 250 * MS, 320.0, 240.0, 1.0), (5 * S + 730 * MS, 320.0, 240.0, 1.0)]
+    result = replay(Timeline(transforms=tf, cameras=camera(), observations=observations(rows)), FRAMES)
+    samples = result.samples
+    world = samples.take(samples.hop == HopName.BODY_TO_WORLD.value)
+    by_edge = {(p, c): world.take((world.parent == p) & (world.child == c)) for p, c in {("map", "odom"),
+                                                                                         ("odom", "base")}}
+    odom, base = by_edge[("map", "odom")], by_edge[("odom", "base")]
+    assert odom.obs_id.tolist() == [100, 101]
+    assert odom.sample_before_ns.tolist() == [2 * S, 5 * S]
+    assert odom.sample_after_ns.tolist() == [3 * S, 6 * S]
+    assert odom.gap_before_ns.tolist() == [250 * MS, 730 * MS]
+    assert odom.gap_after_ns.tolist() == [-750 * MS, -270 * MS]
+    np.testing.assert_allclose(odom.weight, [0.25, 0.73])
+    assert base.sample_before_ns.tolist() == [2200 * MS, 5700 * MS]
+    assert base.sample_after_ns.tolist() == [2300 * MS, 5800 * MS]
+    assert base.gap_before_ns.tolist() == [50 * MS, 30 * MS]
+    # The hop record keeps the stalest edge only: the 1 Hz odometry, 270 ms for the second.
+    hop = result.hops.take(result.hops.hop == HopName.BODY_TO_WORLD.value)
+    assert hop.gap_ns.tolist() == [250 * MS, -270 * MS]
+    mount = samples.take(samples.hop == HopName.CAMERA_TO_BODY.value)
+    assert mount.static.all()
+    assert (mount.parent.tolist(), mount.child.tolist()) == (["base", "base"], ["cam", "cam"])
+    assert mount.gap_before_ns.tolist() == [0, 0]
+    assert set(samples.status.tolist()) == {REPLAYED}
+
+
 def test_pose_offset_shifts_the_lookup_but_gaps_stay_against_the_observation() -> None:
     rows = [(2 * S, 320.0, 240.0, 1.0)]
     timeline = Timeline(transforms=transforms(), cameras=camera(), observations=observations(rows))
