@@ -251,13 +251,22 @@ class _RayWeighting:
 
 @dataclass(frozen=True)
 class _SpreadObjective:
-    """Residual of each world point from the centroid of all of them (a static target)."""
+    """Residual of each world point from the centroid of all of them (a static target).
 
+    The spread is measured relative to the points' range from the camera (rescaled to metres at
+    the recorded range ``range_m``): shrinking every depth towards the camera shrinks any spread,
+    and without that normalisation a seen-from-one-place target "collapses" for a depth or
+    focal scale that explains nothing.
+    """
+
+    range_m: float = 1.0
     weighting: _RayWeighting | None = None
 
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
-        p = evaluate(inputs, pert)[2]
+        p_cam, _, p = evaluate(inputs, pert)
         out: FloatArray = p - np.nanmean(p, axis=0)
+        scale = self.range_m / max(_range(p_cam), 1e-9)
+        out = out * scale
         return out if self.weighting is None else self.weighting.apply(out)
 
     def take(self, index: IntArray) -> _SpreadObjective:
@@ -265,6 +274,13 @@ class _SpreadObjective:
 
 
 _Objective = _PointObjective | _SpreadObjective
+
+
+def _range(p_cam: FloatArray) -> float:
+    """Median distance of the points from the camera (m)."""
+    d = np.linalg.norm(p_cam, axis=1)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else 0.0
 
 
 @dataclass(frozen=True)
@@ -345,7 +361,7 @@ def attribute(
     elif chain.evidence.static_target:
         metric = "static_spread"
         say("minimising the spread of the static target")
-        world_objective = _SpreadObjective()
+        world_objective = _SpreadObjective(range_m=_range(evaluate(inputs, Perturbation())[0]))
         evidence_world = np.tile(np.nanmean(recomputed_world, axis=0), (len(inputs), 1))
         selections = [
             _reweighted(_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say))
@@ -575,6 +591,10 @@ def _select(
                 else candidate
             )
             quick.append((fit_models([model], objective, inputs, base=base), model))
+        # A fit that runs to the edge of its range explains by degenerating, not by a fault.
+        quick = [(fit, model) for fit, model in quick if not _at_bound(model, fit.params[-1])]
+        if not quick:
+            break
         quick.sort(key=lambda item: item[0].bic)
         if current.models:  # refit the best few jointly with what was found before
             x_prev = np.concatenate(current.params)
@@ -582,6 +602,9 @@ def _select(
             for fit, model in quick[:3]:
                 x_start = np.concatenate([x_prev, fit.params[0]])
                 joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
+            joint = [(fit, model) for fit, model in joint if not _at_bound(model, fit.params[-1])]
+            if not joint:
+                break
             joint.sort(key=lambda item: item[0].bic)
             best_fit, best_model = joint[0]
         else:
@@ -598,6 +621,19 @@ def _select(
         fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode,
         inputs=inputs,
     )
+
+
+def _at_bound(model: FaultModel, x: FloatArray) -> bool:
+    """Whether a fitted parameter sits on its lower or upper bound (to 0.1 %).
+
+    Rotation vectors are bounded by the parametrisation (|component| <= pi), not by plausibility.
+    """
+    if not model.lower or model.family == "camera_rotation":
+        return False
+    lo, hi, x = np.asarray(model.lower, float), np.asarray(model.upper, float), np.asarray(x, float)
+    near_lo = np.isfinite(lo) & (x <= lo + 1e-3 * np.abs(lo) + 1e-12)
+    near_hi = np.isfinite(hi) & (x >= hi - 1e-3 * np.abs(hi) - 1e-12)
+    return bool((near_lo | near_hi).any())
 
 
 def _reweighted(sel: _Selected) -> _Selected:

@@ -162,7 +162,13 @@ def _inverted_edge(parent: str, child: str) -> FaultModel:
     )
 
 
-def _depth_scale() -> FaultModel:
+#: Scale bounds on a static target alone: shrinking the points towards the camera (a small depth
+#: factor, or a long focal length that pulls every ray onto the axis) shrinks any spread, so beyond
+#: these a fit only collapses the target; a fit that runs to them is not reported.
+BLIND_SCALE_BOUNDS = (0.2, 5.0)
+
+
+def _depth_scale(blind: bool = False) -> FaultModel:
     def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
         factor = float(x[0]) if mode == "as_run" else 1.0 / float(x[0])
         return {"factor": round(factor, 6)}
@@ -173,16 +179,16 @@ def _depth_scale() -> FaultModel:
         hop=HopName.PIXEL_TO_CAMERA,
         family="depth",
         x0=(1.0,),
-        lower=(1e-4,),
-        upper=(1e4,),
+        lower=(BLIND_SCALE_BOUNDS[0],) if blind else (1e-4,),
+        upper=(BLIND_SCALE_BOUNDS[1],) if blind else (1e4,),
         x_scale=(0.01,),
         apply=lambda p, x: replace(p, depth_factor=float(x[0])),
         estimate=estimate,
-        starts=((0.001,), (1000.0,), (0.5,), (2.0,)),
+        starts=((0.5,), (2.0,)) if blind else ((0.001,), (1000.0,), (0.5,), (2.0,)),
     )
 
 
-def _intrinsics(variant: Literal["resolution", "focal"]) -> FaultModel:
+def _intrinsics(variant: Literal["resolution", "focal"], blind: bool = False) -> FaultModel:
     """K of another resolution (focal length and principal point scale) or another lens (focal only)."""
 
     def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
@@ -199,8 +205,8 @@ def _intrinsics(variant: Literal["resolution", "focal"]) -> FaultModel:
         hop=HopName.PIXEL_TO_CAMERA,
         family="intrinsics",
         x0=(1.0,),
-        lower=(0.05,),
-        upper=(20.0,),
+        lower=(BLIND_SCALE_BOUNDS[0],) if blind else (0.05,),
+        upper=(BLIND_SCALE_BOUNDS[1],) if blind else (20.0,),
         x_scale=(0.01,),
         apply=apply,
         estimate=estimate,
@@ -242,12 +248,13 @@ def models_for(
     """Every fault hypothesis that applies to this chain (optionally only at some hops).
 
     ``blind`` drops the world-frame swap: the spread of a static target cannot say which world
-    frame was meant (map and odom differ by a slow drift that moves every point alike).
+    frame was meant (map and odom differ by a slow drift that moves every point alike); and it
+    bounds the scales to :data:`BLIND_SCALE_BOUNDS`.
     """
     out: list[FaultModel] = [
-        _depth_scale(),
-        _intrinsics("resolution"),
-        _intrinsics("focal"),
+        _depth_scale(blind),
+        _intrinsics("resolution", blind),
+        _intrinsics("focal", blind),
         _rotation(),
         _latency(HopName.BODY_TO_WORLD),
     ]
