@@ -55,17 +55,39 @@ def load_log(
         if config is None and not isinstance(stored, dict):
             raise FramechainError(f"{target}: a saved timeline without a chain needs --chain CHAIN.yaml")
         chosen = config or ChainConfig.from_dict(stored, where=f"{target}/timeline.json")  # type: ignore[arg-type]
+        if config is not None:
+            _check_frames(target, timeline, config)
         return LoadedRun(path=target, timeline=timeline, chain=chosen, chain_suggested=config is None)
     if adapters.LeRobotAdapter().probe(target):
         return _load_lerobot(target, config, chain, episode=episode, robot=robot)
+    if episode is not None or robot is not None:
+        raise FramechainError(f"{target}: --episode and --robot are for LeRobot datasets; this is not one")
     loaded = adapters.open_log(target, config, progress=progress)
     suggested = config is None
+    if config is not None:
+        _check_frames(target, loaded.timeline, config)
     if config is None:
         config = adapters.suggest_chain(loaded)
         if config.evidence_topics():  # read again, now with the evidence topics the suggestion found
             loaded = adapters.open_log(target, config, progress=progress)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=suggested,
                      info=loaded.info, notes=list(getattr(loaded.info, "notes", [])))
+
+
+def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig) -> None:
+    """A frame the chain names but no transform mentions is a typo, not a missing edge 235 times."""
+    import difflib
+
+    transforms = timeline.transforms
+    if not len(transforms):
+        return  # said elsewhere, with the counts
+    known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
+    for role in ("camera", "body", "world"):
+        name = getattr(chain.frames, role)
+        if name not in known:
+            close = difflib.get_close_matches(name, sorted(known), n=3)
+            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
+            raise FramechainError(f"{target}: the chain's {role} frame {name!r} is in no transform of the log{hint}")
 
 
 def _load_lerobot(
@@ -89,6 +111,8 @@ def _load_lerobot(
         raise FramechainError(f"{target}: a LeRobot dataset needs --robot robot.yaml (URDF, joints, cameras)")
     loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=section))
     suggested = config is None
+    if config is not None:
+        _check_frames(target, loaded.timeline, config)
     if config is None:
         stored = loaded.timeline.metadata.get("chain")
         if not isinstance(stored, dict):

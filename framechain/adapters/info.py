@@ -135,7 +135,9 @@ def suggest_chain(loaded: LoadedLog) -> ChainConfig:
     elif "odom" in frames:
         world = "odom"
     else:
-        world = _root_of(tl.transforms, body) or (tree_roots(frame_tree(tl.transforms)) or [ChainFrames().world])[0]
+        roots = [_root_of(tl.transforms, body), *tree_roots(frame_tree(tl.transforms))]
+        # The world is another frame than the camera and the body (a lone camera tree has no world).
+        world = next((r for r in roots if r and r not in (camera, body)), ChainFrames().world)
     depth_topics = sorted(t for t, k in kinds.items() if k == "depth")
     depth_topic: str | None = None
     if depth_topics:
@@ -143,8 +145,13 @@ def suggest_chain(loaded: LoadedLog) -> ChainConfig:
         same = sorted({str(s) for s in d.source[d.frame == camera].tolist()}) if len(d) else []
         depth_topic = same[0] if same else depth_topics[0]
     det_topics = sorted(t for t, k in kinds.items() if k in ("detections", "detection"))
+    # Odometry feeds the chain only when its edge is one of the body's tree (a log can hold several).
+    tree = _root_of(tl.transforms, body)
+    tf = tl.transforms
     odom_topics = sorted(
-        t for t, k in kinds.items() if k == "odometry" and t in set(tl.transforms.source.tolist())
+        t for t, k in kinds.items()
+        if k == "odometry" and tree is not None
+        and any(_root_of(tf, str(child)) == tree for child in set(tf.child[tf.source == t].tolist()))
     )
     return ChainConfig(
         frames=ChainFrames(camera=camera, body=body, world=world),

@@ -4,6 +4,7 @@ metadata.yaml and .db3 or .mcap storage, uncompressed or zstd per file or per me
 
 from __future__ import annotations
 
+import re
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
@@ -31,6 +32,7 @@ def _default_typestore(ros1: bool) -> Any:
 
 def _explain(path: Path, err: Exception) -> AdapterError:
     text = " ".join(str(a) for a in err.args) or type(err).__name__
+    text = re.sub(r"""\((['"])(.*?)\1,\)""", r"\2", text)  # rosbags formats a nested error's args tuple
     low = text.lower()
     if "index" in low and ("not indexed" in low or "reindex" in low or "index" in low):
         return CorruptLogError(

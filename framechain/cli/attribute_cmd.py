@@ -7,7 +7,14 @@ import json
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import add_log_arguments, print_findings, print_suggested_chain, progress_reporter
+from framechain.cli.common import (
+    add_log_arguments,
+    make_out_dir,
+    non_negative_int,
+    print_findings,
+    print_suggested_chain,
+    progress_reporter,
+)
 from framechain.timeline import FramechainError
 
 FORMATS = ("json", "md", "html")
@@ -25,7 +32,8 @@ def register(sub: Any) -> None:
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--format", default="json,md,html", help="comma-separated: json, md, html (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    parser.add_argument("--bootstrap", type=int, default=30, help="bootstrap resamples for intervals (default 30)")
+    parser.add_argument("--bootstrap", type=non_negative_int, default=30,
+                        help="bootstrap resamples for intervals, 0 for none (default 30)")
     parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
     parser.set_defaults(run=run)
 
@@ -44,7 +52,7 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
 
     formats = default_formats or parse_formats(args.format)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)  # fail on an unwritable --out before the analysis, not after
+    make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         run_, result = attribute_log(
             args.log,

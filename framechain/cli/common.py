@@ -6,7 +6,10 @@ import argparse
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
+
+from framechain.timeline import FramechainError
 
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,6 +30,24 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     parser.add_argument("-q", "--quiet", action="store_true",
                         help="no progress output and no suggested chain (results are still printed)")
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def make_out_dir(out: Path) -> None:
+    """Create ``--out``; a path that exists and is not a directory is a user mistake, said in one line."""
+    if out.exists() and not out.is_dir():
+        raise FramechainError(f"--out {out}: exists and is not a directory (give a directory for the outputs)")
+    out.mkdir(parents=True, exist_ok=True)
 
 
 @contextmanager

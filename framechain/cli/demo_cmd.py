@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from framechain.cli.common import make_out_dir
 from framechain.timeline import FramechainError
 
 DEFAULT_FAULTS = ("missing_rotation", "latency:-0.03")
@@ -96,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     faults = tuple(parse_fault(f) for f in (args.fault or DEFAULT_FAULTS))
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out)
     spec = SceneSpec(
         seed=args.seed,
         duration_s=8.0,
@@ -144,5 +145,6 @@ def run(args: argparse.Namespace) -> int:
     print_findings(result)
     for name, path in paths.items():
         print(f"{name}: {path}")
-    print(f"done in {time.perf_counter() - started:.1f} s; open {paths['html']} or `rerun {paths.get('rrd', '')}`")
+    viewer = f" or `rerun {paths['rrd']}`" if "rrd" in paths else ""
+    print(f"done in {time.perf_counter() - started:.1f} s; open {paths['html']}{viewer}")
     return 0

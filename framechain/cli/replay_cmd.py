@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         print_suggested_chain(loaded.chain, quiet)
     if args.json:
         print(json.dumps(_report(loaded, result, outcome, notes, findings)))
-    elif not args.quiet:
+    else:  # --quiet silences progress and the suggested chain, not the result
         _print_text(loaded, result, outcome, notes, findings)
     return 0
 

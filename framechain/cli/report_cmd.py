@@ -6,7 +6,7 @@ import argparse
 from typing import Any
 
 from framechain.cli import attribute_cmd
-from framechain.cli.common import add_log_arguments
+from framechain.cli.common import add_log_arguments, non_negative_int
 
 
 def register(sub: Any) -> None:
@@ -19,7 +19,8 @@ def register(sub: Any) -> None:
     add_log_arguments(parser)
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
-    parser.add_argument("--bootstrap", type=int, default=30, help="bootstrap resamples (default 30)")
+    parser.add_argument("--bootstrap", type=non_negative_int, default=30,
+                        help="bootstrap resamples, 0 for none (default 30)")
     parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
     parser.set_defaults(run=run)
 

@@ -186,7 +186,7 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     console = Console()
     name = f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/]"
     if r["timeless"]:
-        console.print(f"{name}: every edge of the path is static (timeless, from /tf_static)")
+        console.print(f"{name}: every edge of the path is static (timeless)")
     else:
         console.print(f"{name} at stamp {format_stamp(r['stamp_ns'])} s ({r['t_rel_s']:+.6f} s from the first stamp)")
     t, q, rpy = r["translation"], r["quat_xyzw"], r["rpy_deg"]

@@ -19,6 +19,7 @@ names them::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -105,8 +106,12 @@ class ChainConfig:
         _check_keys(hops_raw, HopTopics, f"{where}: evidence.hops")
         point = evidence_raw.get("reference_point")
         if point is not None:
-            if not (isinstance(point, list | tuple) and len(point) == 3):
-                raise ChainConfigError(f"{where}: evidence.reference_point must be [x, y, z] in metres")
+            numbers = isinstance(point, list | tuple) and len(point) == 3 and all(
+                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in point)
+            if not numbers:
+                raise ChainConfigError(
+                    f"{where}: evidence.reference_point must be [x, y, z], three finite numbers in metres; "
+                    f"got {point!r}")
             point = tuple(float(x) for x in point)
         frames_raw = raw.get("frames") or {}
         _check_keys(frames_raw, ChainFrames, f"{where}: frames")
@@ -118,8 +123,12 @@ class ChainConfig:
         robot = raw.get("robot")
         if robot is not None and not isinstance(robot, Mapping):
             raise ChainConfigError(f"{where}: robot must be a mapping")
+        frames = ChainFrames(**{k: str(v).lstrip("/") for k, v in frames_raw.items()})
+        if len({frames.camera, frames.body, frames.world}) < 3:
+            raise ChainConfigError(f"{where}: frames camera, body and world must be three different frames, got "
+                                   f"{frames.camera!r}, {frames.body!r}, {frames.world!r}")
         return cls(
-            frames=ChainFrames(**{k: str(v).lstrip("/") for k, v in frames_raw.items()}),
+            frames=frames,
             topics=ChainTopics(**topics_raw),
             evidence=ChainEvidence(
                 hops=HopTopics(**hops_raw),
@@ -142,7 +151,9 @@ class ChainConfig:
             raise ChainConfigError(f"{p}: cannot read chain configuration ({err.strerror})") from err
         except yaml.YAMLError as err:
             raise ChainConfigError(f"{p}: not valid YAML ({err})") from err
-        return cls.from_dict(raw or {}, where=str(p))
+        if raw is None:
+            raise ChainConfigError(f"{p}: the chain configuration is empty (expected frames, topics, evidence)")
+        return cls.from_dict(raw, where=str(p))
 
     def evidence_topics(self) -> dict[str, str]:
         """Topic -> role name for every evidence topic configured."""

@@ -162,6 +162,54 @@ def test_unknown_chain_key_is_one_line_error(latency_log: tuple[Path, Path], tmp
     assert str(bad) in err
 
 
+@pytest.mark.parametrize(("edit", "expected"), [
+    (("body: base_link", "body: base_lnk"),
+     "body frame 'base_lnk' is in no transform of the log; did you mean 'base_link'"),
+    (("static_target", "reference_point: [a, b, c]\n  static_target"), "reference_point must be [x, y, z]"),
+    (("body: base_link", "body: map"), "three different frames"),
+])
+def test_chain_mistakes_are_named(latency_log: tuple[Path, Path], tmp_path: Path, edit: tuple[str, str],
+                                  expected: str, capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    text = chain.read_text()
+    assert edit[0] in text
+    bad = tmp_path / "chain.yaml"
+    bad.write_text(text.replace(edit[0], edit[1], 1))
+    assert main(["attribute", str(log), "--chain", str(bad), "--out", str(tmp_path / "o")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert expected in err
+
+
+def test_options_that_do_not_apply_are_refused(latency_log: tuple[Path, Path], tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    args = ["attribute", str(log), "--chain", str(chain), "--out", str(tmp_path / "o")]
+    assert main([*args, "--episode", "3"]) == 1
+    assert "--episode and --robot are for LeRobot datasets" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:
+        main([*args, "--bootstrap", "-3"])
+    assert usage.value.code == 2
+    assert "--bootstrap: must be 0 or more" in capsys.readouterr().err
+
+
+def test_out_that_is_a_file_is_one_line(latency_log: tuple[Path, Path], tmp_path: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain = latency_log
+    (tmp_path / "report.md").write_text("x")
+    assert main(["attribute", str(log), "--chain", str(chain), "--out", str(tmp_path / "report.md")]) == 1
+    assert "exists and is not a directory" in capsys.readouterr().err
+
+
+def test_empty_chain_file_is_named(latency_log: tuple[Path, Path], tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    log, _ = latency_log
+    empty = tmp_path / "chain.yaml"
+    empty.write_text("")
+    assert main(["attribute", str(log), "--chain", str(empty), "--out", str(tmp_path / "o")]) == 1
+    assert f"{empty}: the chain configuration is empty" in capsys.readouterr().err
+
+
 def test_missing_log_is_one_line_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["attribute", str(tmp_path / "nope.mcap"), "--out", str(tmp_path / "o")]) == 1
     err = capsys.readouterr().err.strip()
