@@ -389,12 +389,19 @@ def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     return None if path is None else str(path)
 
 
-def scan_dataset(path: str | Path) -> LogInfo:
-    """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes."""
+def scan_dataset(path: str | Path, episode: int | None = None) -> LogInfo:
+    """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes.
+
+    With ``episode``, the counts and the span are that episode's, not the whole dataset's.
+    """
     reader = DatasetReader(path)
-    total = reader.info.get("total_frames")
-    frames = int(total) if isinstance(total, int) else 0
-    longest = max(reader.lengths().values(), default=0)
+    lengths = reader.lengths()
+    if episode is not None:
+        frames = longest = lengths.get(episode, 0)
+    else:
+        total = reader.info.get("total_frames")
+        frames = int(total) if isinstance(total, int) else 0
+        longest = max(lengths.values(), default=0)
     topics = tuple(
         TopicInfo(name=key, msgtype=f"lerobot/{feat.dtype}{list(feat.shape)}", count=frames, rate_hz=reader.fps,
                   encoding="video" if feat.is_video else "parquet")
@@ -440,6 +447,6 @@ class LeRobotAdapter:
             raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
                                "{episode: N, config: robot.yaml}")
         timeline = open_dataset(path, episode=episode, robot=robot)
-        info = scan_dataset(path).with_notes(list(timeline.metadata.get("notes", [])))
+        info = scan_dataset(path, episode).with_notes(list(timeline.metadata.get("notes", [])))
         decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
         return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lerobot_scene import ArmDataset, target_world, write_arm_dataset, write_detection_table, write_robot_yaml
+from lerobot_scene import FPS, ArmDataset, target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 
 from framechain.adapters.errors import AdapterError
 from framechain.adapters.lerobot import LeRobotAdapter, scan_dataset
@@ -43,11 +43,20 @@ def test_attribute_finds_the_camera_latency(latency_case: tuple[ArmDataset, Path
     assert (tmp_path / "attribution.json").is_file()
 
 
-def test_replay_saves_a_recording(latency_case: tuple[ArmDataset, Path], tmp_path: Path) -> None:
+def test_replay_saves_a_recording(latency_case: tuple[ArmDataset, Path], tmp_path: Path,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from rerun.chunk import RrdReader
+
     ds, robot = latency_case
     rrd = tmp_path / "episode0.rrd"
-    assert main(["replay", str(ds.root), "--episode", "0", "--robot", str(robot), "--save", str(rrd), "-q"]) == 0
-    assert rrd.stat().st_size > 0
+    assert main(["replay", str(ds.root), "--episode", "0", "--robot", str(robot), "--save", str(rrd), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["counts"] == {"total": 32, "replayed": 32, "rejected": {}, "stale": 0}  # 32 detections
+    assert report["findings"][0].startswith("latency on camera_to_body")
+    # Rerun's own reader finds one recomputed world point per replayed detection.
+    rows = sum(c.num_rows for c in RrdReader(rrd).stream()
+               if c.entity_path == "/points/recomputed/world" and not c.is_static)
+    assert rows == 32
 
 
 def test_report_writes_html(latency_case: tuple[ArmDataset, Path], tmp_path: Path) -> None:
@@ -55,7 +64,18 @@ def test_report_writes_html(latency_case: tuple[ArmDataset, Path], tmp_path: Pat
     code = main(["report", str(ds.root), "--episode", "0", "--robot", str(robot), "--out", str(tmp_path),
                  "--bootstrap", "5", "-q"])
     assert code == 0
-    assert "latency" in (tmp_path / "report.html").read_text()
+    page = (tmp_path / "report.html").read_text()
+    assert "<td><b>latency</b></td><td>camera_to_body</td><td>offset +40" in page
+    assert page.count("<img ") >= 4  # the plots are embedded
+
+
+def test_info_on_one_episode_counts_that_episode(latency_case: tuple[ArmDataset, Path],
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    ds, robot = latency_case
+    assert main(["info", str(ds.root), "--episode", "1", "--robot", str(robot), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["message_count"] == 30  # episode 1 has 30 frames; the dataset 120
+    assert info["duration_s"] == pytest.approx(29 / FPS)
 
 
 def test_missing_options_are_one_line_errors(latency_case: tuple[ArmDataset, Path], tmp_path: Path,
