@@ -169,7 +169,9 @@ def _print_text(
     for note in notes:
         print(f"note          {note}")
     for i, finding in enumerate(findings, start=1):
-        print(f"finding {i}     {FindingView.of(finding).text()}")
+        print(f"finding {i}     {FindingView.of(finding).headline()}")
+    if findings:
+        print("              (evidence and fixes: `framechain attribute`, or the text log in the viewer)")
     if outcome.path is not None:
         print(f"rerun         saved {outcome.path} (open with: rerun {outcome.path})")
     elif outcome.url is not None:

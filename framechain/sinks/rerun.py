@@ -218,6 +218,15 @@ class FindingView:
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
+        line = self.headline()
+        if self.evidence:
+            line += f" Evidence: {self.evidence.rstrip('.')}."
+        if self.fix:
+            line += f" Fix: {self.fix.rstrip('.')}."
+        return line
+
+    def headline(self) -> str:
+        """Fault, hop, estimate and share of the error, without the evidence and fix sentences."""
         head = f"{_enum_text(self.fault)}"
         if self.hop:
             head += f" on {_enum_text(self.hop)}"
@@ -236,12 +245,7 @@ class FindingView:
             size.append(f"confidence {self.confidence:.2f}")
         if size:
             parts.append(", ".join(size))
-        line = "; ".join(parts) + "."
-        if self.evidence:
-            line += f" Evidence: {self.evidence.rstrip('.')}."
-        if self.fix:
-            line += f" Fix: {self.fix.rstrip('.')}."
-        return line
+        return "; ".join(parts) + "."
 
 
 def _enum_text(value: Any) -> str:
