@@ -6,6 +6,7 @@ import argparse
 import csv
 import json
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from framechain.timeline import FramechainError, format_stamp
@@ -28,7 +29,8 @@ def register(sub: Any) -> None:
         "semantics: linear interpolation of translation and slerp of rotation between the two samples bracketing "
         "the time, static edges timeless, extrapolation an error that names the edge and its recorded span.",
     )
-    p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory or a bare .db3")
+    p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory, a bare .db3, or a LeRobot "
+                   "dataset directory (with --episode and --robot: the frame tree from forward kinematics)")
     p.add_argument("target", help="target frame (the transform maps points into it)")
     p.add_argument("source", help="source frame")
     when = p.add_mutually_exclusive_group()
@@ -40,6 +42,8 @@ def register(sub: Any) -> None:
     fmt = p.add_mutually_exclusive_group()
     fmt.add_argument("--json", action="store_true", help="print JSON")
     fmt.add_argument("--csv", action="store_true", help="print CSV")
+    p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+    p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
     p.set_defaults(run=run)
 
@@ -61,13 +65,19 @@ def parse_stamp(text: str, log_start_ns: int) -> int:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from framechain.adapters import open_log
+    from framechain.adapters import LeRobotAdapter, open_log
     from framechain.adapters.api import TREE_KINDS
     from framechain.replay import LATEST, TransformBuffer
 
     show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
-    loaded = open_log(args.log, kinds=TREE_KINDS, progress=show_progress)
-    transforms = loaded.timeline.transforms
+    if LeRobotAdapter().probe(Path(args.log)):
+        from framechain.pipeline import load_log  # the episode's tree comes from robot.yaml and the URDF
+
+        transforms = load_log(args.log, episode=args.episode, robot=args.robot).timeline.transforms
+    else:
+        if args.episode is not None or args.robot is not None:
+            raise FramechainError(f"{args.log}: --episode and --robot are for LeRobot datasets; this is not one")
+        transforms = open_log(args.log, kinds=TREE_KINDS, progress=show_progress).timeline.transforms
     if not len(transforms):
         raise FramechainError(
             f"{args.log}: no transforms in this log (no /tf, /tf_static, TransformStamped or Odometry)")

@@ -106,3 +106,16 @@ def test_adapter_plugin(latency_case: tuple[ArmDataset, Path]) -> None:
     assert len(loaded.timeline.joint_states) == 30 * 7
     with pytest.raises(AdapterError, match="needs an episode"):
         adapter.open(ds.root, ChainConfig(robot={"config": str(robot)}))
+
+
+def test_tf_over_an_episode(latency_case: tuple[ArmDataset, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """tf2_echo for a LeRobot episode: one transform per joint-state frame of the flange, timeless base."""
+    ds, robot = latency_case
+    assert main(["tf", str(ds.root), "world", "flange_link", "--episode", "1", "--robot", str(robot),
+                 "--series", "-q"]) == 0
+    rows = capsys.readouterr().out.strip().splitlines()
+    assert rows[0].startswith("stamp_ns,t_rel_s,x,y,z")
+    assert len(rows) - 1 == 30  # episode 1: 30 frames
+    assert main(["tf", str(ds.root), "world", "flange_link", "--robot", str(robot)]) == 1
+    assert "needs --episode N" in capsys.readouterr().err
+
