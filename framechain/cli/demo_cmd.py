@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -96,6 +97,12 @@ def run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     faults = tuple(parse_fault(f) for f in (args.fault or DEFAULT_FAULTS))
+    robot_side = [f.kind.value for f in faults if f.where == "robot"]
+    if robot_side and args.evidence in ("reference", "static"):
+        # The robot's own mistakes leave the recording right: against truth there is nothing to find.
+        print(f"framechain demo: note: {', '.join(robot_side)} {'is' if len(robot_side) == 1 else 'are'} injected in "
+              f"the robot's computation, which --evidence {args.evidence} cannot see (the recorded data is right); "
+              "add @data to a --fault to put it in the recording", file=sys.stderr)
     out = Path(args.out)
     make_out_dir(out)
     spec = SceneSpec(

@@ -269,6 +269,15 @@ def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert np.isclose(sum(f["share"] for f in doc["findings"]), 1.0, atol=0.05)
 
 
+def test_demo_says_when_the_evidence_cannot_see_the_faults(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--out", str(tmp_path / "d"), "--evidence", "static", "--no-rrd", "-q"]) == 0
+    out, err = capsys.readouterr()
+    assert "injected in the robot's computation, which --evidence static cannot see" in err
+    assert "No fault beyond noise" in out  # right: the recording it is measured against is right
+    assert "rerun" not in out.splitlines()[-1]  # no recording was written, none is offered
+
+
 def test_unwritable_out_fails_before_the_analysis(latency_log: tuple[Path, Path], tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     log, chain = latency_log
