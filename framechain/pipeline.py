@@ -66,7 +66,7 @@ def load_log(
     suggested = config is None
     if config is not None:
         _check_frames(target, loaded.timeline, config)
-    if config is None:
+    else:
         config = adapters.suggest_chain(loaded)
         if config.evidence_topics():  # read again, now with the evidence topics the suggestion found
             loaded = adapters.open_log(target, config, progress=progress)
@@ -113,7 +113,7 @@ def _load_lerobot(
     suggested = config is None
     if config is not None:
         _check_frames(target, loaded.timeline, config)
-    if config is None:
+    else:
         stored = loaded.timeline.metadata.get("chain")
         if not isinstance(stored, dict):
             raise FramechainError(f"{target}: give --chain CHAIN.yaml to name the camera, body and world frames")

@@ -48,13 +48,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import yaml
 from scipy.spatial.transform import Rotation
 
 from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, CameraTable, FramechainError
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 #: camera_link (FLU) -> optical frame (RDF), REP-103: roll = -pi/2, yaw = -pi/2.
 

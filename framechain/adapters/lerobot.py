@@ -60,9 +60,7 @@ from framechain.timeline import (
     Timeline,
     TransformTable,
 )
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import FloatArray, IntArray
 
 #: ``Timeline.metadata["format"]`` of a LeRobot episode.
 FORMAT = "lerobot"

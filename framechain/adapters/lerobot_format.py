@@ -41,9 +41,7 @@ import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import FloatArray, IntArray
 
 #: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
 TIMESTAMP_TOLERANCE_S = 1e-4

@@ -79,7 +79,7 @@ class McapLog:
             self.truncated = True
             self.summary = None
         if self.summary is not None:
-            for _cid, ch in self.summary.channels.items():
+            for ch in self.summary.channels.values():
                 self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
         self._decoders: dict[int, Decoder] = {}
         self._scanned = False

@@ -36,8 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.timeline import FramechainError
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 #: Frames per block in :meth:`RobotModel.fk_path`.
 FK_BLOCK = 8192

@@ -51,8 +51,7 @@ from scipy.spatial.transform import Rotation
 from framechain.adapters.calibration import CameraCalibration, load_calibration
 from framechain.adapters.robot import RobotModel
 from framechain.timeline import ChainConfig, ChainConfigError, ChainFrames, FramechainError
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 __all__ = [
     "DetectionSource",

@@ -25,13 +25,13 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
 from framechain.analysis.faults import FaultModel, Mode, classify_rotation, models_for, rotation_starts
 from framechain.analysis.fit import Fit, fit_models, perturbation_of, posterior_weights
 from framechain.analysis.fixes import fix_for
 from framechain.replay import (
+    REPLAYED,
     CameraModel,
     HopName,
     ReplayResult,
@@ -43,9 +43,8 @@ from framechain.replay import (
 from framechain.replay.catalogue import Fault
 from framechain.replay.stamps import nearest
 from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
+from framechain.timeline.arrays import FloatArray, IntArray
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
 
 #: A fault must lower the BIC by this much to be reported (strong evidence on Kass-Raftery's scale).
@@ -137,7 +136,7 @@ class Attribution:
         it used (observation stamp minus the nearest sample of its stalest edge), stale count, and
         the error the findings put on it."""
         records = self.replay.hops
-        replayed = records.status == "replayed"
+        replayed = records.status == REPLAYED
         rows = []
         for hop in HopName:
             sel = replayed & (records.hop == hop.value)
@@ -392,14 +391,10 @@ def attribute(
             found.append((model, x, sel.confidences[i], sel.alternatives[i], sel))
     error_before = _distances(world_objective(inputs, Perturbation()))
     combined = perturbation_of([f[0] for f in found], np.concatenate([f[1] for f in found]) if found else np.zeros(0))
-    if metric in ("reference", "static_spread"):
-        # Corrections move the recomputed chain towards the truth.
-        error_after = _distances(world_objective(inputs, combined))
-        corrected_world = evaluate(inputs, combined)[2]
-    else:
-        # As-run faults move the recomputed chain towards what the robot did.
-        error_after = _distances(world_objective(inputs, combined))
-        corrected_world = recomputed_world
+    error_after = _distances(world_objective(inputs, combined))
+    # Corrections move the recomputed chain towards the truth; as-run faults describe what the
+    # robot did, and the recomputed chain stays as it is.
+    corrected_world = evaluate(inputs, combined)[2] if metric in ("reference", "static_spread") else recomputed_world
     say("splitting the error among the faults found (Shapley values)")
     shapley = _shapley(found, world_objective, inputs)
     total = float(np.nanmedian(error_before)) if np.isfinite(error_before).any() else 0.0
@@ -624,11 +619,8 @@ def _select(
 
 
 def _at_bound(model: FaultModel, x: FloatArray) -> bool:
-    """Whether a fitted parameter sits on its lower or upper bound (to 0.1 %).
-
-    Rotation vectors are bounded by the parametrisation (|component| <= pi), not by plausibility.
-    """
-    if not model.lower or model.family == "camera_rotation":
+    """Whether a fitted parameter sits on a bound of its plausible range (to 0.1 %)."""
+    if not model.lower or not model.plausibility_bounds:
         return False
     lo, hi, x = np.asarray(model.lower, float), np.asarray(model.upper, float), np.asarray(x, float)
     near_lo = np.isfinite(lo) & (x <= lo + 1e-3 * np.abs(lo) + 1e-12)

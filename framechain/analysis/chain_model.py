@@ -19,10 +19,7 @@ from scipy.spatial.transform import Rotation
 from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
 from framechain.replay.buffer import compose_hops, invert
 from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, ChainFrames
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-
+from framechain.timeline.arrays import FloatArray, IntArray
 
 
 @dataclass(frozen=True)

@@ -10,15 +10,13 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import Attribution
 from framechain.analysis.fixes import corrected_mount
 from framechain.replay.catalogue import Fault
 from framechain.timeline import DepthFrameTable, Timeline, TransformTable
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 
 class NothingToCorrectError(ValueError):

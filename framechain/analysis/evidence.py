@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -22,8 +21,7 @@ from framechain.analysis.chain_model import Perturbation, evaluate
 from framechain.analysis.fit import perturbation_of
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 METRICS = {
     "logged_hops": "distance between the robot's logged world point and the recomputed one, per observation",

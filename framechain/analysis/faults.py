@@ -16,14 +16,13 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
+from framechain.timeline.arrays import FloatArray
 
-FloatArray = npt.NDArray[np.float64]
 Mode = Literal["as_run", "correction"]
 
 #: Below this angle two rotations are "the same" when naming missing_rotation (degrees).
@@ -49,6 +48,9 @@ class FaultModel:
     choice_penalty: float = 0.0
     #: extra starting points for the local fit (multi-start)
     starts: tuple[tuple[float, ...], ...] = ()
+    #: whether the bounds mark the plausible range (a fit ending on one explains nothing) rather
+    #: than the limits of the parametrisation (a rotation vector's |component| <= pi)
+    plausibility_bounds: bool = True
 
     @property
     def n_params(self) -> int:
@@ -97,6 +99,7 @@ def _rotation() -> FaultModel:
         x0=(0.0, 0.0, 0.0),
         lower=(-np.pi,) * 3,
         upper=(np.pi,) * 3,
+        plausibility_bounds=False,
         x_scale=(0.05,) * 3,
         apply=apply,
         estimate=estimate,

@@ -12,13 +12,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from scipy.optimize import least_squares
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.analysis.faults import FaultModel
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 #: Residuals (N, 3) of a perturbed chain against the evidence; NaN where it cannot be evaluated.
 Objective = Callable[[ChainInputs, Perturbation], FloatArray]

@@ -5,16 +5,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.faults import Mode, rotation_verdict
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
-
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 
 def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str, str, FloatArray, FloatArray] | None:

@@ -43,9 +43,7 @@ from framechain.replay.quaternion import (
     quat_to_rotvec,
 )
 from framechain.timeline import Timeline, TransformTable, normalize_frame
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import FloatArray, IntArray
 
 
 class _Latest:

@@ -5,13 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from framechain.replay.stamps import nearest
 from framechain.timeline import DepthFrameTable, normalize_frame
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import FloatArray, IntArray
 
 
 @dataclass(frozen=True)

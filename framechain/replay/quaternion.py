@@ -13,9 +13,8 @@ conversions, but in scipy 1.17 composing two Rotation arrays costs about 1.3 us 
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
-FloatArray = npt.NDArray[np.float64]
+from framechain.timeline.arrays import FloatArray
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 

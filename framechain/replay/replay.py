@@ -14,7 +14,6 @@ from enum import StrEnum
 from typing import ClassVar
 
 import numpy as np
-import numpy.typing as npt
 
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer, compose
 from framechain.replay.camera import CameraModel
@@ -29,10 +28,7 @@ from framechain.timeline import (
     Timeline,
     normalize_frame,
 )
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
+from framechain.timeline.arrays import BoolArray, FloatArray, IntArray, StrArray
 
 
 class HopName(StrEnum):
@@ -86,9 +82,9 @@ class HopRecordTable(ColumnTable):
         "status": Column("str"),
     }
     obs_id: IntArray
-    hop: npt.NDArray[np.str_]
-    from_frame: npt.NDArray[np.str_]
-    to_frame: npt.NDArray[np.str_]
+    hop: StrArray
+    from_frame: StrArray
+    to_frame: StrArray
     stamp_ns: IntArray
     input_xyz: FloatArray
     output_xyz: FloatArray
@@ -98,7 +94,7 @@ class HopRecordTable(ColumnTable):
     sample_after_ns: IntArray
     gap_ns: IntArray
     stale: BoolArray
-    status: npt.NDArray[np.str_]
+    status: StrArray
 
 
 @dataclass(frozen=True)
@@ -126,16 +122,16 @@ class HopSampleTable(ColumnTable):
         "status": Column("str"),
     }
     obs_id: IntArray
-    hop: npt.NDArray[np.str_]
-    parent: npt.NDArray[np.str_]
-    child: npt.NDArray[np.str_]
+    hop: StrArray
+    parent: StrArray
+    child: StrArray
     static: BoolArray
     sample_before_ns: IntArray
     sample_after_ns: IntArray
     weight: FloatArray
     gap_before_ns: IntArray
     gap_after_ns: IntArray
-    status: npt.NDArray[np.str_]
+    status: StrArray
 
 
 @dataclass(frozen=True)
@@ -160,7 +156,7 @@ class ReplayResult:
 
     frames: ChainFrames
     observations: ObservationTable
-    status: npt.NDArray[np.str_]  # "replayed" or a RejectReason value
+    status: StrArray  # "replayed" or a RejectReason value
     stale: BoolArray
     depth_m: FloatArray
     depth_stamp_ns: IntArray
@@ -329,7 +325,7 @@ def replay(
 
 
 def _sample_rows(
-    obs: ObservationTable, hop: HopName, lookup: LookupResult, status: npt.NDArray[np.str_]
+    obs: ObservationTable, hop: HopName, lookup: LookupResult, status: StrArray
 ) -> HopSampleTable:
     """Every edge of ``lookup``'s path, for every observation (edge-major, as lookups keep them)."""
     n = len(obs)
@@ -369,7 +365,7 @@ def _stalest(lookup: LookupResult, stamps_ns: IntArray) -> tuple[IntArray, IntAr
 def _hop_rows(
     obs: ObservationTable, hop: HopName, from_frame: str, to_frame: str, inp: FloatArray, out: FloatArray,
     translation: FloatArray, quat: FloatArray, before: IntArray, after: IntArray, gap: IntArray,
-    stale: BoolArray, status: npt.NDArray[np.str_],
+    stale: BoolArray, status: StrArray,
 ) -> HopRecordTable:
     n = len(obs)
     return HopRecordTable(

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import IntArray
 
 
 def nearest(sorted_stamps: IntArray, queries: IntArray) -> IntArray:

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import TransformBuffer
@@ -43,9 +42,7 @@ from framechain.timeline import (
     Timeline,
     TransformTable,
 )
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
+from framechain.timeline.arrays import FloatArray, IntArray
 
 #: camera_link (FLU) -> optical frame (RDF), REP-103.
 START_NS = 1_700_000_000_000_000_000

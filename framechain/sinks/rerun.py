@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
+from framechain.analysis.attribute import POINT_MATCH_NS, REFERENCE_MATCH_NS
 from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer, transform_points
 from framechain.replay.stamps import nearest
 from framechain.timeline import (
@@ -56,14 +57,12 @@ from framechain.timeline import (
     Timeline,
     normalize_frame,
 )
+from framechain.timeline.arrays import BoolArray, FloatArray, IntArray
 
 if TYPE_CHECKING:
     import rerun as rr
     import rerun.blueprint as rrb
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Timeline of header (sensor) stamps.
 SENSOR_TIME = "sensor_time"
@@ -138,9 +137,9 @@ class RerunOptions:
     #: A depth frame within this of an observation stamp is logged with it.
     image_window_ns: int = 50_000_000
     #: As-run points without an ``obs_id`` match the observation with the nearest stamp within this.
-    match_tolerance_ns: int = 1_000_000
+    match_tolerance_ns: int = POINT_MATCH_NS
     #: Reference points (motion capture) match the nearest observation within this.
-    reference_tolerance_ns: int = 50_000_000
+    reference_tolerance_ns: int = REFERENCE_MATCH_NS
     point_radius_m: float = 0.02
     axis_length_m: float = 0.2
 
@@ -477,8 +476,8 @@ def as_run_points(
     timeline: Timeline,
     result: ReplayResult,
     *,
-    match_tolerance_ns: int = 1_000_000,
-    reference_tolerance_ns: int = 50_000_000,
+    match_tolerance_ns: int = POINT_MATCH_NS,
+    reference_tolerance_ns: int = REFERENCE_MATCH_NS,
     buffer: TransformBuffer | None = None,
 ) -> AsRunPoints:
     """Match the robot's logged points to observations and express them in the chain frames.

@@ -22,12 +22,8 @@ import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 
+from framechain.timeline.arrays import BoolArray, FloatArray, IntArray, StrArray
 from framechain.timeline.errors import InvalidCameraError, InvalidTransformError, TimelineError
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
-StrArray = npt.NDArray[np.str_]
 
 #: Quaternions further than this from unit length are rejected rather than normalised.
 QUATERNION_NORM_TOLERANCE = 1e-3
