@@ -26,6 +26,25 @@ class LoadedRun:
     chain_suggested: bool  # True when no --chain was given and the configuration was suggested
     info: Any = None  # the adapter's LogInfo (topics, span, notes) when read from a robot log
     notes: list[str] = field(default_factory=list)
+    #: The suggestion (placeholders, what the log lacks) when no chain was given; None otherwise.
+    suggestion: Any = None
+
+    def why_nothing_replayed(self, counts: dict[str, Any]) -> str | None:
+        """One line saying why no observation was replayed and which chain key to add (None: some were)."""
+        from framechain import adapters
+
+        if int(counts.get("replayed", 0)):
+            return None
+        loaded = adapters.LoadedLog(timeline=self.timeline, info=self.info, decoded_topics={})
+        why = adapters.why_nothing_replayed(loaded, self.chain, counts)
+        if why is None:
+            return None
+        # What the reader noticed on the chain's topics (an undecodable topic) often is the cause.
+        named = [t for t in astuple(self.chain.topics) if isinstance(t, str) and t]
+        why += "".join(f"; {n}" for n in self.notes if any(n.startswith(f"topic {t}:") for t in named))
+        if self.chain_suggested:
+            why += " (the chain was suggested: `framechain info LOG` lists what the log lacks)"
+        return why
 
 
 def load_chain(chain: ChainConfig | str | Path | None) -> ChainConfig | None:
@@ -64,14 +83,19 @@ def load_log(
         raise FramechainError(f"{target}: --episode and --robot are for LeRobot datasets; this is not one")
     loaded = adapters.open_log(target, config, progress=progress)
     suggested = config is None
+    suggestion = None
     if config is not None:
         _check_frames(target, loaded.timeline, config)
     else:
-        config = adapters.suggest_chain(loaded)
-        if config.evidence_topics():  # read again, now with the evidence topics the suggestion found
+        suggestion = adapters.suggest(loaded)
+        config = suggestion.config
+        # Read again with the suggestion when it gives evidence topics a role, or picks one of several
+        # detection topics (the others' detections are not this chain's to replay).
+        sources = set(loaded.timeline.observations.source.tolist())
+        if config.evidence_topics() or len(sources) > 1:
             loaded = adapters.open_log(target, config, progress=progress)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=suggested,
-                     info=loaded.info, notes=list(getattr(loaded.info, "notes", [])))
+                     info=loaded.info, notes=list(getattr(loaded.info, "notes", [])), suggestion=suggestion)
 
 
 def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig) -> None:
@@ -101,6 +125,7 @@ def _load_lerobot(
     if episode is not None:
         section["episode"] = episode
     if robot is not None:
+        _check_not_urdf(Path(robot))
         section["config"] = str(Path(robot).resolve())
     elif "config" in section and isinstance(chain_arg, str | Path):
         # robot.yaml named in CHAIN.yaml resolves against the CHAIN.yaml's folder.
@@ -122,6 +147,20 @@ def _load_lerobot(
                      chain_suggested=suggested, info=loaded.info, notes=list(loaded.info.notes))
 
 
+def _check_not_urdf(robot: Path) -> None:
+    """A URDF given where robot.yaml is expected: say what robot.yaml is, in one line."""
+    try:
+        with robot.open("rb") as f:
+            head = f.read(512).lstrip()
+    except OSError:
+        return  # RobotConfig.load says the file cannot be read
+    if robot.suffix.lower() in (".urdf", ".xacro", ".xml") or head.startswith(b"<"):
+        raise FramechainError(
+            f"--robot {robot}: a URDF; --robot takes a robot.yaml that names it (urdf: {robot.name}) and maps "
+            "the dataset's joint states to its joints and the cameras to their links (README: 'LeRobot "
+            "datasets: robot.yaml')")
+
+
 def attribute_log(
     path: str | Path,
     chain: ChainConfig | str | Path | None = None,
@@ -137,8 +176,16 @@ def attribute_log(
     try:
         result = attribute(run.timeline, run.chain, seed=seed, bootstrap=bootstrap, progress=progress)
     except AnalysisError as err:
-        # Nothing to analyse is often explained by what the reader noticed (an undecodable topic).
-        named = [t for t in astuple(run.chain.topics) if t]
+        # Nothing replayed: say why and which key to add; otherwise what the reader noticed (an
+        # undecodable topic) often explains it.
+        from framechain.replay import replay
+
+        counts = replay(run.timeline, run.chain.frames, latency_budget_s=run.chain.latency_budget_s,
+                        ignore_labels=run.chain.evidence.ignore_labels).counts()
+        reason = run.why_nothing_replayed(counts)
+        if reason is not None:
+            raise AnalysisError(f"{run.path}: {reason}") from err
+        named = [t for t in astuple(run.chain.topics) if isinstance(t, str) and t]
         why = [n for n in run.notes if any(n.startswith(f"topic {t}:") for t in named)]
         raise AnalysisError(f"{run.path}: {err}" + "".join(f"; {n}" for n in why)) from err
     # What the reader noticed (a topic the chain names but the log lacks, undecodable messages)

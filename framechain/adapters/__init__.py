@@ -14,9 +14,18 @@ from framechain.adapters.errors import (
     SchemaError,
     UnsupportedLogError,
 )
-from framechain.adapters.info import EdgeInfo, frame_tree, suggest_chain
+from framechain.adapters.info import EdgeInfo, frame_tree
 from framechain.adapters.lerobot import LeRobotAdapter, open_dataset, scan_dataset
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.adapters.suggest import (
+    ChainNeed,
+    NeedStatus,
+    SuggestedChain,
+    chain_needs,
+    suggest,
+    suggest_chain,
+    why_nothing_replayed,
+)
 from framechain.adapters.writer import CONTAINERS, canonical_order, write_log
 
 register_adapter(LeRobotAdapter())
@@ -24,6 +33,7 @@ register_adapter(LeRobotAdapter())
 __all__ = [
     "CONTAINERS",
     "AdapterError",
+    "ChainNeed",
     "CorruptLogError",
     "EdgeInfo",
     "EmptyLogError",
@@ -31,10 +41,13 @@ __all__ = [
     "LoadedLog",
     "LogAdapter",
     "LogInfo",
+    "NeedStatus",
     "SchemaError",
+    "SuggestedChain",
     "TopicInfo",
     "UnsupportedLogError",
     "canonical_order",
+    "chain_needs",
     "detect",
     "frame_tree",
     "open_dataset",
@@ -42,6 +55,8 @@ __all__ = [
     "register_adapter",
     "scan_dataset",
     "scan_log",
+    "suggest",
     "suggest_chain",
+    "why_nothing_replayed",
     "write_log",
 ]

@@ -11,9 +11,10 @@ from typing import Any, Protocol
 
 from framechain.adapters.collect import Collector
 from framechain.adapters.errors import AdapterError, EmptyLogError, UnsupportedLogError
-from framechain.adapters.kinds import Kind, normalize_msgtype, select_topics
+from framechain.adapters.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
 from framechain.adapters.mcap_log import MCAP_MAGIC, McapLog
 from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.mounts import chain_additions
 from framechain.adapters.rosbag_log import RosbagsLog
 from framechain.timeline import ChainConfig
 
@@ -153,7 +154,11 @@ def open_log(
     if plugin is not None:
         return plugin.open(p, chain, progress=progress)
     fmt, target, notes = detect(p)
+    additions = chain_additions(chain)  # a missing calibration file fails before the log is read
+    notes.extend(additions.notes)
     col = Collector(str(p), chain)
+    col.chain_edges.extend(additions.edges)
+    col.file_cameras.extend(additions.cameras)
     with _source(fmt, target) as src:
         info = src.info().with_notes(notes)
         types = {t.name: normalize_msgtype(t.msgtype) for t in info.topics}
@@ -193,11 +198,18 @@ def _check_chain_topics(chain: ChainConfig, types: dict[str, str]) -> list[str]:
     t = chain.topics
     wanted = [
         (t.camera_info, "camera_info"), (t.detections, "detections"), (t.depth, "depth"),
-        (t.pixel_points, "pixel_points"), (t.odometry, "odometry"),
+        (t.pixel_points, "pixel_points"), *((p.topic, "odometry") for p in chain.pose_topics()),
         *((topic, f"evidence {role}") for topic, role in chain.evidence_topics().items()),
     ]
-    return [f"topic {topic}: named by the chain as {slot} but not in the log" for topic, slot in wanted
-            if topic and topic not in types]
+    notes = [f"topic {topic}: named by the chain as {slot} but not in the log" for topic, slot in wanted
+             if topic and topic not in types]
+    evidence = chain.evidence_topics()
+    notes.extend(
+        f"topic {p.topic}: named by the chain as odometry but its type {types[p.topic]} is not a pose "
+        f"({', '.join(sorted(POSE_TYPES))}); not read" for p in chain.pose_topics()
+        if p.topic in types and types[p.topic] not in POSE_TYPES and p.topic not in evidence
+    )
+    return notes
 
 
 @contextmanager
@@ -217,4 +229,5 @@ def _progress(enabled: bool, total: int, label: str) -> Iterator[Callable[[int],
 
 
 #: The kinds that make the frame tree (what ``framechain tf`` reads).
-TREE_KINDS = frozenset({Kind.TF.value, Kind.TRANSFORM.value, Kind.ODOMETRY.value, Kind.RS_EXTRINSIC.value})
+TREE_KINDS = frozenset({Kind.TF.value, Kind.TRANSFORM.value, Kind.ODOMETRY.value, Kind.POSE.value,
+                        Kind.RS_EXTRINSIC.value, Kind.URDF.value})

@@ -36,7 +36,11 @@ A ROS camera_info YAML (``camera_calibration_parsers``) has ``image_width``, ``i
 OpenCV calibration YAML (``cv::FileStorage``) starts with ``%YAML:1.0`` and holds
 ``!!opencv-matrix`` entries ``camera_matrix`` (or ``K``/``cameraMatrix``) and
 ``distortion_coefficients`` (or ``D``/``dist_coeffs``/``distCoeffs``), with ``image_width``/
-``image_height`` (or ``width``/``height``).
+``image_height`` (or ``width``/``height``). A Kalibr camchain (or TagSLAM ``cameras.yaml``) maps
+camera names to ``camera_model: pinhole``, ``intrinsics: [fx, fy, cx, cy]``, ``distortion_model``
+(``radtan`` = plumb_bob k1 k2 p1 p2, ``equidistant`` = OpenCV fisheye k1..k4), ``distortion_coeffs``,
+``resolution: [width, height]``, ``rostopic`` and ``tagtopic``; its extrinsics (``T_cam_imu``,
+``T_cn_cnm1``) are not read. :func:`read_intrinsics_file` reads all three, detected by content.
 """
 
 from __future__ import annotations
@@ -352,13 +356,25 @@ def _strip_opencv_header(text: str) -> str:
     return "\n".join(lines)
 
 
-def read_intrinsics_file(path: str | Path) -> Intrinsics:
-    """Intrinsics from a ROS camera_info YAML or an OpenCV calibration YAML (detected by content)."""
+def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intrinsics:
+    """Intrinsics from a ROS camera_info YAML, a Kalibr camchain or an OpenCV calibration YAML
+    (detected by content).
+
+    ``camera`` picks one camera of a Kalibr file by name, ``rostopic`` or ``tagtopic`` (needed when
+    the file holds several); for a ROS file it must match ``camera_name`` when that is given.
+    """
     p = Path(path)
     source = str(p)
+    if not p.is_file():
+        raise CalibrationError(source, "calibration file not found")
     raw = _read_yaml(p)
     if not isinstance(raw, Mapping):
         raise CalibrationError(source, "expected a mapping of calibration keys")
+    if _is_kalibr(raw):
+        return _kalibr_camera(raw, camera, source)
+    named = raw.get("camera_name")
+    if camera is not None and named is not None and str(named) != camera:
+        raise CalibrationError(source, f"camera {camera!r} is not in the file; it holds camera_name {named!r}")
     K = _first(raw, ("camera_matrix", "K", "cameraMatrix", "camera_matrix_left"))
     if K is None:
         raise CalibrationError(source, "no camera matrix (camera_matrix, K or cameraMatrix)")
@@ -388,6 +404,63 @@ def read_intrinsics_file(path: str | Path) -> Intrinsics:
         float(kmat[0, 0]), float(kmat[1, 1]), float(kmat[0, 2]), float(kmat[1, 2]),
         float(width), float(height), model, coeffs, source,
     )
+
+
+#: Kalibr distortion names -> ROS names (radtan is plumb_bob without k3).
+_KALIBR_DISTORTION = {"radtan": "plumb_bob", "plumb_bob": "plumb_bob", "equidistant": "equidistant",
+                      "fisheye": "equidistant", "rational_polynomial": "rational_polynomial", "none": "none"}
+
+
+def _is_kalibr(raw: Mapping[str, Any]) -> bool:
+    """A camchain: camera names mapping to entries with a Kalibr ``intrinsics`` list."""
+    return any(isinstance(v, Mapping) and isinstance(v.get("intrinsics"), list) for v in raw.values())
+
+
+def kalibr_cameras(path: str | Path) -> list[str]:
+    """The camera names of a Kalibr camchain file (empty for other calibration files)."""
+    raw = _read_yaml(Path(path))
+    if not isinstance(raw, Mapping) or not _is_kalibr(raw):
+        return []
+    return [str(k) for k, v in raw.items() if isinstance(v, Mapping)]
+
+
+def _kalibr_camera(raw: Mapping[str, Any], camera: str | None, source: str) -> Intrinsics:
+    entries = {str(k): v for k, v in raw.items() if isinstance(v, Mapping)}
+    if camera is None:
+        if len(entries) != 1:
+            raise CalibrationError(source, f"{len(entries)} cameras ({', '.join(entries)}); pick one with "
+                                   "camera: NAME (or its rostopic or tagtopic)")
+        name = next(iter(entries))
+    elif camera in entries:
+        name = camera
+    else:
+        by_topic = [k for k, v in entries.items() if camera in (v.get("rostopic"), v.get("tagtopic"))]
+        if not by_topic:
+            listed = ", ".join(f"{k} ({v.get('rostopic', 'no rostopic')})" for k, v in entries.items())
+            raise CalibrationError(source, f"camera {camera!r} is not in the file; its cameras are {listed}")
+        name = by_topic[0]
+    entry = entries[name]
+    where = name
+    model = str(entry.get("camera_model", "pinhole"))
+    if model != "pinhole":
+        raise CalibrationError(source, f"{where}: camera_model {model!r} is not supported (pinhole only)")
+    fx, fy, cx, cy = _vector(entry.get("intrinsics"), 4, source, f"{where}.intrinsics [fx, fy, cx, cy]")
+    if "resolution" not in entry:
+        raise CalibrationError(source, f"{where}: no resolution [width, height]")
+    width, height = _vector(entry["resolution"], 2, source, f"{where}.resolution [width, height]")
+    coeffs = entry.get("distortion_coeffs") or []
+    kalibr_model = str(entry.get("distortion_model") or ("radtan" if coeffs else "none")).lower()
+    if kalibr_model not in _KALIBR_DISTORTION:
+        raise CalibrationError(source, f"{where}: distortion_model {kalibr_model!r} is not supported; expected one "
+                               f"of {sorted(_KALIBR_DISTORTION)}")
+    intrinsics = _make_intrinsics(fx, fy, cx, cy, width, height, _KALIBR_DISTORTION[kalibr_model], coeffs,
+                                  f"{source} [{name}]")
+    counts = {"equidistant": (4,), "plumb_bob": (4, 5), "rational_polynomial": (8,), "none": (0,)}
+    expected = counts[intrinsics.distortion_model]
+    if len(intrinsics.distortion) not in expected:
+        raise CalibrationError(source, f"{where}: {len(intrinsics.distortion)} distortion_coeffs for "
+                               f"{kalibr_model} (expected {' or '.join(map(str, expected))})")
+    return intrinsics
 
 
 def _first(raw: Mapping[str, Any], keys: tuple[str, ...]) -> Any:

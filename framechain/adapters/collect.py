@@ -19,11 +19,21 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.depth import DepthFetch, make_depth_loader
+from framechain.adapters.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
+from framechain.adapters.images import ImageLocator, image_metadata, make_image_loader
 from framechain.adapters.kinds import Kind
+from framechain.adapters.mounts import (
+    FileCamera,
+    StaticEdge,
+    log_urdf_edges,
+    merge_file_cameras,
+    merge_static_edges,
+)
 from framechain.timeline import (
     CameraTable,
     ChainConfig,
     DepthFrameTable,
+    ImageFrameTable,
     JointStateTable,
     ObservationTable,
     PointTable,
@@ -98,8 +108,24 @@ class Collector:
         self.path = path
         self.chain = chain
         self.roles = chain.evidence_topics() if chain else {}
+        #: Pose topics and the child frame their entry names (None: the message's, else the body frame).
+        self.pose_children = {p.topic: p.child for p in chain.pose_topics()} if chain else {}
+        #: Static edges and camera models the chain file adds (see framechain.adapters.mounts).
+        self.chain_edges: list[StaticEdge] = []
+        self.file_cameras: list[FileCamera] = []
         self.notes: list[str] = []
         self.depth_from_pose: dict[str, int] = {}  # detections whose hypothesis pose carried a depth, by topic
+        # fiducials (tags, markers in images, camera-frame points): resolved once the cameras are known
+        evidence = chain.evidence if chain else None
+        marker_size = evidence.markers.size_m if evidence and evidence.markers else None
+        self.fiducials = FiducialRows(
+            size_for_tag=tag_size_lookup(evidence.tag_size_m if evidence else None),
+            size_for_marker=tag_size_lookup(marker_size if marker_size is not None else
+                                            (evidence.tag_size_m if evidence else None)),
+        )
+        self.marker_finder: Any = None  # a markers.MarkerFinder, made when an image topic is read
+        self._fiducials_resolved: tuple[int, ResolvedFiducials] | None = None
+        self._obs_ids: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)
         # transforms: per row
         self.tf_parent: list[str] = []
         self.tf_child: list[str] = []
@@ -144,6 +170,10 @@ class Collector:
         self.depth_loc: list[DepthLocator] = []
         self._depth_seen: Counter[tuple[str, int]] = Counter()
         self.depth_scale: dict[str, float] = {}
+        # camera images on topics.image (metadata; bytes are fetched when a sink shows them)
+        self.image_rows: list[tuple[str, int, int, int, int, str, str]] = []
+        self.image_loc: list[ImageLocator] = []
+        self._image_seen: Counter[tuple[str, int]] = Counter()
         # robot descriptions and librealsense extrinsics
         self.urdf: dict[str, str] = {}
         self.rs_extrinsics: dict[str, tuple[float, ...]] = {}
@@ -199,13 +229,34 @@ class Collector:
 
     def odometry(self, topic: str, log_ns: int, msg: Any) -> None:
         """nav_msgs/Odometry as the edge header.frame_id -> child_frame_id."""
-        child = msg.child_frame_id
-        if not child.strip("/"):
-            self.skipped[(topic, "odometry child_frame_id empty; assumed base_link")] += 1
-            child = "base_link"
         pose = msg.pose.pose
-        self._edge(topic, log_ns, msg.header.frame_id, child, ros_stamp_ns(msg.header.stamp),
-                   pose.position, pose.orientation, kind="odometry")
+        self._edge(topic, log_ns, msg.header.frame_id, self._pose_child(topic, msg.child_frame_id),
+                   ros_stamp_ns(msg.header.stamp), pose.position, pose.orientation, kind="odometry")
+
+    def pose(self, topic: str, log_ns: int, msg: Any) -> None:
+        """PoseStamped, PoseWithCovarianceStamped or TransformStamped on a pose topic the chain names:
+        the dynamic edge header.frame_id -> child (the entry's child, the message's, or the body frame)."""
+        if hasattr(msg, "transform"):  # TransformStamped
+            tr, q, child = msg.transform.translation, msg.transform.rotation, msg.child_frame_id
+        else:
+            pose = msg.pose.pose if hasattr(msg.pose, "pose") else msg.pose  # with covariance, or not
+            tr, q, child = pose.position, pose.orientation, ""
+        self._edge(topic, log_ns, msg.header.frame_id, self._pose_child(topic, child),
+                   ros_stamp_ns(msg.header.stamp), tr, q, kind="odometry")
+
+    def _pose_child(self, topic: str, child: str) -> str:
+        """The child frame of a pose sample: the chain entry's, else the message's, else the body frame."""
+        named = self.pose_children.get(topic)
+        if named:
+            if child.strip("/") and child.strip("/") != named:
+                self.skipped[(topic, f"child frame {child!r} replaced by {named!r} as the chain says")] += 1
+            return named
+        if child.strip("/"):
+            return child
+        body = self.chain.frames.body if self.chain else "base_link"
+        whose = "the chain's frames.body" if self.chain else "the default frames.body"
+        self.skipped[(topic, f"no child frame in the message; {body!r} ({whose}) is used")] += 1
+        return body
 
     def rs_extrinsic(self, topic: str, log_ns: int, msg: Any) -> None:
         """librealsense ``.../<stream>/tf/<ref>``: geometry_msgs/Transform, reference -> stream."""
@@ -365,6 +416,40 @@ class Collector:
                                 encoding, topic))
         self.depth_loc.append(DepthLocator(topic, log_ns, ordinal))
 
+    # -- images ---------------------------------------------------------------------------------
+    def image(self, topic: str, log_ns: int, msg: Any) -> None:
+        """sensor_msgs/Image (raw) or CompressedImage (JPEG, PNG): metadata only."""
+        meta = image_metadata(msg)
+        if meta is None:
+            encoding = getattr(msg, "encoding", getattr(msg, "format", "?"))
+            self.skipped[(topic, f"image encoding {encoding!r} cannot be shown (raw or JPEG/PNG expected)")] += 1
+            return
+        width, height, encoding = meta
+        key = (topic, log_ns)
+        ordinal = self._image_seen[key]
+        self._image_seen[key] += 1
+        self.image_rows.append((msg.header.frame_id, ros_stamp_ns(msg.header.stamp), log_ns, width, height,
+                                encoding, topic))
+        self.image_loc.append(ImageLocator(topic, log_ns, ordinal))
+
+    def _images(self, fetch: DepthFetch | None) -> ImageFrameTable:
+        if not self.image_rows:
+            return ImageFrameTable.empty()
+        frame, stamp, log, w, h, enc, topic = (list(c) for c in zip(*self.image_rows, strict=True))
+        n = len(frame)
+        table = ImageFrameTable(frame=np.asarray(frame, dtype=str), stamp_ns=np.asarray(stamp, dtype=np.int64),
+                                log_time_ns=np.asarray(log, dtype=np.int64), width=np.asarray(w, dtype=np.int64),
+                                height=np.asarray(h, dtype=np.int64), encoding=np.asarray(enc, dtype=str),
+                                source=np.asarray(topic, dtype=str), video_path=np.full(n, ""),
+                                video_time_ns=np.zeros(n, dtype=np.int64))
+        order = _canonical(table.log_time_ns, table.source)
+        locators = [self.image_loc[i] for i in order.tolist()]
+        encodings = [str(e) for e in table.encoding[order]]
+        loader = make_image_loader(fetch, locators, encodings) if fetch is not None else None
+        import dataclasses
+
+        return dataclasses.replace(table.take(order), loader=loader)
+
     # -- dispatch -------------------------------------------------------------------------------
     def handler(self, kind: Kind, *, foxglove: bool = False) -> Callable[[str, int, Any], None] | None:
         """The handler of a kind (Foxglove schemas have their own)."""
@@ -376,8 +461,27 @@ class Collector:
             Kind.DEPTH: self.depth, Kind.DETECTIONS: self.detections, Kind.DETECTION: self.detection,
             Kind.PIXEL_POINT: self.pixel_point, Kind.POINT: self.point, Kind.ODOMETRY: self.odometry,
             Kind.JOINT_STATE: self.joint_state, Kind.URDF: self.urdf_text, Kind.RS_EXTRINSIC: self.rs_extrinsic,
-            Kind.RS_DEPTH_UNITS: self.rs_depth_units,
+            Kind.RS_DEPTH_UNITS: self.rs_depth_units, Kind.POSE: self.pose, Kind.IMAGE: self.image,
         }
+        f = self.fiducials
+        fiducial_handlers: dict[Kind, Callable[[str, int, Any], None]] = {
+            Kind.APRILTAGS: f.apriltags, Kind.APRILTAG_POSES: f.apriltag_poses,
+            Kind.FIDUCIAL_VERTICES: f.fiducial_vertices, Kind.FIDUCIAL_TRANSFORMS: f.fiducial_transforms,
+            Kind.DETECTIONS_3D: f.detections_3d, Kind.CAMERA_POINT: f.camera_point,
+        }
+        table.update(fiducial_handlers)
+        if kind == Kind.MARKER_IMAGE and self.chain is not None and self.chain.evidence.markers is not None:
+            if self.marker_finder is None:  # here, not per message: a bad dictionary is one error
+                from framechain.adapters.markers import MarkerFinder
+
+                self.marker_finder = MarkerFinder(self.chain.evidence.markers.dictionary, f)
+            find: Callable[[str, int, Any], None] = self.marker_finder.image
+
+            def handle(topic: str, log_ns: int, msg: Any) -> None:  # searched for markers, and shown
+                find(topic, log_ns, msg)
+                self.image(topic, log_ns, msg)
+
+            return handle
         return table.get(kind)
 
     # -- build ------------------------------------------------------------------------------------
@@ -395,17 +499,28 @@ class Collector:
                 f"topic {topic}: {count} detections carry a depth in results[0].pose.pose.position.z; it is used as "
                 "the z-depth in the camera frame instead of sampling the depth image"
             )
-        transforms = self._transforms()
+        transforms = self._transforms_with_additions()
         cameras = self._cameras()
+        self._add_fiducial_observations(cameras)
         observations = self._observations()
         points = self._points()
         joints = self._joints()
         depth = self._depth(fetch)
+        images = self._images(fetch)
         meta = dict(metadata)
+        if self._fiducials_resolved is not None:
+            meta["fiducials"] = self._fiducial_metadata()
+            # Detections that never became observations still count: replay adds them to its totals.
+            rejected: Counter[str] = Counter()
+            for topic_counts in meta["fiducials"]["counts"].values():
+                rejected.update(topic_counts.get("rejected", {}))
+            if rejected:
+                meta["rejected_at_read"] = dict(sorted(rejected.items()))
         if self.urdf:
             meta["robot_description"] = dict(self.urdf)
         timeline = Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                            joint_states=joints, points=points, depth_frames=depth, metadata=meta)
+                            joint_states=joints, points=points, depth_frames=depth, image_frames=images,
+                            metadata=meta)
         self.notes.extend(stamp_notes(timeline))
         return timeline, self.notes
 
@@ -468,6 +583,17 @@ class Collector:
         self._note_backwards(table)
         return table.take(_canonical(table.log_time_ns, table.source))
 
+    def _transforms_with_additions(self) -> TransformTable:
+        """The log's edges, the chain's mounts and URDF joints (they win), the log's URDF (fills gaps)."""
+        table = self._transforms()
+        described, bad = log_urdf_edges(self.urdf)
+        self.notes.extend(bad)
+        if not self.chain_edges and not described:
+            return table
+        table, notes = merge_static_edges(table, self.chain_edges, described)
+        self.notes.extend(notes)
+        return table
+
     def _note_backwards(self, table: TransformTable) -> None:
         dyn = ~table.is_static
         if not dyn.any():
@@ -486,6 +612,15 @@ class Collector:
                 )
 
     def _cameras(self) -> CameraTable:
+        """The log's camera models, with the calibration files' in place of theirs for the same frame."""
+        table = self._log_cameras()
+        if not self.file_cameras:
+            return table
+        table, notes = merge_file_cameras(table, self.file_cameras)
+        self.notes.extend(notes)
+        return table
+
+    def _log_cameras(self) -> CameraTable:
         if not self.cam_rows:
             return CameraTable.empty()
         frame, stamp, log, w, h, model, topic = (list(c) for c in zip(*self.cam_rows, strict=True))
@@ -524,6 +659,7 @@ class Collector:
             numeric[:] = False
         start = int(ids[numeric].max()) + 1 if numeric.any() else 0
         ids[~numeric] = np.arange(start, start + int((~numeric).sum()))
+        self._obs_ids = ids.copy()  # in append order: the fiducial side table refers to them
         uvd = np.asarray(self.obs_uvd, dtype=np.float64).reshape(-1, 3)
         table = ObservationTable(
             obs_id=ids, stamp_ns=np.asarray(self.obs_stamp, dtype=np.int64),
@@ -532,6 +668,37 @@ class Collector:
             score=np.asarray(self.obs_score, dtype=np.float64), source=np.asarray(self.obs_topic, dtype=str),
         )
         return table.take(_canonical(table.log_time_ns, table.source))
+
+    def _add_fiducial_observations(self, cameras: CameraTable) -> None:
+        """Fiducial detections as observation rows (tag PnP, projections) with the final camera models."""
+        if self.marker_finder is not None:
+            self.notes.extend(self.marker_finder.notes())
+        if not len(self.fiducials):
+            return
+        hint = ""
+        if self.chain is not None and self.chain.calibration:
+            hint = "the chain's calibration gives no camera with this frame; add calibration: {file:, camera:, frame:}"
+        resolved = resolve_fiducials(self.fiducials, cameras, calibration_hint=hint)
+        self.notes.extend(resolved.notes)
+        self._fiducials_resolved = (len(self.obs_stamp), resolved)
+        k = int(resolved.stamp_ns.size)
+        self.obs_id_text.extend([""] * k)
+        self.obs_stamp.extend(resolved.stamp_ns.tolist())
+        self.obs_log.extend(resolved.log_time_ns.tolist())
+        self.obs_frame.extend(resolved.camera_frame.tolist())
+        self.obs_uvd.extend(np.column_stack([resolved.u, resolved.v, resolved.depth_m]).reshape(-1).tolist())
+        self.obs_label.extend(resolved.label.tolist())
+        self.obs_score.extend(resolved.score.tolist())
+        self.obs_topic.extend(resolved.source.tolist())
+
+    def _fiducial_metadata(self) -> dict[str, Any]:
+        """Counts per topic and the corner side table, keyed by obs_id (JSON-ready)."""
+        assert self._fiducials_resolved is not None
+        first, resolved = self._fiducials_resolved
+        side = dict(resolved.side)
+        position = np.searchsorted(resolved.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
+        ids = self._obs_ids[first + position] if self._obs_ids.size else np.zeros(0, dtype=np.int64)
+        return {"counts": resolved.counts, "corners": {"obs_id": ids.tolist(), **side}}
 
     def _points(self) -> PointTable:
         n = len(self.pt_stamp)

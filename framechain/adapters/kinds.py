@@ -19,10 +19,20 @@ class Kind(StrEnum):
     PIXEL_POINT = "pixel_point"  # geometry_msgs/PointStamped holding (u, v, depth)
     POINT = "point"  # PointStamped, PoseStamped, TransformStamped as logged evidence
     ODOMETRY = "odometry"  # nav_msgs/Odometry
+    POSE = "pose"  # PoseStamped, PoseWithCovarianceStamped, TransformStamped on a pose topic the chain names
     JOINT_STATE = "joint_state"  # sensor_msgs/JointState
     URDF = "urdf"  # std_msgs/String robot description
     RS_EXTRINSIC = "rs_extrinsic"  # librealsense geometry_msgs/Transform on .../tf/<ref>
     RS_DEPTH_UNITS = "rs_depth_units"  # librealsense option Depth_Units (std_msgs/Float32)
+    # Fiducials (framechain.adapters.fiducials): one observation per tag.
+    APRILTAGS = "apriltags"  # apriltag_msgs ApriltagArrayStamped (ROS 1) / AprilTagDetectionArray (ROS 2): corners
+    APRILTAG_POSES = "apriltag_poses"  # apriltag_ros/AprilTagDetectionArray: tag poses in the camera frame
+    FIDUCIAL_VERTICES = "fiducial_vertices"  # fiducial_msgs/FiducialArray: corners
+    FIDUCIAL_TRANSFORMS = "fiducial_transforms"  # fiducial_msgs/FiducialTransformArray: poses in the camera frame
+    DETECTIONS_3D = "detections_3d"  # vision_msgs/Detection3DArray: box centres in the camera frame
+    CAMERA_POINT = "camera_point"  # geometry_msgs/PointStamped named as the detections: a camera-frame point
+    MARKER_IMAGE = "marker_image"  # sensor_msgs/Image or CompressedImage searched for markers
+    IMAGE = "image"  # sensor_msgs/Image or CompressedImage on topics.image, shown by the sinks
 
 
 def normalize_msgtype(name: str) -> str:
@@ -44,8 +54,22 @@ _BY_TYPE: dict[str, Kind] = {
     "sensor_msgs/JointState": Kind.JOINT_STATE,
 }
 
+#: Detector messages whose detections are fiducials (corners or camera-frame points).
+_FIDUCIAL_TYPES: dict[str, Kind] = {
+    "apriltag_msgs/ApriltagArrayStamped": Kind.APRILTAGS,
+    "apriltag_msgs/AprilTagDetectionArray": Kind.APRILTAGS,
+    "apriltag_ros/AprilTagDetectionArray": Kind.APRILTAG_POSES,
+    "fiducial_msgs/FiducialArray": Kind.FIDUCIAL_VERTICES,
+    "fiducial_msgs/FiducialTransformArray": Kind.FIDUCIAL_TRANSFORMS,
+    "vision_msgs/Detection3DArray": Kind.DETECTIONS_3D,
+}
+_BY_TYPE.update(_FIDUCIAL_TYPES)
+
 _POINT_TYPES = frozenset({"geometry_msgs/PointStamped", "geometry_msgs/PoseStamped", "geometry_msgs/TransformStamped"})
 _IMAGE_TYPES = frozenset({"sensor_msgs/Image", "sensor_msgs/CompressedImage"})
+#: Message types a pose topic (``topics.odometry``) may carry, read as a dynamic edge.
+POSE_TYPES = frozenset({"nav_msgs/Odometry", "geometry_msgs/PoseStamped", "geometry_msgs/PoseWithCovarianceStamped",
+                        "geometry_msgs/TransformStamped"})
 
 
 def is_realsense_layout(topics: dict[str, str]) -> bool:
@@ -75,13 +99,18 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
     if chain is not None:
         t = chain.topics
         for topic, kind in (
-            (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.odometry, Kind.ODOMETRY),
-            (t.pixel_points, Kind.PIXEL_POINT),
+            (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.pixel_points, Kind.PIXEL_POINT),
         ):
             if topic:
                 named[topic] = kind
+        for pose in chain.pose_topics():
+            msgtype = norm.get(pose.topic, "")
+            if msgtype in POSE_TYPES:  # other types: api notes that the topic is not a pose
+                named[pose.topic] = Kind.ODOMETRY if msgtype == "nav_msgs/Odometry" else Kind.POSE
         if t.detections:
             named[t.detections] = Kind.DETECTIONS
+        if t.image:  # markers are searched in it and it is shown; or only shown
+            named[t.image] = Kind.MARKER_IMAGE if chain.evidence.markers is not None else Kind.IMAGE
         for topic in chain.evidence_topics():
             named[topic] = Kind.POINT
     for name, msgtype in norm.items():
@@ -89,6 +118,10 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
             kind = named[name]
             if kind == Kind.DETECTIONS and msgtype == "vision_msgs/Detection2D":
                 kind = Kind.DETECTION
+            elif kind == Kind.DETECTIONS and msgtype in _FIDUCIAL_TYPES:
+                kind = _FIDUCIAL_TYPES[msgtype]
+            elif kind == Kind.DETECTIONS and msgtype == "geometry_msgs/PointStamped":
+                kind = Kind.CAMERA_POINT
             out[name] = kind
             continue
         kind_or_none = _BY_TYPE.get(msgtype)

@@ -55,12 +55,14 @@ from framechain.timeline import (
     CameraTable,
     ChainConfig,
     DepthFrameTable,
+    ImageFrameTable,
     JointStateTable,
     ObservationTable,
     Timeline,
     TransformTable,
 )
 from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.timeline.tables import VIDEO_ENCODING
 
 #: ``Timeline.metadata["format"]`` of a LeRobot episode.
 FORMAT = "lerobot"
@@ -129,6 +131,10 @@ def open_dataset(
         _depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
     ])
     joint_states = _joint_states(cfg, q, state_ns, source_name)
+    videos = ImageFrameTable.concat([
+        _video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
+        if cam.video_key is not None and cam.video_key in frames.episode.video_files
+    ])
 
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
@@ -168,7 +174,7 @@ def open_dataset(
         "notes": list(reader.notes),
     }
     return Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                    joint_states=joint_states, depth_frames=depth, metadata=metadata)
+                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
 
 
 def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArray:
@@ -379,6 +385,35 @@ def _depth_frames(
     return DepthFrameTable(
         frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, w),
         height=np.full(n, h), encoding=np.full(n, encoding), source=np.full(n, cam.depth.feature), loader=load,
+    )
+
+
+#: Video references are nudged this much later than the frame's time: float32 timestamps fall a few ns
+#: before the frame's presentation time, and a viewer shows the frame at or before the reference
+#: (LeRobot itself accepts frames within 100 us).
+VIDEO_REFERENCE_NUDGE_NS = 50_000
+
+
+def _video_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray
+) -> ImageFrameTable:
+    """One row per frame of the camera's video: the mp4 and the frame's time in it (not decoded).
+
+    The time in the file is ``from_timestamp + timestamp`` (v3.0 concatenates episodes in one file;
+    v2.1 has one file per episode and from_timestamp 0).
+    """
+    assert cam.video_key is not None
+    path = frames.episode.video_files[cam.video_key]
+    start_s = float(frames.episode.video_from_s.get(cam.video_key, 0.0))
+    in_file = np.round((start_s + frames.timestamp_s.astype(np.float64)) * 1e9).astype(np.int64)
+    n = len(frames)
+    size = cam.camera_table()
+    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
+    return ImageFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns,
+        width=np.full(n, width), height=np.full(n, height),
+        encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
+        video_time_ns=in_file + VIDEO_REFERENCE_NUDGE_NS,
     )
 
 

@@ -30,6 +30,8 @@ from framechain.adapters.decoders import (
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
 from framechain.adapters.kinds import Kind, normalize_msgtype
 from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.adapters.salvage_mcap import ChannelRecord, McapScanner, SchemaRecord
+from framechain.adapters.salvage_report import SalvageReport
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
@@ -83,6 +85,8 @@ class McapLog:
                 self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
         self._decoders: dict[int, Decoder] = {}
         self._scanned = False
+        #: What a linear scan salvaged and lost (None until one ran, or when nothing was damaged).
+        self.salvage: SalvageReport | None = None
 
     def __enter__(self) -> McapLog:
         return self
@@ -139,7 +143,8 @@ class McapLog:
         container = f"mcap ({', '.join(encodings) or 'no channels'})"
         return LogInfo(format="mcap", path=self.path, start_ns=start, end_ns=end,
                        topics=tuple(sorted(topics.values(), key=lambda t: t.name)), notes=tuple(self.notes),
-                       container=container, message_count=total)
+                       container=container, message_count=total,
+                       salvage=self.salvage.to_dict() if self.salvage is not None else None)
 
     @staticmethod
     def _msgtype(ch: _Channel) -> str:
@@ -274,72 +279,42 @@ class McapLog:
             self.notes.append(f"chunk at byte {offset}: {what}; skipped, its messages are lost (count unknown)")
 
     def _linear(self, wanted: dict[str, Kind] | None) -> Iterator[Any]:
-        """Every record in file order; stops cleanly at a cut, skips corrupt chunks."""
-        from mcap.records import Channel, Chunk, Message, Schema
-        from mcap.stream_reader import StreamReader
+        """Every message in file order, salvaging around damage (see :mod:`salvage_mcap`)."""
+        import mmap
 
-        schemas: dict[int, Any] = {}
-        self._f.seek(0)
-        reader = StreamReader(self._f, skip_magic=False, emit_chunks=True)
-        recovered = 0
+        schemas: dict[int, SchemaRecord] = {}
         counting = not self._scanned
-        records = reader.records
-        cut = False
-        while True:
-            try:
-                rec = next(records)
-            except StopIteration:
-                break
-            except Exception:
-                cut = True
-                break
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                if rec.id not in self.channels:
-                    self._add_channel(rec, schemas.get(rec.schema_id))
-            elif isinstance(rec, Chunk):
-                offset = self._f.tell()
-                try:
-                    inner = _chunk_records(rec, keep_all=True)
-                except Exception as err:
-                    self._note_bad_chunk(offset, err, None)
-                    continue
-                for r in inner:
-                    if isinstance(r, Schema):
-                        schemas[r.id] = r
-                    elif isinstance(r, Channel):
-                        if r.id not in self.channels:
-                            self._add_channel(r, schemas.get(r.schema_id))
-                    elif isinstance(r, Message):
-                        recovered += 1
-                        if counting:
-                            self._count(r)
-                        if wanted is None:
-                            continue
-                        ch = self.channels.get(r.channel_id)
+        size = self.path.stat().st_size
+        if size <= len(MCAP_MAGIC):
+            buf: mmap.mmap | bytes = b""
+        else:
+            buf = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)
+        scanner = McapScanner(buf, lambda cid: self.channels[cid].topic if cid in self.channels else None)
+        try:
+            for rec in scanner.records():
+                if isinstance(rec, SchemaRecord):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, ChannelRecord):
+                    if rec.id not in self.channels:
+                        self._add_channel(rec, schemas.get(rec.schema_id))
+                else:
+                    if counting:
+                        self._count(rec)
+                    if wanted is not None:
+                        ch = self.channels.get(rec.channel_id)
                         if ch is not None and ch.topic in wanted:
-                            yield r
-            elif isinstance(rec, Message):
-                recovered += 1
-                if counting:
-                    self._count(rec)
-                if wanted is not None:
-                    ch = self.channels.get(rec.channel_id)
-                    if ch is not None and ch.topic in wanted:
-                        yield rec
+                            yield rec
+        finally:
+            if isinstance(buf, mmap.mmap):
+                buf.close()
         if counting:
             self._scanned = True
-            if self.truncated and cut:
-                self.notes.append(
-                    f"the file is truncated (no footer or summary; the recording was cut short): recovered "
-                    f"{recovered} complete message{'s' if recovered != 1 else ''} before the cut by a linear scan"
-                )
-            elif self.truncated:
-                self.notes.append(
-                    f"the file has no footer or summary: read {recovered} message{'s' if recovered != 1 else ''} "
-                    "by a linear scan"
-                )
+            report = scanner.report
+            if self.truncated or report.damaged:
+                report.reason = ("the file has no usable footer or summary" if self.truncated
+                                 else "the file has no chunk index")
+                self.salvage = report
+                self.notes.extend(n for n in report.notes() if n not in self.notes)
 
     def _count(self, msg: Any) -> None:
         cid = msg.channel_id

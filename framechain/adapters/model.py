@@ -45,6 +45,8 @@ class LogInfo:
     notes: tuple[str, ...] = ()
     container: str = ""  # e.g. "mcap (ros2)", "rosbag2 (sqlite3, zstd per file)"
     message_count: int = 0
+    #: What a salvage read of a damaged log recovered and lost (messages per topic, bytes skipped).
+    salvage: dict[str, Any] | None = None
 
     @property
     def duration_s(self) -> float:
@@ -59,6 +61,7 @@ class LogInfo:
         return LogInfo(
             format=self.format, path=self.path, start_ns=self.start_ns, end_ns=self.end_ns, topics=self.topics,
             notes=tuple(merged), container=self.container, message_count=self.message_count,
+            salvage=self.salvage,
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -67,6 +70,7 @@ class LogInfo:
             "start_ns": self.start_ns, "end_ns": self.end_ns, "duration_s": self.duration_s,
             "message_count": self.message_count, "topics": [t.to_dict() for t in self.topics],
             "notes": list(self.notes),
+            **({"salvage": self.salvage} if self.salvage is not None else {}),
         }
 
 

@@ -37,6 +37,7 @@ import numpy.typing as npt
 
 from framechain.timeline import FramechainError
 from framechain.timeline.arrays import FloatArray
+from framechain.timeline.quaternion import QuatLike, VecLike, compose, homogeneous, quat_from_matrix, quat_multiply
 
 #: Frames per block in :meth:`RobotModel.fk_path`.
 FK_BLOCK = 8192
@@ -111,8 +112,8 @@ class _Step:
     d: tuple[float, float, float]  # prismatic: R0 @ axis, the direction of travel in the parent
 
 
-Quat = tuple["FloatArray | float", "FloatArray | float", "FloatArray | float", "FloatArray | float"]
-Vec = tuple["FloatArray | float", "FloatArray | float", "FloatArray | float"]
+Quat = QuatLike
+Vec = VecLike
 
 
 class RobotModel:
@@ -337,7 +338,7 @@ class RobotModel:
         out: dict[str, FloatArray] = {}
         for name in names:
             quat, trans = _local(self._steps[self._joint(name).name], pos.get(name))
-            out[name] = _homogeneous(quat, trans)
+            out[name] = homogeneous(quat, trans)
         return out
 
     def link_poses(
@@ -363,7 +364,7 @@ class RobotModel:
         out: dict[str, FloatArray] = {}
         for link in wanted:
             quat, trans = pose(link)
-            out[link] = np.broadcast_to(_homogeneous(quat, trans), (n, 4, 4)).copy()
+            out[link] = np.broadcast_to(homogeneous(quat, trans), (n, 4, 4)).copy()
         return out
 
     def fk(
@@ -380,7 +381,7 @@ class RobotModel:
             for joint in path:
                 theta = pos.get(joint.name)
                 acc = _compose(acc, _local(self._steps[joint.name], None if theta is None else theta[lo:hi]))
-            out[lo:hi] = _homogeneous(*acc, n=hi - lo)
+            out[lo:hi] = homogeneous(*acc, n=hi - lo)
         return out
 
     def fk_path(self, q: npt.ArrayLike, path: Sequence[Joint]) -> tuple[FloatArray, FloatArray]:
@@ -407,9 +408,10 @@ class RobotModel:
 
 def _step(joint: Joint) -> _Step:
     R0 = joint.origin[:3, :3]
-    q0 = _quat_from_matrix(R0)
+    x, y, z, w = (float(c) for c in quat_from_matrix(R0))
+    q0 = (x, y, z, w)
     a = joint.axis
-    qa = _qmul(q0, (float(a[0]), float(a[1]), float(a[2]), 0.0))
+    qa = quat_multiply(q0, (float(a[0]), float(a[1]), float(a[2]), 0.0))
     d = R0 @ a
     t0 = joint.origin[:3, 3]
     return _Step(
@@ -418,13 +420,6 @@ def _step(joint: Joint) -> _Step:
         else (0.0, 0.0, 0.0, 0.0),
         (float(d[0]), float(d[1]), float(d[2])) if joint.type is JointType.PRISMATIC else (0.0, 0.0, 0.0),
     )
-
-
-def _quat_from_matrix(R: FloatArray) -> tuple[float, float, float, float]:
-    from scipy.spatial.transform import Rotation
-
-    x, y, z, w = Rotation.from_matrix(R).as_quat()
-    return float(x), float(y), float(z), float(w)
 
 
 def _local(step: _Step, theta: FloatArray | None) -> tuple[Quat, Vec]:
@@ -441,59 +436,19 @@ def _local(step: _Step, theta: FloatArray | None) -> tuple[Quat, Vec]:
     return (c * q0[0] + s * qa[0], c * q0[1] + s * qa[1], c * q0[2] + s * qa[2], c * q0[3] + s * qa[3]), step.t0
 
 
-def _qmul(a: Quat, b: Quat) -> Quat:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    )
-
-
-def _rotate(q: Quat, v: Vec) -> Vec:
-    """``R(q) v`` for a unit quaternion: ``v + w t + q_v x t`` with ``t = 2 q_v x v``."""
-    x, y, z, w = q
-    vx, vy, vz = v
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx))
-
-
 _IDENTITY_Q: Quat = (0.0, 0.0, 0.0, 1.0)
 _ZERO_T: Vec = (0.0, 0.0, 0.0)
 
 
 def _compose(parent: tuple[Quat, Vec], child: tuple[Quat, Vec]) -> tuple[Quat, Vec]:
-    """``T_a_c = T_a_b @ T_b_c`` on structure-of-arrays poses."""
+    """``T_a_c = T_a_b @ T_b_c`` on (quat, translation) component poses; the root passes through."""
     qp, tp = parent
     qc, tc = child
     if qp is _IDENTITY_Q and tp is _ZERO_T:  # the root: nothing to compose
         return child
-    r = _rotate(qp, tc)
-    return _qmul(qp, qc), (tp[0] + r[0], tp[1] + r[1], tp[2] + r[2])
+    t, q = compose(tp, qp, tc, qc)
+    return q, t
 
 
-def _stack(parts: tuple[FloatArray | float, ...], n: int) -> FloatArray:
+def _stack(parts: QuatLike | VecLike, n: int) -> FloatArray:
     return np.stack([np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in parts], axis=1)
-
-
-def _homogeneous(quat: Quat, trans: Vec, *, n: int | None = None) -> FloatArray:
-    n = max(np.size(c) for c in (*quat, *trans)) if n is None else n
-    x, y, z, w = (np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in quat)
-    out = np.zeros((n, 4, 4))
-    out[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[:, 0, 1] = 2.0 * (x * y - z * w)
-    out[:, 0, 2] = 2.0 * (x * z + y * w)
-    out[:, 1, 0] = 2.0 * (x * y + z * w)
-    out[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[:, 1, 2] = 2.0 * (y * z - x * w)
-    out[:, 2, 0] = 2.0 * (x * z - y * w)
-    out[:, 2, 1] = 2.0 * (y * z + x * w)
-    out[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    for i in range(3):
-        out[:, i, 3] = trans[i]
-    out[:, 3, 3] = 1.0
-    return out

@@ -254,6 +254,12 @@ class RobotConfig:
                 raise RobotConfigError(self.source, f"hold.{name}: not a moving, non-mimic URDF joint")
         driven = {m.joint for m in self.joints} | set(self.hold)
         for cam in self.cameras.values():
+            # A camera named "wrist" on an SO-101 would add a second parent to the URDF's wrist_link.
+            frames = [cam.optical_frame] if cam.mount.optical else [cam.link_frame, cam.optical_frame]
+            taken = [f for f in frames if model.has_link(f) or f == self.world_frame]
+            if taken:
+                raise RobotConfigError(self.source, f"camera {cam.name!r}: its frame {taken[0]!r} is already a link "
+                                       f"of the URDF; give the camera another name (e.g. {cam.name}_cam)")
             parent = cam.mount.parent
             if parent == self.world_frame:
                 continue

@@ -15,6 +15,9 @@ from framechain.adapters.decoders import Decoder, ros_decoder
 from framechain.adapters.errors import AdapterError, CorruptLogError, EmptyLogError, SchemaError
 from framechain.adapters.kinds import Kind
 from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.adapters.salvage_report import SalvageReport
+from framechain.adapters.salvage_rosbag1 import Rosbag1Salvage
+from framechain.adapters.salvage_rosbag2 import Rosbag2Salvage
 
 ProgressFn = Callable[[int], None]
 
@@ -34,16 +37,18 @@ def _explain(path: Path, err: Exception) -> AdapterError:
     text = " ".join(str(a) for a in err.args) or type(err).__name__
     text = re.sub(r"""\((['"])(.*?)\1,\)""", r"\2", text)  # rosbags formats a nested error's args tuple
     low = text.lower()
-    if "index" in low and ("not indexed" in low or "reindex" in low or "index" in low):
-        return CorruptLogError(
-            path, f"the ROS 1 bag has no index (the recording was not closed cleanly): {text}; "
-            "run `rosbag reindex` on it and retry",
-        )
     if "metadata" in low:
         return CorruptLogError(path, f"the ROS 2 bag's metadata.yaml cannot be used: {text}")
     if "hash mismatch" in low or ("type" in low and "definition" in low):
         return SchemaError(path, f"message definitions in the bag are inconsistent: {text}")
     return CorruptLogError(path, f"cannot be read as a bag: {text}")
+
+
+def _sqlite_storage(path: Path) -> bool:
+    """A ROS 2 bag stored in sqlite3 (a .db3 file, or a directory holding .db3 files and no .mcap)."""
+    if path.is_dir():
+        return any(path.glob("*.db3")) and not any(path.glob("*.mcap"))
+    return path.suffix == ".db3"
 
 
 class RosbagsLog:
@@ -55,14 +60,24 @@ class RosbagsLog:
         self.path = path
         self.ros1 = path.suffix == ".bag"
         self.notes: list[str] = []
+        #: Set when a ROS 1 bag's index is missing or damaged: the bag is read by a linear scan.
+        self.salvaged: Rosbag1Salvage | Rosbag2Salvage | None = None
+        self._decoders: dict[str, Decoder] = {}
         try:
             self.reader = AnyReader([path], default_typestore=_default_typestore(self.ros1))
             self.reader.open()
         except FileNotFoundError as err:
             raise AdapterError(path, f"not found ({err})") from err
         except Exception as err:
-            raise _explain(path, err) from err
-        self._decoders: dict[str, Decoder] = {}
+            self.salvaged = self._salvage(err)
+            self.notes = self.salvaged.notes
+            return
+        if not self.ros1 and _sqlite_storage(path) and self._container().endswith("zstd per message)"):
+            # One message that fails to decompress would end rosbags' read: read row by row instead.
+            store = self.reader.typestore  # closing the reader empties it
+            self.reader.close()
+            self.salvaged = Rosbag2Salvage(path, None, store)
+            self.notes = self.salvaged.notes
 
     def __enter__(self) -> RosbagsLog:
         return self
@@ -70,12 +85,43 @@ class RosbagsLog:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _salvage(self, err: Exception, why: str = "") -> Rosbag1Salvage | Rosbag2Salvage:
+        """A reader that salvages what rosbags could not read (or the one-line error saying why not)."""
+        path = self.path
+        explained = _explain(path, err)
+        reason = explained.what.removeprefix("cannot be read as a bag: ")
+        try:
+            if self.ros1 and path.is_file():
+                # A recorder killed or a disk filled before the index was written: scan the records.
+                low = reason.lower()
+                why = why or ("the bag has no index (the recording was not closed cleanly)"
+                              if "not indexed" in low or "reindex" in low
+                              else f"the bag's index cannot be used ({reason})")
+                return Rosbag1Salvage(path, why, _default_typestore(ros1=True))
+            if not self.ros1 and _sqlite_storage(path):
+                return Rosbag2Salvage(path, why or f"rosbags cannot open the bag ({reason})",
+                                      _default_typestore(ros1=False))
+        except AdapterError:
+            raise
+        except Exception as salvage_err:  # damage the salvage did not foresee: still one line, never a traceback
+            raise CorruptLogError(path, f"{reason}; a salvage read failed too ({type(salvage_err).__name__}: "
+                                  f"{salvage_err})") from salvage_err
+        raise explained from err
+
+    @property
+    def salvage(self) -> SalvageReport | None:
+        return self.salvaged.salvage if self.salvaged is not None else None
+
     def close(self) -> None:
-        if self.reader.stack is not None:
+        if self.salvaged is not None:
+            self.salvaged.close()
+        if getattr(getattr(self, "reader", None), "stack", None) is not None:
             self.reader.close()
 
     # -- what the bag holds ------------------------------------------------------------------------
     def info(self) -> LogInfo:
+        if self.salvaged is not None:
+            return self.salvaged.info()
         r = self.reader
         counts: Counter[str] = Counter()
         types: dict[str, str] = {}
@@ -120,6 +166,9 @@ class RosbagsLog:
         return self._decoders[msgtype]
 
     def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
+        if self.salvaged is not None:
+            self.salvaged.read(selected, col, progress)
+            return
         conns = [c for c in self.reader.connections if c.topic in selected]
         if not conns:
             return
@@ -134,11 +183,13 @@ class RosbagsLog:
         failures: Counter[str] = Counter()
         first_error: dict[str, str] = {}
         done = 0
+        delivered: Counter[tuple[str, int]] = Counter()
         try:
             for conn, t, raw in self.reader.messages(connections=conns):
                 entry = handlers.get(conn.id)
                 if entry is None:
                     continue
+                delivered[(conn.topic, t)] += 1
                 try:
                     entry[1](conn.topic, t, entry[0](raw))
                 except Exception as err:  # one undecodable message must not end the read
@@ -150,15 +201,29 @@ class RosbagsLog:
         except Exception as err:
             if isinstance(err, AdapterError):
                 raise
-            col.notes.append(f"reading stopped early ({_explain(self.path, err).what}); the data before it is kept")
+            self._read_past_damage(err, selected, col, delivered)
         for topic, n in failures.items():
             col.notes.append(
                 f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
                 f"({first_error[topic]}); skipped"
             )
 
+    def _read_past_damage(self, err: Exception, selected: dict[str, Kind], col: Collector,
+                          delivered: Counter[tuple[str, int]]) -> None:
+        """rosbags stopped at damage inside the bag: a salvage read gives back the messages after it."""
+        what = _explain(self.path, err).what
+        try:
+            self.salvaged = self._salvage(err, f"reading stopped at damage ({what})")
+        except AdapterError:
+            col.notes.append(f"reading stopped early ({what}); the data before it is kept")
+            return
+        self.notes.extend(n for n in self.salvaged.notes if n not in self.notes)
+        self.salvaged.read(selected, col, None, skip=delivered)
+
     # -- lazy fetch ---------------------------------------------------------------------------------
     def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        if self.salvaged is not None:
+            return self.salvaged.fetch(topic, log_time_ns, ordinal)
         conns = [c for c in self.reader.connections if c.topic == topic]
         seen = 0
         for conn, t, raw in self.reader.messages(connections=conns, start=log_time_ns, stop=log_time_ns + 1):

@@ -40,6 +40,7 @@ from framechain.timeline import ChainConfig, Timeline
 CONTAINERS = ("mcap-ros2", "mcap-ros1", "rosbag1", "rosbag2-sqlite", "rosbag2-mcap")
 DEFAULT_TOPICS = {
     "camera_info": "/camera/camera_info", "detections": "/detections", "depth": "/camera/depth/image_raw",
+    "image": "/camera/color/image_raw",
 }
 NS = 1_000_000_000
 
@@ -47,7 +48,7 @@ NS = 1_000_000_000
 def canonical_order(timeline: Timeline) -> Timeline:
     """Every table in the order :func:`open_log` returns rows: log time, then topic, then row order."""
     changes: dict[str, Any] = {}
-    for name in ("transforms", "cameras", "observations", "joint_states", "points", "depth_frames"):
+    for name in ("transforms", "cameras", "observations", "joint_states", "points", "depth_frames", "image_frames"):
         table: Any = getattr(timeline, name)
         changes[name] = table.take(np.lexsort((table.source, table.log_time_ns))) if len(table) else table
     return timeline.replace(**changes)
@@ -170,6 +171,20 @@ class _Builder:
             step=step, data=np.frombuffer(data.tobytes(), dtype=np.uint8),
         )
 
+    def camera_image(self, frame: str, stamp: int, w: int, h: int, encoding: str, data: bytes) -> Any:
+        """A raw image (packed rows, little-endian) as sensor_msgs/Image, JPEG/PNG as CompressedImage."""
+        from framechain.timeline.tables import RAW_IMAGE_ENCODINGS
+
+        payload = np.frombuffer(data, dtype=np.uint8)
+        if encoding in RAW_IMAGE_ENCODINGS:
+            channels, dtype = RAW_IMAGE_ENCODINGS[encoding]
+            return self.T["sensor_msgs/msg/Image"](
+                header=self.header(stamp, frame), height=h, width=w, encoding=encoding, is_bigendian=0,
+                step=w * channels * np.dtype(dtype).itemsize, data=payload,
+            )
+        return self.T["sensor_msgs/msg/CompressedImage"](header=self.header(stamp, frame), format=encoding,
+                                                          data=payload)
+
     def point_stamped(self, frame: str, stamp: int, xyz: npt.NDArray[np.float64]) -> Any:
         return self.T["geometry_msgs/msg/PointStamped"](header=self.header(stamp, frame), point=self.point(*xyz))
 
@@ -221,6 +236,13 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
         image = np.asarray(depth.load(i), dtype=np.float32)
         out.append(_Out(int(depth.log_time_ns[i]), depth_topic, "sensor_msgs/msg/Image",
                         b.image(str(depth.frame[i]), int(depth.stamp_ns[i]), image, depth_encoding)))
+    images = timeline.image_frames
+    image_topic = chain.topics.image or DEFAULT_TOPICS["image"]
+    for i in np.flatnonzero(images.encoding != "video").tolist():
+        kind = "sensor_msgs/msg/CompressedImage" if images.encoding[i] in ("jpeg", "png") else "sensor_msgs/msg/Image"
+        out.append(_Out(int(images.log_time_ns[i]), image_topic, kind,
+                        b.camera_image(str(images.frame[i]), int(images.stamp_ns[i]), int(images.width[i]),
+                                       int(images.height[i]), str(images.encoding[i]), images.load(i))))
     pts = timeline.points
     if len(pts):
         by_role = {role: topic for topic, role in chain.evidence_topics().items()}

@@ -8,7 +8,8 @@ best evidence present (DESIGN.md "Evidence") and explains the error with the fau
 2. a logged target: fault models are fitted to the raw inputs until they reproduce the target;
 3. reference truth: per-hop corrections that remove the error against the reference are fitted,
    finding faults in the recorded data itself;
-4. a static target alone: corrections that minimise the spread of its world points.
+4. static targets alone: corrections that minimise the spread of each label's world points over
+   short windows (or, with no depth, how far each label's rays pass from one point): static.py.
 
 Models are chosen by forward selection on BIC (the simplest explanation wins), combined faults
 are fitted jointly, shares of the error are Shapley values over the faults found, confidence is
@@ -26,14 +27,32 @@ from typing import Any, Literal
 
 import numpy as np
 
+from framechain.analysis.alignment import AlignedEvidence, align_evidence
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
-from framechain.analysis.faults import FaultModel, Mode, classify_rotation, models_for, rotation_starts
+from framechain.analysis.estimates import Estimate, estimate_scalars, estimate_to_json, format_estimate
+from framechain.analysis.faults import (
+    LATENCY_BOUND_S,
+    FaultModel,
+    Mode,
+    classify_rotation,
+    models_for,
+    rotation_starts,
+)
 from framechain.analysis.fit import Fit, fit_models, perturbation_of, posterior_weights
 from framechain.analysis.fixes import fix_for
+from framechain.analysis.frame_swaps import swap_for_rotation
+from framechain.analysis.static import (
+    RayObjective,
+    StaticObjective,
+    is_bearing_only,
+    static_objective,
+    with_unit_depth,
+)
 from framechain.replay import (
     REPLAYED,
     CameraModel,
     HopName,
+    RejectReason,
     ReplayResult,
     TransformBuffer,
     camera_rows_for,
@@ -41,8 +60,7 @@ from framechain.replay import (
     transform_points,
 )
 from framechain.replay.catalogue import Fault
-from framechain.replay.stamps import nearest
-from framechain.timeline import ChainConfig, FramechainError, PointRole, PointTable, Timeline
+from framechain.timeline import ChainConfig, FramechainError, PointRole, Timeline
 from framechain.timeline.arrays import FloatArray, IntArray
 
 Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
@@ -51,15 +69,10 @@ Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
 MIN_BIC_GAIN = 10.0
 #: A hop is divergent when its median departure exceeds this (m).
 HOP_DIVERGENCE_M = 2e-3
-#: Points stamped with the observation's stamp match within this (ns).
-POINT_MATCH_NS = 1_000_000
-#: A reference stream sample matches an observation within this (ns).
-REFERENCE_MATCH_NS = 50_000_000
 MAX_FAULTS = 3
 #: A median error above this with no finding is called unexplained, not noise (m).
 UNEXPLAINED_M = 0.02
 SCHEMA = "framechain/attribution@1"
-ESTIMATE_KEYS = ("offset_s", "angle_deg", "factor", "scale")
 
 
 class AnalysisError(FramechainError):
@@ -72,7 +85,7 @@ class Finding:
 
     fault: Fault
     hop: HopName
-    estimate: dict[str, Any]
+    estimate: Estimate
     interval: dict[str, list[float]]
     share: float
     error_m: float
@@ -85,7 +98,7 @@ class Finding:
         return {
             "fault": self.fault.value,
             "hop": self.hop.value,
-            "estimate": self.estimate,
+            "estimate": estimate_to_json(self.estimate),
             "interval": self.interval,
             "share": round(self.share, 4),
             "error_m": round(self.error_m, 6),
@@ -111,6 +124,8 @@ class Attribution:
     corrected_world: FloatArray  # (N, 3) world points with the findings applied
     findings: tuple[Finding, ...]
     seed: int
+    #: the logged evidence aligned to every observation of ``replay`` (all rows, in the chain's frames)
+    aligned: AlignedEvidence
     notes: tuple[str, ...] = ()
     #: where the error is measured: the world point, or the deepest hop the robot logged
     stage: str = "world"
@@ -172,7 +187,7 @@ class Attribution:
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
         return (
-            f"{top.fault.value} at {top.hop.value} ({_estimate_text(top.estimate)}) explains "
+            f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}) explains "
             f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}."
         )
 
@@ -248,38 +263,7 @@ class _RayWeighting:
         return replace(self, rays_world=self.rays_world[index])
 
 
-@dataclass(frozen=True)
-class _SpreadObjective:
-    """Residual of each world point from the centroid of all of them (a static target).
-
-    The spread is measured relative to the points' range from the camera (rescaled to metres at
-    the recorded range ``range_m``): shrinking every depth towards the camera shrinks any spread,
-    and without that normalisation a seen-from-one-place target "collapses" for a depth or
-    focal scale that explains nothing.
-    """
-
-    range_m: float = 1.0
-    weighting: _RayWeighting | None = None
-
-    def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
-        p_cam, _, p = evaluate(inputs, pert)
-        out: FloatArray = p - np.nanmean(p, axis=0)
-        scale = self.range_m / max(_range(p_cam), 1e-9)
-        out = out * scale
-        return out if self.weighting is None else self.weighting.apply(out)
-
-    def take(self, index: IntArray) -> _SpreadObjective:
-        return self if self.weighting is None else replace(self, weighting=self.weighting.take(index))
-
-
-_Objective = _PointObjective | _SpreadObjective
-
-
-def _range(p_cam: FloatArray) -> float:
-    """Median distance of the points from the camera (m)."""
-    d = np.linalg.norm(p_cam, axis=1)
-    d = d[np.isfinite(d)]
-    return float(np.median(d)) if d.size else 0.0
+_Objective = _PointObjective | StaticObjective
 
 
 @dataclass(frozen=True)
@@ -304,7 +288,22 @@ def attribute(
     say = progress or (lambda _msg: None)
     buffer = TransformBuffer.from_timeline(timeline)
     say("replaying observations")
-    result = replay(timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s)
+    # A static target with no depth source at all is bearing-only: its observations are replayed as
+    # rays (unit depth) and their spread measured as ray intersections (static.RayObjective).
+    bearing_only = (chain.evidence.static_target and not chain.evidence_topics()
+                    and chain.evidence.reference_point is None and is_bearing_only(timeline, chain.frames.camera))
+    static_notes: list[str] = []
+    if bearing_only:
+        timeline, n_rays = with_unit_depth(timeline, chain.frames.camera)
+        static_notes.append(f"bearing only: no depth for {chain.frames.camera} (none in the detections, no depth "
+                            f"frames); its {n_rays} observations are replayed as rays at unit depth and the static "
+                            "targets' spread measured as how far their rays pass from one point")
+    result = replay(timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s,
+                    ignore_labels=chain.evidence.ignore_labels)
+    ignored = int((result.status == RejectReason.IGNORED_LABEL.value).sum())
+    if ignored:
+        static_notes.append(f"ignore_labels: {ignored} observations of labels {list(chain.evidence.ignore_labels)} "
+                            "rejected as ignored_label (declared moving)")
     if len(result) == 0:
         where = f" on {chain.topics.detections}" if chain.topics.detections else ""
         raise AnalysisError(f"the log has no detections{where} to replay (nothing to attribute); check the chain's "
@@ -317,17 +316,17 @@ def attribute(
         )
     camera = _camera_model(timeline, chain, result)
     inputs = ChainInputs.from_replay(result, buffer, camera)
-    points = timeline.points
+    aligned = align_evidence(timeline.points, result.observations, chain.frames, buffer)
+    evidence = aligned.take(np.flatnonzero(result.replayed))  # the rows of ``inputs``
     matched = {
-        role: _match_points(points.with_role(role), inputs.stamp_ns, POINT_MATCH_NS)
+        role: evidence.points(role)
         for role in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD, PointRole.TARGET)
     }
-    reference = _reference(points.with_role(PointRole.REFERENCE), inputs.stamp_ns, chain)
-    matching_notes = _matching_notes(points, matched, inputs.stamp_ns)
+    reference = _reference(evidence.points(PointRole.REFERENCE), chain)
     source = dict(timeline.metadata.get("source", {"path": "", "format": "unknown"}))
     rng = np.random.default_rng(seed)
     recomputed_world = evaluate(inputs, Perturbation())[2]
-    notes: list[str] = [*buffer.warnings, *matching_notes]
+    notes: list[str] = [*buffer.warnings, *aligned.notes, *static_notes]
 
     stage = "world"
     hops_present = [
@@ -359,12 +358,20 @@ def attribute(
         selections = [_reweighted(_select(models_for(inputs), world_objective, inputs, "correction", say))]
     elif chain.evidence.static_target:
         metric = "static_spread"
-        say("minimising the spread of the static target")
-        world_objective = _SpreadObjective(range_m=_range(evaluate(inputs, Perturbation())[0]))
-        evidence_world = np.tile(np.nanmean(recomputed_world, axis=0), (len(inputs), 1))
-        selections = [
-            _reweighted(_select(models_for(inputs, blind=True), world_objective, inputs, "correction", say))
-        ]
+        say("minimising the spread of the static targets")
+        labels = result.observations.label[result.replayed]
+        static, notes_used = static_objective(inputs, labels, window_s=chain.evidence.static_window_s,
+                                              bearing_only=bearing_only, latency_bound_s=LATENCY_BOUND_S)
+        world_objective = static
+        notes.extend(notes_used)
+        evidence_world = static.points(inputs, Perturbation())
+        # Rays carry no depth: a depth scale cannot be seen (and residuals are across rays already).
+        candidates = [m for m in models_for(inputs, blind=True) if not (bearing_only and m.fault == Fault.DEPTH_SCALE)]
+        selected = _select(candidates, world_objective, inputs, "correction", say)
+        selections = [_reweighted(selected)]
+        if isinstance(static, RayObjective):  # errors against where the corrected rays meet, in metres there
+            world_objective = static.anchored(inputs, selected.fit.perturbation())
+            evidence_world = world_objective.points(inputs, Perturbation())
     else:
         metric = "none"
         nan = np.full(len(inputs), np.nan)
@@ -381,6 +388,7 @@ def attribute(
             corrected_world=recomputed_world,
             findings=(),
             seed=seed,
+            aligned=aligned,
             notes=(*notes, "no evidence: log hop points, a target, a reference or declare a static target"),
         )
 
@@ -434,6 +442,7 @@ def attribute(
         corrected_world=corrected_world,
         findings=tuple(findings),
         seed=seed,
+        aligned=aligned,
         notes=tuple(notes),
         stage=stage,
     )
@@ -449,65 +458,12 @@ def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) 
     return CameraModel.from_table(timeline.cameras, int(values[np.argmax(counts)]))
 
 
-def _match_points(points: PointTable, stamps: IntArray, tolerance_ns: int) -> FloatArray:
-    """Points matched to observations by stamp (nearest within the tolerance); NaN where none.
-
-    Several observations at one stamp (several detections in one image) take the points of that
-    stamp in order: the k-th detection of an image the k-th point logged for it.
-    """
-    out = np.full((stamps.size, 3), np.nan)
-    if len(points) == 0 or stamps.size == 0:
-        return out
-    order = np.lexsort((points.log_time_ns, points.stamp_ns))
-    point_stamps = points.stamp_ns[order]
-    group_stamps, group_start, group_size = np.unique(point_stamps, return_index=True, return_counts=True)
-    group = nearest(group_stamps, stamps)
-    rank = _rank_within_equal(stamps)
-    ok = (np.abs(group_stamps[group] - stamps) <= tolerance_ns) & (rank < group_size[group])
-    out[ok] = points.xyz[order[group_start[group[ok]] + rank[ok]]]
-    return out
-
-
-def _rank_within_equal(values: IntArray) -> IntArray:
-    """For each element, how many earlier elements have the same value (0 for the first)."""
-    order = np.argsort(values, kind="stable")
-    sorted_values = values[order]
-    starts = np.flatnonzero(np.r_[True, sorted_values[1:] != sorted_values[:-1]])
-    run = np.repeat(starts, np.diff(np.r_[starts, sorted_values.size]))
-    rank = np.empty_like(values)
-    rank[order] = np.arange(values.size) - run
-    return rank
-
-
-def _matching_notes(points: PointTable, matched: Mapping[PointRole, FloatArray], stamps: IntArray) -> list[str]:
-    """Say when logged evidence did not line up with the observations (it is then not used)."""
-    notes = []
-    for role, values in matched.items():
-        table = points.with_role(role)
-        if len(table) == 0:
-            continue
-        used = int(np.isfinite(values).all(axis=1).sum())
-        if used < min(len(table), stamps.size):
-            topics = ", ".join(sorted(set(table.source.tolist()) - {""})) or role.value
-            gaps = np.abs(table.stamp_ns[:, None] - stamps[None, : min(stamps.size, 2000)]).min(axis=1)
-            notes.append(
-                f"{role.value} points on {topics}: {used} of {stamps.size} observations matched a point stamped within "
-                f"{POINT_MATCH_NS / 1e6:g} ms of the detection's stamp (median offset of the points "
-                f"{np.median(gaps) / 1e6:.1f} ms); log them with the detection's header.stamp"
-            )
-    if np.unique(stamps).size < stamps.size:
-        notes.append(f"{stamps.size - np.unique(stamps).size} observations share a stamp with another; logged points "
-                     "were matched to them in order within each stamp")
-    return notes
-
-
-def _reference(points: PointTable, stamps: IntArray, chain: ChainConfig) -> FloatArray | None:
-    if len(points):
-        matched = _match_points(points, stamps, REFERENCE_MATCH_NS)
-        if np.isfinite(matched).all(axis=1).any():
-            return matched
+def _reference(matched: FloatArray, chain: ChainConfig) -> FloatArray | None:
+    """The logged reference where any matched, else the declared reference point, else None."""
+    if np.isfinite(matched).all(axis=1).any():
+        return matched
     if chain.evidence.reference_point is not None:
-        return np.tile(np.asarray(chain.evidence.reference_point, dtype=float), (stamps.size, 1))
+        return np.tile(np.asarray(chain.evidence.reference_point, dtype=float), (matched.shape[0], 1))
     return None
 
 
@@ -591,6 +547,7 @@ def _select(
         if not quick:
             break
         quick.sort(key=lambda item: item[0].bic)
+        quick = _prefer_edge_swaps(quick, inputs)
         if current.models:  # refit the best few jointly with what was found before
             x_prev = np.concatenate(current.params)
             joint = []
@@ -618,6 +575,25 @@ def _select(
     )
 
 
+def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs) -> list[tuple[Fit, FaultModel]]:
+    """A fitted mount rotation that equals a path edge's rotation (within noise) is that edge skipped.
+
+    When the best hypothesis is a free rotation and the frame swap whose rotation it matches fits
+    about as well (within the BIC margin a finding must clear), the swap goes first: it names the
+    frame to look up, where the rotation would name a 120 degree "calibration error".
+    """
+    if not quick or quick[0][1].fault != Fault.ROTATION_ERROR or quick[0][1].n_params == 0:
+        return quick
+    frame = swap_for_rotation(inputs, quick[0][0].params[-1])
+    if frame is None:
+        return quick
+    name = f"frame_swap[camera:{frame}]"
+    swap = next((i for i, (_fit, model) in enumerate(quick) if model.name == name), None)
+    if swap is None or quick[swap][0].bic - quick[0][0].bic > MIN_BIC_GAIN:
+        return quick
+    return [quick[swap], *(item for i, item in enumerate(quick) if i != swap)]
+
+
 def _at_bound(model: FaultModel, x: FloatArray) -> bool:
     """Whether a fitted parameter sits on a bound of its plausible range (to 0.1 %)."""
     if not model.lower or not model.plausibility_bounds:
@@ -634,6 +610,8 @@ def _reweighted(sel: _Selected) -> _Selected:
     The selection is kept; only the parameters (and their bootstrap) use the weighted residuals.
     """
     if not sel.fit.models or all(m.n_params == 0 for m in sel.fit.models):
+        return sel
+    if isinstance(sel.objective, RayObjective):  # residuals across rays only: nothing to whiten
         return sel
     inputs = sel.inputs
     residual = sel.objective(inputs, sel.fit.perturbation())
@@ -706,33 +684,16 @@ def _bootstrap(
     for _ in range(draws):
         idx = rng.integers(0, n, n)
         refit = fit_models(sel.fit.models, sel.objective.take(idx), inputs.take(idx), x_start=x_fit, grid=False)
-        est = model.estimate(refit.params[index], sel.mode, inputs)
-        for key in ESTIMATE_KEYS:
-            if key in est:
-                samples.setdefault(key, []).append(float(est[key]))
+        scalars = estimate_scalars(model.estimate(refit.params[index], sel.mode, inputs))
+        for key, value in scalars.items():
+            samples.setdefault(key, []).append(float(value))
     return {
         k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)] for k, v in samples.items()
     }
 
 
-def _estimate_text(estimate: Mapping[str, Any]) -> str:
-    parts = []
-    for key, value in estimate.items():
-        if key == "offset_s":
-            parts.append(f"{value * 1e3:+.1f} ms")
-        elif key == "angle_deg":
-            parts.append(f"{value:.2f} deg")
-        elif key in ("factor", "scale"):
-            parts.append(f"x{value:.4g}")
-        elif key in ("used", "hop"):
-            parts.append(str(value))
-        elif key == "permutation":
-            parts.append(f"axes {value}")
-    return ", ".join(parts)
-
-
 def _evidence_sentence(
-    fault: Fault, model: FaultModel, metric: Metric, estimate: Mapping[str, Any], alternative: str, mode: Mode
+    fault: Fault, model: FaultModel, metric: Metric, estimate: Estimate, alternative: str, mode: Mode
 ) -> str:
     where = {
         "logged_hops": f"the robot's logged {model.hop.value.split('_to_')[-1]} points depart from the recomputed hop",
@@ -742,5 +703,6 @@ def _evidence_sentence(
     }[metric]
     side = "recorded data" if mode == "correction" else "chain that produced the evidence"
     return (
-        f"With {fault.value} ({_estimate_text(estimate)}) in the {side}, {where}; next-best explanation: {alternative}."
+        f"With {fault.value} ({format_estimate(estimate)}) in the {side}, {where}; "
+        f"next-best explanation: {alternative}."
     )

@@ -17,7 +17,8 @@ import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
-from framechain.replay.buffer import compose_hops, invert
+from framechain.replay.buffer import compose_hops
+from framechain.replay.quaternion import invert
 from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, ChainFrames
 from framechain.timeline.arrays import FloatArray, IntArray
 
@@ -39,6 +40,11 @@ class Perturbation:
     pose_offset_s: float = 0.0  # body_to_world looked up at tau + offset
     invert_pose: bool = False  # T_wb' = inv(T_wb)
     world: str | None = None  # another world frame (odom for map)
+    #: camera_to_body looked up from this frame instead of the chain's camera frame (camera_link for
+    #: camera_color_optical_frame: the whole optical edge, rotation and translation, dropped)
+    camera_frame: str | None = None
+    #: body_to_world looked up for this frame instead of the chain's body (base_footprint for base_link)
+    body_frame: str | None = None
 
 
 @dataclass(frozen=True)
@@ -145,25 +151,31 @@ class ChainInputs:
         return find_mount(self.buffer, self.frames.body, self.frames.camera)
 
     def world_from_body(
-        self, offset_s: float, world: str | None
+        self, offset_s: float, world: str | None, body: str | None = None
     ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
-        """T_world_body at tau + offset in ``world`` (default: the chain's), and which times were usable."""
-        if offset_s == 0.0 and (world is None or world == self.frames.world):
+        """T_world_body at tau + offset in ``world`` for ``body`` (defaults: the chain's), and which
+        times were usable."""
+        same_frames = (world is None or world == self.frames.world) and (body is None or body == self.frames.body)
+        if offset_s == 0.0 and same_frames:
             return self.t_wb, self.q_wb, np.ones(len(self), dtype=bool)
         times = self.stamp_ns + round(offset_s * 1e9)
-        lookup = self.buffer.lookup(world or self.frames.world, self.frames.body, times)
+        lookup = self.buffer.lookup(world or self.frames.world, body or self.frames.body, times)
         return lookup.translation, lookup.quat_xyzw, lookup.ok
 
     def body_from_camera(
-        self, offset_s: float, invert_edge: str | None = None
+        self, offset_s: float, invert_edge: str | None = None, camera_frame: str | None = None
     ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
-        """T_body_cam at tau + offset (one edge of its path taken the wrong way round, if named).
+        """T_body_cam at tau + offset (one edge of its path taken the wrong way round, if named;
+        looked up from ``camera_frame`` instead of the chain's camera, if named).
 
         Also says which observations had a transform at that time (a shifted time can fall outside
         a moving camera's recorded span); those rows are identity and must be masked by the caller.
         """
         ok = np.ones(len(self), dtype=bool)
-        if invert_edge is not None:
+        if camera_frame is not None and camera_frame != self.frames.camera:
+            lookup = self.buffer.lookup(self.frames.body, camera_frame, self.stamp_ns + round(offset_s * 1e9))
+            t_bc, q_bc, ok = lookup.translation, lookup.quat_xyzw, lookup.ok
+        elif invert_edge is not None:
             path = self.buffer.path(self.frames.body, self.frames.camera)
             times = self.stamp_ns + round(offset_s * 1e9)
             samples = []
@@ -202,7 +214,7 @@ def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
 
 def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
     """camera_to_body under the perturbation."""
-    t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge)
+    t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge, pert.camera_frame)
     rot = Rotation.from_quat(q_bc)
     if pert.permutation is not None:
         p_cam = p_cam @ pert.permutation.T
@@ -218,7 +230,7 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
 
 def hop3(inputs: ChainInputs, pert: Perturbation, p_body: FloatArray) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
     """body_to_world under the perturbation, and which observations had a pose at the shifted time."""
-    t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world)
+    t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world, pert.body_frame)
     if pert.invert_pose:
         t_inv, q_inv = invert(t_wb.T, q_wb.T)
         t_wb, q_wb = t_inv.T, q_inv.T

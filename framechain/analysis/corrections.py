@@ -13,8 +13,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import Attribution
+from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.fixes import corrected_mount
-from framechain.replay.catalogue import Fault
 from framechain.timeline import DepthFrameTable, Timeline, TransformTable
 from framechain.timeline.arrays import FloatArray
 
@@ -33,18 +33,18 @@ def apply_corrections(timeline: Timeline, result: Attribution) -> Timeline:
     out = timeline
     for finding in result.findings:
         e = finding.estimate
-        if finding.fault in (Fault.MISSING_ROTATION, Fault.ROTATION_ERROR):
+        if isinstance(e, RotationEstimate):
             # The estimate is the faulty (recorded) mount relative to the right one: undo it.
-            rotvec = -np.deg2rad(float(e["angle_deg"])) * np.asarray(e["axis"], dtype=float)
+            rotvec = -np.deg2rad(e.angle_deg) * np.asarray(e.axis, dtype=float)
             mount = corrected_mount(result.inputs, rotvec, "correction")
             if mount is None:
                 raise NothingToCorrectError("the camera hangs from no static mount edge to correct")
             parent, child, xyz, rpy = mount
             out = _replace_static_edge(out, parent, child, xyz, Rotation.from_euler("xyz", rpy).as_quat())
-        elif finding.fault == Fault.LATENCY:
+        elif isinstance(e, LatencyEstimate):
             # The pose at tau + offset explains the detection: the camera's clock is off by the offset,
             # so everything it stamped moves (detections, depth frames, CameraInfo of that camera).
-            shift = round(float(e["offset_s"]) * 1e9)
+            shift = round(e.offset_s * 1e9)
             camera = result.config.frames.camera
             obs = out.observations
             depth = out.depth_frames
@@ -57,18 +57,18 @@ def apply_corrections(timeline: Timeline, result: Attribution) -> Timeline:
                 cameras=dataclasses.replace(cams, stamp_ns=np.where(cams.frame == camera, cams.stamp_ns + shift,
                                                                     cams.stamp_ns)),
             )
-        elif finding.fault == Fault.DEPTH_SCALE:
-            factor = float(e["factor"])
+        elif isinstance(e, ScaleEstimate) and e.name == "factor":
+            factor = e.value
             obs = out.observations
             out = out.replace(observations=dataclasses.replace(obs, depth_m=obs.depth_m / factor))
             out = out.replace(depth_frames=_scaled_depth(out.depth_frames, 1.0 / factor))
-        elif finding.fault == Fault.INTRINSICS:
-            scale = float(e["scale"])
+        elif isinstance(e, ScaleEstimate):
+            scale = e.value
             cams = out.cameras
             k = cams.K.copy()
             k[:, 0, 0] /= scale
             k[:, 1, 1] /= scale
-            if e.get("variant") == "resolution":
+            if e.variant == "resolution":
                 k[:, :2, 2] /= scale
             out = out.replace(cameras=dataclasses.replace(cams, K=k))
     return out

@@ -18,6 +18,7 @@ import pyarrow.parquet as pq
 from framechain import __version__
 from framechain.analysis.attribute import Attribution, Finding
 from framechain.analysis.chain_model import Perturbation, evaluate
+from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.fit import perturbation_of
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
@@ -117,6 +118,8 @@ def inputs_record(result: Attribution) -> dict[str, Any]:
             "distortion_model": result.inputs.camera.distortion_model,
         },
         "observations": result.counts(),
+        # What became of each logged point (matched by obs_id or stamp, or why not): see analysis.alignment.
+        "evidence_alignment": result.aligned.counts(),
         "notes": list(result.notes),
     }
 
@@ -165,27 +168,23 @@ def sensitivity(result: Attribution, finding: Finding, steps: int = 31) -> tuple
 
 def _display_size(finding: Finding) -> float:
     e = finding.estimate
-    if "offset_s" in e:
-        return abs(float(e["offset_s"])) * 1e3
-    if "angle_deg" in e:
-        return float(e["angle_deg"])
-    if "factor" in e:
-        return abs(float(e["factor"]) - 1.0) * 100
-    if "scale" in e:
-        return abs(float(e["scale"]) - 1.0) * 100
+    if isinstance(e, LatencyEstimate):
+        return abs(e.offset_s) * 1e3
+    if isinstance(e, RotationEstimate):
+        return e.angle_deg
+    if isinstance(e, ScaleEstimate):
+        return abs(e.value - 1.0) * 100
     return 1.0
 
 
 def _params_of(finding: Finding, n: int) -> FloatArray:
     """The fitted parameter vector in the model's as-run direction, from the finding's estimate."""
     e = finding.estimate
-    if "offset_s" in e:
-        return np.array([float(e["offset_s"])])
-    if "angle_deg" in e:
-        rotvec: FloatArray = np.deg2rad(float(e["angle_deg"])) * np.asarray(e["axis"], dtype=float)
+    if isinstance(e, LatencyEstimate):
+        return np.array([e.offset_s])
+    if isinstance(e, RotationEstimate):
+        rotvec: FloatArray = np.deg2rad(e.angle_deg) * np.asarray(e.axis, dtype=float)
         return rotvec
-    if "factor" in e:
-        return np.array([float(e["factor"])])
-    if "scale" in e:
-        return np.array([float(e["scale"])])
+    if isinstance(e, ScaleEstimate):
+        return np.array([e.value])
     return np.zeros(n)

@@ -13,12 +13,21 @@ from __future__ import annotations
 import itertools
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
+from framechain.analysis.estimates import (
+    Estimate,
+    FrameEstimate,
+    InvertedEstimate,
+    LatencyEstimate,
+    PermutationEstimate,
+    RotationEstimate,
+    ScaleEstimate,
+)
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
 from framechain.timeline.arrays import FloatArray
@@ -38,7 +47,7 @@ class FaultModel:
     hop: HopName
     family: str
     apply: Callable[[Perturbation, FloatArray], Perturbation]
-    estimate: Callable[[FloatArray, Mode, ChainInputs], dict[str, Any]]
+    estimate: Callable[[FloatArray, Mode, ChainInputs], Estimate]
     #: parameter start, bounds and scale; empty for a model with no parameters (a discrete choice)
     x0: tuple[float, ...] = ()
     lower: tuple[float, ...] = ()
@@ -57,6 +66,11 @@ class FaultModel:
         return len(self.x0)
 
 
+#: Time offsets searched (s): on real logs a stamp offset of half a second is not rare (a driver
+#: stamping on arrival, a clock set by hand); fit.py searches the whole range, coarse then fine.
+LATENCY_BOUND_S = 1.0
+
+
 def _latency(hop: HopName) -> FaultModel:
     camera = hop == HopName.CAMERA_TO_BODY
 
@@ -69,11 +83,11 @@ def _latency(hop: HopName) -> FaultModel:
         hop=hop,
         family=f"time:{hop.value}",
         x0=(0.0,),
-        lower=(-0.3,),
-        upper=(0.3,),
+        lower=(-LATENCY_BOUND_S,),
+        upper=(LATENCY_BOUND_S,),
         x_scale=(0.01,),
         apply=apply,
-        estimate=lambda x, mode, inputs: {"offset_s": round(float(x[0]), 6)},
+        estimate=lambda x, mode, inputs: LatencyEstimate(offset_s=round(float(x[0]), 6)),
     )
 
 
@@ -81,15 +95,16 @@ def _rotation() -> FaultModel:
     def apply(p: Perturbation, x: FloatArray) -> Perturbation:
         return replace(p, rotvec_mount=np.asarray(x, dtype=float))
 
-    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> RotationEstimate:
         # The faulty mount relative to the correct one, axis in the mount's link frame.
         _fault, faulty = rotation_verdict(x, mode, inputs)
         rotvec = np.asarray(x, dtype=float) if faulty == "as_run" else -np.asarray(x, dtype=float)
         angle = float(np.linalg.norm(rotvec))
         axis = rotvec / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
         frame = inputs.mount.link if inputs.mount is not None else inputs.frames.camera
-        return {"angle_deg": round(float(np.rad2deg(angle)), 4), "axis": [round(float(a), 4) + 0.0 for a in axis],
-                "axis_frame": frame, "faulty": "recorded data" if faulty == "recorded" else "as run"}
+        ax, ay, az = (round(float(a), 4) + 0.0 for a in axis)  # + 0.0 drops negative zeros
+        return RotationEstimate(angle_deg=round(float(np.rad2deg(angle)), 4), axis=(ax, ay, az), axis_frame=frame,
+                                faulty="recorded data" if faulty == "recorded" else "as run")
 
     return FaultModel(
         name="rotation[camera_to_body]",
@@ -122,9 +137,9 @@ def _axis_flip(perm: FloatArray) -> FaultModel:
         f"{'+' if row[np.argmax(np.abs(row))] > 0 else '-'}{'xyz'[np.argmax(np.abs(row))]}" for row in perm
     )
 
-    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> PermutationEstimate:
         used = perm if mode == "as_run" else perm.T
-        return {"permutation": used.astype(int).tolist()}
+        return PermutationEstimate(permutation=tuple((int(r[0]), int(r[1]), int(r[2])) for r in used))
 
     return FaultModel(
         name=f"axis_flip[{label}]",
@@ -149,7 +164,7 @@ def _inverted(hop: HopName) -> FaultModel:
         hop=hop,
         family="camera_rotation" if camera else f"pose_invert:{hop.value}",
         apply=apply,
-        estimate=lambda x, mode, inputs: {"hop": hop.value},
+        estimate=lambda x, mode, inputs: InvertedEstimate(hop=hop.value),
     )
 
 
@@ -161,7 +176,7 @@ def _inverted_edge(parent: str, child: str) -> FaultModel:
         hop=HopName.CAMERA_TO_BODY,
         family="camera_rotation",
         apply=lambda p, x: replace(p, invert_edge=child),
-        estimate=lambda x, mode, inputs: {"hop": HopName.CAMERA_TO_BODY.value, "edge": [parent, child]},
+        estimate=lambda x, mode, inputs: InvertedEstimate(hop=HopName.CAMERA_TO_BODY.value, edge=(parent, child)),
     )
 
 
@@ -172,9 +187,9 @@ BLIND_SCALE_BOUNDS = (0.2, 5.0)
 
 
 def _depth_scale(blind: bool = False) -> FaultModel:
-    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> ScaleEstimate:
         factor = float(x[0]) if mode == "as_run" else 1.0 / float(x[0])
-        return {"factor": round(factor, 6)}
+        return ScaleEstimate(name="factor", value=round(factor, 6))
 
     return FaultModel(
         name="depth_scale",
@@ -194,9 +209,9 @@ def _depth_scale(blind: bool = False) -> FaultModel:
 def _intrinsics(variant: Literal["resolution", "focal"], blind: bool = False) -> FaultModel:
     """K of another resolution (focal length and principal point scale) or another lens (focal only)."""
 
-    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> ScaleEstimate:
         scale = float(x[0]) if mode == "as_run" else 1.0 / float(x[0])
-        return {"scale": round(scale, 6), "variant": variant}
+        return ScaleEstimate(name="scale", value=round(scale, 6), variant=variant)
 
     def apply(p: Perturbation, x: FloatArray) -> Perturbation:
         s = float(x[0])
@@ -218,11 +233,12 @@ def _intrinsics(variant: Literal["resolution", "focal"], blind: bool = False) ->
 
 
 def _wrong_world(alternative: str, configured: str) -> FaultModel:
-    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> dict[str, Any]:
-        return {
-            "used": alternative if mode == "as_run" else configured,
-            "meant": configured if mode == "as_run" else alternative,
-        }
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> FrameEstimate:
+        return FrameEstimate(
+            used=alternative if mode == "as_run" else configured,
+            meant=configured if mode == "as_run" else alternative,
+            hop=HopName.BODY_TO_WORLD.value,
+        )
 
     return FaultModel(
         name=f"wrong_world_frame[{alternative}]",
@@ -270,6 +286,10 @@ def models_for(
         out += [_inverted_edge(h.parent, h.child) for h in camera_path.hops]
     if not blind:
         out += [_wrong_world(alt, inputs.frames.world) for alt in world_alternatives(inputs)]
+    # Imported here: the frame swaps are fault models too (they build on this module).
+    from framechain.analysis.frame_swaps import frame_swap_models
+
+    out += frame_swap_models(inputs, blind=blind)
     if hops is not None:
         out = [m for m in out if m.hop in hops]
     return out

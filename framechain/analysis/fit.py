@@ -1,32 +1,56 @@
-"""Fitting fault models to evidence: a coarse grid for time offsets, then scipy least squares.
+"""Fitting fault models to evidence: a grid for time offsets, then scipy least squares.
 
 An :class:`Objective` turns a Perturbation into residuals (N, 3) in metres against the evidence
 (logged points, a target, a reference, or the centroid of a static target). Model choice uses
 BIC with a noise floor, so that the simplest explanation wins unless a richer one is clearly
 better, and the posterior weights of the candidates give each choice a confidence.
+
+Time offsets are searched over the model's whole range (+-1 s) before any local fit: on real
+logs the error against the offset has several dips (periodic motion) and a narrow one far from
+zero is common (a stamp offset of half a second). The coarse grid runs on a subsample of the
+observations, its best few dips are refined on a fine grid over all of them, and least squares
+starts from the best.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.analysis.faults import FaultModel
-from framechain.timeline.arrays import FloatArray
+from framechain.timeline.arrays import FloatArray, IntArray
 
-#: Residuals (N, 3) of a perturbed chain against the evidence; NaN where it cannot be evaluated.
-Objective = Callable[[ChainInputs, Perturbation], FloatArray]
+
+class Objective(Protocol):
+    """Residuals (N, 3) of a perturbed chain against the evidence; NaN where it cannot be evaluated."""
+
+    def __call__(self, inputs: ChainInputs, pert: Perturbation, /) -> FloatArray: ...
+
+    def take(self, index: IntArray, /) -> Objective:
+        """The objective over a subset of the observations (same order as ``inputs.take``)."""
+        ...
 
 #: Noise floor (m) in the BIC: below a millimetre per axis, better fits mean nothing.
 NOISE_FLOOR_M = 1e-3
 #: Residual of an observation the perturbed chain cannot evaluate (its pose is out of span).
 MISSING_RESIDUAL_M = 1.0
-#: Grid of time offsets tried before the local refinement (s).
-OFFSET_GRID_S = np.arange(-0.25, 0.2501, 0.0025)
+#: Step of the coarse offset grid (s): finer than the narrowest dip of a latency (a motion of a
+#: few hertz gives dips some 50 ms wide).
+COARSE_STEP_S = 0.01
+#: Step of the fine grid around each coarse dip (s), over +-COARSE_STEP_S.
+FINE_STEP_S = 0.0005
+#: Observations the coarse grid is evaluated on (evenly spaced in the inputs' order), and the fine one.
+GRID_SUBSAMPLE = 800
+FINE_SUBSAMPLE = 4000
+#: Coarse dips refined on the fine grid.
+GRID_DIPS = 3
+#: A grid offset at which fewer than this share of the observations can be evaluated is not tried.
+MIN_EVALUABLE_SHARE = 0.5
 
 
 @dataclass(frozen=True)
@@ -127,19 +151,74 @@ def _grid_offsets(
     inputs: ChainInputs,
     base: Perturbation | None,
 ) -> FloatArray:
-    """Replace every time-offset start by the best value on a coarse grid (others held)."""
+    """Replace every time-offset start by the best value of a coarse-then-fine grid (others held)."""
     x = start.copy()
+    coarse_objective, coarse_inputs = _subsample(objective, inputs, GRID_SUBSAMPLE)
+    fine_objective, fine_inputs = _subsample(objective, inputs, FINE_SUBSAMPLE)
     offset = 0
     for m in models:
         if m.fault.value == "latency":
-            costs = []
-            for value in OFFSET_GRID_S:
-                x[offset] = value
-                r = _residual_vector(objective, inputs, perturbation_of(models, x, base))
-                costs.append(float(np.dot(r, r)))
-            x[offset] = OFFSET_GRID_S[int(np.argmin(costs))]
+            lo, hi = float(m.lower[0]), float(m.upper[0])
+            coarse = np.arange(lo, hi + 1e-9, COARSE_STEP_S)
+            costs = _grid_costs(models, x, offset, coarse, coarse_objective, coarse_inputs, base)
+            best_value, best_cost = float(x[offset]), np.inf
+            for centre in _dips(coarse, costs, GRID_DIPS):
+                fine = np.clip(np.arange(centre - COARSE_STEP_S, centre + COARSE_STEP_S + 1e-9, FINE_STEP_S), lo, hi)
+                fine_costs = _grid_costs(models, x, offset, fine, fine_objective, fine_inputs, base)
+                k = int(np.argmin(fine_costs))
+                if fine_costs[k] < best_cost:
+                    best_value, best_cost = float(fine[k]), float(fine_costs[k])
+            x[offset] = best_value
         offset += m.n_params
     return x
+
+
+def _subsample(objective: Objective, inputs: ChainInputs, size: int) -> tuple[Objective, ChainInputs]:
+    """At most ``size`` observations, evenly spaced (so every part of the log keeps some)."""
+    n = len(inputs)
+    if n <= size:
+        return objective, inputs
+    index = np.unique(np.linspace(0, n - 1, size).round().astype(np.int64))
+    return objective.take(index), inputs.take(index)
+
+
+def _grid_costs(
+    models: tuple[FaultModel, ...],
+    x: FloatArray,
+    offset: int,
+    values: FloatArray,
+    objective: Objective,
+    inputs: ChainInputs,
+    base: Perturbation | None,
+) -> FloatArray:
+    """Mean squared residual over the observations evaluable at each value of one parameter.
+
+    Observations the shifted pose cannot reach (past the ends of the odometry) are left out rather
+    than penalised, so that a large true offset is not hidden by the log's ends; an offset that
+    leaves too few evaluable is not tried (infinite cost).
+    """
+    trial = x.copy()
+    costs = np.full(values.size, np.inf)
+    n = max(len(inputs), 1)
+    for i, value in enumerate(values):
+        trial[offset] = value
+        r = objective(inputs, perturbation_of(models, trial, base))
+        finite = np.isfinite(r).all(axis=1)
+        if finite.sum() >= MIN_EVALUABLE_SHARE * n and finite.any():
+            costs[i] = float(np.mean(np.sum(r[finite] ** 2, axis=1)))
+    return costs
+
+
+def _dips(values: FloatArray, costs: FloatArray, count: int) -> list[float]:
+    """The ``count`` lowest local minima of a grid curve (the global one first)."""
+    finite = np.isfinite(costs)
+    if not finite.any():
+        return [0.0]
+    padded = np.r_[np.inf, costs, np.inf]
+    local = finite & (costs <= padded[:-2]) & (costs <= padded[2:])
+    candidates = np.flatnonzero(local)
+    order = candidates[np.argsort(costs[candidates], kind="stable")]
+    return [float(values[k]) for k in order[:count]]
 
 
 def _finish(

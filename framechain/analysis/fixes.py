@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
+from framechain.analysis.estimates import (
+    Estimate,
+    FrameEstimate,
+    InvertedEstimate,
+    LatencyEstimate,
+    PermutationEstimate,
+    RotationEstimate,
+    ScaleEstimate,
+    axis_text,
+)
 from framechain.analysis.faults import Mode, rotation_verdict
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
@@ -43,33 +50,33 @@ def _publisher(parent: str, child: str, xyz: FloatArray, rpy: FloatArray) -> str
 
 
 def fix_for(
-    fault: Fault, hop: HopName, estimate: Mapping[str, Any], inputs: ChainInputs, x: FloatArray, mode: Mode
+    fault: Fault, hop: HopName, estimate: Estimate, inputs: ChainInputs, x: FloatArray, mode: Mode
 ) -> str:
     """One actionable sentence for a finding."""
     frames = inputs.frames
-    if fault in (Fault.MISSING_ROTATION, Fault.ROTATION_ERROR):
+    if isinstance(estimate, RotationEstimate):
         mount = corrected_mount(inputs, x, mode)
         if mount is None:
-            return (f"Correct the camera-to-body rotation by {estimate['angle_deg']:.2f} deg about "
-                    f"{estimate['axis']} ({estimate['axis_frame']} frame).")
+            return (f"Correct the camera-to-body rotation by {estimate.angle_deg:.2f} deg about "
+                    f"{axis_text(estimate.axis)} ({estimate.axis_frame} frame).")
         parent, child, xyz, rpy = mount
-        if estimate.get("faulty") == "as run" and fault == Fault.ROTATION_ERROR:
+        if estimate.faulty == "as run" and fault == Fault.ROTATION_ERROR:
             # Logged points against the log cannot say which of the two mounts is the calibrated one.
             used = Rotation.from_quat(inputs.mount.q_parent_link) * Rotation.from_rotvec(x)  # type: ignore[union-attr]
-            angle = float(estimate["angle_deg"])
+            angle = estimate.angle_deg
             return (f"The robot's mount and the recorded {parent} -> {child} differ by {angle:.2f} deg; "
                     f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
                     f"used {_origin(xyz, used.as_euler('xyz'))}: keep the calibrated one in both (a reference or a "
                     f"static target in the log tells which).")
-        if estimate.get("faulty") == "as run":
+        if estimate.faulty == "as run":
             lead = (f"The robot's camera-to-body step used a wrong mount; use the recorded {parent} -> {child} "
                     f"(rotation included)")
         else:
             lost = " has no rotation" if fault == Fault.MISSING_ROTATION else " is off"
             lead = f"The recorded mount {parent} -> {child}{lost}; publish (or calibrate to) the corrected one"
         return f"{lead}: {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
-    if fault == Fault.LATENCY:
-        offset_ms = float(estimate["offset_s"]) * 1e3
+    if isinstance(estimate, LatencyEstimate):
+        offset_ms = estimate.offset_s * 1e3
         if hop == HopName.CAMERA_TO_BODY:
             return (
                 f"Look up {frames.body} <- {frames.camera} at the detection's header.stamp: the camera pose used was "
@@ -86,42 +93,58 @@ def fix_for(
             f"that time, waiting for the transform) instead of the pose {abs(offset_ms):.1f} ms "
             f"{'older' if offset_ms < 0 else 'newer'} that was used."
         )
-    if fault == Fault.AXIS_FLIP and mode == "correction":
-        return (f"The recorded rotation above {frames.camera} permutes its axes as {estimate['permutation']}: "
+    if isinstance(estimate, PermutationEstimate) and mode == "correction":
+        return (f"The recorded rotation above {frames.camera} permutes its axes as {_rows(estimate)}: "
                 f"publish the REP-103 optical rotation (q_xyzw -0.5 0.5 -0.5 0.5, rpy -pi/2 0 -pi/2) from the camera "
                 f"link to {frames.camera}.")
-    if fault == Fault.AXIS_FLIP:
+    if isinstance(estimate, PermutationEstimate):
         return (
             f"Transform the point from {frames.camera} (x right, y down, z forward, the detection's header.frame_id), "
-            f"not from a body-convention camera frame; the axes used were permuted as {estimate['permutation']}."
+            f"not from a body-convention camera frame; the axes used were permuted as {_rows(estimate)}."
         )
-    if fault == Fault.DEPTH_SCALE:
-        factor = float(estimate["factor"])
+    if isinstance(estimate, ScaleEstimate) and estimate.name == "factor":
+        factor = estimate.value
         hint = " (16UC1 depth is millimetres: multiply by 0.001)" if 500 < factor < 2000 else ""
-        return f"Scale depth by {1.0 / factor:.6g} before back-projecting{hint}."
-    if fault == Fault.INTRINSICS and mode == "correction":
-        scale = float(estimate["scale"])
+        # A depth from a square marker's corners (PnP) scales with the marker size the chain declares.
+        tags = (f"; for depths from tag or marker corners, declare sizes {1.0 / factor:.4g} times those in "
+                "evidence.tag_size_m (measure the black square's side)") if 0.5 < factor < 2.0 else ""
+        return f"Scale depth by {1.0 / factor:.6g} before back-projecting{hint}{tags}."
+    if isinstance(estimate, ScaleEstimate) and mode == "correction":
+        scale = estimate.value
         cam = inputs.camera
-        principal = estimate.get("variant") == "resolution"
+        principal = estimate.variant == "resolution"
         cx, cy = (cam.cx / scale, cam.cy / scale) if principal else (cam.cx, cam.cy)
         return (f"The recorded CameraInfo's K is that of another {'resolution' if principal else 'lens'} "
                 f"(focal length x{scale:.4g}); the K that fits is fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, "
                 f"cx {cx:.1f}, cy {cy:.1f}: publish the calibration of the stream the detections came from.")
-    if fault == Fault.INTRINSICS:
-        scale = float(estimate["scale"])
+    if isinstance(estimate, ScaleEstimate):
+        scale = estimate.value
         return (
             f"Use the CameraInfo of the stream the detections came from ({inputs.camera.width}x{inputs.camera.height}, "
             f"fx {inputs.camera.fx:.1f}); the K used had its focal length scaled by {scale:.4g}."
         )
-    if fault == Fault.WRONG_WORLD_FRAME:
+    if isinstance(estimate, FrameEstimate) and estimate.hop == HopName.CAMERA_TO_BODY.value:
+        return _camera_frame_fix(estimate, frames.body, mode)
+    if isinstance(estimate, FrameEstimate) and frames.body in (estimate.used, estimate.meant):
+        if mode == "correction":
+            return (f"The recorded chain puts the body at {estimate.used!r} where the camera hangs from "
+                    f"{estimate.meant!r}: transform through {estimate.meant!r}.")
+        return (f"Look up {frames.world} <- {estimate.meant} (tf2 lookupTransform(target={frames.world}, "
+                f"source={estimate.meant}, header.stamp)), not {frames.world} <- {estimate.used}: the points are "
+                f"{estimate.meant} points{_edges_text(estimate)}.")
+    if isinstance(estimate, FrameEstimate) and fault == Fault.WRONG_WORLD_FRAME:
         return (
-            f"Transform into {estimate['meant']!r}, not {estimate['used']!r}: the error follows the map <-> odom drift."
+            f"Transform into {estimate.meant!r}, not {estimate.used!r}: the error follows the map <-> odom drift."
         )
-    if fault == Fault.INVERTED_TRANSFORM and "edge" in estimate:
-        parent, child = estimate["edge"]
+    if isinstance(estimate, FrameEstimate):
+        dropped = f" (the path differs by {', '.join(f'{p} -> {c}' for p, c in estimate.skipped)})" \
+            if estimate.skipped else ""
+        return f"At {estimate.hop}, look up {estimate.meant!r}, not {estimate.used!r}{dropped}."
+    if isinstance(estimate, InvertedEstimate) and estimate.edge is not None:
+        parent, child = estimate.edge
         return (f"The edge {parent} -> {child} is recorded inverted (T_{child}_{parent} where T_{parent}_{child} is "
                 f"meant): publish it the other way round (invert its translation and rotation).")
-    if fault == Fault.INVERTED_TRANSFORM:
+    if isinstance(estimate, InvertedEstimate):
         if hop == HopName.CAMERA_TO_BODY:
             return (
                 f"Use T_{frames.body}_{frames.camera} = lookupTransform(target={frames.body}, source={frames.camera}), "
@@ -132,3 +155,24 @@ def fix_for(
             f"not its inverse."
         )
     return "No fix known for this fault."
+
+
+def _rows(estimate: PermutationEstimate) -> str:
+    return str([list(row) for row in estimate.permutation])
+
+
+def _edges_text(estimate: FrameEstimate) -> str:
+    if not estimate.skipped:
+        return ""
+    return f" (the lookup skipped {', '.join(f'{p} -> {c}' for p, c in estimate.skipped)})"
+
+
+def _camera_frame_fix(estimate: FrameEstimate, body: str, mode: Mode) -> str:
+    """Name the frame to look up on the camera-to-body hop (the optical frame, usually)."""
+    if mode == "correction":
+        return (f"The detections say they are in {estimate.used} but their points are in {estimate.meant}: set the "
+                f"detections' header.frame_id to {estimate.meant} (or look up {body} <- {estimate.meant}).")
+    optical = estimate.meant.endswith(("_optical_frame", "_optical"))
+    why = " (x right, y down, z forward: the detection's header.frame_id)" if optical else ""
+    return (f"Look up {body} <- {estimate.meant}{why}, not {body} <- {estimate.used}: "
+            f"`tf_buffer.lookup_transform('{body}', '{estimate.meant}', header.stamp)`{_edges_text(estimate)}.")

@@ -64,13 +64,13 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
             progress=progress,
         )
     if run_.chain_suggested:
-        print_suggested_chain(run_.chain, args.quiet or args.json)
+        print_suggested_chain(run_.suggestion or run_.chain, args.quiet or args.json)
     paths = write_attribution(result, out)
     report_formats = [f for f in formats if f in ("md", "html")]
     if report_formats:
         from framechain.sinks.report import render_report
 
-        paths.update(render_report(result, out, formats=report_formats))
+        paths.update(render_report(result, out, formats=report_formats, timeline=run_.timeline))
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0

@@ -23,8 +23,8 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--chain",
         metavar="CHAIN.yaml",
-        help="chain configuration (frames, topics, evidence); default: the one `framechain info "
-        "LOG --chain` suggests, printed",
+        help="chain configuration (frames, topics, evidence, calibration, mounts); default: the one "
+        "`framechain info LOG --chain` suggests, printed (`framechain info LOG` lists what the log lacks)",
     )
     parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
@@ -64,7 +64,9 @@ def progress_reporter(quiet: bool, label: str) -> Iterator[Callable[[str], None]
 
 
 def print_suggested_chain(chain: Any, quiet: bool) -> None:
-    """Say which configuration was used when none was given (stderr, so --json stays clean)."""
+    """Say which configuration was used when none was given (stderr, so --json stays clean).
+
+    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig."""
     if quiet:
         return
     from rich.console import Console
@@ -79,7 +81,8 @@ def print_findings(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from framechain.sinks.report import HOP_COLUMNS, estimate_text, hop_rows, interval_text
+    from framechain.analysis.estimates import format_estimate, format_interval
+    from framechain.sinks.report import HOP_COLUMNS, hop_rows
 
     console = Console(width=None if sys.stdout.isatty() else 120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
@@ -93,8 +96,8 @@ def print_findings(result: Any) -> None:
         for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
-            table.add_row(str(i), f.fault.value, f.hop.value, estimate_text(f), interval_text(f), f"{f.share:.0%}",
-                          f"{f.confidence:.2f}")
+            table.add_row(str(i), f.fault.value, f.hop.value, format_estimate(f.estimate), format_interval(f.interval),
+                          f"{f.share:.0%}", f"{f.confidence:.2f}")
         console.print(table)
     hops = Table()
     for col in HOP_COLUMNS:

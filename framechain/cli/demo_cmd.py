@@ -113,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         focal_px=300.0,
         evidence=args.evidence,
         depth_images=True,
+        color_images=True,
         faults=faults,
     )
     with progress_reporter(args.quiet or args.json, "demo") as progress:
@@ -130,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
         paths: dict[str, Path] = {"log": log_path, "chain": chain_path}
         paths.update(write_attribution(result, out))
         say("writing the report")
-        paths.update(render_report(result, out, formats=("md", "html")))
+        paths.update(render_report(result, out, formats=("md", "html"), timeline=run_.timeline))
         if not args.no_rrd:
             from framechain.sinks.rerun import RerunTarget, stream_replay
 
@@ -141,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
                 result.replay,
                 RerunTarget.save(rrd),
                 findings=result.findings,
+                evidence=result.aligned,
                 reference_point=run_.chain.evidence.reference_point,
             )
             paths["rrd"] = rrd

@@ -9,57 +9,76 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from framechain.adapters import EdgeInfo, LoadedLog
+    from framechain.adapters import EdgeInfo, LoadedLog, SuggestedChain
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "info",
-        help="format, topics, frame tree, cameras and a suggested chain of a log",
+        help="format, topics, frame tree, cameras, what the chain needs and a suggested chain of a log",
         description="Read a log (MCAP, ROS 1 bag, ROS 2 bag) and show its format and span, the topics with "
         "types, counts and rates, the frame tree (parent, child, static or dynamic, rate, span, and the delay "
-        "between header stamp and log time per edge), the cameras, and a suggested chain configuration.",
+        "between header stamp and log time per edge), the cameras, what the chain needs (camera frame, "
+        "intrinsics, detections, depth, mount, pose, evidence: found, or missing with the chain key that "
+        "supplies it) and a suggested chain configuration. With --chain CHAIN.yaml the log is read through "
+        "that chain (its calibration files, mounts, urdf and pose topics) and checked against it.",
     )
     p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory, a bare .db3, or a LeRobot "
                    "dataset directory (with --episode and --robot for its frame tree)")
     p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
     p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
-    out = p.add_mutually_exclusive_group()
-    out.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
-    out.add_argument("--chain", action="store_true",
-                     help="print only the suggested chain configuration as YAML "
-                     "(framechain info LOG --chain > chain.yaml)")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
+    p.add_argument("--chain", nargs="?", const=True, default=None, metavar="CHAIN.yaml",
+                   help="alone: print only the suggested chain configuration as YAML (framechain info LOG --chain "
+                   "> chain.yaml); with a file: read the log through that chain and check what it needs")
+    p.add_argument("--chain-file", metavar="CHAIN.yaml", help="the same as --chain CHAIN.yaml")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.adapters import LeRobotAdapter, LoadedLog, frame_tree, open_log, suggest_chain
+    from framechain.adapters import (
+        LeRobotAdapter,
+        LoadedLog,
+        SuggestedChain,
+        chain_needs,
+        frame_tree,
+        open_log,
+        suggest,
+    )
     from framechain.timeline import ChainConfig, FramechainError
 
-    chain: ChainConfig | None
-    if LeRobotAdapter().probe(Path(args.log)) and (args.episode is not None or args.robot is not None):
+    chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
+    print_chain = args.chain is True
+    if print_chain and args.json:
+        raise FramechainError("--chain alone prints the suggested chain as YAML; it does not go with --json")
+    suggestion: SuggestedChain | None = None
+    if LeRobotAdapter().probe(Path(args.log)) and (args.episode is not None or args.robot is not None
+                                                    or chain_file is not None):
         from framechain.pipeline import load_log
 
-        run_ = load_log(args.log, episode=args.episode, robot=args.robot)
+        run_ = load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
         loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
-        chain = run_.chain
+        suggestion = SuggestedChain(config=run_.chain)
     elif LeRobotAdapter().probe(Path(args.log)):
         loaded = _dataset_summary(args.log)
-        chain = None
     else:
-        loaded = open_log(args.log, progress=sys.stderr.isatty() and not (args.json or args.quiet))
-        chain = suggest_chain(loaded)
+        given = ChainConfig.from_yaml(chain_file) if chain_file else None
+        loaded = open_log(args.log, given, progress=sys.stderr.isatty() and not (args.json or args.quiet))
+        suggestion = SuggestedChain(config=given) if given is not None else suggest(loaded)
+    if suggestion is not None and not suggestion.needs:
+        suggestion = SuggestedChain(config=suggestion.config,
+                                    needs=tuple(chain_needs(loaded, suggestion.config)))
     edges = frame_tree(loaded.timeline.transforms)
-    if args.chain:
-        if chain is None:
+    if print_chain:
+        if suggestion is None:
             raise FramechainError(f"{args.log}: a LeRobot dataset's chain comes from --episode N --robot robot.yaml")
-        print(_chain_yaml(loaded, chain.to_yaml(), edges), end="")
+        print(suggestion.to_yaml(source=str(loaded.info.path)), end="")
         return 0
     if args.json:
-        print(json.dumps(_as_json(loaded, edges, chain.to_dict() if chain else {}), indent=2))
+        print(json.dumps(_as_json(loaded, edges, suggestion), indent=2))
         return 0
-    _render(loaded, edges, chain.to_yaml() if chain else "")
+    _render(loaded, edges, suggestion, chain_given=chain_file is not None)
     return 0
 
 
@@ -73,21 +92,7 @@ def _dataset_summary(path: str) -> LoadedLog:
     return LoadedLog(timeline=Timeline(), info=info.with_notes([note]), decoded_topics={})
 
 
-def _chain_yaml(loaded: LoadedLog, text: str, edges: list[EdgeInfo]) -> str:
-    frames = {e.parent for e in edges} | {e.child for e in edges}
-    frames |= set(loaded.timeline.cameras.frame.tolist())
-    header = [f"# chain suggested by `framechain info` from {loaded.info.path}; edit before use"]
-    from framechain.adapters import suggest_chain
-
-    chain = suggest_chain(loaded).frames
-    missing = [f"{slot}={name}" for slot, name in (("camera", chain.camera), ("body", chain.body),
-                                                   ("world", chain.world)) if name not in frames]
-    if missing:
-        header.append(f"# frames not in this log: {', '.join(missing)}")
-    return "\n".join(header) + "\n" + text
-
-
-def _as_json(loaded: LoadedLog, edges: list[EdgeInfo], chain: dict[str, Any]) -> dict[str, Any]:
+def _as_json(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain | None) -> dict[str, Any]:
     cams = loaded.timeline.cameras
     cameras = []
     for frame in dict.fromkeys(cams.frame.tolist()):
@@ -99,8 +104,12 @@ def _as_json(loaded: LoadedLog, edges: list[EdgeInfo], chain: dict[str, Any]) ->
             "distortion": cams.distortion[i, : int(cams.n_distortion[i])].tolist(),
             "count": int((cams.frame == frame).sum()),
         })
+    needs = list(suggestion.needs) if suggestion is not None else []
     return {**loaded.info.to_dict(), "edges": [e.to_dict() for e in edges], "cameras": cameras,
-            "suggested_chain": chain}
+            "suggested_chain": suggestion.config.to_dict() if suggestion is not None else {},
+            "placeholders": dict(suggestion.placeholders) if suggestion is not None else {},
+            "needs": [n.to_dict() for n in needs],
+            "ready": bool(needs) and suggestion is not None and suggestion.ready}
 
 
 def _ms(value: float | None) -> str:
@@ -120,7 +129,8 @@ def _edge_label(e: EdgeInfo) -> str:
             f"[dim]({', '.join(e.sources)})[/]")
 
 
-def _render(loaded: LoadedLog, edges: list[EdgeInfo], chain_yaml: str) -> None:
+def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain | None, *,
+            chain_given: bool) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
@@ -172,6 +182,16 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], chain_yaml: str) -> None:
         console.print(table)
     for note in info.notes:
         console.print(f"[yellow]note:[/] {escape(note)}")
-    if chain_yaml:
+    if suggestion is None:
+        return
+    which = "the given chain" if chain_given else "the suggested chain"
+    verdict = "[green]ready to replay[/]" if suggestion.ready else "[yellow]not ready: add the keys below[/]"
+    console.print(f"[bold]What {which} needs[/] ({verdict})")
+    colour = {"found": "green", "missing": "red", "none": "yellow"}
+    for need in suggestion.needs:
+        fix = f": {escape(need.fix())}" if need.key else ""
+        console.print(f"  {escape(need.piece)}: [{colour[need.status.value]}]{need.status.value}[/] "
+                      f"({escape(need.detail)}{fix})", highlight=False, soft_wrap=True)
+    if not chain_given:
         console.print("[bold]Suggested chain[/] (framechain info LOG --chain > chain.yaml):")
-        console.print(escape(chain_yaml), highlight=False)
+        console.print(escape(suggestion.to_yaml(source=str(info.path))), highlight=False, soft_wrap=True)

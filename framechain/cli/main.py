@@ -18,7 +18,7 @@ from framechain import __version__
 from framechain.timeline import FramechainError
 
 #: Command modules, in the order ``--help`` lists them.
-COMMANDS = ("info", "tf", "replay", "attribute", "report", "demo", "lab")
+COMMANDS = ("info", "tf", "replay", "attribute", "batch", "report", "export", "demo", "lab")
 
 EXIT_OK = 0
 EXIT_INPUT_ERROR = 1  # the log, chain or options could not be used: one line on stderr says why

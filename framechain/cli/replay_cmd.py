@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any
 from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter
 
 if TYPE_CHECKING:
+    from framechain.analysis.alignment import AlignedEvidence
+    from framechain.analysis.attribute import Finding
     from framechain.pipeline import LoadedRun
     from framechain.replay import ReplayResult
     from framechain.sinks.rerun import RerunOutcome, RerunTarget
@@ -31,8 +33,10 @@ is spawned when a display is available, otherwise the recording is saved to ./<L
 
 EPILOG = """\
 exit codes:
-  0    the recording was written (whatever the replay found)
-  1    bad input: the log, the chain or the output could not be used (one line on stderr)
+  0    the recording was written (whatever the replay found; when no observation could be
+       replayed, one line on stderr says why and which chain key to add)
+  1    bad input: the log, the chain or the output could not be used, or the log has no
+       observation to replay (one line on stderr says why and what to add)
   2    usage error
 """
 
@@ -55,6 +59,8 @@ def register(sub: Any) -> None:
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed of the attribution (default 0)")
     parser.add_argument("--max-images", type=int, default=30, metavar="N",
                         help="depth frames logged at most, nearest the observations (default 30)")
+    parser.add_argument("--images", choices=("near", "all", "none"), default="near",
+                        help="camera images logged: those nearest the observations (default), all, or none")
     parser.add_argument("--json", action="store_true", help="print counts and the output as one JSON object")
     parser.set_defaults(run=run)
 
@@ -62,33 +68,42 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     from framechain.pipeline import load_log
     from framechain.replay import replay
+    from framechain.sinks.overlay import ImageSelection
     from framechain.sinks.rerun import RerunOptions, stream_replay
 
     quiet = args.quiet or args.json
-    findings: Sequence[object] = ()
+    findings: Sequence[Finding] = ()
+    evidence: AlignedEvidence | None = None
     with progress_reporter(quiet, "replaying") as progress:
         loaded = load_log(args.log, args.chain, episode=args.episode, robot=args.robot, progress=not quiet)
         notes = list(loaded.notes)
         timeline = loaded.timeline
         if loaded.chain_suggested and loaded.info is not None:
             notes.extend(_unused_point_topics(loaded))
-        result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+        result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s,
+                        ignore_labels=loaded.chain.evidence.ignore_labels)
+        why = loaded.why_nothing_replayed(result.counts())
+        if why is not None:
+            # Still write the recording: the frame tree, the cameras and any rejected observations
+            # are worth looking at; say why nothing was replayed and what to add.
+            print(f"framechain replay: {why}", file=sys.stderr)
         if args.attribute and result.replayed.any():
             from framechain.analysis.attribute import attribute
 
             attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
-            result, findings = attribution.replay, attribution.findings
+            result, findings, evidence = attribution.replay, attribution.findings, attribution.aligned
             notes.extend(n for n in attribution.notes if n not in notes)
         if progress is not None:
             progress("writing the Rerun recording")
         outcome = stream_replay(
-            timeline, result, _target(args, loaded.path), findings=findings,
+            timeline, result, _target(args, loaded.path), findings=findings, evidence=evidence,
             reference_point=loaded.chain.evidence.reference_point,
-            options=RerunOptions(recording_name=loaded.path.name, max_images=args.max_images),
+            options=RerunOptions(recording_name=loaded.path.name, max_images=args.max_images,
+                                 images=ImageSelection(args.images)),
             notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
         )
     if loaded.chain_suggested:
-        print_suggested_chain(loaded.chain, quiet)
+        print_suggested_chain(loaded.suggestion or loaded.chain, quiet)
     if args.json:
         print(json.dumps(_report(loaded, result, outcome, notes, findings)))
     else:  # --quiet silences progress and the suggested chain, not the result
@@ -126,7 +141,7 @@ def _unused_point_topics(loaded: LoadedRun) -> list[str]:
 
 
 def _report(
-    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[object]
+    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[Finding]
 ) -> dict[str, Any]:
     from framechain.sinks.rerun import FindingView
 
@@ -149,7 +164,7 @@ def _report(
 
 
 def _print_text(
-    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[object]
+    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[Finding]
 ) -> None:
     from framechain.sinks.rerun import FindingView
 

@@ -42,6 +42,8 @@ def register(sub: Any) -> None:
     fmt = p.add_mutually_exclusive_group()
     fmt.add_argument("--json", action="store_true", help="print JSON")
     fmt.add_argument("--csv", action="store_true", help="print CSV")
+    p.add_argument("--chain", metavar="CHAIN.yaml",
+                   help="a chain file whose mounts, urdf and pose topics (topics.odometry) add edges to the log's")
     p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
     p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
@@ -70,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain.replay import LATEST, TransformBuffer
 
     show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
+    salvage: dict[str, Any] | None = None
     if LeRobotAdapter().probe(Path(args.log)):
         from framechain.pipeline import load_log  # the episode's tree comes from robot.yaml and the URDF
 
@@ -77,7 +80,18 @@ def run(args: argparse.Namespace) -> int:
     else:
         if args.episode is not None or args.robot is not None:
             raise FramechainError(f"{args.log}: --episode and --robot are for LeRobot datasets; this is not one")
-        transforms = open_log(args.log, kinds=TREE_KINDS, progress=show_progress).timeline.transforms
+        from framechain.pipeline import load_chain
+
+        chain = load_chain(args.chain)
+        loaded = open_log(args.log, chain, kinds=TREE_KINDS, progress=show_progress)
+        transforms = loaded.timeline.transforms
+        salvage = loaded.info.salvage
+        if salvage and not args.quiet:  # a damaged log: say what the answer rests on
+            unknown = " and parts of unknown count" if salvage["lost_unknown_parts"] else ""
+            cut = f", and it is cut short after byte {salvage['cut_at']}" if salvage["cut_at"] is not None else ""
+            print(f"note: {args.log} is damaged ({salvage['reason']}): recovered {salvage['recovered_total']} "
+                  f"messages, lost {salvage['lost_total']}{unknown}{cut}; `framechain info` says where",
+                  file=sys.stderr)
     if not len(transforms):
         raise FramechainError(
             f"{args.log}: no transforms in this log (no /tf, /tf_static, TransformStamped or Odometry)")
@@ -95,7 +109,9 @@ def run(args: argparse.Namespace) -> int:
     times: Any = LATEST if args.at is None else np.array([parse_stamp(args.at, log_start)], dtype=np.int64)
     result = buffer.lookup(args.target, args.source, times)
     result.raise_for_status()
-    record = _record(result, 0, log_start)
+    record = _record(result, 0, log_start, {child: e.source for child, e in buffer.edges.items()})
+    if salvage:
+        record["salvage"] = salvage
     if args.json:
         print(json.dumps(record, indent=2))
     elif args.csv:
@@ -115,7 +131,7 @@ def _rpy_deg(quat_xyzw: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     return out
 
 
-def _record(result: LookupResult, i: int, log_start: int) -> dict[str, Any]:
+def _record(result: LookupResult, i: int, log_start: int, sources: dict[str, str] | None = None) -> dict[str, Any]:
     stamp = int(result.times_ns[i])
     q = result.quat_xyzw[i]
     hops = []
@@ -124,7 +140,7 @@ def _record(result: LookupResult, i: int, log_start: int) -> dict[str, Any]:
         hops.append({
             "parent": h.hop.parent, "child": h.hop.child, "static": h.hop.is_static, "inverse": h.hop.inverse,
             "stamps_ns": [before] if h.hop.is_static or before == after else [before, after],
-            "weight": float(h.weight[i]),
+            "weight": float(h.weight[i]), "source": (sources or {}).get(h.hop.child, ""),
         })
     # A path of static edges only is timeless (tf2 stamps it 0): say so rather than print a stamp.
     timeless = all(h.hop.is_static for h in result.hops)
@@ -213,6 +229,8 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     for h in r["hops"]:
         arrow = f"{h['child']} <- {h['parent']}" if h["inverse"] else f"{h['parent']} -> {h['child']}"
         kind = "static" if h["static"] else "dynamic"
+        if h.get("source"):  # where the edge came from: a topic, or a chain file's mounts / urdf
+            kind += f" ({h['source']})"
         stamps = ", ".join(format_stamp(s) for s in h["stamps_ns"])
         table.add_row(escape(arrow), kind, stamps, "-" if h["static"] else f"{h['weight']:.3f}")
     console.print(table)

@@ -35,6 +35,8 @@ from framechain.replay.quaternion import (
     IDENTITY,
     Quat4,
     Vec3,
+    compose,
+    invert,
     quat_conjugate,
     quat_multiply,
     quat_multiply_into,
@@ -880,19 +882,6 @@ def _static_samples(hop: PathHop, edge: Edge, t: IntArray) -> HopSamples:
         quat_soa=np.broadcast_to(edge.quat_soa[:, :1], (4, n)),
         first_ns=edge.first_ns, last_ns=edge.last_ns,
     )
-
-
-def compose(
-    t_ab: FloatArray, q_ab: FloatArray, t_bc: FloatArray, q_bc: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """``T_a_c = T_a_b @ T_b_c``, components first: translations (3, ...), quaternions (4, ...)."""
-    return quat_rotate(q_ab, t_bc) + t_ab, quat_multiply(q_ab, q_bc)
-
-
-def invert(t_ab: FloatArray, q_ab: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``T_b_a`` from ``T_a_b``, components first."""
-    q_ba = quat_conjugate(q_ab)
-    return -quat_rotate(q_ba, t_ab), q_ba
 
 
 def compose_hops(samples: tuple[HopSamples, ...], n: int) -> tuple[FloatArray, FloatArray]:

@@ -8,17 +8,17 @@ further from the observation stamp than the latency budget. Totals reconcile:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import ClassVar
 
 import numpy as np
 
-from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer, compose
+from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
 from framechain.replay.camera import CameraModel
 from framechain.replay.depth import sample_depth
-from framechain.replay.quaternion import quat_rotate
+from framechain.replay.quaternion import compose, quat_rotate
 from framechain.timeline import (
     CameraTable,
     ChainFrames,
@@ -43,6 +43,7 @@ class RejectReason(StrEnum):
     """Why an observation was not replayed; stable codes used in every output."""
 
     OTHER_CAMERA = "other_camera"  # detected in another camera (one with its own CameraInfo)
+    IGNORED_LABEL = "ignored_label"  # an object the chain declares as moving (evidence.ignore_labels)
     NO_CAMERA_INFO = "no_camera_info"
     OUTSIDE_IMAGE = "outside_image"
     NO_DEPTH = "no_depth"
@@ -170,6 +171,9 @@ class ReplayResult:
     samples: HopSampleTable
     latency_budget_ns: int
     options: ReplayOptions = field(default_factory=ReplayOptions)
+    #: detections the reader could not turn into observations (no intrinsics, PnP failed, ...), by
+    #: reason: they have no row here but count in :meth:`counts`, so every detection is accounted for
+    rejected_at_read: Mapping[str, int] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.status.shape[0])
@@ -180,11 +184,16 @@ class ReplayResult:
         return out
 
     def counts(self) -> dict[str, object]:
-        """``{"total", "replayed", "rejected": {reason: n}, "stale"}``; the totals reconcile."""
+        """``{"total", "replayed", "rejected": {reason: n}, "stale"}``; the totals reconcile.
+
+        Detections rejected while the log was read are in ``total`` and ``rejected`` too.
+        """
         reasons, n = np.unique(self.status[~self.replayed], return_counts=True)
         rejected = {str(r): int(c) for r, c in zip(reasons, n, strict=True)}
+        for reason, count in self.rejected_at_read.items():
+            rejected[reason] = rejected.get(reason, 0) + int(count)
         return {
-            "total": len(self),
+            "total": len(self) + sum(int(c) for c in self.rejected_at_read.values()),
             "replayed": int(self.replayed.sum()),
             "rejected": rejected,
             "stale": int((self.stale & self.replayed).sum()),
@@ -213,11 +222,13 @@ def replay(
     latency_budget_s: float = 0.02,
     options: ReplayOptions | None = None,
     cameras: Mapping[str, CameraModel] | None = None,
+    ignore_labels: Sequence[str] = (),
 ) -> ReplayResult:
     """Replay every observation of ``timeline`` through the chain ``frames``.
 
     ``buffer`` defaults to one built from the timeline's transforms (pass it to replay the same
-    log many times); ``cameras`` overrides the recorded intrinsics per frame (fault models).
+    log many times); ``cameras`` overrides the recorded intrinsics per frame (fault models);
+    observations labelled with one of ``ignore_labels`` are rejected as ``ignored_label``.
     """
     opts = options or ReplayOptions()
     buf = buffer if buffer is not None else TransformBuffer.from_timeline(timeline)
@@ -235,6 +246,8 @@ def replay(
     other_cameras = set(np.unique(timeline.cameras.frame).tolist()) - {camera_frame}
     if other_cameras:
         reject(np.isin(obs.camera_frame, sorted(other_cameras)), RejectReason.OTHER_CAMERA)
+    if ignore_labels:
+        reject(np.isin(obs.label, list(ignore_labels)), RejectReason.IGNORED_LABEL)
 
     # Hop 1: pixel_to_camera.
     ray = np.full((n, 3), np.nan)
@@ -321,6 +334,7 @@ def replay(
         depth_stamp_ns=depth_stamp, ray=ray, p_cam=p_cam, p_body=p_body, p_world=p_world,
         body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops, samples=samples,
         latency_budget_ns=budget_ns, options=opts,
+        rejected_at_read={str(k): int(v) for k, v in dict(timeline.metadata.get("rejected_at_read", {})).items()},
     )
 
 

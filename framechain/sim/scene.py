@@ -3,29 +3,31 @@
 The base orbits the object (up to about 1 m/s and 0.8 rad/s) while its heading wobbles, so the
 object moves across the image and the robot's speed varies. It publishes what a real robot
 records: ``/tf`` (map -> odom drifting slowly at 50 Hz, odom -> base_link at 100 Hz),
-``/tf_static`` (the mast mount, pitched down, and the REP-103 optical rotation), CameraInfo,
-depth (inline or as images) and detections at 30 Hz with pixel and depth noise, and the evidence
-topics of the chosen evidence level.
+``/tf_static`` (base_link -> camera_link, the mast mount pitched down; camera_link -> the optical
+frame, the REP-103 rotation plus an optional offset such as a RealSense colour imager's 15 mm),
+CameraInfo, depth (inline or as images) and detections at 30 Hz with pixel and depth noise, and
+the evidence topics of the chosen evidence level.
 
 Faults are injected either **in the robot's computation** (``where="robot"``: the recorded data is
 right, the robot's logged points are wrong) or **in the recorded data** (``where="data"``: the data
-is wrong, the robot was right). ``expected`` on the result says what attribution should find.
+is wrong, the robot was right). ``expected`` and ``expected_findings`` on the result say what
+attribution should find.
+
+Every transform, projection and interpolation here is the generator's own
+(:mod:`framechain.sim.rigid`: numpy and scipy only), never framechain's replay, so a bug in the
+replay cannot cancel out of the benchmark built on these scenes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.replay import TransformBuffer
-from framechain.replay.buffer import invert
-from framechain.replay.camera import CameraModel
-from framechain.replay.catalogue import FAULT_HOPS, Fault
-from framechain.replay.replay import compose_rows, transform_points
+from framechain.sim import rigid
 from framechain.timeline import (
     OPTICAL_FROM_LINK_QUAT_XYZW,
     CameraTable,
@@ -36,6 +38,7 @@ from framechain.timeline import (
     DepthFrameTable,
     FramechainError,
     HopTopics,
+    ImageFrameTable,
     ObservationTable,
     PointRole,
     PointTable,
@@ -43,15 +46,24 @@ from framechain.timeline import (
     TransformTable,
 )
 from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.timeline.catalogue import FAULT_HOP_VALUES, Fault
 
-#: camera_link (FLU) -> optical frame (RDF), REP-103.
 START_NS = 1_700_000_000_000_000_000
 TOPICS = ChainTopics(
     camera_info="/camera/color/camera_info", detections="/detections", depth="/camera/depth/image_rect_raw"
 )
 HOP_TOPICS = HopTopics(camera="/debug/point_camera", body="/debug/point_body", world="/debug/point_world")
 TARGET_TOPIC = "/grasp_target"
+COLOR_TOPIC = "/camera/color/image_raw"
 REFERENCE_TOPIC = "/mocap/target"
+MOUNT_FRAME = "camera_link"
+BODY_FRAME = "base_link"
+FOOTPRINT_FRAME = "base_footprint"
+#: A sibling imager's optical frame at camera_link's origin (a RealSense's depth camera).
+DEPTH_OPTICAL_FRAME = "camera_depth_optical_frame"
+#: A RealSense's colour optical frame: its name and its offset from camera_link (metres, camera_link axes).
+REALSENSE_OPTICAL_FRAME = "camera_color_optical_frame"
+REALSENSE_OPTICAL_XYZ = (0.0, 0.015, 0.0)
 
 Evidence = Literal["hops", "target", "reference", "static"]
 Where = Literal["robot", "data"]
@@ -65,13 +77,32 @@ class SceneError(FramechainError):
 class InjectedFault:
     """One fault and where it lives. Parameters by kind:
 
-    latency ``offset_s`` (robot: the pose used is the one at tau + offset; data: detections are
-    stamped ``-offset_s`` late, so the pose that explains them is again at tau + offset);
-    rotation_error ``angle_deg``, ``axis`` (body frame); missing_rotation (none: the mount's
-    rotation is dropped, the optical rotation kept); axis_flip ``permutation`` (3x3 signed, applied
-    to camera-frame points); depth_scale ``factor`` (as-run / true); intrinsics ``scale`` (as-run
-    focal / true focal, K of another resolution); wrong_world_frame (odom used for map);
-    inverted_transform ``hop`` (camera_to_body or body_to_world).
+    - latency ``offset_s`` (robot: the pose used is the one at tau + offset; data: detections are
+      stamped ``-offset_s`` late, so the pose that explains them is again at tau + offset); or
+      ``hold_s`` (robot only, a stale pose held: the robot used the pose at the latest odom sample
+      at or before tau - hold_s instead of interpolating at tau; attribution should report an
+      offset of about ``-(hold_s + half an odom period)``).
+    - rotation_error ``angle_deg``, ``axis`` (body frame).
+    - missing_rotation (no parameters: the mount's rotation is dropped, the optical rotation kept).
+    - axis_flip ``permutation`` (3x3 signed, applied to camera-frame points; in the data a proper
+      rotation published on the optical edge); or ``used="camera_link"``, the real form: in the
+      robot, it looked up camera_link instead of the optical frame, so the optical points went
+      through T_base_camera_link alone, losing the optical edge's REP-103 rotation AND its
+      translation; in the data, the detections and their CameraInfo name camera_link (a driver
+      configured with the link as its frame_id) while their pixels are optical. Attribution should
+      report ``used == "camera_link"`` either way.
+    - wrong_camera_frame ``used`` (robot only, default ``"camera_depth_optical_frame"``): the robot
+      looked up the depth imager's optical frame (published at camera_link's origin with the
+      REP-103 rotation) for colour detections: a translation of ``-optical_xyz`` alone, so the
+      scene's ``optical_xyz`` must not be zero.
+    - depth_scale ``factor`` (as-run / true).
+    - intrinsics ``scale`` (as-run K / true K: ``scale=2`` is the camera_info of a 1280x960
+      calibration used for 640x480 images, fx, fy, cx, cy all doubled).
+    - wrong_world_frame ``used`` (robot only): ``"odom"`` (the default, odom used for map) or
+      ``"base_footprint"`` (the robot looked up base_footprint instead of base_link: the scene
+      then publishes base_link -> base_footprint, ``footprint_height_m`` (default 0.08) below).
+    - inverted_transform ``hop`` (camera_to_body, or body_to_world for the robot only); in the data,
+      the mount published inverted (T_camera_link_base on the base_link -> camera_link edge).
     """
 
     kind: Fault
@@ -82,9 +113,58 @@ class InjectedFault:
     def hop(self) -> str:
         if self.kind == Fault.INVERTED_TRANSFORM:
             return str(self.params.get("hop", "camera_to_body"))
-        return FAULT_HOPS[self.kind].value
+        return FAULT_HOP_VALUES[self.kind]
+
+    @property
+    def used_frame(self) -> str | None:
+        """The frame the robot looked up instead of the right one, for the frame-swap forms."""
+        if self.kind == Fault.WRONG_WORLD_FRAME:
+            return str(self.params.get("used", "odom"))
+        if self.kind == Fault.AXIS_FLIP and "used" in self.params:
+            return str(self.params["used"])
+        if self.kind == Fault.WRONG_CAMERA_FRAME:
+            return str(self.params.get("used", DEPTH_OPTICAL_FRAME))
+        return None
 
 
+@dataclass(frozen=True)
+class ExpectedFinding:
+    """What attribution should report for one injected fault.
+
+    ``estimate`` holds attribution.json estimate keys and their true values; ``tolerance`` the
+    allowed absolute error of each numeric key (strings and lists must match exactly).
+    """
+
+    fault: str
+    hop: str
+    estimate: dict[str, Any]
+    tolerance: dict[str, float]
+
+    def names(self, fault: str, hop: str, estimate: Mapping[str, Any]) -> bool:
+        """Whether a finding names this fault: the fault, the hop and, for frame swaps, the frame used."""
+        if (fault, hop) != (self.fault, self.hop):
+            return False
+        return "used" not in self.estimate or estimate.get("used") == self.estimate["used"]
+
+    def estimate_within(self, estimate: Mapping[str, Any]) -> bool:
+        """Whether every expected estimate key is present and within its tolerance."""
+        for key, want in self.estimate.items():
+            got = estimate.get(key)
+            if got is None:
+                return False
+            if isinstance(want, float):
+                if not abs(float(got) - want) <= self.tolerance[key]:
+                    return False
+            elif _plain(got) != _plain(want):
+                return False
+        return True
+
+
+def _plain(value: Any) -> Any:
+    """Tuples and arrays as nested lists, so that [[1, 0], ...] equals ((1, 0), ...)."""
+    if isinstance(value, tuple | list | np.ndarray):
+        return [_plain(v) for v in value]
+    return value
 
 
 @dataclass(frozen=True)
@@ -101,6 +181,8 @@ class SceneSpec:
     focal_px: float = 600.0
     mount_xyz: tuple[float, float, float] = (0.30, 0.0, 1.20)
     mount_pitch_deg: float = 30.0
+    optical_frame: str = "camera_optical_frame"
+    optical_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # camera_link -> optical offset
     object_world: tuple[float, float, float] = (3.0, 1.0, 0.10)
     orbit_radius_m: float = 2.4
     orbit_rate: float | None = None  # rad/s; None: drawn from the seed
@@ -110,6 +192,8 @@ class SceneSpec:
     reference_noise_m: float = 0.002
     evidence: Evidence = "hops"
     depth_images: bool = False
+    #: JPEG colour images on ``/camera/color/image_raw`` (the floor and the object), one per detection.
+    color_images: bool = False
     faults: tuple[InjectedFault, ...] = ()
 
 
@@ -128,9 +212,44 @@ class Scene:
         """(fault, hop) pairs attribution should report, largest effect unknown in advance."""
         return [(f.kind.value, f.hop) for f in self.spec.faults]
 
+    @property
+    def expected_findings(self) -> list[ExpectedFinding]:
+        """One expected finding per injected fault, with the estimate it should carry."""
+        return [_expected_finding(self.spec, f) for f in self.spec.faults]
 
-def _identity3() -> FloatArray:
-    return np.eye(3)
+
+def _expected_finding(spec: SceneSpec, fault: InjectedFault) -> ExpectedFinding:
+    p = fault.params
+    estimate: dict[str, Any] = {}
+    tolerance: dict[str, float] = {}
+    if fault.kind == Fault.LATENCY:
+        if "hold_s" in p:
+            # The held sample is between hold_s and hold_s + one odom period old: on average half a period more.
+            period = 1.0 / spec.odom_rate_hz
+            estimate["offset_s"] = -(float(p["hold_s"]) + 0.5 * period)
+            tolerance["offset_s"] = 0.5 * period + 0.002
+        else:
+            estimate["offset_s"], tolerance["offset_s"] = float(p["offset_s"]), 0.002
+    elif fault.kind == Fault.ROTATION_ERROR:
+        estimate["angle_deg"], tolerance["angle_deg"] = float(p["angle_deg"]), 0.5
+    elif fault.kind == Fault.MISSING_ROTATION:
+        estimate["angle_deg"], tolerance["angle_deg"] = float(abs(spec.mount_pitch_deg)), 0.5
+    elif fault.kind == Fault.DEPTH_SCALE:
+        estimate["factor"] = float(p["factor"])
+        tolerance["factor"] = 0.01 * abs(estimate["factor"])
+    elif fault.kind == Fault.INTRINSICS:
+        estimate["scale"] = float(p["scale"])
+        tolerance["scale"] = 0.01 * abs(estimate["scale"])
+    elif fault.kind == Fault.AXIS_FLIP:
+        if fault.used_frame is not None:
+            estimate["used"] = fault.used_frame
+        else:
+            estimate["permutation"] = np.asarray(p["permutation"], dtype=int).tolist()
+    elif fault.kind in (Fault.WRONG_WORLD_FRAME, Fault.WRONG_CAMERA_FRAME):
+        estimate["used"] = fault.used_frame
+    elif fault.kind == Fault.INVERTED_TRANSFORM and fault.where == "data":
+        estimate["edge"] = [BODY_FRAME, MOUNT_FRAME]
+    return ExpectedFinding(fault.kind.value, fault.hop, estimate, tolerance)
 
 
 @dataclass(frozen=True)
@@ -141,106 +260,127 @@ class _ChainParams:
     depth_factor: float = 1.0
     mount_quat: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
     optical_quat: FloatArray = field(default_factory=lambda: np.array(OPTICAL_FROM_LINK_QUAT_XYZW))
-    cam_permutation: FloatArray = field(default_factory=_identity3)
+    cam_permutation: FloatArray = field(default_factory=lambda: np.eye(3))
+    skip_optical_edge: bool = False  # camera_link looked up for optical points
+    #: the frame the detections and CameraInfo name (None: the optical frame they are really in)
+    detections_frame: str | None = None
+    sibling_optical: bool = False  # the depth imager's optical frame looked up for colour points
     pose_offset_ns: int = 0
+    hold_ns: int | None = None  # zero-order hold of the odom sample at or before tau - hold
     world: str = "map"
+    body: str = BODY_FRAME
     invert_camera: bool = False
     invert_pose: bool = False
+
+
+class _Motion:
+    """The recorded /tf samples and tf-style lookups on them (the generator's own interpolation)."""
+
+    def __init__(self, spec: SceneSpec, rng: np.random.Generator, obj: FloatArray) -> None:
+        orbit_rate = spec.orbit_rate if spec.orbit_rate is not None else rng.uniform(0.15, 0.38) * rng.choice([-1, 1])
+        wobble = spec.wobble_rad if spec.wobble_rad is not None else rng.uniform(0.08, 0.2)
+        wobble_freq = rng.uniform(1.0, 2.2)
+        radius_freq = rng.uniform(0.3, 0.8)
+        phase0 = rng.uniform(-np.pi, np.pi)
+
+        def map_from_base(t_s: FloatArray) -> FloatArray:
+            radius = spec.orbit_radius_m + 0.5 * np.sin(radius_freq * t_s)
+            phi = phase0 + orbit_rate * t_s + 0.3 * np.sin(0.5 * t_s)
+            pos = np.stack([obj[0] + radius * np.cos(phi), obj[1] + radius * np.sin(phi), np.zeros_like(t_s)], 1)
+            heading = np.arctan2(obj[1] - pos[:, 1], obj[0] - pos[:, 0]) + wobble * np.sin(wobble_freq * t_s)
+            return rigid.matrices(pos, Rotation.from_euler("z", heading[:, None]).as_quat())
+
+        def map_from_odom(t_s: FloatArray) -> FloatArray:
+            # Linear in time, so interpolating between its samples is exact.
+            trans = np.stack([0.20 + 0.010 * t_s, -0.10 + 0.006 * t_s, np.zeros_like(t_s)], 1)
+            return rigid.matrices(trans, Rotation.from_euler("z", (0.02 + 0.002 * t_s)[:, None]).as_quat())
+
+        # Samples from 0.5 s before the first frame to 0.5 s after the last.
+        t_odom = np.arange(-0.5, spec.duration_s + 0.5, 1.0 / spec.odom_rate_hz)
+        t_drift = np.arange(-0.5, spec.duration_s + 0.5 + 1e-9, 1.0 / spec.drift_rate_hz)
+        self.odom_ns = ns(t_odom)
+        self.drift_ns = ns(t_drift)
+        odom_from_base = rigid.inverse(map_from_odom(t_odom)) @ map_from_base(t_odom)
+        self.odom_t, self.odom_q = rigid.to_rows(odom_from_base)
+        self.drift_t, self.drift_q = rigid.to_rows(map_from_odom(t_drift))
+
+    def table(self) -> TransformTable:
+        return TransformTable.concat(
+            [
+                TransformTable.from_rows("map", "odom", self.drift_ns, self.drift_t, self.drift_q, source="/tf"),
+                TransformTable.from_rows("odom", BODY_FRAME, self.odom_ns, self.odom_t, self.odom_q, source="/tf"),
+            ]
+        )
+
+    def world_from_base(self, world: str, stamp_ns: IntArray) -> FloatArray:
+        """``T_world_base_link`` at ``stamp_ns``: each dynamic edge interpolated on its own, as tf2 does."""
+        odom_from_base = rigid.interpolate(self.odom_ns, self.odom_t, self.odom_q, stamp_ns)
+        if world == "odom":
+            return odom_from_base
+        out: FloatArray = rigid.interpolate(self.drift_ns, self.drift_t, self.drift_q, stamp_ns) @ odom_from_base
+        return out
 
 
 def generate(spec: SceneSpec) -> Scene:
     """Generate one episode (deterministic in ``spec``)."""
     rng = np.random.default_rng(spec.seed)
-    orbit_rate = spec.orbit_rate if spec.orbit_rate is not None else rng.uniform(0.15, 0.38) * rng.choice([-1, 1])
-    wobble = spec.wobble_rad if spec.wobble_rad is not None else rng.uniform(0.08, 0.2)
-    wobble_freq = rng.uniform(1.0, 2.2)
-    radius_freq = rng.uniform(0.3, 0.8)
-    phase0 = rng.uniform(-np.pi, np.pi)
     obj = np.asarray(spec.object_world, dtype=float)
-
-    def base_pose(t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """T_map_base at times in seconds since the start: translation (N, 3), quat (N, 4)."""
-        radius = spec.orbit_radius_m + 0.5 * np.sin(radius_freq * t_s)
-        phi = phase0 + orbit_rate * t_s + 0.3 * np.sin(0.5 * t_s)
-        pos = np.stack([obj[0] + radius * np.cos(phi), obj[1] + radius * np.sin(phi), np.zeros_like(t_s)], 1)
-        heading = np.arctan2(obj[1] - pos[:, 1], obj[0] - pos[:, 0]) + wobble * np.sin(wobble_freq * t_s)
-        return pos, Rotation.from_euler("z", heading[:, None]).as_quat()
-
-    def drift(t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """T_map_odom: linear in time (so tf2 interpolation between its samples is exact)."""
-        trans = np.stack([0.20 + 0.010 * t_s, -0.10 + 0.006 * t_s, np.zeros_like(t_s)], 1)
-        return trans, Rotation.from_euler("z", (0.02 + 0.002 * t_s)[:, None]).as_quat()
-
-    # /tf: samples from 0.5 s before the first frame to 0.5 s after the last.
-    t_odom = np.arange(-0.5, spec.duration_s + 0.5, 1.0 / spec.odom_rate_hz)
-    t_drift = np.arange(-0.5, spec.duration_s + 0.5 + 1e-9, 1.0 / spec.drift_rate_hz)
-    base_t, base_q = base_pose(t_odom)
-    drift_t_at_odom, drift_q_at_odom = drift(t_odom)
-    odom_t, odom_q = compose_rows(*_invert_rows(drift_t_at_odom, drift_q_at_odom), base_t, base_q)
-    drift_t, drift_q = drift(t_drift)
+    motion = _Motion(spec, rng, obj)
     true_mount_q = Rotation.from_euler("y", spec.mount_pitch_deg, degrees=True).as_quat()
-    K_true = np.array([[spec.focal_px, 0, spec.width / 2], [0, spec.focal_px, spec.height / 2], [0, 0, 1.0]])
+    K_true = rigid.intrinsic_matrix(spec.focal_px, spec.focal_px, spec.width / 2, spec.height / 2)
     truth = _ChainParams(K=K_true, mount_quat=true_mount_q)
     recorded, robot = truth, truth
+    if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults) and not np.any(spec.optical_xyz):
+        raise SceneError("wrong_camera_frame needs the colour optical frame off camera_link (optical_xyz not zero)")
     for fault in spec.faults:
         if fault.where == "robot":
             robot = _inject(robot, fault, truth)
         else:
             recorded = _inject_data(recorded, fault, truth)
-
-    dynamic = TransformTable.concat(
-        [
-            TransformTable.from_rows("map", "odom", ns(t_drift), drift_t, drift_q, source="/tf"),
-            TransformTable.from_rows("odom", "base_link", ns(t_odom), odom_t, odom_q, source="/tf"),
-        ]
-    )
+    footprint_height = [float(f.params.get("footprint_height_m", 0.08)) for f in spec.faults
+                        if f.used_frame == FOOTPRINT_FRAME]
+    body_from_footprint = rigid.matrix([0.0, 0.0, -footprint_height[0] if footprint_height else 0.0], [0, 0, 0, 1.0])
 
     def static_tf(params: _ChainParams) -> TransformTable:
-        mount = TransformTable.from_rows(
-            "base_link",
-            "camera_link",
-            [START_NS],
-            [spec.mount_xyz],
-            [params.mount_quat],
-            is_static=True,
-            source="/tf_static",
-        )
-        optical = TransformTable.from_rows(
-            "camera_link",
-            "camera_optical_frame",
-            [START_NS],
-            [[0.0, 0.0, 0.0]],
-            [params.optical_quat],
-            is_static=True,
-            source="/tf_static",
-        )
+        mount_t, mount_q = np.array([spec.mount_xyz], dtype=float), np.array([params.mount_quat])
         if params.invert_camera:  # the mount published the wrong way round (still one parent per child)
-            t_inv, q_inv = _invert_rows(np.array([spec.mount_xyz]), np.array([params.mount_quat]))
-            mount = TransformTable.from_rows(
-                "base_link", "camera_link", [START_NS], t_inv, q_inv, is_static=True, source="/tf_static"
-            )
-        return TransformTable.concat([mount, optical])
+            mount_t, mount_q = rigid.to_rows(rigid.inverse(rigid.matrices(mount_t, mount_q)))
+        tables = [
+            TransformTable.from_rows(BODY_FRAME, MOUNT_FRAME, [START_NS], mount_t, mount_q,
+                                     is_static=True, source="/tf_static"),
+            TransformTable.from_rows(MOUNT_FRAME, spec.optical_frame, [START_NS], [spec.optical_xyz],
+                                     [params.optical_quat], is_static=True, source="/tf_static"),
+        ]
+        if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults):
+            tables.append(TransformTable.from_rows(MOUNT_FRAME, DEPTH_OPTICAL_FRAME, [START_NS], [[0.0, 0.0, 0.0]],
+                                                   [OPTICAL_FROM_LINK_QUAT_XYZW], is_static=True, source="/tf_static"))
+        if footprint_height:
+            t, q = rigid.to_rows(body_from_footprint[None])
+            tables.append(TransformTable.from_rows(BODY_FRAME, FOOTPRINT_FRAME, [START_NS], t, q,
+                                                   is_static=True, source="/tf_static"))
+        return TransformTable.concat(tables)
 
-    true_tf = TransformTable.concat([dynamic, static_tf(truth)])
-    recorded_tf = TransformTable.concat([dynamic, static_tf(recorded)])
+    recorded_tf = TransformTable.concat([motion.table(), static_tf(recorded)])
 
     # Camera frames: capture times, the object's true pixel and depth, then noise.
     t_cam = np.arange(0.1, spec.duration_s - 0.1, 1.0 / spec.camera_rate_hz)
     capture_ns = ns(t_cam)
-    true_buffer = TransformBuffer(true_tf)
-    world_from_opt = true_buffer.lookup("map", "camera_optical_frame", capture_ns)
-    opt_from_world_t, opt_from_world_q = _invert_rows(world_from_opt.translation, world_from_opt.quat_xyzw)
-    p_opt = transform_points(opt_from_world_t, opt_from_world_q, np.tile(obj, (t_cam.size, 1)))
-    cam_model = CameraModel("camera_optical_frame", K_true, spec.width, spec.height)
-    u_true, v_true = cam_model.project(p_opt)
+    base_from_optical_true = _base_from_camera(spec, truth)
+    world_from_optical = motion.world_from_base("map", capture_ns) @ base_from_optical_true
+    p_opt = rigid.apply(rigid.inverse(world_from_optical), np.tile(obj, (t_cam.size, 1)))
+    u_true, v_true = rigid.project(K_true, p_opt)
     u = u_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
     v = v_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
     depth_measured = np.round(p_opt[:, 2] * (1.0 + rng.normal(0.0, spec.depth_noise_rel, t_cam.size)), 3)
-    visible = cam_model.inside(u, v) & (p_opt[:, 2] > 0.1)
+    # Pixel centres at integers: the image spans -0.5 .. size - 0.5 (what the replay accepts).
+    inside = (u >= -0.5) & (u < spec.width - 0.5) & (v >= -0.5) & (v < spec.height - 0.5)
+    visible = inside & (p_opt[:, 2] > 0.1)
     u, v, depth_measured, capture_ns = u[visible], v[visible], depth_measured[visible], capture_ns[visible]
+    world_from_optical = world_from_optical[visible]
     n = capture_ns.size
 
     # The recorded detection stamps (a late camera clock is a data latency fault).
+    detections_frame = recorded.detections_frame or spec.optical_frame
     stamp_shift = -recorded.pose_offset_ns  # stamps late by -offset so the right pose is at tau + offset
     obs_stamp = capture_ns + stamp_shift
     log_delay = rng.integers(3_000_000, 12_000_000, n)
@@ -249,7 +389,7 @@ def generate(spec: SceneSpec) -> Scene:
         obs_id=np.arange(n),
         stamp_ns=obs_stamp,
         log_time_ns=obs_stamp + log_delay,
-        camera_frame=np.full(n, "camera_optical_frame"),
+        camera_frame=np.full(n, detections_frame),
         u=u,
         v=v,
         depth_m=np.full(n, np.nan) if spec.depth_images else recorded_depth,
@@ -258,7 +398,7 @@ def generate(spec: SceneSpec) -> Scene:
         source=np.full(n, TOPICS.detections or ""),
     )
     cameras = CameraTable(
-        frame=np.full(n, "camera_optical_frame"),
+        frame=np.full(n, detections_frame),
         stamp_ns=obs_stamp,
         log_time_ns=obs_stamp + log_delay,
         width=np.full(n, spec.width),
@@ -269,23 +409,34 @@ def generate(spec: SceneSpec) -> Scene:
         n_distortion=np.full(n, 5),
         source=np.full(n, TOPICS.camera_info or ""),
     )
+    image_frames = ImageFrameTable.empty()
+    if spec.color_images:
+        image_frames = _render_color(spec, K_true, world_from_optical, obs_stamp, u, v)
     depth_frames = DepthFrameTable.empty()
     if spec.depth_images:
-        depth_frames = _render_depth(spec, truth.K, true_buffer, capture_ns, obs_stamp, u, v, recorded_depth)
+        depth_frames = _render_depth(spec, K_true, world_from_optical, obs_stamp, u, v, recorded_depth)
 
     # The robot's own computation, from the same pixels and measured depth, with its parameters.
-    robot_cam = _pixel_to_camera(robot.K, u, v, depth_measured * robot.depth_factor)
-    robot_body = _camera_to_body(robot, spec.mount_xyz, robot_cam)
-    pose = true_buffer.lookup(robot.world, "base_link", capture_ns + robot.pose_offset_ns)
-    pose_t, pose_q = pose.translation, pose.quat_xyzw
+    robot_cam = rigid.back_project(robot.K, u, v, depth_measured * robot.depth_factor)
+    body_from_camera = _base_from_camera(spec, robot)
+    if robot.invert_camera:
+        body_from_camera = rigid.inverse(body_from_camera)
+    robot_body = rigid.apply(body_from_camera, robot_cam @ robot.cam_permutation.T)
+    pose_ns = capture_ns + robot.pose_offset_ns
+    if robot.hold_ns is not None:
+        pose_ns = rigid.held(motion.odom_ns, capture_ns - robot.hold_ns)
+    world_from_body = motion.world_from_base(robot.world, pose_ns)
+    if robot.body == FOOTPRINT_FRAME:
+        world_from_body = world_from_body @ body_from_footprint
     if robot.invert_pose:
-        pose_t, pose_q = _invert_rows(pose_t, pose_q)
-    robot_world = transform_points(pose_t, pose_q, robot_body)
+        world_from_body = rigid.inverse(world_from_body)
+    robot_world = rigid.apply(world_from_body, robot_body)
 
     evidence, points = _evidence(spec, rng, obs_stamp, log_delay, robot_cam, robot_body, robot_world, obj)
     chain = ChainConfig(
-        frames=ChainFrames(camera="camera_optical_frame", body="base_link", world="map"),
-        topics=replace(TOPICS, depth=TOPICS.depth if spec.depth_images else None),
+        frames=ChainFrames(camera=detections_frame, body=BODY_FRAME, world="map"),
+        topics=replace(TOPICS, depth=TOPICS.depth if spec.depth_images else None,
+                       image=COLOR_TOPIC if spec.color_images else None),
         evidence=evidence,
         latency_budget_s=0.02,
     )
@@ -295,6 +446,7 @@ def generate(spec: SceneSpec) -> Scene:
         observations=observations,
         points=points,
         depth_frames=depth_frames,
+        image_frames=image_frames,
         metadata={
             "source": {"path": "<generated>", "format": "generated"},
             "seed": spec.seed,
@@ -304,10 +456,62 @@ def generate(spec: SceneSpec) -> Scene:
     return Scene(spec=spec, timeline=timeline, chain=chain, object_world=obj, robot_world=robot_world)
 
 
+def _render_color(
+    spec: SceneSpec, K: FloatArray, world_from_optical: FloatArray, stamps: IntArray, u: FloatArray, v: FloatArray,
+) -> ImageFrameTable:
+    """JPEG colour images: a 0.5 m checkerboard floor (z = 0), sky above the horizon, and the
+    object as a red disc where it was detected (what the detector saw)."""
+    import io
+
+    from PIL import Image
+
+    cols, rows = np.meshgrid(np.arange(spec.width, dtype=float), np.arange(spec.height, dtype=float))
+    rays = rigid.back_project(K, cols.ravel(), rows.ravel(), np.ones(cols.size)).astype(np.float32)
+    # light tile, dark tile, sky
+    palette = np.array([[150, 150, 140], [95, 100, 95], [190, 210, 235]], dtype=np.uint8)
+    blobs: list[bytes] = []
+    for i in range(stamps.size):  # one image per frame: this loop is over frames, not messages per hop
+        dirs = rays @ world_from_optical[i, :3, :3].T.astype(np.float32)
+        origin = world_from_optical[i, :3, 3].astype(np.float32)
+        down = dirs[:, 2] < -1e-6
+        z = np.where(down, -origin[2] / np.where(down, dirs[:, 2], -1.0), np.inf)
+        hit = z < 30.0
+        x = origin[0] + dirs[:, 0] * np.where(hit, z, 0.0)
+        y = origin[1] + dirs[:, 1] * np.where(hit, z, 0.0)
+        tile = (np.floor(x * 2.0) + np.floor(y * 2.0)).astype(np.int64) & 1  # 0.5 m tiles
+        pix = palette[np.where(hit, tile, 2)].reshape(spec.height, spec.width, 3)
+        r2 = (cols - u[i]) ** 2 + (rows - v[i]) ** 2
+        pix[r2 <= 9.0**2] = (60, 20, 20)
+        pix[r2 <= 7.5**2] = (220, 40, 40)
+        out = io.BytesIO()
+        Image.fromarray(pix, "RGB").save(out, format="JPEG", quality=90)
+        blobs.append(out.getvalue())
+    n = stamps.size
+    return ImageFrameTable(
+        frame=np.full(n, spec.optical_frame), stamp_ns=stamps, log_time_ns=stamps, width=np.full(n, spec.width),
+        height=np.full(n, spec.height), encoding=np.full(n, "jpeg"), source=np.full(n, COLOR_TOPIC),
+        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: blobs[i],
+    )
+
+
+def _base_from_camera(spec: SceneSpec, params: _ChainParams) -> FloatArray:
+    """``T_base_link_X`` with X the optical frame (or camera_link when the optical edge is skipped)."""
+    mount = rigid.matrix(spec.mount_xyz, params.mount_quat)
+    if params.skip_optical_edge:
+        return mount
+    if params.sibling_optical:
+        sibling: FloatArray = mount @ rigid.matrix([0.0, 0.0, 0.0], OPTICAL_FROM_LINK_QUAT_XYZW)
+        return sibling
+    out: FloatArray = mount @ rigid.matrix(spec.optical_xyz, params.optical_quat)
+    return out
+
+
 def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
     p = fault.params
     kind = fault.kind
     if kind == Fault.LATENCY:
+        if "hold_s" in p:
+            return replace(params, hold_ns=round(float(p["hold_s"]) * 1e9))
         return replace(params, pose_offset_ns=round(float(p["offset_s"]) * 1e9))
     if kind == Fault.ROTATION_ERROR:
         error = Rotation.from_rotvec(np.deg2rad(float(p["angle_deg"])) * _unit(p.get("axis", (0, 0, 1))))
@@ -315,6 +519,11 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
     if kind == Fault.MISSING_ROTATION:
         return replace(params, mount_quat=np.array([0.0, 0.0, 0.0, 1.0]))
     if kind == Fault.AXIS_FLIP:
+        if fault.used_frame is not None:
+            if fault.used_frame != MOUNT_FRAME:
+                raise SceneError(f"axis_flip used={fault.used_frame!r}: only {MOUNT_FRAME!r} can stand in for the "
+                                 "optical frame")
+            return replace(params, skip_optical_edge=True)
         return replace(params, cam_permutation=np.asarray(p["permutation"], dtype=float))
     if kind == Fault.DEPTH_SCALE:
         return replace(params, depth_factor=float(p["factor"]))
@@ -323,7 +532,15 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
         k[:2, :] *= float(p["scale"])  # the K of another resolution: focal and principal point scale
         return replace(params, K=k)
     if kind == Fault.WRONG_WORLD_FRAME:
+        if fault.used_frame == FOOTPRINT_FRAME:
+            return replace(params, body=FOOTPRINT_FRAME)
+        if fault.used_frame != "odom":
+            raise SceneError(f"wrong_world_frame used={fault.used_frame!r}: 'odom' or {FOOTPRINT_FRAME!r}")
         return replace(params, world="odom")
+    if kind == Fault.WRONG_CAMERA_FRAME:
+        if fault.used_frame != DEPTH_OPTICAL_FRAME:
+            raise SceneError(f"wrong_camera_frame used={fault.used_frame!r}: only {DEPTH_OPTICAL_FRAME!r} is published")
+        return replace(params, sibling_optical=True)
     if kind == Fault.INVERTED_TRANSFORM:
         if fault.hop == "body_to_world":
             return replace(params, invert_pose=True)
@@ -333,6 +550,22 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
 
 def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
     """A fault in the recorded data: what the log says differs from what the robot used."""
+    robot_only = (
+        fault.kind == Fault.WRONG_WORLD_FRAME
+        or (fault.kind == Fault.INVERTED_TRANSFORM and fault.hop == "body_to_world")
+        or (fault.used_frame is not None and fault.kind != Fault.AXIS_FLIP)
+        or "hold_s" in fault.params
+    )
+    if robot_only:
+        raise SceneError(f"{fault.kind.value} at {fault.hop} ({fault.params}) is a fault of the robot's computation "
+                         "only; drop @data")
+    if fault.kind == Fault.AXIS_FLIP and fault.used_frame is not None:
+        # The detections (and their CameraInfo) name camera_link while their pixels are optical: the
+        # recorded data skips the optical edge (a driver configured with the link as its frame_id).
+        if fault.used_frame != MOUNT_FRAME:
+            raise SceneError(f"axis_flip used={fault.used_frame!r}: only {MOUNT_FRAME!r} can stand in for the "
+                             "optical frame")
+        return replace(params, detections_frame=MOUNT_FRAME)
     if fault.kind == Fault.AXIS_FLIP:
         # A recorded rotation can only permute axes properly (det +1): the optical edge published wrong.
         perm = np.asarray(fault.params["permutation"], dtype=float)
@@ -340,10 +573,6 @@ def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams
             raise SceneError("a recorded axis flip must be a proper rotation (det +1)")
         wrong = Rotation.from_quat(truth.optical_quat) * Rotation.from_matrix(perm)
         return replace(params, optical_quat=wrong.as_quat())
-    if fault.kind == Fault.WRONG_WORLD_FRAME or (
-        fault.kind == Fault.INVERTED_TRANSFORM and fault.hop == "body_to_world"
-    ):
-        raise SceneError(f"{fault.kind.value} at {fault.hop} is a fault of the robot's computation only; drop @data")
     return _inject(params, fault, truth)
 
 
@@ -356,27 +585,6 @@ def ns(t_s: FloatArray) -> IntArray:
 def _unit(axis: Sequence[float]) -> FloatArray:
     a = np.asarray(axis, dtype=float)
     out: FloatArray = a / np.linalg.norm(a)
-    return out
-
-
-def _invert_rows(t: FloatArray, q: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Row-wise inverse of (N, 3)/(N, 4) transforms (the replay's components-first inverse)."""
-    t_inv, q_inv = invert(np.asarray(t, dtype=float).T, np.asarray(q, dtype=float).T)
-    return t_inv.T, q_inv.T
-
-
-def _pixel_to_camera(K: FloatArray, u: FloatArray, v: FloatArray, depth: FloatArray) -> FloatArray:
-    x = (u - K[0, 2]) / K[0, 0]
-    y = (v - K[1, 2]) / K[1, 1]
-    return np.stack([x * depth, y * depth, depth], axis=1)
-
-
-def _camera_to_body(params: _ChainParams, mount_xyz: Sequence[float], p_cam: FloatArray) -> FloatArray:
-    """The robot's camera_to_body with its mount, optical rotation, axis permutation, inversion."""
-    r_body_opt = Rotation.from_quat(params.mount_quat) * Rotation.from_quat(params.optical_quat)
-    t = np.asarray(mount_xyz, dtype=float)
-    p = p_cam @ params.cam_permutation.T
-    out: FloatArray = r_body_opt.inv().apply(p - t) if params.invert_camera else r_body_opt.apply(p) + t
     return out
 
 
@@ -407,8 +615,8 @@ def _evidence(
 
     if spec.evidence == "hops":
         rows += [
-            table("camera_optical_frame", robot_cam, PointRole.HOP_CAMERA, HOP_TOPICS.camera or ""),
-            table("base_link", robot_body, PointRole.HOP_BODY, HOP_TOPICS.body or ""),
+            table(spec.optical_frame, robot_cam, PointRole.HOP_CAMERA, HOP_TOPICS.camera or ""),
+            table(BODY_FRAME, robot_body, PointRole.HOP_BODY, HOP_TOPICS.body or ""),
             table("map", robot_world, PointRole.HOP_WORLD, HOP_TOPICS.world or ""),
         ]
         evidence = ChainEvidence(hops=HOP_TOPICS, static_target=True)
@@ -427,8 +635,7 @@ def _evidence(
 def _render_depth(
     spec: SceneSpec,
     K: FloatArray,
-    buffer: TransformBuffer,
-    capture_ns: IntArray,
+    world_from_optical: FloatArray,
     stamps: IntArray,
     u: FloatArray,
     v: FloatArray,
@@ -439,20 +646,17 @@ def _render_depth(
     The disc carries the measured object depth so the replay's window median returns it exactly
     (to the millimetre); the floor comes from intersecting each pixel's ray with z = 0.
     """
-    world_from_opt = buffer.lookup("map", "camera_optical_frame", capture_ns)
     cols, rows = np.meshgrid(np.arange(spec.width, dtype=float), np.arange(spec.height, dtype=float))
-    rays = np.stack([(cols - K[0, 2]) / K[0, 0], (rows - K[1, 2]) / K[1, 1], np.ones_like(cols)], -1)
-    rays = rays.reshape(-1, 3)
-    images = np.zeros((capture_ns.size, spec.height, spec.width), dtype=np.float32)
+    rays = rigid.back_project(K, cols.ravel(), rows.ravel(), np.ones(cols.size))
+    images = np.zeros((stamps.size, spec.height, spec.width), dtype=np.float32)
     radius2 = 8.0**2
-    for i in range(capture_ns.size):  # one image per frame: this loop is over frames, not messages per hop
-        rot = Rotation.from_quat(world_from_opt.quat_xyzw[i])
-        dirs_world = rot.apply(rays)
-        origin_z = world_from_opt.translation[i, 2]
+    for i in range(stamps.size):  # one image per frame: this loop is over frames, not messages per hop
+        dirs_world = rays @ world_from_optical[i, :3, :3].T
+        origin_z = world_from_optical[i, 2, 3]
         with np.errstate(divide="ignore", invalid="ignore"):
             z = np.where(dirs_world[:, 2] < -1e-6, -origin_z / dirs_world[:, 2], 0.0)
         floor = np.where((z > 0) & (z < 20.0), z, 0.0).reshape(spec.height, spec.width)
         disc = (cols - u[i]) ** 2 + (rows - v[i]) ** 2 <= radius2
         floor[disc] = object_depth[i]
         images[i] = floor
-    return DepthFrameTable.from_arrays("camera_optical_frame", stamps, images, source=TOPICS.depth or "")
+    return DepthFrameTable.from_arrays(spec.optical_frame, stamps, images, source=TOPICS.depth or "")

@@ -19,8 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.attribute import Attribution, Finding
+from framechain.analysis.attribute import Attribution
+from framechain.analysis.estimates import format_estimate, format_interval
 from framechain.analysis.evidence import inputs_record, robot_speed, sensitivity
+from framechain.timeline import Timeline
 from framechain.timeline.arrays import FloatArray
 
 _CSS = """
@@ -46,22 +48,105 @@ class Figure:
 
 
 def render_report(
-    result: Attribution, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html")
+    result: Attribution, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
+    timeline: Timeline | None = None,
 ) -> dict[str, Path]:
-    """Write report.md (with its PNGs) and/or report.html into ``out_dir``."""
+    """Write report.md (with its PNGs) and/or report.html into ``out_dir``.
+
+    With the ``timeline`` (its camera images), both show what the camera saw at the worst
+    observations, with the chain drawn on the image (:func:`image_crops`).
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figures = make_figures(result)
+    sections = image_crops(result, timeline) if timeline is not None else []
     paths: dict[str, Path] = {}
     if "md" in formats:
         for fig in figures:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["md"] = out / "report.md"
-        paths["md"].write_text(markdown(result, figures))
+        for _, crops in sections:
+            for crop in crops:
+                (out / f"{crop.name}.png").write_bytes(crop.png)
+        paths["md"].write_text(markdown(result, figures) + _crops_markdown(sections))
     if "html" in formats:
         paths["html"] = out / "report.html"
-        paths["html"].write_text(html_page(result, figures))
+        page = html_page(result, figures)
+        provenance = "<h2>Provenance</h2>"
+        paths["html"].write_text(page.replace(provenance, _crops_html(sections) + provenance, 1))
     return paths
+
+
+# -- what the camera saw ----------------------------------------------------------------------
+#: Legend of the image crops (the colours of framechain.sinks.overlay).
+CROP_LEGEND = ("green: the detection (and tag corners); blue: the recomputed world point projected back into the "
+               "image; orange: the as-run world point projected the same way; the line between them")
+
+
+def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list[Figure]]]:
+    """Per finding (or once, without findings): the camera image at the worst observations for it,
+    with the detection, both projected world points and the line between them, in its colour.
+
+    A finding's worst observations are those where its hop departs most from the logged hop
+    (``hop_errors``), else where the error against the evidence is largest."""
+    import dataclasses
+
+    from framechain.sinks.overlay import FAULT_COLORS, image_overlay, render_crops, worst_rows
+
+    overlay = image_overlay(timeline, result.replay, result.aligned, result.findings)
+    obs = result.replay.observations
+    n = len(obs)
+
+    def score_for(hop: str | None) -> FloatArray:
+        for candidate in (result.hop_errors.get(hop) if hop else None, result.error_before):
+            if candidate is not None and len(candidate) == n and np.isfinite(candidate).any():
+                return np.asarray(candidate, dtype=float)
+        return overlay.error_px
+
+    sections: list[tuple[str, list[Figure]]] = []
+    for finding in result.findings or (None,):
+        mine = overlay if finding is None else dataclasses.replace(
+            overlay, finding=finding, color=FAULT_COLORS.get(finding.fault.value, overlay.color))
+        rows = worst_rows(timeline, result.replay, mine, score_for(finding.hop.value if finding else None))
+        prefix = f"camera_{finding.fault.value}" if finding else "camera"
+        figures = []
+        for i, png in render_crops(timeline, mine, rows):
+            gap = mine.error_px[i]
+            what = f"{gap:.0f} px between as-run and recomputed" if np.isfinite(gap) else "no as-run point"
+            caption = f"obs {int(obs.obs_id[i])} {obs.label[i]} at {obs.stamp_ns[i] / 1e9:.3f} s: {what}"
+            figures.append(Figure(f"{prefix}_obs_{int(obs.obs_id[i])}", caption, png))
+        if figures:
+            title = f"{finding.fault.value} on {finding.hop.value}" if finding else "the worst observations"
+            sections.append((title, figures))
+    return sections
+
+
+def _crops_intro() -> str:
+    return f"Per finding, at the observations where its hop departs most: {CROP_LEGEND} (in the finding's colour)."
+
+
+def _crops_markdown(sections: Sequence[tuple[str, list[Figure]]]) -> str:
+    if not sections:
+        return ""
+    lines = ["", "## What the camera saw", "", _crops_intro(), ""]
+    for title, crops in sections:
+        lines += [f"### {title}", "", *[f"![{c.caption}]({c.name}.png)" for c in crops], ""]
+    return "\n".join(lines)
+
+
+def _crops_html(sections: Sequence[tuple[str, list[Figure]]]) -> str:
+    if not sections:
+        return ""
+    e = html.escape
+    parts = [f"<h2>What the camera saw</h2><p>{e(_crops_intro())}</p>"]
+    for title, crops in sections:
+        parts.append(f"<h3>{e(title)}</h3><div class='plots'>")
+        for c in crops:
+            data = base64.b64encode(c.png).decode("ascii")
+            parts.append(f"<figure><img alt='{e(c.caption)}' src='data:image/png;base64,{data}'>"
+                         f"<figcaption>{e(c.caption)}</figcaption></figure>")
+        parts.append("</div>")
+    return "".join(parts)
 
 
 # -- figures ----------------------------------------------------------------------------------
@@ -160,47 +245,6 @@ def _png(fig: Any, name: str, caption: str) -> Figure:
 
 
 # -- text -------------------------------------------------------------------------------------
-def estimate_text(f: Finding) -> str:
-    parts = []
-    for key, value in f.estimate.items():
-        if key == "offset_s":
-            parts.append(f"offset {float(value) * 1e3:+.1f} ms")
-        elif key == "angle_deg":
-            frame = f.estimate.get("axis_frame", "")
-            parts.append(f"{float(value):.2f} deg about {_axis_text(f.estimate.get('axis', []))}"
-                         + (f" of {frame}" if frame else ""))
-        elif key in ("factor", "scale"):
-            parts.append(f"{key} {float(value):.4g}")
-        elif key in ("used", "meant", "hop", "variant"):
-            parts.append(f"{key} {value}")
-        elif key == "permutation":
-            parts.append(f"permutation {value}")
-        elif key == "edge":
-            parts.append(f"edge {value[0]} -> {value[1]}")
-    return "; ".join(parts)
-
-
-def _axis_text(axis: Sequence[float]) -> str:
-    """A principal axis by name (-y), any other as a rounded vector."""
-    a = np.asarray(axis, dtype=float)
-    if a.size == 3 and np.max(np.abs(a)) > 0.999:
-        k = int(np.argmax(np.abs(a)))
-        return f"{'+' if a[k] > 0 else '-'}{'xyz'[k]}"
-    return str([round(float(v), 3) + 0.0 for v in a])  # + 0.0 drops negative zeros
-
-
-def interval_text(f: Finding) -> str:
-    out = []
-    for key, (lo, hi) in f.interval.items():
-        if key == "offset_s":
-            out.append(f"{lo * 1e3:+.2f} .. {hi * 1e3:+.2f} ms")
-        elif key == "angle_deg":
-            out.append(f"{lo:.3f} .. {hi:.3f} deg")
-        else:
-            out.append(f"{lo:.5f} .. {hi:.5f}")
-    return "; ".join(out) or "-"
-
-
 HOP_COLUMNS = ("hop", "own departure med / p95 / max", "sample gap med / max", "stale", "attributed to it")
 
 
@@ -245,6 +289,9 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
             f"{record['stamps']['observations_last_ns']} ns, {record['stamps']['keyed_on']}",
         ),
         ("metric", f"{record['metric']['name']}: {record['metric']['definition']}"),
+        ("logged points", "; ".join(
+            f"{role}: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in fates.items())
+            for role, fates in record["evidence_alignment"].items()) or "none"),
         ("latency budget", f"{record['latency_budget_s'] * 1e3:g} ms"),
         (
             "observations",
@@ -274,7 +321,8 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         ]
         for f in result.findings:
             lines.append(
-                f"| {f.fault.value} | {f.hop.value} | {estimate_text(f)} | {interval_text(f)} | {f.share:.0%} | "
+                f"| {f.fault.value} | {f.hop.value} | {format_estimate(f.estimate)} | {format_interval(f.interval)} | "
+                f"{f.share:.0%} | "
                 f"{f.error_m * 1e3:.1f} | {f.confidence:.2f} | {f.fix.replace('|', '/')} |"
             )
         lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
@@ -326,8 +374,8 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         )
         for f in result.findings:
             parts.append(
-                f"<tr><td><b>{e(f.fault.value)}</b></td><td>{e(f.hop.value)}</td><td>{e(estimate_text(f))}</td>"
-                f"<td>{e(interval_text(f))}</td><td>{f.share:.0%}</td><td>{f.error_m * 1e3:.1f} mm</td>"
+                f"<tr><td><b>{e(f.fault.value)}</b></td><td>{e(f.hop.value)}</td><td>{e(format_estimate(f.estimate))}</td>"
+                f"<td>{e(format_interval(f.interval))}</td><td>{f.share:.0%}</td><td>{f.error_m * 1e3:.1f} mm</td>"
                 f"<td>{f.confidence:.2f}</td><td>{e(f.evidence)}</td><td>{_code(f.fix)}</td></tr>"
             )
         parts.append("</table>")

@@ -14,10 +14,19 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
 - ``/camera``: the chain camera as a ``Pinhole`` (RDF) under its optical frame, with the child
   frame ``<camera>_image_plane``; ``/camera/depth`` the depth frames nearest the observations
   (decimated); ``/camera/detections`` every observation's pixel as a 2D point.
+- ``/camera/image``: the camera's images (``--images near``: those nearest the observations; ``all``;
+  ``none``): ``Image`` for raw encodings, ``EncodedImage`` for JPEG/PNG (never decoded here);
+  ``/camera/video``: a LeRobot episode's mp4 as ``AssetVideo`` and one ``VideoFrameReference`` per
+  frame (decoded by the viewer).
+- ``/camera/overlay/*``: the chain drawn on the image (:mod:`framechain.sinks.overlay`): ``corners``
+  (fiducial quads), ``recomputed`` and ``as_run`` (the world points projected back through the
+  replay's transforms), ``error`` (a line between them, coloured by the finding that explains it);
+  ``/series/error_px/as_run`` the length of that line.
 - ``/points/recomputed/{camera,body,world}``: the replay's point at every hop, in the hop's frame;
-  ``/points/as_run/{camera,body,world,target}``: the robot's own logged points, matched to
-  observations; ``/points/reference``: reference truth; ``/points/error/<hop>``: arrows from
-  recomputed to as-run.
+  ``/points/as_run/{camera,body,world,target}``: the robot's own logged points as the attribution
+  aligned them (:mod:`framechain.analysis.alignment`: matched to observations, in the hop's
+  frame); ``/points/reference``: reference truth; ``/points/error/<hop>``: arrows from recomputed
+  to as-run.
 - ``/series/error_mm/<hop>`` (recomputed vs as-run, and ``target``/``reference``) and
   ``/series/gap_ms/<hop>`` (observation stamp minus the stamp of the transform sample used):
   ``Scalars``, one row per replayed observation.
@@ -34,30 +43,39 @@ observation per hop).
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
-from framechain.analysis.attribute import POINT_MATCH_NS, REFERENCE_MATCH_NS
-from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer, transform_points
+from framechain.analysis.alignment import AlignedEvidence, align_evidence
+from framechain.analysis.attribute import Finding
+from framechain.analysis.estimates import format_estimate, format_interval
+from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer
 from framechain.replay.stamps import nearest
+from framechain.sinks.overlay import (
+    DETECTION_COLOR,
+    ImageOverlay,
+    ImageSelection,
+    image_overlay,
+    select_images,
+)
 from framechain.timeline import (
     ChainFrames,
     FramechainError,
+    ImageFrameTable,
     PointRole,
-    PointTable,
     Timeline,
     normalize_frame,
 )
 from framechain.timeline.arrays import BoolArray, FloatArray, IntArray
+from framechain.timeline.tables import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -136,12 +154,10 @@ class RerunOptions:
     max_images: int = 30
     #: A depth frame within this of an observation stamp is logged with it.
     image_window_ns: int = 50_000_000
-    #: As-run points without an ``obs_id`` match the observation with the nearest stamp within this.
-    match_tolerance_ns: int = POINT_MATCH_NS
-    #: Reference points (motion capture) match the nearest observation within this.
-    reference_tolerance_ns: int = REFERENCE_MATCH_NS
     point_radius_m: float = 0.02
     axis_length_m: float = 0.2
+    #: Which camera images are logged: near the observations (default), all, or none.
+    images: ImageSelection = ImageSelection.NEAR
 
 
 @dataclass(frozen=True)
@@ -156,111 +172,42 @@ class RerunOutcome:
     rows: Mapping[str, int]
 
 
-@dataclass(frozen=True)
-class AsRunPoints:
-    """The robot's own logged points, one row per observation in the chain frame of their hop.
-
-    Each array is (N, 3), NaN where the robot logged nothing for that observation (or the point's
-    frame could not be brought into the hop's frame).
-    """
-
-    camera: FloatArray
-    body: FloatArray
-    world: FloatArray
-    target: FloatArray
-    reference: FloatArray
-
-    def by_leaf(self, leaf: str) -> FloatArray:
-        value: FloatArray = getattr(self, leaf)
-        return value
+#: The entity leaf of each role's as-run points.
+ROLE_LEAF: dict[PointRole, str] = {
+    PointRole.HOP_CAMERA: "camera", PointRole.HOP_BODY: "body", PointRole.HOP_WORLD: "world",
+    PointRole.TARGET: "target", PointRole.REFERENCE: "reference",
+}
 
 
 @dataclass(frozen=True)
 class FindingView:
-    """A finding as the sink renders it (from the attribution engine's objects or plain dicts)."""
+    """A finding as the sink (and ``framechain replay``) words it; the estimate text is
+    :func:`~framechain.analysis.estimates.format_estimate`'s."""
 
-    fault: str
-    hop: str
-    estimate: Any = None
-    interval: Any = None  # {key: [low, high]} for estimate keys
-    share: float | None = None
-    error_m: float | None = None
-    confidence: float | None = None
-    evidence: str = ""
-    fix: str = ""
+    finding: Finding
 
     @classmethod
-    def of(cls, finding: Mapping[str, Any] | object) -> FindingView:
-        """Read the known fields from a mapping, a dataclass or any object with attributes."""
-        if isinstance(finding, FindingView):
-            return finding
-        if isinstance(finding, Mapping):
-            get: Callable[[str], Any] = finding.get
-        elif dataclasses.is_dataclass(finding) and not isinstance(finding, type):
-            raw = dataclasses.asdict(finding)
-            get = raw.get
-        else:
-
-            def get(name: str) -> Any:
-                return getattr(finding, name, None)
-
-        def number(name: str) -> float | None:
-            value = get(name)
-            return None if value is None else float(value)
-
-        return cls(
-            fault=_enum_text(get("fault") or "unknown"), hop=_enum_text(get("hop") or ""),
-            estimate=get("estimate"), interval=get("interval"),
-            share=number("share"), error_m=number("error_m"), confidence=number("confidence"),
-            evidence=str(get("evidence") or ""), fix=str(get("fix") or ""),
-        )
+    def of(cls, finding: Finding) -> FindingView:
+        return cls(finding)
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
         line = self.headline()
-        if self.evidence:
-            line += f" Evidence: {self.evidence.rstrip('.')}."
-        if self.fix:
-            line += f" Fix: {self.fix.rstrip('.')}."
+        f = self.finding
+        if f.evidence:
+            line += f" Evidence: {f.evidence.rstrip('.')}."
+        if f.fix:
+            line += f" Fix: {f.fix.rstrip('.')}."
         return line
 
     def headline(self) -> str:
         """Fault, hop, estimate and share of the error, without the evidence and fix sentences."""
-        head = f"{_enum_text(self.fault)}"
-        if self.hop:
-            head += f" on {_enum_text(self.hop)}"
-        parts = [head]
-        if self.estimate is not None:
-            estimate = f"estimate {_format_estimate(self.estimate)}"
-            if isinstance(self.interval, Mapping) and self.interval:
-                estimate += f" (95% interval {_format_estimate(self.interval)})"
-            parts.append(estimate)
-        size = []
-        if self.error_m is not None:
-            size.append(f"{self.error_m * 1e3:.1f} mm")
-        if self.share is not None:
-            size.append(f"{self.share * 100:.0f}% of the error" if self.share <= 1 else f"share {self.share:g}")
-        if self.confidence is not None:
-            size.append(f"confidence {self.confidence:.2f}")
-        if size:
-            parts.append(", ".join(size))
-        return "; ".join(parts) + "."
-
-
-def _enum_text(value: Any) -> str:
-    return str(getattr(value, "value", value))
-
-
-def _format_estimate(value: Any) -> str:
-    if isinstance(value, Mapping):
-        return ", ".join(f"{k}={_format_estimate(v)}" for k, v in value.items())
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return _format_estimate(dataclasses.asdict(value))
-    if isinstance(value, float | np.floating):
-        return f"{float(value):.4g}"
-    if isinstance(value, list | tuple | np.ndarray):
-        return "[" + ", ".join(_format_estimate(v) for v in value) + "]"
-    return _enum_text(value)
+        f = self.finding
+        estimate = f"estimate {format_estimate(f.estimate)}"
+        if f.interval:
+            estimate += f" (95% interval {format_interval(f.interval)})"
+        size = f"{f.error_m * 1e3:.1f} mm, {f.share * 100:.0f}% of the error, confidence {f.confidence:.2f}"
+        return f"{f.fault.value} on {f.hop.value}; {estimate}; {size}."
 
 
 # ----------------------------------------------------------------------------------------------
@@ -325,7 +272,8 @@ def stream_replay(
     result: ReplayResult,
     target: RerunTarget,
     *,
-    findings: Sequence[Mapping[str, Any] | object] = (),
+    findings: Sequence[Finding] = (),
+    evidence: AlignedEvidence | None = None,
     reference_point: Sequence[float] | None = None,
     options: RerunOptions | None = None,
     env: Mapping[str, str] | None = None,
@@ -333,8 +281,9 @@ def stream_replay(
 ) -> RerunOutcome:
     """Send one replay to ``target`` (save, connect or spawn), with the default blueprint.
 
-    ``findings`` are the attribution engine's findings (objects or mappings with ``fault``, ``hop``,
-    ``estimate``, ``share``, ``error_m``, ``evidence``, ``fix``); ``reference_point`` a declared
+    ``findings`` and ``evidence`` are an attribution's (``Attribution.findings``, ``.aligned``): the
+    sink draws the evidence attribution used; without ``evidence`` it aligns the log's points itself
+    (the same :func:`~framechain.analysis.alignment.align_evidence`). ``reference_point`` a declared
     world-frame target [x, y, z] in metres. ``notify`` receives notes for the user (default:
     stderr), such as the fallback from spawn to save. Ends with flush and disconnect (which writes
     the RRD footer).
@@ -349,7 +298,12 @@ def stream_replay(
         notes.append(note)
         say(note)
     rec = rr.RecordingStream(opts.application_id, recording_id=opts.recording_id)
-    blueprint = default_blueprint(result.frames)
+    shows_images = opts.images is not ImageSelection.NONE and len(timeline.image_frames) > 0
+    if evidence is None:
+        evidence = align_evidence(timeline.points, result.observations, result.frames,
+                                  TransformBuffer.from_timeline(timeline))
+    bounds = image_view_bounds(image_overlay(timeline, result, evidence, findings))
+    blueprint = default_blueprint(result.frames, images=shows_images, image_bounds=bounds)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -370,7 +324,8 @@ def stream_replay(
                 chosen = RerunTarget.save(path)
                 fell_back = True
                 rec.save(path, default_blueprint=blueprint)
-        rows = log_replay(rec, timeline, result, findings=findings, reference_point=reference_point, options=opts)
+        rows = log_replay(rec, timeline, result, findings=findings, evidence=evidence,
+                          reference_point=reference_point, options=opts)
         rec.flush(timeout_sec=60.0)
         rec.disconnect()
     except (RuntimeError, OSError) as err:
@@ -382,14 +337,38 @@ def stream_replay(
     )
 
 
-def default_blueprint(frames: ChainFrames) -> rrb.Blueprint:
-    """3D view in the world frame (and all observations' world points), the camera's 2D view,
-    the per-hop error and time-gap series, the text log."""
+def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float] | None:
+    """(u_min, u_max, v_min, v_max) of the camera view: the image, widened to show most projected
+    as-run points (the 90th percentile of how far they fall outside, at most one image size)."""
+    have = overlay.width > 0
+    if not have.any():
+        return None
+    w, h = float(overlay.width[have].max()), float(overlay.height[have].max())
+    u0, u1, v0, v1 = -0.5, w - 0.5, -0.5, h - 0.5
+    uv = overlay.as_run_uv[np.isfinite(overlay.as_run_uv).all(axis=1)]
+    if uv.size:
+        margin_u, margin_v = 0.04 * w, 0.04 * h
+        u0 = max(min(u0, float(np.percentile(uv[:, 0], 10)) - margin_u), -w)
+        u1 = min(max(u1, float(np.percentile(uv[:, 0], 90)) + margin_u), 2 * w)
+        v0 = max(min(v0, float(np.percentile(uv[:, 1], 10)) - margin_v), -h)
+        v1 = min(max(v1, float(np.percentile(uv[:, 1], 90)) + margin_v), 2 * h)
+    return u0, u1, v0, v1
+
+
+def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
+                      image_bounds: tuple[float, float, float, float] | None = None) -> rrb.Blueprint:
+    """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
+    (its images with the chain drawn on them when ``images``, else the depth frames); below them the
+    per-hop error, the error in the image and the time gaps as series, and the findings.
+    ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
+    v_min, v_max) frames the camera view (see :func:`image_view_bounds`)."""
     import rerun.blueprint as rrb
 
+    # With colour images, the depth cloud would bury the points: it stays in the depth tab.
     world = rrb.Spatial3DView(
         name=f"World ({frames.world})", origin="/",
-        contents=["+ /**", "- /series/**", "- /log/**", "- /summary"],
+        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", "- /camera/overlay/**",
+                  *(["- /camera/depth"] if images else [])],
         spatial_information=rrb.SpatialInformation(target_frame=frames.world),
     )
     history = rrb.Spatial3DView(
@@ -401,25 +380,31 @@ def default_blueprint(frames: ChainFrames) -> rrb.Blueprint:
                                           end=rrb.TimeRangeBoundary.infinite())
                      for name in (SENSOR_TIME, LOG_TIME, OBS_INDEX)],
     )
+    plane = rrb.SpatialInformation(target_frame=frames.camera + IMAGE_PLANE_SUFFIX)
+    bounds = None if image_bounds is None else rrb.VisualBounds2D(x_range=image_bounds[:2], y_range=image_bounds[2:])
     camera = rrb.Spatial2DView(
         name=f"Camera ({frames.camera})", origin="/camera",
-        spatial_information=rrb.SpatialInformation(target_frame=frames.camera + IMAGE_PLANE_SUFFIX),
+        contents=["+ /camera/**", "- /camera/depth"] if images else ["+ /camera/**"],
+        spatial_information=plane, visual_bounds=bounds,
     )
+    cameras: rrb.Tabs | rrb.Spatial2DView = camera
+    if images:
+        depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
+                                  contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
+        cameras = rrb.Tabs(camera, depth)
     errors = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
+    pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
     gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
-    text = rrb.Vertical(
-        rrb.TextLogView(name="Findings and rejections", origin="/log"),
-        rrb.TextDocumentView(name="Summary", origin="/summary"),
-        row_shares=[2, 1],
-    )
+    text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
+                    rrb.TextDocumentView(name="Summary", origin="/summary"))
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(rrb.Tabs(world, history), text, row_shares=[3, 1]),
-            rrb.Vertical(camera, errors, gaps, row_shares=[2, 1, 1]),
-            column_shares=[3, 2],
+        rrb.Vertical(
+            rrb.Horizontal(rrb.Tabs(world, history), cameras, column_shares=[1, 1]),
+            rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
+            row_shares=[3, 2],
         ),
-        rrb.TimePanel(state="expanded", timeline=SENSOR_TIME),
-        collapse_panels=False,
+        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
+        collapse_panels=collapse_panels,
     )
 
 
@@ -428,7 +413,8 @@ def log_replay(
     timeline: Timeline,
     result: ReplayResult,
     *,
-    findings: Sequence[Mapping[str, Any] | object] = (),
+    findings: Sequence[Finding] = (),
+    evidence: AlignedEvidence | None = None,
     reference_point: Sequence[float] | None = None,
     options: RerunOptions | None = None,
 ) -> dict[str, int]:
@@ -450,13 +436,16 @@ def log_replay(
     _log_frame_tree(rec, timeline, frames, opts, rows)
     _log_used_transforms(rec, result, rows)
     _log_camera(rec, timeline, result, opts, rows)
-    as_run = as_run_points(timeline, result, match_tolerance_ns=opts.match_tolerance_ns,
-                           reference_tolerance_ns=opts.reference_tolerance_ns)
+    if evidence is None:
+        evidence = align_evidence(timeline.points, result.observations, frames, TransformBuffer.from_timeline(timeline))
+    if len(evidence) != len(result.observations) or not np.array_equal(evidence.obs_id, result.observations.obs_id):
+        raise RerunSinkError("the aligned evidence is not that of this replay's observations")
+    as_run = {leaf: evidence.points(role) for role, leaf in ROLE_LEAF.items()}
     if reference_point is not None:
         declared = np.asarray(reference_point, dtype=float).reshape(3)
-        have = _finite_rows(as_run.reference)
-        reference = np.where(have[:, None], as_run.reference, declared)
-        as_run = dataclasses.replace(as_run, reference=np.where(result.replayed[:, None], reference, np.nan))
+        have = _finite_rows(as_run["reference"])
+        reference = np.where(have[:, None], as_run["reference"], declared)
+        as_run["reference"] = np.where(result.replayed[:, None], reference, np.nan)
         rec.log("/points/reference/declared",
                 rr.Points3D([declared], colors=[REFERENCE_COLOR], radii=[opts.point_radius_m * 1.5],
                             labels=["declared reference"]),
@@ -464,116 +453,10 @@ def log_replay(
         rows["/points/reference/declared"] = 1
     _log_points(rec, result, as_run, opts, rows)
     _log_series(rec, result, as_run, rows)
+    _log_images(rec, timeline, result, opts, rows)
+    _log_overlay(rec, image_overlay(timeline, result, evidence, findings), result, rows)
     _log_text(rec, result, [FindingView.of(f) for f in findings], rows)
     return rows
-
-
-# ----------------------------------------------------------------------------------------------
-# As-run points
-
-
-def as_run_points(
-    timeline: Timeline,
-    result: ReplayResult,
-    *,
-    match_tolerance_ns: int = POINT_MATCH_NS,
-    reference_tolerance_ns: int = REFERENCE_MATCH_NS,
-    buffer: TransformBuffer | None = None,
-) -> AsRunPoints:
-    """Match the robot's logged points to observations and express them in the chain frames.
-
-    A point with ``obs_id >= 0`` belongs to that observation; one without is matched to the
-    observation nearest in stamp within the tolerance (where several observations share that
-    stamp, to the one whose recomputed point is nearest). Points logged in another frame than
-    their hop's are transformed at their stamp with the log's transforms.
-    """
-    frames = result.frames
-    recomputed = {"camera": result.p_cam, "body": result.p_body, "world": result.p_world}
-    wanted = (
-        ("camera", PointRole.HOP_CAMERA, frames.camera, match_tolerance_ns),
-        ("body", PointRole.HOP_BODY, frames.body, match_tolerance_ns),
-        ("world", PointRole.HOP_WORLD, frames.world, match_tolerance_ns),
-        ("target", PointRole.TARGET, frames.world, match_tolerance_ns),
-        ("reference", PointRole.REFERENCE, frames.world, reference_tolerance_ns),
-    )
-    cache: list[TransformBuffer] = [] if buffer is None else [buffer]
-
-    def get_buffer() -> TransformBuffer:
-        if not cache:
-            cache.append(TransformBuffer.from_timeline(timeline))
-        return cache[0]
-
-    out: dict[str, FloatArray] = {}
-    for leaf, role, frame, tolerance in wanted:
-        points = timeline.points.with_role(role)
-        xyz = _points_in_frame(points, frame, get_buffer)
-        near = recomputed.get(leaf, result.p_world)
-        out[leaf] = _match_to_observations(points, xyz, result, near, tolerance)
-    return AsRunPoints(**out)
-
-
-def _points_in_frame(points: PointTable, frame: str, get_buffer: Callable[[], TransformBuffer]) -> FloatArray:
-    """Points (M, 3) expressed in ``frame`` at their stamps (NaN where no transform exists)."""
-    xyz = points.xyz.astype(float, copy=True)
-    target = normalize_frame(frame)
-    for other in np.unique(points.frame):
-        if not other or other == target:
-            continue
-        sel = points.frame == other
-        lookup = get_buffer().lookup(target, str(other), points.stamp_ns[sel])
-        moved = transform_points(lookup.translation, lookup.quat_xyzw, xyz[sel])
-        moved[~lookup.ok] = np.nan
-        xyz[sel] = moved
-    return xyz
-
-
-def _match_to_observations(
-    points: PointTable, xyz: FloatArray, result: ReplayResult, recomputed: FloatArray, tolerance_ns: int
-) -> FloatArray:
-    """(N, 3) per observation: the matched point (the nearest in stamp when several match)."""
-    obs = result.observations
-    n = len(obs)
-    out = np.full((n, 3), np.nan)
-    if len(points) == 0 or n == 0:
-        return out
-    target = np.full(len(points), -1, dtype=np.int64)
-    dt = np.zeros(len(points), dtype=np.int64)
-    # By obs_id.
-    order = np.argsort(obs.obs_id, kind="stable")
-    has_id = points.obs_id >= 0
-    if has_id.any():
-        pos = np.clip(np.searchsorted(obs.obs_id[order], points.obs_id[has_id]), 0, n - 1)
-        hit = obs.obs_id[order][pos] == points.obs_id[has_id]
-        idx = np.flatnonzero(has_id)
-        target[idx[hit]] = order[pos[hit]]
-        dt[idx[hit]] = np.abs(points.stamp_ns[idx[hit]] - obs.stamp_ns[order[pos[hit]]])
-    # By stamp.
-    free = np.flatnonzero(~has_id)
-    if free.size:
-        by_stamp = np.argsort(obs.stamp_ns, kind="stable")
-        stamps = obs.stamp_ns[by_stamp]
-        pick = nearest(stamps, points.stamp_ns[free])
-        gap = np.abs(stamps[pick] - points.stamp_ns[free])
-        ok = gap <= tolerance_ns
-        target[free[ok]] = by_stamp[pick[ok]]
-        dt[free[ok]] = gap[ok]
-        # Several observations on the nearest stamp: the one whose recomputed point is nearest.
-        lo = np.searchsorted(stamps, stamps[pick], side="left")
-        hi = np.searchsorted(stamps, stamps[pick], side="right")
-        for k in np.flatnonzero(ok & (hi - lo > 1)):
-            candidates = by_stamp[lo[k]:hi[k]]
-            dist = np.linalg.norm(recomputed[candidates] - xyz[free[k]], axis=1)
-            dist = np.where(np.isfinite(dist), dist, np.inf)
-            target[free[k]] = candidates[int(np.argmin(dist))]
-    matched = np.flatnonzero((target >= 0) & np.isfinite(xyz).all(axis=1))
-    if matched.size == 0:
-        return out
-    # One point per observation: the nearest in stamp (ties: the later row).
-    ranked = matched[np.lexsort((-matched, dt[matched]))]
-    _, first = np.unique(target[ranked], return_index=True)
-    chosen = ranked[first]
-    out[target[chosen]] = xyz[chosen]
-    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -726,14 +609,146 @@ def _log_camera(
         labels = [f"obs {i} {lab}".rstrip() + ("" if s == REPLAYED else f" ({s})")
                   for i, lab, s in zip(obs.obs_id.tolist(), obs.label.tolist(), result.status.tolist(), strict=True)]
         rec.log("/camera/detections", rr.CoordinateFrame(plane), static=True)
-        rec.send_columns(
-            "/camera/detections", indexes=_obs_indexes(result, every),
-            columns=rr.Points2D.columns(
-                positions=np.stack([obs.u, obs.v], axis=1), colors=colors.astype(np.uint8), labels=labels,
-                radii=np.full(len(obs), 6.0),
-            ),
-        )
+        _send_per_stamp(rec, "/camera/detections", result, every, lambda sel: rr.Points2D.columns(
+            positions=np.stack([obs.u[sel], obs.v[sel]], axis=1), colors=colors[sel].astype(np.uint8),
+            labels=[labels[i] for i in sel.tolist()], radii=np.full(sel.size, 6.0)))
         rows["/camera/detections"] = len(obs)
+
+
+def _log_images(
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, opts: RerunOptions, rows: dict[str, int]
+) -> None:
+    """The camera's images under its image plane: raw as ``Image``, JPEG/PNG as ``EncodedImage`` (bytes
+    as logged), frames of a video file as ``VideoFrameReference`` into one ``AssetVideo`` per file."""
+    import rerun as rr
+
+    images = timeline.image_frames
+    chosen = select_images(timeline, result, opts.images)
+    if chosen.size == 0:
+        return
+    plane = result.frames.camera + IMAGE_PLANE_SUFFIX
+    enc = images.encoding[chosen]
+    raw = chosen[np.isin(enc, list(RAW_IMAGE_ENCODINGS))]
+    compressed = chosen[np.isin(enc, list(COMPRESSED_IMAGE_ENCODINGS))]
+    if raw.size or compressed.size:
+        rec.log("/camera/image", rr.CoordinateFrame(plane), static=True)
+    if raw.size:
+        rec.send_columns(
+            "/camera/image", indexes=_image_indexes(images, result, raw),
+            columns=rr.Image.columns(buffer=[images.load(int(i)) for i in raw],
+                                     format=[_image_format(str(images.encoding[i]), int(images.width[i]),
+                                                           int(images.height[i])) for i in raw]),
+        )
+    if compressed.size:
+        rec.send_columns(
+            "/camera/image", indexes=_image_indexes(images, result, compressed),
+            columns=rr.EncodedImage.columns(blob=[images.load(int(i)) for i in compressed],
+                                            media_type=[f"image/{images.encoding[i]}" for i in compressed]),
+        )
+    if raw.size or compressed.size:
+        rows["/camera/image"] = int(raw.size + compressed.size)
+    video = chosen[enc == VIDEO_ENCODING]
+    for k, path in enumerate(np.unique(images.video_path[video]).tolist()):
+        entity = "/camera/video" if k == 0 else f"/camera/video/{k}"
+        frames = video[images.video_path[video] == path]
+        rec.log(entity, rr.AssetVideo(path=path), rr.CoordinateFrame(plane), static=True)
+        rec.send_columns(entity, indexes=_image_indexes(images, result, frames),
+                         columns=rr.VideoFrameReference.columns_nanos(images.video_time_ns[frames]))
+        rows[entity] = int(frames.size)
+
+
+def _image_format(encoding: str, width: int, height: int) -> rr.components.ImageFormat:
+    import rerun as rr
+
+    channels, dtype = RAW_IMAGE_ENCODINGS[encoding]
+    bgr = encoding.startswith("bgr")
+    models: dict[int, Literal["L", "RGB", "BGR", "RGBA", "BGRA"]] = {
+        1: "L", 3: "BGR" if bgr else "RGB", 4: "BGRA" if bgr else "RGBA"}
+    datatypes: dict[str, Literal["U8", "U16", "F32"]] = {"u1": "U8", "<u2": "U16", "<f4": "F32"}
+    return rr.components.ImageFormat(width=width, height=height, color_model=models[channels],
+                                     channel_datatype=datatypes[dtype])
+
+
+def _image_indexes(images: ImageFrameTable, result: ReplayResult, rows: IntArray) -> list[rr.TimeColumn]:
+    """Sensor and log time of each image, and the row of the observation nearest it (so images
+    follow the ``obs_index`` timeline too)."""
+    import rerun as rr
+
+    obs = result.observations
+    order = np.argsort(obs.stamp_ns, kind="stable")
+    if obs.stamp_ns.size:
+        near = order[nearest(obs.stamp_ns[order], images.stamp_ns[rows])]
+    else:
+        near = np.zeros(rows.size, dtype=np.int64)
+    return [_stamp_column(SENSOR_TIME, images.stamp_ns[rows]), _stamp_column(LOG_TIME, images.log_time_ns[rows]),
+            rr.TimeColumn(OBS_INDEX, sequence=near.astype(np.int64))]
+
+
+def _send_per_stamp(rec: rr.RecordingStream, entity: str, result: ReplayResult, sel: IntArray,
+                    columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
+    """One row per observation stamp holding every observation of that stamp (several tags in one
+    image): a later row at the same time would hide the earlier ones in the viewer."""
+    obs = result.observations
+    sel = sel[np.argsort(obs.stamp_ns[sel], kind="stable")]
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(obs.stamp_ns[sel]) != 0]))
+    lengths = np.diff(np.append(starts, sel.size))
+    rec.send_columns(entity, indexes=_obs_indexes(result, sel[starts]), columns=columns(sel).partition(lengths=lengths))
+
+
+def _log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, rows: dict[str, int]) -> None:
+    """The chain on the image: corners, projected recomputed and as-run points, the line between them.
+
+    Observations with one stamp (several tags in one image) share one row per entity, so the viewer
+    shows all of them at that time (a later row at the same time would hide the earlier ones).
+    """
+    import rerun as rr
+
+    obs = result.observations
+    if len(obs) == 0:
+        return
+    plane = result.frames.camera + IMAGE_PLANE_SUFFIX
+
+    def send(entity: str, sel: IntArray, columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
+        if sel.size == 0:
+            return
+        rec.log(entity, rr.CoordinateFrame(plane), static=True)
+        _send_per_stamp(rec, entity, result, sel, columns)
+        rows[entity] = int(sel.size)
+
+    radius = np.float32(max(2.0, float(np.nanmax(overlay.width, initial=320)) / 160.0))
+    corners = np.flatnonzero(np.isfinite(overlay.corners_px).all(axis=(1, 2)))
+    send("/camera/overlay/corners", corners, lambda sel: rr.LineStrips2D.columns(
+        strips=[np.vstack([q, q[:1]]) for q in overlay.corners_px[sel]],
+        colors=np.tile(np.array(DETECTION_COLOR, dtype=np.uint8), (sel.size, 1)),
+        radii=np.full(sel.size, radius / 2, dtype=np.float32)))
+    def points(uv: FloatArray, color: tuple[int, int, int], what: str) -> Callable[[IntArray], rr.ComponentColumnList]:
+        def columns(sel: IntArray) -> rr.ComponentColumnList:
+            return rr.Points2D.columns(
+                positions=uv[sel], colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
+                radii=np.full(sel.size, radius * 1.5, dtype=np.float32), labels=[what] * sel.size,
+                show_labels=[False] * sel.size)
+
+        return columns
+
+    for name, uv, color in (("recomputed", overlay.recomputed_uv, RECOMPUTED_COLOR),
+                            ("as_run", overlay.as_run_uv, AS_RUN_COLOR)):
+        have = np.flatnonzero(np.isfinite(uv).all(axis=1))
+        what = "recomputed world point" if name == "recomputed" else f"as-run {overlay.as_run_role} point"
+        send(f"/camera/overlay/{name}", have, points(uv, color, what))
+    both = np.flatnonzero(np.isfinite(overlay.recomputed_uv).all(axis=1) & np.isfinite(overlay.as_run_uv).all(axis=1))
+    error_px = overlay.error_px
+    send("/camera/overlay/error", both, lambda sel: rr.LineStrips2D.columns(
+        strips=[np.stack([overlay.recomputed_uv[i], overlay.as_run_uv[i]]) for i in sel.tolist()],
+        colors=np.tile(np.array(overlay.color, dtype=np.uint8), (sel.size, 1)),
+        radii=np.full(sel.size, radius / 2, dtype=np.float32),
+        labels=[f"{error_px[i]:.0f} px: {overlay.label()}" for i in sel.tolist()]))
+    if both.size:
+        entity = "/series/error_px/as_run"
+        rec.log(entity, rr.SeriesLines(names=["as-run vs recomputed in the image (px)"], colors=[overlay.color]),
+                static=True)
+        rec.send_columns(entity, indexes=_obs_indexes(result, both),
+                         columns=rr.Scalars.columns(scalars=error_px[both]))
+        rows[entity] = int(both.size)
 
 
 def _log_depth(
@@ -784,7 +799,8 @@ def _depth_mm(image_m: npt.NDArray[np.float32]) -> npt.NDArray[np.uint16]:
 
 
 def _log_points(
-    rec: rr.RecordingStream, result: ReplayResult, as_run: AsRunPoints, opts: RerunOptions, rows: dict[str, int]
+    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], opts: RerunOptions,
+    rows: dict[str, int],
 ) -> None:
     """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run."""
     import rerun as rr
@@ -808,6 +824,7 @@ def _log_points(
                 positions=xyz[sel], colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
                 radii=np.full(sel.size, radius, dtype=np.float32),
                 labels=[f"obs {i} {what}" for i in obs_id[sel].tolist()],
+                show_labels=[False] * sel.size,  # on hover: several overlap at one point
             ),
         )
         rows[entity] = int(sel.size)
@@ -816,7 +833,7 @@ def _log_points(
         send_points(f"/points/recomputed/{leaf}", hop_frame[leaf], recomputed[leaf], RECOMPUTED_COLOR,
                     f"recomputed ({leaf})")
     for leaf in ("camera", "body", "world", "target"):
-        logged = as_run.by_leaf(leaf)
+        logged = as_run[leaf]
         send_points(f"/points/as_run/{leaf}", hop_frame[leaf], logged, AS_RUN_COLOR, f"as-run ({leaf})")
         both = np.flatnonzero(np.isfinite(logged).all(axis=1) & np.isfinite(recomputed[leaf]).all(axis=1))
         if both.size == 0:
@@ -834,10 +851,12 @@ def _log_points(
             ),
         )
         rows[entity] = int(both.size)
-    send_points("/points/reference/matched", frames.world, as_run.reference, REFERENCE_COLOR, "reference")
+    send_points("/points/reference/matched", frames.world, as_run["reference"], REFERENCE_COLOR, "reference")
 
 
-def _log_series(rec: rr.RecordingStream, result: ReplayResult, as_run: AsRunPoints, rows: dict[str, int]) -> None:
+def _log_series(
+    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], rows: dict[str, int]
+) -> None:
     """Per-hop error (mm) where as-run exists and per-hop time gap (ms), one row per observation."""
     import rerun as rr
 
@@ -855,11 +874,11 @@ def _log_series(rec: rr.RecordingStream, result: ReplayResult, as_run: AsRunPoin
     palette = {HopName.PIXEL_TO_CAMERA: (148, 103, 189), HopName.CAMERA_TO_BODY: (31, 119, 180),
                HopName.BODY_TO_WORLD: (214, 39, 40)}
     for hop, leaf, _role in HOP_POINTS:
-        err = np.linalg.norm(as_run.by_leaf(leaf) - recomputed[leaf], axis=1)
+        err = np.linalg.norm(as_run[leaf] - recomputed[leaf], axis=1)
         sel = np.flatnonzero(ok & np.isfinite(err))
         send(f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3, f"{hop.value} error (mm)", palette[hop])
     for leaf, color in (("target", AS_RUN_COLOR), ("reference", REFERENCE_COLOR)):
-        err = np.linalg.norm(as_run.by_leaf(leaf) - result.p_world, axis=1)
+        err = np.linalg.norm(as_run[leaf] - result.p_world, axis=1)
         sel = np.flatnonzero(ok & np.isfinite(err))
         send(f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)", color)
 
@@ -975,14 +994,12 @@ __all__ = [
     "LOG_TIME",
     "OBS_INDEX",
     "SENSOR_TIME",
-    "AsRunPoints",
     "FindingView",
     "OutputMode",
     "RerunOptions",
     "RerunOutcome",
     "RerunSinkError",
     "RerunTarget",
-    "as_run_points",
     "default_blueprint",
     "display_available",
     "log_replay",

@@ -12,6 +12,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain.timeline.errors import TimelineError
+from framechain.timeline.tables import VIDEO_ENCODING
 
 if TYPE_CHECKING:
     from framechain.timeline.tables import Timeline
@@ -39,6 +40,10 @@ def save_timeline(timeline: Timeline, directory: str | Path) -> None:
             )
         blobs.append(image.tobytes())
     pq.write_table(pa.table({"pixels_f32": pa.array(blobs, type=pa.binary())}), out / "depth_pixels.parquet")
+    images = timeline.image_frames
+    image_blobs = [b"" if str(images.encoding[i]) == VIDEO_ENCODING else bytes(images.load(i))
+                   for i in range(len(images))]
+    pq.write_table(pa.table({"bytes": pa.array(image_blobs, type=pa.binary())}), out / "image_bytes.parquet")
     meta = {"format": _FORMAT, "metadata": dict(timeline.metadata)}
     try:
         text = json.dumps(meta, indent=2, sort_keys=True, default=_json_scalar, allow_nan=True)
@@ -58,7 +63,7 @@ def load_timeline(directory: str | Path) -> Timeline:
     """Inverse of :func:`save_timeline`; depth pixels are read lazily from their column."""
     import dataclasses
 
-    from framechain.timeline.tables import TABLE_TYPES, DepthFrameTable, Timeline
+    from framechain.timeline.tables import TABLE_TYPES, DepthFrameTable, ImageFrameTable, Timeline
 
     src = Path(directory)
     header = src / "timeline.json"
@@ -69,6 +74,8 @@ def load_timeline(directory: str | Path) -> Timeline:
         raise TimelineError(f"{src}: unknown timeline format {meta.get('format')!r}")
     tables: dict[str, Any] = {}
     for name, cls in TABLE_TYPES.items():
+        if name == "image_frames" and not (src / f"{name}.parquet").is_file():
+            continue  # saved before images were collected
         tables[name] = cls.from_arrow(pq.read_table(src / f"{name}.parquet"))
     depth: DepthFrameTable = tables["depth_frames"]
     if len(depth):
@@ -80,4 +87,13 @@ def load_timeline(directory: str | Path) -> Timeline:
             return np.frombuffer(raw, dtype=np.float32).reshape(int(heights[i]), int(widths[i]))
 
         tables["depth_frames"] = dataclasses.replace(depth, loader=load)
+    images: ImageFrameTable | None = tables.get("image_frames")
+    if images is not None and len(images):
+        image_bytes = pq.read_table(src / "image_bytes.parquet").column("bytes")
+
+        def load_image(i: int) -> bytes:
+            raw: bytes = image_bytes[i].as_py()
+            return raw
+
+        tables["image_frames"] = dataclasses.replace(images, loader=load_image)
     return Timeline(**tables, metadata=meta["metadata"])

@@ -540,6 +540,123 @@ class DepthFrameTable(ColumnTable):
         return dataclasses.replace(merged, loader=load if parts else None)
 
 
+ImageLoader = Callable[[int], bytes]
+
+#: Raw encodings an :class:`ImageFrameTable` holds, with (channels, NumPy dtype) of their pixels.
+RAW_IMAGE_ENCODINGS: Mapping[str, tuple[int, str]] = {
+    "mono8": (1, "u1"), "8UC1": (1, "u1"), "mono16": (1, "<u2"), "16UC1": (1, "<u2"), "32FC1": (1, "<f4"),
+    "rgb8": (3, "u1"), "bgr8": (3, "u1"), "rgba8": (4, "u1"), "bgra8": (4, "u1"),
+}
+#: Encodings of compressed images (the bytes of the file) and of frames of a video file.
+COMPRESSED_IMAGE_ENCODINGS = frozenset({"jpeg", "png"})
+VIDEO_ENCODING = "video"
+
+
+@dataclass(frozen=True)
+class ImageFrameTable(ColumnTable):
+    """Camera images: metadata is columnar, bytes are loaded lazily through ``loader``.
+
+    ``encoding`` is a raw encoding of :data:`RAW_IMAGE_ENCODINGS` (the loader returns the pixels
+    packed row after row, little-endian, no row padding), ``jpeg``/``png`` (the loader returns the
+    compressed bytes as logged, never decoded), or ``video``: a frame of the video file
+    ``video_path`` at ``video_time_ns`` from the file's start (nothing to load; a viewer decodes
+    it). ``width``/``height`` are 0 where the log does not say (a compressed image's header is
+    read when it is collected).
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "frame": Column("str"),
+        "stamp_ns": Column("i8"),
+        "log_time_ns": Column("i8"),
+        "width": Column("i8"),
+        "height": Column("i8"),
+        "encoding": Column("str"),
+        "source": Column("str"),
+        "video_path": Column("str"),
+        "video_time_ns": Column("i8"),
+    }
+    frame: StrArray
+    stamp_ns: IntArray
+    log_time_ns: IntArray
+    width: IntArray
+    height: IntArray
+    encoding: StrArray
+    source: StrArray
+    video_path: StrArray
+    video_time_ns: IntArray
+    loader: ImageLoader | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "frame", normalize_frames(self.frame))
+
+    def load(self, index: int) -> bytes:
+        """The bytes of image ``index`` (packed pixels, or the compressed file as logged)."""
+        if str(self.encoding[index]) == VIDEO_ENCODING:
+            raise TimelineError(f"image {index} is a frame of the video {self.video_path[index]}: nothing to load")
+        if self.loader is None:
+            raise TimelineError("ImageFrameTable has no byte loader")
+        return self.loader(index)
+
+    def pixels(self, index: int) -> npt.NDArray[Any]:
+        """Image ``index`` as an (H, W) or (H, W, C) array of a raw encoding (colour order as encoded)."""
+        enc = str(self.encoding[index])
+        if enc not in RAW_IMAGE_ENCODINGS:
+            raise TimelineError(f"image {index} is {enc!r}, not a raw encoding: decode it with an image library")
+        channels, dtype = RAW_IMAGE_ENCODINGS[enc]
+        h, w = int(self.height[index]), int(self.width[index])
+        flat = np.frombuffer(self.load(index), dtype=dtype)
+        if flat.size != h * w * channels:
+            raise TimelineError(f"image {index} ({enc}) holds {flat.size} values, not {h}x{w}x{channels}")
+        return flat.reshape((h, w) if channels == 1 else (h, w, channels))
+
+    def take(self, index: npt.ArrayLike) -> ImageFrameTable:
+        """Rows selected; the loader keeps pointing at the original rows."""
+        rows = np.arange(len(self))[np.asarray(index)]
+        base = self.loader
+        table = super().take(rows)
+        if base is None:
+            return table
+        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])))
+
+    @classmethod
+    def from_arrays(
+        cls, frame: str, stamp_ns: npt.ArrayLike, images: npt.NDArray[Any], *, encoding: str = "rgb8",
+        source: str = "",
+    ) -> ImageFrameTable:
+        """In-memory raw images (N, H, W[, C]) of one encoding: for tests, notebooks and the generator."""
+        if encoding not in RAW_IMAGE_ENCODINGS:
+            raise TimelineError(f"ImageFrameTable.from_arrays: {encoding!r} is not a raw encoding")
+        channels, dtype = RAW_IMAGE_ENCODINGS[encoding]
+        pix = np.ascontiguousarray(images, dtype=dtype)
+        if pix.ndim != (3 if channels == 1 else 4) or (channels > 1 and pix.shape[3] != channels):
+            raise TimelineError(f"ImageFrameTable.from_arrays: shape {pix.shape} does not fit {encoding}")
+        stamps = np.asarray(stamp_ns, dtype=np.int64)
+        n, h, w = pix.shape[:3]
+        return cls(
+            frame=np.full(n, frame), stamp_ns=stamps, log_time_ns=stamps, width=np.full(n, w),
+            height=np.full(n, h), encoding=np.full(n, encoding), source=np.full(n, source),
+            video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64),
+            loader=lambda i: pix[i].tobytes(),
+        )
+
+    @classmethod
+    def concat(cls, tables: Iterable[ImageFrameTable]) -> ImageFrameTable:
+        parts = list(tables)
+        merged = super().concat(parts)
+        offsets = np.cumsum([0, *[len(t) for t in parts]])
+        loaders = [t.loader for t in parts]
+
+        def load(i: int) -> bytes:
+            k = int(np.searchsorted(offsets, i, side="right") - 1)
+            inner = loaders[k]
+            if inner is None:
+                raise TimelineError("ImageFrameTable part has no byte loader")
+            return inner(i - int(offsets[k]))
+
+        return dataclasses.replace(merged, loader=load if parts else None)
+
+
 _TABLES: dict[str, type[ColumnTable]] = {
     "transforms": TransformTable,
     "cameras": CameraTable,
@@ -547,6 +664,7 @@ _TABLES: dict[str, type[ColumnTable]] = {
     "joint_states": JointStateTable,
     "points": PointTable,
     "depth_frames": DepthFrameTable,
+    "image_frames": ImageFrameTable,
 }
 
 
@@ -564,6 +682,7 @@ class Timeline:
     joint_states: JointStateTable = field(default_factory=JointStateTable.empty)
     points: PointTable = field(default_factory=PointTable.empty)
     depth_frames: DepthFrameTable = field(default_factory=DepthFrameTable.empty)
+    image_frames: ImageFrameTable = field(default_factory=ImageFrameTable.empty)
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
     def replace(self, **changes: Any) -> Timeline:

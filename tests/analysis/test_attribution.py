@@ -13,6 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import attribute
+from framechain.analysis.estimates import estimate_to_json
 from framechain.replay.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
@@ -54,7 +55,7 @@ def _check_top(result: Any, fault: InjectedFault, key: str, value: float) -> Non
         (f.fault.value, f.hop.value, f.estimate) for f in result.findings]
     if key:
         rel = key in ("factor", "scale")
-        error = abs(top.estimate[key] - value) / (abs(value) if rel else 1.0)
+        error = abs(estimate_to_json(top.estimate)[key] - value) / (abs(value) if rel else 1.0)
         assert error <= TOLERANCE[key], (top.estimate, value)
 
 
@@ -86,13 +87,13 @@ def test_recorded_axis_flip_and_inverted_mount(level: str) -> None:
     flip = InjectedFault(Fault.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
     scene = _scene(level, (flip,))
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
-    assert (result.findings[0].fault, result.findings[0].estimate["permutation"]) == (
+    assert (result.findings[0].fault, estimate_to_json(result.findings[0].estimate)["permutation"]) == (
         Fault.AXIS_FLIP, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]])
     inverted = InjectedFault(Fault.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
     scene = _scene(level, (inverted,))
     top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
     assert top.fault == Fault.INVERTED_TRANSFORM
-    assert top.estimate["edge"] == ["base_link", "camera_link"]
+    assert estimate_to_json(top.estimate)["edge"] == ["base_link", "camera_link"]
 
 
 @pytest.mark.parametrize("level", ["hops", "target", "reference", "static"])
@@ -113,8 +114,8 @@ def test_combined_missing_rotation_and_latency(level: str) -> None:
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
     by_fault = {f.fault: f for f in result.findings}
     assert set(by_fault) == {Fault.MISSING_ROTATION, Fault.LATENCY}
-    assert abs(by_fault[Fault.MISSING_ROTATION].estimate["angle_deg"] - 30.0) < 0.5
-    assert abs(by_fault[Fault.LATENCY].estimate["offset_s"] + 0.03) < 0.002
+    assert abs(estimate_to_json(by_fault[Fault.MISSING_ROTATION].estimate)["angle_deg"] - 30.0) < 0.5
+    assert abs(estimate_to_json(by_fault[Fault.LATENCY].estimate)["offset_s"] + 0.03) < 0.002
     # Shares add up to the explained error and are sorted largest first.
     shares = [f.share for f in result.findings]
     assert shares == sorted(shares, reverse=True)
@@ -125,7 +126,8 @@ def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
     faults = (InjectedFault(Fault.DEPTH_SCALE, "robot", {"factor": 0.9}),
               InjectedFault(Fault.LATENCY, "robot", {"offset_s": 0.02}))
     scene = _scene("target", faults)
-    found = {f.fault: f.estimate for f in attribute(scene.timeline, scene.chain, bootstrap=0).findings}
+    findings = attribute(scene.timeline, scene.chain, bootstrap=0).findings
+    found = {f.fault: estimate_to_json(f.estimate) for f in findings}
     assert abs(found[Fault.DEPTH_SCALE]["factor"] - 0.9) < 0.009
     assert abs(found[Fault.LATENCY]["offset_s"] - 0.02) < 0.002
 
@@ -137,7 +139,7 @@ def test_missing_rotation_fix_names_the_corrected_mount() -> None:
     rpy = Rotation.from_euler("y", 30, degrees=True).as_euler("xyz")
     assert f'rpy="{rpy[0]:.5f} {rpy[1]:.5f} {rpy[2]:.5f}"' in top.fix
     assert "--frame-id base_link --child-frame-id camera_link" in top.fix
-    assert top.estimate["axis"] == pytest.approx([0.0, -1.0, 0.0], abs=1e-3)
+    assert estimate_to_json(top.estimate)["axis"] == pytest.approx([0.0, -1.0, 0.0], abs=1e-3)
 
 
 def test_bootstrap_interval_covers_the_injected_latency() -> None:

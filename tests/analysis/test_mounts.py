@@ -8,6 +8,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import attribute
+from framechain.analysis.estimates import estimate_to_json
 from framechain.replay.catalogue import Fault
 from framechain.sim.scene import START_NS, InjectedFault, SceneSpec, generate
 from framechain.timeline import TransformTable
@@ -27,7 +28,7 @@ def test_mast_mount_fix_names_mast_to_camera_link() -> None:
     timeline = scene.timeline.replace(transforms=TransformTable.concat([tf.take(~mount), mast, on_mast]))
     top = attribute(timeline, scene.chain, bootstrap=0).findings[0]
     assert top.fault == Fault.ROTATION_ERROR
-    assert abs(top.estimate["angle_deg"] - 3.0) < 0.5
+    assert abs(estimate_to_json(top.estimate)["angle_deg"] - 3.0) < 0.5
     assert "--frame-id mast --child-frame-id camera_link" in top.fix
     # The corrected mount is the true one: pitched 30 deg, no yaw (the generator's truth), 0.2 m above the mast.
     match = re.search(r'<origin xyz="([^"]+)" rpy="([^"]+)"/>', top.fix)

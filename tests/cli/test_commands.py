@@ -38,14 +38,14 @@ def test_help_lists_commands_and_exit_codes(capsys: pytest.CaptureFixture[str]) 
         main(["--help"])
     assert exc.value.code == 0
     text = capsys.readouterr().out
-    for command in ("info", "tf", "replay", "attribute", "report", "demo", "lab"):
+    for command in ("info", "tf", "replay", "attribute", "report", "batch", "export", "demo", "lab"):
         assert command in text
     assert "exit codes" in text
     assert "bad input" in text
 
 
-@pytest.mark.parametrize("command", [["info"], ["tf"], ["replay"], ["attribute"], ["report"], ["demo"], ["lab"],
-                                     ["lab", "tilt"]])
+@pytest.mark.parametrize("command", [["info"], ["tf"], ["replay"], ["attribute"], ["report"], ["batch"], ["export"],
+                                     ["demo"], ["lab"], ["lab", "tilt"]])
 def test_every_command_documents_its_exit_codes(command: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main([*command, "--help"])

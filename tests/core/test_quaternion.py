@@ -1,4 +1,5 @@
-"""quaternion.py against scipy's Rotation on random inputs (components first, x y z w)."""
+"""timeline/quaternion.py (the one quaternion module; replay and adapters use it) against scipy's
+Rotation on random inputs (components first, x y z w)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,14 @@ import pytest
 from core_helpers import assert_same_rotation, random_quats
 from scipy.spatial.transform import Rotation
 
-from framechain.replay.quaternion import (
+from framechain.timeline.quaternion import (
     IDENTITY,
+    compose,
+    homogeneous,
+    invert,
     quat_angle,
     quat_conjugate,
+    quat_from_matrix,
     quat_from_rotvec,
     quat_multiply,
     quat_rotate,
@@ -104,3 +109,37 @@ def test_rotvec_round_trip_random(rng: np.random.Generator) -> None:
     assert_same_rotation(back, q, atol=1e-14)
     np.testing.assert_allclose(quat_to_rotvec(q.T).T, Rotation.from_quat(q).as_rotvec(), atol=1e-13)
     np.testing.assert_allclose(quat_angle(q.T), Rotation.from_quat(q).magnitude(), atol=1e-13)
+
+
+def test_compose_and_invert_are_scipy_products(rng: np.random.Generator) -> None:
+    q_ab, q_bc = random_quats(rng, N), random_quats(rng, N)
+    t_ab, t_bc = rng.normal(size=(N, 3)), rng.normal(size=(N, 3))
+    t_ac, q_ac = compose(t_ab.T, q_ab.T, t_bc.T, q_bc.T)
+    r_ab = Rotation.from_quat(q_ab)
+    np.testing.assert_allclose(t_ac.T, r_ab.apply(t_bc) + t_ab, atol=1e-13)
+    assert_same_rotation(q_ac.T, (r_ab * Rotation.from_quat(q_bc)).as_quat(), atol=1e-15)
+    t_ba, q_ba = invert(t_ab.T, q_ab.T)
+    np.testing.assert_allclose(t_ba.T, -r_ab.inv().apply(t_ab), atol=1e-13)
+    assert_same_rotation(q_ba.T, r_ab.inv().as_quat(), atol=1e-15)
+
+
+def test_compose_takes_components_with_float_constants(rng: np.random.Generator) -> None:
+    """A kinematic chain's fixed joint: Python floats beside per-frame arrays, broadcast."""
+    q_ab = random_quats(rng, 1)[0]
+    t_ab = rng.normal(size=3)
+    q_bc, t_bc = random_quats(rng, N), rng.normal(size=(N, 3))
+    t_ac, q_ac = compose(tuple(float(c) for c in t_ab), tuple(float(c) for c in q_ab),  # type: ignore[arg-type]
+                         tuple(t_bc.T), tuple(q_bc.T))  # type: ignore[arg-type]
+    r_ab = Rotation.from_quat(q_ab)
+    np.testing.assert_allclose(t_ac.T, r_ab.apply(t_bc) + t_ab, atol=1e-13)
+    assert_same_rotation(q_ac.T, (r_ab * Rotation.from_quat(q_bc)).as_quat(), atol=1e-15)
+
+
+def test_homogeneous_and_from_matrix_match_scipy(rng: np.random.Generator) -> None:
+    q, t = random_quats(rng, N), rng.normal(size=(N, 3))
+    m = homogeneous(q.T, t.T)
+    np.testing.assert_allclose(m[:, :3, :3], Rotation.from_quat(q).as_matrix(), atol=1e-14)
+    np.testing.assert_allclose(m[:, :3, 3], t)
+    np.testing.assert_array_equal(m[:, 3], np.tile([0.0, 0.0, 0.0, 1.0], (N, 1)))
+    assert_same_rotation(quat_from_matrix(m[:, :3, :3]).T, q, atol=1e-14)
+    assert quat_from_matrix(np.eye(3)).shape == (4,)

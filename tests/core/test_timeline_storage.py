@@ -12,6 +12,7 @@ from core_helpers import random_quats
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
+    ImageFrameTable,
     InvalidCameraError,
     JointStateTable,
     ObservationTable,
@@ -69,11 +70,19 @@ def full_timeline(rng: np.random.Generator) -> Timeline:
         DepthFrameTable.from_arrays("cam", [100, 200], images[:2], source="/depth"),
         DepthFrameTable.from_arrays("cam2", [150], images[2:], source="/depth2"),
     ])
+    # camera images: raw pixels, a JPEG's bytes as logged, and a frame of a video file (nothing to store)
+    rgb = ImageFrameTable.from_arrays("cam", [100, 200], rng.integers(0, 255, (2, 4, 5, 3)), encoding="bgr8",
+                                      source="/image")
+    jpeg = b"\xff\xd8\xff\xe0" + bytes(range(256))
+    camera_images = ImageFrameTable.concat([rgb, ImageFrameTable(
+        frame=["cam", "cam"], stamp_ns=[300, 400], log_time_ns=[301, 401], width=[640, 640], height=[480, 480],
+        encoding=["jpeg", "video"], source=["/image/compressed", "observation.images.cam"],
+        video_path=["", "/data/videos/file-000.mp4"], video_time_ns=[0, 33_366_666], loader=lambda i: jpeg)])
     metadata = {"source": {"path": "/logs/run 1.mcap", "format": "mcap"}, "span_ns": [int(stamps[0]), 2**62],
                 "urdf": {"/robot_description": "<robot name='r'/>"}, "notes": [], "ratio": 0.1, "ok": True,
                 "none": None}
     return Timeline(transforms=transforms, cameras=cameras, observations=observations, joint_states=joints,
-                    points=points, depth_frames=depth, metadata=metadata)
+                    points=points, depth_frames=depth, image_frames=camera_images, metadata=metadata)
 
 
 def test_parquet_round_trip_is_lossless_for_every_table(tmp_path: Path, rng: np.random.Generator) -> None:
@@ -81,6 +90,9 @@ def test_parquet_round_trip_is_lossless_for_every_table(tmp_path: Path, rng: np.
     original.save(tmp_path / "tl")
     loaded = Timeline.load(tmp_path / "tl")
     assert loaded.equals(original)
+    for i in range(3):  # the video frame has no bytes of its own
+        assert loaded.image_frames.load(i) == original.image_frames.load(i)
+    assert np.array_equal(loaded.image_frames.pixels(1), original.image_frames.pixels(1))
     for name, cls in TABLE_TYPES.items():
         a, b = getattr(original, name), getattr(loaded, name)
         assert len(a) == len(b) > 0, name

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -54,19 +55,34 @@ def test_rerun_reads_the_same_unitree_episode(unitree: Path) -> None:
     np.testing.assert_array_equal(values, ours.columns["observation.state"].astype(np.float64))
 
 
-def test_lerobot_dataset_gives_the_same_frames(arm_dataset: ArmDataset) -> None:
-    # Optional extra framechain[lerobot]; CI does not install it. (Import the submodule: this test
-    # folder is itself named lerobot, a namespace package a real install takes precedence over.)
-    module = pytest.importorskip("lerobot.datasets.lerobot_dataset")
+def test_lerobot_dataset_gives_the_same_frames(arm_dataset: ArmDataset, tmp_path: Path) -> None:
+    # Optional extra framechain[lerobot] (Python >= 3.12); CI does not install it. (Import the
+    # submodule: this test folder is itself named lerobot, a namespace package a real install takes
+    # precedence over. lerobot without its `dataset` extra raises ImportError, not ModuleNotFoundError.)
+    module = pytest.importorskip("lerobot.datasets.lerobot_dataset", exc_type=ImportError)
     LeRobotDataset = module.LeRobotDataset
 
     ours = DatasetReader(arm_dataset.root)
     if ours.layout.value != "v3":
         pytest.skip("current lerobot reads v3.0 only (v2.1 raises BackwardCompatibilityError)")
-    dataset = LeRobotDataset("local/framechain-test", root=arm_dataset.root, episodes=[1],
-                             download_videos=False)
-    frames = ours.read(1, ["observation.state"])
-    hf = dataset.hf_dataset.with_format("numpy")
-    np.testing.assert_array_equal(np.asarray(hf["frame_index"]).reshape(-1), frames.frame_index)
-    np.testing.assert_array_equal(np.asarray(hf["observation.state"]), frames.columns["observation.state"])
-    np.testing.assert_allclose(np.asarray(hf["timestamp"]).reshape(-1), frames.timestamp_s)
+    # lerobot reads a local copy only when every declared video file exists (else it goes to the Hub,
+    # even with download_videos=False). The synthetic dataset declares a wrist video it never wrote:
+    # give a copy empty files at those paths (the frames compared here never decode them).
+    root = tmp_path / "dataset"
+    shutil.copytree(arm_dataset.root, root)
+    meta = module.LeRobotDatasetMetadata("local/framechain-test", root=root)
+    assert meta.total_episodes == len(ours.episodes())
+    assert meta.fps == ours.fps
+    for episode in ours.episodes():
+        for key in meta.video_keys:
+            video = root / meta.get_video_file_path(episode, key)
+            video.parent.mkdir(parents=True, exist_ok=True)
+            video.touch()
+    for episode in ours.episodes():
+        dataset = LeRobotDataset("local/framechain-test", root=root, episodes=[episode], download_videos=False)
+        frames = ours.read(episode, ["observation.state"])
+        hf = dataset.hf_dataset.with_format("numpy")
+        np.testing.assert_array_equal(np.asarray(hf["episode_index"]).reshape(-1), episode)
+        np.testing.assert_array_equal(np.asarray(hf["frame_index"]).reshape(-1), frames.frame_index)
+        np.testing.assert_array_equal(np.asarray(hf["observation.state"]), frames.columns["observation.state"])
+        np.testing.assert_allclose(np.asarray(hf["timestamp"]).reshape(-1), frames.timestamp_s)

@@ -25,6 +25,7 @@ from lerobot_scene import (
 from framechain.adapters.lerobot import open_dataset
 from framechain.adapters.lerobot_format import DatasetError
 from framechain.adapters.robot_config import RobotConfig, RobotConfigError
+from framechain.analysis.estimates import estimate_to_json
 from framechain.replay import HopName, TransformBuffer, replay
 from framechain.timeline import ChainConfig, ChainEvidence, ChainFrames, Timeline
 
@@ -180,7 +181,7 @@ def test_unrecorded_camera_latency_is_attributed(tmp_path: Path) -> None:
     assert result.findings, "no fault found"
     top = result.findings[0]
     assert (top.fault.value, top.hop) == ("latency", HopName.CAMERA_TO_BODY)
-    assert top.estimate["offset_s"] == pytest.approx(delay, abs=2e-3)
+    assert estimate_to_json(top.estimate)["offset_s"] == pytest.approx(delay, abs=2e-3)
 
 
 def test_depth_from_a_dataset_feature(tmp_path: Path) -> None:

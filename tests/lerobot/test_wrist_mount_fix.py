@@ -10,6 +10,7 @@ import yaml
 from lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 from scipy.spatial.transform import Rotation
 
+from framechain.analysis.estimates import estimate_to_json
 from framechain.pipeline import attribute_log
 from framechain.replay.catalogue import Fault
 
@@ -29,8 +30,8 @@ def test_wrist_mount_yaw_error_is_four_degrees_on_the_mount_edge(tmp_path: Path)
     top = result.findings[0]
     assert top.fault == Fault.ROTATION_ERROR
     # A moving camera: the mount error is constant in the mount frame, so it keeps its true size.
-    assert abs(top.estimate["angle_deg"] - 4.0) < 0.5
-    assert top.estimate["axis_frame"] == "wrist_link"
+    assert abs(estimate_to_json(top.estimate)["angle_deg"] - 4.0) < 0.5
+    assert estimate_to_json(top.estimate)["axis_frame"] == "wrist_link"
     assert f"--frame-id {calib['mount']['parent']} --child-frame-id wrist_link" in top.fix
     match = re.search(r'rpy="([^"]+)"', top.fix)
     assert match is not None

@@ -21,15 +21,18 @@ import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
 
+from framechain.analysis.alignment import align_evidence
+from framechain.analysis.attribute import Finding
+from framechain.analysis.estimates import LatencyEstimate, RotationEstimate
 from framechain.cli.main import main
-from framechain.replay import ReplayResult, replay
+from framechain.replay import HopName, ReplayResult, TransformBuffer, replay
+from framechain.replay.catalogue import Fault
 from framechain.sinks.rerun import (
     FindingView,
     OutputMode,
     RerunOptions,
     RerunSinkError,
     RerunTarget,
-    as_run_points,
     display_available,
     resolve_target,
     stream_replay,
@@ -39,6 +42,7 @@ from framechain.timeline import (
     ChainFrames,
     DepthFrameTable,
     ObservationTable,
+    PointRole,
     PointTable,
     Timeline,
     TransformTable,
@@ -135,9 +139,11 @@ class Scene:
     chunks: dict[str, list[tuple[bool, pa.RecordBatch]]]
 
 
-FINDINGS: list[Any] = [
-    {"fault": "latency", "hop": "body_to_world", "estimate": {"offset_s": 0.031}, "share": 0.62,
-     "error_m": 0.024, "evidence": "error grows with speed", "fix": "look the pose up at the image stamp"},
+FINDINGS = [
+    Finding(fault=Fault.LATENCY, hop=HopName.BODY_TO_WORLD, estimate=LatencyEstimate(offset_s=0.031),
+            interval={"offset_s": [0.0295, 0.0321]}, share=0.62, error_m=0.024, confidence=0.97,
+            evidence="error grows with speed", fix="look the pose up at the image stamp",
+            model="latency[body_to_world]"),
 ]
 
 
@@ -299,7 +305,7 @@ def test_text_log_has_findings_rejections_and_summary(scene: Scene) -> None:
     findings = [r[0] for r in _rows(scene.chunks, "/log/findings", "TextLog:text")]
     assert findings == [FindingView.of(FINDINGS[0]).text()]
     assert "latency on body_to_world" in findings[0]
-    assert "offset_s=0.031" in findings[0]
+    assert "estimate +31.0 ms (95% interval +29.50 .. +32.10 ms)" in findings[0]
     assert "62% of the error" in findings[0]
     assert "24.0 mm" in findings[0]
     rejected = [r[0] for r in _rows(scene.chunks, "/log/rejected", "TextLog:text")]
@@ -397,32 +403,31 @@ def test_resolve_target_keeps_spawn_with_a_display() -> None:
 def test_as_run_matching_by_id_stamp_and_frame() -> None:
     timeline = _scene_timeline()
     result = replay(timeline, FRAMES)
-    matched = as_run_points(_with_as_run(timeline, result), result)
+    logged = _with_as_run(timeline, result)
+    buffer = TransformBuffer.from_timeline(logged)
+    matched = align_evidence(logged.points, result.observations, FRAMES, buffer)
     ok = result.replayed
-    np.testing.assert_allclose(matched.camera[ok], result.p_cam[ok])
-    np.testing.assert_allclose(matched.world[ok], result.p_world[ok] + BODY_OFFSET, atol=1e-9)
-    assert np.isnan(matched.world[~ok]).all()
-    assert np.isnan(matched.reference).all()
+    np.testing.assert_allclose(matched.points(PointRole.HOP_CAMERA)[ok], result.p_cam[ok])
+    np.testing.assert_allclose(matched.points(PointRole.HOP_WORLD)[ok], result.p_world[ok] + BODY_OFFSET, atol=1e-9)
+    assert np.isnan(matched.points(PointRole.HOP_WORLD)[~ok]).all()
+    assert np.isnan(matched.points(PointRole.REFERENCE)).all()
     # Outside the stamp tolerance nothing matches.
-    strict = as_run_points(_with_as_run(timeline, result), result, match_tolerance_ns=100_000)
-    assert np.isnan(strict.world).all()
-    assert np.isfinite(strict.body[ok]).all()  # matched by obs_id, whatever the stamp
+    strict = align_evidence(logged.points, result.observations, FRAMES, buffer,
+                            tolerances_ns={PointRole.HOP_WORLD: 100_000})
+    assert np.isnan(strict.points(PointRole.HOP_WORLD)).all()
+    assert np.isfinite(strict.points(PointRole.HOP_BODY)[ok]).all()  # matched by obs_id, whatever the stamp
 
 
-def test_finding_view_reads_objects_and_mappings() -> None:
-    @dataclass
-    class Finding:
-        fault: str
-        hop: str
-        estimate: Any
-        share: float
-        error_m: float
-        evidence: str
-        fix: str
-
-    text = FindingView.of(Finding("missing_rotation", "camera_to_body", {"angle_deg": 30.0, "axis": "y"}, 0.9,
-                                  0.5, "error grows with depth.", "use the full extrinsic")).text()
-    assert text.startswith("missing_rotation on camera_to_body; estimate angle_deg=30, axis=y; 500.0 mm, 90%")
+def test_finding_view_words_a_typed_finding() -> None:
+    finding = Finding(
+        fault=Fault.MISSING_ROTATION, hop=HopName.CAMERA_TO_BODY,
+        estimate=RotationEstimate(angle_deg=30.0, axis=(0.0, -1.0, 0.0), axis_frame="camera_link", faulty="as run"),
+        interval={}, share=0.9, error_m=0.5, confidence=0.99, evidence="error grows with depth.",
+        fix="use the full extrinsic", model="rotation[camera_to_body]",
+    )
+    text = FindingView.of(finding).text()
+    assert text.startswith("missing_rotation on camera_to_body; estimate 30.00 deg about -y of camera_link; "
+                           "500.0 mm, 90% of the error, confidence 0.99.")
     assert text.endswith("Evidence: error grows with depth. Fix: use the full extrinsic.")
 
 
@@ -609,7 +614,11 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
     log = realdata / "evo" / "nav2_turtlebot.mcap"
     out = tmp_path / "nav2.rrd"
     assert main(["replay", str(log), "--save", str(out), "--quiet"]) == 0
-    assert capsys.readouterr().err == ""  # no progress bar, no suggested chain
+    # No progress bar, no suggested chain: only why nothing was replayed (the frame tree is still written).
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "no detections topic in the log" in err[0]
+    assert "topics.detections" in err[0]
     tf = open_log(log).timeline.transforms
     chunks = _read(out)
     for child in np.unique(tf.child).tolist():

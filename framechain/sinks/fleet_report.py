@@ -1,0 +1,357 @@
+"""The fleet report: which logs have which fault, the estimates' spread across the fleet, a plot.
+
+Rendered from the fleet table (one row per log and finding; :data:`framechain.fleet.FLEET_SCHEMA`)
+as one self-contained HTML page (plots embedded) and Markdown (plots beside it as PNG).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+#: Rows listed per table before the report points to the Parquet table instead.
+MAX_LISTED = 200
+STATUS_ORDER = ("findings", "clean", "no_evidence", "nothing_replayed", "error", "crashed")
+STATUS_TEXT = {
+    "findings": "with findings",
+    "clean": "clean (no fault beyond noise)",
+    "no_evidence": "no evidence to measure against",
+    "nothing_replayed": "nothing to replay (the reason names the chain key to add)",
+    "error": "could not be analysed",
+    "crashed": "crashed (computed again on a rerun)",
+}
+_NOT_ANALYSED = ("nothing_replayed", "error", "crashed")
+#: How an estimate is shown: (scale, unit) by estimate_name (offsets in ms, angles in deg, ratios as x).
+_DISPLAY = {"offset_s": (1e3, "ms"), "angle_deg": (1.0, "deg"), "factor": (1.0, "x"), "scale": (1.0, "x")}
+
+_CSS = """
+body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;
+line-height:1.45;padding:0 1em}
+h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
+th,td{border:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
+th{background:#f4f4f4}td.num{text-align:right}code{background:#f4f4f4;padding:.1em .3em;border-radius:3px}
+.summary{font-size:1.1em;background:#f3f6fb;border-left:5px solid #4a78c2;padding:.7em 1em}
+figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
+.muted{color:#777;font-size:.9em}
+"""
+
+
+@dataclass(frozen=True)
+class FleetLog:
+    """One log (or episode) of the fleet with its findings, gathered from its rows."""
+
+    unit: str
+    log: str
+    status: str
+    error: str | None
+    verdict: str | None
+    error_median_m: float | None
+    findings: list[dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class SpreadRow:
+    """The spread of one estimate of one fault across the logs that have it (display units)."""
+
+    fault: str
+    hop: str
+    estimate_name: str | None
+    unit: str
+    logs: int
+    median: float | None
+    p5: float | None
+    p95: float | None
+    lo: float | None
+    hi: float | None
+
+
+@dataclass(frozen=True)
+class FleetFigure:
+    name: str
+    caption: str
+    png: bytes
+
+
+def fleet_logs(table: pa.Table) -> list[FleetLog]:
+    """The logs of the fleet table in table order, each with its findings (rank order)."""
+    logs: dict[str, FleetLog] = {}
+    for row in table.to_pylist():
+        log = logs.get(row["key"])
+        if log is None:
+            log = logs[row["key"]] = FleetLog(
+                unit=row["unit"], log=row["log"], status=row["status"], error=row["error"], verdict=row["verdict"],
+                error_median_m=row["error_median_m"], findings=[])
+        if row["fault"] is not None:
+            log.findings.append(row)
+    return list(logs.values())
+
+
+@dataclass(frozen=True)
+class ReasonRow:
+    """One reason logs were not analysed, how many logs gave it, and one of them."""
+
+    status: str
+    reason: str
+    logs: int
+    example: str
+
+    def cells(self) -> list[str]:
+        return [self.status, str(self.logs), self.reason, self.example]
+
+
+REASON_COLUMNS = ("status", "logs", "reason", "for example")
+
+
+def not_analysed_reasons(logs: Sequence[FleetLog]) -> list[ReasonRow]:
+    """The errors of the logs that were not analysed, grouped by message (the log's path taken out), most first."""
+    groups: dict[tuple[str, str], list[FleetLog]] = {}
+    for log in logs:
+        if log.status in _NOT_ANALYSED:
+            reason = (log.error or "").removeprefix(f"{log.log}: ")
+            groups.setdefault((log.status, reason), []).append(log)
+    ordered = sorted(groups.items(), key=lambda item: (-len(item[1]), item[0]))
+    return [ReasonRow(status=status, reason=reason, logs=len(members), example=members[0].unit)
+            for (status, reason), members in ordered]
+
+
+def estimate_spread(logs: Sequence[FleetLog]) -> list[SpreadRow]:
+    """Per (fault, hop, estimate): how many logs have it and the spread of its numeric estimate."""
+    groups: dict[tuple[str, str, str | None], list[float]] = {}
+    counts: dict[tuple[str, str, str | None], int] = {}
+    for log in logs:
+        for f in log.findings:
+            key = (f["fault"], f["hop"], f["estimate_name"])
+            counts[key] = counts.get(key, 0) + 1
+            found = groups.setdefault(key, [])
+            if f["estimate_value"] is not None and f["estimate_name"] in _DISPLAY:
+                found.append(f["estimate_value"] * _DISPLAY[f["estimate_name"]][0])
+    rows = []
+    for key in sorted(counts, key=lambda k: (-counts[k], k[0], k[1], str(k[2]))):
+        values = np.asarray(groups[key], dtype=np.float64)
+        have = values.size > 0
+        rows.append(SpreadRow(
+            fault=key[0], hop=key[1], estimate_name=key[2], unit=_DISPLAY.get(key[2] or "", (1.0, ""))[1],
+            logs=counts[key],
+            median=float(np.median(values)) if have else None,
+            p5=float(np.percentile(values, 5)) if have else None,
+            p95=float(np.percentile(values, 95)) if have else None,
+            lo=float(values.min()) if have else None, hi=float(values.max()) if have else None,
+        ))
+    return rows
+
+
+def render_fleet_report(
+    table: pa.Table, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
+) -> dict[str, Path]:
+    """Write fleet_report.md (with its PNGs) and/or fleet_report.html into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    logs = fleet_logs(table)
+    spread = estimate_spread(logs)
+    figures = make_fleet_figures(logs)
+    paths: dict[str, Path] = {}
+    if "md" in formats:
+        for fig in figures:
+            (out / f"{fig.name}.png").write_bytes(fig.png)
+        paths["fleet_md"] = out / "fleet_report.md"
+        paths["fleet_md"].write_text(fleet_markdown(logs, spread, figures))
+    if "html" in formats:
+        paths["fleet_html"] = out / "fleet_report.html"
+        paths["fleet_html"].write_text(fleet_html(logs, spread, figures))
+    return paths
+
+
+# -- figures ----------------------------------------------------------------------------------
+def make_fleet_figures(logs: Sequence[FleetLog]) -> list[FleetFigure]:
+    """Logs per fault and status (bars), and every log's estimate per fault (strip plots)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = []
+    statuses = [s for s in STATUS_ORDER if any(log.status == s for log in logs)]
+    faults: dict[str, int] = {}
+    for log in logs:
+        for fault in {f["fault"] for f in log.findings}:
+            faults[fault] = faults.get(fault, 0) + 1
+    fig, (ax_status, ax_fault) = plt.subplots(1, 2, figsize=(9.6, 3.4), dpi=100)
+    ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses], color="tab:blue")
+    ax_status.set_xlabel("logs")
+    ax_status.set_title("Logs by outcome", fontsize=9)
+    ax_status.invert_yaxis()
+    names = sorted(faults, key=lambda k: -faults[k])
+    ax_fault.barh(names or ["(none)"], [faults[n] for n in names] or [0], color="tab:red")
+    ax_fault.set_xlabel("logs with the fault")
+    ax_fault.set_title("Faults across the fleet", fontsize=9)
+    ax_fault.invert_yaxis()
+    figures.append(_png(fig, "fleet_faults", "Logs by outcome, and how many logs have each fault"))
+
+    groups: dict[tuple[str, str], list[float]] = {}
+    for log in logs:
+        for f in log.findings:
+            name = f["estimate_name"]
+            if f["estimate_value"] is not None and name in _DISPLAY:
+                scale, unit = _DISPLAY[name]
+                groups.setdefault((f"{f['fault']} at {f['hop']}", f"{name.split('_')[0]} ({unit})"), []).append(
+                    f["estimate_value"] * scale)
+    if groups:
+        rng = np.random.default_rng(0)  # jitter only: the same report for the same table
+        n = len(groups)
+        fig, axes = plt.subplots(1, n, figsize=(max(3.2 * n, 4.8), 3.4), dpi=100, squeeze=False)
+        for ax, ((title, label), values) in zip(axes[0], sorted(groups.items()), strict=True):
+            y = np.asarray(values)
+            ax.boxplot(y, widths=0.5, showfliers=False)
+            ax.scatter(1 + rng.uniform(-0.15, 0.15, y.size), y, s=10, alpha=0.6, color="tab:red", zorder=3)
+            ax.set_xticks([])
+            ax.set_ylabel(label)
+            ax.set_title(f"{title} ({y.size} logs)", fontsize=8)
+            ax.grid(True, axis="y", alpha=0.3)
+        figures.append(_png(fig, "fleet_estimates", "Each log's estimate, per fault: the spread across the fleet"))
+    return figures
+
+
+def _png(fig: Any, name: str, caption: str) -> FleetFigure:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return FleetFigure(name=name, caption=caption, png=buf.getvalue())
+
+
+# -- text -------------------------------------------------------------------------------------
+def summary_line(logs: Sequence[FleetLog]) -> str:
+    counts = {s: sum(log.status == s for log in logs) for s in STATUS_ORDER}
+    parts = [f"{counts[s]} {STATUS_TEXT[s]}" for s in STATUS_ORDER if counts[s]]
+    return f"{len(logs)} logs: " + "; ".join(parts) + "."
+
+
+def _num(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value * 1e3:.1f} mm"
+
+
+def _spread_cells(row: SpreadRow) -> list[str]:
+    return [row.fault, row.hop, str(row.logs), f"{row.estimate_name or '-'} ({row.unit})" if row.unit else "-",
+            _num(row.median), f"{_num(row.p5)} .. {_num(row.p95)}", f"{_num(row.lo)} .. {_num(row.hi)}"]
+
+
+SPREAD_COLUMNS = ("fault", "hop", "logs", "estimate", "median", "p5 .. p95", "min .. max")
+LOG_COLUMNS = ("log", "faults (estimate, share)", "median error", "verdict")
+
+
+def _with_findings(logs: Sequence[FleetLog]) -> list[FleetLog]:
+    found = [log for log in logs if log.findings]
+    return sorted(found, key=lambda log: -(log.error_median_m or 0.0))
+
+
+def _fault_cell(log: FleetLog) -> str:
+    return "; ".join(f"{f['fault']} at {f['hop']} ({f['estimate_text']}, {f['share']:.0%})" for f in log.findings)
+
+
+def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[FleetFigure]) -> str:
+    def cell(text: object) -> str:
+        return str(text).replace("|", "\\|").replace("\n", " ")
+
+    lines = ["# framechain fleet report", "", f"**{summary_line(logs)}**", ""]
+    lines += ["## Faults across the fleet", ""]
+    if spread:
+        lines += ["| " + " | ".join(SPREAD_COLUMNS) + " |", "|" + " --- |" * len(SPREAD_COLUMNS)]
+        lines += ["| " + " | ".join(cell(c) for c in _spread_cells(r)) + " |" for r in spread]
+    else:
+        lines.append("No log has a finding.")
+    for fig in figures:
+        lines += ["", f"![{fig.caption}]({fig.name}.png)"]
+    found = _with_findings(logs)
+    lines += ["", "## Which logs have which fault", ""]
+    if found:
+        lines += ["| " + " | ".join(LOG_COLUMNS) + " |", "|" + " --- |" * len(LOG_COLUMNS)]
+        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {_mm(log.error_median_m)} | {cell(log.verdict)} |"
+                  for log in found[:MAX_LISTED]]
+        lines += _more(len(found))
+    else:
+        lines.append("None.")
+    failed = [log for log in logs if log.status in _NOT_ANALYSED]
+    if failed:
+        lines += ["", "## Why logs were not analysed", "", "| " + " | ".join(REASON_COLUMNS) + " |",
+                  "|" + " --- |" * len(REASON_COLUMNS)]
+        lines += ["| " + " | ".join(cell(c) for c in r.cells()) + " |" for r in not_analysed_reasons(logs)]
+        lines += ["", "## Logs that could not be analysed", "", "| log | status | error |", "| --- | --- | --- |"]
+        lines += [f"| {cell(log.unit)} | {log.status} | {cell(log.error)} |" for log in failed[:MAX_LISTED]]
+        lines += _more(len(failed))
+    lines += ["", "Every row of fleet.parquet is one log and finding; query it with DuckDB or pandas.", ""]
+    return "\n".join(lines)
+
+
+def _more(n: int) -> list[str]:
+    return ["", f"... and {n - MAX_LISTED} more in fleet.parquet."] if n > MAX_LISTED else []
+
+
+def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[FleetFigure]) -> str:
+    e = html.escape
+    parts = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain fleet report</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>framechain fleet report</h1>",
+        f"<div class='summary'>{e(summary_line(logs))}</div>",
+        "<h2>Faults across the fleet</h2>",
+    ]
+    if spread:
+        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in SPREAD_COLUMNS) + "</tr>")
+        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in _spread_cells(r)) + "</tr>" for r in spread]
+        parts.append("</table>")
+    else:
+        parts.append("<p>No log has a finding.</p>")
+    for fig in figures:
+        data = base64.b64encode(fig.png).decode("ascii")
+        parts.append(f"<figure><img alt='{e(fig.caption)}' src='data:image/png;base64,{data}'>"
+                     f"<figcaption>{e(fig.caption)}</figcaption></figure>")
+    found = _with_findings(logs)
+    parts.append("<h2>Which logs have which fault</h2>")
+    if found:
+        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in LOG_COLUMNS) + "</tr>")
+        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(_fault_cell(log))}</td>"
+                  f"<td class='num'>{_mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td></tr>"
+                  for log in found[:MAX_LISTED]]
+        parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(found)) if t))
+    else:
+        parts.append("<p>None.</p>")
+    failed = [log for log in logs if log.status in _NOT_ANALYSED]
+    if failed:
+        parts.append("<h2>Why logs were not analysed</h2><table><tr>"
+                     + "".join(f"<th>{e(c)}</th>" for c in REASON_COLUMNS) + "</tr>")
+        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in r.cells()) + "</tr>" for r in not_analysed_reasons(logs)]
+        parts.append("</table>")
+        parts.append("<h2>Logs that could not be analysed</h2>"
+                     "<table><tr><th>log</th><th>status</th><th>error</th></tr>")
+        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(log.status)}</td><td>{e(log.error or '')}</td></tr>"
+                  for log in failed[:MAX_LISTED]]
+        parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(failed)) if t))
+    parts.append("<p class='muted'>Written by framechain batch. Every row of fleet.parquet is one log and finding; "
+                 "query it with DuckDB or pandas.</p></body></html>")
+    return "\n".join(parts)
+
+
+__all__ = [
+    "FleetLog",
+    "ReasonRow",
+    "SpreadRow",
+    "estimate_spread",
+    "fleet_logs",
+    "not_analysed_reasons",
+    "render_fleet_report",
+]

@@ -1,0 +1,167 @@
+"""``framechain export``: the log and the replay in one MCAP, read back with mcap's reader.
+
+Every added message is decoded with classes built from the FileDescriptorSet stored in the file
+(not framechain's or foxglove_schemas_protobuf's classes), so a wrong schema registration fails.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+from mcap.reader import make_reader
+
+from framechain.cli.demo_cmd import parse_fault
+from framechain.cli.main import main
+from framechain.pipeline import load_log
+from framechain.replay import replay
+from framechain.sim.logs import write_scene
+from framechain.sim.scene import SceneSpec, generate
+from framechain.sinks.foxglove_export import ANNOTATIONS_TOPIC, FINDINGS_TOPIC, SCENE_TOPIC, TF_TOPIC
+
+ADDED = {TF_TOPIC: "foxglove.FrameTransforms", ANNOTATIONS_TOPIC: "foxglove.ImageAnnotations",
+         SCENE_TOPIC: "foxglove.SceneUpdate", FINDINGS_TOPIC: "foxglove.Log"}
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
+
+
+def _decoder(schema: Any) -> Any:
+    """A message class from the schema's own FileDescriptorSet."""
+    files = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+    pool = descriptor_pool.DescriptorPool()
+    for f in files.file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+
+
+def _read(path: Path) -> tuple[Counter[str], dict[str, list[tuple[int, Any]]], dict[str, list[bytes]]]:
+    copied: Counter[str] = Counter()
+    added: dict[str, list[tuple[int, Any]]] = {}
+    raw: dict[str, list[bytes]] = {}
+    classes: dict[int, Any] = {}
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages():
+            if channel.topic in ADDED:
+                assert schema is not None
+                assert schema.encoding == "protobuf"
+                assert channel.message_encoding == "protobuf"
+                assert schema.name == ADDED[channel.topic]
+                if schema.id not in classes:
+                    classes[schema.id] = _decoder(schema)
+                decoded = classes[schema.id].FromString(message.data)
+                assert decoded.SerializeToString() == message.data  # nothing unknown to the schema
+                added.setdefault(channel.topic, []).append((message.log_time, decoded))
+            else:
+                copied[channel.topic] += 1
+                raw.setdefault(channel.topic, []).append(bytes(message.data))
+    return copied, added, raw
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, Path]:
+    out = tmp_path_factory.mktemp("export")
+    spec = SceneSpec(seed=9, duration_s=1.2, width=160, height=120, focal_px=150.0, color_images=True,
+                     faults=(parse_fault("missing_rotation"),))
+    scene = generate(spec)
+    log = write_scene(scene, out / "episode.mcap")
+    chain = out / "chain.yaml"
+    chain.write_text(scene.chain.to_yaml())
+    annotated = out / "annotated.mcap"
+    assert main(["export", str(log), "--chain", str(chain), "--out", str(annotated), "-q"]) == 0
+    return log, chain, annotated
+
+
+def test_log_messages_copied_unchanged(demo: tuple[Path, Path, Path]) -> None:
+    log, _, annotated = demo
+    copied, _, raw = _read(annotated)
+    original: Counter[str] = Counter()
+    original_raw: dict[str, list[bytes]] = {}
+    with log.open("rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            original[channel.topic] += 1
+            original_raw.setdefault(channel.topic, []).append(bytes(message.data))
+    assert copied == original
+    assert raw == original_raw
+    assert "/camera/color/image_raw" in copied
+
+
+def test_every_added_message_decodes_and_annotations_land_on_the_detection(demo: tuple[Path, Path, Path]) -> None:
+    log, chain, annotated = demo
+    _, added, _ = _read(annotated)
+    assert set(added) == set(ADDED)
+    loaded = load_log(log, chain)
+    obs = loaded.timeline.observations
+    images = loaded.timeline.image_frames
+    assert len(added[ANNOTATIONS_TOPIC]) == len(images) == len(obs)
+    by_stamp = {int(s): (float(u), float(v)) for s, u, v in zip(obs.stamp_ns, obs.u, obs.v, strict=True)}
+    image_stamps = set(images.stamp_ns.tolist())
+    for _, msg in added[ANNOTATIONS_TOPIC]:
+        first = msg.points[0]
+        stamp = first.timestamp.seconds * 10**9 + first.timestamp.nanos
+        assert stamp in image_stamps  # paired with the image it is drawn on
+        assert first.type == 1  # POINTS: the detection
+        assert (first.points[0].x, first.points[0].y) == pytest.approx(by_stamp[stamp], abs=1e-9)
+        # the recomputed point (second POINTS) projects back onto the detection as well
+        recomputed = [p for p in msg.points if p.type == 1][1]
+        assert (recomputed.points[0].x, recomputed.points[0].y) == pytest.approx(by_stamp[stamp], abs=1e-6)
+        lines = [p for p in msg.points if p.type == 4]  # LINE_LIST: recomputed -> as-run
+        assert len(lines) == 1
+        assert len(lines[0].points) == 2
+        assert "missing_rotation on camera_to_body" in msg.texts[0].text
+    findings = [m for _, m in added[FINDINGS_TOPIC]]
+    assert findings
+    assert findings[0].level == 4
+    assert findings[0].message.startswith("missing_rotation on camera_to_body")
+    result = replay(loaded.timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+    tf = [m for _, m in added[TF_TOPIC]]
+    assert len(tf) == int(result.replayed.sum())
+    assert [t.parent_frame_id for t in tf[0].transforms] == ["map", "base_link@replay"]
+    scene = [m for _, m in added[SCENE_TOPIC]]
+    spheres = np.array([[s.pose.position.x, s.pose.position.y, s.pose.position.z] for m in scene
+                        for s in m.entities[0].spheres[:1]])
+    order = np.argsort(obs.stamp_ns, kind="stable")
+    np.testing.assert_allclose(spheres, result.p_world[order], atol=1e-9)
+
+
+def test_real_bag_copied_and_annotated(tmp_path: Path) -> None:
+    bag = REALDATA / "fiducials" / "aruco_images.bag"
+    if not bag.is_file():
+        pytest.skip(f"real logs not found at {REALDATA}")
+    chain = tmp_path / "chain.yaml"
+    chain.write_text("""
+frames: {camera: raspicam, body: base_link, world: map}
+topics: {image: /raspicam_node/image/compressed, camera_info: /raspicam_node/camera_info}
+evidence: {markers: {dictionary: DICT_5X5_1000, size_m: 0.14}}
+mounts:
+  - {parent: map, child: base_link, xyz: [0, 0, 0], rpy: [0, 0, 0]}
+  - {parent: base_link, child: raspicam, xyz: [0.1, 0, 0.3], rpy: [-1.5707963, 0, -1.5707963]}
+""")
+    out = tmp_path / "annotated.mcap"
+    assert main(["export", str(bag), "--chain", str(chain), "--out", str(out), "-q"]) == 0
+    copied, added, raw = _read(out)
+    assert copied == Counter({"/raspicam_node/camera_info": 15, "/raspicam_node/image/compressed": 1})
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/raspicam_node/image/compressed"]
+        assert raw["/raspicam_node/image/compressed"] == [bytes(r) for _, _, r in reader.messages(connections=conns)]
+    (_, annotations), = added[ANNOTATIONS_TOPIC]
+    corners = [p for p in annotations.points if p.type == 2]  # LINE_LOOP: the seven markers
+    assert len(corners) == 7
+    with out.open("rb") as f:  # the copy keeps ROS 1 encodings, readable as ROS 1
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    encodings = {c.topic: c.message_encoding for c in summary.channels.values()}
+    assert encodings["/raspicam_node/image/compressed"] == "ros1"
+
+
+def test_out_must_be_mcap_and_not_the_log(demo: tuple[Path, Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    log, chain, _ = demo
+    assert main(["export", str(log), "--chain", str(chain), "--out", str(log.with_suffix(".txt")), "-q"]) == 1
+    assert "an export is an MCAP file" in capsys.readouterr().err
+    assert main(["export", str(log), "--chain", str(chain), "--out", str(log), "-q"]) == 1
+    assert "would overwrite the log it reads" in capsys.readouterr().err

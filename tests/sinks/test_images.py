@@ -1,0 +1,436 @@
+"""Camera images in the Rerun recording, with the chain drawn on them, read back from the .rrd.
+
+Logs are written with the real writers (the scene generator through write_log, rosbags for the
+real bag is the bag itself, the LeRobot writer plus an H.264 mp4 made with PyAV); projections are
+checked against OpenCV's projectPoints, video frame references against the mp4's own frame times
+as Rerun's AssetVideo reads them.
+"""
+
+from __future__ import annotations
+
+import io
+import sys
+from collections import defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+from scipy.spatial.transform import Rotation
+
+from framechain.adapters import write_log
+from framechain.analysis.attribute import Attribution, attribute
+from framechain.cli.demo_cmd import parse_fault
+from framechain.pipeline import LoadedRun, load_log
+from framechain.replay import ReplayResult, replay
+from framechain.sim.logs import write_scene
+from framechain.sim.scene import Scene, SceneSpec, generate
+from framechain.sinks.overlay import FAULT_COLORS, ImageSelection
+from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
+from framechain.timeline import CameraTable, ChainConfig, ImageFrameTable, ObservationTable, Timeline, TransformTable
+
+Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
+REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
+
+
+def _read(path: Path) -> Batches:
+    out: Batches = defaultdict(list)
+    for chunk in RrdReader(path).stream():
+        out[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
+    return dict(out)
+
+
+def _rows(batches: Batches, entity: str, column: str) -> tuple[np.ndarray, list[Any]]:
+    """(sensor_time ns, values) of the temporal rows of ``entity``, in sensor-time order."""
+    times: list[int] = []
+    values: list[Any] = []
+    for static, batch in batches.get(entity, []):
+        if static or column not in batch.schema.names:
+            continue
+        times.extend(batch.column("sensor_time").cast(pa.int64()).to_pylist())
+        values.extend(batch.column(column).to_pylist())
+    order = np.argsort(times, kind="stable")
+    return np.asarray(times, dtype=np.int64)[order], [values[i] for i in order]
+
+
+def _camera_pose(result: ReplayResult, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """rvec, tvec of camera_from_world for observation ``i`` from the transforms the replay used."""
+    world_from_cam = result.world_from_body.matrix()[i] @ result.body_from_cam.matrix()[i]
+    cam_from_world = np.linalg.inv(world_from_cam)
+    rvec, _ = cv2.Rodrigues(cam_from_world[:3, :3])
+    return rvec, cam_from_world[:3, 3]
+
+
+def _opencv_pixels(timeline: Timeline, result: ReplayResult, p_world: np.ndarray) -> np.ndarray:
+    cams = timeline.cameras
+    k, dist = cams.K[0], cams.distortion[0, : max(int(cams.n_distortion[0]), 5)]
+    out = np.full((len(p_world), 2), np.nan)
+    for i, p in enumerate(p_world):
+        if np.isfinite(p).all() and bool(result.replayed[i]):
+            rvec, tvec = _camera_pose(result, i)
+            if (cv2.Rodrigues(rvec)[0] @ p + tvec)[2] > 0:
+                out[i] = cv2.projectPoints(p.reshape(1, 1, 3), rvec, tvec, k, dist)[0].reshape(2)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The demo scene: JPEG colour images, a missing rotation and a pose latency
+
+
+@dataclass(frozen=True)
+class Run:
+    scene: Scene
+    loaded: LoadedRun
+    attribution: Attribution
+    rrd: Path
+    batches: Batches
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Run:
+    out = tmp_path_factory.mktemp("demo")
+    spec = SceneSpec(seed=5, duration_s=1.5, width=160, height=120, focal_px=150.0, color_images=True,
+                     faults=(parse_fault("missing_rotation"), parse_fault("latency:-0.03")))
+    scene = generate(spec)
+    write_scene(scene, out / "episode.mcap")
+    (out / "chain.yaml").write_text(scene.chain.to_yaml())
+    loaded = load_log(out / "episode.mcap", out / "chain.yaml")
+    attribution = attribute(loaded.timeline, loaded.chain, seed=0)
+    rrd = out / "episode.rrd"
+    stream_replay(loaded.timeline, attribution.replay, RerunTarget.save(rrd), findings=attribution.findings,
+                  evidence=attribution.aligned)
+    return Run(scene, loaded, attribution, rrd, _read(rrd))
+
+
+def test_demo_images_are_the_logged_jpegs_at_their_stamps(demo: Run) -> None:
+    images = demo.loaded.timeline.image_frames
+    obs = demo.loaded.timeline.observations
+    assert len(images) == len(obs) > 20  # the generator renders one image per detection
+    stamps, blobs = _rows(demo.batches, "/camera/image", "EncodedImage:blob")
+    media = _rows(demo.batches, "/camera/image", "EncodedImage:media_type")[1]
+    # near (the default): every image within 50 ms of an observation, here all of them, at their stamps
+    assert np.array_equal(stamps, np.sort(images.stamp_ns))
+    assert {m[0] for m in media} == {"image/jpeg"}
+    by_stamp = {int(s): i for i, s in enumerate(images.stamp_ns)}
+    for stamp, blob in zip(stamps.tolist(), blobs, strict=True):
+        logged = images.load(by_stamp[stamp])
+        assert bytes(blob[0]) == logged  # not re-encoded
+        assert logged.startswith(b"\xff\xd8\xff")
+    # the image is drawn under the pinhole's image plane
+    frames = [b.column("CoordinateFrame:frame").to_pylist() for s, b in demo.batches["/camera/image"] if s]
+    assert frames == [[["camera_optical_frame_image_plane"]]]
+
+
+def test_demo_projected_points_match_opencv(demo: Run) -> None:
+    timeline, result = demo.loaded.timeline, demo.attribution.replay
+    obs = result.observations
+    stamps, recomputed = _rows(demo.batches, "/camera/overlay/recomputed", "Points2D:positions")
+    assert np.array_equal(stamps, np.sort(obs.stamp_ns[result.replayed]))
+    got = np.array([r[0] for r in recomputed])
+    order = np.argsort(obs.stamp_ns, kind="stable")
+    expected = _opencv_pixels(timeline, result, result.p_world)[order]
+    np.testing.assert_allclose(got, expected, atol=2e-3)  # float32 in the recording
+    # the recomputed world point lands back on the detection, inside the 160 x 120 image
+    np.testing.assert_allclose(got, np.stack([obs.u, obs.v], axis=1)[order], atol=2e-3)
+    assert ((got > -0.5) & (got < [159.5, 119.5])).all()
+    # as-run: the robot's own world points (the generator's, not the aligner's) through the same pose
+    robot_world = demo.scene.robot_world[obs.obs_id]
+    _, as_run = _rows(demo.batches, "/camera/overlay/as_run", "Points2D:positions")
+    expected_as_run = _opencv_pixels(timeline, result, robot_world)[order]
+    np.testing.assert_allclose(np.array([r[0] for r in as_run]), expected_as_run, atol=2e-2)
+    # a 30 deg rotation lost: the as-run point is far from the detection (tens of pixels at 150 px focal)
+    assert np.linalg.norm(expected_as_run - got, axis=1).min() > 20
+
+
+def test_demo_error_line_coloured_by_the_explaining_finding(demo: Run) -> None:
+    top = max(demo.attribution.findings, key=lambda f: f.share)
+    assert top.fault.value == "missing_rotation"
+    _, strips = _rows(demo.batches, "/camera/overlay/error", "LineStrips2D:strips")
+    _, colors = _rows(demo.batches, "/camera/overlay/error", "LineStrips2D:colors")
+    _, labels = _rows(demo.batches, "/camera/overlay/error", "LineStrips2D:labels")
+    r, g, b = FAULT_COLORS["missing_rotation"]
+    assert {c[0] for c in colors} == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
+    assert all("missing_rotation on camera_to_body" in lab[0] for lab in labels)
+    _, recomputed = _rows(demo.batches, "/camera/overlay/recomputed", "Points2D:positions")
+    _, as_run = _rows(demo.batches, "/camera/overlay/as_run", "Points2D:positions")
+    for strip, a, c in zip(strips, recomputed, as_run, strict=True):
+        np.testing.assert_allclose(strip[0], [a[0], c[0]], atol=1e-3)
+    # the per-observation length of that line as a series
+    _, px = _rows(demo.batches, "/series/error_px/as_run", "Scalars:scalars")
+    lengths = [np.linalg.norm(np.subtract(c[0], a[0])) for a, c in zip(recomputed, as_run, strict=True)]
+    np.testing.assert_allclose([p[0] for p in px], lengths, rtol=1e-4)
+
+
+def test_demo_blueprint_puts_the_camera_beside_the_3d_view(demo: Run) -> None:
+    reader = RrdReader(demo.rrd)
+    origins: dict[str, str] = {}
+    kinds: dict[str, str] = {}
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            if "ViewBlueprint:class_identifier" in batch.schema.names:
+                kinds[chunk.entity_path] = batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0]
+                origins[chunk.entity_path] = batch.column("ViewBlueprint:space_origin").to_pylist()[-1][0]
+    two_d = [p for p, k in kinds.items() if k == "2D" and origins[p] == "/camera"]
+    assert len(two_d) == 2  # the camera (image and overlay) and its depth
+    assert "3D" in kinds.values()
+    assert "TimeSeries" in kinds.values()
+
+
+def test_images_none_and_all(demo: Run, tmp_path: Path) -> None:
+    timeline, result = demo.loaded.timeline, demo.attribution.replay
+    for selection, expected in ((ImageSelection.NONE, 0), (ImageSelection.ALL, len(timeline.image_frames))):
+        rrd = tmp_path / f"{selection.value}.rrd"
+        stream_replay(timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=selection))
+        stamps, _ = _rows(_read(rrd), "/camera/image", "EncodedImage:blob")
+        assert stamps.size == expected
+
+
+# ----------------------------------------------------------------------------------------------
+# Raw sensor_msgs/Image encodings through a real ROS 2 MCAP
+
+
+def _raw_scene(encoding: str) -> tuple[Timeline, ChainConfig, np.ndarray]:
+    """Two 6 x 8 images of ``encoding``, a camera at the world origin looking along +x, one detection."""
+    rng = np.random.default_rng(3)
+    shapes = {"mono8": (2, 6, 8), "mono16": (2, 6, 8), "16UC1": (2, 6, 8), "32FC1": (2, 6, 8),
+              "rgb8": (2, 6, 8, 3), "bgr8": (2, 6, 8, 3)}
+    dtype = {"mono16": np.uint16, "16UC1": np.uint16, "32FC1": np.float32}.get(encoding, np.uint8)
+    pixels = (rng.uniform(0, 200, shapes[encoding])).astype(dtype)
+    t0 = 1_700_000_000_000_000_000
+    stamps = np.array([t0, t0 + 100_000_000])
+    optical = Rotation.from_euler("xyz", [-np.pi / 2, 0, -np.pi / 2]).as_quat()
+    tf = TransformTable.concat([
+        TransformTable.from_rows("map", "base_link", stamps, [[0, 0, 0]] * 2, [[0, 0, 0, 1]] * 2,
+                                 source="/tf"),
+        TransformTable.from_rows("base_link", "cam", [t0], [[0, 0, 0]], [optical], is_static=True,
+                                 source="/tf_static"),
+    ])
+    cams = CameraTable.from_intrinsics("cam", fx=10.0, fy=10.0, cx=3.5, cy=2.5, width=8, height=6,
+                                       stamp_ns=t0, source="/cam/info")
+    obs = ObservationTable(obs_id=[0], stamp_ns=[t0], log_time_ns=[t0], camera_frame=["cam"], u=[5.0], v=[2.0],
+                           depth_m=[2.0], label=["x"], score=[1.0], source=["/detections"])
+    images = ImageFrameTable.from_arrays("cam", stamps, pixels, encoding=encoding, source="/cam/image")
+    timeline = Timeline(transforms=tf, cameras=cams, observations=obs, image_frames=images)
+    chain = ChainConfig.from_dict({"frames": {"camera": "cam", "body": "base_link", "world": "map"},
+                                   "topics": {"camera_info": "/cam/info", "detections": "/detections",
+                                              "image": "/cam/image"}})
+    return timeline, chain, pixels
+
+
+@pytest.mark.parametrize("encoding", ["mono8", "mono16", "rgb8", "bgr8", "16UC1", "32FC1"])
+def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> None:
+    timeline, chain, pixels = _raw_scene(encoding)
+    write_log(timeline, tmp_path / "raw.mcap", container="mcap-ros2", chain=chain)
+    loaded = load_log(tmp_path / "raw.mcap", chain)
+    images = loaded.timeline.image_frames
+    assert images.encoding.tolist() == [encoding, encoding]
+    assert np.array_equal(images.pixels(1), pixels[1])
+    result = replay(loaded.timeline, chain.frames)
+    assert result.replayed.all()
+    rrd = tmp_path / "raw.rrd"
+    stream_replay(loaded.timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
+    batches = _read(rrd)
+    stamps, buffers = _rows(batches, "/camera/image", "Image:buffer")
+    _, formats = _rows(batches, "/camera/image", "Image:format")
+    assert stamps.tolist() == images.stamp_ns.tolist()
+    for k in range(2):
+        little_endian = pixels[k].astype(pixels.dtype.newbyteorder("<"))
+        assert bytes(np.asarray(buffers[k][0], dtype=np.uint8)) == little_endian.tobytes()
+        fmt = formats[k][0]
+        assert (fmt["width"], fmt["height"]) == (8, 6)
+    # the recomputed point lands on the detection pixel (5, 2) of the 8 x 6 image
+    _, recomputed = _rows(batches, "/camera/overlay/recomputed", "Points2D:positions")
+    np.testing.assert_allclose(recomputed[0][0], [5.0, 2.0], atol=1e-4)
+
+
+# ----------------------------------------------------------------------------------------------
+# The real bag: one JPEG with seven ArUco markers
+
+
+@pytest.fixture(scope="module")
+def aruco(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Iterator[tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]]]:
+    bag = REALDATA / "fiducials" / "aruco_images.bag"
+    if not bag.is_file():
+        pytest.skip(f"real logs not found at {REALDATA}")
+    out = tmp_path_factory.mktemp("aruco")
+    # The bag has no /tf: the chain mounts the camera 0.3 m up on the robot, looking forward.
+    mount = {"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0.0, 0.3], "rpy": [-np.pi / 2, 0.0, -np.pi / 2]}
+    chain = {"frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
+             "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
+             "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}},
+             "mounts": [{"parent": "map", "child": "base_link", "xyz": [1.0, 2.0, 0.0], "rpy": [0.0, 0.0, 0.4]}, mount]}
+    path = out / "chain.yaml"
+    path.write_text(ChainConfig.from_dict(chain).to_yaml())
+    loaded = load_log(bag, path)
+    result = replay(loaded.timeline, loaded.chain.frames)
+    rrd = out / "aruco.rrd"
+    stream_replay(loaded.timeline, result, RerunTarget.save(rrd))
+    return loaded, result, _read(rrd), chain
+
+
+def test_real_jpeg_is_logged_as_recorded(aruco: tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]]) -> None:
+    from rosbags.highlevel import AnyReader
+
+    loaded, _, batches, _ = aruco
+    with AnyReader([REALDATA / "fiducials" / "aruco_images.bag"]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/raspicam_node/image/compressed"]
+        (_, _, raw), = list(reader.messages(connections=conns))
+        msg = reader.deserialize(raw, conns[0].msgtype)
+    stamps, blobs = _rows(batches, "/camera/image", "EncodedImage:blob")
+    assert stamps.tolist() == [msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec]
+    assert bytes(blobs[0][0]) == bytes(msg.data)
+    assert loaded.timeline.image_frames.width.tolist() == [1280]
+    assert loaded.timeline.image_frames.height.tolist() == [960]
+
+
+def test_real_markers_drawn_where_opencv_projects_them(
+    aruco: tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]],
+) -> None:
+    loaded, result, batches, chain = aruco
+    obs = result.observations
+    assert result.replayed.all()
+    assert len(obs) == 7
+    # all seven markers at one stamp share one row (the viewer shows them together)
+    stamps, recomputed = _rows(batches, "/camera/overlay/recomputed", "Points2D:positions")
+    assert stamps.size == 1
+    assert len(recomputed[0]) == 7
+    got = np.array(recomputed[0])
+    # OpenCV with the chain's own mounts (scipy, not framechain) and the bag's CameraInfo
+    def mount(m: dict[str, Any]) -> np.ndarray:
+        t = np.eye(4)
+        t[:3, :3] = Rotation.from_euler("xyz", m["rpy"]).as_matrix()
+        t[:3, 3] = m["xyz"]
+        return t
+    world_from_cam = mount(chain["mounts"][0]) @ mount(chain["mounts"][1])
+    cam_from_world = np.linalg.inv(world_from_cam)
+    rvec, _ = cv2.Rodrigues(cam_from_world[:3, :3])
+    cams = loaded.timeline.cameras
+    expected = cv2.projectPoints(result.p_world.reshape(-1, 1, 3), rvec, cam_from_world[:3, 3], cams.K[0],
+                                 cams.distortion[0, :5])[0].reshape(-1, 2)
+    order = np.argsort(obs.stamp_ns, kind="stable")
+    np.testing.assert_allclose(got, expected[order], atol=5e-3)
+    np.testing.assert_allclose(got, np.stack([obs.u, obs.v], axis=1)[order], atol=5e-3)
+    assert ((got > 0) & (got < [1279.5, 959.5])).all()
+    # the corners from the detector, closed quads around each marker centre
+    _, corners = _rows(batches, "/camera/overlay/corners", "LineStrips2D:strips")
+    quads = np.array(corners[0])
+    assert quads.shape == (7, 5, 2)
+    np.testing.assert_allclose(quads[:, 0], quads[:, 4])
+    inside = [cv2.pointPolygonTest(q[:4].astype(np.float32), tuple(map(float, p)), False) > 0
+              for q, p in zip(quads, got, strict=True)]
+    assert all(inside)
+
+
+# ----------------------------------------------------------------------------------------------
+# A LeRobot episode with an H.264 video
+
+
+def _write_mp4(path: Path, n_frames: int, fps: int, width: int, height: int) -> None:
+    import av
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=fps)
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+        stream.options = {"g": "10", "bf": "0"}
+        for k in range(n_frames):
+            frame = np.zeros((height, width, 3), dtype=np.uint8)
+            frame[:, :, 0] = (k * 9) % 255
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+
+
+def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
+    pytest.importorskip("av")
+    import rerun as rr
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "lerobot"))
+    from lerobot_scene import FPS, HEIGHT, WIDTH, write_arm_dataset, write_robot_yaml
+
+    lengths = (12, 15)
+    dataset = write_arm_dataset(tmp_path / "ds", version="v3.0", lengths=lengths, detection_feature=True)
+    video = dataset.root / "videos" / "observation.images.wrist" / "chunk-000" / "file-000.mp4"
+    _write_mp4(video, sum(lengths), FPS, WIDTH // 4, HEIGHT // 4)
+    robot = write_robot_yaml(tmp_path, detections=[{"feature": "observation.detection.wrist", "camera": "wrist"}])
+    loaded = load_log(dataset.root, robot=robot, episode=1)
+    frames = loaded.timeline.image_frames
+    assert len(frames) == lengths[1]
+    assert set(frames.encoding.tolist()) == {"video"}
+    result = replay(loaded.timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+    rrd = tmp_path / "ep.rrd"
+    stream_replay(loaded.timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
+    batches = _read(rrd)
+    assets = [b for s, b in batches["/camera/video"] if s and "AssetVideo:blob" in b.schema.names]
+    blob = np.asarray(assets[0].column("AssetVideo:blob").to_pylist()[0][0], dtype=np.uint8)
+    assert bytes(blob) == video.read_bytes()
+    stamps, refs = _rows(batches, "/camera/video", "VideoFrameReference:timestamp")
+    assert stamps.tolist() == sorted(frames.stamp_ns.tolist())
+    # Episode 1 starts after episode 0's 12 frames in the shared file: each reference falls on its own frame
+    # of the mp4 (frame times as Rerun reads them from the file), within LeRobot's 100 us tolerance.
+    pts = np.asarray(rr.AssetVideo(path=video).read_frame_timestamps_nanos(), dtype=np.int64)
+    assert pts.size == sum(lengths)
+    ref_ns = np.array([r[0] for r in refs], dtype=np.int64)
+    want = pts[lengths[0]: lengths[0] + lengths[1]]
+    assert ((ref_ns >= want) & (ref_ns - want <= 100_000)).all()
+    # the detections' recomputed points are drawn on the video frames, back on the detected pixels
+    obs = result.observations
+    replayed = np.flatnonzero(result.replayed)
+    assert replayed.size >= 10
+    _, recomputed = _rows(batches, "/camera/overlay/recomputed", "Points2D:positions")
+    got = np.array([r[0] for r in recomputed])
+    order = replayed[np.argsort(obs.stamp_ns[replayed], kind="stable")]
+    expected = _opencv_pixels(loaded.timeline, result, result.p_world)[order]
+    np.testing.assert_allclose(got, expected, atol=5e-3)
+    np.testing.assert_allclose(got, np.stack([obs.u, obs.v], axis=1)[order], atol=5e-3)
+    assert ((got > -0.5) & (got < [WIDTH - 0.5, HEIGHT - 0.5])).all()
+
+
+def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Path) -> None:
+    from PIL import Image
+
+    from framechain.sinks.overlay import FAULT_COLORS, RECOMPUTED_COLOR, image_overlay, render_crops, worst_rows
+    from framechain.sinks.report import render_report
+
+    paths = render_report(demo.attribution, tmp_path, timeline=demo.loaded.timeline)
+    page = paths["html"].read_text()
+    assert "What the camera saw" in page
+    faults = [f.fault.value for f in demo.attribution.findings]
+    assert set(faults) == {"missing_rotation", "latency"}
+    for fault in faults:  # a section of crops per finding
+        assert len(sorted(tmp_path.glob(f"camera_{fault}_obs_*.png"))) == 4
+    assert "### missing_rotation on camera_to_body" in paths["md"].read_text()
+    # missing_rotation's crops are at the observations where camera_to_body departs most
+    timeline, result = demo.loaded.timeline, demo.attribution.replay
+    overlay = image_overlay(timeline, result, demo.attribution.aligned, demo.attribution.findings)
+    departure = demo.attribution.hop_errors["camera_to_body"]
+    rows = worst_rows(timeline, result, overlay, departure)
+    assert departure[rows].min() >= np.percentile(departure, 60)
+    ids = {int(p.stem.rsplit("_", 1)[1]) for p in tmp_path.glob("camera_missing_rotation_obs_*.png")}
+    assert ids == set(result.observations.obs_id[rows].tolist())
+    assert np.diff(rows).min() >= len(result) // 8  # spread over the episode
+    for i, png in render_crops(timeline, overlay, rows, width_px=320):
+        picture = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+        u, v = overlay.detection_uv[i]
+        # where the 160 x 120 image sits in the crop: the rows and columns that are mostly not padding grey
+        not_padding = np.abs(picture - 200).max(axis=2) > 0
+        img_rows = np.flatnonzero(not_padding.mean(axis=1) > 0.8)
+        cols = np.flatnonzero(not_padding[img_rows].mean(axis=0) > 0.8)
+        scale = (cols[-1] - cols[0] + 1) / 160
+        assert (img_rows[-1] - img_rows[0] + 1) / 120 == pytest.approx(scale, rel=0.03)
+        # the recomputed point's dot sits on the detection
+        x, y = cols[0] + (u + 0.5) * scale, img_rows[0] + (v + 0.5) * scale
+        assert np.abs(picture[round(y), round(x)] - RECOMPUTED_COLOR).max() <= 40
+        # the line leaves it in the explaining finding's colour, towards the as-run point
+        a = overlay.as_run_uv[i]
+        mid = ((u + a[0]) / 2 + 0.5) * scale + cols[0], ((v + a[1]) / 2 + 0.5) * scale + img_rows[0]
+        assert np.abs(picture[round(mid[1]), round(mid[0])] - FAULT_COLORS["missing_rotation"]).max() <= 40
