@@ -1,14 +1,17 @@
 """Screenshots of the real Rerun viewer on framechain recordings (slow: not part of the tests).
 
 How: ``rerun REC.rrd VIEW.rbl --serve-web`` hosts the web viewer and serves the recording over
-gRPC; headless Chromium renders it with SwiftShader (WebGL on the CPU; no GPU, no display) and
-writes a PNG. The blueprint ``VIEW.rbl`` is framechain's default with the side panels collapsed.
-The viewer opens at the end of the timeline: the shot shows the last observation.
+gRPC; headless Chromium renders it with SwiftShader (WebGL on the CPU; no GPU, no display). The
+script drives Chromium over the DevTools protocol: it takes a screenshot every 5 s until the viewer
+shows data, waits ``--settle`` seconds more (JPEGs are decoded asynchronously: earlier shots show a
+spinner where the image goes) and keeps the last one. The blueprint ``VIEW.rbl`` is framechain's
+default with the side panels collapsed. The viewer opens at the end of the timeline: the shot
+shows the last observation.
 
-Measured on a busy 2-core machine: 20 s to 2.5 min per screenshot. The virtual-time budget matters:
-20 s of page time showed a loading spinner where the JPEG goes (images are decoded asynchronously);
-60 s shows it; 90 s and more gave an empty viewer with Chromium 156 (the page never connected).
-A native viewer under Xvfb with llvmpipe gave all-black captures on this machine.
+Tried first: ``chromium --screenshot --virtual-time-budget=N`` works on an idle machine, but under
+load the budget ran out while the viewer was still loading (a dark page, or no recording yet). A
+native viewer under Xvfb with llvmpipe gave all-black captures on this machine. Measured on a busy
+2-core machine: about 1 minute per screenshot.
 
     .venv/bin/python scripts/screenshots.py --demo docs/images/demo_viewer.png
     .venv/bin/python scripts/screenshots.py --rrd aruco.rrd --camera raspicam --out docs/images/aruco_viewer.png
@@ -19,10 +22,13 @@ Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``).
 from __future__ import annotations
 
 import argparse
+import base64
+import json
 import os
 import shutil
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -30,6 +36,8 @@ import time
 import urllib.parse
 import urllib.request
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 RERUN = ROOT / ".venv" / "bin" / "rerun"
@@ -69,38 +77,182 @@ def recorded_bounds(rrd: Path) -> tuple[float, float, float, float] | None:
     return None
 
 
-def screenshot(rrd: Path, out: Path, blueprint: Path | None, *, size: tuple[int, int],
-               budget_ms: int, chromium: str) -> None:
-    """Serve ``rrd`` to the web viewer, render it in headless Chromium, write ``out``."""
-    web_port, grpc_port = free_port(), free_port()
+#: A picture of the loaded viewer with data compresses to well over this (empty viewer: ~25 kB, the
+#: loading screen: ~10 kB; the demo: ~240 kB).
+MIN_PICTURE_BYTES = 60_000
+
+
+def not_ready(png: Path) -> str | None:
+    """Why ``png`` is not a picture of the loaded viewer with data (None: it is).
+
+    Headless Chromium's virtual time runs out early on a busy machine: the shot then shows the
+    dark loading screen or a viewer with no recording yet.
+    """
+    from PIL import Image
+
+    with Image.open(png) as img:
+        grey = np.asarray(img.convert("L"), dtype=np.uint8)
+    if (grey > 200).mean() < 0.4:
+        return "the page was still loading (mostly dark)"
+    if png.stat().st_size < MIN_PICTURE_BYTES:
+        return "the viewer shows no recording yet"
+    return None
+
+
+def screenshot(rrd: Path, out: Path, blueprint: Path | None, *, size: tuple[int, int], chromium: str,
+               settle_s: float, timeout_s: float) -> None:
+    """Serve ``rrd`` to the web viewer, open it in headless Chromium, write ``out`` once it shows data."""
+    web_port, grpc_port, debug_port = free_port(), free_port(), free_port()
     files = [str(rrd)] + ([str(blueprint)] if blueprint else [])
     server = subprocess.Popen(
         [str(RERUN), *files, "--serve-web", "--web-viewer-port", str(web_port), "--port", str(grpc_port)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
     )
+    browser: subprocess.Popen[bytes] | None = None
     try:
         page = f"http://127.0.0.1:{web_port}"
-        for _ in range(100):
-            try:
-                urllib.request.urlopen(page, timeout=1).read(64)
-                break
-            except OSError:
-                time.sleep(0.2)
+        _wait_http(page, timeout_s=30)
         source = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
         url = f"{page}/?url={urllib.parse.quote(source, safe='')}&renderer=webgl"
         with tempfile.TemporaryDirectory() as profile:
-            subprocess.run(
+            browser = subprocess.Popen(
                 [chromium, "--headless", "--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
                  "--enable-unsafe-swiftshader", "--disable-background-networking", "--disable-component-update",
-                 "--disable-sync", "--no-first-run", f"--user-data-dir={profile}", f"--screenshot={out}",
-                 f"--window-size={size[0]},{size[1]}", f"--virtual-time-budget={budget_ms}", url],
-                check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=budget_ms / 1000 + 120,
+                 "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
+                 f"--remote-debugging-port={debug_port}", f"--window-size={size[0]},{size[1]}", url],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
             )
+            with DevTools.connect(debug_port, timeout_s=30) as tools:
+                # the viewport, not the window (whose frame takes part of --window-size)
+                tools.call("Emulation.setDeviceMetricsOverride",
+                           {"width": size[0], "height": size[1], "deviceScaleFactor": 1, "mobile": False})
+                started = time.monotonic()
+                while True:
+                    time.sleep(5)
+                    out.write_bytes(tools.screenshot())
+                    why = not_ready(out)
+                    if why is None:
+                        break
+                    if time.monotonic() - started > timeout_s:
+                        raise SystemExit(f"screenshots: {rrd}: {why} after {timeout_s:.0f} s")
+                time.sleep(settle_s)  # images are decoded asynchronously after the viewer shows the data
+                out.write_bytes(tools.screenshot())
+            os.killpg(browser.pid, signal.SIGTERM)
+            browser.wait(timeout=10)
     finally:
+        if browser is not None and browser.poll() is None:
+            os.killpg(browser.pid, signal.SIGTERM)
         # `.venv/bin/rerun` is a wrapper that starts the viewer binary: stop its whole process group.
         os.killpg(server.pid, signal.SIGTERM)
         server.wait(timeout=10)
     print(f"wrote {out}")
+
+
+def _wait_http(url: str, *, timeout_s: float) -> bytes:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            body: bytes = urllib.request.urlopen(url, timeout=2).read()
+            return body
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.3)
+
+
+class DevTools:
+    """Just enough of the Chrome DevTools Protocol over a WebSocket to take screenshots.
+
+    A hand-written client (RFC 6455 framing: masked client frames, fragmented server frames) so the
+    script needs nothing beyond the standard library and Pillow.
+    """
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock = sock
+        self.next_id = 0
+
+    @classmethod
+    def connect(cls, port: int, *, timeout_s: float) -> DevTools:
+        deadline = time.monotonic() + timeout_s
+        while True:
+            targets = json.loads(_wait_http(f"http://127.0.0.1:{port}/json/list", timeout_s=timeout_s))
+            pages = [t for t in targets if t.get("type") == "page" and t.get("webSocketDebuggerUrl")]
+            if pages:
+                break
+            if time.monotonic() > deadline:
+                raise SystemExit("screenshots: Chromium opened no page")
+            time.sleep(0.3)
+        parts = urllib.parse.urlsplit(pages[0]["webSocketDebuggerUrl"])
+        sock = socket.create_connection((parts.hostname, parts.port), timeout=120)
+        key = base64.b64encode(os.urandom(16)).decode()
+        sock.sendall((f"GET {parts.path} HTTP/1.1\r\nHost: {parts.hostname}:{parts.port}\r\nUpgrade: websocket\r\n"
+                      f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+        head = b""
+        while b"\r\n\r\n" not in head:
+            head += sock.recv(1)
+        if b" 101 " not in head.split(b"\r\n", 1)[0]:
+            raise SystemExit(f"screenshots: DevTools refused the WebSocket: {head.splitlines()[0]!r}")
+        return cls(sock)
+
+    def __enter__(self) -> DevTools:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.sock.close()
+
+    def call(self, method: str, params: dict[str, object] | None = None) -> dict[str, object]:
+        self.next_id += 1
+        self._send(json.dumps({"id": self.next_id, "method": method, "params": params or {}}).encode())
+        while True:
+            message = json.loads(self._receive())
+            if message.get("id") == self.next_id:
+                if "error" in message:
+                    raise SystemExit(f"screenshots: {method}: {message['error']}")
+                result: dict[str, object] = message["result"]
+                return result
+
+    def screenshot(self) -> bytes:
+        return base64.b64decode(str(self.call("Page.captureScreenshot", {"format": "png"})["data"]))
+
+    def _send(self, payload: bytes) -> None:
+        n = len(payload)
+        if n < 126:
+            header = struct.pack("!BB", 0x81, 0x80 | n)
+        elif n < 1 << 16:
+            header = struct.pack("!BBH", 0x81, 0x80 | 126, n)
+        else:
+            header = struct.pack("!BBQ", 0x81, 0x80 | 127, n)
+        mask = os.urandom(4)
+        masked = (np.frombuffer(payload, dtype=np.uint8) ^ np.resize(np.frombuffer(mask, dtype=np.uint8), n)).tobytes()
+        self.sock.sendall(header + mask + masked)
+
+    def _exact(self, n: int) -> bytes:
+        data = bytearray()
+        while len(data) < n:
+            chunk = self.sock.recv(n - len(data))
+            if not chunk:
+                raise SystemExit("screenshots: DevTools closed the connection")
+            data += chunk
+        return bytes(data)
+
+    def _receive(self) -> bytes:
+        parts: list[bytes] = []
+        while True:
+            first, second = self._exact(2)
+            length = second & 0x7F
+            if length == 126:
+                length = struct.unpack("!H", self._exact(2))[0]
+            elif length == 127:
+                length = struct.unpack("!Q", self._exact(8))[0]
+            data = self._exact(length)
+            opcode = first & 0x0F
+            if opcode == 0x8:
+                raise SystemExit("screenshots: DevTools closed the connection")
+            if opcode in (0x9, 0xA):  # ping, pong
+                continue
+            parts.append(data)
+            if first & 0x80:
+                return b"".join(parts)
 
 
 def demo_recording(workdir: Path) -> Path:
@@ -121,8 +273,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--world", default="map")
     parser.add_argument("--no-images", action="store_true", help="the recording has no camera images")
     parser.add_argument("--size", default="1600x900")
-    parser.add_argument("--budget-ms", type=int, default=60_000,
-                        help="page time Chromium runs before the shot (default 60000; more broke the page)")
+    parser.add_argument("--settle", type=float, default=20.0, metavar="S",
+                        help="seconds to wait once the data shows, for images to decode (default 20)")
+    parser.add_argument("--timeout", type=float, default=300.0, metavar="S",
+                        help="give up when the viewer shows no data after this long (default 300)")
     args = parser.parse_args(argv)
     chromium = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
     if chromium is None:
@@ -141,7 +295,8 @@ def main(argv: list[str] | None = None) -> int:
         write_blueprint(blueprint, args.camera, args.body, args.world, images=not args.no_images,
                         bounds=recorded_bounds(rrd))
         out.parent.mkdir(parents=True, exist_ok=True)
-        screenshot(rrd, out, blueprint, size=(width, height), budget_ms=args.budget_ms, chromium=chromium)
+        screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
+                   timeout_s=args.timeout)
     return 0
 
 

@@ -15,6 +15,7 @@ from typing import Any
 
 from framechain.adapters.collect import wrap_json
 from framechain.adapters.depth import parse_ros1_image
+from framechain.adapters.fast_cdr import LayoutError, parse_cdr_image
 from framechain.adapters.kinds import normalize_msgtype
 
 Decoder = Callable[[bytes | memoryview], Any]
@@ -77,7 +78,22 @@ def ros_decoder(store: Any, name: str, *, ros1: bool) -> Decoder:
             return lenient
         return lambda raw: deserialize(raw, typename)
     deserialize_cdr = store.deserialize_cdr
+    if normalize_msgtype(typename) == "sensor_msgs/Image" and _standard_image(store, typename):
+
+        def image(raw: bytes | memoryview) -> Any:
+            try:
+                return parse_cdr_image(raw)
+            except LayoutError:
+                return deserialize_cdr(raw, typename)  # says what is wrong in rosbags' words
+
+        return image
     return lambda raw: deserialize_cdr(raw, typename)
+
+
+def _standard_image(store: Any, typename: str) -> bool:
+    """The log's sensor_msgs/Image has the standard fields (parse_cdr_image reads those)."""
+    fields = [name for name, _ in store.fielddefs[typename][1]]
+    return fields == ["header", "height", "width", "encoding", "is_bigendian", "step", "data"]
 
 
 def protobuf_decoder(name: str, descriptor_set: bytes) -> Decoder:

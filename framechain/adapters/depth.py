@@ -59,8 +59,7 @@ def decode_depth(msg: Any, units_m: float = 0.001) -> npt.NDArray[np.float32]:
         return _decode_compressed_depth(bytes(msg.data), fmt, units_m)
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     encoding = str(msg.encoding)
-    data = np.frombuffer(bytes(msg.data) if not isinstance(msg.data, np.ndarray) else msg.data.tobytes(),
-                         dtype=np.uint8)
+    data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)  # a view, never a copy
     if encoding in _U16:
         kind = ">" if msg.is_bigendian else "<"
         code = "i2" if encoding == "16SC1" else "u2"

@@ -15,7 +15,10 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
 
 from framechain.adapters.collect import Collector
 from framechain.adapters.decoders import (
@@ -85,6 +88,9 @@ class McapLog:
                 self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
         self._decoders: dict[int, Decoder] = {}
         self._scanned = False
+        self._where: dict[str, _Locations] = {}
+        self._chunk_by_offset: dict[int, Any] = {}
+        self._fetch_chunk: tuple[int, bytes] | None = None
         #: What a linear scan salvaged and lost (None until one ran, or when nothing was damaged).
         self.salvage: SalvageReport | None = None
 
@@ -226,23 +232,40 @@ class McapLog:
         col.notes.extend(n for n in self.notes if n not in col.notes)
 
     def _indexed(self, wanted: set[int]) -> Iterator[Any]:
-        from mcap.records import Chunk
-
+        """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once."""
         for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             if ci.message_index_offsets and not (set(ci.message_index_offsets) & wanted):
                 continue
-            self._f.seek(ci.chunk_start_offset + 1 + 8)
             try:
-                from mcap.data_stream import ReadDataStream
-
-                chunk = Chunk.read(ReadDataStream(self._f))
-                records = _chunk_records(chunk)
+                data = self._chunk_data(ci)
             except Exception as err:
                 self._note_bad_chunk(ci.chunk_start_offset, err, self._index_counts(ci))
                 continue
-            for rec in records:
-                if rec.channel_id in wanted:
-                    yield rec
+            yield from _chunk_messages(data, wanted)
+
+    def _chunk_data(self, ci: Any, *, check_crc: bool = True) -> bytes:
+        """The decompressed records of a chunk, its CRC checked (CRCValidationError when it differs)."""
+        from mcap.stream_reader import CRCValidationError
+
+        self._f.seek(ci.chunk_start_offset + _RECORD_HEAD.size)
+        body = self._f.read(ci.chunk_length - _RECORD_HEAD.size)
+        _, _, uncompressed_size, crc, name_len = _CHUNK_HEAD.unpack_from(body, 0)
+        pos = _CHUNK_HEAD.size
+        compression = body[pos : pos + name_len].decode("utf-8", "replace")
+        pos += name_len
+        (records_len,) = struct.unpack_from("<Q", body, pos)
+        pos += 8
+        if pos + records_len > len(body):
+            raise ValueError(f"chunk records run past the chunk ({records_len} bytes at {pos} of {len(body)})")
+        raw = memoryview(body)[pos : pos + records_len]
+        data = _decompress(compression, raw, uncompressed_size)
+        if check_crc and crc != 0 and _crc32(data) != crc:
+            from mcap.records import Chunk
+
+            chunk = Chunk(compression=compression, data=b"", message_end_time=0, message_start_time=0,
+                          uncompressed_crc=crc, uncompressed_size=uncompressed_size)
+            raise CRCValidationError(expected=crc, actual=_crc32(data), record=chunk)
+        return data
 
     def _index_counts(self, ci: Any) -> Counter[int]:
         """Messages per channel in a chunk, from the message index records that follow it."""
@@ -328,55 +351,144 @@ class McapLog:
     # -- lazy fetch --------------------------------------------------------------------------------
     def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         """The decoded message of ``topic`` at ``log_time_ns`` (the ordinal-th of equal times)."""
+        if not self.indexed:
+            return self._fetch_linear(topic, log_time_ns, ordinal)
+        where = self._locations(topic)
+        times = where.log_time_ns
+        first = int(np.searchsorted(times, log_time_ns, side="left"))
+        row = first + ordinal
+        if row >= times.size or int(times[row]) != log_time_ns:
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read",
+                                  topic=topic)
+        chunk_offset = int(where.chunk_offset[row])
+        if self._fetch_chunk is None or self._fetch_chunk[0] != chunk_offset:
+            # Frames are asked for in time order and neighbours share chunks: keep the last one.
+            # The read that found this frame checked the chunk's CRC: a re-read does not again.
+            chunk = self._chunk_by_offset[chunk_offset]
+            self._fetch_chunk = (chunk_offset, self._chunk_data(chunk, check_crc=False))
+        data = self._fetch_chunk[1]
+        start = int(where.record_offset[row])
+        opcode, length = _RECORD_HEAD.unpack_from(data, start)
+        cid, _, log_time, _ = _MESSAGE_HEAD.unpack_from(data, start + _RECORD_HEAD.size)
+        if opcode != _OPCODE_MESSAGE or log_time != log_time_ns:
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not where its index says",
+                                  topic=topic)
+        body = start + _RECORD_HEAD.size + _MESSAGE_HEAD.size
+        return self.decoder(cid)(memoryview(data)[body : start + _RECORD_HEAD.size + length])
+
+    def _locations(self, topic: str) -> _Locations:
+        """Where each message of a topic lives (chunk, offset in it), sorted by log time then file order.
+
+        Built once per topic from the message index records that follow the chunks: nothing is
+        decompressed, and each fetch is then a binary search instead of a scan of the chunk index.
+        """
+        if topic in self._where:
+            return self._where[topic]
         cids = {cid for cid, ch in self.channels.items() if ch.topic == topic}
+        times: list[npt.NDArray[np.int64]] = []
+        chunks: list[npt.NDArray[np.int64]] = []
+        offsets: list[npt.NDArray[np.int64]] = []
+        for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            self._chunk_by_offset[int(ci.chunk_start_offset)] = ci
+            for cid, off in ci.message_index_offsets.items():
+                if cid not in cids:
+                    continue
+                # A MessageIndex record: opcode, length, channel id, entries length, (log time, offset) pairs.
+                self._f.seek(off)
+                head = self._f.read(_RECORD_HEAD.size + 6)
+                if len(head) < _RECORD_HEAD.size + 6:
+                    continue
+                (entries_len,) = struct.unpack_from("<I", head, _RECORD_HEAD.size + 2)
+                entries = np.frombuffer(self._f.read(entries_len), dtype="<u8")
+                pairs = entries[: entries.size // 2 * 2].reshape(-1, 2).astype(np.int64)
+                times.append(pairs[:, 0])
+                offsets.append(pairs[:, 1])
+                chunks.append(np.full(pairs.shape[0], int(ci.chunk_start_offset), dtype=np.int64))
+        time_arr = np.concatenate(times) if times else np.zeros(0, dtype=np.int64)
+        chunk_arr = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int64)
+        offset_arr = np.concatenate(offsets) if offsets else np.zeros(0, dtype=np.int64)
+        order = np.lexsort((offset_arr, chunk_arr, time_arr))
+        where = _Locations(time_arr[order], chunk_arr[order], offset_arr[order])
+        self._where[topic] = where
+        return where
+
+    def _fetch_linear(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        """A file without a chunk index: scan it (salvage reads are rare and small)."""
         seen = 0
-        if self.indexed:
-            chunks = [
-                ci for ci in self.summary.chunk_indexes
-                if ci.message_start_time <= log_time_ns <= ci.message_end_time
-                and (not ci.message_index_offsets or set(ci.message_index_offsets) & cids)
-            ]
-            stream: Iterator[Any] = (
-                rec for ci in sorted(chunks, key=lambda c: c.chunk_start_offset) for rec in self._chunk_at(ci)
-            )
-        else:
-            stream = self._linear(wanted={topic: Kind.DEPTH})
-        for rec in stream:
+        for rec in self._linear(wanted={topic: Kind.DEPTH}):
             # A linear scan meets the channel records on the way: look the topic up as it goes.
             channel = self.channels.get(rec.channel_id)
-            if (rec.channel_id in cids or (channel is not None and channel.topic == topic)) \
-                    and rec.log_time == log_time_ns:
+            if channel is not None and channel.topic == topic and rec.log_time == log_time_ns:
                 if seen == ordinal:
                     return self.decoder(rec.channel_id)(rec.data)
                 seen += 1
         raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
 
-    def _chunk_at(self, ci: Any) -> list[Any]:
-        """The messages of a chunk; the last few stay decompressed (neighbouring frames share chunks)."""
-        from mcap.data_stream import ReadDataStream
-        from mcap.records import Chunk
 
-        cache: dict[int, list[Any]] = self.__dict__.setdefault("_chunk_cache", {})
-        key = int(ci.chunk_start_offset)
-        if key in cache:
-            return cache[key]
-        self._f.seek(ci.chunk_start_offset + 1 + 8)
-        records = _chunk_records(Chunk.read(ReadDataStream(self._f)))
-        if len(cache) >= 4:
-            cache.pop(next(iter(cache)))
-        cache[key] = records
-        return records
+@dataclass(frozen=True)
+class _Locations:
+    """Per message of one topic, sorted by log time: its chunk's file offset and its offset in the chunk."""
+
+    log_time_ns: npt.NDArray[np.int64]
+    chunk_offset: npt.NDArray[np.int64]
+    record_offset: npt.NDArray[np.int64]
 
 
-def _chunk_records(chunk: Any, *, keep_all: bool = False) -> list[Any]:
-    """Records of a chunk with its CRC checked; messages only unless ``keep_all``."""
-    from mcap.records import Message
-    from mcap.stream_reader import breakup_chunk
+class _RawMessage(NamedTuple):
+    """A message record inside a decompressed chunk (the fields :meth:`McapLog.read` uses)."""
 
-    records = breakup_chunk(chunk, validate_crc=True)
-    if keep_all:
-        return list(records)
-    return [r for r in records if isinstance(r, Message)]
+    channel_id: int
+    log_time: int
+    data: memoryview
+
+
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, uncompressed CRC, compression name length
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_OPCODE_MESSAGE = 0x05
+
+
+def _crc32(data: bytes) -> int:
+    try:
+        from zlib_ng.zlib_ng import crc32
+    except ImportError:  # the same CRC, about 10x slower
+        from zlib import crc32
+    return int(crc32(data))
+
+
+def _decompress(compression: str, raw: memoryview, size: int) -> bytes:
+    if compression == "":
+        return bytes(raw)
+    if compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(raw, max_output_size=size)
+    if compression == "lz4":
+        import lz4.frame
+
+        return bytes(lz4.frame.decompress(raw))
+    from mcap.exceptions import UnsupportedCompressionError
+
+    raise UnsupportedCompressionError(compression)
+
+
+def _chunk_messages(data: bytes, wanted: set[int]) -> Iterator[_RawMessage]:
+    """The wanted channels' message records of a decompressed chunk, in order."""
+    view = memoryview(data)
+    unpack_record = _RECORD_HEAD.unpack_from
+    unpack_message = _MESSAGE_HEAD.unpack_from
+    head, msg_head = _RECORD_HEAD.size, _MESSAGE_HEAD.size
+    pos, end = 0, len(data)
+    while pos + head <= end:
+        opcode, length = unpack_record(data, pos)
+        body = pos + head
+        if body + length > end:
+            raise ValueError(f"a record of {length} bytes runs past the end of its chunk")
+        if opcode == _OPCODE_MESSAGE:
+            cid, _, log_time, _ = unpack_message(data, body)
+            if cid in wanted:
+                yield _RawMessage(cid, log_time, view[body + msg_head : body + length])
+        pos = body + length
 
 
 def mcap_topic_types(log: McapLog) -> dict[str, str]:

@@ -31,11 +31,12 @@ from framechain.timeline.arrays import BoolArray, FloatArray, IntArray
 #: An image within this of an observation's stamp is the one shown with it.
 IMAGE_WINDOW_NS = 50_000_000
 
-#: Colour of an error line, by the fault of the finding that explains it (RGB).
+#: Colour of an error line, by the fault of the finding that explains it (RGB): none is the
+#: detection's green, the recomputed blue or the as-run orange, nor the grey of a floor.
 FAULT_COLORS: dict[str, tuple[int, int, int]] = {
-    "latency": (214, 39, 40), "axis_flip": (148, 103, 189), "missing_rotation": (255, 127, 14),
-    "rotation_error": (227, 119, 194), "depth_scale": (140, 86, 75), "intrinsics": (188, 189, 34),
-    "wrong_world_frame": (23, 190, 207), "inverted_transform": (127, 127, 127),
+    "latency": (214, 39, 40), "axis_flip": (148, 103, 189), "missing_rotation": (220, 0, 180),
+    "rotation_error": (247, 129, 191), "depth_scale": (140, 86, 75), "intrinsics": (188, 189, 34),
+    "wrong_world_frame": (23, 190, 207), "inverted_transform": (40, 40, 40),
 }
 UNEXPLAINED_COLOR = (214, 39, 40)
 DETECTION_COLOR = (44, 160, 44)
@@ -279,11 +280,11 @@ def render_crops(
         points = [p for p in (overlay.detection_uv[i], overlay.recomputed_uv[i], overlay.as_run_uv[i])
                   if np.isfinite(p).all()]
         pts = np.array(points) if points else np.zeros((0, 2))
-        margin = 0.05 * max(w, h)
-        u0 = int(max(min(0.0, float(pts[:, 0].min(initial=0.0)) - margin), -w))
-        v0 = int(max(min(0.0, float(pts[:, 1].min(initial=0.0)) - margin), -h))
-        u1 = int(min(max(float(w), float(pts[:, 0].max(initial=w)) + margin), 2 * w))
-        v1 = int(min(max(float(h), float(pts[:, 1].max(initial=h)) + margin), 2 * h))
+        margin = 0.05 * max(w, h)  # around points outside the image; none when all are inside
+        lo = pts.min(axis=0) - margin if pts.size else np.zeros(2)
+        hi = pts.max(axis=0) + margin if pts.size else np.array([w, h], dtype=float)
+        u0, v0 = int(np.floor(max(min(0.0, lo[0]), -w))), int(np.floor(max(min(0.0, lo[1]), -h)))
+        u1, v1 = int(np.ceil(min(max(float(w), hi[0]), 2.0 * w))), int(np.ceil(min(max(float(h), hi[1]), 2.0 * h)))
         canvas = Image.new("RGB", (u1 - u0, v1 - v0), (200, 200, 200))
         canvas.paste(picture, (-u0, -v0))
         scale = width_px / canvas.width

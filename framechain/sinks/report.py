@@ -68,12 +68,12 @@ def render_report(
         for _, crops in sections:
             for crop in crops:
                 (out / f"{crop.name}.png").write_bytes(crop.png)
-        paths["md"].write_text(markdown(result, figures) + _crops_markdown(sections))
+        paths["md"].write_text(markdown(result, figures) + _crops_markdown(result, sections))
     if "html" in formats:
         paths["html"] = out / "report.html"
         page = html_page(result, figures)
         provenance = "<h2>Provenance</h2>"
-        paths["html"].write_text(page.replace(provenance, _crops_html(sections) + provenance, 1))
+        paths["html"].write_text(page.replace(provenance, _crops_html(result, sections) + provenance, 1))
     return paths
 
 
@@ -85,13 +85,12 @@ CROP_LEGEND = ("green: the detection (and tag corners); blue: the recomputed wor
 
 def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list[Figure]]]:
     """Per finding (or once, without findings): the camera image at the worst observations for it,
-    with the detection, both projected world points and the line between them, in its colour.
+    with the detection, both projected world points and the line between them (the whole as-run vs
+    recomputed gap, in the colour of the finding that explains most of it, as in Rerun).
 
     A finding's worst observations are those where its hop departs most from the logged hop
     (``hop_errors``), else where the error against the evidence is largest."""
-    import dataclasses
-
-    from framechain.sinks.overlay import FAULT_COLORS, image_overlay, render_crops, worst_rows
+    from framechain.sinks.overlay import image_overlay, render_crops, worst_rows
 
     overlay = image_overlay(timeline, result.replay, result.aligned, result.findings)
     obs = result.replay.observations
@@ -105,40 +104,41 @@ def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list
 
     sections: list[tuple[str, list[Figure]]] = []
     for finding in result.findings or (None,):
-        mine = overlay if finding is None else dataclasses.replace(
-            overlay, finding=finding, color=FAULT_COLORS.get(finding.fault.value, overlay.color))
-        rows = worst_rows(timeline, result.replay, mine, score_for(finding.hop.value if finding else None))
+        rows = worst_rows(timeline, result.replay, overlay, score_for(finding.hop.value if finding else None))
         prefix = f"camera_{finding.fault.value}" if finding else "camera"
         figures = []
-        for i, png in render_crops(timeline, mine, rows):
-            gap = mine.error_px[i]
+        for i, png in render_crops(timeline, overlay, rows):
+            gap = overlay.error_px[i]
             what = f"{gap:.0f} px between as-run and recomputed" if np.isfinite(gap) else "no as-run point"
             caption = f"obs {int(obs.obs_id[i])} {obs.label[i]} at {obs.stamp_ns[i] / 1e9:.3f} s: {what}"
             figures.append(Figure(f"{prefix}_obs_{int(obs.obs_id[i])}", caption, png))
         if figures:
-            title = f"{finding.fault.value} on {finding.hop.value}" if finding else "the worst observations"
+            title = (f"{finding.fault.value} on {finding.hop.value}: where {finding.hop.value} departs most"
+                     if finding else "the worst observations")
             sections.append((title, figures))
     return sections
 
 
-def _crops_intro() -> str:
-    return f"Per finding, at the observations where its hop departs most: {CROP_LEGEND} (in the finding's colour)."
+def _crops_intro(result: Attribution) -> str:
+    top = max(result.findings, key=lambda f: f.share) if result.findings else None
+    colour = f", in the colour of {top.fault.value} on {top.hop.value} (the largest share)" if top else ""
+    return f"Per finding, at the observations where its hop departs most: {CROP_LEGEND}{colour}."
 
 
-def _crops_markdown(sections: Sequence[tuple[str, list[Figure]]]) -> str:
+def _crops_markdown(result: Attribution, sections: Sequence[tuple[str, list[Figure]]]) -> str:
     if not sections:
         return ""
-    lines = ["", "## What the camera saw", "", _crops_intro(), ""]
+    lines = ["", "## What the camera saw", "", _crops_intro(result), ""]
     for title, crops in sections:
         lines += [f"### {title}", "", *[f"![{c.caption}]({c.name}.png)" for c in crops], ""]
     return "\n".join(lines)
 
 
-def _crops_html(sections: Sequence[tuple[str, list[Figure]]]) -> str:
+def _crops_html(result: Attribution, sections: Sequence[tuple[str, list[Figure]]]) -> str:
     if not sections:
         return ""
     e = html.escape
-    parts = [f"<h2>What the camera saw</h2><p>{e(_crops_intro())}</p>"]
+    parts = [f"<h2>What the camera saw</h2><p>{e(_crops_intro(result))}</p>"]
     for title, crops in sections:
         parts.append(f"<h3>{e(title)}</h3><div class='plots'>")
         for c in crops:

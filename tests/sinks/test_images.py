@@ -398,7 +398,15 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
 def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Path) -> None:
     from PIL import Image
 
-    from framechain.sinks.overlay import FAULT_COLORS, RECOMPUTED_COLOR, image_overlay, render_crops, worst_rows
+    from framechain.sinks.overlay import (
+        AS_RUN_COLOR,
+        DETECTION_COLOR,
+        FAULT_COLORS,
+        RECOMPUTED_COLOR,
+        image_overlay,
+        render_crops,
+        worst_rows,
+    )
     from framechain.sinks.report import render_report
 
     paths = render_report(demo.attribution, tmp_path, timeline=demo.loaded.timeline)
@@ -408,7 +416,7 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
     assert set(faults) == {"missing_rotation", "latency"}
     for fault in faults:  # a section of crops per finding
         assert len(sorted(tmp_path.glob(f"camera_{fault}_obs_*.png"))) == 4
-    assert "### missing_rotation on camera_to_body" in paths["md"].read_text()
+    assert "### missing_rotation on camera_to_body: where camera_to_body departs most" in paths["md"].read_text()
     # missing_rotation's crops are at the observations where camera_to_body departs most
     timeline, result = demo.loaded.timeline, demo.attribution.replay
     overlay = image_overlay(timeline, result, demo.attribution.aligned, demo.attribution.findings)
@@ -420,17 +428,24 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
     assert np.diff(rows).min() >= len(result) // 8  # spread over the episode
     for i, png in render_crops(timeline, overlay, rows, width_px=320):
         picture = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-        u, v = overlay.detection_uv[i]
-        # where the 160 x 120 image sits in the crop: the rows and columns that are mostly not padding grey
-        not_padding = np.abs(picture - 200).max(axis=2) > 0
-        img_rows = np.flatnonzero(not_padding.mean(axis=1) > 0.8)
-        cols = np.flatnonzero(not_padding[img_rows].mean(axis=0) > 0.8)
-        scale = (cols[-1] - cols[0] + 1) / 160
-        assert (img_rows[-1] - img_rows[0] + 1) / 120 == pytest.approx(scale, rel=0.03)
-        # the recomputed point's dot sits on the detection
-        x, y = cols[0] + (u + 0.5) * scale, img_rows[0] + (v + 0.5) * scale
-        assert np.abs(picture[round(y), round(x)] - RECOMPUTED_COLOR).max() <= 40
-        # the line leaves it in the explaining finding's colour, towards the as-run point
-        a = overlay.as_run_uv[i]
-        mid = ((u + a[0]) / 2 + 0.5) * scale + cols[0], ((v + a[1]) / 2 + 0.5) * scale + img_rows[0]
-        assert np.abs(picture[round(mid[1]), round(mid[0])] - FAULT_COLORS["missing_rotation"]).max() <= 40
+
+        def centroid(color: tuple[int, int, int], picture: np.ndarray = picture) -> np.ndarray:
+            ys, xs = np.nonzero(np.abs(picture - color).max(axis=2) <= 30)
+            assert xs.size > 0, color
+            return np.array([xs.mean(), ys.mean()])
+
+        # the blue (recomputed) and orange (as-run) dots point the way the projected points do ...
+        recomputed, as_run = centroid(RECOMPUTED_COLOR), centroid(AS_RUN_COLOR)
+        drawn = as_run - recomputed
+        expected = overlay.as_run_uv[i] - overlay.recomputed_uv[i]
+        cos = drawn @ expected / np.linalg.norm(drawn) / np.linalg.norm(expected)
+        assert cos > np.cos(np.radians(2.0))
+        # ... at the scale of the image (160 px wide: the crop's width over the canvas it spans) ...
+        assert np.linalg.norm(drawn) / np.linalg.norm(expected) == pytest.approx(320 / 160, rel=0.05)
+        # ... joined by a line in the explaining finding's colour
+        mid = np.rint((recomputed + as_run) / 2).astype(int)
+        assert np.abs(picture[mid[1], mid[0]] - FAULT_COLORS["missing_rotation"]).max() <= 40
+        # and the recomputed dot sits on the drawn object (the generator's red disc is under it)
+        x, y = np.rint(recomputed).astype(int)
+        ring = picture[y - 12: y + 13, x - 12: x + 13].reshape(-1, 3)
+        assert (np.abs(ring - DETECTION_COLOR).max(axis=1) <= 40).any()
