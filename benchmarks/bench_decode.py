@@ -122,7 +122,7 @@ def main() -> None:
             ("read only: mcap iter_messages, no decode", raw_read),
             ("e2e: mcap iter_decoded_messages (mcap_ros2)", e2e_mcap_ros2),
             ("e2e: rosbags AnyReader + deserialize", e2e_anyreader),
-            ("e2e: framechain open_log (mcap chunks + rosbags + tables)", e2e_open_log),
+            ("e2e: framechain open_log (own chunk reader, layout decoding, tables)", e2e_open_log),
         ):
             results[name] = _rate(fn)
         results.update(_ros1_rates(ts, payloads[:20_000]))

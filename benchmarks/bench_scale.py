@@ -140,7 +140,7 @@ def _floor(path: str, chain_path: str) -> dict[str, Any]:
     chain = ChainConfig.from_yaml(chain_path)
     info = scan_log(path)
     topics = set(select_topics({t.name: normalize_msgtype(t.msgtype) for t in info.topics}, chain))
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     n = 0
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -156,16 +156,21 @@ def _floor(path: str, chain_path: str) -> dict[str, Any]:
             store, typename = stores[schema.id]
             store.deserialize_cdr(message.data, typename)
             n += 1
-    return {"seconds": time.perf_counter() - start, "messages": n, "topics": len(topics)}
+    return {"seconds": time.perf_counter() - start, "cpu_s": time.process_time() - cpu, "messages": n,
+            "topics": len(topics)}
 
 
 def _attribute(path: str, chain_path: str) -> dict[str, Any]:
+    import framechain.adapters
+    import framechain.analysis  # imported before the clock starts, as the floor's libraries are
     from framechain.pipeline import attribute_log
 
-    start = time.perf_counter()
+    assert framechain.adapters.open_log is not None
+    assert framechain.analysis is not None
+    start, cpu = time.perf_counter(), time.process_time()
     run, result = attribute_log(path, chain_path)
     seconds = time.perf_counter() - start
-    return {"seconds": seconds, "observations": len(run.timeline.observations),
+    return {"seconds": seconds, "cpu_s": time.process_time() - cpu, "observations": len(run.timeline.observations),
             "findings": [str(getattr(f, "fault", f)) for f in result.findings], "counts": result.counts()}
 
 
@@ -180,8 +185,10 @@ def child(argv: list[str]) -> None:
 
 
 def measure(what: str, path: Path, chain_path: Path) -> dict[str, Any]:
-    out = subprocess.run([sys.executable, __file__, what, str(path), str(chain_path)], check=True,
+    out = subprocess.run([sys.executable, __file__, what, str(path), str(chain_path)], check=False,
                          capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"bench_scale {what} on {path.name} failed: {out.stderr.strip().splitlines()[-1:]}")
     result: dict[str, Any] = json.loads(out.stdout.strip().splitlines()[-1])
     return result
 
@@ -198,10 +205,13 @@ def main() -> None:
         print(f"   {minutes} min log: {path.stat().st_size / 1e6:.0f} MB ({made:.0f} s to make or find), "
               f"{floor['messages']} messages on {floor['topics']} topics, "
               f"{attribute['observations']} observations", flush=True)
-    print(f"   {'log':>7}  {'floor s':>8}  {'attribute s':>11}  {'ratio':>6}  {'floor MB':>8}  {'attribute MB':>12}")
+    print("   wall seconds and CPU seconds of the process (CPU is steadier on a shared machine); peak RSS in MB")
+    print(f"   {'log':>7}  {'floor s':>8}  {'attribute s':>11}  {'ratio':>6}  {'floor cpu':>9}  {'attr cpu':>8}  "
+          f"{'ratio':>6}  {'floor MB':>8}  {'attribute MB':>12}")
     for minutes, _, floor, attribute in rows:
         print(f"   {minutes:>4} min  {floor['seconds']:>8.2f}  {attribute['seconds']:>11.2f}  "
-              f"{attribute['seconds'] / floor['seconds']:>6.2f}  {floor['peak_rss_mb']:>8.0f}  "
+              f"{attribute['seconds'] / floor['seconds']:>6.2f}  {floor['cpu_s']:>9.2f}  {attribute['cpu_s']:>8.2f}  "
+              f"{attribute['cpu_s'] / floor['cpu_s']:>6.2f}  {floor['peak_rss_mb']:>8.0f}  "
               f"{attribute['peak_rss_mb']:>12.0f}")
 
 

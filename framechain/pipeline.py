@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from framechain.analysis.attribute import AnalysisError, Attribution, attribute
+from framechain.analysis.static import StaticTargetError
 from framechain.timeline import ChainConfig, FramechainError, Timeline
 
 
@@ -176,6 +177,8 @@ def attribute_log(
     try:
         result = attribute(run.timeline, run.chain, seed=seed, bootstrap=bootstrap, progress=progress)
     except AnalysisError as err:
+        if isinstance(err.__cause__, StaticTargetError):  # observations were replayed, too few per object
+            raise AnalysisError(f"{run.path}: {err}") from err
         # Nothing replayed: say why and which key to add; otherwise what the reader noticed (an
         # undecodable topic) often explains it.
         from framechain.replay import replay

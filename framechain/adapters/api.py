@@ -155,6 +155,10 @@ def open_log(
         return plugin.open(p, chain, progress=progress)
     fmt, target, notes = detect(p)
     additions = chain_additions(chain)  # a missing calibration file fails before the log is read
+    if chain is not None and chain.evidence.markers is not None:  # a bad dictionary too, naming the chain file
+        from framechain.adapters.markers import dictionary_id
+
+        dictionary_id(chain.evidence.markers.dictionary, where=str(chain_file(chain)))
     notes.extend(additions.notes)
     col = Collector(str(p), chain)
     col.chain_edges.extend(additions.edges)
@@ -191,6 +195,13 @@ def open_log(
             raise AdapterError(p, bad[0].split(": ", 1)[-1] + "; no usable camera model",
                                topic=chain.topics.camera_info)
     return LoadedLog(timeline=timeline, info=info, decoded_topics={t: k.value for t, k in selected.items()})
+
+
+def chain_file(chain: ChainConfig) -> Path | str:
+    """The chain's file (its directory and name) for error messages, or "chain" when it came from no file."""
+    if chain.origin == "chain":
+        return "chain"
+    return Path(chain.base_dir) / chain.origin if chain.base_dir else Path(chain.origin)
 
 
 def _check_chain_topics(chain: ChainConfig, types: dict[str, str]) -> list[str]:

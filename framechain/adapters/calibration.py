@@ -365,8 +365,8 @@ def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intr
     """
     p = Path(path)
     source = str(p)
-    if not p.is_file():
-        raise CalibrationError(source, "calibration file not found")
+    if not p.is_file():  # the resolved path: a relative name alone does not say where it was looked for
+        raise CalibrationError(str(p.resolve()), "calibration file not found")
     raw = _read_yaml(p)
     if not isinstance(raw, Mapping):
         raise CalibrationError(source, "expected a mapping of calibration keys")

@@ -604,7 +604,7 @@ class Collector:
         back = (k[1:] == k[:-1]) & (s[1:] < s[:-1])
         if back.any():
             for name, count in Counter(k[1:][back].tolist()).items():
-                p, c = name.split("\x1f")
+                p, _, c = name.partition("\x1f")  # a damaged log's names may hold the separator
                 self.notes.append(
                     f"edge {p} -> {c}: header stamps go backwards {count} time{'s' if count != 1 else ''} "
                     "in log order; "

@@ -65,7 +65,8 @@ def decode_depth(msg: Any, units_m: float = 0.001) -> npt.NDArray[np.float32]:
         code = "i2" if encoding == "16SC1" else "u2"
         rows = data[: h * step].reshape(h, step)[:, : w * 2]
         raw = np.ascontiguousarray(rows).view(kind + code).reshape(h, w)
-        return (raw.astype(np.float32) * np.float32(units_m)).astype(np.float32)
+        metres: npt.NDArray[np.float32] = np.multiply(raw, np.float32(units_m), dtype=np.float32)  # one pass
+        return metres
     if encoding in _F32:
         kind = ">" if msg.is_bigendian else "<"
         rows = data[: h * step].reshape(h, step)[:, : w * 4]

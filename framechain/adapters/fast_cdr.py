@@ -17,13 +17,18 @@ rosbags typestore, so any type the log defines is understood the same way rosbag
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
+
+from framechain.adapters.kinds import Kind
+
+if TYPE_CHECKING:
+    from framechain.adapters.collect import Collector
 
 #: Field path inside a message: names and sequence/array indexes, e.g. ("transforms", 0, "header").
 FieldPath = tuple[str | int, ...]
@@ -61,9 +66,10 @@ class Layout:
 
     length: int
     leaves: dict[FieldPath, Leaf]
-    strings: dict[FieldPath, str]
+    strings: dict[FieldPath, tuple[int, int]]  # (offset, length in bytes) of each string's text
     counts: dict[FieldPath, int]  # sequence lengths
-    #: Byte positions that are not numbers: they must match for a message to share this layout.
+    #: Byte positions that are neither numbers nor string text (string lengths, sequence counts,
+    #: padding, the header): they must match for a message to share this layout.
     structure: npt.NDArray[np.intp]
 
 
@@ -82,8 +88,22 @@ class Batch:
         values = block.view(leaf.dtype)
         return values if leaf.array else values[:, 0]
 
+    def strings(self, path: FieldPath) -> list[str]:
+        """The string at ``path`` of every message (decoded once per distinct value)."""
+        offset, size = self.layout.strings[path]
+        if size == 0:
+            return [""] * len(self)
+        block = np.ascontiguousarray(self.data[:, offset : offset + size]).view(f"V{size}")[:, 0]
+        _, first, inverse = np.unique(block, return_index=True, return_inverse=True)
+        texts = [self.data[row, offset : offset + size].tobytes().decode("utf-8", "replace") for row in first.tolist()]
+        return [texts[i] for i in inverse.reshape(-1).tolist()]
+
     def string(self, path: FieldPath) -> str:
-        return self.layout.strings[path]
+        """The string at ``path``, equal in every message (LayoutError when it is not)."""
+        values = set(self.strings(path))
+        if len(values) != 1:
+            raise LayoutError(f"field {'.'.join(map(str, path))} differs between messages")
+        return values.pop()
 
     def count(self, path: FieldPath) -> int:
         return self.layout.counts[path]
@@ -107,7 +127,7 @@ class _Walker:
             self.order = "<" if buf[1] & 1 else ">"
             self.pos, self.origin = 4, 4
         self.leaves: dict[FieldPath, Leaf] = {}
-        self.strings: dict[FieldPath, str] = {}
+        self.strings: dict[FieldPath, tuple[int, int]] = {}
         self.counts: dict[FieldPath, int] = {}
 
     def _align(self, size: int) -> None:
@@ -130,10 +150,11 @@ class _Walker:
     def _string(self, path: FieldPath) -> None:
         n = self._u32()
         at = self._take(n)
-        raw = self.buf[at : at + n]
-        if not self.ros1:
-            raw = raw[:-1] if raw.endswith(b"\x00") else raw
-        self.strings[path] = raw.decode("utf-8", "replace")
+        if not self.ros1:  # CDR strings end in a NUL that is not part of the text
+            if n == 0 or self.buf[at + n - 1] != 0:
+                raise LayoutError(f"field {'.'.join(map(str, path))}: CDR string without its terminating NUL")
+            n -= 1
+        self.strings[path] = (at, n)
 
     def _primitives(self, path: FieldPath, name: str, count: int, *, array: bool) -> None:
         size = _SIZES[name]
@@ -179,10 +200,12 @@ def layout_of(store: Any, typename: str, raw: bytes, *, ros1: bool) -> Layout:
     if walker.pos != len(raw) and not (not ros1 and len(raw) - walker.pos < 4):
         # CDR may end with up to 3 bytes of padding; anything else is not this type.
         raise LayoutError(f"{len(raw) - walker.pos} bytes left after the message")
-    numeric = np.zeros(len(raw), dtype=bool)
+    free = np.zeros(len(raw), dtype=bool)  # bytes that may differ between messages of one layout
     for leaf in walker.leaves.values():
-        numeric[leaf.offset : leaf.offset + np.dtype(leaf.dtype).itemsize * leaf.count] = True
-    return Layout(len(raw), walker.leaves, walker.strings, walker.counts, np.flatnonzero(~numeric))
+        free[leaf.offset : leaf.offset + np.dtype(leaf.dtype).itemsize * leaf.count] = True
+    for offset, size in walker.strings.values():
+        free[offset : offset + size] = True
+    return Layout(len(raw), walker.leaves, walker.strings, walker.counts, np.flatnonzero(~free))
 
 
 def decode_batches(
@@ -226,45 +249,183 @@ def parse_cdr_image(raw: bytes | memoryview) -> SimpleNamespace:
     pixels is not copied before it is decoded. Fields and values as rosbags gives them.
     """
     buf = memoryview(raw)
-    if len(buf) < 4:
-        raise LayoutError("shorter than the CDR encapsulation header")
+    size = len(buf)
+    if size < 16:
+        raise LayoutError("image message shorter than its header")
     order = "<" if buf[1] & 1 else ">"
-    pos = 4
-
-    def u32() -> int:
-        nonlocal pos
-        pos = 4 + ((pos - 4 + 3) & -4)
-        if pos + 4 > len(buf):
-            raise LayoutError("image message ends inside a field")
-        (value,) = struct.unpack_from(order + "I", buf, pos)
-        pos += 4
-        return int(value)
-
-    def string() -> str:
-        nonlocal pos
-        n = u32()
-        if pos + n > len(buf):
-            raise LayoutError("image message ends inside a string")
-        text = bytes(buf[pos : pos + n]).rstrip(b"\x00").decode("utf-8", "replace")
-        pos += n
-        return text
-
-    sec = u32()
-    nanosec = u32()
-    if sec >= 1 << 31:  # builtin_interfaces/Time.sec is int32
-        sec -= 1 << 32
-    frame_id = string()
-    height = u32()
-    width = u32()
-    encoding = string()
-    if pos >= len(buf):
-        raise LayoutError("image message ends before is_bigendian")
-    is_bigendian = int(buf[pos])
-    pos += 1
-    step = u32()
-    n = u32()
-    if pos + n > len(buf):
-        raise LayoutError(f"image data of {n} bytes runs past the message end ({len(buf) - pos} bytes left)")
+    sec, nanosec, n = struct.unpack_from(order + "iII", buf, 4)
+    pos = 16 + n
+    frame_id = bytes(buf[16 : pos - 1]).decode("utf-8", "replace") if n else ""
+    pos = (pos + 3) & -4  # offsets from the start count the 4-byte header: 4-aligned is 4-aligned
+    if pos + 12 > size:
+        raise LayoutError("image message ends inside its size fields")
+    height, width, n = struct.unpack_from(order + "III", buf, pos)
+    pos += 12
+    end = pos + n
+    if end + 1 > size:
+        raise LayoutError("image message ends inside its encoding")
+    encoding = bytes(buf[pos : end - 1]).decode("utf-8", "replace") if n else ""
+    is_bigendian = int(buf[end])
+    pos = (end + 1 + 3) & -4
+    if pos + 8 > size:
+        raise LayoutError("image message ends inside its step")
+    step, n = struct.unpack_from(order + "II", buf, pos)
+    pos += 8
+    if pos + n > size:
+        raise LayoutError(f"image data of {n} bytes runs past the message end ({size - pos} bytes left)")
     header = SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec), frame_id=frame_id)
     return SimpleNamespace(header=header, height=height, width=width, encoding=encoding,
                            is_bigendian=is_bigendian, step=step, data=np.frombuffer(buf[pos : pos + n], dtype=np.uint8))
+
+
+# -- feeding the collector from batches -------------------------------------------------------------
+NS = 1_000_000_000
+_XYZ = ("x", "y", "z")
+_XYZW = ("x", "y", "z", "w")
+
+
+def _stamp_ns(batch: Batch, path: FieldPath) -> npt.NDArray[np.int64]:
+    sec = batch.column((*path, "sec")).astype(np.int64)
+    nanosec = batch.column((*path, "nanosec")).astype(np.int64)
+    stamp: npt.NDArray[np.int64] = sec * NS + nanosec
+    return stamp
+
+
+def _message_major(columns: list[list[str]], n: int) -> list[str]:
+    """Per-element columns (one list of n per sequence element) as rows message after message."""
+    return [column[i] for i in range(n) for column in columns]
+
+
+def feed_tf(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
+    """tf2_msgs/TFMessage rows as :meth:`Collector.tf` appends them, message after message."""
+    n, m = len(batch), batch.count(("transforms",))
+    stamps = np.empty((n, m), dtype=np.int64)
+    vals = np.empty((n, m, 7))
+    parents: list[list[str]] = []
+    children: list[list[str]] = []
+    for j in range(m):
+        base: FieldPath = ("transforms", j)
+        stamps[:, j] = _stamp_ns(batch, (*base, "header", "stamp"))
+        for k, axis in enumerate(_XYZ):
+            vals[:, j, k] = batch.column((*base, "transform", "translation", axis))
+        for k, axis in enumerate(_XYZW):
+            vals[:, j, 3 + k] = batch.column((*base, "transform", "rotation", axis))
+        parents.append(batch.strings((*base, "header", "frame_id")))
+        children.append(batch.strings((*base, "child_frame_id")))
+    col.tf_parent.extend(_message_major(parents, n))
+    col.tf_child.extend(_message_major(children, n))
+    col.tf_stamp.extend(stamps.reshape(-1).tolist())
+    col.tf_vals.extend(vals.reshape(-1).tolist())
+    col.tf_msg_log.extend(log_ns.tolist())
+    col.tf_msg_rows.extend([m] * n)
+    col.tf_msg_static.extend([topic.rstrip("/").endswith("tf_static")] * n)
+    col.tf_msg_topic.extend([topic] * n)
+    col.tf_msg_kind.extend(["tf"] * n)
+
+
+def feed_point(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
+    """geometry_msgs/PointStamped or PoseStamped as :meth:`Collector.point` appends them."""
+    n = len(batch)
+    leaves = batch.layout.leaves
+    if ("point", "x") in leaves:
+        xyz = [batch.column(("point", a)) for a in _XYZ]
+        quat = [np.full(n, np.nan)] * 4
+    else:
+        xyz = [batch.column(("pose", "position", a)) for a in _XYZ]
+        quat = [batch.column(("pose", "orientation", a)) for a in _XYZW]
+    frames = batch.strings(("header", "frame_id"))
+    stamps = _stamp_ns(batch, ("header", "stamp")).tolist()
+    col.pt_frame.extend(frames)  # every field read before the first row is added
+    col.pt_stamp.extend(stamps)
+    col.pt_log.extend(log_ns.tolist())
+    col.pt_vals.extend(np.column_stack([*xyz, *quat]).astype(np.float64).reshape(-1).tolist())
+    col.pt_topic.extend([topic] * n)
+
+
+def feed_camera_info(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
+    """sensor_msgs/CameraInfo (ROS 2 ``k``/``d``, ROS 1 ``K``/``D``) as :meth:`Collector.camera_info`."""
+    leaves = batch.layout.leaves
+    k_name, d_name = ("k", "d") if ("k",) in leaves else ("K", "D")
+    k = batch.column((k_name,)).astype(np.float64).tolist()
+    d = batch.column((d_name,)).astype(np.float64).tolist()
+    frames = batch.strings(("header", "frame_id"))
+    models = batch.strings(("distortion_model",))
+    stamps = _stamp_ns(batch, ("header", "stamp")).tolist()
+    widths = batch.column(("width",)).tolist()
+    heights = batch.column(("height",)).tolist()
+    col.cam_rows.extend(
+        (frame, stamp, log, int(w), int(h), model, topic)
+        for frame, stamp, log, w, h, model in zip(frames, stamps, log_ns.tolist(), widths, heights, models, strict=True)
+    )
+    col.cam_k.extend(k)
+    col.cam_d.extend(d)
+
+
+def feed_detections(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
+    """vision_msgs/Detection2DArray (ROS 2 >= 4, older ROS 2, ROS 1) as :meth:`Collector.detections`."""
+    n, d = len(batch), batch.count(("detections",))
+    leaves, strings = batch.layout.leaves, batch.layout.strings
+    outer_stamp = _stamp_ns(batch, ("header", "stamp"))
+    outer_frame = batch.strings(("header", "frame_id"))
+    u, v, depth, score = (np.full((n, d), np.nan) for _ in range(4))
+    stamp = np.empty((n, d), dtype=np.int64)
+    ident: list[list[str]] = []
+    label: list[list[str]] = []
+    frame: list[list[str]] = []
+    for j in range(d):
+        det: FieldPath = ("detections", j)
+        center: FieldPath = (*det, "bbox", "center")
+        if (*center, "position", "x") in leaves:  # vision_msgs >= 4: Pose2D{position: Point2D, theta}
+            center = (*center, "position")
+        u[:, j] = batch.column((*center, "x"))
+        v[:, j] = batch.column((*center, "y"))
+        own = _stamp_ns(batch, (*det, "header", "stamp"))
+        stamp[:, j] = np.where(own == 0, outer_stamp, own)
+        frame.append([f or o for f, o in zip(batch.strings((*det, "header", "frame_id")), outer_frame, strict=True)])
+        if (*det, "id") in strings:
+            ident.append(batch.strings((*det, "id")))
+        elif (*det, "id") in leaves:
+            ident.append([str(x) for x in batch.column((*det, "id")).tolist()])
+        elif (*det, "tracking_id") in strings:
+            ident.append(batch.strings((*det, "tracking_id")))
+        else:
+            ident.append([""] * n)
+        if batch.count((*det, "results")):
+            r0: FieldPath = (*det, "results", 0)
+            if (*r0, "hypothesis", "score") in leaves:  # vision_msgs >= 3
+                label.append(batch.strings((*r0, "hypothesis", "class_id")))
+                score[:, j] = batch.column((*r0, "hypothesis", "score"))
+            else:  # ROS 1 (int64 id) and vision_msgs 2 (string id)
+                label.append(batch.strings((*r0, "id")) if (*r0, "id") in strings
+                             else [str(x) for x in batch.column((*r0, "id")).tolist()])
+                score[:, j] = batch.column((*r0, "score"))
+            z = batch.column((*r0, "pose", "pose", "position", "z")).astype(np.float64)
+            with np.errstate(invalid="ignore"):
+                given = np.isfinite(z) & (z > 0)
+            depth[given, j] = z[given]
+        else:
+            label.append([""] * n)
+    given_count = int(np.isfinite(depth).sum())
+    if given_count:
+        col.depth_from_pose[topic] = col.depth_from_pose.get(topic, 0) + given_count
+
+    col.obs_id_text.extend(_message_major(ident, n))
+    col.obs_stamp.extend(stamp.reshape(-1).tolist())
+    col.obs_log.extend(np.repeat(log_ns, d).tolist())
+    col.obs_frame.extend(_message_major(frame, n))
+    col.obs_uvd.extend(np.stack([u, v, depth], axis=2).reshape(-1).tolist())
+    col.obs_label.extend(_message_major(label, n))
+    col.obs_score.extend(score.reshape(-1).tolist())
+    col.obs_topic.extend([topic] * (n * d))
+
+
+Feeder = Callable[["Collector", str, npt.NDArray[np.int64], Batch], None]
+#: Message types read in batches, by their normalised name, and what feeds their rows.
+FEEDERS: dict[tuple[Kind, str], Feeder] = {
+    (Kind.TF, "tf2_msgs/TFMessage"): feed_tf,
+    (Kind.TF, "tf/tfMessage"): feed_tf,
+    (Kind.POINT, "geometry_msgs/PointStamped"): feed_point,
+    (Kind.POINT, "geometry_msgs/PoseStamped"): feed_point,
+    (Kind.CAMERA_INFO, "sensor_msgs/CameraInfo"): feed_camera_info,
+    (Kind.DETECTIONS, "vision_msgs/Detection2DArray"): feed_detections,
+}

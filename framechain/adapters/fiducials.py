@@ -65,6 +65,7 @@ class FiducialRejectReason(StrEnum):
     PNP_FAILED = "pnp_failed"  # no square-marker pose in front of the camera
     REPROJECTION_TOO_LARGE = "reprojection_too_large"  # corners do not fit a square of the given size
     BEHIND_CAMERA = "behind_camera"  # a 3D point with z <= 0
+    NO_TAG_SIZE = "no_tag_size"  # a tag with no size in a camera whose other tags have one
 
 
 def _stamp(stamp: Any) -> int:
@@ -315,9 +316,14 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
             _resolve_points(model, idx[~is_corners[idx]], point, u, v, depth, reason)
             _resolve_sized(model, idx[sized[idx]], corners, size, u, v, depth, reproj, reason, reversed_order)
             _resolve_bearing(model, idx[is_corners[idx] & ~sized[idx]], corners, u, v)
+    # A camera's evidence is either points (tags with a size: depth from the corners) or rays (no
+    # size at all); the two do not mix, so a tag without a size beside sized ones is not used.
+    for cam in np.unique(frame[sized & (reason == "")]).tolist():
+        reason[(frame == cam) & is_corners & ~sized & (reason == "")] = FiducialRejectReason.NO_TAG_SIZE.value
     keep = reason == ""
     topic = np.asarray(rows.topic, dtype=str) if n else np.zeros(0, dtype=str)
-    counts, notes = _count(topic, frame, reason, keep, is_corners, sized, reversed_order, no_model_frames,
+    labels = np.asarray(rows.label, dtype=str) if n else np.zeros(0, dtype=str)
+    counts, notes = _count(topic, frame, labels, reason, keep, is_corners, sized, reversed_order, no_model_frames,
                            calibration_hint)
     kept = np.flatnonzero(keep)
     side_rows = kept[is_corners[kept]]
@@ -378,8 +384,8 @@ def _resolve_bearing(model: PinholeModel, idx: IntArray, corners: FloatArray, u:
     u[idx], v[idx] = px[:, 0], px[:, 1]
 
 
-def _count(topic: StrArray, frame: StrArray, reason: npt.NDArray[Any], keep: BoolArray, is_corners: BoolArray,
-           sized: BoolArray, reversed_order: BoolArray, no_model_frames: set[str],
+def _count(topic: StrArray, frame: StrArray, labels: StrArray, reason: npt.NDArray[Any], keep: BoolArray,
+           is_corners: BoolArray, sized: BoolArray, reversed_order: BoolArray, no_model_frames: set[str],
            calibration_hint: str) -> tuple[dict[str, dict[str, Any]], list[str]]:
     counts: dict[str, dict[str, Any]] = {}
     notes: list[str] = []
@@ -390,8 +396,9 @@ def _count(topic: StrArray, frame: StrArray, reason: npt.NDArray[Any], keep: Boo
         counts[t] = {"detections": int(mine.sum()), "observations": int((mine & keep).sum()),
                      "bearing_only": bearing, "rejected": dict(sorted(rejected.items()))}
         for why, count in sorted(rejected.items()):
+            these = mine & (reason == why)
             notes.append(f"topic {t}: {count} detection{'s' if count != 1 else ''} rejected: "
-                         f"{_explain(why, frame[mine & (reason == why)], no_model_frames, calibration_hint)}")
+                         f"{_explain(why, frame[these], labels[these], no_model_frames, calibration_hint)}")
         if bearing:
             notes.append(f"topic {t}: {bearing} tag detection{'s' if bearing != 1 else ''} without a tag size are "
                          "bearings only (set evidence.tag_size_m, or markers.size_m, for a depth from the corners)")
@@ -402,7 +409,13 @@ def _count(topic: StrArray, frame: StrArray, reason: npt.NDArray[Any], keep: Boo
     return counts, notes
 
 
-def _explain(why: str, frames: StrArray, no_model_frames: set[str], calibration_hint: str) -> str:
+def _explain(why: str, frames: StrArray, labels: StrArray, no_model_frames: set[str], calibration_hint: str) -> str:
+    if why == FiducialRejectReason.NO_TAG_SIZE:
+        ids = sorted(set(labels.tolist()), key=lambda x: (len(x), x))
+        shown = ", ".join(ids[:8]) + (f" and {len(ids) - 8} more" if len(ids) > 8 else "")
+        return (f"no size for tag{'s' if len(ids) != 1 else ''} {shown} in evidence.tag_size_m while other tags "
+                f"of camera {', '.join(sorted(set(frames.tolist())))} have one (sized tags give points, unsized "
+                "ones rays; the two are not mixed): add their sizes or a `default`")
     if why == FiducialRejectReason.NO_INTRINSICS:
         cams = sorted(set(frames.tolist()) & no_model_frames) or sorted(set(frames.tolist()))
         hint = calibration_hint or "add calibration: {file: <camchain or CameraInfo yaml>, camera: <name>} " \

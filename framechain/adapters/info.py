@@ -53,9 +53,10 @@ def frame_tree(transforms: TransformTable) -> list[EdgeInfo]:
     order = np.argsort(inverse, kind="stable")
     bounds = np.searchsorted(inverse[order], np.arange(names.size + 1))
     out: list[EdgeInfo] = []
-    for k, name in enumerate(names.tolist()):
+    for k in range(names.size):
         rows = order[bounds[k] : bounds[k + 1]]
-        parent, child = name.split("\x1f")
+        # From the rows, not the key: a damaged log's frame names may hold the separator.
+        parent, child = str(transforms.parent[rows[0]]), str(transforms.child[rows[0]])
         static = bool(transforms.is_static[rows].all())
         stamps = np.sort(transforms.stamp_ns[rows])
         n = int(rows.size)

@@ -21,15 +21,16 @@ from framechain.timeline import ChainConfigError
 _CHANNELS = {"mono8": 1, "8uc1": 1, "rgb8": 3, "bgr8": 3, "8uc3": 3, "rgba8": 4, "bgra8": 4, "8uc4": 4}
 
 
-def dictionary_id(name: str) -> int:
-    """OpenCV's id of a predefined dictionary: ``DICT_5X5_1000``, ``5x5_1000``, ``DICT_APRILTAG_36h11``."""
+def dictionary_id(name: str, where: str = "chain") -> int:
+    """OpenCV's id of a predefined dictionary: ``DICT_5X5_1000``, ``5x5_1000``, ``DICT_APRILTAG_36h11``
+    (``where``: the chain file, to start the error with)."""
     cv2 = require_cv2()
     key = name.strip().upper()
     if not key.startswith("DICT_"):
         key = f"DICT_{key}"
     known = sorted({d.upper() for d in dir(cv2.aruco) if d.startswith("DICT_")})
     if key not in known:
-        raise ChainConfigError(f"chain: evidence.markers.dictionary {name!r} is not an OpenCV dictionary; "
+        raise ChainConfigError(f"{where}: evidence.markers.dictionary {name!r} is not an OpenCV dictionary; "
                                f"known: {', '.join(known)}")
     return int(getattr(cv2.aruco, next(d for d in dir(cv2.aruco) if d.upper() == key)))
 

@@ -10,16 +10,21 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from framechain.adapters.collect import Collector
 from framechain.adapters.decoders import Decoder, ros_decoder
 from framechain.adapters.errors import AdapterError, CorruptLogError, EmptyLogError, SchemaError
-from framechain.adapters.kinds import Kind
+from framechain.adapters.fast_cdr import FEEDERS, Feeder, LayoutError, decode_batches
+from framechain.adapters.kinds import Kind, normalize_msgtype
 from framechain.adapters.model import LogInfo, TopicInfo
 from framechain.adapters.salvage_report import SalvageReport
 from framechain.adapters.salvage_rosbag1 import Rosbag1Salvage
 from framechain.adapters.salvage_rosbag2 import Rosbag2Salvage
 
 ProgressFn = Callable[[int], None]
+#: Messages of a connection gathered before they are decoded together (bounds the memory they hold).
+BATCH_MESSAGES = 8192
 
 
 def _default_typestore(ros1: bool) -> Any:
@@ -184,24 +189,65 @@ class RosbagsLog:
         first_error: dict[str, str] = {}
         done = 0
         delivered: Counter[tuple[str, int]] = Counter()
+        # Types fast_cdr knows are gathered per connection and decoded many at a time by layout.
+        gathered: dict[int, tuple[Feeder, list[int], list[bytes]]] = {}
+        for c in conns:
+            feeder = FEEDERS.get((selected[c.topic], normalize_msgtype(c.msgtype)))
+            if handlers.get(c.id) is not None and feeder is not None and c.msgtype in self.reader.typestore.fielddefs:
+                gathered[c.id] = (feeder, [], [])
+        by_id = {c.id: c for c in conns}
+
+        def handle(topic: str, t: int, raw: bytes | memoryview, entry: tuple[Decoder, Any]) -> None:
+            try:
+                entry[1](topic, t, entry[0](raw))
+            except Exception as err:  # one undecodable message must not end the read
+                failures[topic] += 1
+                first_error.setdefault(topic, f"{type(err).__name__}: {err}")
+
+        def flush(cid: int) -> None:
+            feeder, times, payloads = gathered[cid]
+            if not payloads:
+                return
+            conn, entry = by_id[cid], handlers[cid]
+            assert entry is not None
+            log_times = np.asarray(times, dtype=np.int64)
+            batches, rest = decode_batches(self.reader.typestore, conn.msgtype, payloads, ros1=self.ros1)
+            slow = [rest]
+            for b in batches:
+                try:
+                    feeder(col, conn.topic, log_times[b.rows], b)
+                except (KeyError, LayoutError):  # a layout without the fields the feeder reads
+                    slow.append(b.rows)
+            for row in np.sort(np.concatenate(slow)).tolist():
+                handle(conn.topic, int(log_times[row]), payloads[row], entry)
+            times.clear()
+            payloads.clear()
+
         try:
             for conn, t, raw in self.reader.messages(connections=conns):
                 entry = handlers.get(conn.id)
                 if entry is None:
                     continue
                 delivered[(conn.topic, t)] += 1
-                try:
-                    entry[1](conn.topic, t, entry[0](raw))
-                except Exception as err:  # one undecodable message must not end the read
-                    failures[conn.topic] += 1
-                    first_error.setdefault(conn.topic, f"{type(err).__name__}: {err}")
+                waiting = gathered.get(conn.id)
+                if waiting is not None:
+                    waiting[1].append(t)
+                    waiting[2].append(bytes(raw))
+                    if len(waiting[2]) >= BATCH_MESSAGES:
+                        flush(conn.id)
+                else:
+                    handle(conn.topic, t, raw, entry)
                 done += 1
                 if progress is not None and done % 4096 == 0:
                     progress(4096)
         except Exception as err:
             if isinstance(err, AdapterError):
                 raise
+            for cid in gathered:
+                flush(cid)
             self._read_past_damage(err, selected, col, delivered)
+        for cid in gathered:
+            flush(cid)
         for topic, n in failures.items():
             col.notes.append(
                 f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded "

@@ -23,6 +23,7 @@ import yaml
 
 from framechain.adapters.info import EdgeInfo, frame_tree, tree_roots
 from framechain.adapters.kinds import POSE_TYPES, Kind, normalize_msgtype
+from framechain.adapters.marker_probe import MarkerProbe, probe_markers
 from framechain.adapters.model import LoadedLog
 from framechain.timeline import (
     ChainConfig,
@@ -149,8 +150,15 @@ class SuggestedChain:
                 lines.append(f"  # {slot}: FILL IN  # placeholder: {self.placeholders[slot]}")
             else:
                 lines.append(f"  {slot}: {_scalar(frames[slot])}")
-        body = yaml.safe_dump(raw, sort_keys=False).rstrip("\n")
         todo = [n for n in self.missing() if n.key]
+        evidence = raw.get("evidence") or {}
+        for name in [k for k, v in evidence.items() if v in (None, False, [], {})]:
+            # An unset key the FILL IN comments ask for is left out, not written beside them as false.
+            if any(f"evidence.{name}" in n.key for n in todo):
+                del evidence[name]
+        if "evidence" in raw and not evidence:
+            del raw["evidence"]
+        body = yaml.safe_dump(raw, sort_keys=False).rstrip("\n")
         tail = []
         if todo:
             tail.append("# FILL IN what the log lacks: add these keys, replacing the CAPITALS")
@@ -498,16 +506,30 @@ def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: _LogFacts) ->
         if t.image not in facts.msgtypes:
             return t.image, ChainNeed("detections", NeedStatus.MISSING, f"the chain's topics.image {t.image} is not in "
                                       "the log", f"topics.image: {_image_choice(facts)}")
+        n_images = _count(facts.counts.get(t.image, 0), 'image')
+        if n == 0:  # searched and found none: a wrong dictionary, or no marker in view
+            probe = _probe(loaded, t.image)
+            best = probe.best if probe is not None else None
+            seen = f"; {probe.text()}" if probe is not None else ""
+            key = (f"evidence.markers: {{dictionary: {best}, size_m: {markers.size_m or 'MARKER_EDGE_M'}}}"
+                   if best is not None and best != markers.dictionary else
+                   "evidence.markers.dictionary: another dictionary (the printed markers' family), or topics.image: "
+                   "a topic that sees the markers")
+            return t.image, ChainNeed("detections", NeedStatus.MISSING, f"0 markers found in {n_images} of {t.image} "
+                                      f"with {markers.dictionary}{seen}", key)
         return t.image, ChainNeed("detections", NeedStatus.FOUND, f"markers in the images of {t.image} "
-                                  f"({_count(facts.counts.get(t.image, 0), 'image')}, {_count(n, 'marker')})")
+                                  f"({n_images}, {_count(n, 'marker')})")
     candidates = _detection_topics(loaded, facts)
     if named is None:
         images = facts.topics_of(IMAGE_TYPES)
         images = [i for i in images if "depth" not in i.lower()]
         key = "topics.detections: DETECTIONS_TOPIC"
-        if images:
-            key += (f"; or topics.image: {images[0]}; evidence.markers: {{dictionary: DICT_5X5_1000, "
-                    "size_m: MARKER_SIZE_M}  (markers found in the images)")
+        probe = _probe(loaded, images[0]) if images else None
+        if probe is not None and probe.best is not None:  # only a dictionary that found markers is suggested
+            key += (f"; or topics.image: {images[0]}; evidence.markers: {{dictionary: {probe.best}, "
+                    f"size_m: MARKER_SIZE_M}}  ({probe.text()})")
+        elif probe is not None:
+            key += f"  ({probe.text()})"
         return None, ChainNeed("detections", NeedStatus.MISSING, "no detections topic in the log "
                                "(vision_msgs, AprilTag or fiducial detections)" if not candidates else
                                f"the chain names none (the log has {', '.join(candidates)})",
@@ -526,6 +548,12 @@ def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: _LogFacts) ->
                                 f"topics.detections: {others[0] if others else 'DETECTIONS_TOPIC'}")
     return named, ChainNeed("detections", NeedStatus.FOUND,
                             f"{facts.describe(named)}: {n_msg} messages, {n_obs or len(obs)} detections{also}")
+
+
+def _probe(loaded: LoadedLog, topic: str) -> MarkerProbe | None:
+    """The common dictionaries tried on the first images of ``topic`` (None: no log file, unreadable)."""
+    path = str(getattr(loaded.info, "path", ""))
+    return probe_markers(path, topic) if path not in ("", ".") else None
 
 
 def _count(n: int, noun: str) -> str:

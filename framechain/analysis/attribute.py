@@ -39,11 +39,12 @@ from framechain.analysis.faults import (
     rotation_starts,
 )
 from framechain.analysis.fit import Fit, fit_models, perturbation_of, posterior_weights
-from framechain.analysis.fixes import fix_for
+from framechain.analysis.fixes import FixContext, fix_for
 from framechain.analysis.frame_swaps import swap_for_rotation
 from framechain.analysis.static import (
     RayObjective,
     StaticObjective,
+    StaticTargetError,
     is_bearing_only,
     static_objective,
     with_unit_depth,
@@ -360,8 +361,11 @@ def attribute(
         metric = "static_spread"
         say("minimising the spread of the static targets")
         labels = result.observations.label[result.replayed]
-        static, notes_used = static_objective(inputs, labels, window_s=chain.evidence.static_window_s,
-                                              bearing_only=bearing_only, latency_bound_s=LATENCY_BOUND_S)
+        try:
+            static, notes_used = static_objective(inputs, labels, window_s=chain.evidence.static_window_s,
+                                                  bearing_only=bearing_only, latency_bound_s=LATENCY_BOUND_S)
+        except StaticTargetError as exc:
+            raise AnalysisError(str(exc)) from exc  # observations were replayed: pipeline says it as is
         world_objective = static
         notes.extend(notes_used)
         evidence_world = static.points(inputs, Perturbation())
@@ -369,9 +373,10 @@ def attribute(
         candidates = [m for m in models_for(inputs, blind=True) if not (bearing_only and m.fault == Fault.DEPTH_SCALE)]
         selected = _select(candidates, world_objective, inputs, "correction", say)
         selections = [_reweighted(selected)]
-        if isinstance(static, RayObjective):  # errors against where the corrected rays meet, in metres there
-            world_objective = static.anchored(inputs, selected.fit.perturbation())
-            evidence_world = world_objective.points(inputs, Perturbation())
+        if isinstance(static, RayObjective):  # angles in metres at the range where the corrected rays meet
+            world_objective = static.at_range_of(inputs, selected.fit.perturbation())
+            # Where the corrected rays meet: a faulty chain's rays may meet far off, or not at all.
+            evidence_world = static.points(inputs, selected.fit.perturbation())
     else:
         metric = "none"
         nan = np.full(len(inputs), np.nan)
@@ -398,33 +403,37 @@ def attribute(
         for i, (model, x) in enumerate(zip(sel.fit.models, sel.fit.params, strict=True)):
             found.append((model, x, sel.confidences[i], sel.alternatives[i], sel))
     error_before = _distances(world_objective(inputs, Perturbation()))
+    total = float(np.nanmedian(error_before)) if np.isfinite(error_before).any() else 0.0
+    say("splitting the error among the faults found (Shapley values)")
+    found, shapley, dropped = _drop_unexplaining(found, world_objective, inputs, total)
     combined = perturbation_of([f[0] for f in found], np.concatenate([f[1] for f in found]) if found else np.zeros(0))
     error_after = _distances(world_objective(inputs, combined))
     # Corrections move the recomputed chain towards the truth; as-run faults describe what the
     # robot did, and the recomputed chain stays as it is.
     corrected_world = evaluate(inputs, combined)[2] if metric in ("reference", "static_spread") else recomputed_world
-    say("splitting the error among the faults found (Shapley values)")
-    shapley = _shapley(found, world_objective, inputs)
-    total = float(np.nanmedian(error_before)) if np.isfinite(error_before).any() else 0.0
+    context = _fix_context(timeline, chain, result, camera)
+    for model, x, share_m, why, sel in dropped:
+        estimate = model.estimate(x, sel.mode, inputs)
+        notes.append(f"{model.name} {format_estimate(estimate)} is no finding: its Shapley share of the median "
+                     f"error is {share_m * 1e3:.2f} mm ({share_m / total if total > 0 else 0.0:.1%}), {why}; its fit "
+                     "moved noise, not the error")
     findings: list[Finding] = []
     for k, (model, x, confidence, alternative, sel) in enumerate(found):
         fault = classify_rotation(model, x, sel.mode, inputs)
         estimate = model.estimate(x, sel.mode, inputs)
         interval = _bootstrap(sel, model, rng, bootstrap, say) if bootstrap else {}
-        if shapley[k] < 0:  # it makes the median error worse given the others: it explains none of it
-            notes.append(f"{model.name}: its Shapley share is {shapley[k] * 1e3:.1f} mm (negative); reported as 0")
-        share = max(shapley[k], 0.0) / total if total > 0 else 0.0
         findings.append(
             Finding(
                 fault=fault,
                 hop=model.hop,
                 estimate=estimate,
                 interval=interval,
-                share=float(share),
-                error_m=float(max(shapley[k], 0.0)),
+                share=float(shapley[k] / total) if total > 0 else 0.0,
+                error_m=float(shapley[k]),
                 confidence=float(confidence),
-                evidence=_evidence_sentence(fault, model, metric, estimate, alternative, sel.mode),
-                fix=fix_for(fault, model.hop, estimate, inputs, x, sel.mode),
+                evidence=_evidence_sentence(fault, model, metric, estimate, alternative, sel.mode,
+                                            spread_m=(total, total - float(shapley[k])), rays=bearing_only),
+                fix=fix_for(fault, model.hop, estimate, inputs, x, sel.mode, context=context),
                 model=model.name,
             )
         )
@@ -449,13 +458,36 @@ def attribute(
 
 
 # -- evidence ---------------------------------------------------------------------------------
-def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) -> CameraModel:
+def _camera_row(timeline: Timeline, chain: ChainConfig, result: ReplayResult) -> int:
+    """The row of the camera table most replayed observations were seen through."""
     rows = camera_rows_for(timeline.cameras, chain.frames.camera, result.observations.stamp_ns[result.replayed])
     rows = rows[rows >= 0]
     if rows.size == 0:
         raise AnalysisError(f"no CameraInfo for camera frame {chain.frames.camera!r}")
     values, counts = np.unique(rows, return_counts=True)
-    return CameraModel.from_table(timeline.cameras, int(values[np.argmax(counts)]))
+    return int(values[np.argmax(counts)])
+
+
+def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) -> CameraModel:
+    return CameraModel.from_table(timeline.cameras, _camera_row(timeline, chain, result))
+
+
+def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, camera: CameraModel) -> FixContext:
+    """Where the camera model and the depths came from, so that a fix blames the right file or stream."""
+    row = _camera_row(timeline, chain, result)
+    cameras = timeline.cameras
+    # Calibration files' models are timeless (stamp 0, adapters/mounts.merge_file_cameras and the
+    # LeRobot calibration); a recorded CameraInfo carries the stamp it was published at.
+    from_file = int(cameras.stamp_ns[row]) == 0 and int(cameras.log_time_ns[row]) == 0
+    detection_depth = result.observations.depth_m[result.replayed]
+    markers = chain.evidence.markers
+    return FixContext(
+        camera_source=str(cameras.source[row]),
+        camera_from_file=from_file and bool(str(cameras.source[row])),
+        depth_from_images=bool(np.isnan(detection_depth).mean() > 0.5) if detection_depth.size else False,
+        depth_from_tag_size=(chain.evidence.tag_size_m is not None
+                             or (markers is not None and markers.size_m is not None)),
+    )
 
 
 def _reference(matched: FloatArray, chain: ChainConfig) -> FloatArray | None:
@@ -634,6 +666,53 @@ def _reweighted(sel: _Selected) -> _Selected:
 
 
 # -- shares, intervals, sentences ---------------------------------------------------------------
+#: A fault that explains less than this fraction of the median error, and less than the noise floor
+#: of a median (two standard errors of the residual's median), is not a finding: its fit moved noise.
+MIN_SHARE = 0.01
+
+
+def _drop_unexplaining(
+    found: list[tuple[FaultModel, FloatArray, float, str, _Selected]],
+    objective: _Objective,
+    inputs: ChainInputs,
+    total: float,
+) -> tuple[
+    list[tuple[FaultModel, FloatArray, float, str, _Selected]],
+    list[float],
+    list[tuple[FaultModel, FloatArray, float, str, _Selected]],
+]:
+    """Drop, weakest first, the faults whose Shapley share of the median error is not a share of it.
+
+    A share at or below zero means the fault makes the median error no better given the others. A
+    Shapley value is a difference of medians, so one under two standard errors of the residual's
+    median (1.2533 sigma / sqrt(n) for a median) cannot be told from noise; with it under
+    :data:`MIN_SHARE` of the error as well (a true fault beside a large one can explain under 1% and
+    still be far above the noise: a 30 ms latency beside a 30 deg mount) the fault is dropped.
+    Shares are recomputed over the faults that remain after each drop (the parameters stay as
+    fitted). Returns the kept faults, their Shapley values (m), and the dropped ones with the share
+    they had when dropped.
+    """
+    kept = list(found)
+    dropped: list[tuple[FaultModel, FloatArray, float, str, _Selected]] = []
+    while True:
+        shapley = _shapley(kept, objective, inputs)
+        if not kept:
+            return kept, shapley, dropped
+        combined = perturbation_of([f[0] for f in kept], np.concatenate([f[1] for f in kept]))
+        residual = _distances(objective(inputs, combined))
+        residual = residual[np.isfinite(residual)]
+        floor = 2.0 * 1.2533 * float(np.std(residual)) / math.sqrt(residual.size) if residual.size else 0.0
+        weakest = int(np.argmin(shapley))
+        value = shapley[weakest]
+        if value > 0 and not (value < MIN_SHARE * total and value < floor):
+            return kept, shapley, dropped
+        model, x, _confidence, _alternative, sel = kept.pop(weakest)
+        why = ("it does not lower the median error given the other faults" if value <= 0 else
+               f"under {MIN_SHARE:.0%} of it and under the noise floor of a median ({floor * 1e3:.2f} mm, two "
+               "standard errors)")
+        dropped.append((model, x, value, why, sel))
+
+
 def _shapley(
     found: Sequence[tuple[FaultModel, FloatArray, float, str, _Selected]], objective: _Objective, inputs: ChainInputs
 ) -> list[float]:
@@ -693,13 +772,18 @@ def _bootstrap(
 
 
 def _evidence_sentence(
-    fault: Fault, model: FaultModel, metric: Metric, estimate: Estimate, alternative: str, mode: Mode
+    fault: Fault, model: FaultModel, metric: Metric, estimate: Estimate, alternative: str, mode: Mode,
+    *, spread_m: tuple[float, float] = (math.nan, math.nan), rays: bool = False,
 ) -> str:
+    """``spread_m``: the static objects' median spread before, and after this fault's share of it."""
+    before, after = spread_m
+    measured = ("how far each static object's rays pass from their meeting point" if rays
+                else "the spread of each static object's world points")
     where = {
         "logged_hops": f"the robot's logged {model.hop.value.split('_to_')[-1]} points depart from the recomputed hop",
         "target": "the logged target is reproduced from the raw inputs",
         "reference": "the error against the reference vanishes",
-        "static_spread": "the static target's world points collapse to one point",
+        "static_spread": f"{measured} (median {before * 1e3:.3g} mm) shrinks to {after * 1e3:.3g} mm",
     }[metric]
     side = "recorded data" if mode == "correction" else "chain that produced the evidence"
     return (

@@ -81,18 +81,18 @@ def format_estimate(estimate: Estimate) -> str:
             return f"{angle:.2f} deg about {axis_text(axis)}" + (f" of {frame}" if frame else "")
         case ScaleEstimate(value=value, variant=variant):
             text = f"x{value:.4g}"
-            if variant:
-                text += f" ({_VARIANT_TEXT.get(variant, variant)})"
+            if variant:  # no parentheses: the verdict puts this text in parentheses
+                text += f", {_VARIANT_TEXT.get(variant, variant)}"
             return text
         case PermutationEstimate(permutation=permutation):
             return f"axes {[list(row) for row in permutation]}"
         case FrameEstimate(used=used, meant=meant, skipped=skipped):
             text = f"looked up {used} instead of {meant}"
-            if skipped:
-                text += f" (edges {', '.join(f'{p}->{c}' for p, c in skipped)})"
+            if skipped:  # no parentheses: the verdict puts this text in parentheses
+                text += f", skipping {', '.join(f'{p}->{c}' for p, c in skipped)}"
             return text
         case InvertedEstimate(hop=hop, edge=edge):
-            return f"{hop} inverted" + (f" (edge {edge[0]}->{edge[1]})" if edge else "")
+            return f"{hop} inverted" + (f" at edge {edge[0]}->{edge[1]}" if edge else "")
     raise TypeError(f"not an estimate: {estimate!r}")
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
@@ -19,6 +21,16 @@ from framechain.analysis.faults import Mode, rotation_verdict
 from framechain.replay import HopName
 from framechain.replay.catalogue import Fault
 from framechain.timeline.arrays import FloatArray
+
+
+@dataclass(frozen=True)
+class FixContext:
+    """Where the inputs a fix blames came from (the defaults say nothing is known)."""
+
+    camera_source: str = ""  # the camera table's source: a CameraInfo topic or a calibration file
+    camera_from_file: bool = False  # the intrinsics came from a calibration file, not a recorded CameraInfo
+    depth_from_images: bool = False  # most depths were sampled from depth images (not given by the detections)
+    depth_from_tag_size: bool = False  # the chain declares tag or marker sizes (depth by PnP from corners)
 
 
 def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str, str, FloatArray, FloatArray] | None:
@@ -50,10 +62,12 @@ def _publisher(parent: str, child: str, xyz: FloatArray, rpy: FloatArray) -> str
 
 
 def fix_for(
-    fault: Fault, hop: HopName, estimate: Estimate, inputs: ChainInputs, x: FloatArray, mode: Mode
+    fault: Fault, hop: HopName, estimate: Estimate, inputs: ChainInputs, x: FloatArray, mode: Mode,
+    *, context: FixContext | None = None,
 ) -> str:
-    """One actionable sentence for a finding."""
+    """One actionable sentence for a finding (``context`` says where the camera model and depths came from)."""
     frames = inputs.frames
+    context = context or FixContext()
     if isinstance(estimate, RotationEstimate):
         mount = corrected_mount(inputs, x, mode)
         if mount is None:
@@ -103,20 +117,21 @@ def fix_for(
             f"not from a body-convention camera frame; the axes used were permuted as {_rows(estimate)}."
         )
     if isinstance(estimate, ScaleEstimate) and estimate.name == "factor":
-        factor = estimate.value
-        hint = " (16UC1 depth is millimetres: multiply by 0.001)" if 500 < factor < 2000 else ""
-        # A depth from a square marker's corners (PnP) scales with the marker size the chain declares.
-        tags = (f"; for depths from tag or marker corners, declare sizes {1.0 / factor:.4g} times those in "
-                "evidence.tag_size_m (measure the black square's side)") if 0.5 < factor < 2.0 else ""
-        return f"Scale depth by {1.0 / factor:.6g} before back-projecting{hint}{tags}."
+        return _depth_fix(estimate.value, context)
     if isinstance(estimate, ScaleEstimate) and mode == "correction":
         scale = estimate.value
         cam = inputs.camera
         principal = estimate.variant == "resolution"
         cx, cy = (cam.cx / scale, cam.cy / scale) if principal else (cam.cx, cam.cy)
-        return (f"The recorded CameraInfo's K is that of another {'resolution' if principal else 'lens'} "
-                f"(focal length x{scale:.4g}); the K that fits is fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, "
-                f"cx {cx:.1f}, cy {cy:.1f}: publish the calibration of the stream the detections came from.")
+        other = "resolution" if principal else "lens"
+        fitted = f"fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, cx {cx:.1f}, cy {cy:.1f}"
+        if context.camera_from_file:
+            return (f"The intrinsics from {context.camera_source} are those of another {other} (focal length "
+                    f"x{scale:.4g}); the K that fits is {fitted}: put the calibration of the stream the detections "
+                    f"came from in that file.")
+        recorded = f"CameraInfo on {context.camera_source}" if context.camera_source else "CameraInfo"
+        return (f"The recorded {recorded} has the K of another {other} (focal length x{scale:.4g}); the K that "
+                f"fits is {fitted}: publish the calibration of the stream the detections came from.")
     if isinstance(estimate, ScaleEstimate):
         scale = estimate.value
         return (
@@ -155,6 +170,22 @@ def fix_for(
             f"not its inverse."
         )
     return "No fix known for this fault."
+
+
+def _depth_fix(factor: float, context: FixContext) -> str:
+    """Depth scaled by ``factor``: the depth images' units, or (depths from detections) tag size or odometry scale."""
+    undo = f"Scale depth by {1.0 / factor:.6g} before back-projecting"
+    if context.depth_from_images:
+        hint = " (16UC1 depth is millimetres: multiply by 0.001)" if 500 < factor < 2000 else ""
+        return f"{undo}{hint}: the depth images' units or depth_scale are off by x{factor:.4g}."
+    if context.depth_from_tag_size:
+        # A depth from a square marker's corners (PnP) scales with the marker size the chain declares,
+        # and a scale error of the odometry (VIO) looks the same against a static target or reference.
+        return (f"{undo}: either the declared tag size is off (declare sizes {1.0 / factor:.4g} times those in "
+                f"evidence.tag_size_m or markers.size_m: measure the black square's side) or the odometry/VIO "
+                f"scale is off by x{factor:.4g} (check it against a known distance).")
+    return (f"{undo}: the detector's depth is off by x{factor:.4g} (or the odometry/VIO scale is; check it against "
+            "a known distance).")
 
 
 def _rows(estimate: PermutationEstimate) -> str:

@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
-from framechain.timeline import Timeline, normalize_frame
+from framechain.timeline import FramechainError, Timeline, normalize_frame
 from framechain.timeline.arrays import BoolArray, FloatArray, IntArray, StrArray
 
 #: Window over which one static object is fitted (s). Each object may creep linearly in time
@@ -49,6 +49,10 @@ MIN_RAYS = 6
 CREEP_RIDGE = 0.01
 #: A latency margin that leaves fewer than this share of the observations is not applied.
 MIN_KEPT_SHARE = 0.5
+
+
+class StaticTargetError(FramechainError):
+    """No static object was seen often enough to measure a spread (attribute reports it as one line)."""
 
 
 class ResidualWeighting(Protocol):
@@ -149,7 +153,7 @@ def fit_static_points(values: FloatArray, groups: StaticGroups, *, detrend: bool
     if detrend:
         stt = np.bincount(g, w * tc * tc, minlength=n_groups)
         svt = np.stack([np.bincount(g, w * tc * v[:, k], minlength=n_groups) for k in range(3)], axis=1)
-        slope = np.divide(svt, stt[:, None], out=np.zeros_like(svt), where=stt[:, None] > 1e-12)
+        slope = np.divide(svt, stt[:, None], out=np.zeros(svt.shape), where=stt[:, None] > 1e-12)
         fitted = fitted + slope[g] * tc[:, None]
     out: FloatArray = np.where((groups.used & (count[g] > 0))[:, None], fitted, np.nan)
     return out
@@ -216,6 +220,8 @@ def intersect_rays(
     ``p_i = a + b tau_i`` (``b = 0`` without ``detrend``): the normal equations are 6x6 (3x3) per
     object, accumulated with bincount and solved batched.
     """
+    if origin.shape[0] == 0:
+        return np.zeros((0, 3))
     n_groups = max(groups.n_groups, 1)
     g = np.maximum(groups.group, 0)
     finite = np.isfinite(origin).all(axis=1) & np.isfinite(direction).all(axis=1) & groups.used
@@ -272,42 +278,33 @@ class RayObjective:
     """Bearing-only static objects: the rays of one object must meet in one point.
 
     Residuals are the perpendicular offsets of each ray from its object's intersection, as angles
-    scaled to metres at the recorded range ``range_m`` (so that no perturbation wins by pushing the
+    scaled to metres at the range ``range_m`` (so that no perturbation wins by pushing the
     intersection far away). Latency, a mount rotation, axis flips and intrinsics show in rays; a
-    depth scale does not. With ``anchor`` the objects are fixed points (N, 3) instead of each
-    chain's own intersection: rays that do not meet pull their least-squares point towards the
-    cameras, so a faulty chain is measured against where the corrected one puts the objects.
+    depth scale does not. Every chain is measured against its own intersections, as points with depth
+    are against their own centre: a fault that moves every object together (a constant mount tilt)
+    leaves the rays meeting and is no spread.
     """
 
     groups: StaticGroups
     range_m: float = 1.0
     detrend: bool = True
-    anchor: FloatArray | None = None
 
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         origin, direction = world_rays(inputs, pert)
-        points = self.anchor if self.anchor is not None else intersect_rays(
-            origin, direction, self.groups, detrend=self.detrend)
+        points = intersect_rays(origin, direction, self.groups, detrend=self.detrend)
         return ray_residuals(origin, direction, points, self.range_m)
 
     def points(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
-        if self.anchor is not None:
-            return self.anchor
         origin, direction = world_rays(inputs, pert)
         return intersect_rays(origin, direction, self.groups, detrend=self.detrend)
 
     def take(self, index: IntArray) -> RayObjective:
-        return replace(self, groups=self.groups.take(index),
-                       anchor=None if self.anchor is None else self.anchor[index])
+        return replace(self, groups=self.groups.take(index))
 
-    def anchored(self, inputs: ChainInputs, pert: Perturbation) -> RayObjective:
-        """The objects fixed where the chain corrected by ``pert`` puts them, and errors in metres at
-        the range its rays meet (a faulty chain meets its rays at a wrong range)."""
-        origin, direction = world_rays(inputs, pert)
-        points = intersect_rays(origin, direction, self.groups, detrend=self.detrend)
-        ranges = np.linalg.norm(points - origin, axis=1)
-        ranges = ranges[np.isfinite(ranges)]
-        return replace(self, anchor=points, range_m=float(np.median(ranges)) if ranges.size else self.range_m)
+    def at_range_of(self, inputs: ChainInputs, pert: Perturbation) -> RayObjective:
+        """Errors in metres at the range where the rays of the chain corrected by ``pert`` meet (a
+        faulty chain meets its rays at a wrong range); one range for every chain compared."""
+        return replace(self, range_m=_intersection_range(inputs, pert, self.groups, self.detrend, self.range_m))
 
 
 def _intersection_range(
@@ -406,11 +403,18 @@ def static_objective(
             notes.append(f"static targets: {int((~inside).sum())} observations within {latency_bound_s:g} s of the "
                          "ends of the poses not used (every time offset searched is measured on the same points)")
     groups = static_groups(labels, inputs.stamp_ns, window_s=window, usable=usable)
+    if groups.n_groups == 0:
+        raise StaticTargetError(_too_few_sightings(labels, inputs.stamp_ns, window, usable, MIN_POINTS, ""))
     objective: StaticObjective
     if bearing_only:
         objective = ray_objective(inputs, groups)
         groups = objective.groups
         seen = f"objects seen at least {MIN_RAYS} times in a window, from viewpoints {MIN_PARALLAX_DEG:g} deg apart"
+        if groups.n_groups == 0:
+            raise StaticTargetError(_too_few_sightings(
+                labels, inputs.stamp_ns, window, usable, MIN_RAYS,
+                f" from viewpoints at least {MIN_PARALLAX_DEG:g} deg apart (bearing only: declare the tag sizes "
+                "to measure each sighting's depth)"))
     else:
         p_cam = evaluate(inputs, Perturbation())[0]
         objective = WindowedSpreadObjective(groups, _median_range(p_cam[groups.used]))
@@ -422,3 +426,20 @@ def static_objective(
         "measured against its own object's position"
     )
     return objective, notes
+
+
+def _too_few_sightings(
+    labels: StrArray, stamp_ns: IntArray, window_s: float, usable: BoolArray, needed: int, how: str
+) -> str:
+    """One line on why no static object can be measured: how many labels, the most sightings of one
+    label in one window, and what to change."""
+    every = static_groups(labels, stamp_ns, window_s=window_s, min_points=1, usable=usable)
+    counts = np.bincount(every.group[every.used], minlength=max(every.n_groups, 1))
+    n_labels = len(set(every.labels))
+    most = int(counts.max()) if every.n_groups else 0
+    return (
+        f"static target: no object seen at least {needed} times in one {window_s:g} s window{how} "
+        f"({n_labels} label{'s' if n_labels != 1 else ''} among {int(usable.sum())} observations, at most {most} "
+        f"sighting{'s' if most != 1 else ''} of one label in a window); lengthen evidence.static_window_s or "
+        "record more observations of each static object"
+    )

@@ -165,12 +165,10 @@ def _print_summary(result: Any) -> None:
     spread = estimate_spread(logs)
     if spread:
         table = Table()
-        for col in ("fault", "hop", "logs", "estimate median", "p5 .. p95"):
+        for col in ("fault", "hop", "logs", "estimate (median log)", "p5 .. p95"):
             table.add_column(col)
-        for row in spread:
-            median = "-" if row.median is None else f"{row.median:.4g} {row.unit}"
-            interval = "-" if row.p5 is None else f"{row.p5:.4g} .. {row.p95:.4g}"
-            table.add_row(row.fault, row.hop, str(row.logs), median, interval)
+        for row in spread:  # the texts of format_estimate and format_interval, as attribute prints them
+            table.add_row(row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text)
         console.print(table)
     reasons = not_analysed_reasons(logs)
     for reason in reasons[:3]:

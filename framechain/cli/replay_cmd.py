@@ -82,17 +82,28 @@ def run(args: argparse.Namespace) -> int:
             notes.extend(_unused_point_topics(loaded))
         result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s,
                         ignore_labels=loaded.chain.evidence.ignore_labels)
+        # A bearing-only static target replays nothing on its own (no depth): attribute replays its rays.
+        bearing_only = loaded.chain.evidence.static_target and not result.replayed.any()
+        if args.attribute and (result.replayed.any() or bearing_only):
+            from framechain.analysis.attribute import attribute
+            from framechain.analysis.static import StaticTargetError
+            from framechain.timeline import FramechainError
+
+            try:
+                attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
+            except FramechainError as err:  # the replay is still worth recording: say why there are no findings
+                # With nothing replayed the line below says what is missing, unless rays were replayed.
+                if result.replayed.any() or isinstance(err.__cause__, StaticTargetError):
+                    print(f"framechain replay: not attributed: {err}", file=sys.stderr)
+                    notes.append(f"not attributed: {err}")
+            else:
+                result, findings, evidence = attribution.replay, attribution.findings, attribution.aligned
+                notes.extend(n for n in attribution.notes if n not in notes)
         why = loaded.why_nothing_replayed(result.counts())
         if why is not None:
             # Still write the recording: the frame tree, the cameras and any rejected observations
             # are worth looking at; say why nothing was replayed and what to add.
             print(f"framechain replay: {why}", file=sys.stderr)
-        if args.attribute and result.replayed.any():
-            from framechain.analysis.attribute import attribute
-
-            attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
-            result, findings, evidence = attribution.replay, attribution.findings, attribution.aligned
-            notes.extend(n for n in attribution.notes if n not in notes)
         if progress is not None:
             progress("writing the Rerun recording")
         outcome = stream_replay(

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from framechain.replay.stamps import nearest
 from framechain.timeline import DepthFrameTable, normalize_frame
@@ -53,7 +54,7 @@ def sample_depth(
     offsets = np.arange(-half, half + 1)
     for frame_row in np.unique(index[near]):
         obs = np.flatnonzero(index == frame_row)
-        image = np.asarray(frames.load(int(frame_row)), dtype=np.float64)
+        image = frames.load(int(frame_row))  # converted below, window by window, not as a whole frame
         h, w = image.shape
         rows = np.rint(v[obs]).astype(np.int64)[:, None] + offsets[None, :]
         cols = np.rint(u[obs]).astype(np.int64)[:, None] + offsets[None, :]
@@ -62,9 +63,23 @@ def sample_depth(
         cols_in = (cols >= 0) & (cols < w)
         patch = image[np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
         inside = rows_in[:, :, None] & cols_in[:, None, :]
-        patch = patch.reshape(obs.size, -1)
+        patch = patch.reshape(obs.size, -1).astype(np.float64)
         good = inside.reshape(obs.size, -1) & np.isfinite(patch) & (patch > 0)
-        patch = np.where(good, patch, np.nan)
-        valid = np.isfinite(patch).any(axis=1)
-        depth[obs[valid]] = np.nanmedian(patch[valid], axis=1)
+        valid = good.any(axis=1)
+        depth[obs[valid]] = _median_of_good(patch[valid], good[valid])
     return DepthSamples(depth, index, stamp)
+
+
+def _median_of_good(values: FloatArray, good: npt.NDArray[np.bool_]) -> FloatArray:
+    """Row-wise median of the ``good`` entries (each row has one at least), as ``np.nanmedian`` gives it.
+
+    np.nanmedian on a few rows takes numpy's masked-array path, about 0.6 ms a call: a sort with
+    the bad entries last and the middle one or two picked is the same median at a fraction.
+    """
+    ordered = np.sort(np.where(good, values, np.inf), axis=1)
+    count = good.sum(axis=1)
+    rows = np.arange(values.shape[0])
+    low = ordered[rows, (count - 1) // 2]
+    high = ordered[rows, count // 2]
+    median: FloatArray = 0.5 * (low + high)
+    return median

@@ -261,10 +261,12 @@ def replay(
         unique_rows = np.unique(rows[rows >= 0])
         models = [CameraModel.from_table(timeline.cameras, int(r)) for r in unique_rows]
         model_row = np.searchsorted(unique_rows, rows)
-    for k, model in enumerate(models):
-        sel = (model_row == k) & (status == REPLAYED)
-        if not sel.any():
-            continue
+    # Observations grouped by camera model in one sort (a mask per model is quadratic: a CameraInfo
+    # per frame makes as many models as observations).
+    live = np.flatnonzero(status == REPLAYED)
+    by_model = live[np.argsort(model_row[live], kind="stable")]
+    for sel in np.split(by_model, np.flatnonzero(np.diff(model_row[by_model])) + 1) if by_model.size else []:
+        model = models[int(model_row[sel[0]])]
         inside[sel] = model.inside(obs.u[sel], obs.v[sel])
         x, y = model.pixel_to_normalized(obs.u[sel], obs.v[sel])
         ray[sel] = np.stack([x, y, np.ones_like(x)], axis=1)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +17,8 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+
+from framechain.analysis.estimates import format_interval
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
@@ -72,6 +75,11 @@ class SpreadRow:
     p95: float | None
     lo: float | None
     hi: float | None
+    #: format_estimate's text of the median log's estimate (of the commonest text where there is no number)
+    median_text: str = "-"
+    #: format_interval's texts of the 5..95th percentiles and of the range ("-" without numbers)
+    p5_p95_text: str = "-"
+    range_text: str = "-"
 
 
 @dataclass(frozen=True)
@@ -124,27 +132,43 @@ def not_analysed_reasons(logs: Sequence[FleetLog]) -> list[ReasonRow]:
 
 
 def estimate_spread(logs: Sequence[FleetLog]) -> list[SpreadRow]:
-    """Per (fault, hop, estimate): how many logs have it and the spread of its numeric estimate."""
-    groups: dict[tuple[str, str, str | None], list[float]] = {}
-    counts: dict[tuple[str, str, str | None], int] = {}
+    """Per (fault, hop, estimate): how many logs have it and the spread of its numeric estimate.
+
+    The numbers are in display units (ms, deg, x) for plots; the texts are the one estimate text
+    (``format_estimate``, stored per finding as ``estimate_text``) and ``format_interval``.
+    """
+    texts: dict[tuple[str, str, str | None], list[str]] = {}
+    numeric: dict[tuple[str, str, str | None], list[tuple[float, str]]] = {}  # (SI value, its text)
     for log in logs:
         for f in log.findings:
             key = (f["fault"], f["hop"], f["estimate_name"])
-            counts[key] = counts.get(key, 0) + 1
-            found = groups.setdefault(key, [])
+            text = f["estimate_text"] or "-"
+            texts.setdefault(key, []).append(text)
+            found = numeric.setdefault(key, [])
             if f["estimate_value"] is not None and f["estimate_name"] in _DISPLAY:
-                found.append(f["estimate_value"] * _DISPLAY[f["estimate_name"]][0])
+                found.append((float(f["estimate_value"]), text))
     rows = []
-    for key in sorted(counts, key=lambda k: (-counts[k], k[0], k[1], str(k[2]))):
-        values = np.asarray(groups[key], dtype=np.float64)
-        have = values.size > 0
+    for key in sorted(texts, key=lambda k: (-len(texts[k]), k[0], k[1], str(k[2]))):
+        pairs = sorted(numeric[key], key=lambda pair: pair[0])
+        si = np.asarray([value for value, _text in pairs], dtype=np.float64)
+        scale, unit = _DISPLAY.get(key[2] or "", (1.0, ""))
+        shown = si * scale
+        have = si.size > 0
+        if have:
+            name = str(key[2])
+            median_text = pairs[(si.size - 1) // 2][1]  # the (lower) median log's own estimate text
+            p5_p95 = format_interval({name: [float(np.percentile(si, 5)), float(np.percentile(si, 95))]})
+            span = format_interval({name: [float(si[0]), float(si[-1])]})
+        else:  # estimates without a number (frame swaps, permutations): the commonest text
+            median_text = Counter(texts[key]).most_common(1)[0][0]
+            p5_p95 = span = "-"
         rows.append(SpreadRow(
-            fault=key[0], hop=key[1], estimate_name=key[2], unit=_DISPLAY.get(key[2] or "", (1.0, ""))[1],
-            logs=counts[key],
-            median=float(np.median(values)) if have else None,
-            p5=float(np.percentile(values, 5)) if have else None,
-            p95=float(np.percentile(values, 95)) if have else None,
-            lo=float(values.min()) if have else None, hi=float(values.max()) if have else None,
+            fault=key[0], hop=key[1], estimate_name=key[2], unit=unit, logs=len(texts[key]),
+            median=float(np.median(shown)) if have else None,
+            p5=float(np.percentile(shown, 5)) if have else None,
+            p95=float(np.percentile(shown, 95)) if have else None,
+            lo=float(shown.min()) if have else None, hi=float(shown.max()) if have else None,
+            median_text=median_text, p5_p95_text=p5_p95, range_text=span,
         ))
     return rows
 
@@ -237,20 +261,15 @@ def summary_line(logs: Sequence[FleetLog]) -> str:
     return f"{len(logs)} logs: " + "; ".join(parts) + "."
 
 
-def _num(value: float | None) -> str:
-    return "-" if value is None else f"{value:.4g}"
-
-
 def _mm(value: float | None) -> str:
     return "-" if value is None else f"{value * 1e3:.1f} mm"
 
 
 def _spread_cells(row: SpreadRow) -> list[str]:
-    return [row.fault, row.hop, str(row.logs), f"{row.estimate_name or '-'} ({row.unit})" if row.unit else "-",
-            _num(row.median), f"{_num(row.p5)} .. {_num(row.p95)}", f"{_num(row.lo)} .. {_num(row.hi)}"]
+    return [row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text, row.range_text]
 
 
-SPREAD_COLUMNS = ("fault", "hop", "logs", "estimate", "median", "p5 .. p95", "min .. max")
+SPREAD_COLUMNS = ("fault", "hop", "logs", "estimate (median log)", "p5 .. p95", "min .. max")
 LOG_COLUMNS = ("log", "faults (estimate, share)", "median error", "verdict")
 
 

@@ -39,9 +39,11 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from framechain.timeline.errors import ChainConfigError
+from framechain.timeline.quaternion import quat_from_rotvec, quat_from_rpy
 
 
 @dataclass(frozen=True)
@@ -448,18 +450,12 @@ def _numbers(raw: Any, n: int, where: str) -> tuple[float, ...]:
 
 
 def quat_xyzw_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """URDF/tf2 rpy (fixed axes: roll about x, then pitch about y, then yaw about z): q = qz qy qx."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
-            cr * cp * cy + sr * sp * sy)
+    """URDF/tf2 rpy (fixed axes x, y, z; radians) as a unit quaternion (timeline.quaternion's maths)."""
+    x, y, z, w = quat_from_rpy(np.array([roll, pitch, yaw])).tolist()
+    return (x, y, z, w)
 
 
 def quat_xyzw_from_rotvec(x: float, y: float, z: float) -> tuple[float, float, float, float]:
-    """Rotation vector (axis times angle, radians) as a unit quaternion."""
-    angle = math.sqrt(x * x + y * y + z * z)
-    if angle < 1e-12:
-        return (0.0, 0.0, 0.0, 1.0)
-    s = math.sin(angle / 2) / angle
-    return (x * s, y * s, z * s, math.cos(angle / 2))
+    """Rotation vector (axis times angle, radians) as a unit quaternion (timeline.quaternion's maths)."""
+    qx, qy, qz, qw = quat_from_rotvec(np.array([x, y, z])).tolist()
+    return (qx, qy, qz, qw)

@@ -78,6 +78,17 @@ def quat_from_rotvec(rotvec: FloatArray) -> FloatArray:
     return out
 
 
+def quat_from_rpy(rpy: FloatArray) -> FloatArray:
+    """URDF/tf2 roll-pitch-yaw (3, ...) (fixed axes: roll about x, then pitch about y, then yaw about z,
+    radians) to unit quaternions (4, ...): q = q_z(yaw) q_y(pitch) q_x(roll), scipy's ``from_euler("xyz")``."""
+    half = 0.5 * np.asarray(rpy, dtype=float)
+    zero = np.zeros_like(half[0])
+    q_roll = (np.sin(half[0]), zero, zero, np.cos(half[0]))
+    q_pitch = (zero, np.sin(half[1]), zero, np.cos(half[1]))
+    q_yaw = (zero, zero, np.sin(half[2]), np.cos(half[2]))
+    return quat_multiply(q_yaw, quat_multiply(q_pitch, q_roll))
+
+
 def quat_to_rotvec(q: FloatArray) -> FloatArray:
     """Logarithm map: unit quaternions (4, ...) to rotation vectors (3, ...), angle in [0, pi]."""
     sign = np.where(q[3] < 0, -1.0, 1.0)

@@ -245,6 +245,8 @@ def test_calibration_errors_are_one_line(entry: str, message: str, tmp_path: Pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert message in err
+    if "missing" in entry:  # the resolved path says where it was looked for
+        assert f"{(tmp_path / 'missing.yaml').resolve()}: calibration file not found" in err
 
 
 def test_real_tagslam_bag_with_calibration_and_mount(realdata: Path, tmp_path: Path) -> None:

@@ -43,9 +43,9 @@ CASES: list[tuple[Estimate, str, dict[str, object], dict[str, float]]] = [
      {"angle_deg": 4.5}),
     (ScaleEstimate(name="factor", value=1.05), "x1.05", {"factor": 1.05}, {"factor": 1.05}),
     (ScaleEstimate(name="factor", value=1000.0), "x1000", {"factor": 1000.0}, {"factor": 1000.0}),
-    (ScaleEstimate(name="scale", value=2.0, variant="resolution"), "x2 (K of another resolution)",
+    (ScaleEstimate(name="scale", value=2.0, variant="resolution"), "x2, K of another resolution",
      {"scale": 2.0, "variant": "resolution"}, {"scale": 2.0}),
-    (ScaleEstimate(name="scale", value=1.25, variant="focal"), "x1.25 (focal length of another lens)",
+    (ScaleEstimate(name="scale", value=1.25, variant="focal"), "x1.25, focal length of another lens",
      {"scale": 1.25, "variant": "focal"}, {"scale": 1.25}),
     (PermutationEstimate(permutation=((0, 0, 1), (-1, 0, 0), (0, -1, 0))), "axes [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]",
      {"permutation": [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]}, {}),
@@ -53,10 +53,10 @@ CASES: list[tuple[Estimate, str, dict[str, object], dict[str, float]]] = [
      "looked up camera_link instead of camera_color_optical_frame",
      {"used": "camera_link", "meant": "camera_color_optical_frame", "hop": "camera_to_body"}, {}),
     (FrameEstimate(used="odom", meant="map", hop="body_to_world", skipped=(("map", "odom"),)),
-     "looked up odom instead of map (edges map->odom)",
+     "looked up odom instead of map, skipping map->odom",
      {"used": "odom", "meant": "map", "hop": "body_to_world", "skipped": [["map", "odom"]]}, {}),
     (InvertedEstimate(hop="camera_to_body", edge=("base_link", "camera_link")),
-     "camera_to_body inverted (edge base_link->camera_link)",
+     "camera_to_body inverted at edge base_link->camera_link",
      {"hop": "camera_to_body", "edge": ["base_link", "camera_link"]}, {}),
     (InvertedEstimate(hop="body_to_world"), "body_to_world inverted", {"hop": "body_to_world"}, {}),
 ]
@@ -70,6 +70,14 @@ def test_one_text_json_and_scalars_per_estimate(
     assert estimate_to_json(estimate) == as_json
     assert json.loads(json.dumps(estimate_to_json(estimate))) == as_json  # plain JSON types only
     assert estimate_scalars(estimate) == scalars
+
+
+@pytest.mark.parametrize("estimate", [case[0] for case in CASES])
+def test_estimate_text_reads_inside_the_verdicts_parentheses(estimate: Estimate) -> None:
+    """The verdict and evidence sentences put the text in parentheses: it must hold none of its own."""
+    text = format_estimate(estimate)
+    assert "(" not in text
+    assert ")" not in text
 
 
 def test_interval_text() -> None:

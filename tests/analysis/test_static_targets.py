@@ -8,14 +8,14 @@ written directly. Assertions compare with the injected truth (stamp offsets, tag
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.static import intersect_rays, static_groups
+from framechain.analysis.attribute import AnalysisError, attribute
+from framechain.analysis.static import StaticTargetError, fit_static_points, intersect_rays, static_groups
 from framechain.replay.catalogue import Fault
 from framechain.timeline import (
     CameraTable,
@@ -294,3 +294,19 @@ def test_chain_ignore_labels_and_window() -> None:
         ChainConfig.from_dict({"evidence": {"ignore_labels": [{"id": 3}]}})
     with pytest.raises(ChainConfigError, match=r"evidence\.static_window_s"):
         ChainConfig.from_dict({"evidence": {"static_window_s": -1}})
+
+
+def test_no_object_seen_often_enough_says_so() -> None:
+    """Four labels, at most two sightings of one in a window: no object, one line, no traceback."""
+    labels = np.array(["1", "1", "2", "3", "4"])
+    stamps = np.array([0, 10**8, 2 * 10**8, 3 * 10**8, 4 * 10**8], dtype=np.int64)
+    groups = static_groups(labels, stamps, window_s=5.0)
+    assert groups.n_groups == 0
+    assert np.isnan(fit_static_points(np.ones((5, 3)), groups)).all()
+    assert intersect_rays(np.zeros((0, 3)), np.zeros((0, 3)), groups.take(np.zeros(0, dtype=np.int64))).shape == (0, 3)
+    scene = make_scene(duration_s=20.0)
+    chain = replace(scene.chain, evidence=replace(scene.chain.evidence, static_window_s=1e-6))
+    with pytest.raises(AnalysisError, match=r"no object seen at least 3 times in one 1e-06 s window") as err:
+        attribute(scene.timeline, chain, bootstrap=0)
+    assert isinstance(err.value.__cause__, StaticTargetError)
+    assert "at most 1 sighting" in str(err.value)

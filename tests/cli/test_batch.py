@@ -334,3 +334,21 @@ def test_fleet_table_rows_and_the_estimates_spread() -> None:
     # Sorted -50, -30, -20 ms; linear percentiles: p5 at index 0.1, p95 at index 1.9.
     assert (row.median, row.lo, row.hi) == pytest.approx((-30.0, -50.0, -20.0))
     assert (row.p5, row.p95) == pytest.approx((-50.0 + 0.1 * 20.0, -30.0 + 0.9 * 10.0))
+    # The texts are format_estimate's (the median log's own) and format_interval's, as attribute prints.
+    assert row.median_text == "-30.0 ms"
+    assert row.p5_p95_text == "-48.00 .. -21.00 ms"
+    assert row.range_text == "-50.00 .. -20.00 ms"
+
+
+def test_fleet_spread_keeps_the_text_of_estimates_without_a_number() -> None:
+    """A frame swap has no scalar: the fleet shows its text (``used: camera_link``), not "-"."""
+    from framechain.fleet import fleet_table
+    from framechain.sinks.fleet_report import estimate_spread, fleet_logs
+
+    swap = "looked up camera_link instead of camera_color_optical_frame"
+    finding = {"fault": "axis_flip", "hop": "camera_to_body", "estimate_name": None, "estimate_value": None,
+               "estimate_text": swap, "share": 0.9}
+    records = [{"key": k, "log": f"/fleet/{k}.mcap", "unit": k, "status": "findings", "findings": [finding],
+                "start_ns": 0, "end_ns": 1_000_000_000} for k in "ab"]
+    (row,) = estimate_spread(fleet_logs(fleet_table(records)))
+    assert (row.logs, row.median, row.median_text, row.p5_p95_text) == (2, None, swap, "-")

@@ -17,6 +17,7 @@ from framechain.timeline.quaternion import (
     quat_conjugate,
     quat_from_matrix,
     quat_from_rotvec,
+    quat_from_rpy,
     quat_multiply,
     quat_rotate,
     quat_to_rotvec,
@@ -77,6 +78,23 @@ def test_from_rotvec_random(rng: np.random.Generator) -> None:
     np.testing.assert_allclose(
         quat_from_rotvec(rotvec.T).T, Rotation.from_rotvec(rotvec).as_quat(), rtol=0, atol=1e-15
     )
+
+
+def test_from_rpy_is_scipy_fixed_axis_euler(rng: np.random.Generator) -> None:
+    rpy = rng.uniform(-np.pi, np.pi, (200, 3))
+    assert_same_rotation(quat_from_rpy(rpy.T).T, Rotation.from_euler("xyz", rpy).as_quat())
+    # URDF rpy (fixed axes x then y then z) of a quarter turn about each axis, by hand.
+    h = np.sqrt(0.5)
+    np.testing.assert_allclose(quat_from_rpy(np.array([np.pi / 2, 0.0, 0.0])), [h, 0, 0, h], atol=1e-15)
+    np.testing.assert_allclose(quat_from_rpy(np.array([0.0, 0.0, np.pi / 2])), [0, 0, h, h], atol=1e-15)
+
+
+def test_chain_mount_rotations_use_the_shared_maths(rng: np.random.Generator) -> None:
+    from framechain.timeline.chain import quat_xyzw_from_rotvec, quat_xyzw_from_rpy
+
+    for rpy, rotvec in zip(rng.uniform(-3, 3, (20, 3)), rng.uniform(-2, 2, (20, 3)), strict=True):
+        assert_same_rotation(np.array([quat_xyzw_from_rpy(*rpy)]), Rotation.from_euler("xyz", rpy).as_quat()[None])
+        assert_same_rotation(np.array([quat_xyzw_from_rotvec(*rotvec)]), Rotation.from_rotvec(rotvec).as_quat()[None])
 
 
 @pytest.mark.parametrize("angle", [a for a in ANGLES if a < np.pi - 1e-7])
