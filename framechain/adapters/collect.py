@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.depth import DepthFetch, make_depth_loader
+from framechain.adapters.depth import DepthFetch, DepthWindowKeeper, make_depth_loader
 from framechain.adapters.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
 from framechain.adapters.images import ImageLocator, image_metadata, make_image_loader
 from framechain.adapters.kinds import Kind
@@ -90,6 +90,9 @@ def wrap_json(value: Any) -> Any:
     if isinstance(value, list):
         return [wrap_json(v) for v in value]
     return value
+
+#: Kinds whose messages become pixel observations (a depth frame's windows wait for them).
+OBSERVATION_KINDS = frozenset({Kind.DETECTIONS, Kind.DETECTION, Kind.PIXEL_POINT})
 
 
 @dataclass(frozen=True)
@@ -170,6 +173,10 @@ class Collector:
         self.depth_loc: list[DepthLocator] = []
         self._depth_seen: Counter[tuple[str, int]] = Counter()
         self.depth_scale: dict[str, float] = {}
+        self.depth_keeper = DepthWindowKeeper()
+        self._kept_obs = 0  # observations handed to the keeper so far
+        #: Set by a reader while it reads: decodes the detections it holds in batches (the keeper needs them).
+        self.flush_observations: Callable[[], None] | None = None
         # camera images on topics.image (metadata; bytes are fetched when a sink shows them)
         self.image_rows: list[tuple[str, int, int, int, int, str, str]] = []
         self.image_loc: list[ImageLocator] = []
@@ -401,7 +408,7 @@ class Collector:
     def depth(self, topic: str, log_ns: int, msg: Any) -> None:
         """sensor_msgs/Image (16UC1, mono16, 32FC1) or CompressedImage (compressedDepth): metadata
         only; the pixels stay in the log until an observation needs them."""
-        from framechain.adapters.depth import depth_metadata
+        from framechain.adapters.depth import depth_metadata, raw_depth_pixels
 
         meta = depth_metadata(msg)
         if meta is None:
@@ -412,9 +419,29 @@ class Collector:
         key = (topic, log_ns)
         ordinal = self._depth_seen[key]
         self._depth_seen[key] += 1
-        self.depth_rows.append((msg.header.frame_id, ros_stamp_ns(msg.header.stamp), log_ns, width, height,
-                                encoding, topic))
+        stamp = ros_stamp_ns(msg.header.stamp)
+        self.depth_rows.append((msg.header.frame_id, stamp, log_ns, width, height, encoding, topic))
         self.depth_loc.append(DepthLocator(topic, log_ns, ordinal))
+        if encoding.startswith("compressedDepth"):
+            return  # a PNG: only the whole frame decodes, so it is fetched when needed
+        try:
+            raw = raw_depth_pixels(msg)
+        except ValueError:  # pixels shorter than the header says: the fetch reports it if a detection needs it
+            return
+        if self.depth_keeper.add_frame(len(self.depth_rows) - 1, msg.header.frame_id, stamp, log_ns, raw):
+            self.settle_depth(final=False)
+
+    def settle_depth(self, *, final: bool) -> None:
+        """Hand the detections read since the last call to the depth keeper and let it cut windows."""
+        if self.flush_observations is not None and not final:
+            self.flush_observations()
+        start, end = self._kept_obs, len(self.obs_stamp)
+        if end > start:
+            uvd = np.asarray(self.obs_uvd[3 * start : 3 * end], dtype=np.float64).reshape(-1, 3)
+            self.depth_keeper.add_observations(self.obs_frame[start:end], self.obs_stamp[start:end],
+                                               self.obs_log[start:end], uvd[:, 0], uvd[:, 1])
+            self._kept_obs = end
+        self.depth_keeper.settle(final=final)
 
     # -- images ---------------------------------------------------------------------------------
     def image(self, topic: str, log_ns: int, msg: Any) -> None:
@@ -738,9 +765,11 @@ class Collector:
         locators = [self.depth_loc[i] for i in order.tolist()]
         scales = [self._scale_for(loc.topic) for loc in locators]
         loader = make_depth_loader(fetch, locators, scales) if fetch is not None else None
+        self.settle_depth(final=True)
+        windows = self.depth_keeper.lookup(order.tolist(), scales) if fetch is not None else None
         import dataclasses
 
-        return dataclasses.replace(table.take(order), loader=loader)
+        return dataclasses.replace(table.take(order), loader=loader, windows=windows)
 
     def _scale_for(self, topic: str) -> float:
         for sensor, scale in self.depth_scale.items():

@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from framechain.timeline import TimelineError
+from framechain.timeline import DepthWindows, TimelineError, normalize_frame, pixel_windows
+from framechain.timeline.arrays import IntArray
 
 if TYPE_CHECKING:
     from framechain.adapters.collect import DepthLocator
@@ -31,6 +32,12 @@ _F32 = frozenset({"32FC1"})
 #: Decoded frames kept per loader (a replay visits frames in time order; a few suffice).
 CACHE_FRAMES = 8
 _COMPRESSED_DEPTH_HEADER = 12
+#: Windows kept at read time reach this far from their centre (7 x 7; replay's default is 5 x 5).
+KEEP_HALF = 3
+#: A detection's window is kept for the frames within this of its header stamp (replay's default gap is 50 ms).
+KEEP_GAP_NS = 50_000_000
+#: How long in log time a frame waits for detections logged after it (and detections for frames).
+HORIZON_NS = 2_000_000_000
 
 
 def depth_metadata(msg: Any) -> tuple[int, int, str] | None:
@@ -57,21 +64,31 @@ def decode_depth(msg: Any, units_m: float = 0.001) -> npt.NDArray[np.float32]:
     fmt = getattr(msg, "format", None)
     if fmt is not None and not hasattr(msg, "encoding"):
         return _decode_compressed_depth(bytes(msg.data), fmt, units_m)
+    return pixels_to_metres(raw_depth_pixels(msg), units_m)
+
+
+def raw_depth_pixels(msg: Any) -> npt.NDArray[Any]:
+    """The (H, W) pixels of an uncompressed depth Image as stored (depth units or metres), a view where it can."""
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     encoding = str(msg.encoding)
     data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)  # a view, never a copy
+    kind = ">" if msg.is_bigendian else "<"
     if encoding in _U16:
-        kind = ">" if msg.is_bigendian else "<"
         code = "i2" if encoding == "16SC1" else "u2"
         rows = data[: h * step].reshape(h, step)[:, : w * 2]
-        raw = np.ascontiguousarray(rows).view(kind + code).reshape(h, w)
-        metres: npt.NDArray[np.float32] = np.multiply(raw, np.float32(units_m), dtype=np.float32)  # one pass
-        return metres
+        return np.ascontiguousarray(rows).view(kind + code).reshape(h, w)
     if encoding in _F32:
-        kind = ">" if msg.is_bigendian else "<"
         rows = data[: h * step].reshape(h, step)[:, : w * 4]
-        return np.ascontiguousarray(rows).view(kind + "f4").reshape(h, w).astype(np.float32)
+        return np.ascontiguousarray(rows).view(kind + "f4").reshape(h, w)
     raise TimelineError(f"depth encoding {encoding!r} is not 16UC1, mono16 or 32FC1")
+
+
+def pixels_to_metres(raw: npt.NDArray[Any], units_m: float) -> npt.NDArray[np.float32]:
+    """Metres from :func:`raw_depth_pixels` (or any part of them: the conversion is per pixel)."""
+    if raw.dtype.kind == "f":
+        return raw.astype(np.float32)
+    metres: npt.NDArray[np.float32] = np.multiply(raw, np.float32(units_m), dtype=np.float32)  # one pass
+    return metres
 
 
 def _decode_compressed_depth(data: bytes, fmt: str, units_m: float) -> npt.NDArray[np.float32]:
@@ -108,6 +125,84 @@ def make_depth_loader(
         return image
 
     return load
+
+
+class DepthWindowKeeper:
+    """Keeps, while the log is read, the pixel windows around the detections each depth frame may serve.
+
+    Frames (views of their raw pixels) wait up to :data:`HORIZON_NS` of log time for detections
+    logged after them; detections wait as long for frames logged after them. A detection pairs with
+    every frame of its camera frame within :data:`KEEP_GAP_NS` in header stamp; the replay picks
+    the nearest and finds its window here, or cuts it from the frame re-read from the log when it is
+    not (a detection logged far from its frame, a larger window, a gap above the kept one).
+    Memory: the waiting frames and the kept (2 :data:`KEEP_HALF` + 1)^2 windows.
+    """
+
+    def __init__(self) -> None:
+        self._frames: list[tuple[int, str, int, int, npt.NDArray[Any]]] = []  # row, frame, stamp, log, raw
+        self._obs_frame = np.zeros(0, dtype=str)
+        self._obs_stamp = np.zeros(0, dtype=np.int64)
+        self._obs_log = np.zeros(0, dtype=np.int64)
+        self._obs_rc = np.zeros((0, 2), dtype=np.int64)
+        #: Per depth row (read order): {(centre row, centre col): position} and the raw windows.
+        self.kept: dict[int, tuple[dict[tuple[int, int], int], npt.NDArray[Any]]] = {}
+
+    def add_frame(self, row: int, frame: str, stamp_ns: int, log_ns: int, raw: npt.NDArray[Any]) -> bool:
+        """Hold a frame's raw pixels; True when the oldest has waited long enough (call :meth:`settle`)."""
+        self._frames.append((row, normalize_frame(frame), stamp_ns, log_ns, raw))
+        return log_ns - self._frames[0][3] > HORIZON_NS
+
+    def add_observations(self, frame: Sequence[str], stamp_ns: Sequence[int], log_ns: Sequence[int],
+                         u: npt.NDArray[np.float64], v: npt.NDArray[np.float64]) -> None:
+        """Detections read since the last call (pixels that are not finite are never sampled)."""
+        ok = np.isfinite(u) & np.isfinite(v)
+        if not ok.any():
+            return
+        frames = np.asarray([normalize_frame(f) for f in frame], dtype=str)[ok]
+        rc = np.stack([np.rint(v[ok]), np.rint(u[ok])], axis=1).astype(np.int64)
+        self._obs_frame = np.concatenate([self._obs_frame, frames])
+        self._obs_stamp = np.concatenate([self._obs_stamp, np.asarray(stamp_ns, dtype=np.int64)[ok]])
+        self._obs_log = np.concatenate([self._obs_log, np.asarray(log_ns, dtype=np.int64)[ok]])
+        self._obs_rc = np.concatenate([self._obs_rc, rc])
+
+    def settle(self, *, final: bool) -> None:
+        """Cut the windows of the frames that waited long enough (all when ``final``); drop old detections."""
+        if not self._frames:
+            return
+        newest = max(self._frames[-1][3], int(self._obs_log.max()) if self._obs_log.size else self._frames[-1][3])
+        due = len(self._frames) if final else sum(1 for f in self._frames if f[3] <= newest - HORIZON_NS // 2)
+        for row, frame, stamp, _, raw in self._frames[:due]:
+            near = np.flatnonzero((np.abs(self._obs_stamp - stamp) <= KEEP_GAP_NS) & (self._obs_frame == frame))
+            if near.size == 0:
+                continue
+            centres = np.unique(self._obs_rc[near], axis=0)
+            windows = pixel_windows(raw, centres[:, 0], centres[:, 1], KEEP_HALF)  # fancy indexing: a copy
+            where = {(int(r), int(c)): k for k, (r, c) in enumerate(centres.tolist())}
+            self.kept[row] = (where, windows)
+        del self._frames[:due]
+        keep = self._obs_log >= newest - HORIZON_NS
+        if final:
+            keep[:] = False
+        self._obs_frame, self._obs_stamp = self._obs_frame[keep], self._obs_stamp[keep]
+        self._obs_log, self._obs_rc = self._obs_log[keep], self._obs_rc[keep]
+
+    def lookup(self, read_rows: Sequence[int], units_m: Sequence[float]) -> DepthWindows:
+        """DepthFrameTable.windows for table row i = read row ``read_rows[i]`` in depth units ``units_m[i]``."""
+        kept = self.kept
+
+        def windows(i: int, centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[np.float32] | None:
+            entry = kept.get(int(read_rows[i]))
+            if entry is None or half > KEEP_HALF:
+                return None
+            where, raw = entry
+            try:
+                at = [where[(r, c)] for r, c in zip(centre_rows.tolist(), centre_cols.tolist(), strict=True)]
+            except KeyError:
+                return None
+            cut = KEEP_HALF - half
+            return pixels_to_metres(raw[at, cut : raw.shape[1] - cut, cut : raw.shape[2] - cut], units_m[i])
+
+        return windows
 
 
 def parse_ros1_image(raw: bytes | memoryview) -> SimpleNamespace:

@@ -24,7 +24,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.collect import Collector
+from framechain.adapters.collect import OBSERVATION_KINDS, Collector
 from framechain.adapters.decoders import (
     Decoder,
     DecoderBuildError,
@@ -224,7 +224,6 @@ class McapLog:
         gathered: dict[int, _Gathered] = {}
         failures: Counter[int] = Counter()
         first_error: dict[int, str] = {}
-        done = 0
 
         def handle(cid: int, log_time: int, data: bytes | memoryview) -> None:
             try:
@@ -235,6 +234,29 @@ class McapLog:
                 failures[cid] += 1
                 first_error.setdefault(cid, f"{type(err).__name__}: {err}")
 
+        def flush_observations() -> None:
+            for cid, batch in gathered.items():
+                if selected.get(self.channels[cid].topic) in OBSERVATION_KINDS:
+                    self._feed(cid, batch, col, handle)
+
+        col.flush_observations = flush_observations
+        try:
+            self._read_messages(messages, selected, col, handlers, gathered, handle, progress)
+        finally:
+            col.flush_observations = None
+        for cid, batch in gathered.items():
+            self._feed(cid, batch, col, handle)
+        for cid, n in failures.items():
+            col.notes.append(
+                f"topic {self.channels[cid].topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
+                f"({first_error[cid]}); skipped"
+            )
+        col.notes.extend(n for n in self.notes if n not in col.notes)
+
+    def _read_messages(self, messages: Iterator[Any], selected: dict[str, Kind], col: Collector,
+                       handlers: dict[int, Callable[[str, int, Any], None] | None], gathered: dict[int, _Gathered],
+                       handle: Callable[[int, int, bytes | memoryview], None], progress: ProgressFn | None) -> None:
+        done = 0
         for msg in messages:
             cid = msg.channel_id
             if cid not in handlers:
@@ -255,14 +277,6 @@ class McapLog:
             done += 1
             if progress is not None and done % 4096 == 0:
                 progress(4096)
-        for cid, batch in gathered.items():
-            self._feed(cid, batch, col, handle)
-        for cid, n in failures.items():
-            col.notes.append(
-                f"topic {self.channels[cid].topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
-                f"({first_error[cid]}); skipped"
-            )
-        col.notes.extend(n for n in self.notes if n not in col.notes)
 
     def _handler(self, cid: int, selected: dict[str, Kind], col: Collector) -> Callable[[str, int, Any], None] | None:
         """The collector's handler of a channel (None: not selected, or not decodable; noted)."""

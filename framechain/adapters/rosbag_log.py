@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.adapters.collect import Collector
+from framechain.adapters.collect import OBSERVATION_KINDS, Collector
 from framechain.adapters.decoders import Decoder, ros_decoder
 from framechain.adapters.errors import AdapterError, CorruptLogError, EmptyLogError, SchemaError
 from framechain.adapters.fast_cdr import FEEDERS, Feeder, LayoutError, decode_batches
@@ -223,6 +223,12 @@ class RosbagsLog:
             times.clear()
             payloads.clear()
 
+        def flush_observations() -> None:
+            for cid in gathered:
+                if selected.get(by_id[cid].topic) in OBSERVATION_KINDS:
+                    flush(cid)
+
+        col.flush_observations = flush_observations
         try:
             for conn, t, raw in self.reader.messages(connections=conns):
                 entry = handlers.get(conn.id)
@@ -245,7 +251,10 @@ class RosbagsLog:
                 raise
             for cid in gathered:
                 flush(cid)
+            col.flush_observations = None
             self._read_past_damage(err, selected, col, delivered)
+        finally:
+            col.flush_observations = None
         for cid in gathered:
             flush(cid)
         for topic, n in failures.items():

@@ -21,9 +21,8 @@ import zlib
 from collections import Counter
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
-from typing import Any
 
-from framechain.adapters.salvage_report import SalvageReport
+from framechain.adapters.salvage_report import SalvageReport, StreamDecompressor
 
 MAGIC = b"\x89MCAP0\r\n"
 HEADER, FOOTER, SCHEMA, CHANNEL, MESSAGE, CHUNK, MESSAGE_INDEX = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
@@ -165,41 +164,6 @@ def _inner_records(data: bytes) -> tuple[list[Record], int]:
             out.append(rec)
         pos += 9 + length
     return out, pos
-
-
-class _Stream:
-    """Decompresses a chunk's records piece by piece; stops (keeping the output) at a stream error."""
-
-    def __init__(self, compression: str) -> None:
-        self.compression = compression
-        self.failed = ""
-        self.eof = False
-        self.unused = 0
-        self._obj: Any = None
-        if compression == "zstd":
-            import zstandard
-
-            self._obj = zstandard.ZstdDecompressor().decompressobj()
-        elif compression == "lz4":
-            import lz4.frame
-
-            self._obj = lz4.frame.LZ4FrameDecompressor()
-
-    def feed(self, piece: bytes) -> bytes:
-        if self._obj is None:
-            return piece
-        if self.eof or self.failed:
-            self.unused += len(piece)
-            return b""
-        try:
-            out: bytes = self._obj.decompress(piece)
-        except Exception as err:  # a damaged stream: keep what came out before it
-            self.failed = f"{self.compression} stream error ({type(err).__name__})"
-            return b""
-        self.eof = bool(self._obj.eof)
-        if self.eof:
-            self.unused = len(self._obj.unused_data)
-        return out
 
 
 def _decompress(compression: str, data: bytes) -> bytes:
@@ -350,7 +314,7 @@ class McapScanner:
             return -1
         start = pos + 9 + head.data_start
         stop = min(start + head.data_len, self.size)
-        stream = _Stream(head.compression)
+        stream = StreamDecompressor(head.compression)
         out = bytearray()
         off = start
         while off < stop and not stream.eof and not stream.failed and len(out) <= head.uncompressed_size:

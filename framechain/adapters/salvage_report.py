@@ -95,3 +95,46 @@ def _per_topic(counts: Counter[str]) -> str:
     items = sorted(counts.items())
     text = ", ".join(f"{t} {n}" for t, n in items[:12])
     return text + (f", and {len(items) - 12} more topics" if len(items) > 12 else "")
+
+
+class StreamDecompressor:
+    """Decompresses a chunk piece by piece (zstd, lz4, bz2 all stream; anything else is stored
+    as is) and stops, keeping what came out, at the first stream error: a chunk cut short or
+    damaged gives back every byte before the damage.
+    """
+
+    def __init__(self, compression: str) -> None:
+        self.compression = compression
+        self.failed = ""
+        self.eof = False
+        #: bytes fed after the end of the stream (or after it failed)
+        self.unused = 0
+        self._obj: Any = None
+        if compression == "zstd":
+            import zstandard
+
+            self._obj = zstandard.ZstdDecompressor().decompressobj()
+        elif compression == "lz4":
+            import lz4.frame
+
+            self._obj = lz4.frame.LZ4FrameDecompressor()
+        elif compression == "bz2":
+            import bz2
+
+            self._obj = bz2.BZ2Decompressor()
+
+    def feed(self, piece: bytes) -> bytes:
+        if self._obj is None:
+            return piece
+        if self.eof or self.failed:
+            self.unused += len(piece)
+            return b""
+        try:
+            out: bytes = self._obj.decompress(piece)
+        except Exception as err:  # a damaged stream: keep what came out before it
+            self.failed = f"{self.compression} stream error ({type(err).__name__})"
+            return b""
+        self.eof = bool(self._obj.eof)
+        if self.eof:
+            self.unused = len(getattr(self._obj, "unused_data", b""))
+        return out

@@ -24,7 +24,7 @@ from framechain.adapters.decoders import Decoder, ros_decoder, ros_typename
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
 from framechain.adapters.kinds import Kind
 from framechain.adapters.model import LogInfo, TopicInfo
-from framechain.adapters.salvage_report import SalvageReport
+from framechain.adapters.salvage_report import SalvageReport, StreamDecompressor
 
 MAGIC = b"#ROSBAG V2.0\n"
 OP_MESSAGE, OP_BAG_HEADER, OP_INDEX, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
@@ -133,35 +133,6 @@ def _inner(data: bytes) -> tuple[list[tuple[dict[str, bytes], int, bytes]], int]
         out.append((fields, op, data[start:start + dlen]))
         pos = start + dlen
     return out, pos
-
-
-class _Stream:
-    def __init__(self, compression: str) -> None:
-        self.compression = compression
-        self.failed = ""
-        self.eof = False
-        self._obj: Any = None
-        if compression == "bz2":
-            import bz2
-
-            self._obj = bz2.BZ2Decompressor()
-        elif compression == "lz4":
-            import lz4.frame
-
-            self._obj = lz4.frame.LZ4FrameDecompressor()
-
-    def feed(self, piece: bytes) -> bytes:
-        if self._obj is None:
-            return piece
-        if self.eof or self.failed:
-            return b""
-        try:
-            out: bytes = self._obj.decompress(piece)
-        except Exception as err:  # a damaged stream: keep what came out before it
-            self.failed = f"{self.compression} stream error ({type(err).__name__})"
-            return b""
-        self.eof = bool(self._obj.eof)
-        return out
 
 
 Scan = Generator["Connection | Message", None, int]
@@ -286,7 +257,7 @@ class Rosbag1Scanner:
 
     def _partial_chunk(self, pos: int, fields: dict[str, bytes], start: int) -> Iterator[Connection | Message]:
         compression = fields.get("compression", b"?").decode("latin-1")
-        stream = _Stream("none" if compression == "none" else compression)
+        stream = StreamDecompressor("none" if compression == "none" else compression)
         if compression not in ("none", "bz2", "lz4"):
             self._cut(pos, f"a chunk cut short with unknown compression {compression!r}")
             return

@@ -54,16 +54,18 @@ def sample_depth(
     offsets = np.arange(-half, half + 1)
     for frame_row in np.unique(index[near]):
         obs = np.flatnonzero(index == frame_row)
-        image = frames.load(int(frame_row))  # converted below, window by window, not as a whole frame
-        h, w = image.shape
-        rows = np.rint(v[obs]).astype(np.int64)[:, None] + offsets[None, :]
-        cols = np.rint(u[obs]).astype(np.int64)[:, None] + offsets[None, :]
+        h, w = int(frames.height[frame_row]), int(frames.width[frame_row])
+        centre_rows = np.rint(v[obs]).astype(np.int64)
+        centre_cols = np.rint(u[obs]).astype(np.int64)
+        # The windows kept while the log was read when there, else cut from the frame (same values).
+        windows = frames.load_windows(int(frame_row), centre_rows, centre_cols, half)
+        rows = centre_rows[:, None] + offsets[None, :]
+        cols = centre_cols[:, None] + offsets[None, :]
         # Window pixels outside the image do not exist: they must not repeat the border pixels.
         rows_in = (rows >= 0) & (rows < h)
         cols_in = (cols >= 0) & (cols < w)
-        patch = image[np.clip(rows, 0, h - 1)[:, :, None], np.clip(cols, 0, w - 1)[:, None, :]]
         inside = rows_in[:, :, None] & cols_in[:, None, :]
-        patch = patch.reshape(obs.size, -1).astype(np.float64)
+        patch = windows.reshape(obs.size, -1).astype(np.float64)
         good = inside.reshape(obs.size, -1) & np.isfinite(patch) & (patch > 0)
         valid = good.any(axis=1)
         depth[obs[valid]] = _median_of_good(patch[valid], good[valid])

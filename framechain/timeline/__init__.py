@@ -15,6 +15,7 @@ from framechain.timeline.tables import (
     ColumnTable,
     DepthFrameTable,
     DepthLoader,
+    DepthWindows,
     ImageFrameTable,
     JointStateTable,
     ObservationTable,
@@ -25,6 +26,7 @@ from framechain.timeline.tables import (
     format_stamp,
     normalize_frame,
     normalize_frames,
+    pixel_windows,
 )
 
 __all__ = [
@@ -39,6 +41,7 @@ __all__ = [
     "ColumnTable",
     "DepthFrameTable",
     "DepthLoader",
+    "DepthWindows",
     "FramechainError",
     "HopTopics",
     "ImageFrameTable",
@@ -54,4 +57,5 @@ __all__ = [
     "format_stamp",
     "normalize_frame",
     "normalize_frames",
+    "pixel_windows",
 ]

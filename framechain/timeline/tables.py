@@ -462,6 +462,22 @@ class PointTable(ColumnTable):
 
 #: Loads depth frame ``i`` of a table as metres, shape (height, width), float32; NaN or 0 = none.
 DepthLoader = Callable[[int], npt.NDArray[np.float32]]
+#: Pixel windows of frame ``index`` kept from the read: (index, centre rows, centre cols, half) ->
+#: (k, 2 half + 1, 2 half + 1) metres, or None when any of them was not kept.
+DepthWindows = Callable[[int, IntArray, IntArray, int], "npt.NDArray[np.float32] | None"]
+
+
+def pixel_windows(image: npt.NDArray[Any], centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[Any]:
+    """(k, 2 half + 1, 2 half + 1) windows of ``image`` around the centres, indices clipped to the image.
+
+    Pixels outside the image repeat the border: callers mask them by position.
+    """
+    h, w = image.shape
+    offsets = np.arange(-half, half + 1)
+    rows = np.clip(np.asarray(centre_rows, dtype=np.int64)[:, None] + offsets[None, :], 0, h - 1)
+    cols = np.clip(np.asarray(centre_cols, dtype=np.int64)[:, None] + offsets[None, :], 0, w - 1)
+    windows: npt.NDArray[Any] = image[rows[:, :, None], cols[:, None, :]]
+    return windows
 
 
 @dataclass(frozen=True)
@@ -489,6 +505,8 @@ class DepthFrameTable(ColumnTable):
     encoding: StrArray
     source: StrArray
     loader: DepthLoader | None = field(default=None, compare=False, repr=False)
+    #: Windows kept while the log was read (no second read of their frames); None: none kept.
+    windows: DepthWindows | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -500,14 +518,32 @@ class DepthFrameTable(ColumnTable):
             raise TimelineError("DepthFrameTable has no pixel loader")
         return self.loader(index)
 
+    def load_windows(
+        self, index: int, centre_rows: IntArray, centre_cols: IntArray, half: int
+    ) -> npt.NDArray[np.float32]:
+        """(k, 2 half + 1, 2 half + 1) metres around the centres of frame ``index`` (see :func:`pixel_windows`).
+
+        The windows kept at read time when all are there, else cut from the whole frame: the same values.
+        """
+        if self.windows is not None:
+            kept = self.windows(index, centre_rows, centre_cols, half)
+            if kept is not None:
+                return kept
+        windows: npt.NDArray[np.float32] = pixel_windows(self.load(index), centre_rows, centre_cols, half)
+        return windows
+
     def take(self, index: npt.ArrayLike) -> DepthFrameTable:
         """Rows selected; the loader keeps pointing at the original rows."""
         rows = np.arange(len(self))[np.asarray(index)]
-        base = self.loader
+        base, base_windows = self.loader, self.windows
         table = super().take(rows)
         if base is None:
             return table
-        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])))
+        windows: DepthWindows | None = None
+        if base_windows is not None:
+            def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
+                return base_windows(int(rows[i]), r, c, half)
+        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])), windows=windows)
 
     @classmethod
     def from_arrays(
@@ -537,7 +573,15 @@ class DepthFrameTable(ColumnTable):
                 raise TimelineError("DepthFrameTable part has no pixel loader")
             return inner(i - int(offsets[k]))
 
-        return dataclasses.replace(merged, loader=load if parts else None)
+        kept = [t.windows for t in parts]
+
+        def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
+            k = int(np.searchsorted(offsets, i, side="right") - 1)
+            inner = kept[k]
+            return None if inner is None else inner(i - int(offsets[k]), r, c, half)
+
+        any_kept = any(w is not None for w in kept)
+        return dataclasses.replace(merged, loader=load if parts else None, windows=windows if any_kept else None)
 
 
 ImageLoader = Callable[[int], bytes]
