@@ -199,6 +199,10 @@ def argv_for(command: str, log: Path, source: Source, out: Path, variant: int) -
 
 
 # -- the worker: cases in one process ---------------------------------------------------------------------
+#: Cases one worker process runs before a fresh one takes over (see :func:`worker`).
+CASES_PER_WORKER = 200
+
+
 def _on_alarm(signum: int, frame: Any) -> None:
     raise CaseTimeoutError
 
@@ -266,6 +270,10 @@ def worker(args: argparse.Namespace) -> int:
         resource.setrlimit(resource.RLIMIT_AS, (vm_kb * 1024 + limit, hard))
     del soft
     indices = [int(i) for i in args.indices.split(",")] if args.indices else []
+    # A worker retires after CASES_PER_WORKER cases and the parent starts a fresh one on the rest:
+    # Rerun 0.41 keeps two native threads per blueprint stream for the life of a process, and under
+    # the address-space bound above a long-lived worker would run out of thread stacks.
+    indices = indices[:CASES_PER_WORKER]
     keep = Path(args.keep) if args.keep else None
     for result in run_cases(sources, args.seed, indices, args.timeout, args.max_rss_mb, keep):
         print(json.dumps(result), flush=True)

@@ -406,8 +406,8 @@ class Collector:
 
     # -- depth --------------------------------------------------------------------------------
     def depth(self, topic: str, log_ns: int, msg: Any) -> None:
-        """sensor_msgs/Image (16UC1, mono16, 32FC1) or CompressedImage (compressedDepth): metadata
-        only; the pixels stay in the log until an observation needs them."""
+        """sensor_msgs/Image (16UC1, mono16, 32FC1) or CompressedImage (compressedDepth): metadata, and
+        the raw pixels held briefly so the keeper cuts the windows detections need; the rest stays in the log."""
         from framechain.adapters.depth import depth_metadata, raw_depth_pixels
 
         meta = depth_metadata(msg)

@@ -1,4 +1,4 @@
-"""Depth images: metadata at read time, pixels decoded lazily (only frames an observation needs).
+"""Depth images: metadata and the windows detections need at read time, whole frames decoded lazily.
 
 Encodings: ``16UC1``/``mono16`` in depth units (millimetres unless the log says otherwise, e.g.
 librealsense's ``Depth_Units``), ``32FC1`` in metres, and ``compressedDepth`` (image_transport's
@@ -9,6 +9,7 @@ Every decoder returns metres as float32; 0 and NaN mean no depth.
 from __future__ import annotations
 
 import io
+import itertools
 import struct
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
@@ -18,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import numpy.typing as npt
 
-from framechain.timeline import DepthWindows, TimelineError, normalize_frame, pixel_windows
+from framechain.timeline import DepthWindows, TimelineError, normalize_frame
 from framechain.timeline.arrays import IntArray
 
 if TYPE_CHECKING:
@@ -135,7 +136,7 @@ class DepthWindowKeeper:
     every frame of its camera frame within :data:`KEEP_GAP_NS` in header stamp; the replay picks
     the nearest and finds its window here, or cuts it from the frame re-read from the log when it is
     not (a detection logged far from its frame, a larger window, a gap above the kept one).
-    Memory: the waiting frames and the kept (2 :data:`KEEP_HALF` + 1)^2 windows.
+    Memory: the waiting frames, and per pair a (2 :data:`KEEP_HALF` + 1)^2 float32 window in flat arrays.
     """
 
     def __init__(self) -> None:
@@ -144,8 +145,12 @@ class DepthWindowKeeper:
         self._obs_stamp = np.zeros(0, dtype=np.int64)
         self._obs_log = np.zeros(0, dtype=np.int64)
         self._obs_rc = np.zeros((0, 2), dtype=np.int64)
-        #: Per depth row (read order): {(centre row, centre col): position} and the raw windows.
-        self.kept: dict[int, tuple[dict[tuple[int, int], int], npt.NDArray[Any]]] = {}
+        # Kept windows, a part per settle: depth row (read order), centre (row, col), raw values as
+        # float32 (depth units and float32 metres convert exactly) and whether they are depth units.
+        self._rows: list[IntArray] = []
+        self._centres: list[IntArray] = []
+        self._windows: list[npt.NDArray[np.float32]] = []
+        self._in_units: list[npt.NDArray[np.bool_]] = []
 
     def add_frame(self, row: int, frame: str, stamp_ns: int, log_ns: int, raw: npt.NDArray[Any]) -> bool:
         """Hold a frame's raw pixels; True when the oldest has waited long enough (call :meth:`settle`)."""
@@ -171,36 +176,67 @@ class DepthWindowKeeper:
             return
         newest = max(self._frames[-1][3], int(self._obs_log.max()) if self._obs_log.size else self._frames[-1][3])
         due = len(self._frames) if final else sum(1 for f in self._frames if f[3] <= newest - HORIZON_NS // 2)
-        for row, frame, stamp, _, raw in self._frames[:due]:
-            near = np.flatnonzero((np.abs(self._obs_stamp - stamp) <= KEEP_GAP_NS) & (self._obs_frame == frame))
-            if near.size == 0:
-                continue
-            centres = np.unique(self._obs_rc[near], axis=0)
-            windows = pixel_windows(raw, centres[:, 0], centres[:, 1], KEEP_HALF)  # fancy indexing: a copy
-            where = {(int(r), int(c)): k for k, (r, c) in enumerate(centres.tolist())}
-            self.kept[row] = (where, windows)
+        settling = self._frames[:due]
+        if settling and self._obs_log.size:
+            self._cut(settling)
         del self._frames[:due]
-        keep = self._obs_log >= newest - HORIZON_NS
-        if final:
-            keep[:] = False
+        keep = np.zeros(self._obs_log.size, dtype=bool) if final else self._obs_log >= newest - HORIZON_NS
         self._obs_frame, self._obs_stamp = self._obs_frame[keep], self._obs_stamp[keep]
         self._obs_log, self._obs_rc = self._obs_log[keep], self._obs_rc[keep]
 
+    def _cut(self, settling: list[tuple[int, str, int, int, npt.NDArray[Any]]]) -> None:
+        """Every (frame, detection) pair at once; then one window cut per frame that has any."""
+        stamps = np.asarray([f[2] for f in settling], dtype=np.int64)
+        frames = np.asarray([f[1] for f in settling], dtype=str)
+        pairs = (np.abs(self._obs_stamp[None, :] - stamps[:, None]) <= KEEP_GAP_NS) & (
+            self._obs_frame[None, :] == frames[:, None])
+        which, obs = np.nonzero(pairs)  # grouped by frame
+        if not which.size:
+            return
+        # Window pixel indices of every pair, clipped to its frame as pixel_windows clips them.
+        shapes = np.asarray([f[4].shape for f in settling], dtype=np.int64).reshape(-1, 2)[which]
+        offsets = np.arange(-KEEP_HALF, KEEP_HALF + 1)
+        rc = self._obs_rc[obs]
+        rows = np.clip(rc[:, :1] + offsets, 0, shapes[:, :1] - 1)[:, :, None]
+        cols = np.clip(rc[:, 1:] + offsets, 0, shapes[:, 1:] - 1)[:, None, :]
+        windows = np.empty((which.size, offsets.size, offsets.size), dtype=np.float32)
+        in_units = np.empty(which.size, dtype=bool)
+        bounds = np.flatnonzero(np.r_[True, which[1:] != which[:-1], True]).tolist()
+        for start, end in itertools.pairwise(bounds):
+            raw = settling[int(which[start])][4]
+            windows[start:end] = raw[rows[start:end], cols[start:end]]  # exact: 16-bit integers fit float32
+            in_units[start:end] = raw.dtype.kind != "f"
+        self._rows.append(np.asarray([f[0] for f in settling], dtype=np.int64)[which])
+        self._centres.append(rc)
+        self._windows.append(windows)
+        self._in_units.append(in_units)
+
     def lookup(self, read_rows: Sequence[int], units_m: Sequence[float]) -> DepthWindows:
         """DepthFrameTable.windows for table row i = read row ``read_rows[i]`` in depth units ``units_m[i]``."""
-        kept = self.kept
+        order = np.argsort(np.concatenate([np.zeros(0, dtype=np.int64), *self._rows]), kind="stable")
+        rows = np.concatenate([np.zeros(0, dtype=np.int64), *self._rows])[order]
+        centres = np.concatenate([np.zeros((0, 2), dtype=np.int64), *self._centres])[order]
+        size = 2 * KEEP_HALF + 1
+        kept = np.concatenate([np.zeros((0, size, size), dtype=np.float32), *self._windows])[order]
+        in_units = np.concatenate([np.zeros(0, dtype=bool), *self._in_units])[order]
+        self._rows, self._centres, self._windows, self._in_units = [], [], [], []
 
         def windows(i: int, centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[np.float32] | None:
-            entry = kept.get(int(read_rows[i]))
-            if entry is None or half > KEEP_HALF:
+            read_row = int(read_rows[i])
+            lo, hi = np.searchsorted(rows, [read_row, read_row + 1])
+            if lo == hi or half > KEEP_HALF:
                 return None
-            where, raw = entry
-            try:
-                at = [where[(r, c)] for r, c in zip(centre_rows.tolist(), centre_cols.tolist(), strict=True)]
-            except KeyError:
+            mine = centres[lo:hi]
+            same = (mine[None, :, 0] == centre_rows[:, None]) & (mine[None, :, 1] == centre_cols[:, None])
+            if not same.any(axis=1).all():
                 return None
+            at = lo + same.argmax(axis=1)
             cut = KEEP_HALF - half
-            return pixels_to_metres(raw[at, cut : raw.shape[1] - cut, cut : raw.shape[2] - cut], units_m[i])
+            part = kept[at, cut : size - cut, cut : size - cut]
+            if in_units[lo]:  # as pixels_to_metres converts the frame: float32 values times float32 units
+                metres: npt.NDArray[np.float32] = np.multiply(part, np.float32(units_m[i]), dtype=np.float32)
+                return metres
+            return part
 
         return windows
 

@@ -4,9 +4,11 @@ Reading is one pass, chunk by chunk through the chunk index: topics nobody asked
 without decompression where the index allows, each chunk is decompressed once and its CRC
 checked (zlib-ng's crc32), and a corrupt chunk is skipped and counted (from its message index)
 instead of ending the read. Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo,
-PointStamped, Detection2DArray) are decoded many at a time by their byte layout. A depth frame
-is fetched later by its location (chunk and offset, from the message index records, found by a
-binary search on log time), its chunk decompressed again without a scan of the index. A file whose footer
+PointStamped, Detection2DArray) are decoded many at a time by their byte layout. The pixel
+windows the detections need are cut from the depth frames during the pass (the collector's
+DepthWindowKeeper); a frame whose window was not kept is fetched later by its location (chunk
+and offset, from the message index records, found by a binary search on log time), its chunk
+decompressed again without a scan of the index. A file whose footer
 or summary is missing (a recording cut short) is salvaged by a linear scan of its records: every
 complete message before the cut is recovered and counted.
 """

@@ -234,6 +234,12 @@ class RosbagsLog:
                 entry = handlers.get(conn.id)
                 if entry is None:
                     continue
+                if not isinstance(t, int):  # a damaged sqlite row: its timestamp is not a number
+                    failures[conn.topic] += 1
+                    first_error.setdefault(conn.topic, f"damaged row: its timestamp {bytes(t)[:16]!r} is not a number"
+                                           if isinstance(t, bytes | bytearray | memoryview) else
+                                           f"damaged row: its timestamp {t!r} is not a number")
+                    continue
                 delivered[(conn.topic, t)] += 1
                 waiting = gathered.get(conn.id)
                 if waiting is not None:

@@ -331,10 +331,27 @@ def stream_replay(
     except (RuntimeError, OSError) as err:
         where = str(chosen.path) if chosen.mode is OutputMode.SAVE else (chosen.url or "the default viewer")
         raise RerunSinkError(f"Rerun {chosen.mode.value} to {where} failed: {err}") from err
+    finally:
+        del rec
+        _release_dropped_recordings()
     return RerunOutcome(
         mode=chosen.mode, path=chosen.path if chosen.mode is OutputMode.SAVE else None,
         url=chosen.url, fell_back=fell_back, notes=tuple(notes), rows=rows,
     )
+
+
+def _release_dropped_recordings() -> None:
+    """Stop the threads of recordings Python no longer holds.
+
+    Rerun 0.41 keeps two threads per RecordingStream alive after ``disconnect`` until its orphan
+    sweep runs (normally at exit): a process that replays many logs (a notebook, a fleet worker,
+    the fuzzer) would otherwise run out of threads.
+    """
+    import rerun_bindings
+
+    sweep = getattr(rerun_bindings, "flush_and_cleanup_orphaned_recordings", None)
+    if sweep is not None:
+        sweep()
 
 
 def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float] | None:

@@ -1,0 +1,115 @@
+"""Depth windows kept during the one read pass give the same replay depths, bit for bit, as re-reading frames.
+
+Logs are written by the real writers (mcap_ros2 through write_log, rosbags for ROS 1 and ROS 2
+bags); each is replayed twice: with the windows kept at read time and with them dropped (every
+window then comes from the frame fetched again from the log). The fetch is counted, so a test
+also shows which path it took.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from framechain.adapters import open_log, write_log
+from framechain.adapters.depth import HORIZON_NS
+from framechain.replay import ReplayOptions, ReplayResult, replay
+from framechain.sim.scene import Scene, SceneSpec, generate
+from framechain.timeline import ChainConfig, DepthFrameTable, Timeline
+
+
+def _scene() -> Scene:
+    return generate(SceneSpec(seed=5, duration_s=4.0, width=160, height=120, focal_px=150.0, depth_images=True))
+
+
+def _counting(depth: DepthFrameTable, *, keep_windows: bool) -> tuple[DepthFrameTable, list[int]]:
+    """The table with its loader counting calls; without the kept windows when ``keep_windows`` is False."""
+    calls: list[int] = []
+    base = depth.loader
+    assert base is not None
+
+    def load(i: int) -> npt.NDArray[np.float32]:
+        calls.append(i)
+        return base(i)
+
+    return dataclasses.replace(depth, loader=load, windows=depth.windows if keep_windows else None), calls
+
+
+def _replay_both(timeline: Timeline, chain: ChainConfig) -> tuple[ReplayResult, ReplayResult, list[int], list[int]]:
+    with_kept, kept_calls = _counting(timeline.depth_frames, keep_windows=True)
+    without, fetch_calls = _counting(timeline.depth_frames, keep_windows=False)
+    frames = chain.frames
+    a = replay(timeline.replace(depth_frames=with_kept), frames)
+    b = replay(timeline.replace(depth_frames=without), frames)
+    return a, b, kept_calls, fetch_calls
+
+
+def _same_depths(a: ReplayResult, b: ReplayResult) -> None:
+    da, db = a.depth_m, b.depth_m
+    assert da.tobytes() == db.tobytes()  # bit for bit, NaNs included
+    assert np.array_equal(a.status, b.status)
+    assert np.array_equal(a.depth_stamp_ns, b.depth_stamp_ns)
+
+
+@pytest.mark.parametrize(("container", "name", "encoding"), [
+    ("mcap-ros2", "log.mcap", "16UC1"), ("mcap-ros2", "log.mcap", "32FC1"), ("rosbag1", "log.bag", "16UC1"),
+    ("rosbag2-sqlite", "log_bag", "16UC1"),
+])
+def test_kept_windows_give_the_fetched_depths(tmp_path: Path, container: str, name: str, encoding: str) -> None:
+    scene = _scene()
+    path = write_log(scene.timeline, tmp_path / name, container=container, depth_encoding=encoding,
+                     chain=scene.chain)
+    loaded = open_log(path, scene.chain)
+    assert loaded.timeline.depth_frames.windows is not None
+    a, b, kept_calls, fetch_calls = _replay_both(loaded.timeline, scene.chain)
+    _same_depths(a, b)
+    sampled = np.isfinite(b.depth_m)
+    assert sampled.sum() > 20  # the scene's detections found depth in the images
+    assert not kept_calls  # every window was kept: no frame was read again
+    assert fetch_calls  # the other replay did read frames
+    # Independent of both paths: the 5x5 median around the pixel of the frame decoded whole.
+    depth = loaded.timeline.depth_frames
+    obs = b.observations
+    for k in np.flatnonzero(sampled)[:10].tolist():
+        row = int(np.flatnonzero(depth.stamp_ns == b.depth_stamp_ns[k])[0])
+        image = depth.load(row).astype(np.float64)
+        r, c = int(np.rint(obs.v[k])), int(np.rint(obs.u[k]))
+        box = image[max(r - 2, 0) : r + 3, max(c - 2, 0) : c + 3]
+        good = box[np.isfinite(box) & (box > 0)]
+        assert a.depth_m[k] == pytest.approx(float(np.median(good)), abs=1e-12)
+
+
+def test_windows_not_kept_fall_back_to_the_frame(tmp_path: Path) -> None:
+    """Detections logged long after their frames (beyond the read's horizon): their windows are fetched."""
+    scene = _scene()
+    timeline = scene.timeline
+    late = dataclasses.replace(timeline.observations,
+                               log_time_ns=timeline.observations.log_time_ns + 3 * HORIZON_NS)
+    path = write_log(timeline.replace(observations=late), tmp_path / "late.mcap", container="mcap-ros2",
+                     chain=scene.chain)
+    loaded = open_log(path, scene.chain)
+    a, b, kept_calls, fetch_calls = _replay_both(loaded.timeline, scene.chain)
+    _same_depths(a, b)
+    assert np.isfinite(a.depth_m).sum() > 20
+    # The early frames had left the read's horizon before their detections came: read again.
+    assert kept_calls
+    assert set(kept_calls) <= set(fetch_calls)
+
+
+def test_a_larger_window_than_kept_is_cut_from_the_frame(tmp_path: Path) -> None:
+    scene = _scene()
+    path = write_log(scene.timeline, tmp_path / "log.mcap", container="mcap-ros2",
+                     chain=scene.chain)
+    loaded = open_log(path, scene.chain)
+    with_kept, kept_calls = _counting(loaded.timeline.depth_frames, keep_windows=True)
+    without, _ = _counting(loaded.timeline.depth_frames, keep_windows=False)
+    opts = ReplayOptions(depth_window=9)
+    frames = scene.chain.frames
+    a = replay(loaded.timeline.replace(depth_frames=with_kept), frames, options=opts)
+    b = replay(loaded.timeline.replace(depth_frames=without), frames, options=opts)
+    _same_depths(a, b)
+    assert kept_calls  # 9 x 9 is more than the read kept
