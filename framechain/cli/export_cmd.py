@@ -53,8 +53,12 @@ def run(args: argparse.Namespace) -> int:
         if args.attribute and result.replayed.any():
             from framechain.analysis.attribute import attribute
 
-            attribution = attribute(loaded.timeline, loaded.chain, seed=args.seed, progress=progress)
-            result, findings, evidence = attribution.replay, list(attribution.findings), attribution.aligned
+            try:
+                attribution = attribute(loaded.timeline, loaded.chain, seed=args.seed, progress=progress)
+            except FramechainError as err:  # the recomputed chain is still worth exporting: say why no findings
+                print(f"framechain export: not attributed: {err}", file=sys.stderr)
+            else:
+                result, findings, evidence = attribution.replay, list(attribution.findings), attribution.aligned
         if progress is not None:
             progress(f"writing {out}")
         messages = foxglove_messages(loaded.timeline, result, findings=findings, evidence=evidence)

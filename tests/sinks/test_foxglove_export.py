@@ -165,3 +165,22 @@ def test_out_must_be_mcap_and_not_the_log(demo: tuple[Path, Path, Path], capsys:
     assert "an export is an MCAP file" in capsys.readouterr().err
     assert main(["export", str(log), "--chain", str(chain), "--out", str(log), "-q"]) == 1
     assert "would overwrite the log it reads" in capsys.readouterr().err
+
+
+def test_export_without_findings_still_writes_the_chain(realdata: Path, tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A static target seen once per marker cannot be attributed: the export says why and still writes."""
+    chain = tmp_path / "chain.yaml"
+    chain.write_text(
+        "frames: {camera: raspicam, body: base_link, world: map}\n"
+        "topics: {image: /raspicam_node/image/compressed}\n"
+        "mounts:\n"
+        "  - {parent: map, child: base_link, xyz: [0, 0, 0], quat_xyzw: [0, 0, 0, 1]}\n"
+        "  - {parent: base_link, child: raspicam, xyz: [0, 0, 0.5], quat_xyzw: [-0.5, 0.5, -0.5, 0.5]}\n"
+        "evidence: {markers: {dictionary: DICT_5X5_1000, size_m: 0.14}, static_target: true}\n")
+    out = tmp_path / "annotated.mcap"
+    assert main(["export", str(realdata / "fiducials/aruco_images.bag"), "--chain", str(chain), "--out", str(out),
+                 "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "not attributed: static target: no object seen at least 3 times" in err
+    assert out.stat().st_size > 0
