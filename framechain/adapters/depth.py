@@ -14,7 +14,7 @@ import struct
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from types import SimpleNamespace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -32,6 +32,7 @@ _U16 = frozenset({"16UC1", "mono16", "16SC1"})
 _F32 = frozenset({"32FC1"})
 #: Decoded frames kept per loader (a replay visits frames in time order; a few suffice).
 CACHE_FRAMES = 8
+T = TypeVar("T")
 _COMPRESSED_DEPTH_HEADER = 12
 #: Windows kept at read time reach this far from their centre (7 x 7; replay's default is 5 x 5).
 KEEP_HALF = 3
@@ -108,24 +109,33 @@ def _decode_compressed_depth(data: bytes, fmt: str, units_m: float) -> npt.NDArr
     return (values * np.float32(units_m)).astype(np.float32)
 
 
+def cached_reader(read: Callable[[int], T], size: int) -> Callable[[int], T]:
+    """``read(i)`` behind a small LRU cache: lazy tables re-read a frame from the log on demand, and
+    replay and the sinks ask for the same few frames in a row."""
+    cache: OrderedDict[int, T] = OrderedDict()
+
+    def load(i: int) -> T:
+        if i in cache:
+            cache.move_to_end(i)
+            return cache[i]
+        out = cache[i] = read(i)
+        if len(cache) > size:
+            cache.popitem(last=False)
+        return out
+
+    return load
+
+
 def make_depth_loader(
     fetch: DepthFetch, locators: Sequence[DepthLocator], units_m: Sequence[float]
 ) -> Callable[[int], npt.NDArray[np.float32]]:
     """A DepthLoader that re-reads frame ``i`` from the log on demand (a small LRU cache)."""
-    cache: OrderedDict[int, npt.NDArray[np.float32]] = OrderedDict()
 
-    def load(i: int) -> npt.NDArray[np.float32]:
-        if i in cache:
-            cache.move_to_end(i)
-            return cache[i]
+    def read(i: int) -> npt.NDArray[np.float32]:
         loc = locators[i]
-        image = decode_depth(fetch(loc.topic, loc.log_time_ns, loc.ordinal), units_m[i])
-        cache[i] = image
-        if len(cache) > CACHE_FRAMES:
-            cache.popitem(last=False)
-        return image
+        return decode_depth(fetch(loc.topic, loc.log_time_ns, loc.ordinal), units_m[i])
 
-    return load
+    return cached_reader(read, CACHE_FRAMES)
 
 
 class DepthWindowKeeper:

@@ -8,14 +8,13 @@ logged: nothing here decodes a picture.
 from __future__ import annotations
 
 import io
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from framechain.adapters.depth import DepthFetch
+from framechain.adapters.depth import DepthFetch, cached_reader
 from framechain.timeline import TimelineError
 from framechain.timeline.tables import RAW_IMAGE_ENCODINGS, ImageLoader
 
@@ -93,17 +92,9 @@ def image_bytes(msg: Any, encoding: str) -> bytes:
 def make_image_loader(fetch: DepthFetch, locators: Sequence[ImageLocator],
                       encodings: Sequence[str]) -> ImageLoader:
     """An ImageLoader that re-reads image ``i`` from the log on demand (a small LRU cache)."""
-    cache: OrderedDict[int, bytes] = OrderedDict()
 
-    def load(i: int) -> bytes:
-        if i in cache:
-            cache.move_to_end(i)
-            return cache[i]
+    def read(i: int) -> bytes:
         loc = locators[i]
-        out = image_bytes(fetch(loc.topic, loc.log_time_ns, loc.ordinal), encodings[i])
-        cache[i] = out
-        if len(cache) > CACHE_IMAGES:
-            cache.popitem(last=False)
-        return out
+        return image_bytes(fetch(loc.topic, loc.log_time_ns, loc.ordinal), encodings[i])
 
-    return load
+    return cached_reader(read, CACHE_IMAGES)
