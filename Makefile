@@ -30,7 +30,7 @@ bench: $(STAMP)
 
 # Damaged copies of the real logs (../shared/realdata) through info, tf, replay and attribute:
 # fails on a traceback, a hang, memory beyond the bound or an exit code other than 0 or 1. Not
-# part of `make test` (it takes most of an hour on 2 cores); the tests run a short fixed-seed part.
+# part of `make test` (about 15 minutes on 2 cores); the tests run a short fixed-seed part.
 FUZZ_CASES ?= 10000
 fuzz: $(STAMP)
 	$(PY) tools/fuzz.py --cases $(FUZZ_CASES) --seed 0 --progress
