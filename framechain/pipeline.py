@@ -41,11 +41,15 @@ class LoadedRun:
         if why is None:
             return None
         # What the reader noticed on the chain's topics (an undecodable topic) often is the cause.
-        named = [t for t in astuple(self.chain.topics) if isinstance(t, str) and t]
-        why += "".join(f"; {n}" for n in self.notes if any(n.startswith(f"topic {t}:") for t in named))
+        why += "".join(f"; {n}" for n in self.chain_topic_notes())
         if self.chain_suggested:
             why += " (the chain was suggested: `framechain info LOG` lists what the log lacks)"
         return why
+
+    def chain_topic_notes(self) -> list[str]:
+        """The reader's notes on the topics the chain names (an undecodable topic, say)."""
+        named = [t for t in astuple(self.chain.topics) if isinstance(t, str) and t]
+        return [n for n in self.notes if any(n.startswith(f"topic {t}:") for t in named)]
 
 
 def load_chain(chain: ChainConfig | str | Path | None) -> ChainConfig | None:
@@ -188,9 +192,7 @@ def attribute_log(
         reason = run.why_nothing_replayed(counts)
         if reason is not None:
             raise AnalysisError(f"{run.path}: {reason}") from err
-        named = [t for t in astuple(run.chain.topics) if isinstance(t, str) and t]
-        why = [n for n in run.notes if any(n.startswith(f"topic {t}:") for t in named)]
-        raise AnalysisError(f"{run.path}: {err}" + "".join(f"; {n}" for n in why)) from err
+        raise AnalysisError(f"{run.path}: {err}" + "".join(f"; {n}" for n in run.chain_topic_notes())) from err
     # What the reader noticed (a topic the chain names but the log lacks, undecodable messages)
     # travels with the result into every output.
     result = replace(result, notes=(*run.notes, *(n for n in result.notes if n not in run.notes)))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections import Counter, defaultdict
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,7 @@ import numpy.typing as npt
 
 from framechain.adapters.depth import DepthFetch, DepthWindowKeeper, make_depth_loader
 from framechain.adapters.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
-from framechain.adapters.images import ImageLocator, image_metadata, make_image_loader
+from framechain.adapters.images import image_metadata, make_image_loader
 from framechain.adapters.kinds import Kind
 from framechain.adapters.mounts import (
     FileCamera,
@@ -97,7 +97,7 @@ OBSERVATION_KINDS = frozenset({Kind.DETECTIONS, Kind.DETECTION, Kind.PIXEL_POINT
 
 @dataclass(frozen=True)
 class DepthLocator:
-    """Where a depth frame lives in the log: topic, log time and its rank among equal log times."""
+    """Where a depth frame or an image lives in the log: topic, log time and its rank among equal log times."""
 
     topic: str
     log_time_ns: int
@@ -179,7 +179,7 @@ class Collector:
         self.flush_observations: Callable[[], None] | None = None
         # camera images on topics.image (metadata; bytes are fetched when a sink shows them)
         self.image_rows: list[tuple[str, int, int, int, int, str, str]] = []
-        self.image_loc: list[ImageLocator] = []
+        self.image_loc: list[DepthLocator] = []
         self._image_seen: Counter[tuple[str, int]] = Counter()
         # robot descriptions and librealsense extrinsics
         self.urdf: dict[str, str] = {}
@@ -416,12 +416,9 @@ class Collector:
             self.skipped[(topic, f"encoding {encoding!r} is not depth")] += 1
             return
         width, height, encoding = meta
-        key = (topic, log_ns)
-        ordinal = self._depth_seen[key]
-        self._depth_seen[key] += 1
         stamp = ros_stamp_ns(msg.header.stamp)
         self.depth_rows.append((msg.header.frame_id, stamp, log_ns, width, height, encoding, topic))
-        self.depth_loc.append(DepthLocator(topic, log_ns, ordinal))
+        self.depth_loc.append(_locate(self._depth_seen, topic, log_ns))
         if encoding.startswith("compressedDepth"):
             return  # a PNG: only the whole frame decodes, so it is fetched when needed
         try:
@@ -452,30 +449,21 @@ class Collector:
             self.skipped[(topic, f"image encoding {encoding!r} cannot be shown (raw or JPEG/PNG expected)")] += 1
             return
         width, height, encoding = meta
-        key = (topic, log_ns)
-        ordinal = self._image_seen[key]
-        self._image_seen[key] += 1
         self.image_rows.append((msg.header.frame_id, ros_stamp_ns(msg.header.stamp), log_ns, width, height,
                                 encoding, topic))
-        self.image_loc.append(ImageLocator(topic, log_ns, ordinal))
+        self.image_loc.append(_locate(self._image_seen, topic, log_ns))
 
     def _images(self, fetch: DepthFetch | None) -> ImageFrameTable:
         if not self.image_rows:
             return ImageFrameTable.empty()
-        frame, stamp, log, w, h, enc, topic = (list(c) for c in zip(*self.image_rows, strict=True))
-        n = len(frame)
-        table = ImageFrameTable(frame=np.asarray(frame, dtype=str), stamp_ns=np.asarray(stamp, dtype=np.int64),
-                                log_time_ns=np.asarray(log, dtype=np.int64), width=np.asarray(w, dtype=np.int64),
-                                height=np.asarray(h, dtype=np.int64), encoding=np.asarray(enc, dtype=str),
-                                source=np.asarray(topic, dtype=str), video_path=np.full(n, ""),
+        n = len(self.image_rows)
+        table = ImageFrameTable(**_frame_columns(self.image_rows), video_path=np.full(n, ""),
                                 video_time_ns=np.zeros(n, dtype=np.int64))
         order = _canonical(table.log_time_ns, table.source)
         locators = [self.image_loc[i] for i in order.tolist()]
         encodings = [str(e) for e in table.encoding[order]]
         loader = make_image_loader(fetch, locators, encodings) if fetch is not None else None
-        import dataclasses
-
-        return dataclasses.replace(table.take(order), loader=loader)
+        return replace(table.take(order), loader=loader)
 
     # -- dispatch -------------------------------------------------------------------------------
     def handler(self, kind: Kind, *, foxglove: bool = False) -> Callable[[str, int, Any], None] | None:
@@ -756,26 +744,36 @@ class Collector:
     def _depth(self, fetch: DepthFetch | None) -> DepthFrameTable:
         if not self.depth_rows:
             return DepthFrameTable.empty()
-        frame, stamp, log, w, h, enc, topic = (list(c) for c in zip(*self.depth_rows, strict=True))
-        table = DepthFrameTable(frame=np.asarray(frame, dtype=str), stamp_ns=np.asarray(stamp, dtype=np.int64),
-                                log_time_ns=np.asarray(log, dtype=np.int64), width=np.asarray(w, dtype=np.int64),
-                                height=np.asarray(h, dtype=np.int64), encoding=np.asarray(enc, dtype=str),
-                                source=np.asarray(topic, dtype=str))
+        table = DepthFrameTable(**_frame_columns(self.depth_rows))
         order = _canonical(table.log_time_ns, table.source)
         locators = [self.depth_loc[i] for i in order.tolist()]
         scales = [self._scale_for(loc.topic) for loc in locators]
         loader = make_depth_loader(fetch, locators, scales) if fetch is not None else None
         self.settle_depth(final=True)
         windows = self.depth_keeper.lookup(order.tolist(), scales) if fetch is not None else None
-        import dataclasses
-
-        return dataclasses.replace(table.take(order), loader=loader, windows=windows)
+        return replace(table.take(order), loader=loader, windows=windows)
 
     def _scale_for(self, topic: str) -> float:
         for sensor, scale in self.depth_scale.items():
             if topic.startswith(sensor + "/"):
                 return scale
         return 0.001
+
+
+def _locate(seen: Counter[tuple[str, int]], topic: str, log_ns: int) -> DepthLocator:
+    """The locator of the next frame on ``topic`` at ``log_ns`` (its rank among equal log times)."""
+    ordinal = seen[(topic, log_ns)]
+    seen[(topic, log_ns)] += 1
+    return DepthLocator(topic, log_ns, ordinal)
+
+
+def _frame_columns(rows: list[tuple[str, int, int, int, int, str, str]]) -> dict[str, Any]:
+    """The columns shared by depth and image frame tables, from their metadata rows."""
+    frame, stamp, log, w, h, enc, topic = (list(c) for c in zip(*rows, strict=True))
+    return {"frame": np.asarray(frame, dtype=str), "stamp_ns": np.asarray(stamp, dtype=np.int64),
+            "log_time_ns": np.asarray(log, dtype=np.int64), "width": np.asarray(w, dtype=np.int64),
+            "height": np.asarray(h, dtype=np.int64), "encoding": np.asarray(enc, dtype=str),
+            "source": np.asarray(topic, dtype=str)}
 
 
 def _fit(values: Any, n: int) -> npt.NDArray[np.float64]:

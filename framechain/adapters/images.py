@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,20 +17,14 @@ from framechain.adapters.depth import DepthFetch, cached_reader
 from framechain.timeline import TimelineError
 from framechain.timeline.tables import RAW_IMAGE_ENCODINGS, ImageLoader
 
+if TYPE_CHECKING:
+    from framechain.adapters.collect import DepthLocator
+
 #: Fetched images kept per loader (a sink visits a few frames, in time order).
 CACHE_IMAGES = 4
 _JPEG_MAGIC = b"\xff\xd8\xff"
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _ALIASES = {"8uc1": "mono8", "8uc3": "bgr8", "16uc1": "16UC1", "32fc1": "32FC1", "8uc4": "bgra8"}
-
-
-@dataclass(frozen=True)
-class ImageLocator:
-    """Where an image lives in the log: topic, log time and its rank among equal log times."""
-
-    topic: str
-    log_time_ns: int
-    ordinal: int
 
 
 def raw_encoding(name: str) -> str | None:
@@ -89,7 +82,7 @@ def image_bytes(msg: Any, encoding: str) -> bytes:
     return rows.tobytes()
 
 
-def make_image_loader(fetch: DepthFetch, locators: Sequence[ImageLocator],
+def make_image_loader(fetch: DepthFetch, locators: Sequence[DepthLocator],
                       encodings: Sequence[str]) -> ImageLoader:
     """An ImageLoader that re-reads image ``i`` from the log on demand (a small LRU cache)."""
 

@@ -202,7 +202,7 @@ class McapScanner:
         pos = len(MAGIC)
         while pos < size:
             if size - pos < 9:
-                self._cut(pos, "a record header cut short")
+                self.report.cut(pos, "a record header cut short")
                 return
             op, length = _RECORD.unpack_from(buf, pos)
             end = pos + 9 + length
@@ -242,10 +242,6 @@ class McapScanner:
             elif isinstance(rec, ChannelRecord):
                 self.channels.add(rec.id)
             yield rec
-
-    def _cut(self, pos: int, why: str) -> None:
-        self.report.cut_at = pos
-        self.report.skip(pos, self.size, why)
 
     # -- chunks ---------------------------------------------------------------------------------
     def _chunk(self, pos: int, end: int) -> Generator[Record, None, str]:
@@ -310,7 +306,7 @@ class McapScanner:
         try:
             head = _chunk_head(bytes(self.buf[pos + 9:pos + 9 + _CHUNK_HEAD_BYTES]), self.size - pos - 9)
         except _MalformedError:
-            self._cut(pos, "a chunk cut short before its records began")
+            self.report.cut(pos, "a chunk cut short before its records began")
             return -1
         start = pos + 9 + head.data_start
         stop = min(start + head.data_len, self.size)
@@ -336,7 +332,7 @@ class McapScanner:
         why = f"a {head.compression or 'uncompressed'} chunk cut short ({kept} complete messages kept from it)"
         if stream.failed:
             why += f"; {stream.failed}"
-        self._cut(pos, why)
+        self.report.cut(pos, why)
         return -1
 
     # -- resynchronisation ---------------------------------------------------------------------------
@@ -347,7 +343,7 @@ class McapScanner:
             if self._plausible(p):
                 self.report.skip(bad, p, why + "; resynchronised on the next record")
                 return p
-        self._cut(bad, why)
+        self.report.cut(bad, why)
         return self.size
 
     def _plausible(self, p: int) -> bool:

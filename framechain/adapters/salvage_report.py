@@ -49,6 +49,11 @@ class SalvageReport:
         if end > start:
             self.skipped.append(SkippedRange(start, end, why))
 
+    def cut(self, pos: int, why: str) -> None:
+        """The file ends inside the record starting at ``pos``: skip to the end."""
+        self.cut_at = pos
+        self.skip(pos, self.size, why)
+
     @property
     def damaged(self) -> bool:
         return bool(self.skipped or self.lost or self.lost_unknown or self.cut_at is not None)

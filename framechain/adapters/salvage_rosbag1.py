@@ -157,7 +157,7 @@ class Rosbag1Scanner:
                 fields, op, start, dlen = _record_at(self.buf, pos, self.size)
             except _MalformedError as err:
                 if self.size - pos < 4 + 5 + 4:
-                    self._cut(pos, "a record header cut short")
+                    self.report.cut(pos, "a record header cut short")
                     return
                 pos = self._resync(pos, pos + 1, f"a record that does not parse ({err})")
                 continue
@@ -198,10 +198,6 @@ class Rosbag1Scanner:
                 conn = self.connections.get(rec.conn)
                 self.report.recovered[conn.topic if conn else f"connection {rec.conn}"] += 1
             yield rec
-
-    def _cut(self, pos: int, why: str) -> None:
-        self.report.cut_at = pos
-        self.report.skip(pos, self.size, why)
 
     def _chunk(self, fields: dict[str, bytes], start: int, end: int) -> Generator[Connection | Message, None, str]:
         compression = fields.get("compression", b"?").decode("latin-1")
@@ -259,7 +255,7 @@ class Rosbag1Scanner:
         compression = fields.get("compression", b"?").decode("latin-1")
         stream = StreamDecompressor("none" if compression == "none" else compression)
         if compression not in ("none", "bz2", "lz4"):
-            self._cut(pos, f"a chunk cut short with unknown compression {compression!r}")
+            self.report.cut(pos, f"a chunk cut short with unknown compression {compression!r}")
             return
         out = bytearray()
         off = start
@@ -279,7 +275,7 @@ class Rosbag1Scanner:
         why = f"{label} chunk cut short ({kept} complete messages kept from it)"
         if stream.failed:
             why += f"; {stream.failed}"
-        self._cut(pos, why)
+        self.report.cut(pos, why)
 
     def _resync(self, bad: int, start: int, why: str) -> int:
         """The first record start after ``start`` that parses and is followed by a plausible record."""
@@ -291,7 +287,7 @@ class Rosbag1Scanner:
                     self.report.skip(bad, p, why + "; resynchronised on the next record")
                     return p
             at = buf.find(b"op=", at + 1)
-        self._cut(bad, why)
+        self.report.cut(bad, why)
         return size
 
     def _plausible(self, p: int) -> bool:

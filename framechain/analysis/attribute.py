@@ -315,7 +315,8 @@ def attribute(
             f"no observation of camera {chain.frames.camera!r} could be replayed "
             f"({counts['total']} total, rejected {counts['rejected']})"
         )
-    camera = _camera_model(timeline, chain, result)
+    camera_row = _camera_row(timeline, chain, result)
+    camera = CameraModel.from_table(timeline.cameras, camera_row)
     inputs = ChainInputs.from_replay(result, buffer, camera)
     aligned = align_evidence(timeline.points, result.observations, chain.frames, buffer)
     evidence = aligned.take(np.flatnonzero(result.replayed))  # the rows of ``inputs``
@@ -411,7 +412,7 @@ def attribute(
     # Corrections move the recomputed chain towards the truth; as-run faults describe what the
     # robot did, and the recomputed chain stays as it is.
     corrected_world = evaluate(inputs, combined)[2] if metric in ("reference", "static_spread") else recomputed_world
-    context = _fix_context(timeline, chain, result, camera)
+    context = _fix_context(timeline, chain, result, camera_row)
     for model, x, share_m, why, sel in dropped:
         estimate = model.estimate(x, sel.mode, inputs)
         notes.append(f"{model.name} {format_estimate(estimate)} is no finding: its Shapley share of the median "
@@ -468,13 +469,9 @@ def _camera_row(timeline: Timeline, chain: ChainConfig, result: ReplayResult) ->
     return int(values[np.argmax(counts)])
 
 
-def _camera_model(timeline: Timeline, chain: ChainConfig, result: ReplayResult) -> CameraModel:
-    return CameraModel.from_table(timeline.cameras, _camera_row(timeline, chain, result))
-
-
-def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, camera: CameraModel) -> FixContext:
-    """Where the camera model and the depths came from, so that a fix blames the right file or stream."""
-    row = _camera_row(timeline, chain, result)
+def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, row: int) -> FixContext:
+    """Where the camera model (row ``row`` of the camera table) and the depths came from, so that a fix
+    blames the right file or stream."""
     cameras = timeline.cameras
     # Calibration files' models are timeless (stamp 0, adapters/mounts.merge_file_cameras and the
     # LeRobot calibration); a recorded CameraInfo carries the stamp it was published at.

@@ -172,10 +172,9 @@ class ChainInputs:
         a moving camera's recorded span); those rows are identity and must be masked by the caller.
         """
         ok = np.ones(len(self), dtype=bool)
-        if camera_frame is not None and camera_frame != self.frames.camera:
-            lookup = self.buffer.lookup(self.frames.body, camera_frame, self.stamp_ns + round(offset_s * 1e9))
-            t_bc, q_bc, ok = lookup.translation, lookup.quat_xyzw, lookup.ok
-        elif invert_edge is not None:
+        source = camera_frame or self.frames.camera
+        swapped = source != self.frames.camera
+        if invert_edge is not None and not swapped:
             path = self.buffer.path(self.frames.body, self.frames.camera)
             times = self.stamp_ns + round(offset_s * 1e9)
             samples = []
@@ -187,10 +186,10 @@ class ChainInputs:
                 samples.append(sample)
             t, q = compose_hops(tuple(samples), len(self))
             t_bc, q_bc = t.T, q.T
-        elif offset_s == 0.0 or not self.camera_is_dynamic:
+        elif not swapped and (offset_s == 0.0 or not self.camera_is_dynamic):
             return self.t_bc, self.q_bc, ok
         else:
-            lookup = self.buffer.lookup(self.frames.body, self.frames.camera, self.stamp_ns + round(offset_s * 1e9))
+            lookup = self.buffer.lookup(self.frames.body, source, self.stamp_ns + round(offset_s * 1e9))
             t_bc, q_bc, ok = lookup.translation, lookup.quat_xyzw, lookup.ok
         if not ok.all():
             t_bc, q_bc = t_bc.copy(), q_bc.copy()

@@ -152,8 +152,7 @@ def fix_for(
             f"Transform into {estimate.meant!r}, not {estimate.used!r}: the error follows the map <-> odom drift."
         )
     if isinstance(estimate, FrameEstimate):
-        dropped = f" (the path differs by {', '.join(f'{p} -> {c}' for p, c in estimate.skipped)})" \
-            if estimate.skipped else ""
+        dropped = f" (the path differs by {_skipped_text(estimate)})" if estimate.skipped else ""
         return f"At {estimate.hop}, look up {estimate.meant!r}, not {estimate.used!r}{dropped}."
     if isinstance(estimate, InvertedEstimate) and estimate.edge is not None:
         parent, child = estimate.edge
@@ -195,7 +194,11 @@ def _rows(estimate: PermutationEstimate) -> str:
 def _edges_text(estimate: FrameEstimate) -> str:
     if not estimate.skipped:
         return ""
-    return f" (the lookup skipped {', '.join(f'{p} -> {c}' for p, c in estimate.skipped)})"
+    return f" (the lookup skipped {_skipped_text(estimate)})"
+
+
+def _skipped_text(estimate: FrameEstimate) -> str:
+    return ", ".join(f"{p} -> {c}" for p, c in estimate.skipped)
 
 
 def _camera_frame_fix(estimate: FrameEstimate, body: str, mode: Mode) -> str:

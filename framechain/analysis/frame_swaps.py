@@ -182,41 +182,23 @@ def _near_ancestors(buffer: TransformBuffer, body: str, world: str) -> set[str]:
     return out
 
 
-def _camera_swap(frame: str, fault: Fault, inputs: ChainInputs) -> FaultModel:
-    meant = inputs.frames.camera
+def _swap(frame: str, meant: str, fault: Fault, hop: HopName, inputs: ChainInputs) -> FaultModel:
+    """The chain with ``hop``'s lookup naming ``frame`` instead of ``meant`` (the camera or the body frame)."""
     skipped = _skipped_edges(inputs.buffer, frame, meant)
+    camera = hop == HopName.CAMERA_TO_BODY
 
     def estimate(x: FloatArray, mode: Mode, chain: ChainInputs) -> FrameEstimate:
         # As run: the robot looked up ``frame``. As a correction: the recorded data says ``meant``
         # where the detections really are in ``frame``.
         used, right = (frame, meant) if mode == "as_run" else (meant, frame)
-        return FrameEstimate(used=used, meant=right, hop=HopName.CAMERA_TO_BODY.value, skipped=skipped)
+        return FrameEstimate(used=used, meant=right, hop=hop.value, skipped=skipped)
 
     return FaultModel(
-        name=f"frame_swap[camera:{frame}]",
+        name=f"frame_swap[{'camera' if camera else 'body'}:{frame}]",
         fault=fault,
-        hop=HopName.CAMERA_TO_BODY,
-        family="camera_rotation",
-        apply=lambda p, x: replace(p, camera_frame=frame),
-        estimate=estimate,
-        choice_penalty=float(np.log(max(2.0, 1.0 + MAX_CANDIDATES))),
-    )
-
-
-def _body_swap(frame: str, inputs: ChainInputs) -> FaultModel:
-    meant = inputs.frames.body
-    skipped = _skipped_edges(inputs.buffer, frame, meant)
-
-    def estimate(x: FloatArray, mode: Mode, chain: ChainInputs) -> FrameEstimate:
-        used, right = (frame, meant) if mode == "as_run" else (meant, frame)
-        return FrameEstimate(used=used, meant=right, hop=HopName.BODY_TO_WORLD.value, skipped=skipped)
-
-    return FaultModel(
-        name=f"frame_swap[body:{frame}]",
-        fault=Fault.WRONG_WORLD_FRAME,
-        hop=HopName.BODY_TO_WORLD,
-        family="world_frame",
-        apply=lambda p, x: replace(p, body_frame=frame),
+        hop=hop,
+        family="camera_rotation" if camera else "world_frame",
+        apply=(lambda p, x: replace(p, camera_frame=frame)) if camera else (lambda p, x: replace(p, body_frame=frame)),
         estimate=estimate,
         choice_penalty=float(np.log(max(2.0, 1.0 + MAX_CANDIDATES))),
     )
@@ -230,9 +212,12 @@ def frame_swap_models(inputs: ChainInputs, *, blind: bool = False) -> list[Fault
     """
     if len(inputs) == 0:
         return []
-    models = [_camera_swap(frame, fault, inputs) for frame, fault in camera_frame_candidates(inputs)]
+    frames = inputs.frames
+    models = [_swap(frame, frames.camera, fault, HopName.CAMERA_TO_BODY, inputs)
+              for frame, fault in camera_frame_candidates(inputs)]
     if not blind:
-        models += [_body_swap(frame, inputs) for frame in body_frame_candidates(inputs)]
+        models += [_swap(frame, frames.body, Fault.WRONG_WORLD_FRAME, HopName.BODY_TO_WORLD, inputs)
+                   for frame in body_frame_candidates(inputs)]
     return models
 
 

@@ -247,7 +247,6 @@ def intersect_rays(
         a[:, 3:, :3] = a[:, :3, 3:]
         a[:, 3:, 3:] = acc(tau[:, None, None] ** 2 * m)
         rhs[:, 3:] = acc(tau[:, None] * mo)
-    if detrend:
         creep_scale = np.trace(a[:, 3:, 3:], axis1=1, axis2=2) / 3.0
         a[:, 3:, 3:] += CREEP_RIDGE * creep_scale[:, None, None] * np.eye(3)[None]
     # A tiny ridge keeps degenerate objects (all rays parallel) solvable; usable ones are not moved.
@@ -304,14 +303,14 @@ class RayObjective:
     def at_range_of(self, inputs: ChainInputs, pert: Perturbation) -> RayObjective:
         """Errors in metres at the range where the rays of the chain corrected by ``pert`` meet (a
         faulty chain meets its rays at a wrong range); one range for every chain compared."""
-        return replace(self, range_m=_intersection_range(inputs, pert, self.groups, self.detrend, self.range_m))
+        origin, direction = world_rays(inputs, pert)
+        return replace(self, range_m=_intersection_range(origin, direction, self.groups, self.detrend, self.range_m))
 
 
 def _intersection_range(
-    inputs: ChainInputs, pert: Perturbation, groups: StaticGroups, detrend: bool, default: float
+    origin: FloatArray, direction: FloatArray, groups: StaticGroups, detrend: bool, default: float
 ) -> float:
     """Median distance from the cameras to their objects' ray intersections (``default`` if none)."""
-    origin, direction = world_rays(inputs, pert)
     points = intersect_rays(origin, direction, groups, detrend=detrend)
     ranges = np.linalg.norm(points - origin, axis=1)
     ranges = ranges[np.isfinite(ranges)]
@@ -321,7 +320,7 @@ def _intersection_range(
 def ray_objective(inputs: ChainInputs, groups: StaticGroups, *, detrend: bool = True) -> RayObjective:
     """A :class:`RayObjective` over the objects whose rays span :data:`MIN_PARALLAX_DEG` (the others
     cannot be triangulated), its range the median distance of the recorded intersections."""
-    _origin, direction = world_rays(inputs, Perturbation())
+    origin, direction = world_rays(inputs, Perturbation())
     n_groups = max(groups.n_groups, 1)
     g = np.maximum(groups.group, 0)
     finite = np.isfinite(direction).all(axis=1) & groups.used
@@ -337,7 +336,7 @@ def ray_objective(inputs: ChainInputs, groups: StaticGroups, *, detrend: bool = 
     spread = np.linalg.eigvalsh(np.eye(3)[None] - mean_outer)[:, 0]
     wide = spread >= np.sin(np.deg2rad(MIN_PARALLAX_DEG)) ** 2 / 4.0
     groups = groups.keep(groups.used & wide[g] & (count[g] >= MIN_RAYS))
-    return RayObjective(groups, _intersection_range(inputs, Perturbation(), groups, detrend, 1.0), detrend)
+    return RayObjective(groups, _intersection_range(origin, direction, groups, detrend, 1.0), detrend)
 
 
 # -- what the log holds -----------------------------------------------------------------------

@@ -6,9 +6,7 @@ as one self-contained HTML page (plots embedded) and Markdown (plots beside it a
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -19,6 +17,7 @@ import numpy as np
 import pyarrow as pa
 
 from framechain.analysis.estimates import format_interval
+from framechain.sinks.report import Figure, figure_html, figure_png
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
@@ -80,13 +79,6 @@ class SpreadRow:
     #: format_interval's texts of the 5..95th percentiles and of the range ("-" without numbers)
     p5_p95_text: str = "-"
     range_text: str = "-"
-
-
-@dataclass(frozen=True)
-class FleetFigure:
-    name: str
-    caption: str
-    png: bytes
 
 
 def fleet_logs(table: pa.Table) -> list[FleetLog]:
@@ -195,7 +187,7 @@ def render_fleet_report(
 
 
 # -- figures ----------------------------------------------------------------------------------
-def make_fleet_figures(logs: Sequence[FleetLog]) -> list[FleetFigure]:
+def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     """Logs per fault and status (bars), and every log's estimate per fault (strip plots)."""
     import matplotlib
 
@@ -218,7 +210,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[FleetFigure]:
     ax_fault.set_xlabel("logs with the fault")
     ax_fault.set_title("Faults across the fleet", fontsize=9)
     ax_fault.invert_yaxis()
-    figures.append(_png(fig, "fleet_faults", "Logs by outcome, and how many logs have each fault"))
+    figures.append(figure_png(fig, "fleet_faults", "Logs by outcome, and how many logs have each fault"))
 
     groups: dict[tuple[str, str], list[float]] = {}
     for log in logs:
@@ -240,18 +232,9 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[FleetFigure]:
             ax.set_ylabel(label)
             ax.set_title(f"{title} ({y.size} logs)", fontsize=8)
             ax.grid(True, axis="y", alpha=0.3)
-        figures.append(_png(fig, "fleet_estimates", "Each log's estimate, per fault: the spread across the fleet"))
+        figures.append(figure_png(fig, "fleet_estimates",
+                                  "Each log's estimate, per fault: the spread across the fleet"))
     return figures
-
-
-def _png(fig: Any, name: str, caption: str) -> FleetFigure:
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buf, format="png")
-    plt.close(fig)
-    return FleetFigure(name=name, caption=caption, png=buf.getvalue())
 
 
 # -- text -------------------------------------------------------------------------------------
@@ -282,7 +265,7 @@ def _fault_cell(log: FleetLog) -> str:
     return "; ".join(f"{f['fault']} at {f['hop']} ({f['estimate_text']}, {f['share']:.0%})" for f in log.findings)
 
 
-def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[FleetFigure]) -> str:
+def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure]) -> str:
     def cell(text: object) -> str:
         return str(text).replace("|", "\\|").replace("\n", " ")
 
@@ -320,7 +303,7 @@ def _more(n: int) -> list[str]:
     return ["", f"... and {n - MAX_LISTED} more in fleet.parquet."] if n > MAX_LISTED else []
 
 
-def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[FleetFigure]) -> str:
+def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure]) -> str:
     e = html.escape
     parts = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain fleet report</title>",
@@ -335,10 +318,7 @@ def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: S
         parts.append("</table>")
     else:
         parts.append("<p>No log has a finding.</p>")
-    for fig in figures:
-        data = base64.b64encode(fig.png).decode("ascii")
-        parts.append(f"<figure><img alt='{e(fig.caption)}' src='data:image/png;base64,{data}'>"
-                     f"<figcaption>{e(fig.caption)}</figcaption></figure>")
+    parts += [figure_html(fig) for fig in figures]
     found = _with_findings(logs)
     parts.append("<h2>Which logs have which fault</h2>")
     if found:

@@ -18,7 +18,7 @@ file it depends on, as Foxglove and ``mcap-protobuf-support`` do.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +36,7 @@ from framechain.sinks.overlay import (
 )
 from framechain.sinks.rerun import REPLAY_FRAME_SUFFIX, FindingView
 from framechain.timeline import PointRole, Timeline
+from framechain.timeline.arrays import IntArray
 
 TF_TOPIC = "/framechain/tf"
 ANNOTATIONS_TOPIC = "/framechain/annotations"
@@ -98,6 +99,15 @@ def foxglove_messages(
     return out
 
 
+def _by_stamp(stamp: IntArray) -> Iterator[tuple[int, IntArray]]:
+    """Each distinct stamp (ascending) with the rows that have it (ascending), in one sort."""
+    if not stamp.size:
+        return
+    order = np.argsort(stamp, kind="stable")
+    stamps, starts = np.unique(stamp[order], return_index=True)
+    yield from zip(stamps.tolist(), np.split(order, starts[1:]), strict=True)
+
+
 def _transforms(result: ReplayResult) -> list[ProtobufMessage]:
     from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 
@@ -133,8 +143,7 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
     stamp = np.where(overlay.image_row >= 0, images.stamp_ns[np.maximum(overlay.image_row, 0)]
                      if len(images) else obs.stamp_ns, obs.stamp_ns)
     out: list[ProtobufMessage] = []
-    for when in np.unique(stamp).tolist():
-        rows = np.flatnonzero(stamp == when)
+    for when, rows in _by_stamp(stamp):
         msg = ImageAnnotations()
 
         def points(kind: int, uv: Any, color: tuple[int, int, int], size: float, *, msg: Any = msg,
@@ -184,8 +193,8 @@ def _scene(result: ReplayResult, evidence: AlignedEvidence | None, overlay: Imag
                 break
     out: list[ProtobufMessage] = []
     ok = np.flatnonzero(result.replayed & np.isfinite(result.p_world).all(axis=1))
-    for when in np.unique(obs.stamp_ns[ok]).tolist():
-        rows = ok[obs.stamp_ns[ok] == when]
+    for when, in_ok in _by_stamp(obs.stamp_ns[ok]):
+        rows = ok[in_ok]
         msg = SceneUpdate()
         entity = msg.entities.add()
         _stamp(entity.timestamp, when)

@@ -141,10 +141,7 @@ def _crops_html(result: Attribution, sections: Sequence[tuple[str, list[Figure]]
     parts = [f"<h2>What the camera saw</h2><p>{e(_crops_intro(result))}</p>"]
     for title, crops in sections:
         parts.append(f"<h3>{e(title)}</h3><div class='plots'>")
-        for c in crops:
-            data = base64.b64encode(c.png).decode("ascii")
-            parts.append(f"<figure><img alt='{e(c.caption)}' src='data:image/png;base64,{data}'>"
-                         f"<figcaption>{e(c.caption)}</figcaption></figure>")
+        parts += [figure_html(c) for c in crops]
         parts.append("</div>")
     return "".join(parts)
 
@@ -172,7 +169,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.set_ylabel("error (mm)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    figures.append(_png(fig, "error_per_hop", "Error per hop over time"))
+    figures.append(figure_png(fig, "error_per_hop", "Error per hop over time"))
 
     speed = robot_speed(result)
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
@@ -184,7 +181,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.set_title("A latency grows with speed", fontsize=9)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    figures.append(_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)"))
+    figures.append(figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)"))
 
     recomputed = _recomputed_world(result)
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
@@ -202,7 +199,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    figures.append(_png(fig, "world_top_down", "World points from above"))
+    figures.append(figure_png(fig, "world_top_down", "World points from above"))
 
     if result.findings:
         top = result.findings[0]
@@ -217,7 +214,7 @@ def make_figures(result: Attribution) -> list[Figure]:
             ax.set_title(f"Sensitivity: {top.fault.value} at {top.hop.value}", fontsize=9)
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize=7)
-            figures.append(_png(fig, "sensitivity", f"How fast {top.fault.value} hurts on this episode"))
+            figures.append(figure_png(fig, "sensitivity", f"How fast {top.fault.value} hurts on this episode"))
     return figures
 
 
@@ -234,7 +231,8 @@ def _recomputed_world(result: Attribution) -> FloatArray:
     return evaluate(result.inputs, Perturbation())[2]
 
 
-def _png(fig: Any, name: str, caption: str) -> Figure:
+def figure_png(fig: Any, name: str, caption: str) -> Figure:
+    """Lay out, encode as PNG and close a matplotlib figure (the fleet report shares it)."""
     import matplotlib.pyplot as plt
 
     buf = io.BytesIO()
@@ -242,6 +240,14 @@ def _png(fig: Any, name: str, caption: str) -> Figure:
     fig.savefig(buf, format="png")
     plt.close(fig)
     return Figure(name=name, caption=caption, png=buf.getvalue())
+
+
+def figure_html(fig: Figure) -> str:
+    """The figure embedded in HTML (base64 PNG) with its caption."""
+    e = html.escape
+    data = base64.b64encode(fig.png).decode("ascii")
+    return (f"<figure><img alt='{e(fig.caption)}' src='data:image/png;base64,{data}'>"
+            f"<figcaption>{e(fig.caption)}</figcaption></figure>")
 
 
 # -- text -------------------------------------------------------------------------------------
@@ -394,12 +400,7 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     if result.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in result.notes) + "</ul>")
     parts.append("<div class='plots'>")
-    for fig in figures:
-        data = base64.b64encode(fig.png).decode("ascii")
-        parts.append(
-            f"<figure><img alt='{e(fig.caption)}' src='data:image/png;base64,{data}'>"
-            f"<figcaption>{e(fig.caption)}</figcaption></figure>"
-        )
+    parts += [figure_html(fig) for fig in figures]
     parts.append("</div><h2>Provenance</h2><table>")
     parts += [f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in _provenance(result)]
     parts.append(

@@ -60,7 +60,9 @@ from framechain.analysis.estimates import format_estimate, format_interval
 from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer
 from framechain.replay.stamps import nearest
 from framechain.sinks.overlay import (
+    AS_RUN_COLOR,
     DETECTION_COLOR,
+    RECOMPUTED_COLOR,
     ImageOverlay,
     ImageSelection,
     image_overlay,
@@ -94,8 +96,6 @@ REPLAY_FRAME_SUFFIX = "@replay"
 #: Suffix of the pinhole's child frame, as Rerun's own MCAP loader names it.
 IMAGE_PLANE_SUFFIX = "_image_plane"
 
-RECOMPUTED_COLOR = (31, 119, 180)
-AS_RUN_COLOR = (255, 127, 14)
 REFERENCE_COLOR = (44, 160, 44)
 ERROR_COLOR = (214, 39, 40)
 STALE_COLOR = (255, 187, 120)

@@ -300,16 +300,16 @@ def _ignore_labels(raw: Any, where: str) -> tuple[str, ...]:
 
 
 def _window_s(raw: Any, where: str) -> float | None:
-    if raw is None:
-        return None
-    if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw) or raw <= 0:
-        raise ChainConfigError(f"{where}: expected a positive number of seconds, got {raw!r}")
-    return float(raw)
+    return None if raw is None else _positive(raw, where, "number of seconds")
 
 
 def _positive_size(raw: Any, where: str) -> float:
+    return _positive(raw, where, "size in metres")
+
+
+def _positive(raw: Any, where: str, what: str) -> float:
     if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw) or raw <= 0:
-        raise ChainConfigError(f"{where}: expected a positive size in metres, got {raw!r}")
+        raise ChainConfigError(f"{where}: expected a positive {what}, got {raw!r}")
     return float(raw)
 
 

@@ -16,7 +16,7 @@ import dataclasses
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, ClassVar, Self
+from typing import Any, ClassVar, Self, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -480,6 +480,35 @@ def pixel_windows(image: npt.NDArray[Any], centre_rows: IntArray, centre_cols: I
     return windows
 
 
+_Loaded = TypeVar("_Loaded")
+
+
+def _rows_loader(base: Callable[[int], _Loaded], rows: IntArray) -> Callable[[int], _Loaded]:
+    """A loader of the selected ``rows`` (row ``i`` of the selection is row ``rows[i]`` of ``base``)."""
+    return lambda i: base(int(rows[i]))
+
+
+def _part_of(offsets: IntArray, i: int) -> tuple[int, int]:
+    """Which part row ``i`` of a concatenation (parts starting at ``offsets``) is in, and its row there."""
+    k = int(np.searchsorted(offsets, i, side="right") - 1)
+    return k, i - int(offsets[k])
+
+
+def _concat_loader(
+    loaders: list[Callable[[int], _Loaded] | None], offsets: IntArray, missing: str
+) -> Callable[[int], _Loaded]:
+    """The loader of a concatenation: each row loaded by its part's loader (``missing``: none there)."""
+
+    def load(i: int) -> _Loaded:
+        k, row = _part_of(offsets, i)
+        inner = loaders[k]
+        if inner is None:
+            raise TimelineError(missing)
+        return inner(row)
+
+    return load
+
+
 @dataclass(frozen=True)
 class DepthFrameTable(ColumnTable):
     """Depth images: metadata is columnar, pixels are loaded lazily through ``loader``.
@@ -543,7 +572,7 @@ class DepthFrameTable(ColumnTable):
         if base_windows is not None:
             def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
                 return base_windows(int(rows[i]), r, c, half)
-        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])), windows=windows)
+        return dataclasses.replace(table, loader=_rows_loader(base, rows), windows=windows)
 
     @classmethod
     def from_arrays(
@@ -564,21 +593,13 @@ class DepthFrameTable(ColumnTable):
         parts = list(tables)
         merged = super().concat(parts)
         offsets = np.cumsum([0, *[len(t) for t in parts]])
-        loaders = [t.loader for t in parts]
-
-        def load(i: int) -> npt.NDArray[np.float32]:
-            k = int(np.searchsorted(offsets, i, side="right") - 1)
-            inner = loaders[k]
-            if inner is None:
-                raise TimelineError("DepthFrameTable part has no pixel loader")
-            return inner(i - int(offsets[k]))
-
+        load = _concat_loader([t.loader for t in parts], offsets, "DepthFrameTable part has no pixel loader")
         kept = [t.windows for t in parts]
 
         def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
-            k = int(np.searchsorted(offsets, i, side="right") - 1)
+            k, row = _part_of(offsets, i)
             inner = kept[k]
-            return None if inner is None else inner(i - int(offsets[k]), r, c, half)
+            return None if inner is None else inner(row, r, c, half)
 
         any_kept = any(w is not None for w in kept)
         return dataclasses.replace(merged, loader=load if parts else None, windows=windows if any_kept else None)
@@ -661,7 +682,7 @@ class ImageFrameTable(ColumnTable):
         table = super().take(rows)
         if base is None:
             return table
-        return dataclasses.replace(table, loader=lambda i: base(int(rows[i])))
+        return dataclasses.replace(table, loader=_rows_loader(base, rows))
 
     @classmethod
     def from_arrays(
@@ -689,15 +710,7 @@ class ImageFrameTable(ColumnTable):
         parts = list(tables)
         merged = super().concat(parts)
         offsets = np.cumsum([0, *[len(t) for t in parts]])
-        loaders = [t.loader for t in parts]
-
-        def load(i: int) -> bytes:
-            k = int(np.searchsorted(offsets, i, side="right") - 1)
-            inner = loaders[k]
-            if inner is None:
-                raise TimelineError("ImageFrameTable part has no byte loader")
-            return inner(i - int(offsets[k]))
-
+        load = _concat_loader([t.loader for t in parts], offsets, "ImageFrameTable part has no byte loader")
         return dataclasses.replace(merged, loader=load if parts else None)
 
 

@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from test_tagslam_stairs import BAG, REALDATA, _chain
+from test_tagslam_stairs import BAG, _chain
 
 from framechain.analysis.attribute import AnalysisError, attribute
 from framechain.pipeline import attribute_log, load_log
@@ -17,13 +17,6 @@ from framechain.replay.catalogue import Fault
 from framechain.timeline import ChainConfig
 
 ARUCO = "fiducials/aruco_images.bag"
-
-
-@pytest.fixture(scope="module")
-def realdata() -> Path:
-    if not REALDATA.is_dir():
-        pytest.skip(f"real logs not found at {REALDATA}")
-    return REALDATA
 
 
 def _without_sizes(chain: ChainConfig, sizes: dict[str, float] | None = None) -> ChainConfig:

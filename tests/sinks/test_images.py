@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import io
 import sys
-from collections import defaultdict
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,7 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
+from test_rerun import _read  # the .rrd read back per entity, as the Rerun sink tests read it
 
 from framechain.adapters import write_log
 from framechain.analysis.attribute import Attribution, attribute
@@ -36,13 +36,6 @@ from framechain.timeline import CameraTable, ChainConfig, ImageFrameTable, Obser
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
-
-
-def _read(path: Path) -> Batches:
-    out: Batches = defaultdict(list)
-    for chunk in RrdReader(path).stream():
-        out[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
-    return dict(out)
 
 
 def _rows(batches: Batches, entity: str, column: str) -> tuple[np.ndarray, list[Any]]:
