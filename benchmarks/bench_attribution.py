@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.attribute import attribute
+from framechain.catalogue import Fault
 from framechain.sim.scene import REALSENSE_OPTICAL_FRAME, REALSENSE_OPTICAL_XYZ, InjectedFault, SceneSpec, generate
-from framechain.timeline.catalogue import Fault
 
 LEVELS = ("hops", "target", "reference", "static")
 TARGETS = {"hops": 1.0, "target": 1.0, "reference": 1.0, "static": 0.95}

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+from framechain.catalogue import Fault
 from framechain.fleet import run_batch, usable_cpus
 from framechain.sim import InjectedFault, SceneSpec, generate, write_scene
-from framechain.timeline.catalogue import Fault
 
 FAULTS = (
     InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),

@@ -27,7 +27,7 @@ def _write_fixture(path: Path, n: int) -> list[bytes]:
     """One MCAP (ROS 2, zstd chunks) of n TFMessage; returns the serialised payloads too."""
     from mcap.writer import Writer
 
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     ts = typestore(ros1=False)
     T = ts.types
@@ -64,7 +64,7 @@ def main() -> None:
     from rosbags.highlevel import AnyReader
 
     from framechain.adapters import open_log
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "tf100k.mcap"
@@ -136,7 +136,7 @@ def _ros1_rates(ts2: Any, payloads: list[bytes]) -> dict[str, float]:
     """ROS 1 encoding: rosbags deserialize_ros1 against mcap_ros1's genpy classes (20k messages)."""
     from mcap_ros1._vendor.genpy.dynamic import generate_dynamic
 
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     ts1 = typestore(ros1=True)
     raws1 = []

@@ -77,7 +77,7 @@ def write_long_log(minutes: int) -> tuple[Path, Path]:
 
 def _depth_messages(obs: Any, depth_m: Any, spec: Any) -> Iterator[tuple[int, bytes]]:
     """(log time, CDR bytes) of one 16UC1 depth image per camera frame, in log-time order."""
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     ts = typestore(ros1=False)
     T = ts.types
@@ -107,7 +107,7 @@ def _merge_depth(rest: Path, out: Path, obs: Any, depth_m: Any, spec: Any) -> No
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     text = typestore(ros1=False).generate_msgdef("sensor_msgs/msg/Image", ros_version=2)[0]
     with rest.open("rb") as fin, out.open("wb") as fout:
@@ -134,8 +134,8 @@ def _floor(path: str, chain_path: str) -> dict[str, Any]:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     from framechain.adapters import scan_log
-    from framechain.adapters.kinds import normalize_msgtype, select_topics
-    from framechain.timeline import ChainConfig
+    from framechain.adapters.messages.kinds import normalize_msgtype, select_topics
+    from framechain.config.chain import ChainConfig
 
     chain = ChainConfig.from_yaml(chain_path)
     info = scan_log(path)

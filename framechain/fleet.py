@@ -33,7 +33,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain import __version__
-from framechain.timeline import ChainConfig, FramechainError
+from framechain.config.chain import ChainConfig
+from framechain.timeline import FramechainError
 
 SCHEMA = "framechain/batch@1"
 RESULTS_DIR = "results"
@@ -157,7 +158,7 @@ def _tree_fingerprint(directory: Path) -> tuple[int, int]:
 
 
 def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -> Iterator[LogUnit]:
-    from framechain.adapters.lerobot_format import DatasetReader
+    from framechain.adapters.lerobot.format import DatasetReader
 
     size, mtime = _tree_fingerprint(directory)
     if not robot_given:

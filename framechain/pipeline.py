@@ -14,7 +14,8 @@ from typing import Any
 
 from framechain.analysis.attribute import AnalysisError, Attribution, attribute
 from framechain.analysis.static import StaticTargetError
-from framechain.timeline import ChainConfig, FramechainError, Timeline
+from framechain.config.chain import ChainConfig
+from framechain.timeline import FramechainError, Timeline
 
 
 @dataclass(frozen=True)

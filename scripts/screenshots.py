@@ -53,8 +53,8 @@ def free_port() -> int:
 def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
                     bounds: tuple[float, float, float, float] | None) -> None:
     """framechain's default blueprint with the side panels collapsed, for application ``framechain``."""
+    from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
-    from framechain.timeline import ChainFrames
 
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
                                   collapse_panels=True, image_bounds=bounds)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from framechain.config.chain import ChainFrames
 from framechain.replay import replay
-from framechain.timeline import CameraTable, ChainFrames, ObservationTable, Timeline, TransformTable
+from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 
 
 def _timeline(body_xyz: tuple[float, float, float]) -> Timeline:

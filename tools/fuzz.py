@@ -364,8 +364,8 @@ def original_messages(path: Path, kind: str) -> Counter[tuple[str, int, bytes]]:
 
 
 def salvaged_messages(data: bytes, kind: str) -> list[tuple[str, int, bytes]]:
-    from framechain.adapters.salvage_mcap import ChannelRecord, McapScanner, MessageRecord
-    from framechain.adapters.salvage_rosbag1 import Message, Rosbag1Scanner
+    from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, MessageRecord
+    from framechain.adapters.formats.rosbag.salvage_ros1 import Message, Rosbag1Scanner
 
     out: list[tuple[str, int, bytes]] = []
     if kind == "mcap":

@@ -14,10 +14,10 @@ from framechain.adapters.errors import (
     SchemaError,
     UnsupportedLogError,
 )
-from framechain.adapters.info import EdgeInfo, frame_tree
-from framechain.adapters.lerobot import LeRobotAdapter, open_dataset, scan_dataset
+from framechain.adapters.formats.writer import CONTAINERS, canonical_order, write_log
+from framechain.adapters.lerobot.reader import LeRobotAdapter, open_dataset, scan_dataset
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.suggest import (
+from framechain.adapters.suggest.chain import (
     ChainNeed,
     NeedStatus,
     SuggestedChain,
@@ -26,7 +26,7 @@ from framechain.adapters.suggest import (
     suggest_chain,
     why_nothing_replayed,
 )
-from framechain.adapters.writer import CONTAINERS, canonical_order, write_log
+from framechain.adapters.suggest.frame_tree import EdgeInfo, frame_tree
 
 register_adapter(LeRobotAdapter())
 

@@ -9,14 +9,14 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
 
-from framechain.adapters.collect import Collector
 from framechain.adapters.errors import AdapterError, EmptyLogError, UnsupportedLogError
-from framechain.adapters.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
-from framechain.adapters.mcap_log import MCAP_MAGIC, McapLog
+from framechain.adapters.formats.mcap.reader import MCAP_MAGIC, McapLog
+from framechain.adapters.formats.rosbag.reader import RosbagsLog
+from framechain.adapters.messages.collect import Collector
+from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
 from framechain.adapters.model import LoadedLog, LogInfo
-from framechain.adapters.mounts import chain_additions
-from framechain.adapters.rosbag_log import RosbagsLog
-from framechain.timeline import ChainConfig
+from framechain.adapters.robot.mounts import chain_additions
+from framechain.config.chain import ChainConfig
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -60,7 +60,7 @@ def detect(path: str | Path) -> tuple[str, Path, list[str]]:
         if (p / "meta" / "info.json").is_file():
             raise UnsupportedLogError(
                 p, "a LeRobot dataset, not a log: read an episode with "
-                "framechain.adapters.lerobot.open_dataset(path, episode=..., robot=robot.yaml)",
+                "framechain.adapters.lerobot.reader.open_dataset(path, episode=..., robot=robot.yaml)",
             )
         storage = sorted(p.glob("*.db3")) + sorted(p.glob("*.mcap"))
         if len(storage) == 1:
@@ -156,7 +156,7 @@ def open_log(
     fmt, target, notes = detect(p)
     additions = chain_additions(chain)  # a missing calibration file fails before the log is read
     if chain is not None and chain.evidence.markers is not None:  # a bad dictionary too, naming the chain file
-        from framechain.adapters.markers import dictionary_id
+        from framechain.adapters.messages.markers import dictionary_id
 
         dictionary_id(chain.evidence.markers.dictionary, where=str(chain_file(chain)))
     notes.extend(additions.notes)
@@ -178,7 +178,7 @@ def open_log(
         info = info.with_notes(src.notes)
     col.notes[:0] = notes
     if chain is not None and chain.topics.detections_table:
-        from framechain.adapters.side_table import read_side_table, resolve_side_table
+        from framechain.adapters.messages.side_table import read_side_table, resolve_side_table
 
         table_path = resolve_side_table(chain.topics.detections_table, p)
         col.add_side_detections(read_side_table(table_path), table_path.name)

@@ -1,8 +1,7 @@
-"""The analysis room: fault models, fitting, attribution, evidence files, the tilt lab."""
+"""The analysis room: fault models, fitting, attribution, the tilt lab."""
 
 from framechain.analysis.attribute import AnalysisError, Attribution, Finding, attribute
 from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
-from framechain.analysis.evidence import write_attribution
 from framechain.analysis.lab import TiltRow, crossing_pitch_deg, tilt_sweep
 
 __all__ = [
@@ -15,5 +14,4 @@ __all__ = [
     "attribute",
     "crossing_pitch_deg",
     "tilt_sweep",
-    "write_attribution",
 ]

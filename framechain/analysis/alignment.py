@@ -26,10 +26,11 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
+from framechain.arrays import FloatArray, IntArray
+from framechain.config.chain import ChainFrames
 from framechain.replay import TransformBuffer, transform_points
 from framechain.replay.stamps import nearest
-from framechain.timeline import ChainFrames, ObservationTable, PointRole, PointTable, normalize_frame
-from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.timeline import ObservationTable, PointRole, PointTable, normalize_frame
 
 #: A point stamped with the observation's stamp matches within this (ns).
 POINT_MATCH_NS = 1_000_000

@@ -30,10 +30,9 @@ import numpy as np
 from framechain.analysis.alignment import AlignedEvidence, align_evidence
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
 from framechain.analysis.estimates import Estimate, estimate_scalars, estimate_to_json, format_estimate
+from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.faults import (
     LATENCY_BOUND_S,
-    FaultModel,
-    Mode,
     classify_rotation,
     models_for,
     rotation_starts,
@@ -49,10 +48,12 @@ from framechain.analysis.static import (
     static_objective,
     with_unit_depth,
 )
+from framechain.arrays import FloatArray, IntArray
+from framechain.catalogue import Fault, HopName
+from framechain.config.chain import ChainConfig
 from framechain.replay import (
     REPLAYED,
     CameraModel,
-    HopName,
     RejectReason,
     ReplayResult,
     TransformBuffer,
@@ -60,9 +61,7 @@ from framechain.replay import (
     replay,
     transform_points,
 )
-from framechain.replay.catalogue import Fault
-from framechain.timeline import ChainConfig, FramechainError, PointRole, Timeline
-from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.timeline import FramechainError, PointRole, Timeline
 
 Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
 

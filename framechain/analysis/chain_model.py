@@ -16,11 +16,12 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
+from framechain.arrays import FloatArray, IntArray
+from framechain.config.chain import ChainFrames
+from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
+from framechain.geometry.rotations import invert
 from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
 from framechain.replay.buffer import compose_hops
-from framechain.replay.quaternion import invert
-from framechain.timeline import OPTICAL_FROM_LINK_QUAT_XYZW, ChainFrames
-from framechain.timeline.arrays import FloatArray, IntArray
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ from scipy.spatial.transform import Rotation
 from framechain.analysis.attribute import Attribution
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.fixes import corrected_mount
+from framechain.arrays import FloatArray
 from framechain.timeline import DepthFrameTable, Timeline, TransformTable
-from framechain.timeline.arrays import FloatArray
 
 
 class NothingToCorrectError(ValueError):

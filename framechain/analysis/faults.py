@@ -11,8 +11,7 @@ parameters correct the recorded data towards the truth, so the fault is their in
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Literal
 
 import numpy as np
@@ -20,7 +19,6 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.analysis.estimates import (
-    Estimate,
     FrameEstimate,
     InvertedEstimate,
     LatencyEstimate,
@@ -28,42 +26,13 @@ from framechain.analysis.estimates import (
     RotationEstimate,
     ScaleEstimate,
 )
-from framechain.replay import HopName
-from framechain.replay.catalogue import Fault
-from framechain.timeline.arrays import FloatArray
-
-Mode = Literal["as_run", "correction"]
+from framechain.analysis.fault_model import FaultModel, Mode
+from framechain.analysis.frame_swaps import frame_swap_models
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
 
 #: Below this angle two rotations are "the same" when naming missing_rotation (degrees).
 SAME_ROTATION_DEG = 0.5
-
-
-@dataclass(frozen=True)
-class FaultModel:
-    """One fault hypothesis: its parameters, bounds, and what it does to the chain."""
-
-    name: str  # unique label, e.g. "axis_flip[0,1,2|+,-,+]"
-    fault: Fault
-    hop: HopName
-    family: str
-    apply: Callable[[Perturbation, FloatArray], Perturbation]
-    estimate: Callable[[FloatArray, Mode, ChainInputs], Estimate]
-    #: parameter start, bounds and scale; empty for a model with no parameters (a discrete choice)
-    x0: tuple[float, ...] = ()
-    lower: tuple[float, ...] = ()
-    upper: tuple[float, ...] = ()
-    x_scale: tuple[float, ...] = ()
-    #: extra BIC penalty for a discrete choice among many variants (log of their number)
-    choice_penalty: float = 0.0
-    #: extra starting points for the local fit (multi-start)
-    starts: tuple[tuple[float, ...], ...] = ()
-    #: whether the bounds mark the plausible range (a fit ending on one explains nothing) rather
-    #: than the limits of the parametrisation (a rotation vector's |component| <= pi)
-    plausibility_bounds: bool = True
-
-    @property
-    def n_params(self) -> int:
-        return len(self.x0)
 
 
 #: Time offsets searched (s): on real logs a stamp offset of half a second is not rare (a driver
@@ -287,7 +256,6 @@ def models_for(
     if not blind:
         out += [_wrong_world(alt, inputs.frames.world) for alt in world_alternatives(inputs)]
     # Imported here: the frame swaps are fault models too (they build on this module).
-    from framechain.analysis.frame_swaps import frame_swap_models
 
     out += frame_swap_models(inputs, blind=blind)
     if hops is not None:

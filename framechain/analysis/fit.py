@@ -22,8 +22,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
-from framechain.analysis.faults import FaultModel
-from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.analysis.fault_model import FaultModel
+from framechain.arrays import FloatArray, IntArray
 
 
 class Objective(Protocol):

@@ -17,10 +17,10 @@ from framechain.analysis.estimates import (
     ScaleEstimate,
     axis_text,
 )
-from framechain.analysis.faults import Mode, rotation_verdict
-from framechain.replay import HopName
-from framechain.replay.catalogue import Fault
-from framechain.timeline.arrays import FloatArray
+from framechain.analysis.fault_model import Mode
+from framechain.analysis.faults import rotation_verdict
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
 
 
 @dataclass(frozen=True)

@@ -23,10 +23,10 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.estimates import FrameEstimate
-from framechain.analysis.faults import FaultModel, Mode
-from framechain.replay import HopName, TransformBuffer
-from framechain.replay.catalogue import Fault
-from framechain.timeline.arrays import FloatArray
+from framechain.analysis.fault_model import FaultModel, Mode
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
+from framechain.replay import TransformBuffer
 
 #: How far (edges in the frame tree) from the chain's frame a frame may be to be a candidate.
 NEIGHBOURHOOD_EDGES = 3

@@ -16,15 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from framechain.config.chain import ChainFrames
+from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.replay import replay
-from framechain.timeline import (
-    OPTICAL_FROM_LINK_QUAT_XYZW,
-    CameraTable,
-    ChainFrames,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 
 MOUNT_XYZ = (0.30, 0.0, 0.80)
 

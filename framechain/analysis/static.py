@@ -26,8 +26,8 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate, hop1, hop2, hop3
+from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
 from framechain.timeline import FramechainError, Timeline, normalize_frame
-from framechain.timeline.arrays import BoolArray, FloatArray, IntArray, StrArray
 
 #: Window over which one static object is fitted (s). Each object may creep linearly in time
 #: within its window (odometry drift); what is left is the drift's curvature. Visual-inertial and

@@ -47,8 +47,8 @@ def parse_formats(text: str) -> list[str]:
 
 
 def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
-    from framechain.analysis.evidence import write_attribution
     from framechain.pipeline import attribute_log
+    from framechain.sinks.evidence_files import write_attribution
 
     formats = default_formats or parse_formats(args.format)
     out = Path(args.out)

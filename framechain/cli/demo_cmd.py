@@ -54,7 +54,7 @@ def register(sub: Any) -> None:
 
 
 def parse_fault(text: str) -> Any:
-    from framechain.replay.catalogue import Fault
+    from framechain.catalogue import Fault
     from framechain.sim.scene import InjectedFault
 
     where = "robot"
@@ -88,11 +88,11 @@ def parse_fault(text: str) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.analysis.evidence import write_attribution
     from framechain.cli.common import print_findings, progress_reporter
     from framechain.pipeline import attribute_log
     from framechain.sim.logs import SUFFIX, write_scene
     from framechain.sim.scene import SceneSpec, generate
+    from framechain.sinks.evidence_files import write_attribution
     from framechain.sinks.report import render_report
 
     started = time.perf_counter()

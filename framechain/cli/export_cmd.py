@@ -34,7 +34,7 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.adapters.mcap_export import write_mcap_with
+    from framechain.adapters.formats.mcap.export import write_mcap_with
     from framechain.analysis.alignment import AlignedEvidence
     from framechain.analysis.attribute import Finding
     from framechain.pipeline import load_log

@@ -46,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
         open_log,
         suggest,
     )
-    from framechain.timeline import ChainConfig, FramechainError
+    from framechain.config.chain import ChainConfig
+    from framechain.timeline import FramechainError
 
     chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
     print_chain = args.chain is True
@@ -136,7 +137,7 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
     from rich.table import Table
     from rich.tree import Tree
 
-    from framechain.adapters.info import children_of, tree_roots
+    from framechain.adapters.suggest.frame_tree import children_of, tree_roots
 
     console = Console()
     info = loaded.info

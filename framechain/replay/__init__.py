@@ -11,7 +11,6 @@ from framechain.replay.buffer import (
     TransformBuffer,
 )
 from framechain.replay.camera import CameraModel
-from framechain.replay.catalogue import FAULT_HOPS, Fault
 from framechain.replay.depth import DepthSamples, sample_depth
 from framechain.replay.errors import (
     CameraModelError,
@@ -22,7 +21,6 @@ from framechain.replay.errors import (
 )
 from framechain.replay.replay import (
     REPLAYED,
-    HopName,
     HopRecordTable,
     HopSampleTable,
     RejectReason,
@@ -35,7 +33,6 @@ from framechain.replay.replay import (
 )
 
 __all__ = [
-    "FAULT_HOPS",
     "LATEST",
     "REPLAYED",
     "CameraModel",
@@ -44,10 +41,8 @@ __all__ = [
     "DepthSamples",
     "Edge",
     "ExtrapolationError",
-    "Fault",
     "FrameGraphError",
     "FramePath",
-    "HopName",
     "HopRecordTable",
     "HopSampleTable",
     "HopSamples",

@@ -30,8 +30,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from framechain.replay.errors import ConnectivityError, ExtrapolationError, FrameGraphError
-from framechain.replay.quaternion import (
+from framechain.arrays import FloatArray, IntArray
+from framechain.geometry.rotations import (
     IDENTITY,
     Quat4,
     Vec3,
@@ -44,8 +44,8 @@ from framechain.replay.quaternion import (
     quat_rotate_into,
     quat_to_rotvec,
 )
+from framechain.replay.errors import ConnectivityError, ExtrapolationError, FrameGraphError
 from framechain.timeline import Timeline, TransformTable, normalize_frame
-from framechain.timeline.arrays import FloatArray, IntArray
 
 
 class _Latest:

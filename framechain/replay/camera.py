@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from framechain.arrays import FloatArray
 from framechain.replay.errors import CameraModelError
 from framechain.timeline import CameraTable
-from framechain.timeline.arrays import FloatArray
 
 _N_COEFFS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4, "none": 0}
 # librealsense's "Inverse Brown Conrady" is deprojected by current rsutil.h with the same iteration

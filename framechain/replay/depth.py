@@ -7,9 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from framechain.arrays import FloatArray, IntArray
 from framechain.replay.stamps import nearest
 from framechain.timeline import DepthFrameTable, normalize_frame
-from framechain.timeline.arrays import FloatArray, IntArray
 
 
 @dataclass(frozen=True)

@@ -15,28 +15,14 @@ from typing import ClassVar
 
 import numpy as np
 
+from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
+from framechain.catalogue import HopName
+from framechain.config.chain import ChainFrames
+from framechain.geometry.rotations import compose, quat_rotate
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
 from framechain.replay.camera import CameraModel
 from framechain.replay.depth import sample_depth
-from framechain.replay.quaternion import compose, quat_rotate
-from framechain.timeline import (
-    CameraTable,
-    ChainFrames,
-    Column,
-    ColumnTable,
-    ObservationTable,
-    Timeline,
-    normalize_frame,
-)
-from framechain.timeline.arrays import BoolArray, FloatArray, IntArray, StrArray
-
-
-class HopName(StrEnum):
-    """The three hops of the chain (DESIGN.md)."""
-
-    PIXEL_TO_CAMERA = "pixel_to_camera"
-    CAMERA_TO_BODY = "camera_to_body"
-    BODY_TO_WORLD = "body_to_world"
+from framechain.timeline import CameraTable, Column, ColumnTable, ObservationTable, Timeline, normalize_frame
 
 
 class RejectReason(StrEnum):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from framechain.timeline.arrays import IntArray
+from framechain.arrays import IntArray
 
 
 def nearest(sorted_stamps: IntArray, queries: IntArray) -> IntArray:

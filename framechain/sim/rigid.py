@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from framechain.timeline.arrays import FloatArray, IntArray
+from framechain.arrays import FloatArray, IntArray
 
 
 def matrices(translation: FloatArray, quat_xyzw: FloatArray) -> FloatArray:

@@ -27,17 +27,15 @@ from typing import Any, Literal
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from framechain.arrays import FloatArray, IntArray
+from framechain.catalogue import FAULT_HOPS, Fault
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
+from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.sim import rigid
 from framechain.timeline import (
-    OPTICAL_FROM_LINK_QUAT_XYZW,
     CameraTable,
-    ChainConfig,
-    ChainEvidence,
-    ChainFrames,
-    ChainTopics,
     DepthFrameTable,
     FramechainError,
-    HopTopics,
     ImageFrameTable,
     ObservationTable,
     PointRole,
@@ -45,8 +43,6 @@ from framechain.timeline import (
     Timeline,
     TransformTable,
 )
-from framechain.timeline.arrays import FloatArray, IntArray
-from framechain.timeline.catalogue import FAULT_HOP_VALUES, Fault
 
 START_NS = 1_700_000_000_000_000_000
 TOPICS = ChainTopics(
@@ -113,7 +109,7 @@ class InjectedFault:
     def hop(self) -> str:
         if self.kind == Fault.INVERTED_TRANSFORM:
             return str(self.params.get("hop", "camera_to_body"))
-        return FAULT_HOP_VALUES[self.kind]
+        return FAULT_HOPS[self.kind].value
 
     @property
     def used_frame(self) -> str | None:

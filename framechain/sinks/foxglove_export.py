@@ -26,6 +26,7 @@ import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.attribute import Finding
+from framechain.arrays import IntArray
 from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
     AS_RUN_COLOR,
@@ -36,7 +37,6 @@ from framechain.sinks.overlay import (
 )
 from framechain.sinks.rerun import REPLAY_FRAME_SUFFIX, FindingView
 from framechain.timeline import PointRole, Timeline
-from framechain.timeline.arrays import IntArray
 
 TF_TOPIC = "/framechain/tf"
 ANNOTATIONS_TOPIC = "/framechain/annotations"
@@ -47,7 +47,7 @@ NS = 1_000_000_000
 
 @dataclass(frozen=True)
 class ProtobufMessage:
-    """One serialised message with its schema (matches ``framechain.adapters.mcap_export.ExtraMessage``)."""
+    """One serialised message with its schema (matches ``framechain.adapters.formats.mcap.export.ExtraMessage``)."""
 
     topic: str
     schema_name: str

@@ -23,10 +23,10 @@ import numpy.typing as npt
 
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.attribute import Finding
+from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.replay import CameraModel, ReplayResult, camera_rows_for
 from framechain.replay.stamps import nearest
 from framechain.timeline import PointRole, Timeline, normalize_frame
-from framechain.timeline.arrays import BoolArray, FloatArray, IntArray
 
 #: An image within this of an observation's stamp is the one shown with it.
 IMAGE_WINDOW_NS = 50_000_000

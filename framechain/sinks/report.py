@@ -21,9 +21,9 @@ import numpy as np
 
 from framechain.analysis.attribute import Attribution
 from framechain.analysis.estimates import format_estimate, format_interval
-from framechain.analysis.evidence import inputs_record, robot_speed, sensitivity
+from framechain.arrays import FloatArray
+from framechain.sinks.evidence_files import inputs_record, robot_speed, sensitivity
 from framechain.timeline import Timeline
-from framechain.timeline.arrays import FloatArray
 
 _CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;

@@ -57,7 +57,10 @@ import numpy.typing as npt
 from framechain.analysis.alignment import AlignedEvidence, align_evidence
 from framechain.analysis.attribute import Finding
 from framechain.analysis.estimates import format_estimate, format_interval
-from framechain.replay import REPLAYED, HopName, ReplayResult, TransformBuffer
+from framechain.arrays import BoolArray, FloatArray, IntArray
+from framechain.catalogue import HopName
+from framechain.config.chain import ChainFrames
+from framechain.replay import REPLAYED, ReplayResult, TransformBuffer
 from framechain.replay.stamps import nearest
 from framechain.sinks.overlay import (
     AS_RUN_COLOR,
@@ -68,16 +71,8 @@ from framechain.sinks.overlay import (
     image_overlay,
     select_images,
 )
-from framechain.timeline import (
-    ChainFrames,
-    FramechainError,
-    ImageFrameTable,
-    PointRole,
-    Timeline,
-    normalize_frame,
-)
-from framechain.timeline.arrays import BoolArray, FloatArray, IntArray
-from framechain.timeline.tables import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
+from framechain.timeline import FramechainError, ImageFrameTable, PointRole, Timeline, normalize_frame
+from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
 
 if TYPE_CHECKING:
     import rerun as rr

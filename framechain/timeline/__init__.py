@@ -1,49 +1,35 @@
-"""The model room: columnar tables of one log, nothing format-specific; imports nothing else here."""
+"""The model room: columnar tables of one log, nothing format-specific; imports nothing of framechain's other rooms."""
 
-from framechain.timeline.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
-from framechain.timeline.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.timeline.errors import (
-    ChainConfigError,
     FramechainError,
     InvalidCameraError,
     InvalidTransformError,
     TimelineError,
 )
+from framechain.timeline.frames import DepthFrameTable, DepthLoader, DepthWindows, ImageFrameTable, pixel_windows
+from framechain.timeline.model import Timeline
 from framechain.timeline.tables import (
     CameraTable,
     Column,
     ColumnTable,
-    DepthFrameTable,
-    DepthLoader,
-    DepthWindows,
-    ImageFrameTable,
     JointStateTable,
     ObservationTable,
     PointRole,
     PointTable,
-    Timeline,
     TransformTable,
     format_stamp,
     normalize_frame,
     normalize_frames,
-    pixel_windows,
 )
 
 __all__ = [
-    "OPTICAL_FROM_LINK_QUAT_XYZW",
     "CameraTable",
-    "ChainConfig",
-    "ChainConfigError",
-    "ChainEvidence",
-    "ChainFrames",
-    "ChainTopics",
     "Column",
     "ColumnTable",
     "DepthFrameTable",
     "DepthLoader",
     "DepthWindows",
     "FramechainError",
-    "HopTopics",
     "ImageFrameTable",
     "InvalidCameraError",
     "InvalidTransformError",

@@ -38,7 +38,3 @@ class InvalidCameraError(TimelineError):
         self.source = source
         where = f" on {source}" if source else ""
         super().__init__(f"camera {frame!r}{where}: {what}")
-
-
-class ChainConfigError(FramechainError):
-    """The chain configuration (CHAIN.yaml) is malformed or names unknown keys."""

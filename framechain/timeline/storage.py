@@ -1,10 +1,16 @@
-"""Saving a Timeline as Parquet files in a directory, and loading it back losslessly."""
+"""A Timeline's tables as Parquet files in a directory, and back, losslessly.
+
+Depth pixels are stored as float32 bytes in ``depth_pixels.parquet`` and image bytes in
+``image_bytes.parquet``; both are read back lazily, row by row.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -12,23 +18,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain.timeline.errors import TimelineError
-from framechain.timeline.tables import VIDEO_ENCODING
-
-if TYPE_CHECKING:
-    from framechain.timeline.tables import Timeline
+from framechain.timeline.frames import VIDEO_ENCODING, DepthFrameTable, ImageFrameTable
+from framechain.timeline.tables import ColumnTable
 
 _FORMAT = "framechain/timeline@1"
 
 
-def save_timeline(timeline: Timeline, directory: str | Path) -> None:
-    """One Parquet file per table; depth pixels as float32 bytes in ``depth_pixels.parquet``."""
-    from framechain.timeline.tables import TABLE_TYPES
-
+def write_tables(tables: Mapping[str, ColumnTable], metadata: Mapping[str, Any], directory: str | Path) -> None:
+    """One Parquet file per table, the frames' pixels beside them, and ``timeline.json``."""
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    for name in TABLE_TYPES:
-        pq.write_table(getattr(timeline, name).to_arrow(), out / f"{name}.parquet")
-    depth = timeline.depth_frames
+    for name, table in tables.items():
+        pq.write_table(table.to_arrow(), out / f"{name}.parquet")
+    depth = tables["depth_frames"]
+    assert isinstance(depth, DepthFrameTable)
     blobs = []
     for i in range(len(depth)):
         image = np.ascontiguousarray(depth.load(i), dtype=np.float32)
@@ -40,11 +43,12 @@ def save_timeline(timeline: Timeline, directory: str | Path) -> None:
             )
         blobs.append(image.tobytes())
     pq.write_table(pa.table({"pixels_f32": pa.array(blobs, type=pa.binary())}), out / "depth_pixels.parquet")
-    images = timeline.image_frames
+    images = tables["image_frames"]
+    assert isinstance(images, ImageFrameTable)
     image_blobs = [b"" if str(images.encoding[i]) == VIDEO_ENCODING else bytes(images.load(i))
                    for i in range(len(images))]
     pq.write_table(pa.table({"bytes": pa.array(image_blobs, type=pa.binary())}), out / "image_bytes.parquet")
-    meta = {"format": _FORMAT, "metadata": dict(timeline.metadata)}
+    meta = {"format": _FORMAT, "metadata": dict(metadata)}
     try:
         text = json.dumps(meta, indent=2, sort_keys=True, default=_json_scalar, allow_nan=True)
     except (TypeError, ValueError) as err:
@@ -59,12 +63,10 @@ def _json_scalar(value: Any) -> Any:
     raise TypeError(f"object of type {type(value).__name__} is not JSON serialisable")
 
 
-def load_timeline(directory: str | Path) -> Timeline:
-    """Inverse of :func:`save_timeline`; depth pixels are read lazily from their column."""
-    import dataclasses
-
-    from framechain.timeline.tables import TABLE_TYPES, DepthFrameTable, ImageFrameTable, Timeline
-
+def read_tables(
+    directory: str | Path, types: Mapping[str, type[ColumnTable]]
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Inverse of :func:`write_tables`: ``(tables by name, metadata)``; frame pixels load lazily."""
     src = Path(directory)
     header = src / "timeline.json"
     if not header.is_file():
@@ -73,7 +75,7 @@ def load_timeline(directory: str | Path) -> Timeline:
     if meta.get("format") != _FORMAT:
         raise TimelineError(f"{src}: unknown timeline format {meta.get('format')!r}")
     tables: dict[str, Any] = {}
-    for name, cls in TABLE_TYPES.items():
+    for name, cls in types.items():
         if name == "image_frames" and not (src / f"{name}.parquet").is_file():
             continue  # saved before images were collected
         tables[name] = cls.from_arrow(pq.read_table(src / f"{name}.parquet"))
@@ -96,4 +98,4 @@ def load_timeline(directory: str | Path) -> Timeline:
             return raw
 
         tables["image_frames"] = dataclasses.replace(images, loader=load_image)
-    return Timeline(**tables, metadata=meta["metadata"])
+    return tables, dict(meta["metadata"])

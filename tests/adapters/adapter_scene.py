@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from framechain.config.chain import ChainConfig
 from framechain.timeline import (
     CameraTable,
-    ChainConfig,
     DepthFrameTable,
     JointStateTable,
     ObservationTable,

@@ -27,7 +27,7 @@ def _small_chunks_mcap(path: Path, n: int = 300) -> Path:
     """An MCAP with many small chunks (so a cut or a corrupt chunk loses only part)."""
     from mcap.writer import CompressionType, Writer
 
-    from framechain.adapters.msgdefs import typestore
+    from framechain.adapters.formats.msgdefs import typestore
 
     ts = typestore(ros1=False)
     T = ts.types

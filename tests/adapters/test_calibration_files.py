@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from framechain.adapters import open_log
-from framechain.adapters.calibration import CalibrationError, read_intrinsics_file
 from framechain.cli.main import main
-from framechain.timeline import ChainConfig
+from framechain.config.calibration import CalibrationError, read_intrinsics_file
+from framechain.config.chain import ChainConfig
 
 T0 = 1_700_000_000 * 10**9
 
@@ -285,7 +285,7 @@ def test_real_tagslam_bag_with_calibration_and_mount(realdata: Path, tmp_path: P
 
 def test_chain_keys_round_trip_and_resolve_against_the_chain_file(tmp_path: Path,
                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    from framechain.timeline import ChainConfigError
+    from framechain.config.errors import ChainConfigError
 
     raw = {"calibration": [{"file": "cams/c.yaml", "camera": "cam0"}, {"file": "/abs/d.yaml", "frame": "tof"}],
            "mounts": [{"parent": "a", "child": "b", "xyz": [1, 2, 3], "rpy": [0.1, 0.2, 0.3]}],

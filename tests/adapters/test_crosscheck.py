@@ -15,15 +15,9 @@ from scipy.spatial.transform import Rotation
 
 from framechain.adapters import open_log, write_log
 from framechain.cli.main import main
+from framechain.config.chain import ChainConfig
 from framechain.replay import REPLAYED, replay
-from framechain.timeline import (
-    CameraTable,
-    ChainConfig,
-    DepthFrameTable,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
 
 
 def test_rerun_mcap_reader_agrees_on_tf(written: dict[str, Path]) -> None:

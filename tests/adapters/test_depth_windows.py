@@ -16,10 +16,11 @@ import numpy.typing as npt
 import pytest
 
 from framechain.adapters import open_log, write_log
-from framechain.adapters.depth import HORIZON_NS
+from framechain.adapters.messages.depth import HORIZON_NS
+from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayOptions, ReplayResult, replay
 from framechain.sim.scene import Scene, SceneSpec, generate
-from framechain.timeline import ChainConfig, DepthFrameTable, Timeline
+from framechain.timeline import DepthFrameTable, Timeline
 
 
 def _scene() -> Scene:

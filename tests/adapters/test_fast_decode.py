@@ -14,11 +14,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from framechain.adapters import fast_cdr, mcap_log, open_log
-from framechain.adapters.collect import Collector
-from framechain.adapters.fast_cdr import FEEDERS, LayoutError, decode_batches, layout_of, parse_cdr_image
-from framechain.adapters.kinds import Kind
-from framechain.adapters.msgdefs import typestore
+from framechain.adapters import open_log
+from framechain.adapters.formats import fast_cdr
+from framechain.adapters.formats.fast_cdr import FEEDERS, LayoutError, decode_batches, layout_of, parse_cdr_image
+from framechain.adapters.formats.mcap import reader as mcap_log
+from framechain.adapters.formats.msgdefs import typestore
+from framechain.adapters.messages.collect import Collector
+from framechain.adapters.messages.kinds import Kind
 from framechain.replay.depth import _median_of_good
 
 NS = 1_000_000_000
@@ -299,7 +301,7 @@ def test_every_container_reads_the_same_with_and_without_layout_decoding(
 ) -> None:
     from adapter_scene import CHAIN
 
-    from framechain.adapters import rosbag_log
+    from framechain.adapters.formats.rosbag import reader as rosbag_log
 
     fast = open_log(written[container], CHAIN).timeline
     monkeypatch.setattr(mcap_log, "FEEDERS", {})

@@ -13,8 +13,8 @@ import pytest
 from adapter_scene import T0
 
 from framechain.adapters import open_log
-from framechain.adapters.msgdefs import typestore
-from framechain.timeline import ChainConfig
+from framechain.adapters.formats.msgdefs import typestore
+from framechain.config.chain import ChainConfig
 
 
 def _fds(descriptor: Any) -> bytes:

@@ -14,8 +14,10 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.adapters import open_log
 from framechain.cli.main import main
+from framechain.config.chain import ChainConfig
+from framechain.config.errors import ChainConfigError
 from framechain.replay import TransformBuffer
-from framechain.timeline import ChainConfig, ChainConfigError, FramechainError
+from framechain.timeline import FramechainError
 
 T0 = 1_700_000_000 * 10**9
 NS = 10**9

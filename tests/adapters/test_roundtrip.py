@@ -134,7 +134,7 @@ def test_depth_frames_are_decoded_lazily_and_only_where_needed(
 
 
 def test_only_the_chain_topics_are_decoded(written: dict[str, Path]) -> None:
-    from framechain.timeline import ChainConfig
+    from framechain.config.chain import ChainConfig
 
     chain = ChainConfig.from_dict({"topics": {"camera_info": "/camera/color/camera_info"}})
     loaded = open_log(written["mcap-ros2"], chain)

@@ -14,8 +14,8 @@ import pytest
 from rosbags.rosbag1 import Reader as Rosbag1Reader
 
 from framechain.adapters.api import TREE_KINDS, open_log, scan_log
-from framechain.adapters.salvage_mcap import ChannelRecord, McapScanner, MessageRecord
-from framechain.adapters.salvage_rosbag1 import Message, Rosbag1Scanner
+from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, MessageRecord
+from framechain.adapters.formats.rosbag.salvage_ros1 import Message, Rosbag1Scanner
 
 REALDATA = Path(__file__).resolve().parents[2].parent / "shared" / "realdata"
 Msg = tuple[str, int, bytes]
@@ -409,7 +409,7 @@ def test_salvage_is_said_in_json(tmp_path: Path, capsys: pytest.CaptureFixture[s
 
 
 def test_salvaged_rosbag1_fetches_one_message(tmp_path: Path) -> None:
-    from framechain.adapters.rosbag_log import RosbagsLog
+    from framechain.adapters.formats.rosbag.reader import RosbagsLog
 
     path = tmp_path / "tf.bag"
     _write_bag(path, "lz4")

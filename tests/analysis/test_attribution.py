@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import attribute
 from framechain.analysis.estimates import estimate_to_json
-from framechain.replay.catalogue import Fault
+from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 LEVELS_AS_RUN = ("hops", "target")

@@ -7,7 +7,7 @@ import pytest
 
 from framechain.analysis.attribute import attribute
 from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
-from framechain.replay.catalogue import Fault
+from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
 

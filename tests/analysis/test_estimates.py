@@ -23,10 +23,10 @@ from framechain.analysis.estimates import (
     format_estimate,
     format_interval,
 )
-from framechain.analysis.evidence import write_attribution
+from framechain.catalogue import Fault
 from framechain.cli.common import print_findings
-from framechain.replay.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
+from framechain.sinks.evidence_files import write_attribution
 from framechain.sinks.report import render_report
 from framechain.sinks.rerun import RerunTarget, stream_replay
 

@@ -22,18 +22,12 @@ from scipy.spatial.transform import Rotation, Slerp
 from framechain.analysis.alignment import PointFate, align_evidence
 from framechain.analysis.attribute import Attribution, attribute
 from framechain.analysis.estimates import estimate_to_json
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainFrames
 from framechain.replay import TransformBuffer
-from framechain.replay.catalogue import Fault
 from framechain.sim.scene import InjectedFault, Scene, SceneSpec, generate
 from framechain.sinks.rerun import RerunTarget, stream_replay
-from framechain.timeline import (
-    ChainFrames,
-    ObservationTable,
-    PointRole,
-    PointTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.timeline import ObservationTable, PointRole, PointTable, Timeline, TransformTable
 
 MS = 1_000_000
 #: base_link -> base_footprint: the footprint 12 cm below the base, turned 5 deg (a made-up mount).

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from framechain.analysis.attribute import attribute
+from framechain.catalogue import Fault
 from framechain.replay import replay
-from framechain.replay.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 from framechain.timeline import ObservationTable, PointRole, PointTable
 

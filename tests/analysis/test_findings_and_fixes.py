@@ -15,11 +15,10 @@ import pytest
 from framechain.analysis.attribute import attribute
 from framechain.analysis.estimates import ScaleEstimate
 from framechain.analysis.fixes import FixContext, fix_for
+from framechain.catalogue import Fault, HopName
+from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
-from framechain.replay import HopName
-from framechain.replay.catalogue import Fault
 from framechain.sim.scene import TOPICS, InjectedFault, SceneSpec, generate
-from framechain.timeline import ChainConfig
 
 REALDATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
 

@@ -20,8 +20,9 @@ from framechain.analysis.frame_swaps import (
     camera_swap_fault,
     is_signed_permutation,
 )
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainFrames
 from framechain.replay import CameraModel, TransformBuffer
-from framechain.replay.catalogue import Fault
 from framechain.sim.scene import (
     REALSENSE_OPTICAL_FRAME,
     REALSENSE_OPTICAL_XYZ,
@@ -30,7 +31,7 @@ from framechain.sim.scene import (
     SceneSpec,
     generate,
 )
-from framechain.timeline import CameraTable, ChainFrames, Timeline, TransformTable
+from framechain.timeline import CameraTable, Timeline, TransformTable
 
 OPTICAL_Q = np.array([-0.5, 0.5, -0.5, 0.5])  # REP-103 camera_link -> optical, q_xyzw
 T0 = 1_700_000_000_000_000_000

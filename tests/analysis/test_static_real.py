@@ -12,9 +12,9 @@ import pytest
 from test_tagslam_stairs import BAG, _chain
 
 from framechain.analysis.attribute import AnalysisError, attribute
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainConfig
 from framechain.pipeline import attribute_log, load_log
-from framechain.replay.catalogue import Fault
-from framechain.timeline import ChainConfig
 
 ARUCO = "fiducials/aruco_images.bag"
 

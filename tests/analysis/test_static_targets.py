@@ -16,15 +16,10 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import AnalysisError, attribute
 from framechain.analysis.static import StaticTargetError, fit_static_points, intersect_rays, static_groups
-from framechain.replay.catalogue import Fault
-from framechain.timeline import (
-    CameraTable,
-    ChainConfig,
-    ChainConfigError,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainConfig
+from framechain.config.errors import ChainConfigError
+from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 
 FX, FY, CX, CY, WIDTH, HEIGHT = 500.0, 500.0, 320.0, 240.0, 640, 480
 #: Camera on the rig: 10 cm forward, 20 cm up, looking along the rig's +x (REP-103 optical rotation).

@@ -17,9 +17,9 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.analysis.attribute import attribute
 from framechain.analysis.estimates import estimate_to_json
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
-from framechain.replay.catalogue import Fault
-from framechain.timeline import ChainConfig
 
 cv2 = pytest.importorskip("cv2")
 

@@ -16,11 +16,11 @@ import pyarrow.parquet as pq
 import pytest
 from mcap.reader import make_reader
 
+from framechain.catalogue import Fault
 from framechain.cli.main import main
 from framechain.fleet import RESULTS_DIR, run_batch
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
-from framechain.timeline.catalogue import Fault
 
 LEROBOT_TESTS = Path(__file__).resolve().parents[1] / "lerobot"
 if str(LEROBOT_TESTS) not in sys.path:
@@ -282,7 +282,7 @@ def test_realdata_fleet(realdata: Path, tmp_path: Path) -> None:
     episodes = sorted((Path(r["log"]).name, r["episode"]) for r in rows if r["episode"] is not None)
     assert episodes == [(d, e) for d in ("gr00t_pick_n_place_v20", "unitree_g1_v21") for e in range(3)]
     assert all(r["status"] and (r["status"] in ("findings", "clean") or r["error"]) for r in rows)
-    tagslam = next(r for r in rows if r["log"].endswith("tag_detections.bag"))
+    tagslam = next(r for r in rows if r["log"].endswith("tagslam_stairs/tag_detections.bag"))
     assert tagslam["span_s"] == pytest.approx(86.4, abs=0.1)  # the README's 86.4 s
     assert (out / "fleet_report.html").stat().st_size > 0
     assert (out / "fleet_report.md").stat().st_size > 0

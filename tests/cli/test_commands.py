@@ -12,8 +12,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from framechain.catalogue import Fault
 from framechain.cli.main import main
-from framechain.replay.catalogue import Fault
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 

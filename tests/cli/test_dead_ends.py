@@ -15,16 +15,8 @@ from scipy.spatial.transform import Rotation
 
 from framechain.adapters import write_log
 from framechain.cli.main import main
-from framechain.timeline import (
-    CameraTable,
-    ChainConfig,
-    ChainFrames,
-    ChainTopics,
-    DepthFrameTable,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.config.chain import ChainConfig, ChainFrames, ChainTopics
+from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
 
 ROOT = Path(__file__).resolve().parents[2]
 REALDATA = ROOT.parent / "shared" / "realdata"
@@ -217,7 +209,7 @@ def test_the_suggested_chain_names_only_frames_of_the_log(tmp_path: Path, capsys
 
 
 def test_bare_urdf_as_robot_points_at_robot_yaml(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 
     root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": np.zeros((3, 2), np.float32)})],
                                  features={"observation.state": FeatureSpec("float32", (2,), ["a", "b"])}, fps=10,
@@ -248,8 +240,8 @@ def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(tmp_path: Path, capsy
     import pyarrow.parquet as pq
     import yourdfpy
 
-    from framechain.adapters.lerobot import open_dataset
-    from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+    from framechain.adapters.lerobot.reader import open_dataset
+    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
     from framechain.replay import TransformBuffer
 
     text = _readme_robot_yaml()
@@ -309,7 +301,7 @@ REAL_LOGS = [
     "evo/tf_example.bag", "evo/tf_example", "evo/nav2_turtlebot.mcap", "fiducials/aruco_images.bag",
     "fiducials/aruco_marker.bag", "franka_tf/rosbagFrankaPanda.bag", "franka_tf/ros2_bag",
     "husky_localization/test1.bag", "husky_localization/test1_old_stereo_wheel.bag", "turtlesim/example.bag",
-    "realsense_d435/test_rs.bag", "tagslam_stairs/tag_detections.bag",
+    "realsense_d435/test_rs.bag", "tagslam_stairs/tag_detections.bag", "tagslam_quad_rig/tag_detections.bag",
 ]
 REAL_DATASETS = ["lerobot/gr00t_pick_n_place_v20", "lerobot/unitree_g1_v21"]
 

@@ -11,8 +11,8 @@ import pytest
 import yaml
 
 from framechain.adapters.api import open_log
-from framechain.adapters.marker_probe import probe_markers
-from framechain.adapters.suggest import suggest
+from framechain.adapters.suggest.chain import suggest
+from framechain.adapters.suggest.marker_probe import probe_markers
 from framechain.cli.main import main
 
 REALDATA = Path(__file__).resolve().parents[2].parent / "shared" / "realdata"

@@ -8,7 +8,7 @@ import pytest
 from core_helpers import assert_same_rotation, random_quats
 from scipy.spatial.transform import Rotation
 
-from framechain.timeline.quaternion import (
+from framechain.geometry.rotations import (
     IDENTITY,
     compose,
     homogeneous,
@@ -90,7 +90,7 @@ def test_from_rpy_is_scipy_fixed_axis_euler(rng: np.random.Generator) -> None:
 
 
 def test_chain_mount_rotations_use_the_shared_maths(rng: np.random.Generator) -> None:
-    from framechain.timeline.chain import quat_xyzw_from_rotvec, quat_xyzw_from_rpy
+    from framechain.config.chain import quat_xyzw_from_rotvec, quat_xyzw_from_rpy
 
     for rpy, rotvec in zip(rng.uniform(-3, 3, (20, 3)), rng.uniform(-2, 2, (20, 3)), strict=True):
         assert_same_rotation(np.array([quat_xyzw_from_rpy(*rpy)]), Rotation.from_euler("xyz", rpy).as_quat()[None])

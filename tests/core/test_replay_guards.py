@@ -7,15 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from framechain.replay import REPLAYED, HopName, RejectReason, ReplayOptions, replay, sample_depth
-from framechain.timeline import (
-    CameraTable,
-    ChainFrames,
-    DepthFrameTable,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
+from framechain.catalogue import HopName
+from framechain.config.chain import ChainFrames
+from framechain.replay import REPLAYED, RejectReason, ReplayOptions, replay, sample_depth
+from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
 
 S = 1_000_000_000
 MS = 1_000_000
@@ -296,8 +291,9 @@ def test_observations_of_another_camera_are_rejected_and_counted() -> None:
     """A second camera with its own CameraInfo: its detections are not replayed through this chain."""
     import dataclasses
 
+    from framechain.config.chain import ChainFrames
     from framechain.replay import replay
-    from framechain.timeline import CameraTable, ChainFrames, ObservationTable, Timeline, TransformTable
+    from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 
     cams = CameraTable.concat([
         CameraTable.from_intrinsics("front_optical", fx=500, fy=500, cx=320, cy=240, width=640, height=480),

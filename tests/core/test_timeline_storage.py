@@ -22,7 +22,7 @@ from framechain.timeline import (
     TimelineError,
     TransformTable,
 )
-from framechain.timeline.tables import TABLE_TYPES
+from framechain.timeline.model import TABLE_TYPES
 
 S = 1_000_000_000
 

@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE / "data"

@@ -10,7 +10,7 @@ import yaml
 from lerobot_scene import LINK_FROM_OPTICAL, rx, ry, rz
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.calibration import CalibrationError, load_calibration, read_intrinsics_file
+from framechain.config.calibration import CalibrationError, load_calibration, read_intrinsics_file
 
 INTRINSICS = {"fx": 600.0, "fy": 610.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
 

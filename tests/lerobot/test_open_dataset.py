@@ -22,12 +22,14 @@ from lerobot_scene import (
     write_robot_yaml,
 )
 
-from framechain.adapters.lerobot import open_dataset
-from framechain.adapters.lerobot_format import DatasetError
-from framechain.adapters.robot_config import RobotConfig, RobotConfigError
+from framechain.adapters.lerobot.format import DatasetError
+from framechain.adapters.lerobot.reader import open_dataset
+from framechain.adapters.robot.config import RobotConfig, RobotConfigError
 from framechain.analysis.estimates import estimate_to_json
-from framechain.replay import HopName, TransformBuffer, replay
-from framechain.timeline import ChainConfig, ChainEvidence, ChainFrames, Timeline
+from framechain.catalogue import HopName
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
+from framechain.replay import TransformBuffer, replay
+from framechain.timeline import Timeline
 
 FRAMES = ChainFrames(camera="wrist_optical_frame", body="base_link", world="world")
 
@@ -227,7 +229,7 @@ def test_timeline_saves_and_loads(arm_dataset: ArmDataset, tmp_path: Path) -> No
 def test_so101_dataset_with_a_wrist_camera(so101_urdf: Path, tmp_path: Path, rng: np.random.Generator) -> None:
     import yourdfpy
 
-    from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 
     joints = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
     names = [f"{j}.pos" for j in joints]

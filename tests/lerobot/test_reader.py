@@ -13,7 +13,7 @@ import pytest
 from lerobot_scene import FPS, STATE_NAMES, ArmDataset, episode_times, state_vectors, write_arm_dataset
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot_format import (
+from framechain.adapters.lerobot.format import (
     DatasetError,
     DatasetReader,
     Layout,
@@ -146,7 +146,7 @@ def test_timestamps_going_backwards_and_notes(tmp_path: Path) -> None:
     t = episode_times(0, 10)
     t_bad = t.copy()
     t_bad[5] = t_bad[3]
-    from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 
     spec = {"observation.state": FeatureSpec("float32", (7,), STATE_NAMES)}
     root = write_lerobot_dataset(tmp_path / "bad", [EpisodeData({"observation.state": state_vectors(t)},
@@ -167,7 +167,7 @@ def test_timestamps_going_backwards_and_notes(tmp_path: Path) -> None:
 
 
 def test_variable_rate_timestamps_are_kept(tmp_path: Path) -> None:
-    from framechain.adapters.lerobot_writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 
     t = np.cumsum(np.r_[0.0, np.full(11, 0.04) + np.linspace(-0.01, 0.01, 11)])
     spec = {"observation.state": FeatureSpec("float32", (7,), STATE_NAMES)}

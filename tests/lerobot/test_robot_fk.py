@@ -10,8 +10,8 @@ import pytest
 import yourdfpy
 from lerobot_scene import ARM6
 
-from framechain.adapters.robot import JointType, RobotModel, RobotModelError
-from framechain.adapters.robot_config import JointMapping, JointUnit, RobotConfig, RobotConfigError
+from framechain.adapters.robot.config import JointMapping, JointUnit, RobotConfig, RobotConfigError
+from framechain.adapters.robot.kinematics import JointType, RobotModel, RobotModelError
 
 SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 

@@ -11,8 +11,8 @@ from lerobot_scene import target_world, write_arm_dataset, write_detection_table
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.estimates import estimate_to_json
+from framechain.catalogue import Fault
 from framechain.pipeline import attribute_log
-from framechain.replay.catalogue import Fault
 
 
 def test_wrist_mount_yaw_error_is_four_degrees_on_the_mount_edge(tmp_path: Path) -> None:

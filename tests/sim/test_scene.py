@@ -16,6 +16,7 @@ import pytransform3d.transformations as pt
 from pytransform3d.transform_manager import NumpyTimeseriesTransform, StaticTransform, TemporalTransformManager
 from scipy.spatial.transform import Rotation
 
+from framechain.catalogue import Fault
 from framechain.sim.scene import (
     REALSENSE_OPTICAL_FRAME,
     REALSENSE_OPTICAL_XYZ,
@@ -27,7 +28,6 @@ from framechain.sim.scene import (
     generate,
 )
 from framechain.timeline import PointRole
-from framechain.timeline.catalogue import Fault
 
 REALSENSE = {"optical_frame": REALSENSE_OPTICAL_FRAME, "optical_xyz": REALSENSE_OPTICAL_XYZ}
 REP103_XYZW = [-0.5, 0.5, -0.5, 0.5]  # camera_link (x fwd, y left, z up) -> optical (x right, y down, z fwd)

@@ -26,13 +26,14 @@ from test_rerun import _read  # the .rrd read back per entity, as the Rerun sink
 from framechain.adapters import write_log
 from framechain.analysis.attribute import Attribution, attribute
 from framechain.cli.demo_cmd import parse_fault
+from framechain.config.chain import ChainConfig
 from framechain.pipeline import LoadedRun, load_log
 from framechain.replay import ReplayResult, replay
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import Scene, SceneSpec, generate
 from framechain.sinks.overlay import FAULT_COLORS, ImageSelection
 from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
-from framechain.timeline import CameraTable, ChainConfig, ImageFrameTable, ObservationTable, Timeline, TransformTable
+from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, Timeline, TransformTable
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"

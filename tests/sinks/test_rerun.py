@@ -24,9 +24,10 @@ from scipy.spatial.transform import Rotation
 from framechain.analysis.alignment import align_evidence
 from framechain.analysis.attribute import Finding
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate
+from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
-from framechain.replay import HopName, ReplayResult, TransformBuffer, replay
-from framechain.replay.catalogue import Fault
+from framechain.config.chain import ChainFrames
+from framechain.replay import ReplayResult, TransformBuffer, replay
 from framechain.sinks.rerun import (
     FindingView,
     OutputMode,
@@ -39,7 +40,6 @@ from framechain.sinks.rerun import (
 )
 from framechain.timeline import (
     CameraTable,
-    ChainFrames,
     DepthFrameTable,
     ObservationTable,
     PointRole,
@@ -581,7 +581,7 @@ def test_cli_replay_reads_a_recorded_log(
     scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from framechain.adapters import write_log
-    from framechain.timeline import ChainConfig
+    from framechain.config.chain import ChainConfig
 
     chain = ChainConfig.from_dict({
         "frames": {"camera": "camera_optical_frame", "body": "base_link", "world": "map"},
@@ -634,7 +634,7 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
 
 
 def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from framechain.replay.catalogue import Fault
+    from framechain.catalogue import Fault
     from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
     generated = generate(SceneSpec(duration_s=2.0, width=160, height=120, focal_px=150.0,

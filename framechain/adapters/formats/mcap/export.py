@@ -1,0 +1,137 @@
+"""Copy a log's messages into a new MCAP and add messages of other schemas beside them.
+
+The log's own messages keep their bytes, schemas and encodings: an MCAP is copied record for
+record; a ROS 1 bag becomes ``ros1`` messages with ``ros1msg`` schemas, a ROS 2 bag ``cdr`` messages
+with ``ros2msg``/``ros2idl`` schemas (the definitions stored in the bag), so Foxglove and Rerun read
+the copy as they read the original. A LeRobot dataset has no messages to copy. The added messages
+come already serialised with their schema (protobuf: a ``FileDescriptorSet``), one channel per topic.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+from framechain.adapters.api import detect
+from framechain.adapters.errors import AdapterError
+
+
+class ExtraMessage(Protocol):
+    """A serialised message to add: topic, schema (name, encoding, data), message encoding, times."""
+
+    @property
+    def topic(self) -> str: ...
+    @property
+    def schema_name(self) -> str: ...
+    @property
+    def schema_encoding(self) -> str: ...
+    @property
+    def schema_data(self) -> bytes: ...
+    @property
+    def message_encoding(self) -> str: ...
+    @property
+    def log_time_ns(self) -> int: ...
+    @property
+    def publish_time_ns(self) -> int: ...
+    @property
+    def data(self) -> bytes: ...
+
+
+@dataclass(frozen=True)
+class ExportCounts:
+    """Messages copied from the log and added, per topic."""
+
+    copied: dict[str, int]
+    added: dict[str, int]
+
+
+def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[ExtraMessage]) -> ExportCounts:
+    """Write ``out``: every message of the log ``source`` (None: none) and the ``extra`` messages.
+
+    ``out`` must not be the source itself.
+    """
+    from mcap.writer import CompressionType, Writer
+
+    target = Path(out)
+    if source is not None and Path(source).resolve() == target.resolve():
+        raise AdapterError(str(out), "the export would overwrite the log it reads; choose another --out")
+    copied: dict[str, int] = {}
+    added: dict[str, int] = {}
+    extra_list = sorted(extra, key=lambda m: m.log_time_ns)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with target.open("wb") as f:
+        writer: Any = Writer(f, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="framechain")
+        if source is not None:
+            _copy_log(Path(source), writer, copied)
+        schemas: dict[tuple[str, str], int] = {}
+        channels: dict[str, int] = {}
+        for m in extra_list:
+            key = (m.schema_name, m.schema_encoding)
+            if key not in schemas:
+                schemas[key] = writer.register_schema(m.schema_name, m.schema_encoding, m.schema_data)
+            if m.topic not in channels:
+                channels[m.topic] = writer.register_channel(m.topic, m.message_encoding, schemas[key])
+            writer.add_message(channels[m.topic], log_time=m.log_time_ns, publish_time=m.publish_time_ns,
+                               data=m.data)
+            added[m.topic] = added.get(m.topic, 0) + 1
+        writer.finish()
+    return ExportCounts(copied=copied, added=added)
+
+
+def _copy_log(source: Path, writer: Any, copied: dict[str, int]) -> None:
+    from framechain.adapters.lerobot.reader import is_lerobot_dataset
+
+    if source.is_dir() and is_lerobot_dataset(source):
+        return  # a dataset of Parquet and video files: no messages to copy
+    fmt, target, _ = detect(source)
+    if fmt == "mcap":
+        _copy_mcap(target, writer, copied)
+    else:
+        _copy_rosbag(target, writer, copied)
+
+
+def _copy_mcap(path: Path, writer: Any, copied: dict[str, int]) -> None:
+    from mcap.reader import make_reader
+
+    w = writer
+    schema_ids: dict[int, int] = {}
+    channel_ids: dict[int, int] = {}
+    with path.open("rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if channel.id not in channel_ids:
+                if schema is not None and schema.id not in schema_ids:
+                    schema_ids[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+                channel_ids[channel.id] = w.register_channel(
+                    channel.topic, channel.message_encoding, schema_ids[schema.id] if schema is not None else 0,
+                    metadata=dict(channel.metadata))
+            w.add_message(channel_ids[channel.id], log_time=message.log_time,
+                          publish_time=message.publish_time, data=message.data, sequence=message.sequence)
+            copied[channel.topic] = copied.get(channel.topic, 0) + 1
+
+
+def _copy_rosbag(path: Path, writer: Any, copied: dict[str, int]) -> None:
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import MessageDefinitionFormat
+
+    w = writer
+    with AnyReader([path]) as reader:
+        ros1 = reader.is2 is False
+        channel_ids: dict[int, int] = {}
+        schema_ids: dict[str, int] = {}
+        for conn in reader.connections:
+            text = conn.msgdef.data
+            if ros1:
+                name, encoding, message_encoding = conn.msgtype.replace("/msg/", "/"), "ros1msg", "ros1"
+            else:
+                idl = conn.msgdef.format == MessageDefinitionFormat.IDL
+                name, encoding, message_encoding = conn.msgtype, "ros2idl" if idl else "ros2msg", "cdr"
+            if name not in schema_ids:
+                schema_ids[name] = w.register_schema(name, encoding, text.encode())
+            channel_ids[conn.id] = w.register_channel(conn.topic, message_encoding,
+                                                      schema_ids[name])
+        for conn, t, raw in reader.messages():
+            w.add_message(channel_ids[conn.id], log_time=t, publish_time=t, data=bytes(raw))
+            copied[conn.topic] = copied.get(conn.topic, 0) + 1

@@ -1,0 +1,641 @@
+"""Standalone MCAP files: ROS 2 (cdr), ROS 1 (ros1) and Foxglove (protobuf, JSON) encodings.
+
+Reading is one pass, chunk by chunk through the chunk index: topics nobody asked for are skipped
+without decompression where the index allows, each chunk is decompressed once and its CRC
+checked (zlib-ng's crc32), and a corrupt chunk is skipped and counted (from its message index)
+instead of ending the read. Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo,
+PointStamped, Detection2DArray) are decoded many at a time by their byte layout. The pixel
+windows the detections need are cut from the depth frames during the pass (the collector's
+DepthWindowKeeper); a frame whose window was not kept is fetched later by its location (chunk
+and offset, from the message index records, found by a binary search on log time), its chunk
+decompressed again without a scan of the index. A file whose footer
+or summary is missing (a recording cut short) is salvaged by a linear scan of its records: every
+complete message before the cut is recovered and counted.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.formats.decoders import (
+    Decoder,
+    DecoderBuildError,
+    json_decoder,
+    protobuf_decoder,
+    ros_decoder,
+    ros_typename,
+    typestore_from_idl,
+    typestore_from_msg,
+)
+from framechain.adapters.formats.fast_cdr import FEEDERS, Feeder, LayoutError, decode_batches
+from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, SchemaRecord
+from framechain.adapters.formats.salvage_report import SalvageReport
+from framechain.adapters.messages.collect import OBSERVATION_KINDS, Collector
+from framechain.adapters.messages.kinds import Kind, normalize_msgtype
+from framechain.adapters.model import LogInfo, TopicInfo
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+_FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
+
+ProgressFn = Callable[[int], None]
+#: Messages of a channel gathered before they are decoded together (bounds the memory they hold).
+BATCH_MESSAGES = 8192
+
+
+@dataclass
+class _Gathered:
+    """A channel's messages waiting to be decoded together."""
+
+    feeder: Feeder
+    log_times: list[int] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
+
+
+@dataclass
+class _Channel:
+    id: int
+    topic: str
+    encoding: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+
+
+class McapLog:
+    """One MCAP file opened for reading (a context manager)."""
+
+    def __init__(self, path: Path) -> None:
+        from mcap.exceptions import McapError
+
+        self.path = path
+        self._f = path.open("rb")
+        self.notes: list[str] = []
+        head = self._f.read(8)
+        if head != MCAP_MAGIC:
+            self._f.close()
+            raise CorruptLogError(path, "not an MCAP file (bad magic at the start)")
+        self._f.seek(0)
+        self.summary: Any = None
+        self.truncated = False
+        self.channels: dict[int, _Channel] = {}
+        self._counts: Counter[int] = Counter()
+        self._first: dict[int, int] = {}
+        self._last: dict[int, int] = {}
+        self._lost: Counter[int] = Counter()
+        self.profile = ""
+        try:
+            from mcap.reader import SeekingReader
+
+            reader = SeekingReader(self._f)
+            self.profile = reader.get_header().profile
+            self.summary = reader.get_summary()
+        except (McapError, struct.error, ValueError, OSError):
+            self.truncated = True
+            self.summary = None
+        if self.summary is not None:
+            for ch in self.summary.channels.values():
+                self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
+        self._decoders: dict[int, Decoder] = {}
+        #: Per ROS channel: its typestore, type name (rosbags' spelling) and whether it is ROS 1.
+        self._stores: dict[int, tuple[Any, str, bool]] = {}
+        self._scanned = False
+        self._where: dict[str, _Locations] = {}
+        self._chunk_by_offset: dict[int, Any] = {}
+        self._fetch_chunk: tuple[int, bytes] | None = None
+        self._zstd: Any = None
+        #: What a linear scan salvaged and lost (None until one ran, or when nothing was damaged).
+        self.salvage: SalvageReport | None = None
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._f.close()
+
+    def _add_channel(self, ch: Any, schema: Any) -> None:
+        """Keep a channel, and say at once when its messages cannot be decoded whatever they hold."""
+        if schema is None:
+            channel = _Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
+        else:
+            channel = _Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
+        self.channels[ch.id] = channel
+        problem = _undecodable(channel)
+        if problem:
+            note = f"topic {channel.topic}: {problem}; its messages are not read"
+            if note not in self.notes:
+                self.notes.append(note)
+
+    # -- what the file holds --------------------------------------------------------------
+    @property
+    def indexed(self) -> bool:
+        return self.summary is not None and bool(self.summary.chunk_indexes)
+
+    def info(self) -> LogInfo:
+        stats = self.summary.statistics if self.summary is not None else None
+        if stats is not None and self.indexed:
+            counts = dict(stats.channel_message_counts)
+            start, end = int(stats.message_start_time), int(stats.message_end_time)
+        else:
+            if not self._scanned:
+                for _ in self._linear(wanted=None):
+                    pass
+            counts = dict(self._counts)
+            start = min(self._first.values(), default=0)
+            end = max(self._last.values(), default=0)
+        duration = max(end - start, 0) * 1e-9
+        topics: dict[str, TopicInfo] = {}
+        for cid, ch in sorted(self.channels.items()):
+            n = int(counts.get(cid, 0))
+            if ch.topic in topics:  # several channels of one topic
+                prev = topics[ch.topic]
+                n += prev.count
+            rate = (n - 1) / duration if n > 1 and duration > 0 else 0.0
+            topics[ch.topic] = TopicInfo(ch.topic, self._msgtype(ch), n, rate, ch.encoding)
+        total = sum(t.count for t in topics.values())
+        if total == 0 and not self.truncated:
+            raise EmptyLogError(self.path, "the MCAP file holds no messages")
+        encodings = sorted({c.encoding for c in self.channels.values()})
+        container = f"mcap ({', '.join(encodings) or 'no channels'})"
+        return LogInfo(format="mcap", path=self.path, start_ns=start, end_ns=end,
+                       topics=tuple(sorted(topics.values(), key=lambda t: t.name)), notes=tuple(self.notes),
+                       container=container, message_count=total,
+                       salvage=self.salvage.to_dict() if self.salvage is not None else None)
+
+    @staticmethod
+    def _msgtype(ch: _Channel) -> str:
+        return ch.schema_name or "(no schema)"
+
+    # -- decoding -----------------------------------------------------------------------------
+    def decoder(self, cid: int) -> Decoder:
+        if cid in self._decoders:
+            return self._decoders[cid]
+        ch = self.channels[cid]
+        try:
+            dec = self._build_decoder(ch)
+        except DecoderBuildError as err:
+            raise SchemaError(self.path, str(err), topic=ch.topic) from err
+        self._decoders[cid] = dec
+        return dec
+
+    def _build_decoder(self, ch: _Channel) -> Decoder:
+        problem = _undecodable(ch)
+        if problem:
+            raise DecoderBuildError(problem)
+        text = ch.schema_data.decode("utf-8", "replace")
+        ros: tuple[Any, bool] | None = None
+        if ch.encoding == "cdr" and ch.schema_encoding == "ros2msg":
+            ros = typestore_from_msg(ch.schema_name, text), False
+        elif ch.encoding == "cdr" and ch.schema_encoding == "ros2idl":
+            ros = typestore_from_idl(text), False
+        elif ch.encoding == "ros1" and ch.schema_encoding == "ros1msg":
+            ros = typestore_from_msg(ch.schema_name, text), True
+        if ros is not None:
+            store, ros1 = ros
+            self._stores[ch.id] = (store, ros_typename(ch.schema_name), ros1)
+            return ros_decoder(store, ch.schema_name, ros1=ros1)
+        if ch.encoding == "protobuf" and ch.schema_encoding == "protobuf":
+            return protobuf_decoder(ch.schema_name, ch.schema_data)
+        return json_decoder()  # the only encoding left that _undecodable lets through
+
+    # -- reading ----------------------------------------------------------------------------------
+    def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
+        """Decode the selected topics into the collector.
+
+        Topics of a type :data:`fast_cdr.FEEDERS` knows are gathered and decoded many messages at
+        a time by their byte layout; messages no layout fits go through rosbags one by one.
+        """
+        if self.indexed:
+            wanted = {cid for cid, ch in self.channels.items() if ch.topic in selected}
+            messages: Iterator[Any] = self._indexed(wanted)
+        else:
+            messages = self._linear(wanted=selected)
+        handlers: dict[int, Callable[[str, int, Any], None] | None] = {}
+        gathered: dict[int, _Gathered] = {}
+        failures: Counter[int] = Counter()
+        first_error: dict[int, str] = {}
+
+        def handle(cid: int, log_time: int, data: bytes | memoryview) -> None:
+            try:
+                handler = handlers[cid]
+                assert handler is not None
+                handler(self.channels[cid].topic, log_time, self._decoders[cid](data))
+            except Exception as err:  # one undecodable message must not end the read
+                failures[cid] += 1
+                first_error.setdefault(cid, f"{type(err).__name__}: {err}")
+
+        def flush_observations() -> None:
+            for cid, batch in gathered.items():
+                if selected.get(self.channels[cid].topic) in OBSERVATION_KINDS:
+                    self._feed(cid, batch, col, handle)
+
+        col.flush_observations = flush_observations
+        try:
+            self._read_messages(messages, selected, col, handlers, gathered, handle, progress)
+        finally:
+            col.flush_observations = None
+        for cid, batch in gathered.items():
+            self._feed(cid, batch, col, handle)
+        for cid, n in failures.items():
+            col.notes.append(
+                f"topic {self.channels[cid].topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
+                f"({first_error[cid]}); skipped"
+            )
+        col.notes.extend(n for n in self.notes if n not in col.notes)
+
+    def _read_messages(self, messages: Iterator[Any], selected: dict[str, Kind], col: Collector,
+                       handlers: dict[int, Callable[[str, int, Any], None] | None], gathered: dict[int, _Gathered],
+                       handle: Callable[[int, int, bytes | memoryview], None], progress: ProgressFn | None) -> None:
+        done = 0
+        for msg in messages:
+            cid = msg.channel_id
+            if cid not in handlers:
+                handlers[cid] = self._handler(cid, selected, col)
+                feeder = self._feeder(cid, selected)
+                if handlers[cid] is not None and feeder is not None:
+                    gathered[cid] = _Gathered(feeder)
+            if handlers[cid] is None:
+                continue
+            batch = gathered.get(cid)
+            if batch is not None:
+                batch.log_times.append(msg.log_time)
+                batch.payloads.append(bytes(msg.data))
+                if len(batch.payloads) >= BATCH_MESSAGES:
+                    self._feed(cid, batch, col, handle)
+            else:
+                handle(cid, msg.log_time, msg.data)
+            done += 1
+            if progress is not None and done % 4096 == 0:
+                progress(4096)
+
+    def _handler(self, cid: int, selected: dict[str, Kind], col: Collector) -> Callable[[str, int, Any], None] | None:
+        """The collector's handler of a channel (None: not selected, or not decodable; noted)."""
+        ch = self.channels.get(cid)
+        kind = selected.get(ch.topic) if ch else None
+        if ch is None or kind is None:
+            return None
+        fox = ch.schema_name.startswith("foxglove.")
+        if fox and kind not in _FOXGLOVE_KINDS:
+            return None
+        try:
+            self.decoder(cid)
+        except SchemaError as err:
+            col.notes.append(f"{err.what.rstrip('.')}: topic {ch.topic} skipped")
+            return None
+        return col.handler(kind, foxglove=fox)
+
+    def _feeder(self, cid: int, selected: dict[str, Kind]) -> Feeder | None:
+        ch = self.channels[cid]
+        if cid not in self._stores:
+            return None
+        return FEEDERS.get((selected[ch.topic], normalize_msgtype(ch.schema_name)))
+
+    def _feed(self, cid: int, batch: _Gathered, col: Collector,
+              handle: Callable[[int, int, bytes | memoryview], None]) -> None:
+        """Decode a channel's gathered messages by layout; the rest one by one, in file order."""
+        if not batch.payloads:
+            return
+        store, typename, ros1 = self._stores[cid]
+        log_times = np.asarray(batch.log_times, dtype=np.int64)
+        batches, rest = decode_batches(store, typename, batch.payloads, ros1=ros1)
+        slow = [rest]
+        for b in batches:
+            try:
+                batch.feeder(col, self.channels[cid].topic, log_times[b.rows], b)
+            except (KeyError, LayoutError):  # a layout without the fields the feeder reads
+                slow.append(b.rows)
+        for row in np.sort(np.concatenate(slow)).tolist():
+            handle(cid, int(log_times[row]), batch.payloads[row])
+        batch.log_times.clear()
+        batch.payloads.clear()
+
+    def _indexed(self, wanted: set[int]) -> Iterator[Any]:
+        """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once."""
+        for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            if ci.message_index_offsets and not (set(ci.message_index_offsets) & wanted):
+                continue
+            try:
+                data = self._chunk_data(ci)
+            except Exception as err:
+                self._note_bad_chunk(ci.chunk_start_offset, err, self._index_counts(ci))
+                continue
+            yield from _chunk_messages(data, wanted)
+
+    def _chunk_body(self, ci: Any) -> tuple[str, memoryview, int, int]:
+        """(compression, compressed records, uncompressed size, uncompressed CRC) of a chunk."""
+        self._f.seek(ci.chunk_start_offset + _RECORD_HEAD.size)
+        body = self._f.read(ci.chunk_length - _RECORD_HEAD.size)
+        _, _, uncompressed_size, crc, name_len = _CHUNK_HEAD.unpack_from(body, 0)
+        pos = _CHUNK_HEAD.size
+        compression = body[pos : pos + name_len].decode("utf-8", "replace")
+        pos += name_len
+        (records_len,) = struct.unpack_from("<Q", body, pos)
+        pos += 8
+        if pos + records_len > len(body):
+            raise ValueError(f"chunk records run past the chunk ({records_len} bytes at {pos} of {len(body)})")
+        return compression, memoryview(body)[pos : pos + records_len], uncompressed_size, crc
+
+    def _chunk_data(self, ci: Any, *, check_crc: bool = True) -> bytes:
+        """The decompressed records of a chunk, its CRC checked (CRCValidationError when it differs)."""
+        from mcap.stream_reader import CRCValidationError
+
+        compression, raw, uncompressed_size, crc = self._chunk_body(ci)
+        if compression == "zstd":
+            if self._zstd is None:
+                import zstandard
+
+                self._zstd = zstandard.ZstdDecompressor()  # one per reader: its context is reused
+            data: bytes = self._zstd.decompress(raw, max_output_size=uncompressed_size)
+        else:
+            data = _decompress(compression, raw, uncompressed_size)
+        if check_crc and crc != 0 and _crc32(data) != crc:
+            from mcap.records import Chunk
+
+            chunk = Chunk(compression=compression, data=b"", message_end_time=0, message_start_time=0,
+                          uncompressed_crc=crc, uncompressed_size=uncompressed_size)
+            raise CRCValidationError(expected=crc, actual=_crc32(data), record=chunk)
+        return data
+
+    def _index_counts(self, ci: Any) -> Counter[int]:
+        """Messages per channel in a chunk, from the message index records that follow it."""
+        from mcap.records import MessageIndex
+        from mcap.stream_reader import StreamReader
+
+        counts: Counter[int] = Counter()
+        if not ci.message_index_length:
+            return counts
+        try:
+            self._f.seek(ci.chunk_start_offset + ci.chunk_length)
+            blob = self._f.read(ci.message_index_length)
+            for rec in StreamReader(io.BytesIO(blob), skip_magic=True).records:
+                if isinstance(rec, MessageIndex):
+                    counts[rec.channel_id] += len(rec.records)
+        except Exception:
+            return counts
+        return counts
+
+    def _note_bad_chunk(self, offset: int, err: Exception, counts: Counter[int] | None) -> None:
+        from mcap.stream_reader import CRCValidationError
+
+        what = "CRC mismatch" if isinstance(err, CRCValidationError) else f"unreadable ({type(err).__name__})"
+        if counts:
+            per_topic: Counter[str] = Counter()
+            for cid, n in counts.items():
+                per_topic[self.channels[cid].topic if cid in self.channels else f"channel {cid}"] += n
+            lost = sum(per_topic.values())
+            detail = ", ".join(f"{t} {n}" for t, n in sorted(per_topic.items()))
+            self.notes.append(
+                f"chunk at byte {offset}: {what}; skipped, {lost} message{'s' if lost != 1 else ''} lost ({detail})"
+            )
+        else:
+            self.notes.append(f"chunk at byte {offset}: {what}; skipped, its messages are lost (count unknown)")
+
+    def _linear(self, wanted: dict[str, Kind] | None) -> Iterator[Any]:
+        """Every message in file order, salvaging around damage (see :mod:`salvage_mcap`)."""
+        import mmap
+
+        schemas: dict[int, SchemaRecord] = {}
+        counting = not self._scanned
+        size = self.path.stat().st_size
+        if size <= len(MCAP_MAGIC):
+            buf: mmap.mmap | bytes = b""
+        else:
+            buf = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)
+        scanner = McapScanner(buf, lambda cid: self.channels[cid].topic if cid in self.channels else None)
+        try:
+            for rec in scanner.records():
+                if isinstance(rec, SchemaRecord):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, ChannelRecord):
+                    if rec.id not in self.channels:
+                        self._add_channel(rec, schemas.get(rec.schema_id))
+                else:
+                    if counting:
+                        self._count(rec)
+                    if wanted is not None:
+                        ch = self.channels.get(rec.channel_id)
+                        if ch is not None and ch.topic in wanted:
+                            yield rec
+        finally:
+            if isinstance(buf, mmap.mmap):
+                buf.close()
+        if counting:
+            self._scanned = True
+            report = scanner.report
+            if self.truncated or report.damaged:
+                report.reason = ("the file has no usable footer or summary" if self.truncated
+                                 else "the file has no chunk index")
+                self.salvage = report
+                self.notes.extend(n for n in report.notes() if n not in self.notes)
+
+    def _count(self, msg: Any) -> None:
+        cid = msg.channel_id
+        self._counts[cid] += 1
+        t = int(msg.log_time)
+        if cid not in self._first or t < self._first[cid]:
+            self._first[cid] = t
+        if cid not in self._last or t > self._last[cid]:
+            self._last[cid] = t
+
+    # -- lazy fetch --------------------------------------------------------------------------------
+    def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        """The decoded message of ``topic`` at ``log_time_ns`` (the ordinal-th of equal times)."""
+        if not self.indexed:
+            return self._fetch_linear(topic, log_time_ns, ordinal)
+        where = self._locations(topic)
+        times = where.log_time_ns
+        first = int(np.searchsorted(times, log_time_ns, side="left"))
+        row = first + ordinal
+        if row >= times.size or int(times[row]) != log_time_ns:
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read",
+                                  topic=topic)
+        chunk_offset = int(where.chunk_offset[row])
+        if self._fetch_chunk is None or self._fetch_chunk[0] != chunk_offset:
+            # Frames are asked for in time order and neighbours share chunks: keep the last one.
+            # The read that found this frame checked the chunk's CRC: a re-read does not again.
+            # (zstd's streaming reader could stop at the frame, but measured 7x slower than one call.)
+            chunk = self._chunk_by_offset[chunk_offset]
+            self._fetch_chunk = (chunk_offset, self._chunk_data(chunk, check_crc=False))
+        data = self._fetch_chunk[1]
+        start = int(where.record_offset[row])
+        body = start + _RECORD_HEAD.size + _MESSAGE_HEAD.size
+        if body > len(data):
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns is past its chunk's end",
+                                  topic=topic)
+        opcode, length = _RECORD_HEAD.unpack_from(data, start)
+        cid, _, log_time, _ = _MESSAGE_HEAD.unpack_from(data, start + _RECORD_HEAD.size)
+        end = start + _RECORD_HEAD.size + length
+        if opcode != _OPCODE_MESSAGE or log_time != log_time_ns or end > len(data):
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not where its index says",
+                                  topic=topic)
+        return self.decoder(cid)(memoryview(data)[body:end])
+
+    def _locations(self, topic: str) -> _Locations:
+        """Where each message of a topic lives (chunk, offset in it), sorted by log time then file order.
+
+        Built once per topic from the message index records that follow the chunks: nothing is
+        decompressed, and each fetch is then a binary search instead of a scan of the chunk index.
+        """
+        if topic in self._where:
+            return self._where[topic]
+        cids = {cid for cid, ch in self.channels.items() if ch.topic == topic}
+        times: list[npt.NDArray[np.int64]] = []
+        chunks: list[npt.NDArray[np.int64]] = []
+        offsets: list[npt.NDArray[np.int64]] = []
+        for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+            self._chunk_by_offset[int(ci.chunk_start_offset)] = ci
+            if not ci.message_index_offsets:  # written without message indexes: find them in the chunk once
+                try:
+                    found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
+                except Exception:  # noted when the read met it
+                    continue
+                times.append(found[:, 0])
+                offsets.append(found[:, 1])
+                chunks.append(np.full(found.shape[0], int(ci.chunk_start_offset), dtype=np.int64))
+                continue
+            for cid, off in ci.message_index_offsets.items():
+                if cid not in cids:
+                    continue
+                # A MessageIndex record: opcode, length, channel id, entries length, (log time, offset) pairs.
+                self._f.seek(off)
+                head = self._f.read(_RECORD_HEAD.size + 6)
+                if len(head) < _RECORD_HEAD.size + 6:
+                    continue
+                (entries_len,) = struct.unpack_from("<I", head, _RECORD_HEAD.size + 2)
+                entries = np.frombuffer(self._f.read(entries_len), dtype="<u8")
+                pairs = entries[: entries.size // 2 * 2].reshape(-1, 2).astype(np.int64)
+                times.append(pairs[:, 0])
+                offsets.append(pairs[:, 1])
+                chunks.append(np.full(pairs.shape[0], int(ci.chunk_start_offset), dtype=np.int64))
+        time_arr = np.concatenate(times) if times else np.zeros(0, dtype=np.int64)
+        chunk_arr = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int64)
+        offset_arr = np.concatenate(offsets) if offsets else np.zeros(0, dtype=np.int64)
+        order = np.lexsort((offset_arr, chunk_arr, time_arr))
+        where = _Locations(time_arr[order], chunk_arr[order], offset_arr[order])
+        self._where[topic] = where
+        return where
+
+    def _fetch_linear(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
+        """A file without a chunk index: scan it (salvage reads are rare and small)."""
+        seen = 0
+        for rec in self._linear(wanted={topic: Kind.DEPTH}):
+            # A linear scan meets the channel records on the way: look the topic up as it goes.
+            channel = self.channels.get(rec.channel_id)
+            if channel is not None and channel.topic == topic and rec.log_time == log_time_ns:
+                if seen == ordinal:
+                    return self.decoder(rec.channel_id)(rec.data)
+                seen += 1
+        raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read", topic=topic)
+
+
+@dataclass(frozen=True)
+class _Locations:
+    """Per message of one topic, sorted by log time: its chunk's file offset and its offset in the chunk."""
+
+    log_time_ns: npt.NDArray[np.int64]
+    chunk_offset: npt.NDArray[np.int64]
+    record_offset: npt.NDArray[np.int64]
+
+
+class _RawMessage(NamedTuple):
+    """A message record inside a decompressed chunk (the fields :meth:`McapLog.read` uses)."""
+
+    channel_id: int
+    log_time: int
+    data: memoryview
+
+
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, uncompressed CRC, compression name length
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_OPCODE_MESSAGE = 0x05
+
+
+def _crc32(data: bytes) -> int:
+    try:
+        from zlib_ng.zlib_ng import crc32
+    except ImportError:  # the same CRC, about 10x slower
+        from zlib import crc32
+    return int(crc32(data))
+
+
+def _decompress(compression: str, raw: memoryview, size: int) -> bytes:
+    if compression == "":
+        return bytes(raw)
+    if compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(raw, max_output_size=size)
+    if compression == "lz4":
+        import lz4.frame
+
+        return bytes(lz4.frame.decompress(raw))
+    from mcap.exceptions import UnsupportedCompressionError
+
+    raise UnsupportedCompressionError(compression)
+
+
+def _message_offsets(data: bytes, cids: set[int]) -> npt.NDArray[np.int64]:
+    """(log time, record offset) of the channels' messages in a decompressed chunk, shape (n, 2)."""
+    rows: list[tuple[int, int]] = []
+    pos, end = 0, len(data)
+    while pos + _RECORD_HEAD.size <= end:
+        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+        body = pos + _RECORD_HEAD.size
+        if opcode == _OPCODE_MESSAGE and body + _MESSAGE_HEAD.size <= end:
+            cid, _, log_time, _ = _MESSAGE_HEAD.unpack_from(data, body)
+            if cid in cids:
+                rows.append((log_time, pos))
+        pos = body + length
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 2)
+
+
+def _chunk_messages(data: bytes, wanted: set[int]) -> Iterator[_RawMessage]:
+    """The wanted channels' message records of a decompressed chunk, in order."""
+    view = memoryview(data)
+    unpack_record = _RECORD_HEAD.unpack_from
+    unpack_message = _MESSAGE_HEAD.unpack_from
+    head, msg_head = _RECORD_HEAD.size, _MESSAGE_HEAD.size
+    pos, end = 0, len(data)
+    while pos + head <= end:
+        opcode, length = unpack_record(data, pos)
+        body = pos + head
+        if body + length > end:
+            raise ValueError(f"a record of {length} bytes runs past the end of its chunk")
+        if opcode == _OPCODE_MESSAGE:
+            cid, _, log_time, _ = unpack_message(data, body)
+            if cid in wanted:
+                yield _RawMessage(cid, log_time, view[body + msg_head : body + length])
+        pos = body + length
+
+
+def mcap_topic_types(log: McapLog) -> dict[str, str]:
+    return {ch.topic: normalize_msgtype(ch.schema_name) for ch in log.channels.values() if ch.schema_name}
+
+
+#: (message encoding, schema encoding) pairs with a decoder; JSON needs no schema to be read.
+_DECODABLE = {("cdr", "ros2msg"), ("cdr", "ros2idl"), ("ros1", "ros1msg"), ("protobuf", "protobuf")}
+
+
+def _undecodable(ch: _Channel) -> str:
+    """Why a channel's messages cannot be decoded ('' when they can)."""
+    if ch.encoding == "json":
+        return ""
+    if not ch.schema_name:
+        return f"no schema for message encoding {ch.encoding!r}, so the message type is unknown"
+    if (ch.encoding, ch.schema_encoding) not in _DECODABLE:
+        return (f"message encoding {ch.encoding!r} with schema encoding {ch.schema_encoding!r} ({ch.schema_name}) "
+                "is not supported (cdr/ros2msg, cdr/ros2idl, ros1/ros1msg, protobuf or json)")
+    return ""

@@ -1,0 +1,580 @@
+"""LeRobot datasets on disk (v2.0, v2.1, v3.0) read with pyarrow alone: no lerobot, no torch.
+
+Layouts (``meta/info.json`` in both; see REFERENCE.md section 4):
+
+- v2.x: ``meta/episodes.jsonl`` (``episode_index``, ``tasks``, ``length``), one episode per data
+  file ``data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet`` with
+  ``episode_chunk = episode_index // chunks_size``; videos one mp4 per episode and key.
+- v3.0: ``meta/episodes/chunk-*/file-*.parquet`` (one row per episode: ``length``,
+  ``data/chunk_index``, ``data/file_index``, ``dataset_from_index``, ``dataset_to_index``,
+  ``videos/<key>/...``), many episodes per data file ``data/chunk-{c:03d}/file-{f:03d}.parquet``;
+  an episode's rows are those with its ``episode_index``.
+
+Per-frame columns: ``timestamp`` (seconds from the episode start), ``frame_index`` (0..length-1),
+``index`` (global), ``episode_index``, ``task_index``, and one column per non-video feature
+(vectors as ``fixed_size_list`` or ``list``). Only the columns asked for are read.
+
+Metadata that disagrees with the files is handled in two ways. What would make the frames read
+wrong (an episode whose row count differs from its declared length, a data file missing or
+holding another episode, timestamps that go backwards, names that do not fit a feature's shape)
+raises :class:`DatasetError` naming the file and the inconsistency. What does not (a
+``total_chunks`` that does not count the chunk folders, a declared video key with no files,
+timestamps offset from ``frame_index / fps``) becomes a note on :attr:`DatasetReader.notes`, or
+a :class:`DatasetError` with ``strict=True``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.dataset as pads
+import pyarrow.parquet as pq
+
+from framechain.adapters.errors import AdapterError
+from framechain.arrays import FloatArray, IntArray
+
+#: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
+TIMESTAMP_TOLERANCE_S = 1e-4
+#: The per-frame columns lerobot adds to every dataset.
+INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+
+__all__ = [
+    "INDEX_COLUMNS",
+    "DatasetError",
+    "DatasetReader",
+    "EpisodeFrames",
+    "EpisodeInfo",
+    "FeatureInfo",
+    "Layout",
+    "flatten_names",
+    "is_lerobot_dataset",
+]
+
+
+class DatasetError(AdapterError):
+    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency."""
+
+    def __init__(self, path: str | Path, what: str) -> None:
+        super().__init__(path, what)
+
+
+class Layout(StrEnum):
+    """On-disk layout family: v2 (one episode per file) or v3 (many episodes per file)."""
+
+    V2 = "v2"
+    V3 = "v3"
+
+
+class InfoJson(TypedDict, total=False):
+    """The keys of ``meta/info.json`` framechain reads."""
+
+    codebase_version: str
+    robot_type: str | None
+    fps: float
+    total_episodes: int
+    total_frames: int
+    total_chunks: int
+    chunks_size: int
+    data_path: str
+    video_path: str | None
+    features: dict[str, dict[str, Any]]
+    splits: dict[str, str]
+
+
+@dataclass(frozen=True)
+class FeatureInfo:
+    """One entry of ``info.json`` ``features``; ``names`` flattened (nested lists and dicts)."""
+
+    key: str
+    dtype: str
+    shape: tuple[int, ...]
+    names: tuple[str, ...] | None
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_video(self) -> bool:
+        return self.dtype == "video"
+
+    @property
+    def is_depth_map(self) -> bool:
+        return bool(self.info.get("video.is_depth_map", False))
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape)) if self.shape else 1
+
+
+@dataclass(frozen=True)
+class EpisodeInfo:
+    """One episode's metadata: where its frames and videos live."""
+
+    index: int
+    length: int
+    tasks: tuple[str, ...]
+    data_file: Path
+    from_index: int | None = None  # v3: global index range [from, to)
+    to_index: int | None = None
+    video_files: Mapping[str, Path] = field(default_factory=dict)
+    #: v3: where the episode starts inside the shared mp4, per video key (s); v2: 0.
+    video_from_s: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EpisodeFrames:
+    """The frames of one episode, sorted by ``index``: timestamps, indices and requested columns."""
+
+    episode: EpisodeInfo
+    timestamp_s: FloatArray
+    frame_index: IntArray
+    index: IntArray
+    columns: Mapping[str, npt.NDArray[Any]]
+
+    def __len__(self) -> int:
+        return int(self.timestamp_s.shape[0])
+
+    @property
+    def stamp_ns(self) -> IntArray:
+        """Timestamps as integer nanoseconds (rounded)."""
+        out: IntArray = np.round(self.timestamp_s * 1e9).astype(np.int64)
+        return out
+
+
+def flatten_names(raw: Any) -> tuple[str, ...] | None:
+    """``names`` of a feature as one flat tuple: lists, nested lists (Unitree) and dicts of lists."""
+    if raw is None:
+        return None
+    out: list[str] = []
+
+    def walk(node: Any) -> None:
+        if isinstance(node, str):
+            out.append(node)
+        elif isinstance(node, Mapping):
+            for value in node.values():
+                walk(value)
+        elif isinstance(node, list | tuple):
+            for value in node:
+                walk(value)
+        else:
+            out.append(str(node))
+
+    walk(raw)
+    return tuple(out)
+
+
+def is_lerobot_dataset(path: str | Path) -> bool:
+    """True when ``path`` is a directory with ``meta/info.json`` naming a LeRobot codebase version."""
+    info = Path(path) / "meta" / "info.json"
+    if not info.is_file():
+        return False
+    try:
+        version = json.loads(info.read_text()).get("codebase_version", "")
+    except (OSError, ValueError, AttributeError):
+        return False
+    return isinstance(version, str) and version.startswith(("v2", "v3"))
+
+
+class DatasetReader:
+    """A LeRobot dataset directory: its metadata, its episodes, one episode's columns at a time.
+
+    Constructing it reads ``meta/info.json`` and the episode index (episodes.jsonl or the
+    episodes parquet's ``episode_index`` column) and checks them against the files present.
+    """
+
+    def __init__(self, root: str | Path, *, strict: bool = False) -> None:
+        self.root = Path(root)
+        self.strict = strict
+        self.notes: list[str] = []
+        info_path = self.root / "meta" / "info.json"
+        if not self.root.is_dir():
+            raise DatasetError(self.root, "not a directory")
+        if not info_path.is_file():
+            raise DatasetError(info_path, "missing: not a LeRobot dataset (no meta/info.json)")
+        try:
+            raw = json.loads(info_path.read_text())
+        except (OSError, ValueError) as err:
+            raise DatasetError(info_path, f"cannot read as JSON ({err})") from err
+        if not isinstance(raw, dict):
+            raise DatasetError(info_path, "expected a JSON object")
+        self._info_path = info_path
+        self.info: InfoJson = raw  # type: ignore[assignment]
+        self.version = str(raw.get("codebase_version", ""))
+        if self.version.startswith("v2"):
+            self.layout = Layout.V2
+        elif self.version.startswith("v3"):
+            self.layout = Layout.V3
+        else:
+            raise DatasetError(info_path, f"codebase_version {self.version!r} is not v2.x or v3.x")
+        fps = raw.get("fps")
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not fps > 0 or not math.isfinite(fps):
+            raise DatasetError(info_path, f"fps must be a positive number, got {fps!r}")
+        self.fps = float(fps)
+        self.robot_type = raw.get("robot_type")
+        feats = raw.get("features")
+        if not isinstance(feats, dict) or not feats:
+            raise DatasetError(info_path, "features is missing or empty")
+        self.features: dict[str, FeatureInfo] = {k: self._feature(k, v) for k, v in feats.items()}
+        self.chunks_size = int(raw.get("chunks_size") or 1000)
+        data_path = raw.get("data_path")
+        if not isinstance(data_path, str):
+            raise DatasetError(info_path, "data_path template is missing")
+        self.data_path = data_path
+        video_path = raw.get("video_path")
+        self.video_path = video_path if isinstance(video_path, str) else None
+        self._tasks = self._read_tasks()
+        if self.layout is Layout.V2:
+            self._episodes_v2 = self._read_episodes_v2()
+            self._episode_ids = sorted(self._episodes_v2)
+        else:
+            self._episode_ids = self._read_episode_ids_v3()
+        self._check_totals()
+        self._check_videos()
+
+    # ------------------------------------------------------------------------------- metadata
+
+    def note(self, path: str | Path, what: str) -> None:
+        """Record a harmless inconsistency (raise it with ``strict=True``)."""
+        if self.strict:
+            raise DatasetError(path, what)
+        text = f"{path}: {what}"
+        if text not in self.notes:
+            self.notes.append(text)
+
+    def _feature(self, key: str, raw: Any) -> FeatureInfo:
+        if not isinstance(raw, Mapping) or "dtype" not in raw:
+            raise DatasetError(self._info_path, f"feature {key!r} has no dtype")
+        shape_raw = raw.get("shape") or [1]
+        try:
+            shape = tuple(int(s) for s in shape_raw)
+        except (TypeError, ValueError):
+            raise DatasetError(
+                self._info_path, f"feature {key!r} has shape {shape_raw!r}, not a list of ints"
+            ) from None
+        info = raw.get("info") or raw.get("video_info") or {}
+        return FeatureInfo(key, str(raw["dtype"]), shape, flatten_names(raw.get("names")),
+                           dict(info) if isinstance(info, Mapping) else {})
+
+    def feature(self, key: str) -> FeatureInfo:
+        try:
+            return self.features[key]
+        except KeyError:
+            raise DatasetError(
+                self._info_path, f"no feature {key!r}; features are {sorted(self.features)}"
+            ) from None
+
+    def names(self, key: str) -> tuple[str, ...]:
+        """Element names of a vector feature (``key_0``... when info.json gives none)."""
+        feat = self.feature(key)
+        n = feat.size
+        if feat.names is None:
+            return tuple(f"{key}_{i}" for i in range(n))
+        if len(feat.names) != n:
+            raise DatasetError(
+                self._info_path,
+                f"feature {key!r} has shape {list(feat.shape)} ({n} values) but {len(feat.names)} names",
+            )
+        return feat.names
+
+    @property
+    def video_keys(self) -> list[str]:
+        return [k for k, f in self.features.items() if f.is_video]
+
+    def episodes(self) -> list[int]:
+        """Episode indices, ascending."""
+        return list(self._episode_ids)
+
+    def lengths(self) -> dict[int, int]:
+        """Declared frame count of every episode (episodes.jsonl or the episodes parquet)."""
+        if self.layout is Layout.V2:
+            return {e: int(row["length"]) for e, row in sorted(self._episodes_v2.items())}
+        files = self._episodes_files_v3()
+        table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index", "length"])
+        pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
+        return {int(e): int(n) for e, n in sorted(pairs)}
+
+    def _read_tasks(self) -> dict[int, str]:
+        jsonl = self.root / "meta" / "tasks.jsonl"
+        parquet = self.root / "meta" / "tasks.parquet"
+        out: dict[int, str] = {}
+        if jsonl.is_file():
+            for row in _jsonl(jsonl):
+                if "task_index" in row and "task" in row:
+                    out[int(row["task_index"])] = str(row["task"])
+        elif parquet.is_file():
+            table = pq.read_table(parquet)
+            idx = table.column("task_index").to_pylist() if "task_index" in table.column_names else []
+            text_col = next((c for c in ("task", "__index_level_0__") if c in table.column_names), None)
+            if text_col is not None:
+                out = {int(i): str(t) for i, t in zip(idx, table.column(text_col).to_pylist(), strict=True)}
+        return out
+
+    def _read_episodes_v2(self) -> dict[int, dict[str, Any]]:
+        path = self.root / "meta" / "episodes.jsonl"
+        if not path.is_file():
+            raise DatasetError(path, "missing: a v2 dataset lists its episodes here")
+        out: dict[int, dict[str, Any]] = {}
+        for lineno, row in enumerate(_jsonl(path), start=1):
+            if "episode_index" not in row or "length" not in row:
+                raise DatasetError(path, f"line {lineno} lacks episode_index or length")
+            ep = int(row["episode_index"])
+            if ep in out:
+                raise DatasetError(path, f"episode {ep} is listed twice")
+            out[ep] = row
+        if not out:
+            raise DatasetError(path, "lists no episodes")
+        return out
+
+    def _episodes_files_v3(self) -> list[Path]:
+        folder = self.root / "meta" / "episodes"
+        files = sorted(folder.glob("chunk-*/file-*.parquet"))
+        if not files:
+            raise DatasetError(folder, "no episodes parquet files (chunk-*/file-*.parquet): not a v3 dataset?")
+        return files
+
+    def _read_episode_ids_v3(self) -> list[int]:
+        files = self._episodes_files_v3()
+        table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index"])
+        ids = table.column("episode_index").to_numpy()
+        if np.unique(ids).size != ids.size:
+            raise DatasetError(files[0].parent.parent, "an episode_index appears in two episode rows")
+        return sorted(int(i) for i in ids)
+
+    def _check_totals(self) -> None:
+        info = self.info
+        total = info.get("total_episodes")
+        if isinstance(total, int) and total != len(self._episode_ids):
+            self.note(self._info_path, f"total_episodes is {total} but {len(self._episode_ids)} episodes are listed")
+        if self.layout is Layout.V2:
+            frames = sum(int(r["length"]) for r in self._episodes_v2.values())
+            if isinstance(info.get("total_frames"), int) and info["total_frames"] != frames:
+                self.note(self._info_path, f"total_frames is {info['total_frames']} but the episodes' lengths "
+                          f"add up to {frames}")
+            chunks = sorted(p.name for p in (self.root / "data").glob("chunk-*") if p.is_dir())
+            declared = info.get("total_chunks")
+            if isinstance(declared, int) and declared != len(chunks):
+                self.note(self._info_path, f"total_chunks is {declared} but data/ holds {len(chunks)} chunk folders "
+                          f"({', '.join(chunks) or 'none'})")
+        splits = info.get("splits") or {}
+        for split, span in splits.items() if isinstance(splits, Mapping) else ():
+            try:
+                lo, hi = (int(x) for x in str(span).split(":"))
+            except ValueError:
+                self.note(self._info_path, f"split {split!r} is {span!r}, not 'start:stop'")
+                continue
+            if hi > len(self._episode_ids) or lo < 0:
+                self.note(self._info_path, f"split {split!r} is {span!r} but the dataset has "
+                          f"{len(self._episode_ids)} episodes")
+
+    def _check_videos(self) -> None:
+        for key in self.video_keys:
+            present = any((self.root / "videos").glob(f"**/{key}/*.mp4")) or any(
+                (self.root / "videos" / key).glob("chunk-*/*.mp4")
+            )
+            if not present:
+                self.note(self._info_path, f"video feature {key!r} is declared but no video files exist for it "
+                          f"under {self.root / 'videos'}")
+
+    # ------------------------------------------------------------------------------- episodes
+
+    def episode(self, index: int) -> EpisodeInfo:
+        """Metadata of one episode (its data file, length, tasks, videos)."""
+        if index not in self._episode_ids:
+            ids = self._episode_ids
+            shown = f"{ids[0]}..{ids[-1]}" if ids == list(range(ids[0], ids[-1] + 1)) else str(ids)
+            raise DatasetError(self.root, f"no episode {index}; episodes are {shown}")
+        if self.layout is Layout.V2:
+            return self._episode_v2(index)
+        return self._episode_v3(index)
+
+    def _episode_v2(self, index: int) -> EpisodeInfo:
+        row = self._episodes_v2[index]
+        chunk = index // self.chunks_size
+        try:
+            data_file = self.root / self.data_path.format(episode_chunk=chunk, episode_index=index)
+        except (KeyError, IndexError, ValueError) as err:
+            raise DatasetError(self._info_path, f"data_path {self.data_path!r} cannot be filled ({err})") from err
+        videos: dict[str, Path] = {}
+        if self.video_path is not None:
+            for key in self.video_keys:
+                vf = self.root / self.video_path.format(episode_chunk=chunk, video_key=key, episode_index=index)
+                if vf.is_file():
+                    videos[key] = vf
+        tasks = row.get("tasks") or []
+        return EpisodeInfo(index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks),
+                           data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0))
+
+    def _episode_v3(self, index: int) -> EpisodeInfo:
+        files = self._episodes_files_v3()
+        dataset = pads.dataset([str(f) for f in files], format="parquet")
+        names = set(dataset.schema.names)
+        wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
+                  "dataset_from_index", "dataset_to_index"]
+        for key in self.video_keys:
+            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp"]
+        required = ["episode_index", "length", "data/chunk_index", "data/file_index"]
+        missing = [c for c in required if c not in names]
+        where = self.root / "meta" / "episodes"
+        if missing:
+            raise DatasetError(where, f"episodes parquet lacks columns {missing}")
+        table = dataset.to_table(columns=[c for c in wanted if c in names],
+                                 filter=pc.field("episode_index") == index)
+        row = {k: v[0] for k, v in table.to_pydict().items()}
+        try:
+            data_file = self.root / self.data_path.format(
+                chunk_index=int(row["data/chunk_index"]), file_index=int(row["data/file_index"]))
+        except (KeyError, IndexError, ValueError) as err:
+            raise DatasetError(self._info_path, f"data_path {self.data_path!r} cannot be filled ({err})") from err
+        videos: dict[str, Path] = {}
+        video_from: dict[str, float] = {}
+        for key in self.video_keys:
+            c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
+            if c is None or f is None or self.video_path is None:
+                continue
+            vf = self.root / self.video_path.format(video_key=key, chunk_index=int(c), file_index=int(f))
+            if vf.is_file():
+                videos[key] = vf
+                video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
+        tasks = row.get("tasks") or []
+        return EpisodeInfo(
+            index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks), data_file=data_file,
+            from_index=None if row.get("dataset_from_index") is None else int(row["dataset_from_index"]),
+            to_index=None if row.get("dataset_to_index") is None else int(row["dataset_to_index"]),
+            video_files=videos, video_from_s=video_from,
+        )
+
+    def read(self, index: int, columns: Sequence[str] = ()) -> EpisodeFrames:
+        """One episode's frames: timestamps, frame and global indices, and ``columns`` as arrays.
+
+        Vector features come back as ``(T, *shape)``, scalars as ``(T,)``. Only the columns asked
+        for (plus the index columns) are read from the Parquet file.
+        """
+        ep = self.episode(index)
+        path = ep.data_file
+        if not path.is_file():
+            raise DatasetError(path, f"data file of episode {index} is missing")
+        try:
+            schema = pq.read_schema(path)
+        except (OSError, pa.ArrowInvalid) as err:
+            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+        present = set(schema.names)
+        for col in columns:
+            if col in self.features and self.features[col].is_video:
+                raise DatasetError(self._info_path, f"feature {col!r} is a video: it has no Parquet column")
+            if col not in present:
+                declared = "declared in info.json but " if col in self.features else ""
+                raise DatasetError(path, f"column {col!r} is {declared}not in this file; it has {sorted(present)}")
+        index_cols = [c for c in ("timestamp", "frame_index", "episode_index", "index") if c in present]
+        read_cols = list(dict.fromkeys([*index_cols, *columns]))
+        filters = [("episode_index", "=", index)] if self.layout is Layout.V3 and "episode_index" in present else None
+        try:
+            table = pq.read_table(path, columns=read_cols, filters=filters)
+        except (OSError, pa.ArrowInvalid) as err:
+            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+        if "index" in present:
+            table = table.sort_by("index")
+        n = table.num_rows
+        if n == 0:
+            raise DatasetError(path, f"holds no rows of episode {index}")
+        if "episode_index" in present:
+            eps = np.unique(table.column("episode_index").to_numpy())
+            if eps.tolist() != [index]:
+                raise DatasetError(path, f"expected rows of episode {index}, found episode_index {eps.tolist()}")
+        if n != ep.length:
+            raise DatasetError(path, f"episode {index} has {n} rows but its metadata declares length {ep.length}")
+        global_index = (table.column("index").to_numpy().astype(np.int64) if "index" in present
+                        else np.arange(n, dtype=np.int64))
+        if ep.from_index is not None and ep.to_index is not None and (
+            ep.to_index - ep.from_index != n or int(global_index[0]) != ep.from_index
+        ):
+            raise DatasetError(path, f"episode {index} rows have index {global_index[0]}..{global_index[-1]} but "
+                               f"the episodes parquet declares [{ep.from_index}, {ep.to_index})")
+        if "frame_index" in present:
+            frame_index = table.column("frame_index").to_numpy().astype(np.int64)
+            if not np.array_equal(frame_index, np.arange(n)):
+                self.note(path, f"frame_index of episode {index} is not 0..{n - 1}")
+        else:
+            frame_index = global_index - global_index[0]
+            self.note(path, "no frame_index column: frame indices derived from index")
+        if "timestamp" in present:
+            ts = _column(table.column("timestamp"), path, "timestamp").astype(np.float64).reshape(n)
+            if not np.isfinite(ts).all():
+                raise DatasetError(path, f"episode {index} has non-finite timestamps")
+            if n > 1 and not (np.diff(ts) > 0).all():
+                k = int(np.flatnonzero(np.diff(ts) <= 0)[0])
+                raise DatasetError(path, f"timestamps of episode {index} do not increase at frame {k + 1} "
+                                   f"({ts[k]:.6f} s then {ts[k + 1]:.6f} s)")
+            expected = frame_index / self.fps
+            dev = ts - expected
+            if np.abs(dev).max() > TIMESTAMP_TOLERANCE_S:
+                if np.ptp(dev) <= TIMESTAMP_TOLERANCE_S:
+                    self.note(path, f"timestamps start at {ts[0]:.6g} s, not 0: offset {dev[0]:+.6g} s "
+                              f"from frame_index / fps ({self.fps:g} fps)")
+                else:
+                    self.note(path, f"timestamps depart from frame_index / fps by up to "
+                              f"{np.abs(dev).max():.6g} s (variable rate)")
+        else:
+            ts = frame_index / self.fps
+            self.note(path, "no timestamp column: timestamps derived from frame_index / fps")
+        out: dict[str, npt.NDArray[Any]] = {}
+        for col in columns:
+            arr = _column(table.column(col), path, col)
+            feat = self.features.get(col)
+            if feat is not None and feat.shape and feat.size > 1 and arr.ndim >= 2 and arr[0].size == feat.size:
+                arr = arr.reshape((n, *feat.shape))
+            out[col] = arr
+        return EpisodeFrames(episode=ep, timestamp_s=ts, frame_index=frame_index, index=global_index,
+                             columns=out)
+
+    def task_names(self) -> dict[int, str]:
+        return dict(self._tasks)
+
+
+def _jsonl(path: Path) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as err:
+        raise DatasetError(path, f"cannot read ({err.strerror})") from err
+    for lineno, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except ValueError as err:
+            raise DatasetError(path, f"line {lineno} is not JSON ({err})") from err
+        if not isinstance(row, dict):
+            raise DatasetError(path, f"line {lineno} is not a JSON object")
+        rows.append(row)
+    return rows
+
+
+def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
+    """An Arrow column as NumPy: scalars (T,); lists and fixed-size lists (T, n) or (T, n, m)."""
+    arr = col.combine_chunks()
+    n = len(arr)
+    shape: list[int] = [n]
+    while pa.types.is_list(arr.type) or pa.types.is_fixed_size_list(arr.type) or pa.types.is_large_list(arr.type):
+        if arr.null_count:
+            raise DatasetError(path, f"column {name!r} has null rows")
+        lengths = pc.list_value_length(arr).to_numpy(zero_copy_only=False)
+        width = int(lengths[0]) if lengths.size else 0
+        if lengths.size and not (lengths == width).all():
+            raise DatasetError(path, f"column {name!r} holds lists of different lengths "
+                               f"({int(lengths.min())}..{int(lengths.max())})")
+        shape.append(width)
+        arr = arr.flatten()
+    if pa.types.is_struct(arr.type) or pa.types.is_binary(arr.type) or pa.types.is_string(arr.type):
+        return np.asarray(arr.to_pylist(), dtype=object).reshape(shape)
+    if arr.null_count and (pa.types.is_floating(arr.type) or pa.types.is_integer(arr.type)):
+        arr = arr.cast(pa.float64()).fill_null(math.nan)
+    values = arr.to_numpy(zero_copy_only=False)
+    return np.asarray(values).reshape(shape)

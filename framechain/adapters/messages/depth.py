@@ -1,0 +1,252 @@
+"""Depth images: metadata and the windows detections need at read time, whole frames decoded lazily.
+
+Encodings: ``16UC1``/``mono16`` in depth units (millimetres unless the log says otherwise, e.g.
+librealsense's ``Depth_Units``), ``32FC1`` in metres, and ``compressedDepth`` (image_transport's
+12-byte header, then a PNG of 16-bit depth units or of quantised inverse depth for 32FC1).
+Every decoder returns metres as float32; 0 and NaN mean no depth.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+import struct
+from collections.abc import Callable, Sequence
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.adapters.messages.locator import FrameFetch, FrameLocator, cached_reader
+from framechain.arrays import IntArray
+from framechain.timeline import DepthWindows, TimelineError, normalize_frame
+
+_U16 = frozenset({"16UC1", "mono16", "16SC1"})
+_F32 = frozenset({"32FC1"})
+#: Decoded frames kept per loader (a replay visits frames in time order; a few suffice).
+CACHE_FRAMES = 8
+_COMPRESSED_DEPTH_HEADER = 12
+#: Windows kept at read time reach this far from their centre (7 x 7; replay's default is 5 x 5).
+KEEP_HALF = 3
+#: A detection's window is kept for the frames within this of its header stamp (replay's default gap is 50 ms).
+KEEP_GAP_NS = 50_000_000
+#: How long in log time a frame waits for detections logged after it (and detections for frames).
+HORIZON_NS = 2_000_000_000
+
+
+def depth_metadata(msg: Any) -> tuple[int, int, str] | None:
+    """(width, height, encoding) of a depth Image or compressedDepth CompressedImage; None if not depth."""
+    fmt = getattr(msg, "format", None)
+    if fmt is not None and not hasattr(msg, "encoding"):
+        if "compressedDepth" not in fmt:
+            return None
+        data = bytes(msg.data[: _COMPRESSED_DEPTH_HEADER + 24])
+        png = data[_COMPRESSED_DEPTH_HEADER:]
+        if png[:8] != b"\x89PNG\r\n\x1a\n" or len(png) < 24:
+            return None
+        width, height = struct.unpack(">II", png[16:24])
+        base = fmt.split(";")[0].strip() or "16UC1"
+        return int(width), int(height), f"compressedDepth {base}"
+    encoding = str(msg.encoding)
+    if encoding not in _U16 and encoding not in _F32:
+        return None
+    return int(msg.width), int(msg.height), encoding
+
+
+def decode_depth(msg: Any, units_m: float = 0.001) -> npt.NDArray[np.float32]:
+    """Depth in metres (H, W) float32 from an Image or a compressedDepth CompressedImage."""
+    fmt = getattr(msg, "format", None)
+    if fmt is not None and not hasattr(msg, "encoding"):
+        return _decode_compressed_depth(bytes(msg.data), fmt, units_m)
+    return pixels_to_metres(raw_depth_pixels(msg), units_m)
+
+
+def raw_depth_pixels(msg: Any) -> npt.NDArray[Any]:
+    """The (H, W) pixels of an uncompressed depth Image as stored (depth units or metres), a view where it can."""
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    encoding = str(msg.encoding)
+    data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)  # a view, never a copy
+    kind = ">" if msg.is_bigendian else "<"
+    if encoding in _U16:
+        code = "i2" if encoding == "16SC1" else "u2"
+        rows = data[: h * step].reshape(h, step)[:, : w * 2]
+        return np.ascontiguousarray(rows).view(kind + code).reshape(h, w)
+    if encoding in _F32:
+        rows = data[: h * step].reshape(h, step)[:, : w * 4]
+        return np.ascontiguousarray(rows).view(kind + "f4").reshape(h, w)
+    raise TimelineError(f"depth encoding {encoding!r} is not 16UC1, mono16 or 32FC1")
+
+
+def pixels_to_metres(raw: npt.NDArray[Any], units_m: float) -> npt.NDArray[np.float32]:
+    """Metres from :func:`raw_depth_pixels` (or any part of them: the conversion is per pixel)."""
+    if raw.dtype.kind == "f":
+        return raw.astype(np.float32)
+    metres: npt.NDArray[np.float32] = np.multiply(raw, np.float32(units_m), dtype=np.float32)  # one pass
+    return metres
+
+
+def _decode_compressed_depth(data: bytes, fmt: str, units_m: float) -> npt.NDArray[np.float32]:
+    from PIL import Image
+
+    _, quant_a, quant_b = struct.unpack("<iff", data[:_COMPRESSED_DEPTH_HEADER])
+    with Image.open(io.BytesIO(data[_COMPRESSED_DEPTH_HEADER:])) as img:
+        values = np.asarray(img, dtype=np.uint16) if img.mode.startswith("I") else np.asarray(img)
+    values = values.astype(np.float32)
+    if fmt.split(";", maxsplit=1)[0].strip() == "32FC1":
+        # image_transport: inverse depth quantised as value = quant_a / depth + quant_b.
+        out = np.full(values.shape, np.nan, dtype=np.float32)
+        ok = values > 0
+        out[ok] = np.float32(quant_a) / (values[ok] - np.float32(quant_b))
+        return out
+    return (values * np.float32(units_m)).astype(np.float32)
+
+
+def make_depth_loader(
+    fetch: FrameFetch, locators: Sequence[FrameLocator], units_m: Sequence[float]
+) -> Callable[[int], npt.NDArray[np.float32]]:
+    """A DepthLoader that re-reads frame ``i`` from the log on demand (a small LRU cache)."""
+
+    def read(i: int) -> npt.NDArray[np.float32]:
+        loc = locators[i]
+        return decode_depth(fetch(loc.topic, loc.log_time_ns, loc.ordinal), units_m[i])
+
+    return cached_reader(read, CACHE_FRAMES)
+
+
+class DepthWindowKeeper:
+    """Keeps, while the log is read, the pixel windows around the detections each depth frame may serve.
+
+    Frames (views of their raw pixels) wait up to :data:`HORIZON_NS` of log time for detections
+    logged after them; detections wait as long for frames logged after them. A detection pairs with
+    every frame of its camera frame within :data:`KEEP_GAP_NS` in header stamp; the replay picks
+    the nearest and finds its window here, or cuts it from the frame re-read from the log when it is
+    not (a detection logged far from its frame, a larger window, a gap above the kept one).
+    Memory: the waiting frames, and per pair a (2 :data:`KEEP_HALF` + 1)^2 float32 window in flat arrays.
+    """
+
+    def __init__(self) -> None:
+        self._frames: list[tuple[int, str, int, int, npt.NDArray[Any]]] = []  # row, frame, stamp, log, raw
+        self._obs_frame = np.zeros(0, dtype=str)
+        self._obs_stamp = np.zeros(0, dtype=np.int64)
+        self._obs_log = np.zeros(0, dtype=np.int64)
+        self._obs_rc = np.zeros((0, 2), dtype=np.int64)
+        # Kept windows, a part per settle: depth row (read order), centre (row, col), raw values as
+        # float32 (depth units and float32 metres convert exactly) and whether they are depth units.
+        self._rows: list[IntArray] = []
+        self._centres: list[IntArray] = []
+        self._windows: list[npt.NDArray[np.float32]] = []
+        self._in_units: list[npt.NDArray[np.bool_]] = []
+
+    def add_frame(self, row: int, frame: str, stamp_ns: int, log_ns: int, raw: npt.NDArray[Any]) -> bool:
+        """Hold a frame's raw pixels; True when the oldest has waited long enough (call :meth:`settle`)."""
+        self._frames.append((row, normalize_frame(frame), stamp_ns, log_ns, raw))
+        return log_ns - self._frames[0][3] > HORIZON_NS
+
+    def add_observations(self, frame: Sequence[str], stamp_ns: Sequence[int], log_ns: Sequence[int],
+                         u: npt.NDArray[np.float64], v: npt.NDArray[np.float64]) -> None:
+        """Detections read since the last call (pixels that are not finite are never sampled)."""
+        ok = np.isfinite(u) & np.isfinite(v)
+        if not ok.any():
+            return
+        frames = np.asarray([normalize_frame(f) for f in frame], dtype=str)[ok]
+        rc = np.stack([np.rint(v[ok]), np.rint(u[ok])], axis=1).astype(np.int64)
+        self._obs_frame = np.concatenate([self._obs_frame, frames])
+        self._obs_stamp = np.concatenate([self._obs_stamp, np.asarray(stamp_ns, dtype=np.int64)[ok]])
+        self._obs_log = np.concatenate([self._obs_log, np.asarray(log_ns, dtype=np.int64)[ok]])
+        self._obs_rc = np.concatenate([self._obs_rc, rc])
+
+    def settle(self, *, final: bool) -> None:
+        """Cut the windows of the frames that waited long enough (all when ``final``); drop old detections."""
+        if not self._frames:
+            return
+        newest = max(self._frames[-1][3], int(self._obs_log.max()) if self._obs_log.size else self._frames[-1][3])
+        due = len(self._frames) if final else sum(1 for f in self._frames if f[3] <= newest - HORIZON_NS // 2)
+        settling = self._frames[:due]
+        if settling and self._obs_log.size:
+            self._cut(settling)
+        del self._frames[:due]
+        keep = np.zeros(self._obs_log.size, dtype=bool) if final else self._obs_log >= newest - HORIZON_NS
+        self._obs_frame, self._obs_stamp = self._obs_frame[keep], self._obs_stamp[keep]
+        self._obs_log, self._obs_rc = self._obs_log[keep], self._obs_rc[keep]
+
+    def _cut(self, settling: list[tuple[int, str, int, int, npt.NDArray[Any]]]) -> None:
+        """Every (frame, detection) pair at once; then one window cut per frame that has any."""
+        stamps = np.asarray([f[2] for f in settling], dtype=np.int64)
+        frames = np.asarray([f[1] for f in settling], dtype=str)
+        pairs = (np.abs(self._obs_stamp[None, :] - stamps[:, None]) <= KEEP_GAP_NS) & (
+            self._obs_frame[None, :] == frames[:, None])
+        which, obs = np.nonzero(pairs)  # grouped by frame
+        if not which.size:
+            return
+        # Window pixel indices of every pair, clipped to its frame as pixel_windows clips them.
+        shapes = np.asarray([f[4].shape for f in settling], dtype=np.int64).reshape(-1, 2)[which]
+        offsets = np.arange(-KEEP_HALF, KEEP_HALF + 1)
+        rc = self._obs_rc[obs]
+        rows = np.clip(rc[:, :1] + offsets, 0, shapes[:, :1] - 1)[:, :, None]
+        cols = np.clip(rc[:, 1:] + offsets, 0, shapes[:, 1:] - 1)[:, None, :]
+        windows = np.empty((which.size, offsets.size, offsets.size), dtype=np.float32)
+        in_units = np.empty(which.size, dtype=bool)
+        bounds = np.flatnonzero(np.r_[True, which[1:] != which[:-1], True]).tolist()
+        for start, end in itertools.pairwise(bounds):
+            raw = settling[int(which[start])][4]
+            windows[start:end] = raw[rows[start:end], cols[start:end]]  # exact: 16-bit integers fit float32
+            in_units[start:end] = raw.dtype.kind != "f"
+        self._rows.append(np.asarray([f[0] for f in settling], dtype=np.int64)[which])
+        self._centres.append(rc)
+        self._windows.append(windows)
+        self._in_units.append(in_units)
+
+    def lookup(self, read_rows: Sequence[int], units_m: Sequence[float]) -> DepthWindows:
+        """DepthFrameTable.windows for table row i = read row ``read_rows[i]`` in depth units ``units_m[i]``."""
+        order = np.argsort(np.concatenate([np.zeros(0, dtype=np.int64), *self._rows]), kind="stable")
+        rows = np.concatenate([np.zeros(0, dtype=np.int64), *self._rows])[order]
+        centres = np.concatenate([np.zeros((0, 2), dtype=np.int64), *self._centres])[order]
+        size = 2 * KEEP_HALF + 1
+        kept = np.concatenate([np.zeros((0, size, size), dtype=np.float32), *self._windows])[order]
+        in_units = np.concatenate([np.zeros(0, dtype=bool), *self._in_units])[order]
+        self._rows, self._centres, self._windows, self._in_units = [], [], [], []
+
+        def windows(i: int, centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[np.float32] | None:
+            read_row = int(read_rows[i])
+            lo, hi = np.searchsorted(rows, [read_row, read_row + 1])
+            if lo == hi or half > KEEP_HALF:
+                return None
+            mine = centres[lo:hi]
+            same = (mine[None, :, 0] == centre_rows[:, None]) & (mine[None, :, 1] == centre_cols[:, None])
+            if not same.any(axis=1).all():
+                return None
+            at = lo + same.argmax(axis=1)
+            cut = KEEP_HALF - half
+            part = kept[at, cut : size - cut, cut : size - cut]
+            if in_units[lo]:  # as pixels_to_metres converts the frame: float32 values times float32 units
+                metres: npt.NDArray[np.float32] = np.multiply(part, np.float32(units_m[i]), dtype=np.float32)
+                return metres
+            return part
+
+        return windows
+
+
+def parse_ros1_image(raw: bytes | memoryview) -> SimpleNamespace:
+    """A ROS 1 sensor_msgs/Image parsed field by field, tolerating trailing bytes.
+
+    librealsense writes 4 bytes after the pixel data, which strict deserialisers reject.
+    """
+    buf = bytes(raw)
+    seq, sec, nsec, n = struct.unpack_from("<IIII", buf, 0)
+    o = 16
+    frame_id = buf[o : o + n].decode("utf-8", "replace")
+    o += n
+    height, width, n_enc = struct.unpack_from("<III", buf, o)
+    o += 12
+    encoding = buf[o : o + n_enc].decode("ascii", "replace")
+    o += n_enc
+    is_bigendian, step, n_data = struct.unpack_from("<BII", buf, o)
+    o += 9
+    if o + n_data > len(buf):
+        raise ValueError(f"image data of {n_data} bytes runs past the message end ({len(buf) - o} bytes left)")
+    stamp = SimpleNamespace(sec=sec, nanosec=nsec)
+    return SimpleNamespace(
+        header=SimpleNamespace(seq=seq, stamp=stamp, frame_id=frame_id), height=height, width=width,
+        encoding=encoding, is_bigendian=is_bigendian, step=step, data=memoryview(buf)[o : o + n_data],
+    )

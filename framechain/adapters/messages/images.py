@@ -1,0 +1,90 @@
+"""Camera images: metadata at read time, bytes fetched lazily (only the frames a sink shows).
+
+``sensor_msgs/Image`` in a raw encoding (mono8, mono16, rgb8, bgr8, rgba8, bgra8, 16UC1, 32FC1)
+is repacked without row padding, little-endian; ``CompressedImage`` (JPEG, PNG) keeps its bytes as
+logged: nothing here decodes a picture.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from framechain.adapters.messages.locator import FrameFetch, FrameLocator, cached_reader
+from framechain.timeline import TimelineError
+from framechain.timeline.frames import RAW_IMAGE_ENCODINGS, ImageLoader
+
+#: Fetched images kept per loader (a sink visits a few frames, in time order).
+CACHE_IMAGES = 4
+_JPEG_MAGIC = b"\xff\xd8\xff"
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_ALIASES = {"8uc1": "mono8", "8uc3": "bgr8", "16uc1": "16UC1", "32fc1": "32FC1", "8uc4": "bgra8"}
+
+
+def raw_encoding(name: str) -> str | None:
+    """The table's name of a ROS raw encoding (``8UC3`` is OpenCV's bgr8), None if not one."""
+    low = name.strip().lower()
+    if low in _ALIASES:
+        return _ALIASES[low]
+    for known in RAW_IMAGE_ENCODINGS:
+        if known.lower() == low:
+            return known
+    return None
+
+
+def image_metadata(msg: Any) -> tuple[int, int, str] | None:
+    """(width, height, encoding) of an Image or a JPEG/PNG CompressedImage; None if neither.
+
+    A compressed image's size comes from its header (PIL reads only the header, not the pixels).
+    """
+    fmt = getattr(msg, "format", None)
+    if fmt is not None and not hasattr(msg, "encoding"):
+        if "compresseddepth" in str(fmt).lower():
+            return None
+        data = bytes(msg.data)
+        kind = "jpeg" if data.startswith(_JPEG_MAGIC) else "png" if data.startswith(_PNG_MAGIC) else None
+        if kind is None:
+            return None
+        from PIL import Image
+
+        try:
+            with Image.open(io.BytesIO(data)) as img:
+                width, height = img.size
+        except (OSError, ValueError):
+            return None
+        return int(width), int(height), kind
+    encoding = raw_encoding(str(msg.encoding))
+    if encoding is None:
+        return None
+    return int(msg.width), int(msg.height), encoding
+
+
+def image_bytes(msg: Any, encoding: str) -> bytes:
+    """The bytes the table holds for ``msg``: compressed as logged, raw packed little-endian."""
+    if encoding not in RAW_IMAGE_ENCODINGS:
+        return bytes(msg.data)
+    channels, dtype = RAW_IMAGE_ENCODINGS[encoding]
+    item = np.dtype(dtype).itemsize
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    row = w * channels * item
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8)
+    if step < row or data.size < h * step:
+        raise TimelineError(f"image {w}x{h} {encoding}: step {step} and {data.size} bytes do not hold it")
+    rows = np.ascontiguousarray(data[: h * step].reshape(h, step)[:, :row])
+    if item > 1 and bool(msg.is_bigendian):
+        rows = rows.view(">" + dtype.lstrip("<")).astype(dtype)
+    return rows.tobytes()
+
+
+def make_image_loader(fetch: FrameFetch, locators: Sequence[FrameLocator],
+                      encodings: Sequence[str]) -> ImageLoader:
+    """An ImageLoader that re-reads image ``i`` from the log on demand (a small LRU cache)."""
+
+    def read(i: int) -> bytes:
+        loc = locators[i]
+        return image_bytes(fetch(loc.topic, loc.log_time_ns, loc.ordinal), encodings[i])
+
+    return cached_reader(read, CACHE_IMAGES)

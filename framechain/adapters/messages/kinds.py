@@ -1,0 +1,155 @@
+"""Message kinds framechain understands, and which topics of a log feed which table."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+from framechain.config.chain import ChainConfig
+
+
+class Kind(StrEnum):
+    """What a topic's messages become in the Timeline."""
+
+    TF = "tf"  # tf2_msgs/TFMessage, tf/tfMessage, foxglove.FrameTransforms
+    TRANSFORM = "transform"  # geometry_msgs/TransformStamped, foxglove.FrameTransform
+    CAMERA_INFO = "camera_info"  # sensor_msgs/CameraInfo, foxglove.CameraCalibration
+    DEPTH = "depth"  # sensor_msgs/Image (16UC1, 32FC1), CompressedImage (compressedDepth)
+    DETECTIONS = "detections"  # vision_msgs/Detection2DArray
+    DETECTION = "detection"  # vision_msgs/Detection2D
+    PIXEL_POINT = "pixel_point"  # geometry_msgs/PointStamped holding (u, v, depth)
+    POINT = "point"  # PointStamped, PoseStamped, TransformStamped as logged evidence
+    ODOMETRY = "odometry"  # nav_msgs/Odometry
+    POSE = "pose"  # PoseStamped, PoseWithCovarianceStamped, TransformStamped on a pose topic the chain names
+    JOINT_STATE = "joint_state"  # sensor_msgs/JointState
+    URDF = "urdf"  # std_msgs/String robot description
+    RS_EXTRINSIC = "rs_extrinsic"  # librealsense geometry_msgs/Transform on .../tf/<ref>
+    RS_DEPTH_UNITS = "rs_depth_units"  # librealsense option Depth_Units (std_msgs/Float32)
+    # Fiducials (framechain.adapters.messages.fiducials): one observation per tag.
+    APRILTAGS = "apriltags"  # apriltag_msgs ApriltagArrayStamped (ROS 1) / AprilTagDetectionArray (ROS 2): corners
+    APRILTAG_POSES = "apriltag_poses"  # apriltag_ros/AprilTagDetectionArray: tag poses in the camera frame
+    FIDUCIAL_VERTICES = "fiducial_vertices"  # fiducial_msgs/FiducialArray: corners
+    FIDUCIAL_TRANSFORMS = "fiducial_transforms"  # fiducial_msgs/FiducialTransformArray: poses in the camera frame
+    DETECTIONS_3D = "detections_3d"  # vision_msgs/Detection3DArray: box centres in the camera frame
+    CAMERA_POINT = "camera_point"  # geometry_msgs/PointStamped named as the detections: a camera-frame point
+    MARKER_IMAGE = "marker_image"  # sensor_msgs/Image or CompressedImage searched for markers
+    IMAGE = "image"  # sensor_msgs/Image or CompressedImage on topics.image, shown by the sinks
+
+
+def normalize_msgtype(name: str) -> str:
+    """``tf2_msgs/msg/TFMessage`` and ``tf2_msgs/TFMessage`` both become ``tf2_msgs/TFMessage``."""
+    return name.replace("/msg/", "/")
+
+
+_BY_TYPE: dict[str, Kind] = {
+    "tf2_msgs/TFMessage": Kind.TF,
+    "tf/tfMessage": Kind.TF,
+    "foxglove.FrameTransforms": Kind.TF,
+    "foxglove.FrameTransform": Kind.TRANSFORM,
+    "geometry_msgs/TransformStamped": Kind.TRANSFORM,
+    "sensor_msgs/CameraInfo": Kind.CAMERA_INFO,
+    "foxglove.CameraCalibration": Kind.CAMERA_INFO,
+    "vision_msgs/Detection2DArray": Kind.DETECTIONS,
+    "vision_msgs/Detection2D": Kind.DETECTION,
+    "nav_msgs/Odometry": Kind.ODOMETRY,
+    "sensor_msgs/JointState": Kind.JOINT_STATE,
+}
+
+#: Detector messages whose detections are fiducials (corners or camera-frame points).
+_FIDUCIAL_TYPES: dict[str, Kind] = {
+    "apriltag_msgs/ApriltagArrayStamped": Kind.APRILTAGS,
+    "apriltag_msgs/AprilTagDetectionArray": Kind.APRILTAGS,
+    "apriltag_ros/AprilTagDetectionArray": Kind.APRILTAG_POSES,
+    "fiducial_msgs/FiducialArray": Kind.FIDUCIAL_VERTICES,
+    "fiducial_msgs/FiducialTransformArray": Kind.FIDUCIAL_TRANSFORMS,
+    "vision_msgs/Detection3DArray": Kind.DETECTIONS_3D,
+}
+_BY_TYPE.update(_FIDUCIAL_TYPES)
+
+_POINT_TYPES = frozenset({"geometry_msgs/PointStamped", "geometry_msgs/PoseStamped", "geometry_msgs/TransformStamped"})
+_IMAGE_TYPES = frozenset({"sensor_msgs/Image", "sensor_msgs/CompressedImage"})
+#: Message types a pose topic (``topics.odometry``) may carry, read as a dynamic edge.
+POSE_TYPES = frozenset({"nav_msgs/Odometry", "geometry_msgs/PoseStamped", "geometry_msgs/PoseWithCovarianceStamped",
+                        "geometry_msgs/TransformStamped"})
+
+
+def is_realsense_layout(topics: dict[str, str]) -> bool:
+    """A librealsense recording (``/file_version`` and ``/device_0/...`` topics)."""
+    return "/file_version" in topics and any(t.startswith("/device_") for t in topics)
+
+
+def _looks_depth(topic: str, msgtype: str) -> bool:
+    low = topic.lower()
+    if msgtype == "sensor_msgs/CompressedImage":
+        return "compresseddepth" in low
+    return "depth" in low and "color" not in low.rsplit("/", 3)[-1]
+
+
+def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str, Kind]:
+    """Topic -> kind for the topics to decode; every other topic is skipped without decoding.
+
+    ``topics`` maps topic name to message type. With a chain, only the topics it names plus the
+    frame tree (/tf, /tf_static), joint states and robot descriptions are read; without one,
+    every topic of a kind framechain understands (evidence points need a chain to give them a
+    role, so they are read only when the chain names them).
+    """
+    norm = {name: normalize_msgtype(t) for name, t in topics.items()}
+    realsense = is_realsense_layout(norm)
+    out: dict[str, Kind] = {}
+    named: dict[str, Kind] = {}
+    if chain is not None:
+        t = chain.topics
+        for topic, kind in (
+            (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.pixel_points, Kind.PIXEL_POINT),
+        ):
+            if topic:
+                named[topic] = kind
+        for pose in chain.pose_topics():
+            msgtype = norm.get(pose.topic, "")
+            if msgtype in POSE_TYPES:  # other types: api notes that the topic is not a pose
+                named[pose.topic] = Kind.ODOMETRY if msgtype == "nav_msgs/Odometry" else Kind.POSE
+        if t.detections:
+            named[t.detections] = Kind.DETECTIONS
+        if t.image:  # markers are searched in it and it is shown; or only shown
+            named[t.image] = Kind.MARKER_IMAGE if chain.evidence.markers is not None else Kind.IMAGE
+        for topic in chain.evidence_topics():
+            named[topic] = Kind.POINT
+    for name, msgtype in norm.items():
+        if name in named:
+            kind = named[name]
+            if kind == Kind.DETECTIONS and msgtype == "vision_msgs/Detection2D":
+                kind = Kind.DETECTION
+            elif kind == Kind.DETECTIONS and msgtype in _FIDUCIAL_TYPES:
+                kind = _FIDUCIAL_TYPES[msgtype]
+            elif kind == Kind.DETECTIONS and msgtype == "geometry_msgs/PointStamped":
+                kind = Kind.CAMERA_POINT
+            out[name] = kind
+            continue
+        kind_or_none = _BY_TYPE.get(msgtype)
+        if realsense:
+            if msgtype == "geometry_msgs/Transform" and "/tf/" in name:
+                out[name] = Kind.RS_EXTRINSIC
+                continue
+            if name.endswith("/option/Depth_Units/value"):
+                out[name] = Kind.RS_DEPTH_UNITS
+                continue
+        if msgtype == "std_msgs/String" and name.rstrip("/").endswith("robot_description"):
+            out[name] = Kind.URDF
+            continue
+        if chain is not None:
+            # With a chain: the frame tree and joints always; other kinds only where named (or
+            # where the chain leaves the slot empty, so the tree stays complete).
+            if kind_or_none in (Kind.TF, Kind.TRANSFORM, Kind.JOINT_STATE) or (
+                (kind_or_none == Kind.ODOMETRY and not chain.topics.odometry)
+                or (kind_or_none == Kind.CAMERA_INFO and (realsense or not chain.topics.camera_info))
+            ):
+                out[name] = kind_or_none
+            continue
+        if kind_or_none is not None:
+            out[name] = kind_or_none
+        elif msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
+            out[name] = Kind.DEPTH
+    return out
+
+
+def point_types() -> frozenset[str]:
+    return _POINT_TYPES

@@ -1,0 +1,43 @@
+"""A fault hypothesis as a small model over the vectorised chain: parameters, bounds, and what it
+does to the chain (a :class:`Perturbation`); the catalogue's models are in :mod:`faults`, the
+frame swaps in :mod:`frame_swaps`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+from framechain.analysis.chain_model import ChainInputs, Perturbation
+from framechain.analysis.estimates import Estimate
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
+
+Mode = Literal["as_run", "correction"]
+
+@dataclass(frozen=True)
+class FaultModel:
+    """One fault hypothesis: its parameters, bounds, and what it does to the chain."""
+
+    name: str  # unique label, e.g. "axis_flip[0,1,2|+,-,+]"
+    fault: Fault
+    hop: HopName
+    family: str
+    apply: Callable[[Perturbation, FloatArray], Perturbation]
+    estimate: Callable[[FloatArray, Mode, ChainInputs], Estimate]
+    #: parameter start, bounds and scale; empty for a model with no parameters (a discrete choice)
+    x0: tuple[float, ...] = ()
+    lower: tuple[float, ...] = ()
+    upper: tuple[float, ...] = ()
+    x_scale: tuple[float, ...] = ()
+    #: extra BIC penalty for a discrete choice among many variants (log of their number)
+    choice_penalty: float = 0.0
+    #: extra starting points for the local fit (multi-start)
+    starts: tuple[tuple[float, ...], ...] = ()
+    #: whether the bounds mark the plausible range (a fit ending on one explains nothing) rather
+    #: than the limits of the parametrisation (a rotation vector's |component| <= pi)
+    plausibility_bounds: bool = True
+
+    @property
+    def n_params(self) -> int:
+        return len(self.x0)

@@ -1,0 +1,189 @@
+"""Evidence files: attribution.json, the per-observation-and-hop Parquet table, and inputs.json.
+
+The Parquet table has one row per observation and hop (replayed or not) so that two methods can
+be compared on the same saved panel; inputs.json records everything the result depends on:
+inputs, frames, units, stamps, latency budget, configuration, seed, metric definitions, labels.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from framechain import __version__
+from framechain.analysis.attribute import Attribution, Finding
+from framechain.analysis.chain_model import Perturbation, evaluate
+from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
+from framechain.analysis.fit import perturbation_of
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
+
+METRICS = {
+    "logged_hops": "distance between the robot's logged world point and the recomputed one, per observation",
+    "target": "distance between the logged target and the recomputed world point, per observation",
+    "reference": "distance between the reference (ground truth) and the recomputed world point, per observation",
+    "static_spread": "distance of each recomputed world point of the static target from their centroid",
+    "none": "no evidence to measure against",
+}
+
+
+def write_attribution(result: Attribution, out_dir: str | Path) -> dict[str, Path]:
+    """Write attribution.json, evidence.parquet, samples.parquet and inputs.json into ``out_dir``.
+
+    evidence.parquet: one row per observation and hop; samples.parquet: one row per observation,
+    hop and edge, with the stamps of the transform samples used and the gap to each.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "attribution": out / "attribution.json",
+        "evidence": out / "evidence.parquet",
+        "samples": out / "samples.parquet",
+        "inputs": out / "inputs.json",
+    }
+    paths["attribution"].write_text(json.dumps(result.to_json(), indent=2) + "\n")
+    pq.write_table(evidence_table(result), paths["evidence"])
+    pq.write_table(result.replay.samples.to_arrow(), paths["samples"])
+    paths["inputs"].write_text(json.dumps(inputs_record(result), indent=2) + "\n")
+    return paths
+
+
+def evidence_table(result: Attribution) -> pa.Table:
+    """One row per observation and hop: the hop record plus the evidence and the error."""
+    hops = result.replay.hops
+    table = hops.to_arrow()
+    n_rows = len(hops)
+    evidence = np.full((n_rows, 3), np.nan)
+    hop_error = np.full(n_rows, np.nan)  # the hop's own departure (logged against recomputed)
+    chain_error = np.full(n_rows, np.nan)  # on body_to_world rows: the whole chain against the evidence
+    chain_error_after = np.full(n_rows, np.nan)
+    replayed_ids = result.inputs.obs_id
+    order = np.argsort(replayed_ids)
+    pos = np.clip(np.searchsorted(replayed_ids[order], hops.obs_id), 0, max(replayed_ids.size - 1, 0))
+    found = replayed_ids.size > 0
+    row = order[pos] if found else pos
+    matched = (replayed_ids[row] == hops.obs_id) if found else np.zeros(n_rows, dtype=bool)
+    world = matched & (hops.hop == HopName.BODY_TO_WORLD.value)
+    evidence[world] = result.evidence_points[row[world]]
+    chain_error[world] = result.error_before[row[world]]
+    chain_error_after[world] = result.error_after[row[world]]
+    for hop, departure in result.hop_errors.items():
+        sel = matched & (hops.hop == hop)
+        hop_error[sel] = departure[row[sel]]
+    table = table.append_column("evidence_xyz", pa.FixedSizeListArray.from_arrays(pa.array(evidence.reshape(-1)), 3))
+    table = table.append_column("hop_error_m", pa.array(hop_error))
+    table = table.append_column("chain_error_m", pa.array(chain_error))
+    table = table.append_column("chain_error_after_m", pa.array(chain_error_after))
+    return table.append_column("metric", pa.array([result.metric] * n_rows))
+
+
+def inputs_record(result: Attribution) -> dict[str, Any]:
+    obs = result.replay.observations
+    labels, counts = np.unique(obs.label, return_counts=True) if len(obs) else (np.array([]), np.array([]))
+    cfg = result.config
+    return {
+        "schema": "framechain/inputs@1",
+        "framechain_version": __version__,
+        "source": result.source,
+        "frames": {"camera": cfg.frames.camera, "body": cfg.frames.body, "world": cfg.frames.world},
+        "topics": cfg.to_dict().get("topics", {}),
+        "units": {
+            "length": "m",
+            "time": "ns (integers) inside, s in estimates",
+            "angle": "deg in estimates",
+            "depth": "m along the optical axis (z-depth)",
+            "pixels": "px, origin at the top-left pixel centre",
+        },
+        "stamps": {
+            "observations_first_ns": int(obs.stamp_ns.min()) if len(obs) else None,
+            "observations_last_ns": int(obs.stamp_ns.max()) if len(obs) else None,
+            "keyed_on": "header.stamp (tf2 semantics); log time kept beside it",
+        },
+        "latency_budget_s": cfg.latency_budget_s,
+        "configuration": cfg.to_dict(),
+        "seed": result.seed,
+        "metric": {"name": result.metric, "definition": METRICS[result.metric]},
+        "labels": {str(k): int(v) for k, v in zip(labels, counts, strict=True)},
+        "camera": {
+            "frame": result.inputs.camera.frame,
+            "K": result.inputs.camera.K.tolist(),
+            "width": result.inputs.camera.width,
+            "height": result.inputs.camera.height,
+            "distortion_model": result.inputs.camera.distortion_model,
+        },
+        "observations": result.counts(),
+        # What became of each logged point (matched by obs_id or stamp, or why not): see analysis.alignment.
+        "evidence_alignment": result.aligned.counts(),
+        "notes": list(result.notes),
+    }
+
+
+def robot_speed(result: Attribution, window_s: float = 0.05) -> FloatArray:
+    """Body speed in the world frame (m/s) at each replayed observation, by central differences."""
+    inputs = result.inputs
+    t_before, _, ok_b = inputs.world_from_body(-window_s, None)
+    t_after, _, ok_a = inputs.world_from_body(window_s, None)
+    speed = np.linalg.norm(t_after - t_before, axis=1) / (2 * window_s)
+    speed[~(ok_a & ok_b)] = np.nan
+    out: FloatArray = speed
+    return out
+
+
+def sensitivity(result: Attribution, finding: Finding, steps: int = 31) -> tuple[FloatArray, FloatArray, str]:
+    """Median world error as the finding's fault grows from nothing to 1.5x its estimate.
+
+    The tilt lab for whatever was found: how fast does this fault hurt at this robot's depths
+    and speeds? Returns (magnitudes, median error in m, axis label).
+    """
+    from framechain.analysis.faults import models_for
+
+    model = next((m for m in models_for(result.inputs) if m.name == finding.model), None)
+    if model is None or model.n_params == 0:
+        return np.zeros(0), np.zeros(0), ""
+    x_full = _params_of(finding, model.n_params)
+    magnitudes = np.linspace(0.0, 1.5, steps)
+    errors = np.empty(steps)
+    baseline = evaluate(result.inputs, Perturbation())[2]
+    for k, a in enumerate(magnitudes):
+        scaled = finding.fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS)  # these grow from 1, not from 0
+        x = 1.0 + a * (x_full - 1.0) if scaled else a * x_full
+        p = evaluate(result.inputs, perturbation_of([model], x))[2]
+        errors[k] = float(np.nanmedian(np.linalg.norm(p - baseline, axis=1)))
+    label = {
+        Fault.LATENCY: "pose time offset (ms)",
+        Fault.MISSING_ROTATION: "rotation lost (deg)",
+        Fault.ROTATION_ERROR: "rotation error (deg)",
+        Fault.DEPTH_SCALE: "depth scale error (%)",
+        Fault.INTRINSICS: "focal scale error (%)",
+    }.get(finding.fault, "fault size (fraction of the estimate)")
+    axis = magnitudes * _display_size(finding)
+    return axis, errors, label
+
+
+def _display_size(finding: Finding) -> float:
+    e = finding.estimate
+    if isinstance(e, LatencyEstimate):
+        return abs(e.offset_s) * 1e3
+    if isinstance(e, RotationEstimate):
+        return e.angle_deg
+    if isinstance(e, ScaleEstimate):
+        return abs(e.value - 1.0) * 100
+    return 1.0
+
+
+def _params_of(finding: Finding, n: int) -> FloatArray:
+    """The fitted parameter vector in the model's as-run direction, from the finding's estimate."""
+    e = finding.estimate
+    if isinstance(e, LatencyEstimate):
+        return np.array([e.offset_s])
+    if isinstance(e, RotationEstimate):
+        rotvec: FloatArray = np.deg2rad(e.angle_deg) * np.asarray(e.axis, dtype=float)
+        return rotvec
+    if isinstance(e, ScaleEstimate):
+        return np.array([e.value])
+    return np.zeros(n)
