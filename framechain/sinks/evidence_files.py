@@ -20,7 +20,7 @@ from framechain.analysis.attribute import Attribution, Finding
 from framechain.analysis.chain_model import Perturbation, evaluate
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.fit import perturbation_of
-from framechain.arrays import FloatArray
+from framechain.arrays import FloatArray, rows_of
 from framechain.catalogue import Fault, HopName
 
 METRICS = {
@@ -62,12 +62,8 @@ def evidence_table(result: Attribution) -> pa.Table:
     hop_error = np.full(n_rows, np.nan)  # the hop's own departure (logged against recomputed)
     chain_error = np.full(n_rows, np.nan)  # on body_to_world rows: the whole chain against the evidence
     chain_error_after = np.full(n_rows, np.nan)
-    replayed_ids = result.inputs.obs_id
-    order = np.argsort(replayed_ids)
-    pos = np.clip(np.searchsorted(replayed_ids[order], hops.obs_id), 0, max(replayed_ids.size - 1, 0))
-    found = replayed_ids.size > 0
-    row = order[pos] if found else pos
-    matched = (replayed_ids[row] == hops.obs_id) if found else np.zeros(n_rows, dtype=bool)
+    row = rows_of(result.inputs.obs_id, hops.obs_id)  # the hop record's observation among the replayed ones
+    matched = row >= 0
     world = matched & (hops.hop == HopName.BODY_TO_WORLD.value)
     evidence[world] = result.evidence_points[row[world]]
     chain_error[world] = result.error_before[row[world]]
