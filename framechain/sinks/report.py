@@ -22,7 +22,8 @@ import numpy as np
 from framechain.analysis.attribute import Attribution
 from framechain.analysis.estimates import format_estimate, format_interval
 from framechain.arrays import FloatArray
-from framechain.sinks.evidence_files import inputs_record, robot_speed, sensitivity
+from framechain.analysis.sensitivity import robot_speed, sensitivity
+from framechain.sinks.evidence_files import inputs_record
 from framechain.timeline import Timeline
 
 _CSS = """
