@@ -10,7 +10,7 @@ into one table. :func:`load_log` is the reading part alone (``framechain info`` 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import astuple, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -80,15 +80,30 @@ def load_log(
     if episode is not None or robot is not None:
         raise FramechainError(f"{target}: --episode and --robot are for LeRobot datasets; this is not one")
     if config is not None:
-        loaded = adapters.open_log(target, config, progress=progress)
+        loaded = read_log(target, config, progress=progress)
         _check_frames(target, loaded.timeline, config)
         return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=False,
                          info=loaded.info, notes=list(loaded.info.notes))
-    loaded = adapters.open_log(target, None, progress=progress, point_roles=adapters.evidence_roles)
+    loaded = read_log(target, None, progress=progress, point_roles=adapters.evidence_roles)
     suggestion = adapters.suggest(loaded)
     loaded = adapters.as_suggested(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
                      info=loaded.info, notes=list(loaded.info.notes), suggestion=suggestion)
+
+
+def read_log(
+    path: str | Path,
+    chain: ChainConfig | None = None,
+    *,
+    progress: bool = False,
+    kinds: Collection[str] | None = None,
+    point_roles: Callable[[adapters.LogInfo], Mapping[str, str]] | None = None,
+) -> adapters.LoadedLog:
+    """Read a robot log (MCAP, ROS 1 bag, ROS 2 bag) into the model as it is: one pass over the topics
+    ``chain`` needs (every topic framechain understands without one), narrowed to message ``kinds``
+    (``framechain tf`` reads the frame tree alone). No chain is suggested (``framechain info`` shows
+    the log whole)."""
+    return adapters.open_log(path, chain, progress=progress, kinds=kinds, point_roles=point_roles)
 
 
 def _stored_chain(target: Path, timeline: Timeline, config: ChainConfig | None) -> LoadedRun:
@@ -258,4 +273,4 @@ def _as_read(loaded: LoadedRun, result: Attribution) -> Attribution:
     return replace(result, source=source)
 
 
-__all__ = ["IN_MEMORY", "LoadedRun", "Run", "attribute_log", "load_chain", "load_log", "run"]
+__all__ = ["IN_MEMORY", "LoadedRun", "Run", "attribute_log", "load_chain", "load_log", "read_log", "run"]

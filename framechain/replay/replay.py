@@ -23,7 +23,6 @@ from framechain.replay.camera import CameraModel
 from framechain.replay.depth import sample_depth
 from framechain.timeline import CameraTable, Column, ColumnTable, ObservationTable, Timeline, normalize_frame
 
-
 #: Status string of an observation that went through every hop.
 REPLAYED = "replayed"
 

@@ -16,7 +16,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain import __version__
-from framechain.analysis.attribute import Attribution
+from framechain.analysis.findings import Attribution
+from framechain.analysis.run import Run
 from framechain.arrays import rows_of
 from framechain.catalogue import HopName
 
@@ -29,12 +30,13 @@ METRICS = {
 }
 
 
-def write_attribution(result: Attribution, out_dir: str | Path) -> dict[str, Path]:
-    """Write attribution.json, evidence.parquet, samples.parquet and inputs.json into ``out_dir``.
+def write_attribution(run: Run, out_dir: str | Path) -> dict[str, Path]:
+    """Write the run's attribution.json, evidence.parquet, samples.parquet and inputs.json into ``out_dir``.
 
     evidence.parquet: one row per observation and hop; samples.parquet: one row per observation,
     hop and edge, with the stamps of the transform samples used and the gap to each.
     """
+    result = run.attributed()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.attribute import Finding
+from framechain.analysis.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import CameraModel, ReplayResult
 from framechain.replay.stamps import nearest
