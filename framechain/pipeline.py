@@ -5,7 +5,8 @@ suggested chain is worked out from the same read), replays once and aligns once,
 :class:`~framechain.analysis.run.Run` to the sinks, which compute nothing a stage before them owns.
 :func:`attribute_log` is ``run`` for its attribution: a pure function of its inputs with no global
 state, so a fleet's episodes can be mapped over a process pool (or Ray) and the results gathered
-into one table. :func:`load_log` is the reading part alone (``framechain info`` and ``tf``).
+into one table. :func:`load_log` is the reading part alone (with a chain suggested when none is
+given); :func:`read_log` reads a robot log as it is (``framechain info`` and ``tf``).
 """
 
 from __future__ import annotations
@@ -203,7 +204,7 @@ def run(
     replayed = replay_chain(loaded.timeline, loaded.chain, rays=attribute)
     nothing = _why_nothing_replayed(loaded, replayed.replay)
     attribution: Attribution | None = None
-    why: NotAttributed | None = NotAttributed(Unattributed.NOT_ASKED, "not asked to attribute (--no-attribute)")
+    why: NotAttributed | None = NotAttributed(Unattributed.NOT_ASKED, "attribution was not asked for")
     if attribute:
         try:
             attribution = _as_read(loaded, attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap,
