@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -35,6 +35,9 @@ import pyarrow.parquet as pq
 from framechain import __version__
 from framechain.config.chain import ChainConfig
 from framechain.timeline import FramechainError
+
+if TYPE_CHECKING:
+    from framechain.analysis.run import Run
 
 SCHEMA = "framechain/batch@1"
 RESULTS_DIR = "results"
@@ -200,8 +203,7 @@ def _file_digest(path: str | Path | None) -> str | None:
 # -- the pure per-unit function ---------------------------------------------------------------
 def run_unit(task: UnitTask) -> dict[str, Any]:
     """Attribute one log or episode; the record of the outcome (never raises for a bad log)."""
-    from framechain.analysis.attribute import AnalysisError
-    from framechain.pipeline import attribute_log
+    from framechain import pipeline
 
     unit = task.unit
     start, start_cpu = time.perf_counter(), time.process_time()
@@ -209,11 +211,8 @@ def run_unit(task: UnitTask) -> dict[str, Any]:
     if unit.problem is not None:
         return {**record, "status": "error", "error": unit.problem, "error_type": "BatchError"}
     try:
-        run, result = attribute_log(unit.path, task.chain, seed=task.seed, bootstrap=task.bootstrap,
-                                    episode=unit.episode, robot=task.robot if unit.episode is not None else None)
-    except AnalysisError as err:  # read, but no observation replayed: the message names the key to add
-        record.update(status="nothing_replayed", error=_one_line(err), error_type=type(err).__name__)
-        record.update(_span_of(unit))
+        made = pipeline.run(unit.path, task.chain, seed=task.seed, bootstrap=task.bootstrap, episode=unit.episode,
+                            robot=task.robot if unit.episode is not None else None)
     except FramechainError as err:  # unreadable log, chain that does not fit it
         record.update(status="error", error=_one_line(err), error_type=type(err).__name__)
         record.update(_span_of(unit))
@@ -221,21 +220,33 @@ def run_unit(task: UnitTask) -> dict[str, Any]:
         record.update(status="crashed", error=_one_line(err), error_type=type(err).__name__)
         record.update(_span_of(unit))
     else:
-        findings = [_finding_row(f) for f in result.findings]
-        status: Status = "no_evidence" if result.metric == "none" else "findings" if findings else "clean"
-        counts = result.counts()
-        info = run.info
-        record.update(
-            status=status, verdict=result.verdict, metric=result.metric, chain_suggested=run.chain_suggested,
-            start_ns=None if info is None else int(info.start_ns), end_ns=None if info is None else int(info.end_ns),
-            observations=int(counts["total"]), replayed=int(counts["replayed"]),
-            error_median_m=result.error_summary()["median"], error_p95_m=result.error_summary()["p95"],
-            residual_median_m=result.error_summary(result.error_after)["median"],
-            findings=findings, notes=list(result.notes),
-        )
+        record.update(_outcome(made))
     record["elapsed_s"] = round(time.perf_counter() - start, 4)
     record["cpu_s"] = round(time.process_time() - start_cpu, 4)
     return record
+
+
+def _outcome(made: Run) -> dict[str, Any]:
+    """A run's part of its unit's record: its findings, or why there are none."""
+    info = made.info
+    span = {"start_ns": None if info is None else int(info.start_ns),
+            "end_ns": None if info is None else int(info.end_ns)}
+    result = made.attribution
+    if result is None:  # read, but not attributed (nothing replayed): the message names the key to add
+        assert made.not_attributed is not None
+        error = f"{made.path}: {made.not_attributed.detail}"
+        return {"status": "nothing_replayed", "error": _one_line(Exception(error)), "error_type": "AnalysisError",
+                **span}
+    findings = [_finding_row(f) for f in result.findings]
+    status: Status = "no_evidence" if result.metric == "none" else "findings" if findings else "clean"
+    counts = result.counts()
+    return {
+        "status": status, "verdict": result.verdict, "metric": result.metric, "chain_suggested": made.chain_suggested,
+        **span, "observations": int(counts["total"]), "replayed": int(counts["replayed"]),
+        "error_median_m": result.error_summary()["median"], "error_p95_m": result.error_summary()["p95"],
+        "residual_median_m": result.error_summary(result.error_after)["median"],
+        "findings": findings, "notes": list(result.notes),
+    }
 
 
 def _record_head(task: UnitTask) -> dict[str, Any]:

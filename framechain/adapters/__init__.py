@@ -17,16 +17,10 @@ from framechain.adapters.errors import (
 from framechain.adapters.formats.writer import CONTAINERS, canonical_order, write_log
 from framechain.adapters.lerobot.reader import LeRobotAdapter, open_dataset, scan_dataset
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.suggest.chain import (
-    ChainNeed,
-    NeedStatus,
-    SuggestedChain,
-    chain_needs,
-    suggest,
-    suggest_chain,
-    why_nothing_replayed,
-)
+from framechain.adapters.suggest.chain import SuggestedChain, as_suggested, evidence_roles, suggest, suggest_chain
+from framechain.adapters.suggest.explain import why_nothing_replayed
 from framechain.adapters.suggest.frame_tree import EdgeInfo, frame_tree
+from framechain.adapters.suggest.needs import ChainNeed, NeedStatus, chain_needs
 
 register_adapter(LeRobotAdapter())
 
@@ -46,9 +40,11 @@ __all__ = [
     "SuggestedChain",
     "TopicInfo",
     "UnsupportedLogError",
+    "as_suggested",
     "canonical_order",
     "chain_needs",
     "detect",
+    "evidence_roles",
     "frame_tree",
     "open_dataset",
     "open_log",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 import weakref
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
@@ -139,12 +139,14 @@ def scan_log(path: str | Path) -> LogInfo:
 
 def open_log(
     path: str | Path, chain: ChainConfig | None = None, *, progress: bool = False,
-    kinds: Collection[str] | None = None,
+    kinds: Collection[str] | None = None, point_roles: Callable[[LogInfo], Mapping[str, str]] | None = None,
 ) -> LoadedLog:
     """Read a log into the Timeline: only the topics ``chain`` needs (all it understands if None).
 
     ``kinds`` narrows further to some message kinds (:class:`Kind` values, e.g. ``{"tf"}``);
-    ``progress`` shows a progress bar on stderr for large logs.
+    ``progress`` shows a progress bar on stderr for large logs; ``point_roles``, given what the log
+    holds, names point topics to read as evidence beside the chain's, with their roles (a suggested
+    chain's evidence, so that a log without a chain is read once).
 
     Every table comes in log-time order (ties: by topic, then file order). Depth pixels stay in
     the log until :meth:`DepthFrameTable.load` asks for a frame.
@@ -167,6 +169,10 @@ def open_log(
         info = src.info().with_notes(notes)
         types = {t.name: normalize_msgtype(t.msgtype) for t in info.topics}
         selected = select_topics(types, chain)
+        if point_roles is not None:  # read as a chain naming them would: as points, with their roles
+            extra = {t: r for t, r in point_roles(info).items() if t in types}
+            selected.update(dict.fromkeys(extra, Kind.POINT))
+            col.roles = {**col.roles, **extra}
         if kinds is not None:
             wanted = {Kind(k) for k in kinds}
             selected = {t: k for t, k in selected.items() if k in wanted}

@@ -1,17 +1,27 @@
-"""The analysis room: fault models, fitting, attribution, the tilt lab."""
+"""The analysis room: one replay and its aligned evidence, fault models, fitting, attribution, the run
+every sink renders, the tilt lab."""
 
-from framechain.analysis.attribute import AnalysisError, Attribution, Finding, attribute
+from framechain.analysis.attribute import AnalysisError, Attribution, Finding, attribute, attribute_replayed
 from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
+from framechain.analysis.findings import Unattributed
 from framechain.analysis.lab import TiltRow, crossing_pitch_deg, tilt_sweep
+from framechain.analysis.replayed import Replayed, replay_chain
+from framechain.analysis.run import NotAttributed, Run
 
 __all__ = [
     "AnalysisError",
     "Attribution",
     "Finding",
+    "NotAttributed",
     "NothingToCorrectError",
+    "Replayed",
+    "Run",
     "TiltRow",
+    "Unattributed",
     "apply_corrections",
     "attribute",
+    "attribute_replayed",
     "crossing_pitch_deg",
+    "replay_chain",
     "tilt_sweep",
 ]

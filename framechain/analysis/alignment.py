@@ -26,7 +26,7 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray, IntArray
+from framechain.arrays import FloatArray, IntArray, rows_of
 from framechain.config.chain import ChainFrames
 from framechain.replay import TransformBuffer, transform_points
 from framechain.replay.stamps import nearest
@@ -196,14 +196,9 @@ def _match(table: PointTable, obs_id: IntArray, stamps: IntArray, tolerance_ns: 
     out = np.full(n, -1, dtype=np.int64)
     # 1. By obs_id: the first point logged for the observation.
     with_id = np.flatnonzero(table.obs_id >= 0)
-    if with_id.size:
-        with_id = with_id[np.lexsort((table.log_time_ns[with_id], table.obs_id[with_id]))]
-        ids = table.obs_id[with_id]
-        first = np.r_[True, ids[1:] != ids[:-1]]
-        with_id, ids = with_id[first], ids[first]
-        pos = np.clip(np.searchsorted(ids, obs_id), 0, ids.size - 1)
-        hit = ids[pos] == obs_id
-        out[hit] = with_id[pos[hit]]
+    with_id = with_id[np.argsort(table.log_time_ns[with_id], kind="stable")]
+    row = rows_of(table.obs_id[with_id], obs_id)
+    out[row >= 0] = with_id[row[row >= 0]]
     # 2. By stamp and rank within equal stamps, for observations still without a point.
     free = np.flatnonzero(table.obs_id < 0)
     if free.size:

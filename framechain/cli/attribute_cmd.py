@@ -47,30 +47,24 @@ def parse_formats(text: str) -> list[str]:
 
 
 def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
-    from framechain.pipeline import attribute_log
+    from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
 
     formats = default_formats or parse_formats(args.format)
     out = Path(args.out)
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
-        run_, result = attribute_log(
-            args.log,
-            args.chain,
-            seed=args.seed,
-            bootstrap=args.bootstrap,
-            episode=args.episode,
-            robot=args.robot,
-            progress=progress,
-        )
-    if run_.chain_suggested:
-        print_suggested_chain(run_.suggestion or run_.chain, args.quiet or args.json)
-    paths = write_attribution(result, out)
+        made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
+                            bootstrap=args.bootstrap, progress=progress)
+    result = made.attributed()  # none: one line saying why, exit 1
+    if made.chain_suggested:
+        print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)
+    paths = write_attribution(made, out)
     report_formats = [f for f in formats if f in ("md", "html")]
     if report_formats:
         from framechain.sinks.report import render_report
 
-        paths.update(render_report(result, out, formats=report_formats, timeline=run_.timeline))
+        paths.update(render_report(made, out, formats=report_formats))
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0

@@ -7,9 +7,12 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from framechain.timeline import FramechainError
+
+if TYPE_CHECKING:
+    from framechain.analysis.run import Run
 
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
@@ -76,13 +79,30 @@ def print_suggested_chain(chain: Any, quiet: bool) -> None:
     console.print(chain.to_yaml().rstrip(), markup=False, highlight=False)
 
 
+def say_unattributed(run: Run, command: str) -> list[str]:
+    """Say on stderr why a replayed run has no findings, and why nothing was replayed (with the chain key to
+    add); the outputs are still written. Returns the note to record beside them."""
+    from framechain.analysis.findings import Unattributed
+
+    # Reasons the user hears otherwise: asked for none, or why nothing replayed (below).
+    said_elsewhere = {Unattributed.NOT_ASKED, Unattributed.NO_DETECTIONS, Unattributed.NOTHING_REPLAYED}
+    notes = []
+    why = run.not_attributed
+    if why is not None and why.reason not in said_elsewhere:
+        print(f"framechain {command}: not attributed: {why.detail}", file=sys.stderr)
+        notes.append(f"not attributed: {why.detail}")
+    if run.nothing_replayed is not None:
+        print(f"framechain {command}: {run.nothing_replayed}", file=sys.stderr)
+    return notes
+
+
 def print_findings(result: Any) -> None:
     """The verdict, the counts, the findings, the per-hop summary, the fixes and the notes, with rich."""
     from rich.console import Console
     from rich.table import Table
 
-    from framechain.analysis.estimates import format_estimate, format_interval
     from framechain.sinks.report import HOP_COLUMNS, hop_rows
+    from framechain.sinks.text import FindingView
 
     console = Console(width=None if sys.stdout.isatty() else 120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
@@ -96,8 +116,8 @@ def print_findings(result: Any) -> None:
         for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
-            table.add_row(str(i), f.fault.value, f.hop.value, format_estimate(f.estimate), format_interval(f.interval),
-                          f"{f.share:.0%}", f"{f.confidence:.2f}")
+            c = FindingView.of(f).cells()
+            table.add_row(str(i), c.fault, c.hop, c.estimate, c.interval, c.share, c.confidence)
         console.print(table)
     hops = Table()
     for col in HOP_COLUMNS:

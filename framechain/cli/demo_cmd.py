@@ -88,8 +88,8 @@ def parse_fault(text: str) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
+    from framechain import pipeline
     from framechain.cli.common import print_findings, progress_reporter
-    from framechain.pipeline import attribute_log
     from framechain.sim.logs import SUFFIX, write_scene
     from framechain.sim.scene import SceneSpec, generate
     from framechain.sinks.evidence_files import write_attribution
@@ -127,24 +127,18 @@ def run(args: argparse.Namespace) -> int:
         write_scene(scene, log_path, container=args.container)
         chain_path = out / "chain.yaml"
         chain_path.write_text(scene.chain.to_yaml())
-        run_, result = attribute_log(log_path, chain_path, seed=args.seed, progress=progress)
+        made = pipeline.run(log_path, chain_path, seed=args.seed, progress=progress)
+        result = made.attributed()
         paths: dict[str, Path] = {"log": log_path, "chain": chain_path}
-        paths.update(write_attribution(result, out))
+        paths.update(write_attribution(made, out))
         say("writing the report")
-        paths.update(render_report(result, out, formats=("md", "html"), timeline=run_.timeline))
+        paths.update(render_report(made, out, formats=("md", "html")))
         if not args.no_rrd:
             from framechain.sinks.rerun import RerunTarget, stream_replay
 
             say("writing the Rerun recording")
             rrd = out / "episode.rrd"
-            stream_replay(
-                run_.timeline,
-                result.replay,
-                RerunTarget.save(rrd),
-                findings=result.findings,
-                evidence=result.aligned,
-                reference_point=run_.chain.evidence.reference_point,
-            )
+            stream_replay(made, RerunTarget.save(rrd))
             paths["rrd"] = rrd
     if args.json:
         print(json.dumps(result.to_json(), indent=2))

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter
+from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter, say_unattributed
 from framechain.timeline import FramechainError
 
 DESCRIPTION = """\
@@ -34,43 +34,29 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from framechain import pipeline
     from framechain.adapters.formats.mcap.export import write_mcap_with
-    from framechain.analysis.alignment import AlignedEvidence
-    from framechain.analysis.attribute import Finding
-    from framechain.pipeline import load_log
-    from framechain.replay import replay
     from framechain.sinks.foxglove_export import foxglove_messages
 
     out = Path(args.out)
     if out.suffix.lower() != ".mcap":
         raise FramechainError(f"--out {out}: an export is an MCAP file; name it *.mcap")
     quiet = args.quiet or args.json
-    findings: list[Finding] = []
-    evidence: AlignedEvidence | None = None
     with progress_reporter(quiet, "exporting") as progress:
-        loaded = load_log(args.log, args.chain, episode=args.episode, robot=args.robot, progress=not quiet)
-        result = replay(loaded.timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
-        if args.attribute and result.replayed.any():
-            from framechain.analysis.attribute import attribute
-
-            try:
-                attribution = attribute(loaded.timeline, loaded.chain, seed=args.seed, progress=progress)
-            except FramechainError as err:  # the recomputed chain is still worth exporting: say why no findings
-                print(f"framechain export: not attributed: {err}", file=sys.stderr)
-            else:
-                result, findings, evidence = attribution.replay, list(attribution.findings), attribution.aligned
+        made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
+                            seed=args.seed, progress=progress)
+        say_unattributed(made, "export")  # the recomputed chain is still worth exporting
         if progress is not None:
             progress(f"writing {out}")
-        messages = foxglove_messages(loaded.timeline, result, findings=findings, evidence=evidence)
-        counts = write_mcap_with(loaded.path, out, messages)
-    if loaded.chain_suggested:
-        print_suggested_chain(loaded.chain, quiet)
-    replay_counts = result.counts()
+        counts = write_mcap_with(made.path, out, foxglove_messages(made))
+    if made.chain_suggested:
+        print_suggested_chain(made.suggestion or made.chain, quiet)
+    replay_counts = made.replay.counts()
     if args.json:
         print(json.dumps({"out": str(out), "copied": counts.copied, "added": counts.added,
-                          "observations": replay_counts, "findings": len(findings)}))
+                          "observations": replay_counts, "findings": len(made.findings)}))
         return 0
-    print(f"log           {loaded.path}")
+    print(f"log           {made.path}")
     print(f"copied        {sum(counts.copied.values())} messages on {len(counts.copied)} topics")
     for topic, n in sorted(counts.added.items()):
         print(f"added         {n:>6} on {topic}")

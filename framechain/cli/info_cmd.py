@@ -37,16 +37,8 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.adapters import (
-        LeRobotAdapter,
-        LoadedLog,
-        SuggestedChain,
-        chain_needs,
-        frame_tree,
-        open_log,
-        suggest,
-    )
-    from framechain.config.chain import ChainConfig
+    from framechain import pipeline
+    from framechain.adapters import LeRobotAdapter, LoadedLog, SuggestedChain, chain_needs, frame_tree, suggest
     from framechain.timeline import FramechainError
 
     chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
@@ -56,16 +48,14 @@ def run(args: argparse.Namespace) -> int:
     suggestion: SuggestedChain | None = None
     if LeRobotAdapter().probe(Path(args.log)) and (args.episode is not None or args.robot is not None
                                                     or chain_file is not None):
-        from framechain.pipeline import load_log
-
-        run_ = load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
+        run_ = pipeline.load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
         loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
         suggestion = SuggestedChain(config=run_.chain)
     elif LeRobotAdapter().probe(Path(args.log)):
         loaded = _dataset_summary(args.log)
     else:
-        given = ChainConfig.from_yaml(chain_file) if chain_file else None
-        loaded = open_log(args.log, given, progress=sys.stderr.isatty() and not (args.json or args.quiet))
+        given = pipeline.load_chain(chain_file)
+        loaded = pipeline.read_log(args.log, given, progress=sys.stderr.isatty() and not (args.json or args.quiet))
         suggestion = SuggestedChain(config=given) if given is not None else suggest(loaded)
     if suggestion is not None and not suggestion.needs:
         suggestion = SuggestedChain(config=suggestion.config,

@@ -5,17 +5,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter
+from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter, say_unattributed
 
 if TYPE_CHECKING:
-    from framechain.analysis.alignment import AlignedEvidence
-    from framechain.analysis.attribute import Finding
-    from framechain.pipeline import LoadedRun
-    from framechain.replay import ReplayResult
+    from framechain.analysis.run import Run
     from framechain.sinks.rerun import RerunOutcome, RerunTarget
 
 DESCRIPTION = """\
@@ -66,59 +62,36 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain.pipeline import load_log
-    from framechain.replay import replay
+    from framechain import pipeline
     from framechain.sinks.overlay import ImageSelection
     from framechain.sinks.rerun import RerunOptions, stream_replay
 
     quiet = args.quiet or args.json
-    findings: Sequence[Finding] = ()
-    evidence: AlignedEvidence | None = None
     with progress_reporter(quiet, "replaying") as progress:
-        loaded = load_log(args.log, args.chain, episode=args.episode, robot=args.robot, progress=not quiet)
-        notes = list(loaded.notes)
-        timeline = loaded.timeline
-        if loaded.chain_suggested and loaded.info is not None:
-            notes.extend(_unused_point_topics(loaded))
-        result = replay(timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s,
-                        ignore_labels=loaded.chain.evidence.ignore_labels)
-        # A bearing-only static target replays nothing on its own (no depth): attribute replays its rays.
-        bearing_only = loaded.chain.evidence.static_target and not result.replayed.any()
-        if args.attribute and (result.replayed.any() or bearing_only):
-            from framechain.analysis.attribute import attribute
-            from framechain.analysis.static import StaticTargetError
-            from framechain.timeline import FramechainError
-
-            try:
-                attribution = attribute(timeline, loaded.chain, seed=args.seed, progress=progress)
-            except FramechainError as err:  # the replay is still worth recording: say why there are no findings
-                # With nothing replayed the line below says what is missing, unless rays were replayed.
-                if result.replayed.any() or isinstance(err.__cause__, StaticTargetError):
-                    print(f"framechain replay: not attributed: {err}", file=sys.stderr)
-                    notes.append(f"not attributed: {err}")
-            else:
-                result, findings, evidence = attribution.replay, attribution.findings, attribution.aligned
-                notes.extend(n for n in attribution.notes if n not in notes)
-        why = loaded.why_nothing_replayed(result.counts())
-        if why is not None:
-            # Still write the recording: the frame tree, the cameras and any rejected observations
-            # are worth looking at; say why nothing was replayed and what to add.
-            print(f"framechain replay: {why}", file=sys.stderr)
+        made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
+                            seed=args.seed, progress=progress)
+        notes = list(made.notes)
+        if made.chain_suggested and made.info is not None:
+            notes.extend(_unused_point_topics(made))
+        # The recording is still written without findings, or with nothing replayed: the frame tree, the
+        # cameras and any rejected observations are worth looking at.
+        notes.extend(say_unattributed(made, "replay"))
+        if made.attribution is not None:
+            notes.extend(n for n in made.attribution.notes if n not in notes)
         if progress is not None:
             progress("writing the Rerun recording")
         outcome = stream_replay(
-            timeline, result, _target(args, loaded.path), findings=findings, evidence=evidence,
-            reference_point=loaded.chain.evidence.reference_point,
-            options=RerunOptions(recording_name=loaded.path.name, max_images=args.max_images,
+            made, _target(args, made.path),
+            options=RerunOptions(recording_name=made.path.name, max_images=args.max_images,
                                  images=ImageSelection(args.images)),
             notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
         )
-    if loaded.chain_suggested:
-        print_suggested_chain(loaded.suggestion or loaded.chain, quiet)
+    if made.chain_suggested:
+        print_suggested_chain(made.suggestion or made.chain, quiet)
     if args.json:
-        print(json.dumps(_report(loaded, result, outcome, notes, findings)))
+        print(json.dumps(_report(made, outcome, notes)))
     else:  # --quiet silences progress and the suggested chain, not the result
-        _print_text(loaded, result, outcome, notes, findings)
+        _print_text(made, outcome, notes)
     return 0
 
 
@@ -140,7 +113,7 @@ def _log_name(path: Path) -> str:
     return name.removesuffix(path.suffix) if path.is_file() else name
 
 
-def _unused_point_topics(loaded: LoadedRun) -> list[str]:
+def _unused_point_topics(loaded: Run) -> list[str]:
     """Without a chain the log does not say which topic holds which hop's point: say so."""
     topics = sorted(t.name for t in getattr(loaded.info, "topics", ())
                     if str(t.msgtype).rsplit("/", 1)[-1] in _POINT_TYPES
@@ -151,10 +124,8 @@ def _unused_point_topics(loaded: LoadedRun) -> list[str]:
             "(evidence: hops, target, reference) in CHAIN.yaml and pass --chain"]
 
 
-def _report(
-    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[Finding]
-) -> dict[str, Any]:
-    from framechain.sinks.rerun import FindingView
+def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, Any]:
+    from framechain.sinks.text import FindingView
 
     frames = loaded.chain.frames
     return {
@@ -163,8 +134,8 @@ def _report(
         "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
         "chain_suggested": loaded.chain_suggested,
         "latency_budget_s": loaded.chain.latency_budget_s,
-        "counts": result.counts(),
-        "findings": [FindingView.of(f).text() for f in findings],
+        "counts": loaded.replay.counts(),
+        "findings": [FindingView.of(f).text() for f in loaded.findings],
         "output": {
             "mode": outcome.mode.value, "path": None if outcome.path is None else str(outcome.path),
             "url": outcome.url, "fell_back": outcome.fell_back,
@@ -174,13 +145,12 @@ def _report(
     }
 
 
-def _print_text(
-    loaded: LoadedRun, result: ReplayResult, outcome: RerunOutcome, notes: list[str], findings: Sequence[Finding]
-) -> None:
-    from framechain.sinks.rerun import FindingView
+def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
+    from framechain.sinks.text import FindingView
 
     frames = loaded.chain.frames
-    counts = result.counts()
+    findings = loaded.findings
+    counts = loaded.replay.counts()
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
     detail = ", ".join(f"{reason} {n}" for reason, n in sorted(rejected.items()))

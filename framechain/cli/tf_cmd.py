@@ -67,23 +67,20 @@ def parse_stamp(text: str, log_start_ns: int) -> int:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from framechain.adapters import LeRobotAdapter, open_log
+    from framechain import pipeline
+    from framechain.adapters import LeRobotAdapter
     from framechain.adapters.api import TREE_KINDS
     from framechain.replay import LATEST, TransformBuffer
 
     show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
     salvage: dict[str, Any] | None = None
-    if LeRobotAdapter().probe(Path(args.log)):
-        from framechain.pipeline import load_log  # the episode's tree comes from robot.yaml and the URDF
-
-        transforms = load_log(args.log, episode=args.episode, robot=args.robot).timeline.transforms
+    if LeRobotAdapter().probe(Path(args.log)):  # the episode's tree comes from robot.yaml and the URDF
+        transforms = pipeline.load_log(args.log, episode=args.episode, robot=args.robot).timeline.transforms
     else:
         if args.episode is not None or args.robot is not None:
             raise FramechainError(f"{args.log}: --episode and --robot are for LeRobot datasets; this is not one")
-        from framechain.pipeline import load_chain
-
-        chain = load_chain(args.chain)
-        loaded = open_log(args.log, chain, kinds=TREE_KINDS, progress=show_progress)
+        loaded = pipeline.read_log(args.log, pipeline.load_chain(args.chain), kinds=TREE_KINDS,
+                                   progress=show_progress)
         transforms = loaded.timeline.transforms
         salvage = loaded.info.salvage
         if salvage and not args.quiet:  # a damaged log: say what the answer rests on

@@ -1,5 +1,6 @@
 """The replay room: TransformBuffer (tf2 semantics, vectorised), camera models, the hop-by-hop replay."""
 
+from framechain.catalogue import NothingReplayed, RejectReason
 from framechain.replay.buffer import (
     LATEST,
     Edge,
@@ -23,7 +24,6 @@ from framechain.replay.replay import (
     REPLAYED,
     HopRecordTable,
     HopSampleTable,
-    RejectReason,
     ReplayOptions,
     ReplayResult,
     camera_rows_for,
@@ -48,6 +48,7 @@ __all__ = [
     "HopSamples",
     "LookupResult",
     "LookupStatus",
+    "NothingReplayed",
     "PathHop",
     "RejectReason",
     "ReplayOptions",

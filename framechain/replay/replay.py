@@ -10,33 +10,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import StrEnum
 from typing import ClassVar
 
 import numpy as np
 
 from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
-from framechain.catalogue import HopName
+from framechain.catalogue import HopName, NothingReplayed, RejectReason
 from framechain.config.chain import ChainFrames
 from framechain.geometry.rotations import compose, quat_rotate
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
 from framechain.replay.camera import CameraModel
 from framechain.replay.depth import sample_depth
 from framechain.timeline import CameraTable, Column, ColumnTable, ObservationTable, Timeline, normalize_frame
-
-
-class RejectReason(StrEnum):
-    """Why an observation was not replayed; stable codes used in every output."""
-
-    OTHER_CAMERA = "other_camera"  # detected in another camera (one with its own CameraInfo)
-    IGNORED_LABEL = "ignored_label"  # an object the chain declares as moving (evidence.ignore_labels)
-    NO_CAMERA_INFO = "no_camera_info"
-    OUTSIDE_IMAGE = "outside_image"
-    NO_DEPTH = "no_depth"
-    DEPTH_INVALID = "depth_invalid"  # not finite or not positive
-    MISSING_EDGE = "missing_edge"  # no path between the frames
-    EXTRAPOLATION = "extrapolation"  # outside a transform's recorded span
-
 
 #: Status string of an observation that went through every hop.
 REPLAYED = "replayed"
@@ -148,6 +133,9 @@ class ReplayResult:
     depth_m: FloatArray
     depth_stamp_ns: IntArray
     ray: FloatArray  # (N, 3) undistorted [x, y, 1]
+    #: (N,) row of ``timeline.cameras`` in force for each observation (-1: none), the model its pixel was
+    #: undistorted with unless ``cameras`` overrode it
+    camera_row: IntArray
     p_cam: FloatArray  # (N, 3) NaN where rejected
     p_body: FloatArray
     p_world: FloatArray
@@ -185,6 +173,26 @@ class ReplayResult:
             "stale": int((self.stale & self.replayed).sum()),
         }
 
+    def nothing_replayed(self) -> NothingReplayed | None:
+        """Why no observation was replayed, every rejection counted by reason (None when some were)."""
+        if self.replayed.any():
+            return None
+        reasons, n = np.unique(self.status, return_counts=True)
+        return NothingReplayed(
+            total=len(self) + sum(int(c) for c in self.rejected_at_read.values()),
+            rejected={RejectReason(str(r)): int(c) for r, c in zip(reasons, n, strict=True)},
+            rejected_at_read=dict(self.rejected_at_read),
+        )
+
+    def main_camera_row(self) -> int | None:
+        """The row of the camera table most replayed observations were seen through (None: none)."""
+        rows = self.camera_row[self.replayed]
+        rows = rows[rows >= 0]
+        if rows.size == 0:
+            return None
+        values, counts = np.unique(rows, return_counts=True)
+        return int(values[np.argmax(counts)])
+
 
 def camera_rows_for(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> IntArray:
     """Row of ``cameras`` in force at each stamp for ``frame`` (-1 where there is none).
@@ -219,50 +227,104 @@ def replay(
     opts = options or ReplayOptions()
     buf = buffer if buffer is not None else TransformBuffer.from_timeline(timeline)
     obs = timeline.observations
-    n = len(obs)
-    status = np.full(n, REPLAYED, dtype=object)
-    budget_ns = round(latency_budget_s * 1e9)
-
-    def reject(mask: BoolArray, reason: RejectReason) -> None:
-        fresh = mask & (status == REPLAYED)
-        status[fresh] = reason.value
-
+    status = _Status(len(obs))
     # An observation of another camera of this log is not this chain's to replay.
-    camera_frame = frames.camera
-    other_cameras = set(np.unique(timeline.cameras.frame).tolist()) - {camera_frame}
+    other_cameras = set(np.unique(timeline.cameras.frame).tolist()) - {frames.camera}
     if other_cameras:
-        reject(np.isin(obs.camera_frame, sorted(other_cameras)), RejectReason.OTHER_CAMERA)
+        status.reject(np.isin(obs.camera_frame, sorted(other_cameras)), RejectReason.OTHER_CAMERA)
     if ignore_labels:
-        reject(np.isin(obs.label, list(ignore_labels)), RejectReason.IGNORED_LABEL)
+        status.reject(np.isin(obs.label, list(ignore_labels)), RejectReason.IGNORED_LABEL)
+    ray, camera_row = _rays(timeline, frames.camera, status, cameras)  # hop 1: pixel_to_camera
+    depth = _depths(timeline, frames.camera, status, opts)
+    p_cam = ray * np.where(np.isfinite(depth.depth_m), depth.depth_m, np.nan)[:, None]  # (0 * Inf would warn)
+    # Hops 2 and 3: transforms at the observation stamp (plus any offset a fault model asks for).
+    body_from_cam = buf.lookup(frames.body, frames.camera, obs.stamp_ns + opts.camera_offset_ns,
+                               tolerance_ns=opts.tolerance_ns)
+    world_from_body = buf.lookup(frames.world, frames.body, obs.stamp_ns + opts.pose_offset_ns,
+                                 tolerance_ns=opts.tolerance_ns)
+    for lookup in (body_from_cam, world_from_body):
+        status.reject(lookup.status == LookupStatus.NO_PATH, RejectReason.MISSING_EDGE)
+        status.reject(~lookup.ok, RejectReason.EXTRAPOLATION)
+    ok = status.live
+    p_cam[~ok] = np.nan
+    p_body = transform_points(body_from_cam.translation, body_from_cam.quat_xyzw, p_cam)
+    p_world = transform_points(world_from_body.translation, world_from_body.quat_xyzw, p_body)
+    status_str = status.codes.astype(str)
+    hops, stale = _records(obs, frames, depth, (p_cam, p_body, p_world), (body_from_cam, world_from_body),
+                           round(latency_budget_s * 1e9), status_str)
+    samples = HopSampleTable.concat([
+        _sample_rows(obs, HopName.CAMERA_TO_BODY, body_from_cam, status_str),
+        _sample_rows(obs, HopName.BODY_TO_WORLD, world_from_body, status_str),
+    ])
+    return ReplayResult(
+        frames=frames, observations=obs, status=status_str, stale=stale & ok, depth_m=depth.depth_m,
+        depth_stamp_ns=depth.stamp_ns, ray=ray, camera_row=camera_row, p_cam=p_cam, p_body=p_body,
+        p_world=p_world, body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops, samples=samples,
+        latency_budget_ns=round(latency_budget_s * 1e9), options=opts,
+        rejected_at_read={str(k): int(v) for k, v in dict(timeline.metadata.get("rejected_at_read", {})).items()},
+    )
 
-    # Hop 1: pixel_to_camera.
+
+class _Status:
+    """Each observation's status: ``replayed`` until the first reason rejects it."""
+
+    def __init__(self, n: int) -> None:
+        self.codes = np.full(n, REPLAYED, dtype=object)
+
+    @property
+    def live(self) -> BoolArray:
+        out: BoolArray = self.codes == REPLAYED
+        return out
+
+    def reject(self, mask: BoolArray, reason: RejectReason) -> None:
+        self.codes[mask & self.live] = reason.value
+
+
+def _rays(
+    timeline: Timeline, camera_frame: str, status: _Status, cameras: Mapping[str, CameraModel] | None
+) -> tuple[FloatArray, IntArray]:
+    """Hop 1: each live observation's undistorted ray [x, y, 1] (NaN elsewhere), and the row of the camera
+    table in force at its stamp; rejects the observations without a camera model or outside the image."""
+    obs = timeline.observations
+    n = len(obs)
     ray = np.full((n, 3), np.nan)
     inside = np.zeros(n, dtype=bool)
+    rows = camera_rows_for(timeline.cameras, camera_frame, obs.stamp_ns)
     if cameras is not None and camera_frame in cameras:
         models = [cameras[camera_frame]]
         model_row = np.zeros(n, dtype=np.int64)
     else:
-        rows = camera_rows_for(timeline.cameras, camera_frame, obs.stamp_ns)
-        reject(rows < 0, RejectReason.NO_CAMERA_INFO)
+        status.reject(rows < 0, RejectReason.NO_CAMERA_INFO)
         unique_rows = np.unique(rows[rows >= 0])
         models = [CameraModel.from_table(timeline.cameras, int(r)) for r in unique_rows]
         model_row = np.searchsorted(unique_rows, rows)
     # Observations grouped by camera model in one sort (a mask per model is quadratic: a CameraInfo
     # per frame makes as many models as observations).
-    live = np.flatnonzero(status == REPLAYED)
+    live = np.flatnonzero(status.live)
     by_model = live[np.argsort(model_row[live], kind="stable")]
     for sel in np.split(by_model, np.flatnonzero(np.diff(model_row[by_model])) + 1) if by_model.size else []:
         model = models[int(model_row[sel[0]])]
         inside[sel] = model.inside(obs.u[sel], obs.v[sel])
         x, y = model.pixel_to_normalized(obs.u[sel], obs.v[sel])
         ray[sel] = np.stack([x, y, np.ones_like(x)], axis=1)
-    reject(~inside, RejectReason.OUTSIDE_IMAGE)
+    status.reject(~inside, RejectReason.OUTSIDE_IMAGE)
+    return ray, rows
 
+
+@dataclass(frozen=True)
+class _Depths:
+    depth_m: FloatArray  # (N,) the detection's own depth, else sampled from a depth frame
+    stamp_ns: IntArray  # (N,) where the depth came from (the observation or the depth frame)
+    has_source: BoolArray  # (N,) a depth was given or a depth frame found (a stamp of 0 is a valid stamp)
+
+
+def _depths(timeline: Timeline, camera_frame: str, status: _Status, opts: ReplayOptions) -> _Depths:
+    """Each observation's depth; rejects those without one (no depth frame near) or with an invalid one."""
+    obs = timeline.observations
     depth = obs.depth_m.copy()
     depth_stamp = np.where(np.isfinite(depth), obs.stamp_ns, 0)
-    # Where the depth came from (the observation or a depth frame); a stamp of 0 is a valid stamp.
-    has_depth_source = np.isfinite(depth)
-    need = np.isnan(depth) & (status == REPLAYED)  # NaN: not given, sample it; +-Inf is given and invalid
+    has_source = np.isfinite(depth)
+    need = np.isnan(depth) & status.live  # NaN: not given, sample it; +-Inf is given and invalid
     if need.any():
         sampled = sample_depth(
             timeline.depth_frames, camera_frame, obs.stamp_ns[need], obs.u[need], obs.v[need],
@@ -270,28 +332,22 @@ def replay(
         )
         depth[need] = sampled.depth_m
         depth_stamp[need] = sampled.stamp_ns
-        has_depth_source[need] = sampled.frame_index >= 0
-        reject(need & ~has_depth_source, RejectReason.NO_DEPTH)
-    reject(~np.isfinite(depth) | (depth <= 0), RejectReason.DEPTH_INVALID)
-    p_cam = ray * np.where(np.isfinite(depth), depth, np.nan)[:, None]  # (0 * Inf would warn)
+        has_source[need] = sampled.frame_index >= 0
+        status.reject(need & ~has_source, RejectReason.NO_DEPTH)
+    status.reject(~np.isfinite(depth) | (depth <= 0), RejectReason.DEPTH_INVALID)
+    return _Depths(depth, depth_stamp, has_source)
 
-    # Hops 2 and 3: transforms at the observation stamp (plus any offset a fault model asks for).
-    body_from_cam = buf.lookup(
-        frames.body, camera_frame, obs.stamp_ns + opts.camera_offset_ns, tolerance_ns=opts.tolerance_ns
-    )
-    world_from_body = buf.lookup(
-        frames.world, frames.body, obs.stamp_ns + opts.pose_offset_ns, tolerance_ns=opts.tolerance_ns
-    )
-    for lookup in (body_from_cam, world_from_body):
-        reject(lookup.status == LookupStatus.NO_PATH, RejectReason.MISSING_EDGE)
-        reject(~lookup.ok, RejectReason.EXTRAPOLATION)
 
-    ok = status == REPLAYED
-    p_cam[~ok] = np.nan
-    p_body = transform_points(body_from_cam.translation, body_from_cam.quat_xyzw, p_cam)
-    p_world = transform_points(world_from_body.translation, world_from_body.quat_xyzw, p_body)
-
-    depth_gap = np.where(has_depth_source, obs.stamp_ns - depth_stamp, 0)
+def _records(
+    obs: ObservationTable, frames: ChainFrames, depth: _Depths, points: tuple[FloatArray, FloatArray, FloatArray],
+    lookups: tuple[LookupResult, LookupResult], budget_ns: int, status: StrArray,
+) -> tuple[HopRecordTable, BoolArray]:
+    """One record per observation and hop, and whether each observation is stale (any sample, or its depth
+    frame, further from its stamp than the budget; or a transform taken from just outside its span)."""
+    n = len(obs)
+    p_cam, p_body, p_world = points
+    body_from_cam, world_from_body = lookups
+    depth_gap = np.where(depth.has_source, obs.stamp_ns - depth.stamp_ns, 0)
     gap_cam, before_cam, after_cam = _stalest(body_from_cam, obs.stamp_ns)
     gap_world, before_world, after_world = _stalest(world_from_body, obs.stamp_ns)
     stale_cam = np.abs(gap_cam) > budget_ns
@@ -299,31 +355,19 @@ def replay(
     stale_depth = np.abs(depth_gap) > budget_ns
     stale = (stale_cam | stale_world | stale_depth | (body_from_cam.status == LookupStatus.NEAREST)
              | (world_from_body.status == LookupStatus.NEAREST))
-    status_str = status.astype(str)
-
     hops = HopRecordTable.concat([
-        _hop_rows(obs, HopName.PIXEL_TO_CAMERA, "pixel", camera_frame,
-                  np.stack([obs.u, obs.v, depth], axis=1), p_cam, np.zeros((n, 3)),
-                  np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), depth_stamp, depth_stamp, depth_gap, stale_depth,
-                  status_str),
-        _hop_rows(obs, HopName.CAMERA_TO_BODY, camera_frame, frames.body, p_cam, p_body,
+        _hop_rows(obs, HopName.PIXEL_TO_CAMERA, "pixel", frames.camera,
+                  np.stack([obs.u, obs.v, depth.depth_m], axis=1), p_cam, np.zeros((n, 3)),
+                  np.tile([0.0, 0.0, 0.0, 1.0], (n, 1)), depth.stamp_ns, depth.stamp_ns, depth_gap, stale_depth,
+                  status),
+        _hop_rows(obs, HopName.CAMERA_TO_BODY, frames.camera, frames.body, p_cam, p_body,
                   body_from_cam.translation, body_from_cam.quat_xyzw, before_cam, after_cam, gap_cam,
-                  stale_cam, status_str),
+                  stale_cam, status),
         _hop_rows(obs, HopName.BODY_TO_WORLD, frames.body, frames.world, p_body, p_world,
                   world_from_body.translation, world_from_body.quat_xyzw, before_world, after_world,
-                  gap_world, stale_world, status_str),
+                  gap_world, stale_world, status),
     ])
-    samples = HopSampleTable.concat([
-        _sample_rows(obs, HopName.CAMERA_TO_BODY, body_from_cam, status_str),
-        _sample_rows(obs, HopName.BODY_TO_WORLD, world_from_body, status_str),
-    ])
-    return ReplayResult(
-        frames=frames, observations=obs, status=status_str, stale=stale & ok, depth_m=depth,
-        depth_stamp_ns=depth_stamp, ray=ray, p_cam=p_cam, p_body=p_body, p_world=p_world,
-        body_from_cam=body_from_cam, world_from_body=world_from_body, hops=hops, samples=samples,
-        latency_budget_ns=budget_ns, options=opts,
-        rejected_at_read={str(k): int(v) for k, v in dict(timeline.metadata.get("rejected_at_read", {})).items()},
-    )
+    return hops, stale
 
 
 def _sample_rows(

@@ -18,6 +18,7 @@ import pyarrow as pa
 
 from framechain.analysis.estimates import format_interval
 from framechain.sinks.report import Figure, figure_html, figure_png
+from framechain.sinks.text import CSS, mm
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
@@ -33,19 +34,6 @@ STATUS_TEXT = {
 _NOT_ANALYSED = ("nothing_replayed", "error", "crashed")
 #: How an estimate is shown: (scale, unit) by estimate_name (offsets in ms, angles in deg, ratios as x).
 _DISPLAY = {"offset_s": (1e3, "ms"), "angle_deg": (1.0, "deg"), "factor": (1.0, "x"), "scale": (1.0, "x")}
-
-_CSS = """
-body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;
-line-height:1.45;padding:0 1em}
-h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
-table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
-th{background:#f4f4f4}td.num{text-align:right}code{background:#f4f4f4;padding:.1em .3em;border-radius:3px}
-.summary{font-size:1.1em;background:#f3f6fb;border-left:5px solid #4a78c2;padding:.7em 1em}
-figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
-.muted{color:#777;font-size:.9em}
-"""
-
 
 @dataclass(frozen=True)
 class FleetLog:
@@ -244,10 +232,6 @@ def summary_line(logs: Sequence[FleetLog]) -> str:
     return f"{len(logs)} logs: " + "; ".join(parts) + "."
 
 
-def _mm(value: float | None) -> str:
-    return "-" if value is None else f"{value * 1e3:.1f} mm"
-
-
 def _spread_cells(row: SpreadRow) -> list[str]:
     return [row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text, row.range_text]
 
@@ -282,7 +266,7 @@ def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
     lines += ["", "## Which logs have which fault", ""]
     if found:
         lines += ["| " + " | ".join(LOG_COLUMNS) + " |", "|" + " --- |" * len(LOG_COLUMNS)]
-        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {_mm(log.error_median_m)} | {cell(log.verdict)} |"
+        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {mm(log.error_median_m)} | {cell(log.verdict)} |"
                   for log in found[:MAX_LISTED]]
         lines += _more(len(found))
     else:
@@ -307,7 +291,7 @@ def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: S
     e = html.escape
     parts = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain fleet report</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<style>{CSS}</style></head><body>",
         "<h1>framechain fleet report</h1>",
         f"<div class='summary'>{e(summary_line(logs))}</div>",
         "<h2>Faults across the fleet</h2>",
@@ -324,7 +308,7 @@ def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: S
     if found:
         parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in LOG_COLUMNS) + "</tr>")
         parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(_fault_cell(log))}</td>"
-                  f"<td class='num'>{_mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td></tr>"
+                  f"<td class='num'>{mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td></tr>"
                   for log in found[:MAX_LISTED]]
         parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(found)) if t))
     else:

@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.attribute import Finding
+from framechain.analysis.findings import Finding
+from framechain.analysis.run import Run
 from framechain.arrays import IntArray
 from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
@@ -35,7 +36,8 @@ from framechain.sinks.overlay import (
     ImageOverlay,
     image_overlay,
 )
-from framechain.sinks.rerun import REPLAY_FRAME_SUFFIX, FindingView
+from framechain.sinks.rerun_common import REPLAY_FRAME_SUFFIX
+from framechain.sinks.text import FindingView
 from framechain.timeline import PointRole, Timeline
 
 TF_TOPIC = "/framechain/tf"
@@ -86,16 +88,14 @@ def _color(target: Any, rgb: tuple[int, int, int], alpha: float = 1.0) -> None:
     target.r, target.g, target.b, target.a = rgb[0] / 255, rgb[1] / 255, rgb[2] / 255, alpha
 
 
-def foxglove_messages(
-    timeline: Timeline, result: ReplayResult, *, findings: Sequence[Finding] = (),
-    evidence: AlignedEvidence | None = None,
-) -> list[ProtobufMessage]:
-    """Every added message (see the module docstring), in no particular order."""
-    overlay = image_overlay(timeline, result, evidence, findings)
+def foxglove_messages(run: Run) -> list[ProtobufMessage]:
+    """Every message the run adds (see the module docstring), in no particular order."""
+    result = run.replay
+    overlay = image_overlay(run.timeline, result, run.aligned, run.findings)
     out = _transforms(result)
-    out += _annotations(timeline, result, overlay)
-    out += _scene(result, evidence, overlay)
-    out += _findings(result, findings)
+    out += _annotations(run.timeline, result, overlay)
+    out += _scene(result, run.aligned, overlay)
+    out += _findings(result, run.findings)
     return out
 
 
@@ -178,7 +178,7 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
     return out
 
 
-def _scene(result: ReplayResult, evidence: AlignedEvidence | None, overlay: ImageOverlay) -> list[ProtobufMessage]:
+def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverlay) -> list[ProtobufMessage]:
     """As-run and recomputed world points and the line between them, one SceneUpdate per observation time."""
     from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
@@ -186,7 +186,7 @@ def _scene(result: ReplayResult, evidence: AlignedEvidence | None, overlay: Imag
     schema = file_descriptor_set(SceneUpdate)
     obs = result.observations
     as_run = np.full((len(obs), 3), np.nan)
-    if evidence is not None and len(evidence) == len(obs):
+    if len(evidence) == len(obs):
         for role in (PointRole.HOP_WORLD, PointRole.TARGET):
             if evidence.present(role):
                 as_run = evidence.points(role)

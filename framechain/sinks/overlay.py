@@ -22,9 +22,9 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.attribute import Finding
-from framechain.arrays import BoolArray, FloatArray, IntArray
-from framechain.replay import CameraModel, ReplayResult, camera_rows_for
+from framechain.analysis.findings import Finding
+from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
+from framechain.replay import CameraModel, ReplayResult
 from framechain.replay.stamps import nearest
 from framechain.timeline import PointRole, Timeline, normalize_frame
 
@@ -111,7 +111,7 @@ def project_world_points(timeline: Timeline, result: ReplayResult, p_world: Floa
         return out
     world_from_cam = result.world_from_body.matrix() @ result.body_from_cam.matrix()
     usable = np.isfinite(world_from_cam).all(axis=(1, 2)) & np.isfinite(p_world).all(axis=1)
-    rows = camera_rows_for(timeline.cameras, result.frames.camera, obs.stamp_ns)
+    rows = result.camera_row
     usable &= rows >= 0
     if not usable.any():
         return out
@@ -176,11 +176,8 @@ def fiducial_corners(timeline: Timeline, obs_id: IntArray) -> FloatArray:
     if ids.size == 0 or corners is None:
         return out
     quads = np.asarray(corners, dtype=float).reshape(ids.size, 4, 2)
-    order = np.argsort(ids, kind="stable")
-    pos = np.searchsorted(ids[order], obs_id)
-    pos = np.clip(pos, 0, ids.size - 1)
-    hit = ids[order][pos] == obs_id
-    out[hit] = quads[order][pos[hit]]
+    row = rows_of(ids, obs_id)
+    out[row >= 0] = quads[row[row >= 0]]
     return out
 
 
@@ -201,7 +198,7 @@ def image_overlay(
                 as_run_uv = project_world_points(timeline, result, points)
                 role = name
                 break
-    rows = camera_rows_for(timeline.cameras, result.frames.camera, obs.stamp_ns)
+    rows = result.camera_row
     have = rows >= 0
     width = np.zeros(n, dtype=np.int64)
     height = np.zeros(n, dtype=np.int64)

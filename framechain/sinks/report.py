@@ -19,25 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.attribute import Attribution
-from framechain.analysis.estimates import format_estimate, format_interval
+from framechain.analysis.findings import Attribution
+from framechain.analysis.run import Run
+from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray
-from framechain.sinks.evidence_files import inputs_record, robot_speed, sensitivity
-from framechain.timeline import Timeline
-
-_CSS = """
-body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;
-line-height:1.45;padding:0 1em}
-h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
-.verdict{font-size:1.2em;background:#fff6e5;border-left:5px solid #f0a020;padding:.7em 1em;margin:1em 0}
-.verdict.clean{background:#eaf7ea;border-color:#3a3}
-table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
-th{background:#f4f4f4}code{background:#f4f4f4;padding:.1em .3em;border-radius:3px;font-size:.9em;word-break:break-all}
-.plots{display:grid;grid-template-columns:1fr 1fr;gap:1em}.plots figure{margin:0}
-.plots img{width:100%;border:1px solid #eee}figcaption{font-size:.85em;color:#555}
-.muted{color:#777;font-size:.9em}
-"""
+from framechain.sinks.evidence_files import inputs_record
+from framechain.sinks.text import CSS, FindingView, mm
 
 
 @dataclass(frozen=True)
@@ -47,19 +34,17 @@ class Figure:
     png: bytes
 
 
-def render_report(
-    result: Attribution, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
-    timeline: Timeline | None = None,
-) -> dict[str, Path]:
-    """Write report.md (with its PNGs) and/or report.html into ``out_dir``.
+def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html")) -> dict[str, Path]:
+    """Write report.md (with its PNGs) and/or report.html of the run's attribution into ``out_dir``.
 
-    With the ``timeline`` (its camera images), both show what the camera saw at the worst
-    observations, with the chain drawn on the image (:func:`image_crops`).
+    Both show what the camera saw at the worst observations, with the chain drawn on the image
+    (:func:`image_crops`), where the log has camera images.
     """
+    result = run.attributed()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figures = make_figures(result)
-    sections = image_crops(result, timeline) if timeline is not None else []
+    sections = image_crops(run)
     paths: dict[str, Path] = {}
     if "md" in formats:
         for fig in figures:
@@ -83,7 +68,7 @@ CROP_LEGEND = ("green: the detection (and tag corners); blue: the recomputed wor
                "image; orange: the as-run world point projected the same way; the line between them")
 
 
-def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list[Figure]]]:
+def image_crops(run: Run) -> list[tuple[str, list[Figure]]]:
     """Per finding (or once, without findings): the camera image at the worst observations for it,
     with the detection, both projected world points and the line between them (the whole as-run vs
     recomputed gap, in the colour of the finding that explains most of it, as in Rerun).
@@ -92,8 +77,9 @@ def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list
     (``hop_errors``), else where the error against the evidence is largest."""
     from framechain.sinks.overlay import image_overlay, render_crops, worst_rows
 
-    overlay = image_overlay(timeline, result.replay, result.aligned, result.findings)
-    obs = result.replay.observations
+    result, timeline = run.attributed(), run.timeline
+    overlay = image_overlay(timeline, run.replay, run.aligned, run.findings)
+    obs = run.replay.observations
     n = len(obs)
 
     def score_for(hop: str | None) -> FloatArray:
@@ -104,7 +90,7 @@ def image_crops(result: Attribution, timeline: Timeline) -> list[tuple[str, list
 
     sections: list[tuple[str, list[Figure]]] = []
     for finding in result.findings or (None,):
-        rows = worst_rows(timeline, result.replay, overlay, score_for(finding.hop.value if finding else None))
+        rows = worst_rows(timeline, run.replay, overlay, score_for(finding.hop.value if finding else None))
         prefix = f"camera_{finding.fault.value}" if finding else "camera"
         figures = []
         for i, png in render_crops(timeline, overlay, rows):
@@ -263,10 +249,10 @@ def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
         faults = f" ({', '.join(r['faults'])})" if r["faults"] else ""
         rows.append((
             r["hop"],
-            "not logged" if dep is None else f"{_mm(dep['median'])} / {_mm(dep['p95'])} / {_mm(dep['max'])}",
+            "not logged" if dep is None else f"{mm(dep['median'])} / {mm(dep['p95'])} / {mm(dep['max'])}",
             "-" if gap is None else f"{gap['median']:.1f} / {gap['max']:.1f} ms",
             str(r["stale"]),
-            f"{_mm(r['attributed_m'])}{faults}",
+            f"{mm(r['attributed_m'])}{faults}",
         ))
     return rows
 
@@ -322,15 +308,12 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         lines += [
-            "| fault | hop | estimate | 95% interval | share | error (mm) | confidence | fix |",
+            "| fault | hop | estimate | 95% interval | share | error | confidence | fix |",
             "| --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
-        for f in result.findings:
-            lines.append(
-                f"| {f.fault.value} | {f.hop.value} | {format_estimate(f.estimate)} | {format_interval(f.interval)} | "
-                f"{f.share:.0%} | "
-                f"{f.error_m * 1e3:.1f} | {f.confidence:.2f} | {f.fix.replace('|', '/')} |"
-            )
+        for c in (FindingView.of(f).cells() for f in result.findings):
+            lines.append(f"| {c.fault} | {c.hop} | {c.estimate} | {c.interval} | {c.share} | {c.error} | "
+                         f"{c.confidence} | {c.fix.replace('|', '/')} |")
         lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
     else:
         lines.append("No fault beyond noise.")
@@ -338,9 +321,9 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "",
         "## Error",
         "",
-        f"Against the {s['metric'].replace('_', ' ')}: median {_mm(s['median'])}, p95 {_mm(s['p95'])}, "
-        f"max {_mm(s['max'])}; {_after_label(result)}: "
-        f"median {_mm(result.error_summary(result.error_after)['median'])}.",
+        f"Against the {s['metric'].replace('_', ' ')}: median {mm(s['median'])}, p95 {mm(s['p95'])}, "
+        f"max {mm(s['max'])}; {_after_label(result)}: "
+        f"median {mm(result.error_summary(result.error_after)['median'])}.",
         "",
         "### Per hop",
         "",
@@ -358,17 +341,13 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _mm(value: float | None) -> str:
-    return "n/a" if value is None else f"{value * 1e3:.1f} mm"
-
-
 def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     e = html.escape
     s = result.error_summary()
     title = Path(str(result.source.get("path", ""))).name or "episode"
     parts = [
         f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain: {e(title)}</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<style>{CSS}</style></head><body>",
         f"<h1>framechain report: {e(title)}</h1>",
         f"<div class='verdict{'' if result.findings else ' clean'}'>{e(result.verdict)}</div>",
         "<h2>Findings</h2>",
@@ -378,20 +357,20 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
             "<table><tr><th>fault</th><th>hop</th><th>estimate</th><th>95% interval</th><th>share</th>"
             "<th>error</th><th>confidence</th><th>evidence</th><th>fix</th></tr>"
         )
-        for f in result.findings:
+        for c in (FindingView.of(f).cells() for f in result.findings):
             parts.append(
-                f"<tr><td><b>{e(f.fault.value)}</b></td><td>{e(f.hop.value)}</td><td>{e(format_estimate(f.estimate))}</td>"
-                f"<td>{e(format_interval(f.interval))}</td><td>{f.share:.0%}</td><td>{f.error_m * 1e3:.1f} mm</td>"
-                f"<td>{f.confidence:.2f}</td><td>{e(f.evidence)}</td><td>{_code(f.fix)}</td></tr>"
+                f"<tr><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.estimate)}</td><td>{e(c.interval)}</td>"
+                f"<td>{c.share}</td><td>{c.error}</td><td>{c.confidence}</td><td>{e(c.evidence)}</td>"
+                f"<td>{_code(c.fix)}</td></tr>"
             )
         parts.append("</table>")
     else:
         parts.append("<p>No fault beyond noise.</p>")
     counts = result.counts()
     parts.append(
-        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {_mm(s['median'])}, "
-        f"p95 {_mm(s['p95'])}, max {_mm(s['max'])}; {_after_label(result)}: median "
-        f"{_mm(result.error_summary(result.error_after)['median'])}. Observations: {counts['total']} total, "
+        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {mm(s['median'])}, "
+        f"p95 {mm(s['p95'])}, max {mm(s['max'])}; {_after_label(result)}: median "
+        f"{mm(result.error_summary(result.error_after)['median'])}. Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
     parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")

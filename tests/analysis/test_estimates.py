@@ -9,7 +9,6 @@ from pathlib import Path
 import pytest
 from rerun.chunk import RrdReader
 
-from framechain.analysis.attribute import attribute
 from framechain.analysis.estimates import (
     Estimate,
     FrameEstimate,
@@ -25,6 +24,7 @@ from framechain.analysis.estimates import (
 )
 from framechain.catalogue import Fault
 from framechain.cli.common import print_findings
+from framechain.pipeline import run
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 from framechain.sinks.evidence_files import write_attribution
 from framechain.sinks.report import render_report
@@ -90,7 +90,8 @@ def test_interval_text() -> None:
 def test_every_output_shows_the_same_estimate_text(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     scene = generate(SceneSpec(seed=3, duration_s=4.0, evidence="hops",
                                faults=(InjectedFault(Fault.LATENCY, params={"offset_s": -0.03}),)))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    made = run(scene.timeline, scene.chain, bootstrap=0)
+    result = made.attributed()
     top = result.findings[0]
     assert top.fault == Fault.LATENCY
     text = format_estimate(top.estimate)
@@ -99,14 +100,13 @@ def test_every_output_shows_the_same_estimate_text(tmp_path: Path, capsys: pytes
     assert f"({text})" in top.evidence
     print_findings(result)
     assert text in capsys.readouterr().out
-    report = render_report(result, tmp_path, formats=("md",))["md"].read_text()
+    report = render_report(made, tmp_path, formats=("md",))["md"].read_text()
     assert f"| {text} |" in report
     rrd = tmp_path / "finding.rrd"
-    stream_replay(scene.timeline, result.replay, RerunTarget.save(rrd), findings=result.findings,
-                  evidence=result.aligned)
+    stream_replay(made, RerunTarget.save(rrd))
     logged = [row[0] for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/log/findings"
               for row in chunk.to_record_batch().column("TextLog:text").to_pylist()]
     assert logged
     assert f"estimate {text}" in logged[0]
-    saved = json.loads(write_attribution(result, tmp_path)["attribution"].read_text())
+    saved = json.loads(write_attribution(made, tmp_path)["attribution"].read_text())
     assert saved["findings"][0]["estimate"] == {"offset_s": pytest.approx(-0.03, abs=5e-4)}

@@ -20,10 +20,11 @@ from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.analysis.alignment import PointFate, align_evidence
-from framechain.analysis.attribute import Attribution, attribute
+from framechain.analysis.attribute import Attribution
 from framechain.analysis.estimates import estimate_to_json
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainFrames
+from framechain.pipeline import run
 from framechain.replay import TransformBuffer
 from framechain.sim.scene import InjectedFault, Scene, SceneSpec, generate
 from framechain.sinks.rerun import RerunTarget, stream_replay
@@ -102,8 +103,8 @@ def test_points_logged_in_other_frames_give_the_same_answer_and_picture(
     scene = generate(SceneSpec(seed=5, duration_s=4.0, evidence="hops", faults=faults))
     other = _in_other_frames(scene)
     assert set(np.unique(other.points.frame)) == {"camera_link", "base_footprint", "odom"}
-    as_logged = attribute(scene.timeline, scene.chain, bootstrap=0)
-    moved = attribute(other, scene.chain, bootstrap=0)
+    logged_run, moved_run = run(scene.timeline, scene.chain, bootstrap=0), run(other, scene.chain, bootstrap=0)
+    as_logged, moved = logged_run.attributed(), moved_run.attributed()
     assert moved.verdict == as_logged.verdict
     assert [(f, h) for f, h, _, _ in _summary(moved)] == [(f, h) for f, h, _, _ in _summary(as_logged)]
     for (_, _, e1, s1), (_, _, e2, s2) in zip(_summary(moved), _summary(as_logged), strict=True):
@@ -115,10 +116,9 @@ def test_points_logged_in_other_frames_give_the_same_answer_and_picture(
         assert moved.verdict.startswith("No fault beyond noise")
     # The picture: the as-run points Rerun draws are the same, and they are the robot's own (in map).
     pictures = []
-    for name, timeline, result in (("logged", scene.timeline, as_logged), ("moved", other, moved)):
+    for name, made in (("logged", logged_run), ("moved", moved_run)):
         rrd = tmp_path / f"{name}.rrd"
-        stream_replay(timeline, result.replay, RerunTarget.save(rrd), findings=result.findings,
-                      evidence=result.aligned)
+        stream_replay(made, RerunTarget.save(rrd))
         pictures.append(_as_run_positions(rrd))
     assert set(pictures[0]) == {"/points/as_run/camera", "/points/as_run/body", "/points/as_run/world"}
     for entity, positions in pictures[0].items():

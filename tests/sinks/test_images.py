@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +24,12 @@ from scipy.spatial.transform import Rotation
 from test_rerun import _read  # the .rrd read back per entity, as the Rerun sink tests read it
 
 from framechain.adapters import write_log
-from framechain.analysis.attribute import Attribution, attribute
+from framechain.analysis.attribute import Attribution
+from framechain.analysis.run import Run as PipelineRun
 from framechain.cli.demo_cmd import parse_fault
 from framechain.config.chain import ChainConfig
-from framechain.pipeline import LoadedRun, load_log
-from framechain.replay import ReplayResult, replay
+from framechain.pipeline import run
+from framechain.replay import ReplayResult
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import Scene, SceneSpec, generate
 from framechain.sinks.overlay import FAULT_COLORS, ImageSelection
@@ -79,7 +80,7 @@ def _opencv_pixels(timeline: Timeline, result: ReplayResult, p_world: np.ndarray
 @dataclass(frozen=True)
 class Run:
     scene: Scene
-    loaded: LoadedRun
+    loaded: PipelineRun
     attribution: Attribution
     rrd: Path
     batches: Batches
@@ -93,11 +94,10 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Run:
     scene = generate(spec)
     write_scene(scene, out / "episode.mcap")
     (out / "chain.yaml").write_text(scene.chain.to_yaml())
-    loaded = load_log(out / "episode.mcap", out / "chain.yaml")
-    attribution = attribute(loaded.timeline, loaded.chain, seed=0)
+    loaded = run(out / "episode.mcap", out / "chain.yaml", seed=0)
+    attribution = loaded.attributed()
     rrd = out / "episode.rrd"
-    stream_replay(loaded.timeline, attribution.replay, RerunTarget.save(rrd), findings=attribution.findings,
-                  evidence=attribution.aligned)
+    stream_replay(loaded, RerunTarget.save(rrd))
     return Run(scene, loaded, attribution, rrd, _read(rrd))
 
 
@@ -177,10 +177,10 @@ def test_demo_blueprint_puts_the_camera_beside_the_3d_view(demo: Run) -> None:
 
 
 def test_images_none_and_all(demo: Run, tmp_path: Path) -> None:
-    timeline, result = demo.loaded.timeline, demo.attribution.replay
+    timeline, replayed = demo.loaded.timeline, replace(demo.loaded, attribution=None)  # the images, no findings
     for selection, expected in ((ImageSelection.NONE, 0), (ImageSelection.ALL, len(timeline.image_frames))):
         rrd = tmp_path / f"{selection.value}.rrd"
-        stream_replay(timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=selection))
+        stream_replay(replayed, RerunTarget.save(rrd), options=RerunOptions(images=selection))
         stamps, _ = _rows(_read(rrd), "/camera/image", "EncodedImage:blob")
         assert stamps.size == expected
 
@@ -221,14 +221,14 @@ def _raw_scene(encoding: str) -> tuple[Timeline, ChainConfig, np.ndarray]:
 def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> None:
     timeline, chain, pixels = _raw_scene(encoding)
     write_log(timeline, tmp_path / "raw.mcap", container="mcap-ros2", chain=chain)
-    loaded = load_log(tmp_path / "raw.mcap", chain)
+    loaded = run(tmp_path / "raw.mcap", chain, attribute=False)
     images = loaded.timeline.image_frames
     assert images.encoding.tolist() == [encoding, encoding]
     assert np.array_equal(images.pixels(1), pixels[1])
-    result = replay(loaded.timeline, chain.frames)
+    result = loaded.replay
     assert result.replayed.all()
     rrd = tmp_path / "raw.rrd"
-    stream_replay(loaded.timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
+    stream_replay(loaded, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
     batches = _read(rrd)
     stamps, buffers = _rows(batches, "/camera/image", "Image:buffer")
     _, formats = _rows(batches, "/camera/image", "Image:format")
@@ -250,7 +250,7 @@ def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> Non
 @pytest.fixture(scope="module")
 def aruco(
     tmp_path_factory: pytest.TempPathFactory,
-) -> Iterator[tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]]]:
+) -> Iterator[tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]]:
     bag = REALDATA / "fiducials" / "aruco_images.bag"
     if not bag.is_file():
         pytest.skip(f"real logs not found at {REALDATA}")
@@ -263,14 +263,14 @@ def aruco(
              "mounts": [{"parent": "map", "child": "base_link", "xyz": [1.0, 2.0, 0.0], "rpy": [0.0, 0.0, 0.4]}, mount]}
     path = out / "chain.yaml"
     path.write_text(ChainConfig.from_dict(chain).to_yaml())
-    loaded = load_log(bag, path)
-    result = replay(loaded.timeline, loaded.chain.frames)
+    loaded = run(bag, path, attribute=False)
+    result = loaded.replay
     rrd = out / "aruco.rrd"
-    stream_replay(loaded.timeline, result, RerunTarget.save(rrd))
+    stream_replay(loaded, RerunTarget.save(rrd))
     return loaded, result, _read(rrd), chain
 
 
-def test_real_jpeg_is_logged_as_recorded(aruco: tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]]) -> None:
+def test_real_jpeg_is_logged_as_recorded(aruco: tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]) -> None:
     from rosbags.highlevel import AnyReader
 
     loaded, _, batches, _ = aruco
@@ -286,7 +286,7 @@ def test_real_jpeg_is_logged_as_recorded(aruco: tuple[LoadedRun, ReplayResult, B
 
 
 def test_real_markers_drawn_where_opencv_projects_them(
-    aruco: tuple[LoadedRun, ReplayResult, Batches, dict[str, Any]],
+    aruco: tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]],
 ) -> None:
     loaded, result, batches, chain = aruco
     obs = result.observations
@@ -356,13 +356,13 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
     video = dataset.root / "videos" / "observation.images.wrist" / "chunk-000" / "file-000.mp4"
     _write_mp4(video, sum(lengths), FPS, WIDTH // 4, HEIGHT // 4)
     robot = write_robot_yaml(tmp_path, detections=[{"feature": "observation.detection.wrist", "camera": "wrist"}])
-    loaded = load_log(dataset.root, robot=robot, episode=1)
+    loaded = run(dataset.root, robot=robot, episode=1, attribute=False)
     frames = loaded.timeline.image_frames
     assert len(frames) == lengths[1]
     assert set(frames.encoding.tolist()) == {"video"}
-    result = replay(loaded.timeline, loaded.chain.frames, latency_budget_s=loaded.chain.latency_budget_s)
+    result = loaded.replay
     rrd = tmp_path / "ep.rrd"
-    stream_replay(loaded.timeline, result, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
+    stream_replay(loaded, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
     batches = _read(rrd)
     assets = [b for s, b in batches["/camera/video"] if s and "AssetVideo:blob" in b.schema.names]
     blob = np.asarray(assets[0].column("AssetVideo:blob").to_pylist()[0][0], dtype=np.uint8)
@@ -403,7 +403,7 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
     )
     from framechain.sinks.report import render_report
 
-    paths = render_report(demo.attribution, tmp_path, timeline=demo.loaded.timeline)
+    paths = render_report(demo.loaded, tmp_path)
     page = paths["html"].read_text()
     assert "What the camera saw" in page
     faults = [f.fault.value for f in demo.attribution.findings]

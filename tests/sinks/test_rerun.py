@@ -11,7 +11,7 @@ import sys
 import time
 from collections import defaultdict
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,12 +21,14 @@ import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
 
+from framechain import pipeline
 from framechain.analysis.alignment import align_evidence
-from framechain.analysis.attribute import Finding
+from framechain.analysis.attribute import Attribution, Finding
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate
+from framechain.analysis.run import Run
 from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
-from framechain.config.chain import ChainFrames
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.replay import ReplayResult, TransformBuffer, replay
 from framechain.sinks.rerun import (
     FindingView,
@@ -147,6 +149,24 @@ FINDINGS = [
 ]
 
 
+def _run(timeline: Timeline, *, findings: list[Finding] | None = None,
+         reference_point: tuple[float, float, float] | None = None) -> Run:
+    """The run of a hand-built timeline through FRAMES, replayed only; ``findings`` handed to the sinks as if
+    an attribution had found them (the sinks draw them; nothing else of the attribution is read)."""
+    chain = ChainConfig(frames=FRAMES, evidence=ChainEvidence(reference_point=reference_point))
+    made = pipeline.run(timeline, chain, attribute=False)
+    if findings is None:
+        return made
+    n = int(made.replay.replayed.sum())
+    found = Attribution(
+        source={}, config=chain, replay=made.replay, inputs=None, metric="none",  # type: ignore[arg-type]
+        error_before=np.full(n, np.nan), error_after=np.full(n, np.nan), hop_errors={},
+        evidence_points=np.full((n, 3), np.nan), corrected_world=np.full((n, 3), np.nan), findings=tuple(findings),
+        seed=0, aligned=made.aligned,
+    )
+    return replace(made, attribution=found, not_attributed=None)
+
+
 def _read(path: Path) -> dict[str, list[tuple[bool, pa.RecordBatch]]]:
     out: dict[str, list[tuple[bool, pa.RecordBatch]]] = defaultdict(list)
     for chunk in RrdReader(path).stream():
@@ -159,10 +179,10 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     timeline = _scene_timeline()
     first = replay(timeline, FRAMES)
     timeline = _with_as_run(timeline, first)
-    result = replay(timeline, FRAMES)
+    made = _run(timeline, findings=FINDINGS, reference_point=REFERENCE_POINT)
+    result = made.replay
     rrd = tmp_path_factory.mktemp("rerun") / "scene.rrd"
-    outcome = stream_replay(timeline, result, RerunTarget.save(rrd), findings=FINDINGS,
-                            reference_point=REFERENCE_POINT, options=RerunOptions(recording_id="scene"))
+    outcome = stream_replay(made, RerunTarget.save(rrd), options=RerunOptions(recording_id="scene"))
     assert outcome.mode is OutputMode.SAVE
     assert outcome.path == rrd
     assert not outcome.fell_back
@@ -353,7 +373,7 @@ def test_rerun_verifies_the_recording(scene: Scene) -> None:
 
 def test_depth_frames_are_decimated(tmp_path: Path, scene: Scene) -> None:
     rrd = tmp_path / "few.rrd"
-    stream_replay(scene.timeline, scene.result, RerunTarget.save(rrd), options=RerunOptions(max_images=2))
+    stream_replay(_run(scene.timeline), RerunTarget.save(rrd), options=RerunOptions(max_images=2))
     chunks = [c for c in RrdReader(rrd).stream() if c.entity_path == "/camera/depth" and not c.is_static]
     assert sum(c.num_rows for c in chunks) == 2
 
@@ -381,7 +401,7 @@ def test_spawn_without_display_falls_back_to_saving(
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert not display_available()
     fallback = tmp_path / "fallback.rrd"
-    outcome = stream_replay(scene.timeline, scene.result, RerunTarget.spawn(fallback))
+    outcome = stream_replay(_run(scene.timeline), RerunTarget.spawn(fallback))
     assert outcome.mode is OutputMode.SAVE
     assert outcome.fell_back
     assert outcome.path == fallback
@@ -495,7 +515,7 @@ def _received_entities(server: GrpcServer) -> set[str]:
 # The server's file is a stream without footer; Rerun's reader says so and scans the whole file.
 @pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
 def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer) -> None:
-    outcome = stream_replay(scene.timeline, scene.result, RerunTarget.connect(grpc_server.url))
+    outcome = stream_replay(_run(scene.timeline), RerunTarget.connect(grpc_server.url))
     assert outcome.mode is OutputMode.CONNECT
     assert outcome.url == grpc_server.url
     assert outcome.path is None
@@ -506,9 +526,9 @@ def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer
 def test_connect_to_nothing_fails_at_once(scene: Scene) -> None:
     url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"
     with pytest.raises(RerunSinkError, match="no Rerun viewer listening at rerun"):
-        stream_replay(scene.timeline, scene.result, RerunTarget.connect(url), options=RerunOptions())
+        stream_replay(_run(scene.timeline), RerunTarget.connect(url), options=RerunOptions())
     with pytest.raises(RerunSinkError, match="not a Rerun gRPC URL"):
-        stream_replay(scene.timeline, scene.result, RerunTarget.connect("http://"))
+        stream_replay(_run(scene.timeline), RerunTarget.connect("http://"))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -656,14 +676,14 @@ def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.C
 
 def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scene) -> None:
     empty = Timeline()
-    outcome = stream_replay(empty, replay(empty, FRAMES), RerunTarget.save(tmp_path / "empty.rrd"))
+    outcome = stream_replay(_run(empty), RerunTarget.save(tmp_path / "empty.rrd"))
     assert outcome.rows["/summary"] == 1
     # Observations without any transform: all rejected (missing edge), each a text log entry.
-    blind = scene.timeline.replace(transforms=TransformTable.empty())
-    result = replay(blind, FRAMES)
+    blind = _run(scene.timeline.replace(transforms=TransformTable.empty()), findings=FINDINGS)
+    result = blind.replay
     assert not result.replayed.any()
     out = tmp_path / "blind.rrd"
-    outcome = stream_replay(blind, result, RerunTarget.save(out), findings=FINDINGS)
+    outcome = stream_replay(blind, RerunTarget.save(out))
     chunks = _read(out)
     assert len(_rows(chunks, "/log/rejected", "TextLog:text")) == len(result)
     assert "/points/recomputed/world" not in chunks

@@ -1,0 +1,306 @@
+"""What a chain needs and whether the log has it: each piece (camera frame, intrinsics, detections,
+depth, mount, pose, evidence) found, and where, or missing with the chain key that supplies it."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from framechain.adapters.messages.kinds import POSE_TYPES
+from framechain.adapters.model import LoadedLog
+from framechain.adapters.suggest.facts import (
+    CAMERA_INFO_TYPES,
+    CORNER_DETECTION_TYPES,
+    IMAGE_TYPES,
+    POSE_DETECTION_TYPES,
+    LogFacts,
+    beside_yaml,
+    calibration_hint,
+    detection_topics,
+    frame_path,
+    log_facts,
+    path_text,
+    tag_size_hint,
+)
+from framechain.adapters.suggest.marker_probe import MarkerProbe, probe_markers
+from framechain.config.chain import ChainConfig, ChainFrames
+
+
+class NeedStatus(StrEnum):
+    FOUND = "found"
+    MISSING = "missing"
+    NONE = "none"  # optional for replay (evidence): attribution needs it
+
+
+@dataclass(frozen=True)
+class ChainNeed:
+    """One piece of the chain: found (and where) or missing (and the chain key that supplies it)."""
+
+    piece: str  # camera frame | intrinsics | detections | depth | mount | pose | evidence
+    status: NeedStatus
+    detail: str
+    #: What to add to CHAIN.yaml (a YAML fragment with placeholders in capitals); "" when found.
+    key: str = ""
+
+    @property
+    def found(self) -> bool:
+        return self.status == NeedStatus.FOUND
+
+    def fix(self) -> str:
+        """The key as prose: ``add `evidence.tag_size_m: 0.16` (the tags' edge)``; "" when found."""
+        return f"add {quote_key(self.key)}" if self.key else ""
+
+    def line(self) -> str:
+        """``depth: missing (no depth images, no tag size: add `evidence.tag_size_m: 0.16`)``."""
+        fix = f": {self.fix()}" if self.key else ""
+        return f"{self.piece}: {self.status.value} ({self.detail}{fix})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"piece": self.piece, "status": self.status.value, "detail": self.detail, "key": self.key}
+
+
+def quote_key(key: str) -> str:
+    """``a: 1  (why); or b: 2`` as ```a: 1` (why); or `b: 2```: keys in backticks, notes outside."""
+    parts = []
+    for part in key.split("; "):
+        lead = "or " if part.startswith("or ") else ""
+        text, _, note = part.removeprefix("or ").partition("  (")
+        parts.append(f"{lead}`{text.strip()}`" + (f" ({note}" if note else ""))
+    return "; ".join(parts)
+
+
+#: The pieces a replay cannot do without (evidence is for attribution).
+REPLAY_PIECES = ("camera frame", "intrinsics", "detections", "depth", "mount", "pose")
+
+
+# -- what the chain needs -------------------------------------------------------------------------------
+def chain_needs(
+    loaded: LoadedLog, chain: ChainConfig, *, placeholders: Mapping[str, str] | None = None,
+) -> list[ChainNeed]:
+    """Each piece of ``chain`` checked against the log (read with or without that chain)."""
+    holes = dict(placeholders or {})
+    facts = log_facts(loaded)
+    frames = chain.frames
+    path = Path(str(getattr(loaded.info, "path", "")))
+    beside = beside_yaml(path) if str(path) not in ("", ".") else []
+    needs: list[ChainNeed] = []
+    needs.append(_camera_need(frames.camera, holes, facts, loaded))
+    detections, det_need = _detections_need(chain, loaded, facts)
+    needs.append(_intrinsics_need(chain, holes, facts, loaded, beside, detections))
+    needs.append(det_need)
+    needs.append(_depth_need(chain, loaded, facts, beside, detections))
+    needs.append(_mount_need(frames, holes, facts))
+    needs.append(_pose_need(chain, holes, facts))
+    needs.append(_evidence_need(chain, detections, facts))
+    return needs
+
+
+def _camera_need(camera: str, holes: Mapping[str, str], facts: LogFacts, loaded: LoadedLog) -> ChainNeed:
+    if "camera" in holes:
+        return ChainNeed("camera frame", NeedStatus.MISSING, holes["camera"], "frames: {camera: CAMERA_OPTICAL_FRAME}")
+    if camera not in facts.frames:
+        return ChainNeed("camera frame", NeedStatus.MISSING, f"{camera} is in no transform, CameraInfo or detection "
+                         "of the log", "frames: {camera: CAMERA_OPTICAL_FRAME}")
+    tl = loaded.timeline
+    where = sorted({str(s) for s in tl.observations.source[tl.observations.camera_frame == camera].tolist()})
+    if where:
+        return ChainNeed("camera frame", NeedStatus.FOUND, f"{camera} (header.frame_id of {', '.join(where)})")
+    cams = sorted({str(s) for s in tl.cameras.source[tl.cameras.frame == camera].tolist()})
+    return ChainNeed("camera frame", NeedStatus.FOUND, f"{camera}" + (f" (from {', '.join(cams)})" if cams else ""))
+
+
+def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: LogFacts) -> tuple[str | None, ChainNeed]:
+    """The detections topic the chain replays, and its need."""
+    t = chain.topics
+    obs = loaded.timeline.observations
+    named = t.detections or t.pixel_points
+    markers = chain.evidence.markers
+    if named is None and t.detections_table:
+        n = len(obs)
+        return None, ChainNeed("detections", NeedStatus.FOUND if n else NeedStatus.MISSING,
+                               f"{n} detections from the table {t.detections_table}",
+                               "" if n else "topics.detections_table: DETECTIONS.parquet")
+    if named is None and t.image and markers:
+        n = int((obs.source == t.image).sum()) if len(obs) else 0
+        if t.image not in facts.msgtypes:
+            return t.image, ChainNeed("detections", NeedStatus.MISSING, f"the chain's topics.image {t.image} is not in "
+                                      "the log", f"topics.image: {_image_choice(facts)}")
+        n_images = _count(facts.counts.get(t.image, 0), 'image')
+        if n == 0:  # searched and found none: a wrong dictionary, or no marker in view
+            probe = _probe(loaded, t.image)
+            best = probe.best if probe is not None else None
+            seen = f"; {probe.text()}" if probe is not None else ""
+            key = (f"evidence.markers: {{dictionary: {best}, size_m: {markers.size_m or 'MARKER_EDGE_M'}}}"
+                   if best is not None and best != markers.dictionary else
+                   "evidence.markers.dictionary: another dictionary (the printed markers' family), or topics.image: "
+                   "a topic that sees the markers")
+            return t.image, ChainNeed("detections", NeedStatus.MISSING, f"0 markers found in {n_images} of {t.image} "
+                                      f"with {markers.dictionary}{seen}", key)
+        return t.image, ChainNeed("detections", NeedStatus.FOUND, f"markers in the images of {t.image} "
+                                  f"({n_images}, {_count(n, 'marker')})")
+    candidates = detection_topics(loaded, facts)
+    if named is None:
+        images = facts.topics_of(IMAGE_TYPES)
+        images = [i for i in images if "depth" not in i.lower()]
+        key = "topics.detections: DETECTIONS_TOPIC"
+        probe = _probe(loaded, images[0]) if images else None
+        if probe is not None and probe.best is not None:  # only a dictionary that found markers is suggested
+            key += (f"; or topics.image: {images[0]}; evidence.markers: {{dictionary: {probe.best}, "
+                    f"size_m: MARKER_SIZE_M}}  ({probe.text()})")
+        elif probe is not None:
+            key += f"  ({probe.text()})"
+        return None, ChainNeed("detections", NeedStatus.MISSING, "no detections topic in the log "
+                               "(vision_msgs, AprilTag or fiducial detections)" if not candidates else
+                               f"the chain names none (the log has {', '.join(candidates)})",
+                               key if not candidates else f"topics.detections: {candidates[0]}")
+    if named not in facts.msgtypes and len(obs) == 0:
+        also = f" (detection topics in the log: {', '.join(candidates)})" if candidates else ""
+        return named, ChainNeed("detections", NeedStatus.MISSING, f"the chain names {named}, which the log lacks{also}",
+                                f"topics.detections: {candidates[0] if candidates else 'DETECTIONS_TOPIC'}")
+    n_obs = int((obs.source == named).sum()) if len(obs) else 0
+    n_msg = facts.counts.get(named, 0)
+    others = [c for c in candidates if c != named]
+    also = f"; also {', '.join(others)}" if others else ""
+    if n_obs == 0 and len(obs) == 0:
+        return named, ChainNeed("detections", NeedStatus.MISSING,
+                                f"{facts.describe(named)} has {n_msg} messages but no detection was read from them",
+                                f"topics.detections: {others[0] if others else 'DETECTIONS_TOPIC'}")
+    return named, ChainNeed("detections", NeedStatus.FOUND,
+                            f"{facts.describe(named)}: {n_msg} messages, {n_obs or len(obs)} detections{also}")
+
+
+def _probe(loaded: LoadedLog, topic: str) -> MarkerProbe | None:
+    """The common dictionaries tried on the first images of ``topic`` (None: no log file, unreadable)."""
+    path = str(getattr(loaded.info, "path", ""))
+    return probe_markers(path, topic) if path not in ("", ".") else None
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _image_choice(facts: LogFacts) -> str:
+    images = [i for i in facts.topics_of(IMAGE_TYPES) if "depth" not in i.lower()]
+    return images[0] if images else "IMAGE_TOPIC"
+
+
+def _intrinsics_need(
+    chain: ChainConfig, holes: Mapping[str, str], facts: LogFacts, loaded: LoadedLog,
+    beside: list[tuple[str, Any]], detections: str | None,
+) -> ChainNeed:
+    camera = chain.frames.camera
+    cams = loaded.timeline.cameras
+    hint = calibration_hint(beside, detections) or "calibration: {file: CAMERAS.yaml, camera: NAME}"
+    if "camera" not in holes and len(cams) and (cams.frame == camera).any():
+        i = int(np.flatnonzero(cams.frame == camera)[0])
+        return ChainNeed("intrinsics", NeedStatus.FOUND,
+                         f"{cams.source[i]} ({int(cams.width[i])}x{int(cams.height[i])}, {cams.distortion_model[i]})")
+    infos = facts.topics_of(CAMERA_INFO_TYPES)
+    if infos:
+        other = sorted({str(f) for f in cams.frame.tolist()}) if len(cams) else []
+        detail = (f"no CameraInfo for {camera}; the log's ({', '.join(infos)}) are for "
+                  f"{', '.join(other) or 'other frames'}")
+        return ChainNeed("intrinsics", NeedStatus.MISSING, detail, f"{hint}  (or topics.camera_info: TOPIC)")
+    return ChainNeed("intrinsics", NeedStatus.MISSING, "no CameraInfo in the log",
+                     f"{hint}  (ROS camera_info, Kalibr or OpenCV YAML)")
+
+
+def _depth_need(
+    chain: ChainConfig, loaded: LoadedLog, facts: LogFacts, beside: list[tuple[str, Any]], detections: str | None,
+) -> ChainNeed:
+    tl = loaded.timeline
+    if chain.topics.depth:
+        if chain.topics.depth in facts.msgtypes:
+            return ChainNeed("depth", NeedStatus.FOUND, f"depth images on {chain.topics.depth} "
+                             f"({facts.counts.get(chain.topics.depth, 0)} frames)")
+        return ChainNeed("depth", NeedStatus.MISSING, f"the chain names depth topic {chain.topics.depth}, which the "
+                         "log lacks", "topics.depth: DEPTH_IMAGE_TOPIC")
+    msgtype = facts.msgtypes.get(detections or "", "")
+    if msgtype in POSE_DETECTION_TYPES:
+        return ChainNeed("depth", NeedStatus.FOUND, f"the detections of {detections} carry a 3D position")
+    tag_size = chain.evidence.tag_size_m
+    markers = chain.evidence.markers
+    if tag_size is not None and (msgtype in CORNER_DETECTION_TYPES or detections is None):
+        return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP)")
+    if markers is not None and detections == chain.topics.image:
+        if markers.size_m is not None:
+            return ChainNeed("depth", NeedStatus.FOUND, f"marker corners and evidence.markers size_m {markers.size_m} "
+                             "(PnP)")
+        return ChainNeed("depth", NeedStatus.MISSING, "markers without a size give bearings only",
+                         f"evidence.markers: {{dictionary: {markers.dictionary}, size_m: MARKER_EDGE_M}}")
+    obs = tl.observations
+    mine = obs.depth_m[obs.source == detections] if detections and len(obs) else obs.depth_m[:0]
+    if mine.size and np.isfinite(mine).any():
+        share = float(np.isfinite(mine).mean())
+        return ChainNeed("depth", NeedStatus.FOUND, f"a depth in the detections themselves ({share:.0%} of them)")
+    if msgtype in CORNER_DETECTION_TYPES:
+        size = tag_size_hint(beside)
+        size_text = f"{size:g}" if size is not None else "TAG_EDGE_M"
+        return ChainNeed("depth", NeedStatus.MISSING, "tag corners but no tag size (AprilTag/ArUco corners give a "
+                         "depth by PnP)", f"evidence.tag_size_m: {size_text}")
+    depth_images = [t for t in facts.topics_of(IMAGE_TYPES) if "depth" in t.lower()]
+    if depth_images:
+        return ChainNeed("depth", NeedStatus.MISSING, f"depth images on {depth_images[0]} but the chain names none",
+                         f"topics.depth: {depth_images[0]}")
+    return ChainNeed("depth", NeedStatus.MISSING, "no depth images, no depth in the detections, no tag size",
+                     "topics.depth: DEPTH_IMAGE_TOPIC; or evidence.tag_size_m: TAG_EDGE_M  (fiducial corners)")
+
+
+def _mount_key(body: str, camera: str) -> str:
+    return (f"mounts: [{{parent: {body}, child: {camera}, xyz: [X, Y, Z], quat_xyzw: [QX, QY, QZ, QW]}}]; "
+            "or urdf: ROBOT.urdf")
+
+
+def _mount_need(frames: ChainFrames, holes: Mapping[str, str], facts: LogFacts) -> ChainNeed:
+    body = "BODY_FRAME" if "body" in holes else frames.body
+    camera = "CAMERA_OPTICAL_FRAME" if "camera" in holes else frames.camera
+    if "camera" in holes or "body" in holes:
+        return ChainNeed("mount", NeedStatus.MISSING, "no camera -> body path without both frames",
+                         _mount_key(body, camera))
+    path = frame_path(facts.edges, frames.body, frames.camera)
+    if path is None:
+        return ChainNeed("mount", NeedStatus.MISSING, f"no path from the camera frame {frames.camera} to the body "
+                         f"{frames.body}", _mount_key(body, camera))
+    return ChainNeed("mount", NeedStatus.FOUND, path_text(path, facts, start=frames.body))
+
+
+def _pose_need(chain: ChainConfig, holes: Mapping[str, str], facts: LogFacts) -> ChainNeed:
+    frames = chain.frames
+    poses = facts.topics_of(POSE_TYPES)
+    key = f"topics.odometry: {poses[0] if poses else 'POSE_TOPIC'}  (Odometry, PoseStamped, ... as world -> body)"
+    named = [p.topic for p in chain.pose_topics()]
+    lacking = [p for p in named if p not in facts.msgtypes]
+    if lacking:
+        return ChainNeed("pose", NeedStatus.MISSING, f"the chain names pose topic {', '.join(lacking)}, which the "
+                         "log lacks", key)
+    if "body" in holes or "world" in holes:
+        return ChainNeed("pose", NeedStatus.MISSING, "no body -> world path without both frames", key)
+    path = frame_path(facts.edges, frames.world, frames.body)
+    if path is None:
+        return ChainNeed("pose", NeedStatus.MISSING, f"no path from the body {frames.body} to the world "
+                         f"{frames.world}", key)
+    return ChainNeed("pose", NeedStatus.FOUND, path_text(path, facts, start=frames.world))
+
+
+def _evidence_need(chain: ChainConfig, detections: str | None, facts: LogFacts) -> ChainNeed:
+    ev = chain.evidence
+    have = [f"{role} {topic}" for topic, role in chain.evidence_topics().items()]
+    if ev.reference_point is not None:
+        have.append("reference_point")
+    if ev.static_target:
+        have.append("static_target")
+    if have:
+        return ChainNeed("evidence", NeedStatus.FOUND, ", ".join(have))
+    tags = facts.msgtypes.get(detections or "", "") in CORNER_DETECTION_TYPES | POSE_DETECTION_TYPES
+    first = "evidence.static_target: true  (the tags do not move)" if tags else \
+        "evidence.static_target: true  (the detected object does not move)"
+    return ChainNeed("evidence", NeedStatus.NONE, "attribution needs evidence: the robot's own points, a target, "
+                     "a reference or a static target",
+                     f"{first}; or evidence.reference: TOPIC; or evidence.reference_point: [X, Y, Z]; "
+                     "or evidence.hops: {camera: TOPIC, body: TOPIC, world: TOPIC}")
+

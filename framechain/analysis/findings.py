@@ -1,0 +1,173 @@
+"""What attribution returns: the findings, the Attribution with its summaries and the attribution.json
+contract, and the error raised (with its typed reason) when a log cannot be attributed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any, Literal
+
+import numpy as np
+
+from framechain.analysis.alignment import AlignedEvidence
+from framechain.analysis.chain_model import ChainInputs
+from framechain.analysis.estimates import Estimate, estimate_to_json, format_estimate
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
+from framechain.config.chain import ChainConfig
+from framechain.replay import REPLAYED, ReplayResult
+from framechain.timeline import FramechainError
+
+Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
+SCHEMA = "framechain/attribution@1"
+
+
+class Unattributed(StrEnum):
+    """Why a run has no attribution."""
+
+    NOT_ASKED = "not_asked"  # the run was asked to replay only (--no-attribute)
+    NO_DETECTIONS = "no_detections"  # nothing to replay
+    NOTHING_REPLAYED = "nothing_replayed"  # every observation was rejected
+    NO_CAMERA_INFO = "no_camera_info"  # no camera model for the replayed observations
+    STATIC_TARGET = "static_target"  # observations replayed, but too few sightings of one static object
+
+
+class AnalysisError(FramechainError):
+    """The log could not be analysed (nothing replayed, no camera model, too few sightings)."""
+
+    def __init__(self, message: str, reason: Unattributed = Unattributed.NOTHING_REPLAYED) -> None:
+        super().__init__(message)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One fault found: the catalogue entry, its size, its share of the error and the fix."""
+
+    fault: Fault
+    hop: HopName
+    estimate: Estimate
+    interval: dict[str, list[float]]
+    share: float
+    error_m: float
+    confidence: float
+    evidence: str
+    fix: str
+    model: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "fault": self.fault.value,
+            "hop": self.hop.value,
+            "estimate": estimate_to_json(self.estimate),
+            "interval": self.interval,
+            "share": round(self.share, 4),
+            "error_m": round(self.error_m, 6),
+            "confidence": round(self.confidence, 4),
+            "evidence": self.evidence,
+            "fix": self.fix,
+        }
+
+
+@dataclass(frozen=True)
+class Attribution:
+    """The result of :func:`attribute`: counts, error, findings, and what they were computed from."""
+
+    source: dict[str, Any]
+    config: ChainConfig
+    replay: ReplayResult
+    inputs: ChainInputs
+    metric: Metric
+    error_before: FloatArray  # (N,) per replayed observation, against the evidence
+    error_after: FloatArray  # (N,) once every finding is corrected
+    hop_errors: dict[str, FloatArray]  # hop -> (N,) departure of the logged hop (logged-hops level)
+    evidence_points: FloatArray  # (N, 3) world-frame evidence per replayed observation (NaN: none)
+    corrected_world: FloatArray  # (N, 3) world points with the findings applied
+    findings: tuple[Finding, ...]
+    seed: int
+    #: the logged evidence aligned to every observation of ``replay`` (all rows, in the chain's frames)
+    aligned: AlignedEvidence
+    notes: tuple[str, ...] = ()
+    #: where the error is measured: the world point, or the deepest hop the robot logged
+    stage: str = "world"
+
+    def counts(self) -> dict[str, Any]:
+        return self.replay.counts()
+
+    def error_summary(self, errors: FloatArray | None = None) -> dict[str, Any]:
+        e = self.error_before if errors is None else errors
+        e = e[np.isfinite(e)]
+        if e.size == 0:
+            return {"metric": self.metric, "stage": self.stage, "median": None, "p95": None, "max": None}
+        return {
+            "metric": self.metric,
+            "stage": self.stage,
+            "median": round(float(np.median(e)), 6),
+            "p95": round(float(np.percentile(e, 95)), 6),
+            "max": round(float(e.max()), 6),
+        }
+
+    def hop_summary(self) -> list[dict[str, Any]]:
+        """One row per hop: its own departure where the robot logged it, the time gaps of the samples
+        it used (observation stamp minus the nearest sample of its stalest edge), stale count, and
+        the error the findings put on it."""
+        records = self.replay.hops
+        replayed = records.status == REPLAYED
+        rows = []
+        for hop in HopName:
+            sel = replayed & (records.hop == hop.value)
+            gaps_ms = np.abs(records.gap_ns[sel]) * 1e-6
+            departure = self.hop_errors.get(hop.value)
+            dep = departure[np.isfinite(departure)] if departure is not None else np.zeros(0)
+            rows.append({
+                "hop": hop.value,
+                "departure_m": None if dep.size == 0 else {
+                    "median": round(float(np.median(dep)), 6), "p95": round(float(np.percentile(dep, 95)), 6),
+                    "max": round(float(dep.max()), 6)},
+                "gap_ms": None if gaps_ms.size == 0 else {
+                    "median": round(float(np.median(gaps_ms)), 3), "max": round(float(gaps_ms.max()), 3)},
+                "stale": int(records.stale[sel].sum()),
+                "attributed_m": round(sum(f.error_m for f in self.findings if f.hop == hop), 6),
+                "faults": [f.fault.value for f in self.findings if f.hop == hop],
+            })
+        return rows
+
+    @property
+    def verdict(self) -> str:
+        """The answer in one sentence."""
+        summary = self.error_summary()
+        if self.metric == "none":
+            return (
+                "No evidence in this log to measure the chain against (no logged points, reference or static target)."
+            )
+        if not self.findings:
+            return (
+                f"No fault beyond noise: median error {summary['median'] * 1e3:.1f} mm against the "
+                f"{self.metric.replace('_', ' ')}."
+            )
+        top = self.findings[0]
+        more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+        return (
+            f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}) explains "
+            f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}."
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        """The attribution.json contract (schema framechain/attribution@1)."""
+        counts = self.counts()
+        frames = self.config.frames
+        return {
+            "schema": SCHEMA,
+            "source": self.source,
+            "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
+            "observations": counts,
+            "error_m": self.error_summary(),
+            "residual_m": self.error_summary(self.error_after),
+            "verdict": self.verdict,
+            "findings": [f.to_json() for f in self.findings],
+            "hops": self.hop_summary(),
+            "notes": list(self.notes),
+        }
+
+
+__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed"]

@@ -1,0 +1,147 @@
+"""What each fault found is worth: its Shapley share of the median error (dropping the ones that move
+noise), its bootstrap interval, and the sentence that says what it was found from."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from framechain.analysis.chain_model import ChainInputs
+from framechain.analysis.estimates import Estimate, estimate_scalars, format_estimate
+from framechain.analysis.fault_model import FaultModel, Mode
+from framechain.analysis.findings import Metric
+from framechain.analysis.fit import fit_models, perturbation_of
+from framechain.analysis.selection import Objective, Selected, distances
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault
+
+#: A fault found: its model, fitted parameters, confidence, the next-best explanation, and its selection.
+Found = tuple[FaultModel, FloatArray, float, str, Selected]
+#: A fault that explains less than this fraction of the median error, and less than the noise floor
+#: of a median (two standard errors of the residual's median), is not a finding: its fit moved noise.
+MIN_SHARE = 0.01
+
+
+def drop_unexplaining(
+    found: list[Found],
+    objective: Objective,
+    inputs: ChainInputs,
+    total: float,
+) -> tuple[
+    list[Found],
+    list[float],
+    list[Found],
+]:
+    """Drop, weakest first, the faults whose Shapley share of the median error is not a share of it.
+
+    A share at or below zero means the fault makes the median error no better given the others. A
+    Shapley value is a difference of medians, so one under two standard errors of the residual's
+    median (1.2533 sigma / sqrt(n) for a median) cannot be told from noise; with it under
+    :data:`MIN_SHARE` of the error as well (a true fault beside a large one can explain under 1% and
+    still be far above the noise: a 30 ms latency beside a 30 deg mount) the fault is dropped.
+    Shares are recomputed over the faults that remain after each drop (the parameters stay as
+    fitted). Returns the kept faults, their Shapley values (m), and the dropped ones with the share
+    they had when dropped.
+    """
+    kept = list(found)
+    dropped: list[Found] = []
+    while True:
+        shapley = shapley_values(kept, objective, inputs)
+        if not kept:
+            return kept, shapley, dropped
+        combined = perturbation_of([f[0] for f in kept], np.concatenate([f[1] for f in kept]))
+        residual = distances(objective(inputs, combined))
+        residual = residual[np.isfinite(residual)]
+        floor = 2.0 * 1.2533 * float(np.std(residual)) / math.sqrt(residual.size) if residual.size else 0.0
+        weakest = int(np.argmin(shapley))
+        value = shapley[weakest]
+        if value > 0 and not (value < MIN_SHARE * total and value < floor):
+            return kept, shapley, dropped
+        model, x, _confidence, _alternative, sel = kept.pop(weakest)
+        why = ("it does not lower the median error given the other faults" if value <= 0 else
+               f"under {MIN_SHARE:.0%} of it and under the noise floor of a median ({floor * 1e3:.2f} mm, two "
+               "standard errors)")
+        dropped.append((model, x, value, why, sel))
+
+
+def shapley_values(
+    found: Sequence[Found], objective: Objective, inputs: ChainInputs
+) -> list[float]:
+    """Shapley values of the median error explained, over the faults found (2^k replays)."""
+    k = len(found)
+    if k == 0:
+        return []
+    cache: dict[frozenset[int], float] = {}
+
+    def error(subset: frozenset[int]) -> float:
+        if subset not in cache:
+            chosen = [found[i] for i in sorted(subset)]
+            pert = perturbation_of(
+                [c[0] for c in chosen], np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
+            )
+            cache[subset] = float(np.nanmedian(distances(objective(inputs, pert))))
+        return cache[subset]
+
+    values = []
+    for i in range(k):
+        others = [j for j in range(k) if j != i]
+        phi = 0.0
+        for size in range(k):
+            weight = math.factorial(size) * math.factorial(k - size - 1) / math.factorial(k)
+            for subset in itertools.combinations(others, size):
+                s = frozenset(subset)
+                phi += weight * (error(s) - error(s | {i}))
+        values.append(phi)
+    return values
+
+
+def bootstrap_interval(
+    sel: Selected,
+    model: FaultModel,
+    rng: np.random.Generator,
+    draws: int,
+    say: Callable[[str], None],
+) -> dict[str, list[float]]:
+    """95% intervals of the model's scalar estimates over observation resamples."""
+    if model.n_params == 0:
+        return {}
+    say(f"bootstrapping {model.name} ({draws} resamples)")
+    x_fit = np.concatenate(sel.fit.params)
+    index = [m.name for m in sel.fit.models].index(model.name)
+    samples: dict[str, list[float]] = {}
+    inputs = sel.inputs
+    n = len(inputs)
+    for _ in range(draws):
+        idx = rng.integers(0, n, n)
+        refit = fit_models(sel.fit.models, sel.objective.take(idx), inputs.take(idx), x_start=x_fit, grid=False)
+        scalars = estimate_scalars(model.estimate(refit.params[index], sel.mode, inputs))
+        for key, value in scalars.items():
+            samples.setdefault(key, []).append(float(value))
+    return {
+        k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)] for k, v in samples.items()
+    }
+
+
+def evidence_sentence(
+    fault: Fault, model: FaultModel, metric: Metric, estimate: Estimate, alternative: str, mode: Mode,
+    *, spread_m: tuple[float, float] = (math.nan, math.nan), rays: bool = False,
+) -> str:
+    """``spread_m``: the static objects' median spread before, and after this fault's share of it."""
+    before, after = spread_m
+    measured = ("how far each static object's rays pass from their meeting point" if rays
+                else "the spread of each static object's world points")
+    where = {
+        "logged_hops": f"the robot's logged {model.hop.value.split('_to_')[-1]} points depart from the recomputed hop",
+        "target": "the logged target is reproduced from the raw inputs",
+        "reference": "the error against the reference vanishes",
+        "static_spread": f"{measured} (median {before * 1e3:.3g} mm) shrinks to {after * 1e3:.3g} mm",
+    }[metric]
+    side = "recorded data" if mode == "correction" else "chain that produced the evidence"
+    return (
+        f"With {fault.value} ({format_estimate(estimate)}) in the {side}, {where}; "
+        f"next-best explanation: {alternative}."
+    )
+

@@ -1,0 +1,87 @@
+"""The default layout of a Rerun recording: the world in 3D beside the camera's view, series and text below."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from framechain.config.chain import ChainFrames
+from framechain.sinks.overlay import (
+    ImageOverlay,
+)
+from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, OBS_INDEX, SENSOR_TIME
+
+if TYPE_CHECKING:
+    import rerun.blueprint as rrb
+
+
+def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float] | None:
+    """(u_min, u_max, v_min, v_max) of the camera view: the image, widened to show most projected
+    as-run points (the 90th percentile of how far they fall outside, at most one image size)."""
+    have = overlay.width > 0
+    if not have.any():
+        return None
+    w, h = float(overlay.width[have].max()), float(overlay.height[have].max())
+    u0, u1, v0, v1 = -0.5, w - 0.5, -0.5, h - 0.5
+    uv = overlay.as_run_uv[np.isfinite(overlay.as_run_uv).all(axis=1)]
+    if uv.size:
+        margin_u, margin_v = 0.04 * w, 0.04 * h
+        u0 = max(min(u0, float(np.percentile(uv[:, 0], 10)) - margin_u), -w)
+        u1 = min(max(u1, float(np.percentile(uv[:, 0], 90)) + margin_u), 2 * w)
+        v0 = max(min(v0, float(np.percentile(uv[:, 1], 10)) - margin_v), -h)
+        v1 = min(max(v1, float(np.percentile(uv[:, 1], 90)) + margin_v), 2 * h)
+    return u0, u1, v0, v1
+
+
+def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
+                      image_bounds: tuple[float, float, float, float] | None = None) -> rrb.Blueprint:
+    """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
+    (its images with the chain drawn on them when ``images``, else the depth frames); below them the
+    per-hop error, the error in the image and the time gaps as series, and the findings.
+    ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
+    v_min, v_max) frames the camera view (see :func:`image_view_bounds`)."""
+    import rerun.blueprint as rrb
+
+    # With colour images, the depth cloud would bury the points: it stays in the depth tab.
+    world = rrb.Spatial3DView(
+        name=f"World ({frames.world})", origin="/",
+        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", "- /camera/overlay/**",
+                  *(["- /camera/depth"] if images else [])],
+        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
+    )
+    history = rrb.Spatial3DView(
+        name="All observations (world points)", origin="/",
+        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target",
+                  "+ /points/reference/**", "+ /points/error/world", "+ /frames/**", "+ /tf/**"],
+        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
+        time_ranges=[rrb.VisibleTimeRange(name, start=rrb.TimeRangeBoundary.infinite(),
+                                          end=rrb.TimeRangeBoundary.infinite())
+                     for name in (SENSOR_TIME, LOG_TIME, OBS_INDEX)],
+    )
+    plane = rrb.SpatialInformation(target_frame=frames.camera + IMAGE_PLANE_SUFFIX)
+    bounds = None if image_bounds is None else rrb.VisualBounds2D(x_range=image_bounds[:2], y_range=image_bounds[2:])
+    camera = rrb.Spatial2DView(
+        name=f"Camera ({frames.camera})", origin="/camera",
+        contents=["+ /camera/**", "- /camera/depth"] if images else ["+ /camera/**"],
+        spatial_information=plane, visual_bounds=bounds,
+    )
+    cameras: rrb.Tabs | rrb.Spatial2DView = camera
+    if images:
+        depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
+                                  contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
+        cameras = rrb.Tabs(camera, depth)
+    errors = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
+    pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
+    gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
+    text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
+                    rrb.TextDocumentView(name="Summary", origin="/summary"))
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(rrb.Tabs(world, history), cameras, column_shares=[1, 1]),
+            rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
+            row_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
+        collapse_panels=collapse_panels,
+    )

@@ -1,0 +1,103 @@
+"""What every part of the Rerun stream shares: its timelines, frame names, colours and options, and
+the columns that put rows of observations on the timelines."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.arrays import IntArray
+from framechain.catalogue import HopName
+from framechain.replay import ReplayResult
+from framechain.sinks.overlay import (
+    ImageSelection,
+)
+from framechain.timeline import PointRole
+
+if TYPE_CHECKING:
+    import rerun as rr
+
+
+SENSOR_TIME = "sensor_time"
+#: Timeline of the log's receive times.
+LOG_TIME = "log_time"
+#: Timeline of the observation's row in the ObservationTable.
+OBS_INDEX = "obs_index"
+
+#: Suffix of the frames that carry the transforms the replay used (``base_link@replay``).
+REPLAY_FRAME_SUFFIX = "@replay"
+#: Suffix of the pinhole's child frame, as Rerun's own MCAP loader names it.
+IMAGE_PLANE_SUFFIX = "_image_plane"
+
+REFERENCE_COLOR = (44, 160, 44)
+ERROR_COLOR = (214, 39, 40)
+STALE_COLOR = (255, 187, 120)
+
+#: The point at the output of each hop, by hop: (entity leaf, as-run role).
+HOP_POINTS: tuple[tuple[HopName, str, PointRole], ...] = (
+    (HopName.PIXEL_TO_CAMERA, "camera", PointRole.HOP_CAMERA),
+    (HopName.CAMERA_TO_BODY, "body", PointRole.HOP_BODY),
+    (HopName.BODY_TO_WORLD, "world", PointRole.HOP_WORLD),
+)
+
+
+@dataclass(frozen=True)
+class RerunOptions:
+    """Knobs of the Rerun stream."""
+
+    application_id: str = "framechain"
+    recording_id: str | None = None
+    recording_name: str | None = None
+    #: At most this many depth frames are logged (the ones nearest observations, decimated evenly).
+    max_images: int = 30
+    #: A depth frame within this of an observation stamp is logged with it.
+    image_window_ns: int = 50_000_000
+    point_radius_m: float = 0.02
+    axis_length_m: float = 0.2
+    #: Which camera images are logged: near the observations (default), all, or none.
+    images: ImageSelection = ImageSelection.NEAR
+
+
+ROLE_LEAF: dict[PointRole, str] = {
+    PointRole.HOP_CAMERA: "camera", PointRole.HOP_BODY: "body", PointRole.HOP_WORLD: "world",
+    PointRole.TARGET: "target", PointRole.REFERENCE: "reference",
+}
+
+
+def entity_part(name: str) -> str:
+    import rerun as rr
+
+    escaped: str = rr.escape_entity_path_part(name)
+    return escaped
+
+
+def stamp_column(name: str, ns: npt.ArrayLike) -> rr.TimeColumn:
+    import rerun as rr
+
+    return rr.TimeColumn(name, timestamp=np.asarray(ns, dtype=np.int64).astype("datetime64[ns]"))
+
+
+def obs_indexes(result: ReplayResult, rows: IntArray) -> list[rr.TimeColumn]:
+    import rerun as rr
+
+    obs = result.observations
+    return [
+        stamp_column(SENSOR_TIME, obs.stamp_ns[rows]),
+        stamp_column(LOG_TIME, obs.log_time_ns[rows]),
+        rr.TimeColumn(OBS_INDEX, sequence=rows.astype(np.int64)),
+    ]
+
+
+def send_per_stamp(rec: rr.RecordingStream, entity: str, result: ReplayResult, sel: IntArray,
+                    columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
+    """One row per observation stamp holding every observation of that stamp (several tags in one
+    image): a later row at the same time would hide the earlier ones in the viewer."""
+    obs = result.observations
+    sel = sel[np.argsort(obs.stamp_ns[sel], kind="stable")]
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(obs.stamp_ns[sel]) != 0]))
+    lengths = np.diff(np.append(starts, sel.size))
+    rec.send_columns(entity, indexes=obs_indexes(result, sel[starts]), columns=columns(sel).partition(lengths=lengths))

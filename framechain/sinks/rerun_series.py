@@ -1,0 +1,209 @@
+"""The numbers and words of a Rerun recording: every hop's point recomputed and as run, the error arrows,
+per-hop error and time-gap series, the findings, rejections and stale observations, and a summary."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from framechain.arrays import FloatArray, IntArray, rows_of
+from framechain.catalogue import HopName
+from framechain.replay import REPLAYED, ReplayResult
+from framechain.sinks.overlay import (
+    AS_RUN_COLOR,
+    RECOMPUTED_COLOR,
+)
+from framechain.sinks.rerun_common import (
+    ERROR_COLOR,
+    HOP_POINTS,
+    REFERENCE_COLOR,
+    REPLAY_FRAME_SUFFIX,
+    RerunOptions,
+    obs_indexes,
+)
+from framechain.sinks.text import FindingView
+
+if TYPE_CHECKING:
+    import rerun as rr
+
+
+def log_points(
+    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], opts: RerunOptions,
+    rows: dict[str, int],
+) -> None:
+    """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run."""
+    import rerun as rr
+
+    frames = result.frames
+    hop_frame = {"camera": frames.camera + REPLAY_FRAME_SUFFIX, "body": frames.body + REPLAY_FRAME_SUFFIX,
+                 "world": frames.world, "target": frames.world}
+    recomputed = {"camera": result.p_cam, "body": result.p_body, "world": result.p_world,
+                  "target": result.p_world}
+    obs_id = result.observations.obs_id
+    radius = opts.point_radius_m
+
+    def send_points(entity: str, frame: str, xyz: FloatArray, color: tuple[int, int, int], what: str) -> None:
+        sel = np.flatnonzero(np.isfinite(xyz).all(axis=1))
+        if sel.size == 0:
+            return
+        rec.log(entity, rr.CoordinateFrame(frame), static=True)
+        rec.send_columns(
+            entity, indexes=obs_indexes(result, sel),
+            columns=rr.Points3D.columns(
+                positions=xyz[sel], colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
+                radii=np.full(sel.size, radius, dtype=np.float32),
+                labels=[f"obs {i} {what}" for i in obs_id[sel].tolist()],
+                show_labels=[False] * sel.size,  # on hover: several overlap at one point
+            ),
+        )
+        rows[entity] = int(sel.size)
+
+    for leaf in ("camera", "body", "world"):
+        send_points(f"/points/recomputed/{leaf}", hop_frame[leaf], recomputed[leaf], RECOMPUTED_COLOR,
+                    f"recomputed ({leaf})")
+    for leaf in ("camera", "body", "world", "target"):
+        logged = as_run[leaf]
+        send_points(f"/points/as_run/{leaf}", hop_frame[leaf], logged, AS_RUN_COLOR, f"as-run ({leaf})")
+        both = np.flatnonzero(np.isfinite(logged).all(axis=1) & np.isfinite(recomputed[leaf]).all(axis=1))
+        if both.size == 0:
+            continue
+        entity = f"/points/error/{leaf}"
+        rec.log(entity, rr.CoordinateFrame(hop_frame[leaf]), static=True)
+        delta = logged[both] - recomputed[leaf][both]
+        rec.send_columns(
+            entity, indexes=obs_indexes(result, both),
+            columns=rr.Arrows3D.columns(
+                origins=recomputed[leaf][both], vectors=delta,
+                colors=np.tile(np.array(ERROR_COLOR, dtype=np.uint8), (both.size, 1)),
+                radii=np.full(both.size, radius / 4, dtype=np.float32),
+                labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
+            ),
+        )
+        rows[entity] = int(both.size)
+    send_points("/points/reference/matched", frames.world, as_run["reference"], REFERENCE_COLOR, "reference")
+
+
+def log_series(
+    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], rows: dict[str, int]
+) -> None:
+    """Per-hop error (mm) where as-run exists and per-hop time gap (ms), one row per observation."""
+    import rerun as rr
+
+    ok = result.replayed
+    recomputed = {"camera": result.p_cam, "body": result.p_body, "world": result.p_world}
+
+    def send(entity: str, sel: IntArray, values: FloatArray, name: str, color: tuple[int, int, int]) -> None:
+        if sel.size == 0:
+            return
+        rec.log(entity, rr.SeriesLines(names=[name], colors=[color]), rr.SeriesPoints(
+            names=[name], colors=[color], marker_sizes=[2.0]), static=True)
+        rec.send_columns(entity, indexes=obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
+        rows[entity] = int(sel.size)
+
+    palette = {HopName.PIXEL_TO_CAMERA: (148, 103, 189), HopName.CAMERA_TO_BODY: (31, 119, 180),
+               HopName.BODY_TO_WORLD: (214, 39, 40)}
+    for hop, leaf, _role in HOP_POINTS:
+        err = np.linalg.norm(as_run[leaf] - recomputed[leaf], axis=1)
+        sel = np.flatnonzero(ok & np.isfinite(err))
+        send(f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3, f"{hop.value} error (mm)", palette[hop])
+    for leaf, color in (("target", AS_RUN_COLOR), ("reference", REFERENCE_COLOR)):
+        err = np.linalg.norm(as_run[leaf] - result.p_world, axis=1)
+        sel = np.flatnonzero(ok & np.isfinite(err))
+        send(f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)", color)
+
+    hops = result.hops
+    for hop in HopName:
+        sel_rows = np.flatnonzero((hops.hop == hop.value) & (hops.status == REPLAYED))
+        obs_rows = rows_of(result.observations.obs_id, hops.obs_id[sel_rows])
+        order = np.argsort(obs_rows, kind="stable")
+        send(f"/series/gap_ms/{hop.value}", obs_rows[order], hops.gap_ns[sel_rows][order] / 1e6,
+             f"{hop.value} gap (ms)", palette[hop])
+
+
+def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[FindingView],
+              rows: dict[str, int]) -> None:
+    """Findings (at the first observation), rejected and stale observations, and a summary."""
+    import rerun as rr
+
+    obs = result.observations
+    budget_ms = result.latency_budget_ns / 1e6
+    found = list(findings)
+    if found and len(obs):
+        first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
+        rec.send_columns("/log/findings", indexes=obs_indexes(result, first),
+                         columns=rr.TextLog.columns(text=[f.text() for f in found],
+                                                    level=[rr.TextLogLevel.ERROR] * len(found)))
+        rows["/log/findings"] = len(found)
+    elif found:
+        rec.log("/log/findings", rr.TextLog("\n".join(f.text() for f in found), level=rr.TextLogLevel.ERROR),
+                static=True)
+        rows["/log/findings"] = 1
+    rejected = np.flatnonzero(~result.replayed)
+    if rejected.size:
+        texts = [_rejection_text(result, int(i)) for i in rejected]
+        rec.send_columns("/log/rejected", indexes=obs_indexes(result, rejected),
+                         columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.WARN] * rejected.size))
+        rows["/log/rejected"] = int(rejected.size)
+    stale = np.flatnonzero(result.stale & result.replayed)
+    if stale.size:
+        hops = result.hops
+        gaps = np.zeros((len(obs), len(HopName)), dtype=np.int64)
+        for j, hop in enumerate(HopName):
+            sel = np.flatnonzero(hops.hop == hop.value)
+            gaps[rows_of(result.observations.obs_id, hops.obs_id[sel]), j] = hops.gap_ns[sel]
+        texts = []
+        for i in stale.tolist():
+            worst = int(np.argmax(np.abs(gaps[i])))
+            texts.append(f"obs {int(obs.obs_id[i])} stale: {list(HopName)[worst].value} used a sample "
+                         f"{gaps[i, worst] / 1e6:+.1f} ms from the observation stamp (budget {budget_ms:g} ms)")
+        rec.send_columns("/log/stale", indexes=obs_indexes(result, stale),
+                         columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.INFO] * stale.size))
+        rows["/log/stale"] = int(stale.size)
+    rec.log("/summary", rr.TextDocument(summary_markdown(result, found), media_type=rr.MediaType.MARKDOWN),
+            static=True)
+    rows["/summary"] = 1
+
+
+def _rejection_text(result: ReplayResult, i: int) -> str:
+    obs = result.observations
+    reason = str(result.status[i])
+    frames = result.frames
+    detail = ""
+    if reason in ("extrapolation", "missing_edge"):
+        for name, lookup in (("camera_to_body", result.body_from_cam), ("body_to_world", result.world_from_body)):
+            if not bool(lookup.ok[i]):
+                detail = f" on {name} ({lookup.target} <- {lookup.source})"
+                break
+    elif reason in ("no_depth", "depth_invalid"):
+        detail = f" (depth {result.depth_m[i]:.3g} m)" if np.isfinite(result.depth_m[i]) else ""
+    elif reason == "outside_image":
+        detail = f" (pixel {obs.u[i]:.1f}, {obs.v[i]:.1f})"
+    elif reason == "no_camera_info":
+        detail = f" (no CameraInfo for {frames.camera})"
+    return f"obs {int(obs.obs_id[i])} {obs.label[i]} rejected: {reason}{detail}".replace("  ", " ")
+
+
+def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ()) -> str:
+    """Counts (total, replayed, rejected per reason, stale) and findings as Markdown."""
+    counts = result.counts()
+    rejected = counts["rejected"]
+    assert isinstance(rejected, dict)
+    frames = result.frames
+    lines = [
+        "# framechain replay",
+        "",
+        f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
+        f"latency budget {result.latency_budget_ns / 1e6:g} ms.",
+        "",
+        "| observations | count |",
+        "| --- | ---: |",
+        f"| total | {counts['total']} |",
+        f"| replayed | {counts['replayed']} |",
+        *[f"| rejected: {reason} | {n} |" for reason, n in sorted(rejected.items())],
+        f"| stale (replayed) | {counts['stale']} |",
+    ]
+    if findings:
+        lines += ["", "## Findings", "", *[f"- {f.text()}" for f in findings]]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,90 @@
+"""The words every output shares: a finding's cells and sentences, millimetres, the reports' style.
+
+The CLI table, both reports, the Rerun text log and the Foxglove findings word a finding with
+:class:`FindingView`, so the same estimate reads the same everywhere; the estimate text itself is
+:func:`~framechain.analysis.estimates.format_estimate`'s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from framechain.analysis.estimates import format_estimate, format_interval
+from framechain.analysis.findings import Finding
+
+
+def mm(value_m: float | None) -> str:
+    """A length in metres as millimetres, one decimal (``n/a`` when there is none)."""
+    return "n/a" if value_m is None else f"{value_m * 1e3:.1f} mm"
+
+
+class FindingCells(NamedTuple):
+    """A finding as table cells (each output picks its columns)."""
+
+    fault: str
+    hop: str
+    estimate: str
+    interval: str  # 95% interval
+    share: str
+    error: str
+    confidence: str
+    evidence: str
+    fix: str
+
+
+@dataclass(frozen=True)
+class FindingView:
+    """A finding as every output words it."""
+
+    finding: Finding
+
+    @classmethod
+    def of(cls, finding: Finding) -> FindingView:
+        return cls(finding)
+
+    def cells(self) -> FindingCells:
+        f = self.finding
+        return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
+                            interval=format_interval(f.interval), share=f"{f.share:.0%}", error=mm(f.error_m),
+                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix)
+
+    def text(self) -> str:
+        """One line: fault, hop, estimate, share of the error, evidence and fix."""
+        line = self.headline()
+        f = self.finding
+        if f.evidence:
+            line += f" Evidence: {f.evidence.rstrip('.')}."
+        if f.fix:
+            line += f" Fix: {f.fix.rstrip('.')}."
+        return line
+
+    def headline(self) -> str:
+        """Fault, hop, estimate and share of the error, without the evidence and fix sentences."""
+        c = self.cells()
+        estimate = f"estimate {c.estimate}"
+        if self.finding.interval:
+            estimate += f" (95% interval {c.interval})"
+        size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
+        return f"{c.fault} on {c.hop}; {estimate}; {size}."
+
+
+#: The style of the HTML reports (one log's and the fleet's).
+CSS = """
+body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;
+line-height:1.45;padding:0 1em}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.6em}
+.verdict{font-size:1.2em;background:#fff6e5;border-left:5px solid #f0a020;padding:.7em 1em;margin:1em 0}
+.verdict.clean{background:#eaf7ea;border-color:#3a3}
+.summary{font-size:1.1em;background:#f3f6fb;border-left:5px solid #4a78c2;padding:.7em 1em}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
+th,td{border:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
+th{background:#f4f4f4}td.num{text-align:right}
+code{background:#f4f4f4;padding:.1em .3em;border-radius:3px;font-size:.9em;word-break:break-all}
+.plots{display:grid;grid-template-columns:1fr 1fr;gap:1em}.plots figure{margin:0}
+figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}.plots img{width:100%}
+figcaption{font-size:.85em;color:#555}
+.muted{color:#777;font-size:.9em}
+"""
+
+__all__ = ["CSS", "FindingCells", "FindingView", "mm"]

@@ -1,0 +1,152 @@
+"""One run, computed once: every command that reads a log reads it once, replays once and aligns once.
+
+Counted where the work happens: the readers' decode pass (``McapLog.read``, ``RosbagsLog.read``), the
+replay (``framechain.replay.replay``) and the alignment of the logged evidence (``align_evidence``),
+wherever a module holds them. Covered: a chain given, a chain suggested (whose evidence topics and
+detections topic used to cost a second read), and a log that cannot be attributed (which used to
+cost a third replay).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from framechain import pipeline
+from framechain.adapters.formats.mcap.reader import McapLog
+from framechain.adapters.formats.rosbag.reader import RosbagsLog
+from framechain.analysis.alignment import align_evidence
+from framechain.catalogue import Fault
+from framechain.cli.main import main
+from framechain.replay import replay
+from framechain.sim.logs import write_scene
+from framechain.sim.scene import InjectedFault, SceneSpec, generate
+
+Counts = Counter[str]
+
+
+@pytest.fixture
+def counts(monkeypatch: pytest.MonkeyPatch) -> Counts:
+    """How many decode passes, replays and alignments the code under test made."""
+    seen: Counts = Counter()
+
+    def counting(name: str, original: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapper(*args: Any, **kwargs: Any) -> Any:
+            seen[name] += 1
+            return original(*args, **kwargs)
+
+        return wrapper
+
+    monkeypatch.setattr(McapLog, "read", counting("read", McapLog.read))
+    monkeypatch.setattr(RosbagsLog, "read", counting("read", RosbagsLog.read))
+    for name, original in (("replay", replay), ("align", align_evidence)):
+        wrapped = counting(name, original)
+        for module in list(sys.modules.values()):  # every module that imported it by name
+            if module is not None and module.__name__.startswith("framechain") \
+                    and getattr(module, original.__name__, None) is original:
+                monkeypatch.setattr(module, original.__name__, wrapped)
+    return seen
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A real MCAP with the robot's hop points (a suggested chain gives them their roles) and its chain."""
+    out = tmp_path_factory.mktemp("once")
+    scene = generate(SceneSpec(seed=2, duration_s=2.0, width=160, height=120, focal_px=150.0, evidence="hops",
+                               faults=(InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),)))
+    path = write_scene(scene, out / "episode.mcap")
+    chain = out / "chain.yaml"
+    chain.write_text(scene.chain.to_yaml())
+    # Every label declared moving: every observation rejected, nothing to attribute.
+    labels = tuple(sorted(set(scene.timeline.observations.label.tolist())))
+    ignored = out / "ignored.yaml"
+    ignored.write_text(replace(scene.chain, evidence=replace(scene.chain.evidence, ignore_labels=labels)).to_yaml())
+    return path, chain
+
+
+def _once(counts: Counts) -> None:
+    assert counts == {"read": 1, "replay": 1, "align": 1}, dict(counts)
+
+
+def test_the_suggested_chain_is_worked_out_from_the_one_read(log: tuple[Path, Path], counts: Counts) -> None:
+    path, _ = log
+    made = pipeline.run(path, bootstrap=0)
+    _once(counts)
+    assert made.chain_suggested
+    assert made.chain.evidence_topics()  # what used to cost a second read: the hop points given roles
+    assert made.attributed().metric == "logged_hops"
+    assert made.findings[0].fault == Fault.LATENCY
+    # The same run as the chain written out gives, read with that chain.
+    given = pipeline.run(path, made.chain, bootstrap=0)
+    assert given.attributed().to_json()["findings"] == made.attributed().to_json()["findings"]
+
+
+@pytest.mark.parametrize("chain", ["given", "suggested", "not attributable"])
+def test_attribute_reads_once_and_replays_once(log: tuple[Path, Path], chain: str, tmp_path: Path,
+                                               counts: Counts, capsys: pytest.CaptureFixture[str]) -> None:
+    path, chain_file = log
+    args = {"given": ["--chain", str(chain_file)], "suggested": [],
+            "not attributable": ["--chain", str(chain_file.with_name("ignored.yaml"))]}[chain]
+    code = main(["attribute", str(path), *args, "--out", str(tmp_path / "out"), "--bootstrap", "0", "-q"])
+    _once(counts)
+    if chain == "not attributable":
+        assert code == 1
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1
+        assert "all rejected: ignored_label" in err[0]
+    else:
+        assert code == 0
+        assert json.loads((tmp_path / "out" / "attribution.json").read_text())["findings"][0]["fault"] == "latency"
+
+
+@pytest.mark.parametrize("chain", ["given", "suggested", "not attributable"])
+def test_replay_save_reads_once_and_replays_once(log: tuple[Path, Path], chain: str, tmp_path: Path,
+                                                 counts: Counts, capsys: pytest.CaptureFixture[str]) -> None:
+    path, chain_file = log
+    args = {"given": ["--chain", str(chain_file)], "suggested": [],
+            "not attributable": ["--chain", str(chain_file.with_name("ignored.yaml"))]}[chain]
+    assert main(["replay", str(path), *args, "--save", str(tmp_path / "r.rrd"), "--json", "-q"]) == 0
+    _once(counts)
+    report = json.loads(capsys.readouterr().out)
+    assert (tmp_path / "r.rrd").stat().st_size > 0
+    if chain == "not attributable":
+        assert report["counts"]["replayed"] == 0
+        assert report["findings"] == []
+    else:
+        assert report["findings"][0].startswith("latency on body_to_world")
+
+
+@pytest.mark.parametrize("chain", ["given", "suggested", "not attributable"])
+def test_export_reads_once_and_replays_once(log: tuple[Path, Path], chain: str, tmp_path: Path,
+                                            counts: Counts, capsys: pytest.CaptureFixture[str]) -> None:
+    path, chain_file = log
+    args = {"given": ["--chain", str(chain_file)], "suggested": [],
+            "not attributable": ["--chain", str(chain_file.with_name("ignored.yaml"))]}[chain]
+    assert main(["export", str(path), *args, "--out", str(tmp_path / "a.mcap"), "--json", "-q"]) == 0
+    _once(counts)  # the copy of the log's own messages into the export is a copy, not a decode pass
+    report = json.loads(capsys.readouterr().out)
+    assert report["findings"] == (0 if chain == "not attributable" else 1)
+    if chain == "not attributable":  # export applies ignore_labels as every other command does
+        assert report["observations"]["rejected"] == {"ignored_label": report["observations"]["total"]}
+
+
+@pytest.mark.parametrize("chain", ["given", "suggested", "not attributable"])
+def test_batch_of_one_log_reads_once_and_replays_once(log: tuple[Path, Path], chain: str, tmp_path: Path,
+                                                      counts: Counts) -> None:
+    import pyarrow.parquet as pq
+
+    path, chain_file = log
+    args = {"given": ["--chain", str(chain_file)], "suggested": [],
+            "not attributable": ["--chain", str(chain_file.with_name("ignored.yaml"))]}[chain]
+    assert main(["batch", str(path), *args, "--out", str(tmp_path / "b"), "-j", "1", "--bootstrap", "0",
+                 "--format", "none", "-q"]) == 0
+    _once(counts)
+    rows = pq.read_table(tmp_path / "b" / "fleet.parquet").to_pylist()
+    assert [r["status"] for r in rows] == (["nothing_replayed"] if chain == "not attributable" else ["findings"])
