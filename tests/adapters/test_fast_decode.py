@@ -119,18 +119,20 @@ def _plain(value: Any) -> Any:
 
 def collector_rows(col: Collector) -> dict[str, Any]:
     """The collector's rows per table, each row one tuple, sorted (batches append layout by layout)."""
-    tf_log = np.repeat(np.asarray(col.tf_msg_log, dtype=np.int64), col.tf_msg_rows).tolist()
-    vals = np.asarray(col.tf_vals, dtype=np.float64).reshape(-1, 7).tolist()
-    uvd = np.asarray(col.obs_uvd, dtype=np.float64).reshape(-1, 3).tolist()
-    pts = np.asarray(col.pt_vals, dtype=np.float64).reshape(-1, 7).tolist()
+    tf, cam, obs, pt = col.transforms, col.cameras, col.observations, col.points
+    tf_log = np.repeat(np.asarray(tf.message_log_ns, dtype=np.int64), tf.message_rows).tolist()
+    vals = np.asarray(tf.values, dtype=np.float64).reshape(-1, 7).tolist()
+    uvd = np.asarray(obs.uvd, dtype=np.float64).reshape(-1, 3).tolist()
+    pts = np.asarray(pt.values, dtype=np.float64).reshape(-1, 7).tolist()
     tables = {
-        "tf": zip(tf_log, col.tf_parent, col.tf_child, col.tf_stamp, vals, strict=True),
-        "tf_messages": zip(col.tf_msg_log, col.tf_msg_rows, col.tf_msg_static, col.tf_msg_topic, col.tf_msg_kind,
-                           strict=True),
-        "cameras": zip(col.cam_rows, col.cam_k, col.cam_d, strict=True),
-        "observations": zip(col.obs_log, col.obs_id_text, col.obs_stamp, col.obs_frame, uvd, col.obs_label,
-                            col.obs_score, col.obs_topic, strict=True),
-        "points": zip(col.pt_log, col.pt_frame, col.pt_stamp, pts, col.pt_topic, strict=True),
+        "tf": zip(tf_log, tf.parent, tf.child, tf.stamp_ns, vals, strict=True),
+        "tf_messages": zip(tf.message_log_ns, tf.message_rows, tf.message_static, tf.message_topic,
+                           tf.message_kind, strict=True),
+        "cameras": zip(zip(cam.frame, cam.stamp_ns, cam.log_time_ns, cam.width, cam.height, cam.model, cam.topic,
+                           strict=True), cam.k, cam.d, strict=True),
+        "observations": zip(obs.log_time_ns, obs.id_text, obs.stamp_ns, obs.frame, uvd, obs.label, obs.score,
+                            obs.topic, strict=True),
+        "points": zip(pt.log_time_ns, pt.frame, pt.stamp_ns, pts, pt.topic, strict=True),
     }
     rows: dict[str, Any] = {name: sorted(_plain(list(rows)), key=repr) for name, rows in tables.items()}
     rows["depth_from_pose"] = dict(col.depth_from_pose)
