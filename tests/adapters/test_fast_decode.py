@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from framechain.adapters import open_log
-from framechain.adapters.formats import fast_cdr
+from framechain.adapters.formats import decode_loop, fast_cdr
 from framechain.adapters.formats.fast_cdr import FEEDERS, LayoutError, decode_batches, layout_of, parse_cdr_image
 from framechain.adapters.formats.mcap import reader as mcap_log
 from framechain.adapters.formats.msgdefs import typestore
@@ -276,7 +276,7 @@ def test_open_log_gives_the_same_timeline_with_and_without_layout_decoding(
 ) -> None:
     path = tmp_path / "many.mcap"
     _write_mcap(path, Msgs(ros1=False), 3000)
-    monkeypatch.setattr(mcap_log, "BATCH_MESSAGES", 500)  # several flushes per channel
+    monkeypatch.setattr(decode_loop, "BATCH_MESSAGES", 500)  # several flushes per channel
     fast = open_log(path).timeline
     monkeypatch.setattr(mcap_log, "FEEDERS", {})
     slow = open_log(path).timeline
