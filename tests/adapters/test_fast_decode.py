@@ -144,12 +144,12 @@ def both_ways(msgs: Msgs, kind: Kind, typename: str, objects: list[Any], encodin
     """Collector rows from rosbags + the collector's handler, from the layout path, and leftovers."""
     raws = [serialise(msgs, m, typename, encoding) for m in objects]
     log_ns = np.arange(len(raws), dtype=np.int64) * 1000 + 5
-    slow = Collector("x")
+    slow = Collector()
     handler = slow.handler(kind)
     assert handler is not None
     for t, raw in zip(log_ns.tolist(), raws, strict=True):
         handler(topic, t, deserialise(msgs, raw, typename, encoding))
-    fast = Collector("x")
+    fast = Collector()
     batches, rest = decode_batches(msgs.ts, typename, raws, ros1=msgs.ros1)
     feeder = FEEDERS[(kind, typename.replace("/msg/", "/"))]
     for batch in batches:

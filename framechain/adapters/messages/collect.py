@@ -99,8 +99,7 @@ OBSERVATION_KINDS = frozenset({Kind.DETECTIONS, Kind.DETECTION, Kind.PIXEL_POINT
 class Collector:
     """Accumulates the rows of one log; :meth:`build` returns the Timeline and the notes."""
 
-    def __init__(self, path: str, chain: ChainConfig | None = None) -> None:
-        self.path = path
+    def __init__(self, chain: ChainConfig | None = None) -> None:
         self.chain = chain
         self.roles = chain.evidence_topics() if chain else {}
         #: Pose topics and the child frame their entry names (None: the message's, else the body frame).

@@ -79,7 +79,6 @@ class McapLog:
         self._counts: Counter[int] = Counter()
         self._first: dict[int, int] = {}
         self._last: dict[int, int] = {}
-        self._lost: Counter[int] = Counter()
         self.profile = ""
         try:
             from mcap.reader import SeekingReader

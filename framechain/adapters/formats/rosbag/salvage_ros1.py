@@ -322,7 +322,6 @@ class Rosbag1Salvage:
         size = path.stat().st_size
         self._buf: mmap.mmap | bytes = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
         self._store = typestore
-        self._registered: set[str] = set()
         self._decoders: dict[str, Decoder] = {}
         self.connections: dict[int, Connection] = {}
         self._counts: Counter[int] = Counter()
