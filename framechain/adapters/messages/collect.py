@@ -110,13 +110,7 @@ class Collector:
         self.notes: list[str] = []
         self.depth_from_pose: dict[str, int] = {}  # detections whose hypothesis pose carried a depth, by topic
         # fiducials (tags, markers in images, camera-frame points): resolved once the cameras are known
-        evidence = chain.evidence if chain else None
-        marker_size = evidence.markers.size_m if evidence and evidence.markers else None
-        self.fiducials = FiducialRows(
-            size_for_tag=tag_size_lookup(evidence.tag_size_m if evidence else None),
-            size_for_marker=tag_size_lookup(marker_size if marker_size is not None else
-                                            (evidence.tag_size_m if evidence else None)),
-        )
+        self.fiducials = _fiducial_rows(chain)
         self.marker_finder: Any = None  # a markers.MarkerFinder, made when an image topic is read
         self._fiducials_resolved: tuple[int, ResolvedFiducials] | None = None
         self._obs_ids: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)  # in append order
@@ -524,6 +518,15 @@ class Collector:
             if topic.startswith(sensor + "/"):
                 return scale
         return 0.001
+
+
+def _fiducial_rows(chain: ChainConfig | None) -> FiducialRows:
+    """Fiducial rows sized as the chain says: tags by ``tag_size_m``, markers by their own size or that."""
+    evidence = chain.evidence if chain else None
+    tag_size = evidence.tag_size_m if evidence else None
+    marker_size = evidence.markers.size_m if evidence and evidence.markers else None
+    return FiducialRows(size_for_tag=tag_size_lookup(tag_size),
+                        size_for_marker=tag_size_lookup(marker_size if marker_size is not None else tag_size))
 
 
 def stamp_notes(timeline: Timeline) -> list[str]:
