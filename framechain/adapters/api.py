@@ -162,7 +162,7 @@ def open_log(
 
         dictionary_id(chain.evidence.markers.dictionary, where=str(chain_file(chain)))
     notes.extend(additions.notes)
-    col = Collector(str(p), chain)
+    col = Collector(chain)
     col.chain_edges.extend(additions.edges)
     col.file_cameras.extend(additions.cameras)
     with _source(fmt, target) as src:

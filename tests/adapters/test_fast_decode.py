@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from framechain.adapters import open_log
-from framechain.adapters.formats import fast_cdr
+from framechain.adapters.formats import decode_loop, fast_cdr
 from framechain.adapters.formats.fast_cdr import FEEDERS, LayoutError, decode_batches, layout_of, parse_cdr_image
 from framechain.adapters.formats.mcap import reader as mcap_log
 from framechain.adapters.formats.msgdefs import typestore
@@ -119,18 +119,20 @@ def _plain(value: Any) -> Any:
 
 def collector_rows(col: Collector) -> dict[str, Any]:
     """The collector's rows per table, each row one tuple, sorted (batches append layout by layout)."""
-    tf_log = np.repeat(np.asarray(col.tf_msg_log, dtype=np.int64), col.tf_msg_rows).tolist()
-    vals = np.asarray(col.tf_vals, dtype=np.float64).reshape(-1, 7).tolist()
-    uvd = np.asarray(col.obs_uvd, dtype=np.float64).reshape(-1, 3).tolist()
-    pts = np.asarray(col.pt_vals, dtype=np.float64).reshape(-1, 7).tolist()
+    tf, cam, obs, pt = col.transforms, col.cameras, col.observations, col.points
+    tf_log = np.repeat(np.asarray(tf.message_log_ns, dtype=np.int64), tf.message_rows).tolist()
+    vals = np.asarray(tf.values, dtype=np.float64).reshape(-1, 7).tolist()
+    uvd = np.asarray(obs.uvd, dtype=np.float64).reshape(-1, 3).tolist()
+    pts = np.asarray(pt.values, dtype=np.float64).reshape(-1, 7).tolist()
     tables = {
-        "tf": zip(tf_log, col.tf_parent, col.tf_child, col.tf_stamp, vals, strict=True),
-        "tf_messages": zip(col.tf_msg_log, col.tf_msg_rows, col.tf_msg_static, col.tf_msg_topic, col.tf_msg_kind,
-                           strict=True),
-        "cameras": zip(col.cam_rows, col.cam_k, col.cam_d, strict=True),
-        "observations": zip(col.obs_log, col.obs_id_text, col.obs_stamp, col.obs_frame, uvd, col.obs_label,
-                            col.obs_score, col.obs_topic, strict=True),
-        "points": zip(col.pt_log, col.pt_frame, col.pt_stamp, pts, col.pt_topic, strict=True),
+        "tf": zip(tf_log, tf.parent, tf.child, tf.stamp_ns, vals, strict=True),
+        "tf_messages": zip(tf.message_log_ns, tf.message_rows, tf.message_static, tf.message_topic,
+                           tf.message_kind, strict=True),
+        "cameras": zip(zip(cam.frame, cam.stamp_ns, cam.log_time_ns, cam.width, cam.height, cam.model, cam.topic,
+                           strict=True), cam.k, cam.d, strict=True),
+        "observations": zip(obs.log_time_ns, obs.id_text, obs.stamp_ns, obs.frame, uvd, obs.label, obs.score,
+                            obs.topic, strict=True),
+        "points": zip(pt.log_time_ns, pt.frame, pt.stamp_ns, pts, pt.topic, strict=True),
     }
     rows: dict[str, Any] = {name: sorted(_plain(list(rows)), key=repr) for name, rows in tables.items()}
     rows["depth_from_pose"] = dict(col.depth_from_pose)
@@ -142,12 +144,12 @@ def both_ways(msgs: Msgs, kind: Kind, typename: str, objects: list[Any], encodin
     """Collector rows from rosbags + the collector's handler, from the layout path, and leftovers."""
     raws = [serialise(msgs, m, typename, encoding) for m in objects]
     log_ns = np.arange(len(raws), dtype=np.int64) * 1000 + 5
-    slow = Collector("x")
+    slow = Collector()
     handler = slow.handler(kind)
     assert handler is not None
     for t, raw in zip(log_ns.tolist(), raws, strict=True):
         handler(topic, t, deserialise(msgs, raw, typename, encoding))
-    fast = Collector("x")
+    fast = Collector()
     batches, rest = decode_batches(msgs.ts, typename, raws, ros1=msgs.ros1)
     feeder = FEEDERS[(kind, typename.replace("/msg/", "/"))]
     for batch in batches:
@@ -274,7 +276,7 @@ def test_open_log_gives_the_same_timeline_with_and_without_layout_decoding(
 ) -> None:
     path = tmp_path / "many.mcap"
     _write_mcap(path, Msgs(ros1=False), 3000)
-    monkeypatch.setattr(mcap_log, "BATCH_MESSAGES", 500)  # several flushes per channel
+    monkeypatch.setattr(decode_loop, "BATCH_MESSAGES", 500)  # several flushes per channel
     fast = open_log(path).timeline
     monkeypatch.setattr(mcap_log, "FEEDERS", {})
     slow = open_log(path).timeline

@@ -17,7 +17,6 @@ from framechain.adapters.api import TREE_KINDS, open_log, scan_log
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, MessageRecord
 from framechain.adapters.formats.rosbag.salvage_ros1 import Message, Rosbag1Scanner
 
-REALDATA = Path(__file__).resolve().parents[2].parent / "shared" / "realdata"
 Msg = tuple[str, int, bytes]
 
 
@@ -368,8 +367,8 @@ def test_ros2_cut_db3_and_stale_metadata(tmp_path: Path) -> None:
     ("franka_tf/rosbagFrankaPanda.bag", 300),
     ("husky_localization/test1.bag", 6000),
 ])
-def test_real_logs_cut_at_half(tmp_path: Path, name: str, at_least: int) -> None:
-    src = REALDATA / name
+def test_real_logs_cut_at_half(realdata: Path, tmp_path: Path, name: str, at_least: int) -> None:
+    src = realdata / name
     if not src.is_file():
         pytest.skip(f"{src} not present")
     data = src.read_bytes()

@@ -12,15 +12,15 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-REALDATA = ROOT.parent / "shared" / "realdata"
 SMALL_LOGS = ("tf_example.bag", "tf_example", "nav2_turtlebot.mcap")
 
 
-def test_short_fixed_seed_fuzz_run() -> None:
-    if not (REALDATA / "evo" / "tf_example.bag").is_file():
+def test_short_fixed_seed_fuzz_run(realdata: Path) -> None:
+    if not (realdata / "evo" / "tf_example.bag").is_file():
         pytest.skip("the real logs are not present")
     run = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--cases", "9", "--seed", "1", "--jobs", "1",
+         "--realdata", str(realdata),
          "--timeout", "60", "--logs", ",".join(SMALL_LOGS), "--random-cuts", "3", "--max-boundaries", "6",
          "--json"],
         capture_output=True, text=True, timeout=240, check=False,

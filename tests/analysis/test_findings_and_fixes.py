@@ -20,8 +20,6 @@ from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
 from framechain.sim.scene import TOPICS, InjectedFault, SceneSpec, generate
 
-REALDATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "realdata"
-
 
 def _reference_run(fault: InjectedFault, *, depth_images: bool = False) -> object:
     spec = SceneSpec(seed=3, duration_s=4.0, evidence="reference", faults=(fault,), depth_images=depth_images)
@@ -80,12 +78,12 @@ def test_attribute_knows_depth_came_from_depth_images() -> None:
     assert "tag size" not in top.fix
 
 
-def test_findings_that_explain_nothing_are_notes_on_a_real_log() -> None:
+def test_findings_that_explain_nothing_are_notes_on_a_real_log(realdata: Path) -> None:
     """The reviewer's case: ArUco markers against a declared reference point. A depth scale fitted
     there made the median error worse (-32 mm of it); it must be a note, not a finding at conf 1.00."""
-    bag = REALDATA / "fiducials" / "aruco_images.bag"
+    bag = realdata / "fiducials" / "aruco_images.bag"
     if not bag.is_file():
-        pytest.skip(f"real logs not found at {REALDATA}")
+        pytest.skip(f"{bag} not present")
     chain = ChainConfig.from_dict({
         "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
         "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},

@@ -23,7 +23,6 @@ from framechain.pipeline import load_log
 
 cv2 = pytest.importorskip("cv2")
 
-REALDATA = Path(__file__).resolve().parents[2].parent / "shared" / "realdata"
 BAG = "tagslam_stairs/tag_detections.bag"
 CAMERA = "t265_fisheye1_optical_frame"
 TAGS = "/t265/fisheye1/tags"
@@ -104,10 +103,7 @@ def _median_spread(labels: np.ndarray, world: np.ndarray) -> float:
 
 
 @pytest.fixture(scope="module")
-def tagslam() -> tuple[Path, ChainConfig, Any]:
-    if not REALDATA.is_dir():
-        pytest.skip(f"real logs not found at {REALDATA}")
-    realdata = REALDATA
+def tagslam(realdata: Path) -> tuple[Path, ChainConfig, Any]:
     chain = _chain(realdata)
     return realdata, chain, load_log(realdata / BAG, chain)
 

@@ -19,7 +19,6 @@ from framechain.config.chain import ChainConfig, ChainFrames, ChainTopics
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
 
 ROOT = Path(__file__).resolve().parents[2]
-REALDATA = ROOT.parent / "shared" / "realdata"
 T0 = 1_700_000_000_000_000_000
 OPTICAL_Q = (-0.5, 0.5, -0.5, 0.5)  # camera_link (FLU) -> optical (RDF), REP-103
 MOUNT_XYZ = (0.3, 0.0, 0.8)
@@ -232,10 +231,11 @@ def _readme_robot_yaml() -> str:
     return block.group(1)
 
 
-def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    urdf = REALDATA / "urdf" / "so101" / "so101_new_calib.urdf"
+def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(realdata: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    urdf = realdata / "urdf" / "so101" / "so101_new_calib.urdf"
     if not urdf.is_file():
-        pytest.skip("../shared/realdata absent")
+        pytest.skip(f"{urdf} not present")
     import pyarrow as pa
     import pyarrow.parquet as pq
     import yourdfpy
@@ -306,21 +306,19 @@ REAL_LOGS = [
 REAL_DATASETS = ["lerobot/gr00t_pick_n_place_v20", "lerobot/unitree_g1_v21"]
 
 
-def test_the_real_log_list_is_complete() -> None:
-    if not REALDATA.is_dir():
-        pytest.skip("../shared/realdata absent")
-    found = {str(p.relative_to(REALDATA)) for p in REALDATA.glob("*/*") if p.suffix in (".bag", ".mcap")}
-    found |= {str(p.parent.relative_to(REALDATA)) for p in REALDATA.glob("*/*/metadata.yaml")}
-    found |= {str(p.parent.parent.relative_to(REALDATA)) for p in REALDATA.glob("*/*/meta/info.json")}
+def test_the_real_log_list_is_complete(realdata: Path) -> None:
+    found = {str(p.relative_to(realdata)) for p in realdata.glob("*/*") if p.suffix in (".bag", ".mcap")}
+    found |= {str(p.parent.relative_to(realdata)) for p in realdata.glob("*/*/metadata.yaml")}
+    found |= {str(p.parent.parent.relative_to(realdata)) for p in realdata.glob("*/*/meta/info.json")}
     assert found == set(REAL_LOGS) | set(REAL_DATASETS)
 
 
 @pytest.mark.parametrize("name", REAL_LOGS)
-def test_every_real_log_runs_or_says_what_it_lacks(name: str, tmp_path: Path,
+def test_every_real_log_runs_or_says_what_it_lacks(name: str, realdata: Path, tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    log = REALDATA / name
+    log = realdata / name
     if not log.exists():
-        pytest.skip("../shared/realdata absent")
+        pytest.skip(f"{log} not present")
     assert main(["info", str(log), "--json", "-q"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert {n["piece"] for n in info["needs"]} == {"camera frame", "intrinsics", "detections", "depth", "mount",
@@ -349,10 +347,11 @@ def test_every_real_log_runs_or_says_what_it_lacks(name: str, tmp_path: Path,
 
 
 @pytest.mark.parametrize("name", REAL_DATASETS)
-def test_real_lerobot_datasets_say_what_they_need(name: str, capsys: pytest.CaptureFixture[str]) -> None:
-    root = REALDATA / name
+def test_real_lerobot_datasets_say_what_they_need(name: str, realdata: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    root = realdata / name
     if not root.exists():
-        pytest.skip("../shared/realdata absent")
+        pytest.skip(f"{root} not present")
     assert main(["info", str(root), "--json", "-q"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert any("--robot robot.yaml" in n for n in info["notes"])
@@ -360,13 +359,13 @@ def test_real_lerobot_datasets_say_what_they_need(name: str, capsys: pytest.Capt
     assert "--robot robot.yaml" in _one_line(capsys.readouterr().err)
 
 
-def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(tmp_path: Path,
+def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """The issue's example: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
     tagslam.yaml beside the bag."""
-    folder = REALDATA / "tagslam_stairs"
+    folder = realdata / "tagslam_stairs"
     if not folder.is_dir():
-        pytest.skip("../shared/realdata absent")
+        pytest.skip(f"{folder} not present")
     log = folder / "tag_detections.bag"
     needs = _needs(log, capsys)
     assert needs["detections"]["status"] == "found"

@@ -15,8 +15,6 @@ from framechain.adapters.suggest.chain import suggest
 from framechain.adapters.suggest.marker_probe import probe_markers
 from framechain.cli.main import main
 
-REALDATA = Path(__file__).resolve().parents[2].parent / "shared" / "realdata"
-ARUCO = REALDATA / "fiducials" / "aruco_images.bag"
 IMAGE = "/raspicam_node/image/compressed"
 
 
@@ -33,15 +31,17 @@ def _chain(tmp_path: Path, dictionary: str) -> Path:
 
 
 @pytest.fixture(autouse=True)
-def _realdata() -> None:
-    if not ARUCO.is_file():
-        pytest.skip(f"real logs not found at {REALDATA}")
+def aruco(realdata: Path) -> Path:
+    bag = realdata / "fiducials" / "aruco_images.bag"
+    if not bag.is_file():
+        pytest.skip(f"{bag} not present")
+    return bag
 
 
 def test_zero_markers_is_not_ready_and_names_the_dictionary_that_finds_them(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    aruco: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["info", str(ARUCO), "--chain", str(_chain(tmp_path, "DICT_4X4_50")), "--json", "-q"]) == 0
+    assert main(["info", str(aruco), "--chain", str(_chain(tmp_path, "DICT_4X4_50")), "--json", "-q"]) == 0
     info = json.loads(capsys.readouterr().out)
     detections = next(n for n in info["needs"] if n["piece"] == "detections")
     assert info["ready"] is False
@@ -50,12 +50,12 @@ def test_zero_markers_is_not_ready_and_names_the_dictionary_that_finds_them(
     # The image holds markers 100, 103, 106, 107, 110, 111, 112 of DICT_5X5_1000 (test_markers.py).
     assert "7 markers of DICT_5X5_1000" in detections["detail"]
     assert detections["key"] == "evidence.markers: {dictionary: DICT_5X5_1000, size_m: 0.14}"
-    assert main(["info", str(ARUCO), "--chain", str(_chain(tmp_path, "DICT_5X5_1000")), "--json", "-q"]) == 0
+    assert main(["info", str(aruco), "--chain", str(_chain(tmp_path, "DICT_5X5_1000")), "--json", "-q"]) == 0
     assert json.loads(capsys.readouterr().out)["ready"] is True
 
 
-def test_probe_counts_markers_per_dictionary() -> None:
-    probe = probe_markers(ARUCO, IMAGE)
+def test_probe_counts_markers_per_dictionary(aruco: Path) -> None:
+    probe = probe_markers(aruco, IMAGE)
     assert probe is not None
     assert probe.images == 1
     assert probe.found["DICT_5X5_1000"] == 7
@@ -63,23 +63,24 @@ def test_probe_counts_markers_per_dictionary() -> None:
     assert sum(probe.found.values()) == 7  # no other family reads these markers
 
 
-def test_suggestion_names_only_a_dictionary_that_found_markers() -> None:
-    text = suggest(open_log(ARUCO)).to_yaml()
+def test_suggestion_names_only_a_dictionary_that_found_markers(realdata: Path, aruco: Path) -> None:
+    text = suggest(open_log(aruco)).to_yaml()
     assert "dictionary: DICT_5X5_1000" in text
     assert "7 markers of DICT_5X5_1000 in the first 1 image" in text
     # The evidence the FILL IN comments ask for is not also written as false.
     assert "static_target: false" not in text
     assert "evidence.static_target: true" in text
-    rs = REALDATA / "realsense_d435" / "test_rs.bag"
+    rs = realdata / "realsense_d435" / "test_rs.bag"
     if rs.is_file():
         text = suggest(open_log(rs)).to_yaml()
         assert "evidence.markers" not in text
         assert "no markers of DICT_4X4_50" in text
 
 
-def test_bad_dictionary_error_starts_with_the_chain_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_bad_dictionary_error_starts_with_the_chain_file(aruco: Path, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
     chain = _chain(tmp_path, "DICT_NOPE")
-    assert main(["info", str(ARUCO), "--chain", str(chain)]) == 1
+    assert main(["info", str(aruco), "--chain", str(chain)]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert f"error: {chain}: evidence.markers.dictionary 'DICT_NOPE' is not an OpenCV dictionary" in err

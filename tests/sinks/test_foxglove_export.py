@@ -25,7 +25,6 @@ from framechain.sinks.foxglove_export import ANNOTATIONS_TOPIC, FINDINGS_TOPIC, 
 
 ADDED = {TF_TOPIC: "foxglove.FrameTransforms", ANNOTATIONS_TOPIC: "foxglove.ImageAnnotations",
          SCENE_TOPIC: "foxglove.SceneUpdate", FINDINGS_TOPIC: "foxglove.Log"}
-REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 
 
 def _decoder(schema: Any) -> Any:
@@ -127,10 +126,10 @@ def test_every_added_message_decodes_and_annotations_land_on_the_detection(demo:
     np.testing.assert_allclose(spheres, result.p_world[order], atol=1e-9)
 
 
-def test_real_bag_copied_and_annotated(tmp_path: Path) -> None:
-    bag = REALDATA / "fiducials" / "aruco_images.bag"
+def test_real_bag_copied_and_annotated(realdata: Path, tmp_path: Path) -> None:
+    bag = realdata / "fiducials" / "aruco_images.bag"
     if not bag.is_file():
-        pytest.skip(f"real logs not found at {REALDATA}")
+        pytest.skip(f"{bag} not present")
     chain = tmp_path / "chain.yaml"
     chain.write_text("""
 frames: {camera: raspicam, body: base_link, world: map}

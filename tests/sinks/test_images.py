@@ -37,7 +37,6 @@ from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
 from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, Timeline, TransformTable
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
-REALDATA = Path(__file__).resolve().parents[3] / "shared" / "realdata"
 
 
 def _rows(batches: Batches, entity: str, column: str) -> tuple[np.ndarray, list[Any]]:
@@ -249,11 +248,11 @@ def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> Non
 
 @pytest.fixture(scope="module")
 def aruco(
-    tmp_path_factory: pytest.TempPathFactory,
+    realdata: Path, tmp_path_factory: pytest.TempPathFactory,
 ) -> Iterator[tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]]:
-    bag = REALDATA / "fiducials" / "aruco_images.bag"
+    bag = realdata / "fiducials" / "aruco_images.bag"
     if not bag.is_file():
-        pytest.skip(f"real logs not found at {REALDATA}")
+        pytest.skip(f"{bag} not present")
     out = tmp_path_factory.mktemp("aruco")
     # The bag has no /tf: the chain mounts the camera 0.3 m up on the robot, looking forward.
     mount = {"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0.0, 0.3], "rpy": [-np.pi / 2, 0.0, -np.pi / 2]}
@@ -270,11 +269,12 @@ def aruco(
     return loaded, result, _read(rrd), chain
 
 
-def test_real_jpeg_is_logged_as_recorded(aruco: tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]) -> None:
+def test_real_jpeg_is_logged_as_recorded(realdata: Path,
+                                         aruco: tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]) -> None:
     from rosbags.highlevel import AnyReader
 
     loaded, _, batches, _ = aruco
-    with AnyReader([REALDATA / "fiducials" / "aruco_images.bag"]) as reader:
+    with AnyReader([realdata / "fiducials" / "aruco_images.bag"]) as reader:
         conns = [c for c in reader.connections if c.topic == "/raspicam_node/image/compressed"]
         (_, _, raw), = list(reader.messages(connections=conns))
         msg = reader.deserialize(raw, conns[0].msgtype)

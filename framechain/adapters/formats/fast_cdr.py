@@ -312,15 +312,10 @@ def feed_tf(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Ba
             vals[:, j, 3 + k] = batch.column((*base, "transform", "rotation", axis))
         parents.append(batch.strings((*base, "header", "frame_id")))
         children.append(batch.strings((*base, "child_frame_id")))
-    col.tf_parent.extend(_message_major(parents, n))
-    col.tf_child.extend(_message_major(children, n))
-    col.tf_stamp.extend(stamps.reshape(-1).tolist())
-    col.tf_vals.extend(vals.reshape(-1).tolist())
-    col.tf_msg_log.extend(log_ns.tolist())
-    col.tf_msg_rows.extend([m] * n)
-    col.tf_msg_static.extend([topic.rstrip("/").endswith("tf_static")] * n)
-    col.tf_msg_topic.extend([topic] * n)
-    col.tf_msg_kind.extend(["tf"] * n)
+    col.transforms.extend_messages(
+        topic, log_ns.tolist(), m, parent=_message_major(parents, n), child=_message_major(children, n),
+        stamp_ns=stamps.reshape(-1).tolist(), values=vals.reshape(-1).tolist(),
+        static=topic.rstrip("/").endswith("tf_static"))
 
 
 def feed_point(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
@@ -335,11 +330,9 @@ def feed_point(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch:
         quat = [batch.column(("pose", "orientation", a)) for a in _XYZW]
     frames = batch.strings(("header", "frame_id"))
     stamps = _stamp_ns(batch, ("header", "stamp")).tolist()
-    col.pt_frame.extend(frames)  # every field read before the first row is added
-    col.pt_stamp.extend(stamps)
-    col.pt_log.extend(log_ns.tolist())
-    col.pt_vals.extend(np.column_stack([*xyz, *quat]).astype(np.float64).reshape(-1).tolist())
-    col.pt_topic.extend([topic] * n)
+    # every field read before the first row is added
+    col.points.extend(topic, log_ns.tolist(), frame=frames, stamp_ns=stamps,
+                      values=np.column_stack([*xyz, *quat]).astype(np.float64).reshape(-1).tolist())
 
 
 def feed_camera_info(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
@@ -353,12 +346,8 @@ def feed_camera_info(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], 
     stamps = _stamp_ns(batch, ("header", "stamp")).tolist()
     widths = batch.column(("width",)).tolist()
     heights = batch.column(("height",)).tolist()
-    col.cam_rows.extend(
-        (frame, stamp, log, int(w), int(h), model, topic)
-        for frame, stamp, log, w, h, model in zip(frames, stamps, log_ns.tolist(), widths, heights, models, strict=True)
-    )
-    col.cam_k.extend(k)
-    col.cam_d.extend(d)
+    col.cameras.extend(topic, log_ns.tolist(), frame=frames, stamp_ns=stamps, width=[int(w) for w in widths],
+                       height=[int(h) for h in heights], model=models, k=k, d=d)
 
 
 def feed_detections(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], batch: Batch) -> None:
@@ -409,14 +398,11 @@ def feed_detections(col: Collector, topic: str, log_ns: npt.NDArray[np.int64], b
     if given_count:
         col.depth_from_pose[topic] = col.depth_from_pose.get(topic, 0) + given_count
 
-    col.obs_id_text.extend(_message_major(ident, n))
-    col.obs_stamp.extend(stamp.reshape(-1).tolist())
-    col.obs_log.extend(np.repeat(log_ns, d).tolist())
-    col.obs_frame.extend(_message_major(frame, n))
-    col.obs_uvd.extend(np.stack([u, v, depth], axis=2).reshape(-1).tolist())
-    col.obs_label.extend(_message_major(label, n))
-    col.obs_score.extend(score.reshape(-1).tolist())
-    col.obs_topic.extend([topic] * (n * d))
+    col.observations.extend(
+        topic, id_text=_message_major(ident, n), stamp_ns=stamp.reshape(-1).tolist(),
+        log_time_ns=np.repeat(log_ns, d).tolist(), frame=_message_major(frame, n),
+        uvd=np.stack([u, v, depth], axis=2).reshape(-1).tolist(), label=_message_major(label, n),
+        score=score.reshape(-1).tolist())
 
 
 Feeder = Callable[["Collector", str, npt.NDArray[np.int64], Batch], None]

@@ -230,7 +230,6 @@ class DatasetReader:
         self.data_path = data_path
         video_path = raw.get("video_path")
         self.video_path = video_path if isinstance(video_path, str) else None
-        self._tasks = self._read_tasks()
         if self.layout is Layout.V2:
             self._episodes_v2 = self._read_episodes_v2()
             self._episode_ids = sorted(self._episodes_v2)
@@ -300,22 +299,6 @@ class DatasetReader:
         table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index", "length"])
         pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
         return {int(e): int(n) for e, n in sorted(pairs)}
-
-    def _read_tasks(self) -> dict[int, str]:
-        jsonl = self.root / "meta" / "tasks.jsonl"
-        parquet = self.root / "meta" / "tasks.parquet"
-        out: dict[int, str] = {}
-        if jsonl.is_file():
-            for row in _jsonl(jsonl):
-                if "task_index" in row and "task" in row:
-                    out[int(row["task_index"])] = str(row["task"])
-        elif parquet.is_file():
-            table = pq.read_table(parquet)
-            idx = table.column("task_index").to_pylist() if "task_index" in table.column_names else []
-            text_col = next((c for c in ("task", "__index_level_0__") if c in table.column_names), None)
-            if text_col is not None:
-                out = {int(i): str(t) for i, t in zip(idx, table.column(text_col).to_pylist(), strict=True)}
-        return out
 
     def _read_episodes_v2(self) -> dict[int, dict[str, Any]]:
         path = self.root / "meta" / "episodes.jsonl"
@@ -504,26 +487,7 @@ class DatasetReader:
         else:
             frame_index = global_index - global_index[0]
             self.note(path, "no frame_index column: frame indices derived from index")
-        if "timestamp" in present:
-            ts = _column(table.column("timestamp"), path, "timestamp").astype(np.float64).reshape(n)
-            if not np.isfinite(ts).all():
-                raise DatasetError(path, f"episode {index} has non-finite timestamps")
-            if n > 1 and not (np.diff(ts) > 0).all():
-                k = int(np.flatnonzero(np.diff(ts) <= 0)[0])
-                raise DatasetError(path, f"timestamps of episode {index} do not increase at frame {k + 1} "
-                                   f"({ts[k]:.6f} s then {ts[k + 1]:.6f} s)")
-            expected = frame_index / self.fps
-            dev = ts - expected
-            if np.abs(dev).max() > TIMESTAMP_TOLERANCE_S:
-                if np.ptp(dev) <= TIMESTAMP_TOLERANCE_S:
-                    self.note(path, f"timestamps start at {ts[0]:.6g} s, not 0: offset {dev[0]:+.6g} s "
-                              f"from frame_index / fps ({self.fps:g} fps)")
-                else:
-                    self.note(path, f"timestamps depart from frame_index / fps by up to "
-                              f"{np.abs(dev).max():.6g} s (variable rate)")
-        else:
-            ts = frame_index / self.fps
-            self.note(path, "no timestamp column: timestamps derived from frame_index / fps")
+        ts = self._timestamps(table, path, index, frame_index)
         out: dict[str, npt.NDArray[Any]] = {}
         for col in columns:
             arr = _column(table.column(col), path, col)
@@ -534,8 +498,30 @@ class DatasetReader:
         return EpisodeFrames(episode=ep, timestamp_s=ts, frame_index=frame_index, index=global_index,
                              columns=out)
 
-    def task_names(self) -> dict[int, str]:
-        return dict(self._tasks)
+    def _timestamps(self, table: pa.Table, path: Path, index: int, frame_index: IntArray) -> FloatArray:
+        """The episode's timestamps (s), checked: finite, increasing, near ``frame_index / fps`` (else a note);
+        derived from ``frame_index / fps`` when the file has none."""
+        n = table.num_rows
+        if "timestamp" not in table.column_names:
+            self.note(path, "no timestamp column: timestamps derived from frame_index / fps")
+            derived: FloatArray = frame_index / self.fps
+            return derived
+        ts: FloatArray = _column(table.column("timestamp"), path, "timestamp").astype(np.float64).reshape(n)
+        if not np.isfinite(ts).all():
+            raise DatasetError(path, f"episode {index} has non-finite timestamps")
+        if n > 1 and not (np.diff(ts) > 0).all():
+            k = int(np.flatnonzero(np.diff(ts) <= 0)[0])
+            raise DatasetError(path, f"timestamps of episode {index} do not increase at frame {k + 1} "
+                               f"({ts[k]:.6f} s then {ts[k + 1]:.6f} s)")
+        dev = ts - frame_index / self.fps
+        if np.abs(dev).max() > TIMESTAMP_TOLERANCE_S:
+            if np.ptp(dev) <= TIMESTAMP_TOLERANCE_S:
+                self.note(path, f"timestamps start at {ts[0]:.6g} s, not 0: offset {dev[0]:+.6g} s "
+                          f"from frame_index / fps ({self.fps:g} fps)")
+            else:
+                self.note(path, f"timestamps depart from frame_index / fps by up to "
+                          f"{np.abs(dev).max():.6g} s (variable rate)")
+        return ts
 
 
 def _jsonl(path: Path) -> list[dict[str, Any]]:

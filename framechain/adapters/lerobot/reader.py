@@ -92,24 +92,7 @@ def open_dataset(
         sources.append(DetectionSource(table=Path(detections)))
     names = reader.names(cfg.state_feature)
     cfg.check_names(names)
-    for cam in cfg.cameras.values():
-        if cam.video_key is not None:
-            feat = reader.feature(cam.video_key)
-            if not feat.is_video and feat.dtype != "image":
-                raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
-                                       f"{feat.dtype} feature, not video or image")
-    columns = [cfg.state_feature]
-    columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
-    columns += [s.feature for s in sources if s.feature is not None]
-    for cam in cfg.cameras.values():
-        if cam.depth is not None:
-            feat = reader.feature(cam.depth.feature)
-            if feat.is_video or feat.dtype == "image":
-                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is "
-                                   f"{'a video' if feat.is_video else 'an encoded image'}: framechain does not "
-                                   "decode images; store depth as an array feature (height, width)")
-            columns.append(cam.depth.feature)
-    frames = reader.read(episode, list(dict.fromkeys(columns)))
+    frames = reader.read(episode, _columns(cfg, reader, sources))
     state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
     bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
     if bad.any():
@@ -135,15 +118,45 @@ def open_dataset(
         _video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
         if cam.video_key is not None and cam.video_key in frames.episode.video_files
     ])
+    return Timeline(transforms=transforms, cameras=cameras, observations=observations,
+                    joint_states=joint_states, depth_frames=depth, image_frames=videos,
+                    metadata=_metadata(Path(path), episode, cfg, model, reader, frames))
 
+
+def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
+    """The per-frame columns an episode is read with; camera features of the wrong kind fail here."""
+    for cam in cfg.cameras.values():
+        if cam.video_key is not None:
+            feat = reader.feature(cam.video_key)
+            if not feat.is_video and feat.dtype != "image":
+                raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
+                                       f"{feat.dtype} feature, not video or image")
+    columns = [cfg.state_feature]
+    columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
+    columns += [s.feature for s in sources if s.feature is not None]
+    for cam in cfg.cameras.values():
+        if cam.depth is not None:
+            feat = reader.feature(cam.depth.feature)
+            if feat.is_video or feat.dtype == "image":
+                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is "
+                                   f"{'a video' if feat.is_video else 'an encoded image'}: framechain does not "
+                                   "decode images; store depth as an array feature (height, width)")
+            columns.append(cam.depth.feature)
+    return list(dict.fromkeys(columns))
+
+
+def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, reader: DatasetReader,
+              frames: EpisodeFrames) -> dict[str, Any]:
+    """What the episode came from: dataset, robot configuration, joints held or at zero, cameras, chain."""
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
     zeroed = [j for j in model.actuated if j not in driven and j not in held]
     chain = cfg.chain_config(root=model.root) if cfg.cameras else None
-    metadata: dict[str, Any] = {
+    state_ns = frames.stamp_ns
+    return {
         "format": FORMAT,
-        "source": {"path": str(Path(path).resolve()), "format": FORMAT, "episode": episode},
-        "source_path": str(Path(path).resolve()),
+        "source": {"path": str(path.resolve()), "format": FORMAT, "episode": episode},
+        "source_path": str(path.resolve()),
         "codebase_version": reader.version,
         "robot_type": reader.robot_type,
         "episode": episode,
@@ -173,8 +186,6 @@ def open_dataset(
         "chain": None if chain is None else chain.to_dict(),
         "notes": list(reader.notes),
     }
-    return Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
 
 
 def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArray:

@@ -95,7 +95,6 @@ def write_lerobot_dataset(
     for e, ep in enumerate(episodes):
         tables.append(_episode_table(ep, e, start, tasks[ep.task], all_features, fps))
         start += tables[-1].num_rows
-    video_keys = [k for k, f in all_features.items() if f.dtype == "video"]
     info_features = {k: f.to_json() for k, f in all_features.items()}
     info_features.update({
         "timestamp": {"dtype": "float32", "shape": [1], "names": None},
@@ -109,57 +108,73 @@ def write_lerobot_dataset(
         "total_frames": start, "total_tasks": len(tasks), "chunks_size": chunks_size, "fps": fps,
         "splits": {"train": f"0:{len(episodes)}"}, "features": info_features,
     }
-    lengths = [t.num_rows for t in tables]
     if version == "v2.1":
-        info.update({"total_videos": len(video_keys) * len(episodes),
-                     "total_chunks": max(1, (len(episodes) + chunks_size - 1) // chunks_size),
-                     "data_path": V21_DATA_PATH, "video_path": V21_VIDEO_PATH if video_keys else None})
-        for e, table in enumerate(tables):
-            path = out / V21_DATA_PATH.format(episode_chunk=e // chunks_size, episode_index=e)
-            _write_parquet(table, path)
-        with (out / "meta" / "episodes.jsonl").open("w") as fh:
-            for e, ep in enumerate(episodes):
-                fh.write(json.dumps({"episode_index": e, "tasks": [ep.task], "length": lengths[e]}) + "\n")
-        with (out / "meta" / "tasks.jsonl").open("w") as fh:
-            for task, i in tasks.items():
-                fh.write(json.dumps({"task_index": i, "task": task}) + "\n")
-        with (out / "meta" / "episodes_stats.jsonl").open("w") as fh:
-            for e, table in enumerate(tables):
-                fh.write(json.dumps({"episode_index": e, "stats": _stats(table, all_features)}) + "\n")
+        _write_v21(out, episodes, tables, tasks, all_features, info, chunks_size=chunks_size)
     else:
-        info.update({"data_files_size_in_mb": 100, "video_files_size_in_mb": 200,
-                     "data_path": V30_DATA_PATH, "video_path": V30_VIDEO_PATH if video_keys else None})
-        per_file = episodes_per_file or max(1, len(episodes))
-        rows: list[dict[str, Any]] = []
-        offsets = np.cumsum([0, *lengths])
-        for e, ep in enumerate(episodes):
-            file_index = e // per_file
-            row: dict[str, Any] = {
-                "episode_index": e, "tasks": [ep.task], "length": lengths[e],
-                "data/chunk_index": 0, "data/file_index": file_index,
-                "dataset_from_index": int(offsets[e]), "dataset_to_index": int(offsets[e + 1]),
-            }
-            for key in video_keys:
-                # Episodes concatenated in one mp4 per key: the episode starts where the last ended.
-                first = e - e % per_file
-                from_s = float(sum(lengths[first:e]) / fps)
-                row.update({f"videos/{key}/chunk_index": 0, f"videos/{key}/file_index": file_index,
-                            f"videos/{key}/from_timestamp": from_s,
-                            f"videos/{key}/to_timestamp": from_s + lengths[e] / fps})
-            row.update({"meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0})
-            rows.append(row)
-        for file_index in range((len(episodes) + per_file - 1) // per_file):
-            part = tables[file_index * per_file:(file_index + 1) * per_file]
-            _write_parquet(pa.concat_tables(part), out / V30_DATA_PATH.format(chunk_index=0, file_index=file_index))
-        episodes_table = pa.Table.from_pylist(rows)
-        _write_parquet(episodes_table, out / V30_EPISODES_PATH.format(chunk_index=0, file_index=0), hf=False)
-        task_table = pa.table({"task_index": pa.array(list(tasks.values()), pa.int64()),
-                               "task": pa.array(list(tasks), pa.string())})
-        pq.write_table(task_table, out / "meta" / "tasks.parquet")
-        stats = _stats(pa.concat_tables(tables), all_features)
-        (out / "meta" / "stats.json").write_text(json.dumps(stats, indent=2))
+        _write_v30(out, episodes, tables, tasks, all_features, info, fps=fps, episodes_per_file=episodes_per_file)
     (out / "meta" / "info.json").write_text(json.dumps(info, indent=4))
     return out
+
+
+def _write_v21(out: Path, episodes: Sequence[EpisodeData], tables: list[pa.Table], tasks: Mapping[str, int],
+               features: Mapping[str, FeatureSpec], info: dict[str, Any], *, chunks_size: int) -> None:
+    """v2.1: one Parquet file per episode; episodes, tasks and per-episode stats as JSON lines."""
+    video_keys = [k for k, f in features.items() if f.dtype == "video"]
+    lengths = [t.num_rows for t in tables]
+    info.update({"total_videos": len(video_keys) * len(episodes),
+                 "total_chunks": max(1, (len(episodes) + chunks_size - 1) // chunks_size),
+                 "data_path": V21_DATA_PATH, "video_path": V21_VIDEO_PATH if video_keys else None})
+    for e, table in enumerate(tables):
+        path = out / V21_DATA_PATH.format(episode_chunk=e // chunks_size, episode_index=e)
+        _write_parquet(table, path)
+    with (out / "meta" / "episodes.jsonl").open("w") as fh:
+        for e, ep in enumerate(episodes):
+            fh.write(json.dumps({"episode_index": e, "tasks": [ep.task], "length": lengths[e]}) + "\n")
+    with (out / "meta" / "tasks.jsonl").open("w") as fh:
+        for task, i in tasks.items():
+            fh.write(json.dumps({"task_index": i, "task": task}) + "\n")
+    with (out / "meta" / "episodes_stats.jsonl").open("w") as fh:
+        for e, table in enumerate(tables):
+            fh.write(json.dumps({"episode_index": e, "stats": _stats(table, features)}) + "\n")
+
+
+def _write_v30(out: Path, episodes: Sequence[EpisodeData], tables: list[pa.Table], tasks: Mapping[str, int],
+               features: Mapping[str, FeatureSpec], info: dict[str, Any], *, fps: int,
+               episodes_per_file: int | None) -> None:
+    """v3.0: ``episodes_per_file`` episodes per data file (default all), the episodes parquet, tasks, stats."""
+    video_keys = [k for k, f in features.items() if f.dtype == "video"]
+    lengths = [t.num_rows for t in tables]
+    info.update({"data_files_size_in_mb": 100, "video_files_size_in_mb": 200,
+                 "data_path": V30_DATA_PATH, "video_path": V30_VIDEO_PATH if video_keys else None})
+    per_file = episodes_per_file or max(1, len(episodes))
+    rows: list[dict[str, Any]] = []
+    offsets = np.cumsum([0, *lengths])
+    for e, ep in enumerate(episodes):
+        file_index = e // per_file
+        row: dict[str, Any] = {
+            "episode_index": e, "tasks": [ep.task], "length": lengths[e],
+            "data/chunk_index": 0, "data/file_index": file_index,
+            "dataset_from_index": int(offsets[e]), "dataset_to_index": int(offsets[e + 1]),
+        }
+        for key in video_keys:
+            # Episodes concatenated in one mp4 per key: the episode starts where the last ended.
+            first = e - e % per_file
+            from_s = float(sum(lengths[first:e]) / fps)
+            row.update({f"videos/{key}/chunk_index": 0, f"videos/{key}/file_index": file_index,
+                        f"videos/{key}/from_timestamp": from_s,
+                        f"videos/{key}/to_timestamp": from_s + lengths[e] / fps})
+        row.update({"meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0})
+        rows.append(row)
+    for file_index in range((len(episodes) + per_file - 1) // per_file):
+        part = tables[file_index * per_file:(file_index + 1) * per_file]
+        _write_parquet(pa.concat_tables(part), out / V30_DATA_PATH.format(chunk_index=0, file_index=file_index))
+    episodes_table = pa.Table.from_pylist(rows)
+    _write_parquet(episodes_table, out / V30_EPISODES_PATH.format(chunk_index=0, file_index=0), hf=False)
+    task_table = pa.table({"task_index": pa.array(list(tasks.values()), pa.int64()),
+                           "task": pa.array(list(tasks), pa.string())})
+    pq.write_table(task_table, out / "meta" / "tasks.parquet")
+    stats = _stats(pa.concat_tables(tables), features)
+    (out / "meta" / "stats.json").write_text(json.dumps(stats, indent=2))
 
 
 def _episode_table(

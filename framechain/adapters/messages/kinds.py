@@ -65,7 +65,6 @@ _FIDUCIAL_TYPES: dict[str, Kind] = {
 }
 _BY_TYPE.update(_FIDUCIAL_TYPES)
 
-_POINT_TYPES = frozenset({"geometry_msgs/PointStamped", "geometry_msgs/PoseStamped", "geometry_msgs/TransformStamped"})
 _IMAGE_TYPES = frozenset({"sensor_msgs/Image", "sensor_msgs/CompressedImage"})
 #: Message types a pose topic (``topics.odometry``) may carry, read as a dynamic edge.
 POSE_TYPES = frozenset({"nav_msgs/Odometry", "geometry_msgs/PoseStamped", "geometry_msgs/PoseWithCovarianceStamped",
@@ -149,7 +148,3 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
         elif msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
             out[name] = Kind.DEPTH
     return out
-
-
-def point_types() -> frozenset[str]:
-    return _POINT_TYPES

@@ -18,8 +18,8 @@ from __future__ import annotations
 import io
 import struct
 from collections import Counter
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -27,6 +27,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.formats.decode_loop import Batched, DecodeLoop, ProgressFn, Route
 from framechain.adapters.formats.decoders import (
     Decoder,
     DecoderBuildError,
@@ -37,28 +38,15 @@ from framechain.adapters.formats.decoders import (
     typestore_from_idl,
     typestore_from_msg,
 )
-from framechain.adapters.formats.fast_cdr import FEEDERS, Feeder, LayoutError, decode_batches
+from framechain.adapters.formats.fast_cdr import FEEDERS
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, SchemaRecord
 from framechain.adapters.formats.salvage_report import SalvageReport
-from framechain.adapters.messages.collect import OBSERVATION_KINDS, Collector
+from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
 from framechain.adapters.model import LogInfo, TopicInfo
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
-
-ProgressFn = Callable[[int], None]
-#: Messages of a channel gathered before they are decoded together (bounds the memory they hold).
-BATCH_MESSAGES = 8192
-
-
-@dataclass
-class _Gathered:
-    """A channel's messages waiting to be decoded together."""
-
-    feeder: Feeder
-    log_times: list[int] = field(default_factory=list)
-    payloads: list[bytes] = field(default_factory=list)
 
 
 @dataclass
@@ -91,7 +79,6 @@ class McapLog:
         self._counts: Counter[int] = Counter()
         self._first: dict[int, int] = {}
         self._last: dict[int, int] = {}
-        self._lost: Counter[int] = Counter()
         self.profile = ""
         try:
             from mcap.reader import SeekingReader
@@ -217,71 +204,18 @@ class McapLog:
         Topics of a type :data:`fast_cdr.FEEDERS` knows are gathered and decoded many messages at
         a time by their byte layout; messages no layout fits go through rosbags one by one.
         """
+        messages: Iterable[tuple[int, int, bytes | memoryview]]
         if self.indexed:
             wanted = {cid for cid, ch in self.channels.items() if ch.topic in selected}
-            messages: Iterator[Any] = self._indexed(wanted)
+            messages = self._indexed(wanted)
         else:
-            messages = self._linear(wanted=selected)
-        handlers: dict[int, Callable[[str, int, Any], None] | None] = {}
-        gathered: dict[int, _Gathered] = {}
-        failures: Counter[int] = Counter()
-        first_error: dict[int, str] = {}
+            messages = ((rec.channel_id, rec.log_time, rec.data) for rec in self._linear(wanted=selected))
+        loop = DecodeLoop(col, lambda cid: self._route(cid, selected, col), progress)
+        loop.run(messages)
+        loop.finish(self.notes)
 
-        def handle(cid: int, log_time: int, data: bytes | memoryview) -> None:
-            try:
-                handler = handlers[cid]
-                assert handler is not None
-                handler(self.channels[cid].topic, log_time, self._decoders[cid](data))
-            except Exception as err:  # one undecodable message must not end the read
-                failures[cid] += 1
-                first_error.setdefault(cid, f"{type(err).__name__}: {err}")
-
-        def flush_observations() -> None:
-            for cid, batch in gathered.items():
-                if selected.get(self.channels[cid].topic) in OBSERVATION_KINDS:
-                    self._feed(cid, batch, col, handle)
-
-        col.flush_observations = flush_observations
-        try:
-            self._read_messages(messages, selected, col, handlers, gathered, handle, progress)
-        finally:
-            col.flush_observations = None
-        for cid, batch in gathered.items():
-            self._feed(cid, batch, col, handle)
-        for cid, n in failures.items():
-            col.notes.append(
-                f"topic {self.channels[cid].topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
-                f"({first_error[cid]}); skipped"
-            )
-        col.notes.extend(n for n in self.notes if n not in col.notes)
-
-    def _read_messages(self, messages: Iterator[Any], selected: dict[str, Kind], col: Collector,
-                       handlers: dict[int, Callable[[str, int, Any], None] | None], gathered: dict[int, _Gathered],
-                       handle: Callable[[int, int, bytes | memoryview], None], progress: ProgressFn | None) -> None:
-        done = 0
-        for msg in messages:
-            cid = msg.channel_id
-            if cid not in handlers:
-                handlers[cid] = self._handler(cid, selected, col)
-                feeder = self._feeder(cid, selected)
-                if handlers[cid] is not None and feeder is not None:
-                    gathered[cid] = _Gathered(feeder)
-            if handlers[cid] is None:
-                continue
-            batch = gathered.get(cid)
-            if batch is not None:
-                batch.log_times.append(msg.log_time)
-                batch.payloads.append(bytes(msg.data))
-                if len(batch.payloads) >= BATCH_MESSAGES:
-                    self._feed(cid, batch, col, handle)
-            else:
-                handle(cid, msg.log_time, msg.data)
-            done += 1
-            if progress is not None and done % 4096 == 0:
-                progress(4096)
-
-    def _handler(self, cid: int, selected: dict[str, Kind], col: Collector) -> Callable[[str, int, Any], None] | None:
-        """The collector's handler of a channel (None: not selected, or not decodable; noted)."""
+    def _route(self, cid: int, selected: dict[str, Kind], col: Collector) -> Route | None:
+        """Where a channel's messages go (None: not selected, or a Foxglove schema of a kind not read)."""
         ch = self.channels.get(cid)
         kind = selected.get(ch.topic) if ch else None
         if ch is None or kind is None:
@@ -289,39 +223,18 @@ class McapLog:
         fox = ch.schema_name.startswith("foxglove.")
         if fox and kind not in _FOXGLOVE_KINDS:
             return None
-        try:
-            self.decoder(cid)
-        except SchemaError as err:
-            col.notes.append(f"{err.what.rstrip('.')}: topic {ch.topic} skipped")
+        decode = self.decoder(cid)  # a SchemaError: the loop notes the topic as skipped
+        handle = col.handler(kind, foxglove=fox)
+        if handle is None:
             return None
-        return col.handler(kind, foxglove=fox)
+        batched = None
+        feeder = FEEDERS.get((kind, normalize_msgtype(ch.schema_name))) if cid in self._stores else None
+        if feeder is not None:
+            store, typename, ros1 = self._stores[cid]
+            batched = Batched(store, typename, ros1, feeder)
+        return Route(ch.topic, kind, decode, handle, batched)
 
-    def _feeder(self, cid: int, selected: dict[str, Kind]) -> Feeder | None:
-        ch = self.channels[cid]
-        if cid not in self._stores:
-            return None
-        return FEEDERS.get((selected[ch.topic], normalize_msgtype(ch.schema_name)))
-
-    def _feed(self, cid: int, batch: _Gathered, col: Collector,
-              handle: Callable[[int, int, bytes | memoryview], None]) -> None:
-        """Decode a channel's gathered messages by layout; the rest one by one, in file order."""
-        if not batch.payloads:
-            return
-        store, typename, ros1 = self._stores[cid]
-        log_times = np.asarray(batch.log_times, dtype=np.int64)
-        batches, rest = decode_batches(store, typename, batch.payloads, ros1=ros1)
-        slow = [rest]
-        for b in batches:
-            try:
-                batch.feeder(col, self.channels[cid].topic, log_times[b.rows], b)
-            except (KeyError, LayoutError):  # a layout without the fields the feeder reads
-                slow.append(b.rows)
-        for row in np.sort(np.concatenate(slow)).tolist():
-            handle(cid, int(log_times[row]), batch.payloads[row])
-        batch.log_times.clear()
-        batch.payloads.clear()
-
-    def _indexed(self, wanted: set[int]) -> Iterator[Any]:
+    def _indexed(self, wanted: set[int]) -> Iterator[_RawMessage]:
         """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once."""
         for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             if ci.message_index_offsets and not (set(ci.message_index_offsets) & wanted):
@@ -619,10 +532,6 @@ def _chunk_messages(data: bytes, wanted: set[int]) -> Iterator[_RawMessage]:
             if cid in wanted:
                 yield _RawMessage(cid, log_time, view[body + msg_head : body + length])
         pos = body + length
-
-
-def mcap_topic_types(log: McapLog) -> dict[str, str]:
-    return {ch.topic: normalize_msgtype(ch.schema_name) for ch in log.channels.values() if ch.schema_name}
 
 
 #: (message encoding, schema encoding) pairs with a decoder; JSON needs no schema to be read.

@@ -27,7 +27,7 @@ from framechain.adapters.formats.salvage_report import SalvageReport, StreamDeco
 MAGIC = b"\x89MCAP0\r\n"
 HEADER, FOOTER, SCHEMA, CHANNEL, MESSAGE, CHUNK, MESSAGE_INDEX = 0x01, 0x02, 0x03, 0x04, 0x05, 0x06, 0x07
 DATA_END = 0x0F
-_OPCODES = frozenset(range(0x01, 0x10))
+_OPCODES = frozenset(range(HEADER, DATA_END + 1))
 _OPCODE_BYTES = re.compile(rb"[\x01-\x0f]")
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
@@ -194,7 +194,6 @@ class McapScanner:
         self._topic_of = topic_of
         self.report = SalvageReport("no usable footer or summary", size=self.size)
         self.channels: set[int] = set()
-        self.ended_cleanly = False
 
     # -- the scan -----------------------------------------------------------------------------
     def records(self) -> Iterator[Record]:
@@ -207,7 +206,6 @@ class McapScanner:
             op, length = _RECORD.unpack_from(buf, pos)
             end = pos + 9 + length
             if op == FOOTER and end <= size:
-                self.ended_cleanly = True
                 return
             if op not in _OPCODES:
                 pos = self._resync(pos, pos + 1, f"unknown opcode 0x{op:02x}")

@@ -6,25 +6,19 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from framechain.adapters.errors import AdapterError, CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.formats.decode_loop import Batched, DecodeLoop, ProgressFn, Route
 from framechain.adapters.formats.decoders import Decoder, ros_decoder
-from framechain.adapters.formats.fast_cdr import FEEDERS, Feeder, LayoutError, decode_batches
+from framechain.adapters.formats.fast_cdr import FEEDERS
 from framechain.adapters.formats.rosbag.salvage_ros1 import Rosbag1Salvage
 from framechain.adapters.formats.rosbag.salvage_ros2 import Rosbag2Salvage
 from framechain.adapters.formats.salvage_report import SalvageReport
-from framechain.adapters.messages.collect import OBSERVATION_KINDS, Collector
+from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
 from framechain.adapters.model import LogInfo, TopicInfo
-
-ProgressFn = Callable[[int], None]
-#: Messages of a connection gathered before they are decoded together (bounds the memory they hold).
-BATCH_MESSAGES = 8192
 
 
 def _default_typestore(ros1: bool) -> Any:
@@ -177,97 +171,31 @@ class RosbagsLog:
         conns = [c for c in self.reader.connections if c.topic in selected]
         if not conns:
             return
-        handlers: dict[int, tuple[Decoder, Callable[[str, int, Any], None]] | None] = {}
-        for c in conns:
-            handler = col.handler(selected[c.topic])
-            try:
-                handlers[c.id] = (self.decoder(c.msgtype, c.topic), handler) if handler is not None else None
-            except SchemaError as err:
-                col.notes.append(f"{err.what}: topic {c.topic} skipped")
-                handlers[c.id] = None
-        failures: Counter[str] = Counter()
-        first_error: dict[str, str] = {}
-        done = 0
-        delivered: Counter[tuple[str, int]] = Counter()
-        # Types fast_cdr knows are gathered per connection and decoded many at a time by layout.
-        gathered: dict[int, tuple[Feeder, list[int], list[bytes]]] = {}
-        for c in conns:
-            feeder = FEEDERS.get((selected[c.topic], normalize_msgtype(c.msgtype)))
-            if handlers.get(c.id) is not None and feeder is not None and c.msgtype in self.reader.typestore.fielddefs:
-                gathered[c.id] = (feeder, [], [])
         by_id = {c.id: c for c in conns}
-
-        def handle(topic: str, t: int, raw: bytes | memoryview, entry: tuple[Decoder, Any]) -> None:
-            try:
-                entry[1](topic, t, entry[0](raw))
-            except Exception as err:  # one undecodable message must not end the read
-                failures[topic] += 1
-                first_error.setdefault(topic, f"{type(err).__name__}: {err}")
-
-        def flush(cid: int) -> None:
-            feeder, times, payloads = gathered[cid]
-            if not payloads:
-                return
-            conn, entry = by_id[cid], handlers[cid]
-            assert entry is not None
-            log_times = np.asarray(times, dtype=np.int64)
-            batches, rest = decode_batches(self.reader.typestore, conn.msgtype, payloads, ros1=self.ros1)
-            slow = [rest]
-            for b in batches:
-                try:
-                    feeder(col, conn.topic, log_times[b.rows], b)
-                except (KeyError, LayoutError):  # a layout without the fields the feeder reads
-                    slow.append(b.rows)
-            for row in np.sort(np.concatenate(slow)).tolist():
-                handle(conn.topic, int(log_times[row]), payloads[row], entry)
-            times.clear()
-            payloads.clear()
-
-        def flush_observations() -> None:
-            for cid in gathered:
-                if selected.get(by_id[cid].topic) in OBSERVATION_KINDS:
-                    flush(cid)
-
-        col.flush_observations = flush_observations
+        loop = DecodeLoop(col, lambda cid: self._route(by_id[cid], selected[by_id[cid].topic], col), progress,
+                          count_delivered=True)
+        for c in conns:  # every connection's schema checked (and noted) before the first message
+            loop.route(c.id)
         try:
-            for conn, t, raw in self.reader.messages(connections=conns):
-                entry = handlers.get(conn.id)
-                if entry is None:
-                    continue
-                if not isinstance(t, int):  # a damaged sqlite row: its timestamp is not a number
-                    failures[conn.topic] += 1
-                    first_error.setdefault(conn.topic, f"damaged row: its timestamp {bytes(t)[:16]!r} is not a number"
-                                           if isinstance(t, bytes | bytearray | memoryview) else
-                                           f"damaged row: its timestamp {t!r} is not a number")
-                    continue
-                delivered[(conn.topic, t)] += 1
-                waiting = gathered.get(conn.id)
-                if waiting is not None:
-                    waiting[1].append(t)
-                    waiting[2].append(bytes(raw))
-                    if len(waiting[2]) >= BATCH_MESSAGES:
-                        flush(conn.id)
-                else:
-                    handle(conn.topic, t, raw, entry)
-                done += 1
-                if progress is not None and done % 4096 == 0:
-                    progress(4096)
+            loop.run((conn.id, t, raw) for conn, t, raw in self.reader.messages(connections=conns))
         except Exception as err:
             if isinstance(err, AdapterError):
                 raise
-            for cid in gathered:
-                flush(cid)
-            col.flush_observations = None
-            self._read_past_damage(err, selected, col, delivered)
-        finally:
-            col.flush_observations = None
-        for cid in gathered:
-            flush(cid)
-        for topic, n in failures.items():
-            col.notes.append(
-                f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
-                f"({first_error[topic]}); skipped"
-            )
+            loop.flush()
+            self._read_past_damage(err, selected, col, loop.delivered)
+        loop.finish()
+
+    def _route(self, conn: Any, kind: Kind, col: Collector) -> Route | None:
+        """Where a connection's messages go; types fast_cdr knows are decoded many at a time by layout."""
+        handle = col.handler(kind)
+        if handle is None:
+            return None
+        decode = self.decoder(conn.msgtype, conn.topic)  # a SchemaError: the loop notes the topic as skipped
+        store = self.reader.typestore
+        feeder = FEEDERS.get((kind, normalize_msgtype(conn.msgtype)))
+        if feeder is None or conn.msgtype not in store.fielddefs:
+            return Route(conn.topic, kind, decode, handle)
+        return Route(conn.topic, kind, decode, handle, Batched(store, conn.msgtype, self.ros1, feeder))
 
     def _read_past_damage(self, err: Exception, selected: dict[str, Kind], col: Collector,
                           delivered: Counter[tuple[str, int]]) -> None:

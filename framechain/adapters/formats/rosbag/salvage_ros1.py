@@ -14,12 +14,13 @@ from __future__ import annotations
 import mmap
 import struct
 from collections import Counter
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Generator, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.formats.decode_loop import DecodeLoop, ProgressFn, Route
 from framechain.adapters.formats.decoders import Decoder, ros_decoder, ros_typename
 from framechain.adapters.formats.salvage_report import SalvageReport, StreamDecompressor
 from framechain.adapters.messages.collect import Collector
@@ -35,8 +36,6 @@ _MAX_HEADER = 1 << 16
 #: How far before an ``op=`` field a record may start (header length field, other fields first).
 _BACK = 1024
 _FEED = 1 << 20
-
-ProgressFn = Callable[[int], None]
 
 
 class _MalformedError(Exception):
@@ -323,7 +322,6 @@ class Rosbag1Salvage:
         size = path.stat().st_size
         self._buf: mmap.mmap | bytes = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
         self._store = typestore
-        self._registered: set[str] = set()
         self._decoders: dict[str, Decoder] = {}
         self.connections: dict[int, Connection] = {}
         self._counts: Counter[int] = Counter()
@@ -405,40 +403,16 @@ class Rosbag1Salvage:
     def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None, *,
              skip: Counter[tuple[str, int]] | None = None) -> None:
         """Decode the selected topics into the collector; ``skip``: (topic, log time) already delivered."""
-        handlers: dict[int, tuple[Decoder, Callable[[str, int, Any], None]] | None] = {}
-        failures: Counter[str] = Counter()
-        first_error: dict[str, str] = {}
-        done = 0
-        for conn, msg, _ in self._messages():
-            if conn.id not in handlers:
-                handlers[conn.id] = None
-                kind = selected.get(conn.topic)
-                handler = col.handler(kind) if kind is not None else None
-                if handler is not None:
-                    try:
-                        handlers[conn.id] = (self.decoder(conn), handler)
-                    except SchemaError as err:
-                        note = f"{err.what}: topic {conn.topic} skipped"
-                        if note not in col.notes:
-                            col.notes.append(note)
-            entry = handlers[conn.id]
-            if entry is None:
-                continue
-            if skip and skip[(conn.topic, msg.time_ns)] > 0:
-                skip[(conn.topic, msg.time_ns)] -= 1
-                continue
-            try:
-                entry[1](conn.topic, msg.time_ns, entry[0](msg.data))
-            except Exception as err:  # one undecodable message must not end the read
-                failures[conn.topic] += 1
-                first_error.setdefault(conn.topic, f"{type(err).__name__}: {err}")
-            done += 1
-            if progress is not None and done % 4096 == 0:
-                progress(4096)
-        for topic, n in failures.items():
-            col.notes.append(f"topic {topic}: {n} message{'s' if n != 1 else ''} could not be decoded "
-                             f"({first_error[topic]}); skipped")
-        col.notes.extend(n for n in self.notes if n not in col.notes)
+        loop = DecodeLoop(col, lambda conn: self._route(conn, selected, col), progress, skip=skip)
+        loop.run((conn, msg.time_ns, msg.data) for conn, msg, _ in self._messages())
+        loop.finish(self.notes)
+
+    def _route(self, conn: Connection, selected: dict[str, Kind], col: Collector) -> Route | None:
+        kind = selected.get(conn.topic)
+        handle = col.handler(kind) if kind is not None else None
+        if kind is None or handle is None:
+            return None
+        return Route(conn.topic, kind, self.decoder(conn), handle)  # a SchemaError: the loop notes the topic
 
     def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         """One message, decoded: the first call indexes where each message's chunk starts, so a

@@ -17,13 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
+from framechain.adapters.formats.decode_loop import DecodeLoop, ProgressFn, Route
 from framechain.adapters.formats.decoders import Decoder, ros_decoder, ros_typename
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind
 from framechain.adapters.model import LogInfo, TopicInfo
 
-ProgressFn = Callable[[int], None]
 #: Rows fetched per query while the pages read cleanly.
 _BATCH = 512
 #: Consecutive unreadable row ids after which the rest of the table is taken as lost.
@@ -322,38 +322,23 @@ class Rosbag2Salvage:
     def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None, *,
              skip: Counter[tuple[str, int]] | None = None) -> None:
         """Decode the selected topics into the collector; ``skip``: (topic, log time) already delivered."""
-        handlers: dict[str, tuple[Decoder, Callable[[str, int, Any], None]] | None] = {}
-        failures: Counter[str] = Counter()
-        first_error: dict[str, str] = {}
-        done = 0
-        for topic, t, data in self._messages():
-            if topic.name not in handlers:
-                handlers[topic.name] = None
-                kind = selected.get(topic.name)
-                handler = col.handler(kind) if kind is not None else None
-                if handler is not None:
-                    try:
-                        handlers[topic.name] = (self.decoder(topic), handler)
-                    except SchemaError as err:
-                        col.notes.append(f"{err.what}: topic {topic.name} skipped")
-            entry = handlers[topic.name]
-            if entry is None:
-                continue
-            if skip and skip[(topic.name, t)] > 0:
-                skip[(topic.name, t)] -= 1
-                continue
-            try:
-                entry[1](topic.name, t, entry[0](data))
-            except Exception as err:  # one undecodable message must not end the read
-                failures[topic.name] += 1
-                first_error.setdefault(topic.name, f"{type(err).__name__}: {err}")
-            done += 1
-            if progress is not None and done % 4096 == 0:
-                progress(4096)
-        for name, n in failures.items():
-            col.notes.append(f"topic {name}: {n} message{'s' if n != 1 else ''} could not be decoded "
-                             f"({first_error[name]}); skipped")
-        col.notes.extend(n for n in self.notes if n not in col.notes)
+        first: dict[str, _Topic] = {}  # per name, the first topic met: its type decodes the name's messages
+
+        def route(name: str) -> Route | None:
+            kind = selected.get(name)
+            handle = col.handler(kind) if kind is not None else None
+            if kind is None or handle is None:
+                return None
+            return Route(name, kind, self.decoder(first[name]), handle)  # a SchemaError: the loop notes it
+
+        def messages() -> Iterator[tuple[str, int, bytes]]:
+            for topic, t, data in self._messages():
+                first.setdefault(topic.name, topic)
+                yield topic.name, t, data
+
+        loop = DecodeLoop(col, route, progress, skip=skip)
+        loop.run(messages())
+        loop.finish(self.notes)
 
     def fetch(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         seen = 0
