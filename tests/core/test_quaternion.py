@@ -90,11 +90,13 @@ def test_from_rpy_is_scipy_fixed_axis_euler(rng: np.random.Generator) -> None:
 
 
 def test_chain_mount_rotations_use_the_shared_maths(rng: np.random.Generator) -> None:
-    from framechain.config.chain import quat_xyzw_from_rotvec, quat_xyzw_from_rpy
+    from framechain.config.chain import ChainConfig
 
     for rpy, rotvec in zip(rng.uniform(-3, 3, (20, 3)), rng.uniform(-2, 2, (20, 3)), strict=True):
-        assert_same_rotation(np.array([quat_xyzw_from_rpy(*rpy)]), Rotation.from_euler("xyz", rpy).as_quat()[None])
-        assert_same_rotation(np.array([quat_xyzw_from_rotvec(*rotvec)]), Rotation.from_rotvec(rotvec).as_quat()[None])
+        mounts = ChainConfig.from_dict({"mounts": [{"parent": "a", "child": "b", "rpy": rpy.tolist()},
+                                                   {"parent": "b", "child": "c", "rotvec": rotvec.tolist()}]}).mounts
+        assert_same_rotation(np.array([mounts[0].quat_xyzw]), Rotation.from_euler("xyz", rpy).as_quat()[None])
+        assert_same_rotation(np.array([mounts[1].quat_xyzw]), Rotation.from_rotvec(rotvec).as_quat()[None])
 
 
 @pytest.mark.parametrize("angle", [a for a in ANGLES if a < np.pi - 1e-7])
