@@ -56,7 +56,7 @@ STAIRS_CHAIN: dict[str, Any] = {
     "mounts": [{"parent": "basalt_pose_frame", "child": "t265_fisheye1_optical_frame",
                 "xyz": [0.010699, 0.000025, -0.000092], "rotvec": [-0.0135696, 0.0062165, -3.1391944]}],
     "evidence": {"static_target": True,
-                 "tag_size_m": {"default": 0.16, **{k: 0.10 for k in range(100, 108)}}},
+                 "tag_size_m": {"default": 0.16, **dict.fromkeys(range(100, 108), 0.1)}},
 }
 
 #: Values a mutation puts in place of another.
@@ -251,7 +251,8 @@ def run_command(argv: list[str], timeout: float) -> dict[str, Any]:
     return result
 
 
-def run_cases(indices: list[int], seed: int, realdata: Path, timeout: float, keep: Path | None) -> Iterator[dict[str, Any]]:
+def run_cases(indices: list[int], seed: int, realdata: Path, timeout: float, keep: Path | None
+              ) -> Iterator[dict[str, Any]]:
     for index in indices:
         with tempfile.TemporaryDirectory(prefix="fuzzcfg") as tmp:
             workdir = Path(tmp)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from scipy.spatial.transform import Rotation
+import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.estimates import (
@@ -21,6 +21,7 @@ from framechain.analysis.fault_model import Mode
 from framechain.analysis.faults import rotation_verdict
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.rotations import quat_from_rotvec, quat_multiply, quat_to_rpy
 
 
 @dataclass(frozen=True)
@@ -45,9 +46,9 @@ def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str
     if mount is None:
         return None
     _fault, faulty = rotation_verdict(x, mode, inputs)
-    recorded = Rotation.from_quat(mount.q_parent_link)
-    right = recorded if faulty == "as_run" else recorded * Rotation.from_rotvec(x)
-    return mount.parent, mount.link, mount.t_parent_link, right.as_euler("xyz")
+    recorded = mount.q_parent_link
+    right = recorded if faulty == "as_run" else quat_multiply(recorded, quat_from_rotvec(np.asarray(x, dtype=float)))
+    return mount.parent, mount.link, mount.t_parent_link, quat_to_rpy(right)
 
 
 def _origin(xyz: FloatArray, rpy: FloatArray) -> str:
@@ -76,11 +77,12 @@ def fix_for(
         parent, child, xyz, rpy = mount
         if estimate.faulty == "as run" and fault == Fault.ROTATION_ERROR:
             # Logged points against the log cannot say which of the two mounts is the calibrated one.
-            used = Rotation.from_quat(inputs.mount.q_parent_link) * Rotation.from_rotvec(x)  # type: ignore[union-attr]
+            used = quat_to_rpy(quat_multiply(inputs.mount.q_parent_link,  # type: ignore[union-attr]
+                                             quat_from_rotvec(np.asarray(x, dtype=float))))
             angle = estimate.angle_deg
             return (f"The robot's mount and the recorded {parent} -> {child} differ by {angle:.2f} deg; "
                     f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
-                    f"used {_origin(xyz, used.as_euler('xyz'))}: keep the calibrated one in both (a reference or a "
+                    f"used {_origin(xyz, used)}: keep the calibrated one in both (a reference or a "
                     f"static target in the log tells which).")
         if estimate.faulty == "as run":
             lead = (f"The robot's camera-to-body step used a wrong mount; use the recorded {parent} -> {child} "

@@ -241,22 +241,25 @@ def _inline_intrinsics(section: Section) -> Intrinsics:
                                      for k in ("fx", "fy", "cx", "cy", "width", "height"))
     dist = section.get("distortion", [])
     model = section.name("distortion_model", "plumb_bob" if dist else "none", what="a distortion model name")
-    return _make_intrinsics(section, fx, fy, cx, cy, width, height, model or "none", dist, "intrinsics")
+    return _make_intrinsics(section, (fx, fy, cx, cy, width, height), model or "none", dist,
+                            ("intrinsics", "intrinsics.distortion"))
 
 
-def _make_intrinsics(section: Section, fx: float, fy: float, cx: float, cy: float, width: float, height: float,
-                     model: str, dist: Any, where: str) -> Intrinsics:
-    """Intrinsics checked against each other and the image size; ``where`` names them in messages."""
+def _make_intrinsics(section: Section, pinhole: tuple[float, float, float, float, float, float], model: str,
+                     dist: Any, where: tuple[str, str]) -> Intrinsics:
+    """Intrinsics ``(fx, fy, cx, cy, width, height)`` checked against each other and the image size;
+    ``where`` names the intrinsics and the distortion in messages."""
+    fx, fy, cx, cy, width, height = pinhole
     if not (fx > 0 and fy > 0):
-        section.fail_at(where, f"focal lengths fx={fx} fy={fy} must be positive")
+        section.fail_in(where[0], f"focal lengths fx={fx} fy={fy} must be positive")
     if not (1 <= width <= 1e5 and 1 <= height <= 1e5 and float(width).is_integer() and float(height).is_integer()):
-        section.fail_at(where, f"image size {width:g}x{height:g} must be positive integers (pixels)")
+        section.fail_in(where[0], f"image size {width:g}x{height:g} must be whole numbers of pixels")
     coeffs = dist if isinstance(dist, list | tuple) else [dist]
     if len(coeffs) > 14 or not all(finite_number(c) for c in coeffs):
-        section.fail_at(where, f"distortion must be at most 14 finite numbers, got {show(dist)}")
+        section.fail_at(where[1], f"must be at most 14 finite numbers, got {show(dist)}")
     before = len(section.notes)
-    section.check_plausible(f"{where}:", lambda _: plausible.intrinsics(fx, fy, cx, cy, int(width), int(height)),
-                            None)
+    section.check_plausible(where[0], lambda _: plausible.intrinsics(fx, fy, cx, cy, int(width), int(height)), None,
+                            within=True)
     return Intrinsics(fx, fy, cx, cy, int(width), int(height), model, tuple(float(c) for c in coeffs),
                       section.source, tuple(section.notes[before:]))
 
@@ -343,12 +346,15 @@ def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intr
         "none" if not coeffs else "plumb_bob")
     if abs(kmat[0, 1]) > 1e-9 or abs(kmat[2, 2] - 1.0) > 1e-9:
         top.fail(f"camera matrix {kmat.tolist()} is not a pinhole K (skew 0, K[2,2] = 1)")
-    return _make_intrinsics(top, float(kmat[0, 0]), float(kmat[1, 1]), float(kmat[0, 2]), float(kmat[1, 2]),
-                            width, height, model, coeffs, key)
+    pinhole = (float(kmat[0, 0]), float(kmat[1, 1]), float(kmat[0, 2]), float(kmat[1, 2]), width, height)
+    return _make_intrinsics(top, pinhole, model, coeffs, (key, _first(top, _DISTORTION_KEYS) or "distortion"))
+
+
+_DISTORTION_KEYS = ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs", "distortion")
 
 
 def _distortion(top: Section) -> list[Any]:
-    key = _first(top, ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs", "distortion"))
+    key = _first(top, _DISTORTION_KEYS)
     dist = top.get(key) if key is not None else []
     if isinstance(dist, Mapping):
         dist = dist.get("data", [])
@@ -414,8 +420,8 @@ def _kalibr_camera(top: Section, camera: str | None) -> Intrinsics:
                        ).lower()
     if kalibr_model not in _KALIBR_DISTORTION:
         entry.fail(f"distortion_model {kalibr_model!r} is not supported; expected one of {sorted(_KALIBR_DISTORTION)}")
-    intrinsics = _make_intrinsics(entry, fx, fy, cx, cy, width, height, _KALIBR_DISTORTION[kalibr_model], coeffs,
-                                  f"{name}.intrinsics")
+    intrinsics = _make_intrinsics(entry, (fx, fy, cx, cy, width, height), _KALIBR_DISTORTION[kalibr_model], coeffs,
+                                  (f"{name}.intrinsics", f"{name}.distortion_coeffs"))
     counts = {"equidistant": (4,), "plumb_bob": (4, 5), "rational_polynomial": (8,), "none": (0,)}
     expected = counts[intrinsics.distortion_model]
     if len(intrinsics.distortion) not in expected:

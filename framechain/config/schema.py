@@ -130,18 +130,24 @@ class Section:
         """A mistake in one value: ``"<path> <what>"``."""
         raise self.error(self.source, f"{path} {what}")
 
+    def fail_in(self, path: str, what: str) -> NoReturn:
+        """A mistake among the values under ``path``: ``"<path>: <what>"``."""
+        raise self.error(self.source, f"{path}: {what}")
+
     def expected(self, key: Any, what: str, value: Any) -> NoReturn:
         """A value of none of the shapes a key takes: ``"<path>: expected <what>, got <value>"``."""
         self.expected_at(self.path(key), what, value)
 
     def expected_at(self, path: str, what: str, value: Any) -> NoReturn:
-        raise self.error(self.source, f"{path}: expected {what}, got {show(value)}")
+        self.fail_in(path, f"expected {what}, got {show(value)}")
 
     def note_at(self, path: str, text: str) -> None:
         self.notes.append(f"{self.source}: {path} {text}")
 
-    def check_plausible(self, path: str, check: Check, value: Any) -> None:
-        """Run a plausibility check: an error naming the slip, a note, or nothing."""
+    def check_plausible(self, path: str, check: Check, value: Any, *, within: bool = False) -> None:
+        """Run a plausibility check: an error naming the slip, a note, or nothing. ``within``: the
+        check's text names a key below ``path`` (``"<path>: cx 1280 is ..."``)."""
+        path = f"{path}:" if within else path
         try:
             note = check(value)
         except plausible.Implausible as err:

@@ -17,7 +17,8 @@ The conversions every room uses, each once here: rotation vectors (:func:`quat_f
 :func:`quat_to_rotvec`), URDF roll-pitch-yaw (:func:`quat_from_rpy`, :func:`quat_to_rpy`),
 matrices (:func:`quat_from_matrix`, :func:`quat_to_matrix`, :func:`homogeneous`), angles
 (:func:`quat_angle`, :func:`quat_angle_between`) and rigid transforms ``T_a_b`` as a translation
-and a quaternion (:func:`compose`, :func:`invert`, :func:`transform_points`).
+and a quaternion (:func:`compose`, :func:`invert`); :mod:`framechain.geometry.transforms` applies
+them to the rows tables hold.
 """
 
 from __future__ import annotations
@@ -180,15 +181,6 @@ def invert(t_ab: FloatArray, q_ab: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``T_b_a`` from ``T_a_b``, components first."""
     q_ba = quat_conjugate(q_ab)
     return -quat_rotate(q_ba, t_ab), q_ba
-
-
-def transform_points(t_ab: VecLike, q_ab: QuatLike, p_b: VecLike) -> FloatArray:
-    """``p_a = T_a_b p_b``: points (3, ...) of frame b in frame a, components first (one transform, or one
-    per point)."""
-    rotated = quat_rotate(q_ab, p_b)
-    t = np.asarray(t_ab, dtype=float)
-    out: FloatArray = rotated + t.reshape(t.shape + (1,) * (rotated.ndim - t.ndim))
-    return out
 
 
 def homogeneous(quat: QuatLike, translation: VecLike, *, n: int | None = None) -> FloatArray:
