@@ -2,8 +2,8 @@
 
 Three valid files are mutated, each read by the command a user would run:
 
-- ``chain``: the README's CHAIN.yaml for the tagslam_stairs bag, through ``info LOG --chain`` and
-  ``attribute LOG --chain`` (every third case);
+- ``chain``: the README's CHAIN.yaml for the tagslam_stairs bag, through ``info LOG --chain``, and
+  ``attribute LOG --chain`` for every ``--attribute-every``-th chain case;
 - ``calibration``: the Kalibr ``cameras.yaml`` beside that bag, or a ROS camera_info YAML made from
   its cam0, named by the same chain, through ``info LOG --chain``;
 - ``robot``: a robot.yaml for the unitree_g1_v21 LeRobot dataset (a generated arm URDF, an inline
@@ -15,8 +15,8 @@ null, NaN, +-inf, huge or tiny numbers, a unit slip (x1000, x0.001), strings, li
 exception escaping the CLI, or "Traceback" on stderr), an exit code other than 0 or 1, an exit 1
 whose stderr is not exactly one line, or a hang (over ``--timeout`` seconds).
 
-    python tools/fuzz_config.py --cases 1500 --seed 0       # what `make fuzz` runs
-    python tools/fuzz_config.py --cases 30 --seed 1 --json  # a short run
+    python tools/fuzz_config.py --cases 1500 --seed 0       # what `make fuzz` runs (through tools/fuzz.py)
+    python tools/fuzz_config.py --cases 210 --seed 1 --mix chain=5,calibration=1,robot=1 --json  # the tests' run
 
 Cases are reproducible: ``--only N`` reruns case N and ``--keep DIR`` keeps the mutated files of failures.
 """
@@ -46,7 +46,9 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 REALDATA = ROOT.parent / "shared" / "realdata"
-TARGETS = ("chain", "chain", "calibration", "robot")  # chains are the most varied: twice the share
+TARGETS = ("chain", "calibration", "robot")
+#: Cases of each target in a cycle: chains are the most varied, twice the share.
+DEFAULT_MIX = "chain=2,calibration=1,robot=1"
 
 #: The README's chain for the tagslam_stairs bag (README "A real recording").
 STAIRS_CHAIN: dict[str, Any] = {
@@ -164,10 +166,22 @@ def mutate(doc: dict[str, Any], rng: random.Random) -> tuple[dict[str, Any], lis
 
 
 # -- the cases --------------------------------------------------------------------------------------
-def materialise(index: int, seed: int, realdata: Path, workdir: Path) -> tuple[str, list[str], list[str]]:
+def parse_mix(text: str) -> list[str]:
+    """``chain=2,calibration=1,robot=1`` as the cycle of targets ``[chain, chain, calibration, robot]``."""
+    cycle: list[str] = []
+    for part in text.split(","):
+        name, _, count = part.partition("=")
+        if name not in TARGETS or not count.isdigit():
+            raise SystemExit(f"fuzz_config: --mix takes {'|'.join(TARGETS)}=COUNT,...; got {part!r}")
+        cycle += [name] * int(count)
+    return cycle
+
+
+def materialise(index: int, seed: int, realdata: Path, workdir: Path, cycle: list[str], attribute_every: int
+                ) -> tuple[str, list[str], list[str]]:
     """Write case ``index``'s files into ``workdir``: its target, what was mutated, the command line."""
     rng = random.Random(f"config:{seed}:{index}")
-    target = TARGETS[index % len(TARGETS)]
+    target = cycle[index % len(cycle)]
     kalibr = yaml.safe_load((realdata / "tagslam_stairs" / "cameras.yaml").read_text())
     chain = copy.deepcopy(STAIRS_CHAIN)
     log = stairs_log(realdata)
@@ -192,7 +206,9 @@ def materialise(index: int, seed: int, realdata: Path, workdir: Path) -> tuple[s
     for name, doc in files.items():
         _write_yaml(workdir / name, doc)
     _write_yaml(workdir / "chain.yaml", chain)
-    if target == "chain" and index % 3 == 0:
+    # Which chain case this is, counting chain cases only: every attribute_every-th runs attribute.
+    chain_case = cycle.count("chain") * (index // len(cycle)) + cycle[:index % len(cycle)].count("chain")
+    if target == "chain" and attribute_every and chain_case % attribute_every == 0:
         return target, done, ["attribute", "-q", str(log), "--chain", str(workdir / "chain.yaml"), "--out",
                               str(workdir / "out"), "--format", "json", "--bootstrap", "0"]
     return target, done, ["info", str(log), "--chain", str(workdir / "chain.yaml")]
@@ -251,14 +267,15 @@ def run_command(argv: list[str], timeout: float) -> dict[str, Any]:
     return result
 
 
-def run_cases(indices: list[int], seed: int, realdata: Path, timeout: float, keep: Path | None
-              ) -> Iterator[dict[str, Any]]:
+def run_cases(indices: list[int], args: argparse.Namespace) -> Iterator[dict[str, Any]]:
+    keep = Path(args.keep) if args.keep else None
     for index in indices:
         with tempfile.TemporaryDirectory(prefix="fuzzcfg") as tmp:
             workdir = Path(tmp)
-            target, done, argv = materialise(index, seed, realdata, workdir)
+            target, done, argv = materialise(index, args.seed, Path(args.realdata), workdir, parse_mix(args.mix),
+                                             args.attribute_every)
             result = {"case": index, "target": target, "command": argv[0], "what": "; ".join(done),
-                      **run_command(argv, timeout)}
+                      **run_command(argv, args.timeout)}
             if result["status"] != "ok" and keep is not None:
                 shutil.copytree(workdir, keep / f"case{index}", dirs_exist_ok=True)
         yield result
@@ -267,18 +284,21 @@ def run_cases(indices: list[int], seed: int, realdata: Path, timeout: float, kee
 def run_workers(indices: list[int], args: argparse.Namespace) -> list[dict[str, Any]]:
     """The cases split over ``--jobs`` worker processes (each runs its share in order)."""
     jobs = max(1, args.jobs)
-    procs = []
-    for share in (indices[i::jobs] for i in range(jobs)):
-        if not share:
-            continue
-        cmd = [sys.executable, __file__, "--worker", "--seed", str(args.seed), "--realdata", args.realdata,
-               "--only", ",".join(map(str, share)), "--timeout", str(args.timeout),
-               *(["--keep", args.keep] if args.keep else [])]
-        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True))
     results: list[dict[str, Any]] = []
-    for proc in procs:
-        stdout, _ = proc.communicate()
-        results += [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+    with tempfile.TemporaryDirectory(prefix="fuzzcfg") as tmp:
+        procs = []
+        for k, share in enumerate(indices[i::jobs] for i in range(jobs)):
+            if not share:
+                continue
+            cmd = [sys.executable, __file__, "--worker", "--seed", str(args.seed), "--realdata", args.realdata,
+                   "--only", ",".join(map(str, share)), "--timeout", str(args.timeout), "--mix", args.mix,
+                   "--attribute-every", str(args.attribute_every), *(["--keep", args.keep] if args.keep else [])]
+            out = Path(tmp) / f"worker{k}.jsonl"  # a file, not a pipe: no worker waits on another's reader
+            with out.open("w") as sink:
+                procs.append((subprocess.Popen(cmd, stdout=sink, stderr=subprocess.DEVNULL, text=True), out))
+        for proc, out in procs:
+            proc.wait()
+            results += [json.loads(line) for line in out.read_text().splitlines() if line.startswith("{")]
     done = {r["case"] for r in results}
     results += [{"case": i, "status": "crash", "what": "worker died"} for i in indices if i not in done]
     return sorted(results, key=lambda r: int(r["case"]))
@@ -295,23 +315,30 @@ def summarise(results: list[dict[str, Any]], seconds: float) -> dict[str, Any]:
     }
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0] if __doc__ else None)
     parser.add_argument("--cases", type=int, default=1500)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds per case before it counts as a hang")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--mix", default=DEFAULT_MIX, help="cases of each target in a cycle (default %(default)s)")
+    parser.add_argument("--attribute-every", type=int, default=3,
+                        help="every N-th chain case runs attribute instead of info (0: never)")
     parser.add_argument("--realdata", default=str(REALDATA))
     parser.add_argument("--only", default="", help="comma-separated case numbers to run")
     parser.add_argument("--keep", default="", help="directory for the files of failed cases")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     realdata = Path(args.realdata)
     indices = [int(i) for i in args.only.split(",")] if args.only else list(range(args.cases))
-    keep = Path(args.keep) if args.keep else None
+    parse_mix(args.mix)
     if args.worker:
-        for result in run_cases(indices, args.seed, realdata, args.timeout, keep):
+        for result in run_cases(indices, args):
             print(json.dumps(result), flush=True)
         return 0
     if not stairs_log(realdata).is_file() or not unitree_dataset(realdata).is_dir():

@@ -206,7 +206,8 @@ def load_calibration(
         name=cam_name, intrinsics=intrinsics, mount=mount, frame=top.frame("frame") or "",
         video_key=top.name("video_key", what="a feature name"),
         timing=CameraTiming(timing.name("timestamp_column", what="a column name"), offset_s or 0.0),
-        depth=_depth(top), source=source, notes=(*intrinsics.notes, *top.notes),
+        # Inline intrinsics noted into this file's notes already; a file's own come with its intrinsics.
+        depth=_depth(top), source=source, notes=tuple(dict.fromkeys((*intrinsics.notes, *top.notes))),
     )
 
 
@@ -242,7 +243,7 @@ def _inline_intrinsics(section: Section) -> Intrinsics:
     dist = section.get("distortion", [])
     model = section.name("distortion_model", "plumb_bob" if dist else "none", what="a distortion model name")
     return _make_intrinsics(section, (fx, fy, cx, cy, width, height), model or "none", dist,
-                            ("intrinsics", "intrinsics.distortion"))
+                            (section.where, section.path("distortion")))
 
 
 def _make_intrinsics(section: Section, pinhole: tuple[float, float, float, float, float, float], model: str,
@@ -411,10 +412,10 @@ def _kalibr_camera(top: Section, camera: str | None) -> Intrinsics:
     model = entry.name("camera_model", "pinhole", what="a camera model name")
     if model != "pinhole":
         entry.fail(f"camera_model {model!r} is not supported (pinhole only)")
-    fx, fy, cx, cy = entry.vector("intrinsics", 4, what="[fx, fy, cx, cy], four finite numbers") or ()
-    if "resolution" not in entry:
-        entry.fail("no resolution [width, height]")
-    width, height = entry.vector("resolution", 2, what="[width, height], two finite numbers") or ()
+    fx, fy, cx, cy = entry.vector("intrinsics", 4, required=True, hint="[fx, fy, cx, cy]",
+                                  what="[fx, fy, cx, cy], four finite numbers") or (0.0, 0.0, 0.0, 0.0)
+    width, height = entry.vector("resolution", 2, required=True, hint="[width, height]",
+                                 what="[width, height], two finite numbers") or (0.0, 0.0)
     coeffs = entry.get("distortion_coeffs", [])
     kalibr_model = str(entry.name("distortion_model", "radtan" if coeffs else "none", what="a distortion model name")
                        ).lower()

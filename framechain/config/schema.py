@@ -238,9 +238,11 @@ class Section:
             self.check_plausible(path, check, float(value))
         return float(value)
 
-    def vector(self, key: Any, n: int, default: tuple[float, ...] | None = None, *, what: str = "",
-               check: Check | None = None) -> tuple[float, ...] | None:
+    def vector(self, key: Any, n: int, default: tuple[float, ...] | None = None, *, required: bool = False,
+               hint: str = "", what: str = "", check: Check | None = None) -> tuple[float, ...] | None:
         """``n`` finite numbers (a list), then their plausibility ``check``."""
+        if required:
+            self.require(key, hint)
         value = self.raw.get(key)
         if value is None:
             return default

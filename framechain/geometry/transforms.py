@@ -18,7 +18,7 @@ __all__ = ["compose_rows", "invert_rows", "transform_points"]
 
 def transform_points(translation: npt.ArrayLike, quat_xyzw: npt.ArrayLike, points: npt.ArrayLike) -> FloatArray:
     """``p_a = T_a_b p_b`` row by row: transforms (N, 3)/(N, 4) applied to points (N, 3)."""
-    out: FloatArray = (quat_rotate(np.asarray(quat_xyzw).T, np.asarray(points).T) + np.asarray(translation).T).T
+    out: FloatArray = quat_rotate(np.asarray(quat_xyzw).T, np.asarray(points).T).T + np.asarray(translation)
     return out
 
 
