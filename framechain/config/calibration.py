@@ -291,7 +291,7 @@ def _opencv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> list[list[float]
     try:
         rows, cols = int(m["rows"]), int(m["cols"])
         data = np.asarray(m["data"], dtype=float).reshape(rows, cols)
-    except (KeyError, TypeError, ValueError) as err:
+    except (KeyError, TypeError, ValueError, OverflowError) as err:
         raise yaml.constructor.ConstructorError(
             None, None, f"an opencv-matrix needs rows, cols and rows x cols numbers as data ({err})",
             node.start_mark) from None
@@ -303,13 +303,9 @@ _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", _opencv_matrix)
 
 
 def _strip_opencv_header(text: str) -> str:
-    """OpenCV writes ``%YAML:1.0`` (not valid YAML 1.1) on its first line: drop it."""
-    lines = text.splitlines()
-    if lines and lines[0].startswith("%YAML:"):
-        lines = lines[1:]
-        if lines and lines[0].strip() == "---":
-            lines = lines[1:]
-    return "\n".join(lines)
+    """OpenCV writes ``%YAML:1.0`` (not valid YAML 1.1) on its first line: make it a comment (so that
+    YAML's line numbers stay the file's)."""
+    return "#" + text if text.startswith("%YAML:") else text
 
 
 def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intrinsics:
