@@ -18,6 +18,9 @@ given back.
 
 Cases are numbered and reproducible: ``--only N`` reruns case N (its damaged file is kept with
 ``--keep DIR``).
+
+``--config-cases N`` adds N cases of mutated configuration files (CHAIN.yaml, calibration files,
+robot.yaml) through the commands that read them: ``tools/fuzz_config.py``, the same verdicts.
 """
 
 from __future__ import annotations
@@ -566,6 +569,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-seconds", type=float, default=0.0,
                         help="stop starting cases after this long (0: run them all) and report the count")
     parser.add_argument("--progress", action="store_true")
+    parser.add_argument("--config-cases", type=int, default=0,
+                        help="cases of mutated configuration files (tools/fuzz_config.py) after the logs")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--sources", default="", help=argparse.SUPPRESS)
     parser.add_argument("--indices", default="", help=argparse.SUPPRESS)
@@ -588,6 +593,16 @@ def main(argv: list[str] | None = None) -> int:
     failures = [r for r in results if r["status"] != "ok"]
     statuses = Counter(r["status"] for r in results)
     properties: list[dict[str, Any]] = []
+    config: dict[str, Any] = {}
+    if args.config_cases:
+        import fuzz_config  # beside this file
+
+        config_args = fuzz_config.parse_args(["--cases", str(args.config_cases), "--seed", str(args.seed),
+                                              "--jobs", str(args.jobs), "--realdata", args.realdata,
+                                              *(["--keep", args.keep] if args.keep else [])])
+        start = time.perf_counter()
+        config = fuzz_config.summarise(fuzz_config.run_workers(list(range(args.config_cases)), config_args),
+                                       time.perf_counter() - start)
     if not args.no_property:
         rng = random.Random(args.seed)
         properties = [check_cuts(s.path, s.kind, rng, args.random_cuts, args.max_boundaries)
@@ -602,6 +617,7 @@ def main(argv: list[str] | None = None) -> int:
         "failures": failures[:20], "failure_count": len(failures),
         "cut_property": properties,
         "cut_property_problems": sum(p["problem_count"] for p in properties),
+        "config": config,
     }
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -617,7 +633,18 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  cut property {Path(p['log']).name}: {p['cuts']} cuts, {p['problem_count']} problems")
             for text in p["problems"]:
                 print(f"    {text}")
-    return 0 if not failures and not summary["cut_property_problems"] else 1
+        if config:
+            print(fuzz_config_line(config))
+    return 0 if not failures and not summary["cut_property_problems"] and not config.get("failure_count") else 1
+
+
+def fuzz_config_line(config: dict[str, Any]) -> str:
+    """The configuration cases in one line, and their failures."""
+    lines = [f"{config['cases']} configuration cases in {config['seconds']:.0f} s: "
+             f"{', '.join(f'{k} {v}' for k, v in sorted(config['statuses'].items()))}"]
+    lines += [f"  case {r['case']} ({r.get('target')}, {r.get('command')}: {r.get('what')}): {r['status']}"
+              for r in config["failures"]]
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -14,14 +14,20 @@ from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.chain import ChainFrames
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
-from framechain.geometry.rotations import invert
-from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer, transform_points
-from framechain.replay.buffer import compose_hops
+from framechain.geometry.rotations import (
+    quat_angle_between,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_rotate,
+)
+from framechain.geometry.transforms import invert_rows, transform_points
+from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer
+from framechain.replay.composition import compose_hops
 
 
 @dataclass(frozen=True)
@@ -73,8 +79,8 @@ def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
     first = edges[path.hops[0].child]
     if not first.is_static:
         return None
-    is_optical = Rotation.from_quat(first.quat_xyzw[0]) * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
-    if len(path.hops) > 1 and not path.hops[1].inverse and np.rad2deg(is_optical.magnitude()) < 1.0:
+    off_optical = quat_angle_between(np.asarray(OPTICAL_FROM_LINK_QUAT_XYZW), first.quat_xyzw[0])
+    if len(path.hops) > 1 and not path.hops[1].inverse and np.rad2deg(off_optical) < 1.0:
         mount = edges[path.hops[1].child]
         if mount.is_static:
             return Mount(mount.parent, mount.child, first.quat_xyzw[0].copy(), mount.translation[0].copy(),
@@ -215,15 +221,16 @@ def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
 def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
     """camera_to_body under the perturbation."""
     t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge, pert.camera_frame)
-    rot = Rotation.from_quat(q_bc)
     if pert.permutation is not None:
         p_cam = p_cam @ pert.permutation.T
     if np.any(pert.rotvec_mount):
         # R_bc' = R_bc R_cam_link exp(x) R_link_cam = R_bc exp(R_cam_link x)
         q_link_cam = inputs.mount.q_link_cam if inputs.mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
-        rotvec_cam = Rotation.from_quat(q_link_cam).inv().apply(pert.rotvec_mount)
-        rot = rot * Rotation.from_rotvec(rotvec_cam)
-    out: FloatArray = rot.inv().apply(p_cam - t_bc) if pert.invert_camera else rot.apply(p_cam) + t_bc
+        rotvec_cam = quat_rotate(quat_conjugate(q_link_cam), np.asarray(pert.rotvec_mount, dtype=float))
+        q_bc = quat_multiply(np.asarray(q_bc).T, quat_from_rotvec(rotvec_cam)[:, None]).T
+    if pert.invert_camera:
+        t_bc, q_bc = invert_rows(t_bc, q_bc)
+    out: FloatArray = transform_points(t_bc, q_bc, p_cam)
     out[~ok] = np.nan  # no camera pose at the shifted time
     return out
 
@@ -232,8 +239,7 @@ def hop3(inputs: ChainInputs, pert: Perturbation, p_body: FloatArray) -> tuple[F
     """body_to_world under the perturbation, and which observations had a pose at the shifted time."""
     t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world, pert.body_frame)
     if pert.invert_pose:
-        t_inv, q_inv = invert(t_wb.T, q_wb.T)
-        t_wb, q_wb = t_inv.T, q_inv.T
+        t_wb, q_wb = invert_rows(t_wb, q_wb)
     return transform_points(t_wb, q_wb, p_body), ok
 
 

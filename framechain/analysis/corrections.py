@@ -10,12 +10,12 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.attribute import Attribution
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.fixes import corrected_mount
 from framechain.arrays import FloatArray
+from framechain.geometry.rotations import quat_from_rpy
 from framechain.timeline import DepthFrameTable, Timeline, TransformTable
 
 
@@ -40,7 +40,7 @@ def apply_corrections(timeline: Timeline, result: Attribution) -> Timeline:
             if mount is None:
                 raise NothingToCorrectError("the camera hangs from no static mount edge to correct")
             parent, child, xyz, rpy = mount
-            out = _replace_static_edge(out, parent, child, xyz, Rotation.from_euler("xyz", rpy).as_quat())
+            out = _replace_static_edge(out, parent, child, xyz, quat_from_rpy(rpy))
         elif isinstance(e, LatencyEstimate):
             # The pose at tau + offset explains the detection: the camera's clock is off by the offset,
             # so everything it stamped moves (detections, depth frames, CameraInfo of that camera).

@@ -15,7 +15,6 @@ from dataclasses import replace
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
 from framechain.analysis.estimates import (
@@ -30,6 +29,14 @@ from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.frame_swaps import frame_swap_models
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.rotations import (
+    quat_angle,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_rotate,
+    quat_to_rotvec,
+)
 
 #: Below this angle two rotations are "the same" when naming missing_rotation (degrees).
 SAME_ROTATION_DEG = 0.5
@@ -274,10 +281,11 @@ def rotation_verdict(x: FloatArray, mode: Mode, inputs: ChainInputs) -> tuple[Fa
     recorded_side: Literal["as_run", "recorded"] = "recorded" if mode == "correction" else "as_run"
     if mount is None or change <= SAME_ROTATION_DEG:
         return Fault.ROTATION_ERROR, recorded_side
-    recorded = Rotation.from_quat(mount.q_parent_link)
-    if mode == "as_run" and np.rad2deg((recorded * Rotation.from_rotvec(x)).magnitude()) < SAME_ROTATION_DEG:
+    recorded = mount.q_parent_link
+    fitted = quat_multiply(recorded, quat_from_rotvec(np.asarray(x, dtype=float)))
+    if mode == "as_run" and np.rad2deg(quat_angle(fitted)) < SAME_ROTATION_DEG:
         return Fault.MISSING_ROTATION, "as_run"
-    if np.rad2deg(recorded.magnitude()) < SAME_ROTATION_DEG:
+    if np.rad2deg(quat_angle(recorded)) < SAME_ROTATION_DEG:
         return Fault.MISSING_ROTATION, "recorded"
     return Fault.ROTATION_ERROR, recorded_side
 
@@ -294,9 +302,9 @@ def rotation_starts(inputs: ChainInputs, mode: Mode) -> tuple[tuple[float, ...],
     starts: list[tuple[float, ...]] = []
     mount = inputs.mount
     if mount is not None and mode == "as_run":
-        starts.append(tuple(float(v) for v in Rotation.from_quat(mount.q_parent_link).inv().as_rotvec()))
+        starts.append(tuple(float(v) for v in quat_to_rotvec(quat_conjugate(mount.q_parent_link))))
     q_link_cam = mount.q_link_cam if mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
     # R_bc exp(R_cam_link x) = I  ->  x = R_link_cam rotvec(R_bc^-1)
-    lost_all = Rotation.from_quat(q_link_cam).apply(Rotation.from_quat(inputs.q_bc[0]).inv().as_rotvec())
+    lost_all = quat_rotate(q_link_cam, quat_to_rotvec(quat_conjugate(inputs.q_bc[0])))
     starts.append(tuple(float(v) for v in (lost_all if mode == "as_run" else -lost_all)))
     return tuple(starts)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from scipy.spatial.transform import Rotation
+import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.estimates import (
@@ -21,6 +21,7 @@ from framechain.analysis.fault_model import Mode
 from framechain.analysis.faults import rotation_verdict
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.rotations import quat_from_rotvec, quat_multiply, quat_to_rpy
 
 
 @dataclass(frozen=True)
@@ -45,9 +46,9 @@ def corrected_mount(inputs: ChainInputs, x: FloatArray, mode: Mode) -> tuple[str
     if mount is None:
         return None
     _fault, faulty = rotation_verdict(x, mode, inputs)
-    recorded = Rotation.from_quat(mount.q_parent_link)
-    right = recorded if faulty == "as_run" else recorded * Rotation.from_rotvec(x)
-    return mount.parent, mount.link, mount.t_parent_link, right.as_euler("xyz")
+    recorded = mount.q_parent_link
+    right = recorded if faulty == "as_run" else quat_multiply(recorded, quat_from_rotvec(np.asarray(x, dtype=float)))
+    return mount.parent, mount.link, mount.t_parent_link, quat_to_rpy(right)
 
 
 def _origin(xyz: FloatArray, rpy: FloatArray) -> str:
@@ -66,109 +67,128 @@ def fix_for(
     *, context: FixContext | None = None,
 ) -> str:
     """One actionable sentence for a finding (``context`` says where the camera model and depths came from)."""
-    frames = inputs.frames
     context = context or FixContext()
     if isinstance(estimate, RotationEstimate):
-        mount = corrected_mount(inputs, x, mode)
-        if mount is None:
-            return (f"Correct the camera-to-body rotation by {estimate.angle_deg:.2f} deg about "
-                    f"{axis_text(estimate.axis)} ({estimate.axis_frame} frame).")
-        parent, child, xyz, rpy = mount
-        if estimate.faulty == "as run" and fault == Fault.ROTATION_ERROR:
-            # Logged points against the log cannot say which of the two mounts is the calibrated one.
-            used = Rotation.from_quat(inputs.mount.q_parent_link) * Rotation.from_rotvec(x)  # type: ignore[union-attr]
-            angle = estimate.angle_deg
-            return (f"The robot's mount and the recorded {parent} -> {child} differ by {angle:.2f} deg; "
-                    f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
-                    f"used {_origin(xyz, used.as_euler('xyz'))}: keep the calibrated one in both (a reference or a "
-                    f"static target in the log tells which).")
-        if estimate.faulty == "as run":
-            lead = (f"The robot's camera-to-body step used a wrong mount; use the recorded {parent} -> {child} "
-                    f"(rotation included)")
-        else:
-            lost = " has no rotation" if fault == Fault.MISSING_ROTATION else " is off"
-            lead = f"The recorded mount {parent} -> {child}{lost}; publish (or calibrate to) the corrected one"
-        return f"{lead}: {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
+        return _rotation_fix(fault, estimate, inputs, x, mode)
     if isinstance(estimate, LatencyEstimate):
-        offset_ms = estimate.offset_s * 1e3
-        if hop == HopName.CAMERA_TO_BODY:
-            return (
-                f"Look up {frames.body} <- {frames.camera} at the detection's header.stamp: the camera pose used was "
-                f"{abs(offset_ms):.1f} ms {'older' if offset_ms < 0 else 'newer'} than the image."
-            )
-        if mode == "correction":
-            return (
-                f"The detections are stamped {abs(offset_ms):.1f} ms {'late' if offset_ms < 0 else 'early'}: "
-                f"correct the camera clock or its stamping offset, then look up {frames.world} <- {frames.body} "
-                "at header.stamp."
-            )
-        return (
-            f"Look up {frames.world} <- {frames.body} at the detection's header.stamp (tf2 lookupTransform with "
-            f"that time, waiting for the transform) instead of the pose {abs(offset_ms):.1f} ms "
-            f"{'older' if offset_ms < 0 else 'newer'} that was used."
-        )
-    if isinstance(estimate, PermutationEstimate) and mode == "correction":
-        return (f"The recorded rotation above {frames.camera} permutes its axes as {_rows(estimate)}: "
-                f"publish the REP-103 optical rotation (q_xyzw -0.5 0.5 -0.5 0.5, rpy -pi/2 0 -pi/2) from the camera "
-                f"link to {frames.camera}.")
+        return _latency_fix(hop, estimate, inputs, mode)
     if isinstance(estimate, PermutationEstimate):
-        return (
-            f"Transform the point from {frames.camera} (x right, y down, z forward, the detection's header.frame_id), "
-            f"not from a body-convention camera frame; the axes used were permuted as {_rows(estimate)}."
-        )
-    if isinstance(estimate, ScaleEstimate) and estimate.name == "factor":
-        return _depth_fix(estimate.value, context)
-    if isinstance(estimate, ScaleEstimate) and mode == "correction":
-        scale = estimate.value
-        cam = inputs.camera
-        principal = estimate.variant == "resolution"
-        cx, cy = (cam.cx / scale, cam.cy / scale) if principal else (cam.cx, cam.cy)
-        other = "resolution" if principal else "lens"
-        fitted = f"fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, cx {cx:.1f}, cy {cy:.1f}"
-        if context.camera_from_file:
-            return (f"The intrinsics from {context.camera_source} are those of another {other} (focal length "
-                    f"x{scale:.4g}); the K that fits is {fitted}: put the calibration of the stream the detections "
-                    f"came from in that file.")
-        recorded = f"CameraInfo on {context.camera_source}" if context.camera_source else "CameraInfo"
-        return (f"The recorded {recorded} has the K of another {other} (focal length x{scale:.4g}); the K that "
-                f"fits is {fitted}: publish the calibration of the stream the detections came from.")
+        return _permutation_fix(estimate, inputs, mode)
     if isinstance(estimate, ScaleEstimate):
-        scale = estimate.value
+        return _scale_fix(estimate, inputs, mode, context)
+    if isinstance(estimate, FrameEstimate):
+        return _frame_fix(fault, estimate, inputs, mode)
+    if isinstance(estimate, InvertedEstimate):
+        return _inverted_fix(hop, estimate, inputs)
+    return "No fix known for this fault."
+
+
+def _rotation_fix(fault: Fault, estimate: RotationEstimate, inputs: ChainInputs, x: FloatArray, mode: Mode) -> str:
+    mount = corrected_mount(inputs, x, mode)
+    if mount is None:
+        return (f"Correct the camera-to-body rotation by {estimate.angle_deg:.2f} deg about "
+                f"{axis_text(estimate.axis)} ({estimate.axis_frame} frame).")
+    parent, child, xyz, rpy = mount
+    if estimate.faulty == "as run" and fault == Fault.ROTATION_ERROR:
+        # Logged points against the log cannot say which of the two mounts is the calibrated one.
+        used = quat_to_rpy(quat_multiply(inputs.mount.q_parent_link,  # type: ignore[union-attr]
+                                         quat_from_rotvec(np.asarray(x, dtype=float))))
+        angle = estimate.angle_deg
+        return (f"The robot's mount and the recorded {parent} -> {child} differ by {angle:.2f} deg; "
+                f"the recorded one is {_origin(xyz, rpy)} (`{_publisher(parent, child, xyz, rpy)}`), the robot "
+                f"used {_origin(xyz, used)}: keep the calibrated one in both (a reference or a "
+                f"static target in the log tells which).")
+    if estimate.faulty == "as run":
+        lead = (f"The robot's camera-to-body step used a wrong mount; use the recorded {parent} -> {child} "
+                f"(rotation included)")
+    else:
+        lost = " has no rotation" if fault == Fault.MISSING_ROTATION else " is off"
+        lead = f"The recorded mount {parent} -> {child}{lost}; publish (or calibrate to) the corrected one"
+    return f"{lead}: {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
+
+
+def _latency_fix(hop: HopName, estimate: LatencyEstimate, inputs: ChainInputs, mode: Mode) -> str:
+    frames = inputs.frames
+    offset_ms = estimate.offset_s * 1e3
+    if hop == HopName.CAMERA_TO_BODY:
         return (
-            f"Use the CameraInfo of the stream the detections came from ({inputs.camera.width}x{inputs.camera.height}, "
-            f"fx {inputs.camera.fx:.1f}); the K used had its focal length scaled by {scale:.4g}."
+            f"Look up {frames.body} <- {frames.camera} at the detection's header.stamp: the camera pose used was "
+            f"{abs(offset_ms):.1f} ms {'older' if offset_ms < 0 else 'newer'} than the image."
         )
-    if isinstance(estimate, FrameEstimate) and estimate.hop == HopName.CAMERA_TO_BODY.value:
+    if mode == "correction":
+        return (
+            f"The detections are stamped {abs(offset_ms):.1f} ms {'late' if offset_ms < 0 else 'early'}: "
+            f"correct the camera clock or its stamping offset, then look up {frames.world} <- {frames.body} "
+            "at header.stamp."
+        )
+    return (
+        f"Look up {frames.world} <- {frames.body} at the detection's header.stamp (tf2 lookupTransform with "
+        f"that time, waiting for the transform) instead of the pose {abs(offset_ms):.1f} ms "
+        f"{'older' if offset_ms < 0 else 'newer'} that was used."
+    )
+
+
+def _permutation_fix(estimate: PermutationEstimate, inputs: ChainInputs, mode: Mode) -> str:
+    camera = inputs.frames.camera
+    if mode == "correction":
+        return (f"The recorded rotation above {camera} permutes its axes as {_rows(estimate)}: "
+                f"publish the REP-103 optical rotation (q_xyzw -0.5 0.5 -0.5 0.5, rpy -pi/2 0 -pi/2) from the camera "
+                f"link to {camera}.")
+    return (
+        f"Transform the point from {camera} (x right, y down, z forward, the detection's header.frame_id), "
+        f"not from a body-convention camera frame; the axes used were permuted as {_rows(estimate)}."
+    )
+
+
+def _scale_fix(estimate: ScaleEstimate, inputs: ChainInputs, mode: Mode, context: FixContext) -> str:
+    scale = estimate.value
+    cam = inputs.camera
+    if estimate.name == "factor":
+        return _depth_fix(scale, context)
+    if mode != "correction":
+        return (f"Use the CameraInfo of the stream the detections came from ({cam.width}x{cam.height}, "
+                f"fx {cam.fx:.1f}); the K used had its focal length scaled by {scale:.4g}.")
+    principal = estimate.variant == "resolution"
+    cx, cy = (cam.cx / scale, cam.cy / scale) if principal else (cam.cx, cam.cy)
+    other = "resolution" if principal else "lens"
+    fitted = f"fx {cam.fx / scale:.1f}, fy {cam.fy / scale:.1f}, cx {cx:.1f}, cy {cy:.1f}"
+    if context.camera_from_file:
+        return (f"The intrinsics from {context.camera_source} are those of another {other} (focal length "
+                f"x{scale:.4g}); the K that fits is {fitted}: put the calibration of the stream the detections "
+                f"came from in that file.")
+    recorded = f"CameraInfo on {context.camera_source}" if context.camera_source else "CameraInfo"
+    return (f"The recorded {recorded} has the K of another {other} (focal length x{scale:.4g}); the K that "
+            f"fits is {fitted}: publish the calibration of the stream the detections came from.")
+
+
+def _frame_fix(fault: Fault, estimate: FrameEstimate, inputs: ChainInputs, mode: Mode) -> str:
+    frames = inputs.frames
+    if estimate.hop == HopName.CAMERA_TO_BODY.value:
         return _camera_frame_fix(estimate, frames.body, mode)
-    if isinstance(estimate, FrameEstimate) and frames.body in (estimate.used, estimate.meant):
+    if frames.body in (estimate.used, estimate.meant):
         if mode == "correction":
             return (f"The recorded chain puts the body at {estimate.used!r} where the camera hangs from "
                     f"{estimate.meant!r}: transform through {estimate.meant!r}.")
         return (f"Look up {frames.world} <- {estimate.meant} (tf2 lookupTransform(target={frames.world}, "
                 f"source={estimate.meant}, header.stamp)), not {frames.world} <- {estimate.used}: the points are "
                 f"{estimate.meant} points{_edges_text(estimate)}.")
-    if isinstance(estimate, FrameEstimate) and fault == Fault.WRONG_WORLD_FRAME:
-        return (
-            f"Transform into {estimate.meant!r}, not {estimate.used!r}: the error follows the map <-> odom drift."
-        )
-    if isinstance(estimate, FrameEstimate):
-        dropped = f" (the path differs by {_skipped_text(estimate)})" if estimate.skipped else ""
-        return f"At {estimate.hop}, look up {estimate.meant!r}, not {estimate.used!r}{dropped}."
-    if isinstance(estimate, InvertedEstimate) and estimate.edge is not None:
+    if fault == Fault.WRONG_WORLD_FRAME:
+        return f"Transform into {estimate.meant!r}, not {estimate.used!r}: the error follows the map <-> odom drift."
+    dropped = f" (the path differs by {_skipped_text(estimate)})" if estimate.skipped else ""
+    return f"At {estimate.hop}, look up {estimate.meant!r}, not {estimate.used!r}{dropped}."
+
+
+def _inverted_fix(hop: HopName, estimate: InvertedEstimate, inputs: ChainInputs) -> str:
+    frames = inputs.frames
+    if estimate.edge is not None:
         parent, child = estimate.edge
         return (f"The edge {parent} -> {child} is recorded inverted (T_{child}_{parent} where T_{parent}_{child} is "
                 f"meant): publish it the other way round (invert its translation and rotation).")
-    if isinstance(estimate, InvertedEstimate):
-        if hop == HopName.CAMERA_TO_BODY:
-            return (
-                f"Use T_{frames.body}_{frames.camera} = lookupTransform(target={frames.body}, source={frames.camera}), "
-                f"not its inverse."
-            )
-        return (
-            f"Use T_{frames.world}_{frames.body} = lookupTransform(target={frames.world}, source={frames.body}), "
-            f"not its inverse."
-        )
-    return "No fix known for this fault."
+    if hop == HopName.CAMERA_TO_BODY:
+        return (f"Use T_{frames.body}_{frames.camera} = lookupTransform(target={frames.body}, source={frames.camera}), "
+                f"not its inverse.")
+    return (f"Use T_{frames.world}_{frames.body} = lookupTransform(target={frames.world}, source={frames.body}), "
+            f"not its inverse.")
 
 
 def _depth_fix(factor: float, context: FixContext) -> str:

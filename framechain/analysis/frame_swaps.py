@@ -19,13 +19,20 @@ from collections import deque
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.estimates import FrameEstimate
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.rotations import (
+    quat_angle,
+    quat_angle_between,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_rotate,
+    quat_to_matrix,
+)
 from framechain.replay import TransformBuffer
 
 #: How far (edges in the frame tree) from the chain's frame a frame may be to be a candidate.
@@ -85,7 +92,7 @@ def _skipped_edges(buffer: TransformBuffer, used: str, meant: str) -> tuple[tupl
 
 def is_signed_permutation(quat_xyzw: FloatArray) -> bool:
     """Whether a rotation permutes and flips axes (every matrix entry 0 or +-1), the identity excluded."""
-    matrix = Rotation.from_quat(quat_xyzw).as_matrix()
+    matrix = quat_to_matrix(quat_xyzw)
     entries = np.abs(matrix)
     whole = np.all((entries < PERMUTATION_TOLERANCE) | (np.abs(entries - 1.0) < PERMUTATION_TOLERANCE))
     return bool(whole) and not np.allclose(matrix, np.eye(3), atol=PERMUTATION_TOLERANCE)
@@ -95,7 +102,7 @@ def camera_swap_fault(quat_xyzw: FloatArray) -> Fault:
     """The catalogue entry of looking up a frame whose rotation from the camera frame is ``quat_xyzw``."""
     if is_signed_permutation(quat_xyzw):
         return Fault.AXIS_FLIP
-    if np.rad2deg(Rotation.from_quat(quat_xyzw).magnitude()) > SAME_ROTATION_DEG:
+    if np.rad2deg(quat_angle(quat_xyzw)) > SAME_ROTATION_DEG:
         return Fault.ROTATION_ERROR
     return Fault.WRONG_CAMERA_FRAME
 
@@ -162,7 +169,7 @@ def body_frame_candidates(inputs: ChainInputs) -> list[str]:
         if relative is None:
             continue
         translation, quat = relative
-        if np.linalg.norm(translation) < SAME_PLACE_M and np.rad2deg(Rotation.from_quat(quat).magnitude()) < 1e-3:
+        if np.linalg.norm(translation) < SAME_PLACE_M and np.rad2deg(quat_angle(quat)) < 1e-3:
             continue
         out.append(frame)
     return out
@@ -227,16 +234,15 @@ def swap_for_rotation(inputs: ChainInputs, rotvec_mount: FloatArray) -> str | No
     A rotation fit that lands on the rotation of a path edge (the REP-103 optical rotation, say)
     is that edge skipped, not a mis-calibrated mount: the caller then prefers the swap.
     """
-    fitted = Rotation.from_rotvec(np.asarray(rotvec_mount, dtype=float))
     q_link_cam = inputs.mount.q_link_cam if inputs.mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
     # R_bc' = R_bc exp(R_cam_link x): the change of the camera rotation in the camera frame.
-    change_cam = Rotation.from_rotvec(Rotation.from_quat(q_link_cam).inv().apply(fitted.as_rotvec()))
+    change_cam = quat_from_rotvec(quat_rotate(quat_conjugate(q_link_cam), np.asarray(rotvec_mount, dtype=float)))
     stamp = int(inputs.stamp_ns[0])
     for frame, _fault in camera_frame_candidates(inputs):
         relative = _relative(inputs.buffer, inputs.frames.camera, frame, stamp)
         if relative is None:
             continue
         # Looking up ``frame`` uses R_b_frame = R_bc R_c_frame: the camera rotation changed by R_c_frame.
-        if np.rad2deg((Rotation.from_quat(relative[1]).inv() * change_cam).magnitude()) < 2.0:
+        if np.rad2deg(quat_angle_between(relative[1], change_cam)) < 2.0:
             return frame
     return None

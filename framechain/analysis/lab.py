@@ -14,10 +14,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.config.chain import ChainFrames
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
+from framechain.geometry.rotations import quat_from_rpy
 from framechain.replay import replay
 from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 
@@ -71,7 +71,7 @@ def tilt_sweep(pitches_deg: Sequence[float], depths_m: Sequence[float]) -> list[
             "camera_link",
             stamps,
             np.tile(MOUNT_XYZ, (n, 1)),
-            Rotation.from_euler("y", mount_pitch[:, None], degrees=True).as_quat(),
+            quat_from_rpy(np.stack([np.zeros(n), np.deg2rad(mount_pitch), np.zeros(n)])).T,
         )
         timeline = Timeline(transforms=TransformTable.concat([fixed, mount]), cameras=camera, observations=observations)
         worlds.append(replay(timeline, frames).p_world)

@@ -121,10 +121,12 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _rpy_deg(quat_xyzw: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Fixed-axis roll, pitch, yaw in degrees (tf2's getRPY)."""
-    from scipy.spatial.transform import Rotation
+    """Fixed-axis roll, pitch, yaw in degrees (tf2's getRPY) of one quaternion (4,) or rows (N, 4)."""
+    import numpy as np
 
-    out: npt.NDArray[np.float64] = Rotation.from_quat(quat_xyzw).as_euler("xyz", degrees=True)
+    from framechain.geometry.rotations import quat_to_rpy
+
+    out: npt.NDArray[np.float64] = np.degrees(quat_to_rpy(quat_xyzw.T).T)
     return out
 
 

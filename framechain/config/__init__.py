@@ -1,5 +1,7 @@
 """The configuration room: what a user writes (CHAIN.yaml, robot.yaml, camera calibration files),
-parsed and checked, every mistake one line naming the file, the key and the value."""
+parsed and checked through one schema (:mod:`framechain.config.schema`), every number checked for
+what it can physically be (:mod:`framechain.config.plausible`), every mistake one line naming the
+file, the key and the value (:class:`ConfigError`)."""
 
 from framechain.config.chain import (
     CalibrationSource,
@@ -12,9 +14,10 @@ from framechain.config.chain import (
     MountEdge,
     PoseTopic,
 )
-from framechain.config.errors import ChainConfigError, ConfigError
+from framechain.config.errors import CalibrationError, ChainConfigError, ConfigError, RobotConfigError
 
 __all__ = [
+    "CalibrationError",
     "CalibrationSource",
     "ChainConfig",
     "ChainConfigError",
@@ -26,4 +29,5 @@ __all__ = [
     "MarkerSpec",
     "MountEdge",
     "PoseTopic",
+    "RobotConfigError",
 ]

@@ -18,7 +18,8 @@ One YAML mapping per camera (a file of its own, or inline under ``cameras:`` in 
     mount:
       parent: gripper_link             # the URDF link (or the world frame for a scene camera)
       xyz: [0.0, -0.03, 0.02]          # metres
-      rpy: [0.0, 0.0, 0.0]             # radians, fixed axes x-y-z as URDF; or quat_xyzw: [x, y, z, w]
+      rpy: [0.0, 0.0, 0.0]             # radians, fixed axes x-y-z as URDF; or quat_xyzw: [x, y, z, w],
+                                       # or rotvec: [x, y, z] (radians)
       optical: false                   # required. true: the mount gives the optical frame (RDF)
                                        # directly. false: it gives a camera_link (FLU), and the
                                        # REP-103 rotation q_xyzw = (-0.5, 0.5, -0.5, 0.5) to the
@@ -45,24 +46,22 @@ camera names to ``camera_model: pinhole``, ``intrinsics: [fx, fy, cx, cy]``, ``d
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
-from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray
+from framechain.config import plausible
+from framechain.config.errors import CalibrationError
+from framechain.config.schema import Section, finite_number, read_yaml, show
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
-from framechain.timeline import CameraTable, FramechainError
-
-#: camera_link (FLU) -> optical frame (RDF), REP-103: roll = -pi/2, yaw = -pi/2.
+from framechain.timeline import CameraTable
 
 __all__ = [
-    "OPTICAL_FROM_LINK_QUAT_XYZW",
     "CalibrationError",
     "CameraCalibration",
     "CameraTiming",
@@ -72,15 +71,6 @@ __all__ = [
     "load_calibration",
     "read_intrinsics_file",
 ]
-
-
-class CalibrationError(FramechainError):
-    """A calibration file is unreadable, incomplete or inconsistent; names the file and the key."""
-
-    def __init__(self, source: str, what: str) -> None:
-        self.source = source
-        self.what = what
-        super().__init__(f"{source}: {what}")
 
 
 @dataclass(frozen=True)
@@ -96,6 +86,8 @@ class Intrinsics:
     distortion_model: str = "plumb_bob"
     distortion: tuple[float, ...] = ()
     source: str = ""
+    #: Values that are plausible but unusual (fx far from fy), one line each.
+    notes: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def K(self) -> FloatArray:
@@ -143,6 +135,8 @@ class CameraCalibration:
     timing: CameraTiming = field(default_factory=CameraTiming)
     depth: DepthSource | None = None
     source: str = ""
+    #: Values that are plausible but unusual, one line each (the intrinsics' included).
+    notes: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def optical_frame(self) -> str:
@@ -172,160 +166,115 @@ class CameraCalibration:
 
 
 _TOP_KEYS = {"name", "frame", "intrinsics", "intrinsics_file", "mount", "video_key", "timing", "depth"}
+_INTRINSICS_KEYS = {"fx", "fy", "cx", "cy", "width", "height", "distortion_model", "distortion"}
+_MOUNT_KEYS = {"parent", "xyz", "rpy", "quat_xyzw", "rotvec", "optical"}
 
 
 def load_calibration(
-    raw: str | Path | Mapping[str, Any], *, name: str | None = None, base_dir: str | Path | None = None
+    raw: str | Path | Mapping[str, Any], *, name: str | None = None, base_dir: str | Path | None = None,
+    source: str | None = None, where: str = "",
 ) -> CameraCalibration:
     """Read a camera calibration (a YAML file path, or an already-parsed mapping).
 
     ``name`` defaults to the file's ``name`` key, else the file stem. Relative paths in the
-    calibration resolve against the file's directory (for a mapping: ``base_dir``).
+    calibration resolve against the file's directory (for a mapping: ``base_dir``). A mapping
+    found inside another file (robot.yaml's ``cameras:``) names that file as ``source`` and its
+    path in it as ``where``.
     """
     if isinstance(raw, Mapping):
-        source = f"calibration {name or raw.get('name', '?')}"
-        data: Mapping[str, Any] = raw
+        source = source or f"calibration {name or raw.get('name', '?')}"
+        data: Any = raw
         folder = Path(base_dir) if base_dir is not None else Path.cwd()
+        stem = ""
     else:
         path = Path(raw)
         if base_dir is not None and not path.is_absolute():
             path = Path(base_dir) / path
-        source = str(path)
-        data = _read_yaml(path)
-        folder = path.parent
-        if not isinstance(data, Mapping):
-            raise CalibrationError(source, "expected a mapping at the top level")
-        name = name or str(data.get("name") or path.stem)
-    unknown = sorted(set(data) - _TOP_KEYS)
-    if unknown:
-        raise CalibrationError(source, f"unknown keys {unknown}; known keys are {sorted(_TOP_KEYS)}")
-    cam_name = str(name or data.get("name") or "")
+        source, data, folder, stem = str(path), _read_yaml(path), path.parent, path.stem
+    top = Section(data, source=source, where=where, known=_TOP_KEYS, error=CalibrationError,
+                  what="a camera calibration mapping")
+    cam_name = name or top.name("name", what="a camera name") or stem
     if not cam_name:
-        raise CalibrationError(source, "the camera has no name")
-    if "intrinsics" in data and "intrinsics_file" in data:
-        raise CalibrationError(source, "give either intrinsics or intrinsics_file, not both")
-    if "intrinsics" in data:
-        intrinsics = _inline_intrinsics(data["intrinsics"], source)
-    elif "intrinsics_file" in data:
-        ipath = Path(str(data["intrinsics_file"]))
-        intrinsics = read_intrinsics_file(ipath if ipath.is_absolute() else folder / ipath)
-    else:
-        raise CalibrationError(
-            source, "no intrinsics: give intrinsics: {fx, fy, cx, cy, width, height} or intrinsics_file"
-        )
-    if "mount" not in data:
-        raise CalibrationError(source, "no mount: give mount: {parent, xyz, rpy | quat_xyzw, optical}")
-    mount = _mount(data["mount"], source)
-    timing_raw = data.get("timing") or {}
-    _check(timing_raw, {"timestamp_column", "offset_s"}, source, "timing")
-    offset = timing_raw.get("offset_s", 0.0)
-    if not isinstance(offset, int | float) or not math.isfinite(offset):
-        raise CalibrationError(source, f"timing.offset_s must be a number of seconds, got {offset!r}")
-    column = timing_raw.get("timestamp_column")
-    timing = CameraTiming(None if column is None else str(column), float(offset))
-    depth = None
-    if data.get("depth") is not None:
-        depth_raw = data["depth"]
-        _check(depth_raw, {"feature", "scale_m"}, source, "depth")
-        if "feature" not in depth_raw:
-            raise CalibrationError(source, "depth needs feature: the dataset's depth image feature")
-        scale = depth_raw.get("scale_m", 1.0)
-        if not isinstance(scale, int | float) or not scale > 0:
-            raise CalibrationError(source, f"depth.scale_m must be a positive number, got {scale!r}")
-        depth = DepthSource(str(depth_raw["feature"]), float(scale))
-    video_key = data.get("video_key")
+        top.fail("the camera has no name")
+    intrinsics = _intrinsics(top, folder)
+    if "mount" not in top:
+        top.fail("no mount: give mount: {parent, xyz, rpy | quat_xyzw | rotvec, optical}")
+    mount = _mount(top.section("mount", _MOUNT_KEYS))
+    timing = top.section("timing", {"timestamp_column", "offset_s"})
+    offset_s = timing.number("offset_s", 0.0, unit="s", check=plausible.camera_offset)
     return CameraCalibration(
-        name=cam_name, intrinsics=intrinsics, mount=mount, frame=str(data.get("frame") or "").lstrip("/"),
-        video_key=None if video_key is None else str(video_key), timing=timing, depth=depth, source=source,
+        name=cam_name, intrinsics=intrinsics, mount=mount, frame=top.frame("frame") or "",
+        video_key=top.name("video_key", what="a feature name"),
+        timing=CameraTiming(timing.name("timestamp_column", what="a column name"), offset_s or 0.0),
+        # Inline intrinsics noted into this file's notes already; a file's own come with its intrinsics.
+        depth=_depth(top), source=source, notes=tuple(dict.fromkeys((*intrinsics.notes, *top.notes))),
     )
+
+
+def _intrinsics(top: Section, folder: Path) -> Intrinsics:
+    """Inline ``intrinsics``, or ``intrinsics_file`` relative to ``folder``."""
+    if "intrinsics" in top and "intrinsics_file" in top:
+        top.fail("give either intrinsics or intrinsics_file, not both")
+    if "intrinsics" in top:
+        return _inline_intrinsics(top.section("intrinsics", _INTRINSICS_KEYS))
+    if "intrinsics_file" not in top:
+        top.fail("no intrinsics: give intrinsics: {fx, fy, cx, cy, width, height} or intrinsics_file")
+    path = Path(top.name("intrinsics_file", what="a file name") or "")
+    return read_intrinsics_file(path if path.is_absolute() else folder / path)
+
+
+def _depth(top: Section) -> DepthSource | None:
+    if "depth" not in top:
+        return None
+    depth = top.section("depth", {"feature", "scale_m"})
+    feature = depth.name("feature", required=True, hint="the dataset's depth image feature", what="a feature name")
+    scale = depth.number("scale_m", 1.0, positive=True, unit="metres per unit", check=plausible.depth_scale)
+    return DepthSource(feature or "", 1.0 if scale is None else scale)
 
 
 def _read_yaml(path: Path) -> Any:
-    try:
-        text = path.read_text()
-    except OSError as err:
-        raise CalibrationError(str(path), f"cannot read calibration ({err.strerror})") from err
-    try:
-        return yaml.load(_strip_opencv_header(text), Loader=_OpenCVLoader)  # a SafeLoader subclass
-    except yaml.YAMLError as err:
-        raise CalibrationError(str(path), f"not valid YAML ({err})") from err
+    return read_yaml(path, error=CalibrationError, what="calibration", loader=_OpenCVLoader,
+                     prepare=_strip_opencv_header)
 
 
-def _check(raw: Any, known: set[str], source: str, where: str) -> None:
-    if not isinstance(raw, Mapping):
-        raise CalibrationError(source, f"{where} must be a mapping, got {type(raw).__name__}")
-    unknown = sorted(set(raw) - known)
-    if unknown:
-        raise CalibrationError(source, f"{where}: unknown keys {unknown}; known keys are {sorted(known)}")
+def _inline_intrinsics(section: Section) -> Intrinsics:
+    fx, fy, cx, cy, width, height = (section.number(k, required=True) or 0.0
+                                     for k in ("fx", "fy", "cx", "cy", "width", "height"))
+    dist = section.get("distortion", [])
+    model = section.name("distortion_model", "plumb_bob" if dist else "none", what="a distortion model name")
+    return _make_intrinsics(section, (fx, fy, cx, cy, width, height), model or "none", dist,
+                            (section.where, section.path("distortion")))
 
 
-def _number(raw: Mapping[str, Any], key: str, source: str, where: str) -> float:
-    if key not in raw:
-        raise CalibrationError(source, f"{where}: missing {key}")
-    value = raw[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise CalibrationError(source, f"{where}.{key} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _vector(raw: Any, n: int, source: str, what: str) -> tuple[float, ...]:
-    try:
-        arr = np.asarray(raw, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise CalibrationError(source, f"{what} must be a list of {n} numbers, got {raw!r}") from None
-    if arr.shape != (n,) or not np.isfinite(arr).all():
-        raise CalibrationError(source, f"{what} must be {n} finite numbers, got {raw!r}")
-    return tuple(float(x) for x in arr)
-
-
-def _inline_intrinsics(raw: Any, source: str) -> Intrinsics:
-    _check(raw, {"fx", "fy", "cx", "cy", "width", "height", "distortion_model", "distortion"}, source, "intrinsics")
-    dist = raw.get("distortion") or []
-    return _make_intrinsics(
-        _number(raw, "fx", source, "intrinsics"), _number(raw, "fy", source, "intrinsics"),
-        _number(raw, "cx", source, "intrinsics"), _number(raw, "cy", source, "intrinsics"),
-        _number(raw, "width", source, "intrinsics"), _number(raw, "height", source, "intrinsics"),
-        str(raw.get("distortion_model") or ("plumb_bob" if dist else "none")), dist, source,
-    )
-
-
-def _make_intrinsics(
-    fx: float, fy: float, cx: float, cy: float, width: float, height: float, model: str, dist: Any, source: str
-) -> Intrinsics:
+def _make_intrinsics(section: Section, pinhole: tuple[float, float, float, float, float, float], model: str,
+                     dist: Any, where: tuple[str, str]) -> Intrinsics:
+    """Intrinsics ``(fx, fy, cx, cy, width, height)`` checked against each other and the image size;
+    ``where`` names the intrinsics and the distortion in messages."""
+    fx, fy, cx, cy, width, height = pinhole
     if not (fx > 0 and fy > 0):
-        raise CalibrationError(source, f"focal lengths fx={fx} fy={fy} must be positive")
-    if not (width >= 1 and height >= 1 and float(width).is_integer() and float(height).is_integer()):
-        raise CalibrationError(source, f"image size {width}x{height} must be positive integers")
-    coeffs = np.asarray(dist if dist is not None else [], dtype=float).reshape(-1)
-    if coeffs.size > 14 or not np.isfinite(coeffs).all():
-        raise CalibrationError(source, f"distortion must be at most 14 finite numbers, got {coeffs.size}")
-    return Intrinsics(fx, fy, cx, cy, int(width), int(height), model, tuple(float(c) for c in coeffs), source)
+        section.fail_in(where[0], f"focal lengths fx={fx} fy={fy} must be positive")
+    if not (1 <= width <= 1e5 and 1 <= height <= 1e5 and float(width).is_integer() and float(height).is_integer()):
+        section.fail_in(where[0], f"image size {width:g}x{height:g} must be whole numbers of pixels")
+    coeffs = dist if isinstance(dist, list | tuple) else [dist]
+    if len(coeffs) > 14 or not all(finite_number(c) for c in coeffs):
+        section.fail_at(where[1], f"must be at most 14 finite numbers, got {show(dist)}")
+    before = len(section.notes)
+    section.check_plausible(where[0], lambda _: plausible.intrinsics(fx, fy, cx, cy, int(width), int(height)), None,
+                            within=True)
+    return Intrinsics(fx, fy, cx, cy, int(width), int(height), model, tuple(float(c) for c in coeffs),
+                      section.source, tuple(section.notes[before:]))
 
 
-def _mount(raw: Any, source: str) -> Mount:
-    _check(raw, {"parent", "xyz", "rpy", "quat_xyzw", "optical"}, source, "mount")
-    if "parent" not in raw:
-        raise CalibrationError(source, "mount: missing parent (the link the camera is mounted on)")
-    if "optical" not in raw or not isinstance(raw["optical"], bool):
-        raise CalibrationError(
-            source,
-            "mount.optical must be stated, true or false: true if the mount gives the optical frame "
-            "(x right, y down, z forward), false if it gives a camera_link (x forward, y left, z up)",
+def _mount(section: Section) -> Mount:
+    parent = section.frame("parent", required=True, hint="the link the camera is mounted on")
+    if not isinstance(section.get("optical"), bool):
+        section.fail_at(
+            section.path("optical"),
+            "must be stated, true or false: true if the mount gives the optical frame (x right, y down, z "
+            "forward), false if it gives a camera_link (x forward, y left, z up)",
         )
-    xyz = _vector(raw.get("xyz", [0.0, 0.0, 0.0]), 3, source, "mount.xyz")
-    if "rpy" in raw and "quat_xyzw" in raw:
-        raise CalibrationError(source, "mount: give either rpy or quat_xyzw, not both")
-    if "quat_xyzw" in raw:
-        q = np.asarray(_vector(raw["quat_xyzw"], 4, source, "mount.quat_xyzw"))
-        norm = float(np.linalg.norm(q))
-        if abs(norm - 1.0) > 1e-3:
-            raise CalibrationError(source, f"mount.quat_xyzw has norm {norm:.6g}, not 1 (order is x, y, z, w)")
-        q = q / norm
-    else:
-        rpy = _vector(raw.get("rpy", [0.0, 0.0, 0.0]), 3, source, "mount.rpy")
-        q = Rotation.from_euler("xyz", rpy).as_quat()  # URDF rpy: fixed axes, roll about x first
-    quat = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-    return Mount(str(raw["parent"]).lstrip("/"), (xyz[0], xyz[1], xyz[2]), quat, bool(raw["optical"]))
+    pose = section.pose(rotation_required=False)
+    return Mount(parent or "", pose.xyz, pose.quat_xyzw, bool(section.get("optical")))
 
 
 # ------------------------------------------------------------------------------ intrinsics files
@@ -336,10 +285,16 @@ class _OpenCVLoader(yaml.SafeLoader):
 
 
 def _opencv_matrix(loader: yaml.SafeLoader, node: yaml.Node) -> list[list[float]]:
-    assert isinstance(node, yaml.MappingNode)
+    if not isinstance(node, yaml.MappingNode):
+        raise yaml.constructor.ConstructorError(None, None, "an opencv-matrix must be a mapping", node.start_mark)
     m = loader.construct_mapping(node, deep=True)
-    rows, cols = int(m["rows"]), int(m["cols"])
-    data = np.asarray(m["data"], dtype=float).reshape(rows, cols)
+    try:
+        rows, cols = int(m["rows"]), int(m["cols"])
+        data = np.asarray(m["data"], dtype=float).reshape(rows, cols)
+    except (KeyError, TypeError, ValueError, OverflowError) as err:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"an opencv-matrix needs rows, cols and rows x cols numbers as data ({err})",
+            node.start_mark) from None
     out: list[list[float]] = data.tolist()
     return out
 
@@ -348,13 +303,9 @@ _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", _opencv_matrix)
 
 
 def _strip_opencv_header(text: str) -> str:
-    """OpenCV writes ``%YAML:1.0`` (not valid YAML 1.1) on its first line: drop it."""
-    lines = text.splitlines()
-    if lines and lines[0].startswith("%YAML:"):
-        lines = lines[1:]
-        if lines and lines[0].strip() == "---":
-            lines = lines[1:]
-    return "\n".join(lines)
+    """OpenCV writes ``%YAML:1.0`` (not valid YAML 1.1) on its first line: make it a comment (so that
+    YAML's line numbers stay the file's)."""
+    return "#" + text if text.startswith("%YAML:") else text
 
 
 def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intrinsics:
@@ -368,43 +319,64 @@ def read_intrinsics_file(path: str | Path, *, camera: str | None = None) -> Intr
     source = str(p)
     if not p.is_file():  # the resolved path: a relative name alone does not say where it was looked for
         raise CalibrationError(str(p.resolve()), "calibration file not found")
-    raw = _read_yaml(p)
-    if not isinstance(raw, Mapping):
-        raise CalibrationError(source, "expected a mapping of calibration keys")
-    if _is_kalibr(raw):
-        return _kalibr_camera(raw, camera, source)
-    named = raw.get("camera_name")
+    top = Section(_read_yaml(p), source=source, error=CalibrationError)
+    if _is_kalibr(top.raw):
+        return _kalibr_camera(top, camera)
+    named = top.get("camera_name")
     if camera is not None and named is not None and str(named) != camera:
-        raise CalibrationError(source, f"camera {camera!r} is not in the file; it holds camera_name {named!r}")
-    K = _first(raw, ("camera_matrix", "K", "cameraMatrix", "camera_matrix_left"))
-    if K is None:
-        raise CalibrationError(source, "no camera matrix (camera_matrix, K or cameraMatrix)")
+        top.fail(f"camera {camera!r} is not in the file; it holds camera_name {named!r}")
+    key = _first(top, ("camera_matrix", "K", "cameraMatrix", "camera_matrix_left"))
+    if key is None:
+        top.fail("no camera matrix (camera_matrix, K or cameraMatrix)")
+    K = top.get(key)
     if isinstance(K, Mapping):  # ROS: {rows, cols, data}
         if "data" not in K:
-            raise CalibrationError(source, "camera_matrix has no data")
+            top.fail(f"{key} has no data")
         K = K["data"]
-    kmat = np.asarray(_vector(K, 9, source, "camera_matrix"), dtype=float).reshape(3, 3)
-    dist = _first(raw, ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs", "distortion"))
+    if isinstance(K, list) and all(isinstance(row, list) for row in K):  # OpenCV: rows of the matrix
+        K = [x for row in K for x in row]
+    kmat = np.asarray(top.vector_value(K, 9, key), dtype=float).reshape(3, 3)
+    coeffs = _distortion(top)
+    width, height = _image_size(top)
+    model = top.name("distortion_model", what="a distortion model name") or (
+        "plumb_bob" if len(coeffs) in (4, 5) else "rational_polynomial" if len(coeffs) == 8 else
+        "none" if not coeffs else "plumb_bob")
+    if abs(kmat[0, 1]) > 1e-9 or abs(kmat[2, 2] - 1.0) > 1e-9:
+        top.fail(f"camera matrix {kmat.tolist()} is not a pinhole K (skew 0, K[2,2] = 1)")
+    pinhole = (float(kmat[0, 0]), float(kmat[1, 1]), float(kmat[0, 2]), float(kmat[1, 2]), width, height)
+    return _make_intrinsics(top, pinhole, model, coeffs, (key, _first(top, _DISTORTION_KEYS) or "distortion"))
+
+
+_DISTORTION_KEYS = ("distortion_coefficients", "D", "dist_coeffs", "distCoeffs", "distortion")
+
+
+def _distortion(top: Section) -> list[Any]:
+    key = _first(top, _DISTORTION_KEYS)
+    dist = top.get(key) if key is not None else []
     if isinstance(dist, Mapping):
         dist = dist.get("data", [])
-    coeffs = np.asarray(dist if dist is not None else [], dtype=float).reshape(-1)
-    width = _first(raw, ("image_width", "width", "imageWidth"))
-    height = _first(raw, ("image_height", "height", "imageHeight"))
-    if width is None or height is None:
-        size = _first(raw, ("image_size", "imageSize"))
-        if size is not None:
-            width, height = np.asarray(size, dtype=float).reshape(-1)[:2]
-        else:
-            raise CalibrationError(source, "no image size (image_width/image_height or width/height)")
-    model = str(raw.get("distortion_model") or ("plumb_bob" if coeffs.size in (4, 5) else
-                                                "rational_polynomial" if coeffs.size == 8 else
-                                                "none" if coeffs.size == 0 else "plumb_bob"))
-    if abs(kmat[0, 1]) > 1e-9 or abs(kmat[2, 2] - 1.0) > 1e-9:
-        raise CalibrationError(source, f"camera matrix {kmat.tolist()} is not a pinhole K (skew 0, K[2,2] = 1)")
-    return _make_intrinsics(
-        float(kmat[0, 0]), float(kmat[1, 1]), float(kmat[0, 2]), float(kmat[1, 2]),
-        float(width), float(height), model, coeffs, source,
-    )
+    if isinstance(dist, list) and dist and all(isinstance(row, list) for row in dist):  # OpenCV: one row
+        dist = [x for row in dist for x in row]
+    if not isinstance(dist, list):
+        top.fail_at(key or "distortion", f"must be a list of numbers, got {show(dist)}")
+    return dist
+
+
+def _image_size(top: Section) -> tuple[float, float]:
+    width_key = _first(top, ("image_width", "width", "imageWidth"))
+    height_key = _first(top, ("image_height", "height", "imageHeight"))
+    if width_key is not None and height_key is not None:
+        return top.number(width_key) or 0.0, top.number(height_key) or 0.0
+    size_key = _first(top, ("image_size", "imageSize"))
+    if size_key is None:
+        top.fail("no image size (image_width/image_height or width/height)")
+    size = top.get(size_key)
+    if isinstance(size, list) and size and all(isinstance(row, list) for row in size):
+        size = [x for row in size for x in row]
+    if isinstance(size, list) and len(size) > 2:
+        size = size[:2]
+    width, height = top.vector_value(size, 2, size_key, what="[width, height]")
+    return width, height
 
 
 #: Kalibr distortion names -> ROS names (radtan is plumb_bob without k3).
@@ -412,25 +384,17 @@ _KALIBR_DISTORTION = {"radtan": "plumb_bob", "plumb_bob": "plumb_bob", "equidist
                       "fisheye": "equidistant", "rational_polynomial": "rational_polynomial", "none": "none"}
 
 
-def _is_kalibr(raw: Mapping[str, Any]) -> bool:
+def _is_kalibr(raw: Mapping[Any, Any]) -> bool:
     """A camchain: camera names mapping to entries with a Kalibr ``intrinsics`` list."""
     return any(isinstance(v, Mapping) and isinstance(v.get("intrinsics"), list) for v in raw.values())
 
 
-def kalibr_cameras(path: str | Path) -> list[str]:
-    """The camera names of a Kalibr camchain file (empty for other calibration files)."""
-    raw = _read_yaml(Path(path))
-    if not isinstance(raw, Mapping) or not _is_kalibr(raw):
-        return []
-    return [str(k) for k, v in raw.items() if isinstance(v, Mapping)]
-
-
-def _kalibr_camera(raw: Mapping[str, Any], camera: str | None, source: str) -> Intrinsics:
-    entries = {str(k): v for k, v in raw.items() if isinstance(v, Mapping)}
+def _kalibr_camera(top: Section, camera: str | None) -> Intrinsics:
+    entries = {str(k): v for k, v in top.raw.items() if isinstance(v, Mapping)}
     if camera is None:
         if len(entries) != 1:
-            raise CalibrationError(source, f"{len(entries)} cameras ({', '.join(entries)}); pick one with "
-                                   "camera: NAME (or its rostopic or tagtopic)")
+            top.fail(f"{len(entries)} cameras ({', '.join(entries)}); pick one with camera: NAME (or its rostopic or "
+                     "tagtopic)")
         name = next(iter(entries))
     elif camera in entries:
         name = camera
@@ -438,34 +402,31 @@ def _kalibr_camera(raw: Mapping[str, Any], camera: str | None, source: str) -> I
         by_topic = [k for k, v in entries.items() if camera in (v.get("rostopic"), v.get("tagtopic"))]
         if not by_topic:
             listed = ", ".join(f"{k} ({v.get('rostopic', 'no rostopic')})" for k, v in entries.items())
-            raise CalibrationError(source, f"camera {camera!r} is not in the file; its cameras are {listed}")
+            top.fail(f"camera {camera!r} is not in the file; its cameras are {listed}")
         name = by_topic[0]
-    entry = entries[name]
-    where = name
-    model = str(entry.get("camera_model", "pinhole"))
+    entry = top.child(entries[name], name)
+    model = entry.name("camera_model", "pinhole", what="a camera model name")
     if model != "pinhole":
-        raise CalibrationError(source, f"{where}: camera_model {model!r} is not supported (pinhole only)")
-    fx, fy, cx, cy = _vector(entry.get("intrinsics"), 4, source, f"{where}.intrinsics [fx, fy, cx, cy]")
-    if "resolution" not in entry:
-        raise CalibrationError(source, f"{where}: no resolution [width, height]")
-    width, height = _vector(entry["resolution"], 2, source, f"{where}.resolution [width, height]")
-    coeffs = entry.get("distortion_coeffs") or []
-    kalibr_model = str(entry.get("distortion_model") or ("radtan" if coeffs else "none")).lower()
+        entry.fail(f"camera_model {model!r} is not supported (pinhole only)")
+    fx, fy, cx, cy = entry.vector("intrinsics", 4, required=True, hint="[fx, fy, cx, cy]",
+                                  what="[fx, fy, cx, cy], four finite numbers") or (0.0, 0.0, 0.0, 0.0)
+    width, height = entry.vector("resolution", 2, required=True, hint="[width, height]",
+                                 what="[width, height], two finite numbers") or (0.0, 0.0)
+    coeffs = entry.get("distortion_coeffs", [])
+    kalibr_model = str(entry.name("distortion_model", "radtan" if coeffs else "none", what="a distortion model name")
+                       ).lower()
     if kalibr_model not in _KALIBR_DISTORTION:
-        raise CalibrationError(source, f"{where}: distortion_model {kalibr_model!r} is not supported; expected one "
-                               f"of {sorted(_KALIBR_DISTORTION)}")
-    intrinsics = _make_intrinsics(fx, fy, cx, cy, width, height, _KALIBR_DISTORTION[kalibr_model], coeffs,
-                                  f"{source} [{name}]")
+        entry.fail(f"distortion_model {kalibr_model!r} is not supported; expected one of {sorted(_KALIBR_DISTORTION)}")
+    intrinsics = _make_intrinsics(entry, (fx, fy, cx, cy, width, height), _KALIBR_DISTORTION[kalibr_model], coeffs,
+                                  (f"{name}.intrinsics", f"{name}.distortion_coeffs"))
     counts = {"equidistant": (4,), "plumb_bob": (4, 5), "rational_polynomial": (8,), "none": (0,)}
     expected = counts[intrinsics.distortion_model]
     if len(intrinsics.distortion) not in expected:
-        raise CalibrationError(source, f"{where}: {len(intrinsics.distortion)} distortion_coeffs for "
-                               f"{kalibr_model} (expected {' or '.join(map(str, expected))})")
-    return intrinsics
+        entry.fail(f"{len(intrinsics.distortion)} distortion_coeffs for {kalibr_model} (expected "
+                   f"{' or '.join(map(str, expected))})")
+    return replace(intrinsics, source=f"{top.source} [{name}]")
 
 
-def _first(raw: Mapping[str, Any], keys: tuple[str, ...]) -> Any:
-    for key in keys:
-        if key in raw and raw[key] is not None:
-            return raw[key]
-    return None
+def _first(section: Section, keys: tuple[str, ...]) -> str | None:
+    """The first of ``keys`` the section gives."""
+    return next((key for key in keys if key in section), None)

@@ -33,17 +33,16 @@ Calibration, mounts and poses from outside the log (paths relative to the chain 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import yaml
 
+from framechain.config import plausible
 from framechain.config.errors import ChainConfigError
-from framechain.geometry.rotations import quat_from_rotvec, quat_from_rpy
+from framechain.config.schema import ROTATION_KEYS, Section, finite_number, read_yaml, show
 
 
 @dataclass(frozen=True)
@@ -158,12 +157,15 @@ class ChainConfig:
     base_dir: str | None = field(default=None, compare=False)
     #: Where the configuration came from (the chain file's name), to name mounts' sources.
     origin: str = field(default="chain", compare=False)
+    #: Values that are plausible but unusual, one line each (the outputs' notes carry them).
+    notes: tuple[str, ...] = field(default=(), compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain dictionary, as written to CHAIN.yaml (None values dropped)."""
         raw = asdict(self)
         raw.pop("base_dir")
         raw.pop("origin")
+        raw.pop("notes")
         for key in ("calibration", "mounts"):
             if not raw[key]:
                 raw.pop(key)
@@ -193,87 +195,48 @@ class ChainConfig:
     @classmethod
     def from_dict(cls, raw: Mapping[str, Any], *, where: str = "chain",
                   base_dir: str | Path | None = None) -> ChainConfig:
-        """Parse and check a configuration; unknown keys raise :class:`ChainConfigError`.
+        """Parse and check a configuration; a mistake raises :class:`ChainConfigError` naming the key.
 
-        ``base_dir``: where relative paths (calibration files, urdf) live, normally the chain
-        file's directory (None: the working directory).
+        ``where`` names the source (the chain file) in messages; ``base_dir``: where relative paths
+        (calibration files, urdf) live, normally the chain file's directory (None: the working
+        directory). Plausible but unusual values become :attr:`notes`.
         """
-        if not isinstance(raw, Mapping):
-            raise ChainConfigError(f"{where}: expected a mapping at the top level")
-        _check_keys(raw, cls, where, internal=("base_dir", "origin"))
-        evidence_raw = raw.get("evidence") or {}
-        _check_keys(evidence_raw, ChainEvidence, f"{where}: evidence")
-        hops_raw = evidence_raw.get("hops") or {}
-        _check_keys(hops_raw, HopTopics, f"{where}: evidence.hops")
-        point = evidence_raw.get("reference_point")
-        if point is not None:
-            numbers = isinstance(point, list | tuple) and len(point) == 3 and all(
-                isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in point)
-            if not numbers:
-                raise ChainConfigError(
-                    f"{where}: evidence.reference_point must be [x, y, z], three finite numbers in metres; "
-                    f"got {point!r}")
-            point = tuple(float(x) for x in point)
-        frames_raw = raw.get("frames") or {}
-        _check_keys(frames_raw, ChainFrames, f"{where}: frames")
-        topics_raw = dict(raw.get("topics") or {})
-        _check_keys(topics_raw, ChainTopics, f"{where}: topics")
-        if evidence_raw.get("markers") is not None and not topics_raw.get("image"):
-            raise ChainConfigError(f"{where}: evidence.markers needs topics.image (the image topic to find them in)")
-        poses = _pose_topics(topics_raw.pop("odometry", None), f"{where}: topics.odometry")
-        poses += _pose_topics(topics_raw.pop("poses", None), f"{where}: topics.poses")
-        poses = _merge_pose_topics(poses, f"{where}: topics")
+        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes"), error=ChainConfigError)
+        topics = top.section("topics", _keys(ChainTopics))
+        evidence = parse_evidence(top) or ChainEvidence()
+        if evidence.markers is not None and "image" not in topics:
+            top.fail("evidence.markers needs topics.image (the image topic to find them in)")
+        poses = _merge_pose_topics(_pose_topics(topics, "odometry") + _pose_topics(topics, "poses"), topics)
         odometry = poses[0].topic if poses else None
         if len(poses) == 1 and poses[0].child is None:
             poses = []
-        urdf = raw.get("urdf")
-        if urdf is not None and not (isinstance(urdf, str) and urdf.strip()):
-            raise ChainConfigError(f"{where}: urdf must be a file name, got {urdf!r}")
-        budget = raw.get("latency_budget_s", 0.02)
-        if not isinstance(budget, int | float) or budget < 0:
-            raise ChainConfigError(f"{where}: latency_budget_s must be a non-negative number of seconds")
-        robot = raw.get("robot")
+        robot = top.get("robot")
         if robot is not None and not isinstance(robot, Mapping):
-            raise ChainConfigError(f"{where}: robot must be a mapping")
-        frames = ChainFrames(**{k: str(v).lstrip("/") for k, v in frames_raw.items()})
-        if len({frames.camera, frames.body, frames.world}) < 3:
-            raise ChainConfigError(f"{where}: frames camera, body and world must be three different frames, got "
-                                   f"{frames.camera!r}, {frames.body!r}, {frames.world!r}")
+            top.fail_at("robot", f"must be a mapping, got {show(robot)}")
+        budget = latency_budget(top)
+        named = {k: topics.name(k, what="a topic name") for k in _keys(ChainTopics, "odometry", "poses")}
         return cls(
-            frames=frames,
-            topics=ChainTopics(**topics_raw, odometry=odometry, poses=tuple(poses)),
-            evidence=ChainEvidence(
-                hops=HopTopics(**hops_raw),
-                target=evidence_raw.get("target"),
-                reference=evidence_raw.get("reference"),
-                reference_point=point,
-                static_target=bool(evidence_raw.get("static_target", False)),
-                ignore_labels=_ignore_labels(evidence_raw.get("ignore_labels"), f"{where}: evidence.ignore_labels"),
-                static_window_s=_window_s(evidence_raw.get("static_window_s"), f"{where}: evidence.static_window_s"),
-                tag_size_m=_tag_size(evidence_raw.get("tag_size_m"), f"{where}: evidence.tag_size_m"),
-                markers=_marker_spec(evidence_raw.get("markers"), f"{where}: evidence.markers"),
-            ),
-            latency_budget_s=float(budget),
+            frames=_frames(top.section("frames", _keys(ChainFrames))),
+            topics=ChainTopics(**named, odometry=odometry, poses=tuple(poses)),
+            evidence=evidence,
+            latency_budget_s=0.02 if budget is None else budget,
             robot=robot,
-            calibration=_calibration_sources(raw.get("calibration"), f"{where}: calibration"),
-            mounts=tuple(_mount_edge(m, f"{where}: mounts[{i}]") for i, m in enumerate(_as_list(raw.get("mounts")))),
-            urdf=None if urdf is None else str(urdf),
+            calibration=_calibration_sources(top),
+            mounts=tuple(_mount_edge(top.child(m, f"mounts[{i}]", _MOUNT_KEYS, what=_MOUNT_WHAT))
+                         for i, m in enumerate(_as_list(top.get("mounts")))),
+            urdf=top.name("urdf", what="a file name"),
             base_dir=None if base_dir is None else str(base_dir),
             origin=Path(where).name if where != "chain" else "chain",
+            notes=tuple(top.notes),
         )
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> ChainConfig:
         """Read CHAIN.yaml."""
         p = Path(path)
-        try:
-            raw = yaml.safe_load(p.read_text())
-        except OSError as err:
-            raise ChainConfigError(f"{p}: cannot read chain configuration ({err.strerror})") from err
-        except yaml.YAMLError as err:
-            raise ChainConfigError(f"{p}: not valid YAML ({err})") from err
+        raw = read_yaml(p, error=ChainConfigError, what="chain configuration")
         if raw is None:
-            raise ChainConfigError(f"{p}: the chain configuration is empty (expected frames, topics, evidence)")
+            raise ChainConfigError(str(p), "the chain configuration is empty (expected frames, topics, evidence)")
         return cls.from_dict(raw, where=str(p), base_dir=p.parent)
 
     def evidence_topics(self) -> dict[str, str]:
@@ -289,57 +252,82 @@ class ChainConfig:
         return out
 
 
-def _ignore_labels(raw: Any, where: str) -> tuple[str, ...]:
+def _keys(cls: type, *internal: str) -> set[str]:
+    """The keys a file may give for a dataclass: its fields, less the ``internal`` ones."""
+    return {f.name for f in fields(cls)} - set(internal)
+
+
+def latency_budget(section: Section) -> float | None:
+    """``latency_budget_s`` of a chain (or of robot.yaml's ``chain:``): seconds, 0 or more."""
+    return section.number("latency_budget_s", minimum=0.0, unit="s", check=plausible.latency_budget)
+
+
+def parse_evidence(parent: Section) -> ChainEvidence | None:
+    """The ``evidence`` mapping of CHAIN.yaml (or of robot.yaml's ``chain:``); None when not given."""
+    if "evidence" not in parent:
+        return None
+    section = parent.section("evidence", _keys(ChainEvidence))
+    hops = section.section("hops", _keys(HopTopics))
+    point = section.vector("reference_point", 3, what="[x, y, z], three finite numbers in metres",
+                           check=plausible.position)
+    return ChainEvidence(
+        hops=HopTopics(**{k: hops.name(k, what="a topic name") for k in _keys(HopTopics)}),
+        target=section.name("target", what="a topic name"),
+        reference=section.name("reference", what="a topic name"),
+        reference_point=None if point is None else (point[0], point[1], point[2]),
+        static_target=section.flag("static_target", False),
+        ignore_labels=_ignore_labels(section),
+        static_window_s=section.number("static_window_s", positive=True, unit="s", check=plausible.static_window),
+        tag_size_m=_tag_size(section),
+        markers=_marker_spec(section),
+    )
+
+
+def _frames(section: Section) -> ChainFrames:
+    default = ChainFrames()
+    frames = ChainFrames(camera=section.frame("camera") or default.camera, body=section.frame("body") or default.body,
+                         world=section.frame("world") or default.world)
+    if len({frames.camera, frames.body, frames.world}) < 3:
+        section.fail(f"camera, body and world must be three different frames, got {frames.camera!r}, "
+                     f"{frames.body!r}, {frames.world!r}")
+    return frames
+
+
+def _ignore_labels(section: Section) -> tuple[str, ...]:
     """Labels as strings (YAML reads tag ids as numbers); a single label is accepted too."""
+    raw = section.get("ignore_labels")
     if raw is None:
         return ()
     items = raw if isinstance(raw, list | tuple) else [raw]
     if not all(isinstance(x, str | int) and not isinstance(x, bool) for x in items):
-        raise ChainConfigError(f"{where}: expected a list of labels (tag ids or class names), got {raw!r}")
+        section.expected("ignore_labels", "a list of labels (tag ids or class names)", raw)
     return tuple(str(x) for x in items)
 
 
-def _window_s(raw: Any, where: str) -> float | None:
-    return None if raw is None else _positive(raw, where, "number of seconds")
-
-
-def _positive_size(raw: Any, where: str) -> float:
-    return _positive(raw, where, "size in metres")
-
-
-def _positive(raw: Any, where: str, what: str) -> float:
-    if isinstance(raw, bool) or not isinstance(raw, int | float) or not math.isfinite(raw) or raw <= 0:
-        raise ChainConfigError(f"{where}: expected a positive {what}, got {raw!r}")
-    return float(raw)
-
-
-def _tag_size(raw: Any, where: str) -> float | dict[str, float] | None:
+def _tag_size(section: Section) -> float | dict[str, float] | None:
     """One size, or ``{tag id: size, default: size}`` (ids as strings, as labels are)."""
+    raw = section.get("tag_size_m")
+    path = section.path("tag_size_m")
     if raw is None:
         return None
     if isinstance(raw, Mapping):
-        return {str(k): _positive_size(v, f"{where}.{k}") for k, v in raw.items()}
-    return _positive_size(raw, where)
+        sizes = section.child(raw, path)
+        return {key: sizes.number_value(value, f"{path}.{key}", positive=True, unit="m", check=plausible.tag_size)
+                for key, value in sizes.entries()}
+    if not finite_number(raw) or raw <= 0:
+        section.expected("tag_size_m", "a positive size in metres (one number, or {tag id: size, default: size})",
+                         raw)
+    return section.number_value(raw, path, check=plausible.tag_size)
 
 
-def _marker_spec(raw: Any, where: str) -> MarkerSpec | None:
-    if raw is None:
+def _marker_spec(section: Section) -> MarkerSpec | None:
+    if "markers" not in section:
         return None
-    _check_keys(raw, MarkerSpec, where)
-    name = raw.get("dictionary")
-    if not isinstance(name, str) or not name.strip():
-        raise ChainConfigError(f"{where}: needs dictionary: an OpenCV marker dictionary such as DICT_5X5_1000")
-    size = raw.get("size_m")
-    return MarkerSpec(name.strip(), None if size is None else _positive_size(size, f"{where}.size_m"))
-
-
-def _check_keys(raw: Any, cls: type, where: str, *, internal: tuple[str, ...] = ()) -> None:
-    if not isinstance(raw, Mapping):
-        raise ChainConfigError(f"{where}: expected a mapping, got {type(raw).__name__}")
-    known = {f.name for f in fields(cls)} - set(internal)
-    unknown = sorted(set(raw) - known)
-    if unknown:
-        raise ChainConfigError(f"{where}: unknown keys {unknown}; known keys are {sorted(known)}")
+    markers = section.section("markers", _keys(MarkerSpec))
+    name = markers.name("dictionary")
+    if name is None:
+        markers.fail("needs dictionary: an OpenCV marker dictionary such as DICT_5X5_1000")
+    return MarkerSpec(name, markers.number("size_m", positive=True, unit="m", check=plausible.tag_size))
 
 
 def _drop_none(value: Any) -> Any:
@@ -356,106 +344,61 @@ def _as_list(raw: Any) -> list[Any]:
     return list(raw) if isinstance(raw, list | tuple) else [raw]
 
 
-def _pose_topics(raw: Any, where: str) -> list[PoseTopic]:
+def _pose_topics(topics: Section, key: str) -> list[PoseTopic]:
     """``/odom``, ``{topic: /pose, child: base_link}`` or a list of them."""
+    raw = topics.get(key)
     out: list[PoseTopic] = []
     for i, entry in enumerate(_as_list(raw)):
-        here = f"{where}[{i}]" if isinstance(raw, list | tuple) else where
-        if isinstance(entry, str) and entry:
-            out.append(PoseTopic(entry))
+        here = f"{topics.path(key)}[{i}]" if isinstance(raw, list | tuple) else topics.path(key)
+        if isinstance(entry, str) and entry.strip():
+            out.append(PoseTopic(entry.strip()))
             continue
         if not isinstance(entry, Mapping) or not isinstance(entry.get("topic"), str):
-            raise ChainConfigError(f"{here}: expected a topic name or {{topic: /name, child: frame}}, got {entry!r}")
-        _check_keys(entry, PoseTopic, here)
-        child = entry.get("child")
-        out.append(PoseTopic(str(entry["topic"]), None if child is None else str(child).lstrip("/")))
+            topics.expected_at(here, "a topic name or {topic: /name, child: frame}", entry)
+        pose = topics.child(entry, here, _keys(PoseTopic))
+        out.append(PoseTopic(pose.name("topic", required=True, what="a topic name") or "", pose.frame("child")))
     return out
 
 
-def _merge_pose_topics(poses: list[PoseTopic], where: str) -> list[PoseTopic]:
+def _merge_pose_topics(poses: list[PoseTopic], topics: Section) -> list[PoseTopic]:
     """One entry per topic (``odometry`` and ``poses`` may both name it); a named child wins."""
     merged: dict[str, PoseTopic] = {}
     for pose in poses:
         known = merged.get(pose.topic)
         if known is not None and known.child and pose.child and known.child != pose.child:
-            raise ChainConfigError(f"{where}: pose topic {pose.topic} is given two children, {known.child!r} and "
-                                   f"{pose.child!r}")
+            topics.fail(f"pose topic {pose.topic} is given two children, {known.child!r} and {pose.child!r}")
         if known is None or pose.child:
             merged[pose.topic] = pose
     return list(merged.values())
 
 
-def _calibration_sources(raw: Any, where: str) -> tuple[CalibrationSource, ...]:
+def _calibration_sources(top: Section) -> tuple[CalibrationSource, ...]:
+    raw = top.get("calibration")
     out: list[CalibrationSource] = []
     for i, entry in enumerate(_as_list(raw)):
-        here = f"{where}[{i}]" if isinstance(raw, list | tuple) else where
-        fields_ = {"file": entry} if isinstance(entry, str) else entry
-        _check_keys(fields_, CalibrationSource, here)
-        if not isinstance(fields_.get("file"), str) or not fields_["file"].strip():
-            raise ChainConfigError(f"{here}: needs file: the calibration file (relative to the chain file)")
-        camera, frame = fields_.get("camera"), fields_.get("frame")
-        out.append(CalibrationSource(str(fields_["file"]), None if camera is None else str(camera),
-                                     None if frame is None else str(frame).lstrip("/")))
+        here = f"calibration[{i}]" if isinstance(raw, list | tuple) else "calibration"
+        source = top.child({"file": entry} if isinstance(entry, str) else entry, here, _keys(CalibrationSource),
+                           what="a file name or {file, camera, frame}")
+        file = source.name("file", required=False, what="a file name")
+        if file is None:
+            source.fail("needs file: the calibration file (relative to the chain file)")
+        out.append(CalibrationSource(file, source.name("camera", what="a camera name"), source.frame("frame")))
     defaulted = [i for i, c in enumerate(out) if c.frame is None]
     if len(defaulted) > 1:
-        raise ChainConfigError(f"{where}[{defaulted[1]}]: give frame: (the camera's optical frame); only one entry "
-                               "can default to frames.camera")
+        top.fail(f"calibration[{defaulted[1]}]: give frame: (the camera's optical frame); only one entry can "
+                 "default to frames.camera")
     return tuple(out)
 
 
-_ROTATION_KEYS = ("quat_xyzw", "rpy", "rotvec")
+_MOUNT_KEYS = {"parent", "child", "xyz", *ROTATION_KEYS}
+_MOUNT_WHAT = "{parent, child, xyz, quat_xyzw | rpy | rotvec}"
 
 
-def _mount_edge(raw: Any, where: str) -> MountEdge:
+def _mount_edge(mount: Section) -> MountEdge:
     """``{parent, child, xyz, quat_xyzw | rpy | rotvec}`` as ``T_parent_child``."""
-    if not isinstance(raw, Mapping):
-        raise ChainConfigError(f"{where}: expected {{parent, child, xyz, quat_xyzw | rpy | rotvec}}, got {raw!r}")
-    known = {"parent", "child", "xyz", *_ROTATION_KEYS}
-    unknown = sorted(set(raw) - known)
-    if unknown:
-        raise ChainConfigError(f"{where}: unknown keys {unknown}; known keys are {sorted(known)}")
-    for key in ("parent", "child"):
-        if not isinstance(raw.get(key), str) or not raw[key].strip("/ "):
-            raise ChainConfigError(f"{where}: needs {key}: a frame name")
-    parent, child = raw["parent"].strip().lstrip("/"), raw["child"].strip().lstrip("/")
+    parent = mount.frame("parent", required=True, hint="a frame name") or ""
+    child = mount.frame("child", required=True, hint="a frame name") or ""
     if parent == child:
-        raise ChainConfigError(f"{where}: parent and child are the same frame {parent!r}")
-    given = [k for k in _ROTATION_KEYS if k in raw]
-    if len(given) != 1:
-        what = f"two rotations ({' and '.join(given)})" if given else "no rotation"
-        raise ChainConfigError(f"{where}: {what}; give exactly one of quat_xyzw [x, y, z, w], rpy [roll, pitch, yaw] "
-                               "(radians, fixed axes x-y-z as URDF) or rotvec [x, y, z] (radians)")
-    xyz = _numbers(raw.get("xyz", [0.0, 0.0, 0.0]), 3, f"{where}: xyz")
-    key = given[0]
-    if key == "quat_xyzw":
-        q = _numbers(raw[key], 4, f"{where}: quat_xyzw")
-        norm = math.sqrt(sum(x * x for x in q))
-        if abs(norm - 1.0) > 1e-3:
-            raise ChainConfigError(f"{where}: quat_xyzw {list(q)} has norm {norm:.6g}, not 1 (the order is x, y, z, w)")
-        # Renormalise only what is off by more than rounding, so that to_dict -> from_dict is exact.
-        quat = tuple(x / norm for x in q) if abs(norm - 1.0) > 1e-15 else q
-    elif key == "rpy":
-        quat = quat_xyzw_from_rpy(*_numbers(raw[key], 3, f"{where}: rpy"))
-    else:
-        quat = quat_xyzw_from_rotvec(*_numbers(raw[key], 3, f"{where}: rotvec"))
-    return MountEdge(parent, child, (xyz[0], xyz[1], xyz[2]), (quat[0], quat[1], quat[2], quat[3]))
-
-
-def _numbers(raw: Any, n: int, where: str) -> tuple[float, ...]:
-    ok = isinstance(raw, list | tuple) and len(raw) == n and all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in raw)
-    if not ok:
-        raise ChainConfigError(f"{where}: expected {n} finite numbers, got {raw!r}")
-    return tuple(float(x) for x in raw)
-
-
-def quat_xyzw_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """URDF/tf2 rpy (fixed axes x, y, z; radians) as a unit quaternion (timeline.quaternion's maths)."""
-    x, y, z, w = quat_from_rpy(np.array([roll, pitch, yaw])).tolist()
-    return (x, y, z, w)
-
-
-def quat_xyzw_from_rotvec(x: float, y: float, z: float) -> tuple[float, float, float, float]:
-    """Rotation vector (axis times angle, radians) as a unit quaternion (timeline.quaternion's maths)."""
-    qx, qy, qz, qw = quat_from_rotvec(np.array([x, y, z])).tolist()
-    return (qx, qy, qz, qw)
+        mount.fail(f"parent and child are the same frame {parent!r}")
+    pose = mount.pose(rotation_required=True)
+    return MountEdge(parent, child, pose.xyz, pose.quat_xyzw)

@@ -11,9 +11,19 @@ conversions, but in scipy 1.17 composing two Rotation arrays costs about 1.3 us 
 
 Components may also be given one by one as a tuple (``(x, y, z, w)``, each an array or a Python
 float): constants then broadcast for free, as in a kinematic chain whose fixed joints are floats.
+One rotation is a (4,) array, one vector a (3,) one; rows of a table ``(N, 4)`` go in as ``rows.T``.
+
+The conversions every room uses, each once here: rotation vectors (:func:`quat_from_rotvec`,
+:func:`quat_to_rotvec`), URDF roll-pitch-yaw (:func:`quat_from_rpy`, :func:`quat_to_rpy`),
+matrices (:func:`quat_from_matrix`, :func:`quat_to_matrix`, :func:`homogeneous`), angles
+(:func:`quat_angle`, :func:`quat_angle_between`) and rigid transforms ``T_a_b`` as a translation
+and a quaternion (:func:`compose`, :func:`invert`); :mod:`framechain.geometry.transforms` applies
+them to the rows tables hold.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -89,6 +99,19 @@ def quat_from_rpy(rpy: FloatArray) -> FloatArray:
     return quat_multiply(q_yaw, quat_multiply(q_pitch, q_roll))
 
 
+def quat_to_rpy(q: FloatArray) -> FloatArray:
+    """URDF/tf2 roll-pitch-yaw (3, ...) of unit quaternions (4, ...): the inverse of :func:`quat_from_rpy`
+    (tf2's ``getRPY``, scipy's ``as_euler("xyz")``), pitch in [-pi/2, pi/2], roll and yaw in [-pi, pi]."""
+    from scipy.spatial.transform import Rotation
+
+    arr = np.asarray(q, dtype=float)
+    with warnings.catch_warnings():  # at pitch +-pi/2 any split of roll and yaw is right: scipy warns
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        rpy = Rotation.from_quat(arr.reshape(4, -1).T).as_euler("xyz")
+    out: FloatArray = rpy.T.reshape(3, *arr.shape[1:])
+    return out
+
+
 def quat_to_rotvec(q: FloatArray) -> FloatArray:
     """Logarithm map: unit quaternions (4, ...) to rotation vectors (3, ...), angle in [0, pi]."""
     sign = np.where(q[3] < 0, -1.0, 1.0)
@@ -105,6 +128,29 @@ def quat_to_rotvec(q: FloatArray) -> FloatArray:
 def quat_angle(q: FloatArray) -> FloatArray:
     """Rotation angle in radians, in [0, pi], of quaternions (4, ...)."""
     out: FloatArray = 2.0 * np.arctan2(np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2), np.abs(q[3]))
+    return out
+
+
+def quat_angle_between(a: QuatLike, b: QuatLike) -> FloatArray:
+    """Angle in radians, in [0, pi], of the rotation taking ``a`` to ``b`` (``a^-1 b``), quaternions (4, ...)."""
+    ax, ay, az, aw = a
+    return quat_angle(quat_multiply((-np.asarray(ax), -np.asarray(ay), -np.asarray(az), aw), b))
+
+
+def quat_to_matrix(q: QuatLike) -> FloatArray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (4, ...)."""
+    x, y, z, w = (np.asarray(c, dtype=float) for c in q)
+    shape = np.broadcast_shapes(x.shape, y.shape, z.shape, w.shape)
+    out = np.empty((*shape, 3, 3))
+    out[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[..., 0, 1] = 2.0 * (x * y - z * w)
+    out[..., 0, 2] = 2.0 * (x * z + y * w)
+    out[..., 1, 0] = 2.0 * (x * y + z * w)
+    out[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[..., 1, 2] = 2.0 * (y * z - x * w)
+    out[..., 2, 0] = 2.0 * (x * z - y * w)
+    out[..., 2, 1] = 2.0 * (y * z + x * w)
+    out[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
     return out
 
 
@@ -143,17 +189,9 @@ def homogeneous(quat: QuatLike, translation: VecLike, *, n: int | None = None) -
     ``n`` defaults to the largest component size (constant components broadcast).
     """
     n = max(int(np.size(c)) for c in (*quat, *translation)) if n is None else n
-    x, y, z, w = (np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in quat)
     out = np.zeros((n, 4, 4))
-    out[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[:, 0, 1] = 2.0 * (x * y - z * w)
-    out[:, 0, 2] = 2.0 * (x * z + y * w)
-    out[:, 1, 0] = 2.0 * (x * y + z * w)
-    out[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[:, 1, 2] = 2.0 * (y * z - x * w)
-    out[:, 2, 0] = 2.0 * (x * z - y * w)
-    out[:, 2, 1] = 2.0 * (y * z + x * w)
-    out[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    x, y, z, w = (np.broadcast_to(np.asarray(c, dtype=float), (n,)) for c in quat)
+    out[:, :3, :3] = quat_to_matrix((x, y, z, w))
     for i in range(3):
         out[:, i, 3] = translation[i]
     out[:, 3, 3] = 1.0

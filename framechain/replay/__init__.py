@@ -1,6 +1,7 @@
 """The replay room: TransformBuffer (tf2 semantics, vectorised), camera models, the hop-by-hop replay."""
 
 from framechain.catalogue import NothingReplayed, RejectReason
+from framechain.geometry.transforms import transform_points
 from framechain.replay.buffer import (
     LATEST,
     Edge,
@@ -27,9 +28,7 @@ from framechain.replay.replay import (
     ReplayOptions,
     ReplayResult,
     camera_rows_for,
-    compose_rows,
     replay,
-    transform_points,
 )
 
 __all__ = [
@@ -56,7 +55,6 @@ __all__ = [
     "TransformBuffer",
     "TransformLookupError",
     "camera_rows_for",
-    "compose_rows",
     "replay",
     "sample_depth",
     "transform_points",

@@ -17,7 +17,7 @@ import numpy as np
 from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
 from framechain.catalogue import HopName, NothingReplayed, RejectReason
 from framechain.config.chain import ChainFrames
-from framechain.geometry.rotations import compose, quat_rotate
+from framechain.geometry.transforms import transform_points
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
 from framechain.replay.camera import CameraModel
 from framechain.replay.depth import sample_depth
@@ -420,18 +420,3 @@ def _hop_rows(
         translation=translation, quat_xyzw=quat, sample_before_ns=before, sample_after_ns=after,
         gap_ns=gap, stale=stale, status=status,
     )
-
-
-def transform_points(
-    translation: FloatArray, quat_xyzw: FloatArray, points: FloatArray
-) -> FloatArray:
-    """Apply transforms (N, 3)/(N, 4) to points (N, 3): ``T @ p`` row by row, vectorised."""
-    return (quat_rotate(np.asarray(quat_xyzw).T, np.asarray(points).T) + np.asarray(translation).T).T
-
-
-def compose_rows(
-    t_ab: FloatArray, q_ab: FloatArray, t_bc: FloatArray, q_bc: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Row-wise ``T_a_c = T_a_b @ T_b_c`` on (N, 3)/(N, 4) arrays."""
-    t, q = compose(np.asarray(t_ab).T, np.asarray(q_ab).T, np.asarray(t_bc).T, np.asarray(q_bc).T)
-    return t.T, q.T

@@ -325,112 +325,26 @@ def generate(spec: SceneSpec) -> Scene:
     true_mount_q = Rotation.from_euler("y", spec.mount_pitch_deg, degrees=True).as_quat()
     K_true = rigid.intrinsic_matrix(spec.focal_px, spec.focal_px, spec.width / 2, spec.height / 2)
     truth = _ChainParams(K=K_true, mount_quat=true_mount_q)
-    recorded, robot = truth, truth
-    if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults) and not np.any(spec.optical_xyz):
-        raise SceneError("wrong_camera_frame needs the colour optical frame off camera_link (optical_xyz not zero)")
-    for fault in spec.faults:
-        if fault.where == "robot":
-            robot = _inject(robot, fault, truth)
-        else:
-            recorded = _inject_data(recorded, fault, truth)
+    recorded, robot = _faulty_params(spec, truth)
     footprint_height = [float(f.params.get("footprint_height_m", 0.08)) for f in spec.faults
                         if f.used_frame == FOOTPRINT_FRAME]
     body_from_footprint = rigid.matrix([0.0, 0.0, -footprint_height[0] if footprint_height else 0.0], [0, 0, 0, 1.0])
-
-    def static_tf(params: _ChainParams) -> TransformTable:
-        mount_t, mount_q = np.array([spec.mount_xyz], dtype=float), np.array([params.mount_quat])
-        if params.invert_camera:  # the mount published the wrong way round (still one parent per child)
-            mount_t, mount_q = rigid.to_rows(rigid.inverse(rigid.matrices(mount_t, mount_q)))
-        tables = [
-            TransformTable.from_rows(BODY_FRAME, MOUNT_FRAME, [START_NS], mount_t, mount_q,
-                                     is_static=True, source="/tf_static"),
-            TransformTable.from_rows(MOUNT_FRAME, spec.optical_frame, [START_NS], [spec.optical_xyz],
-                                     [params.optical_quat], is_static=True, source="/tf_static"),
-        ]
-        if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults):
-            tables.append(TransformTable.from_rows(MOUNT_FRAME, DEPTH_OPTICAL_FRAME, [START_NS], [[0.0, 0.0, 0.0]],
-                                                   [OPTICAL_FROM_LINK_QUAT_XYZW], is_static=True, source="/tf_static"))
-        if footprint_height:
-            t, q = rigid.to_rows(body_from_footprint[None])
-            tables.append(TransformTable.from_rows(BODY_FRAME, FOOTPRINT_FRAME, [START_NS], t, q,
-                                                   is_static=True, source="/tf_static"))
-        return TransformTable.concat(tables)
-
-    recorded_tf = TransformTable.concat([motion.table(), static_tf(recorded)])
-
-    # Camera frames: capture times, the object's true pixel and depth, then noise.
-    t_cam = np.arange(0.1, spec.duration_s - 0.1, 1.0 / spec.camera_rate_hz)
-    capture_ns = ns(t_cam)
-    base_from_optical_true = _base_from_camera(spec, truth)
-    world_from_optical = motion.world_from_base("map", capture_ns) @ base_from_optical_true
-    p_opt = rigid.apply(rigid.inverse(world_from_optical), np.tile(obj, (t_cam.size, 1)))
-    u_true, v_true = rigid.project(K_true, p_opt)
-    u = u_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
-    v = v_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
-    depth_measured = np.round(p_opt[:, 2] * (1.0 + rng.normal(0.0, spec.depth_noise_rel, t_cam.size)), 3)
-    # Pixel centres at integers: the image spans -0.5 .. size - 0.5 (what the replay accepts).
-    inside = (u >= -0.5) & (u < spec.width - 0.5) & (v >= -0.5) & (v < spec.height - 0.5)
-    visible = inside & (p_opt[:, 2] > 0.1)
-    u, v, depth_measured, capture_ns = u[visible], v[visible], depth_measured[visible], capture_ns[visible]
-    world_from_optical = world_from_optical[visible]
-    n = capture_ns.size
-
-    # The recorded detection stamps (a late camera clock is a data latency fault).
-    detections_frame = recorded.detections_frame or spec.optical_frame
-    stamp_shift = -recorded.pose_offset_ns  # stamps late by -offset so the right pose is at tau + offset
-    obs_stamp = capture_ns + stamp_shift
-    log_delay = rng.integers(3_000_000, 12_000_000, n)
-    recorded_depth = np.round(depth_measured * recorded.depth_factor, 3)
-    observations = ObservationTable(
-        obs_id=np.arange(n),
-        stamp_ns=obs_stamp,
-        log_time_ns=obs_stamp + log_delay,
-        camera_frame=np.full(n, detections_frame),
-        u=u,
-        v=v,
-        depth_m=np.full(n, np.nan) if spec.depth_images else recorded_depth,
-        label=np.full(n, "cup"),
-        score=np.full(n, 0.9),
-        source=np.full(n, TOPICS.detections or ""),
-    )
-    cameras = CameraTable(
-        frame=np.full(n, detections_frame),
-        stamp_ns=obs_stamp,
-        log_time_ns=obs_stamp + log_delay,
-        width=np.full(n, spec.width),
-        height=np.full(n, spec.height),
-        K=np.tile(recorded.K, (n, 1, 1)),
-        distortion_model=np.full(n, "plumb_bob"),
-        distortion=np.zeros((n, 14)),
-        n_distortion=np.full(n, 5),
-        source=np.full(n, TOPICS.camera_info or ""),
-    )
+    footprint = body_from_footprint if footprint_height else None
+    recorded_tf = TransformTable.concat([motion.table(), _static_tf(spec, recorded, footprint)])
+    seen = _capture(spec, rng, motion, truth, obj)
+    observations, cameras, obs_stamp, log_delay = _recorded_detections(spec, rng, recorded, seen)
     image_frames = ImageFrameTable.empty()
     if spec.color_images:
-        image_frames = _render_color(spec, K_true, world_from_optical, obs_stamp, u, v)
+        image_frames = _render_color(spec, K_true, seen.world_from_optical, obs_stamp, seen.u, seen.v)
     depth_frames = DepthFrameTable.empty()
     if spec.depth_images:
-        depth_frames = _render_depth(spec, K_true, world_from_optical, obs_stamp, u, v, recorded_depth)
-
-    # The robot's own computation, from the same pixels and measured depth, with its parameters.
-    robot_cam = rigid.back_project(robot.K, u, v, depth_measured * robot.depth_factor)
-    body_from_camera = _base_from_camera(spec, robot)
-    if robot.invert_camera:
-        body_from_camera = rigid.inverse(body_from_camera)
-    robot_body = rigid.apply(body_from_camera, robot_cam @ robot.cam_permutation.T)
-    pose_ns = capture_ns + robot.pose_offset_ns
-    if robot.hold_ns is not None:
-        pose_ns = rigid.held(motion.odom_ns, capture_ns - robot.hold_ns)
-    world_from_body = motion.world_from_base(robot.world, pose_ns)
-    if robot.body == FOOTPRINT_FRAME:
-        world_from_body = world_from_body @ body_from_footprint
-    if robot.invert_pose:
-        world_from_body = rigid.inverse(world_from_body)
-    robot_world = rigid.apply(world_from_body, robot_body)
-
+        recorded_depth = np.round(seen.depth_m * recorded.depth_factor, 3)
+        depth_frames = _render_depth(spec, K_true, seen.world_from_optical, obs_stamp, seen.u, seen.v,
+                                     recorded_depth)
+    robot_cam, robot_body, robot_world = _robot_points(spec, robot, motion, seen, body_from_footprint)
     evidence, points = _evidence(spec, rng, obs_stamp, log_delay, robot_cam, robot_body, robot_world, obj)
     chain = ChainConfig(
-        frames=ChainFrames(camera=detections_frame, body=BODY_FRAME, world="map"),
+        frames=ChainFrames(camera=recorded.detections_frame or spec.optical_frame, body=BODY_FRAME, world="map"),
         topics=replace(TOPICS, depth=TOPICS.depth if spec.depth_images else None,
                        image=COLOR_TOPIC if spec.color_images else None),
         evidence=evidence,
@@ -450,6 +364,125 @@ def generate(spec: SceneSpec) -> Scene:
         },
     )
     return Scene(spec=spec, timeline=timeline, chain=chain, object_world=obj, robot_world=robot_world)
+
+
+def _faulty_params(spec: SceneSpec, truth: _ChainParams) -> tuple[_ChainParams, _ChainParams]:
+    """The chain as recorded in the data and as the robot used it: the truth with the faults injected."""
+    recorded, robot = truth, truth
+    if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults) and not np.any(spec.optical_xyz):
+        raise SceneError("wrong_camera_frame needs the colour optical frame off camera_link (optical_xyz not zero)")
+    for fault in spec.faults:
+        if fault.where == "robot":
+            robot = _inject(robot, fault, truth)
+        else:
+            recorded = _inject_data(recorded, fault, truth)
+    return recorded, robot
+
+
+def _static_tf(spec: SceneSpec, params: _ChainParams, body_from_footprint: FloatArray | None) -> TransformTable:
+    """The recorded /tf_static: the mount, the optical edge, and the frames the faults need."""
+    mount_t, mount_q = np.array([spec.mount_xyz], dtype=float), np.array([params.mount_quat])
+    if params.invert_camera:  # the mount published the wrong way round (still one parent per child)
+        mount_t, mount_q = rigid.to_rows(rigid.inverse(rigid.matrices(mount_t, mount_q)))
+    tables = [
+        TransformTable.from_rows(BODY_FRAME, MOUNT_FRAME, [START_NS], mount_t, mount_q,
+                                 is_static=True, source="/tf_static"),
+        TransformTable.from_rows(MOUNT_FRAME, spec.optical_frame, [START_NS], [spec.optical_xyz],
+                                 [params.optical_quat], is_static=True, source="/tf_static"),
+    ]
+    if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults):
+        tables.append(TransformTable.from_rows(MOUNT_FRAME, DEPTH_OPTICAL_FRAME, [START_NS], [[0.0, 0.0, 0.0]],
+                                               [OPTICAL_FROM_LINK_QUAT_XYZW], is_static=True, source="/tf_static"))
+    if body_from_footprint is not None:
+        t, q = rigid.to_rows(body_from_footprint[None])
+        tables.append(TransformTable.from_rows(BODY_FRAME, FOOTPRINT_FRAME, [START_NS], t, q,
+                                               is_static=True, source="/tf_static"))
+    return TransformTable.concat(tables)
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """The frames in which the camera saw the object: capture times, pixels and depth (noisy)."""
+
+    capture_ns: IntArray
+    u: FloatArray
+    v: FloatArray
+    depth_m: FloatArray  # measured (noise, millimetre rounding), before any depth fault
+    world_from_optical: FloatArray  # (n, 4, 4) the true camera pose
+
+
+def _capture(spec: SceneSpec, rng: np.random.Generator, motion: _Motion, truth: _ChainParams, obj: FloatArray
+             ) -> _Seen:
+    """Camera frames: capture times, the object's true pixel and depth, then noise; the visible ones."""
+    t_cam = np.arange(0.1, spec.duration_s - 0.1, 1.0 / spec.camera_rate_hz)
+    capture_ns = ns(t_cam)
+    world_from_optical = motion.world_from_base("map", capture_ns) @ _base_from_camera(spec, truth)
+    p_opt = rigid.apply(rigid.inverse(world_from_optical), np.tile(obj, (t_cam.size, 1)))
+    u_true, v_true = rigid.project(truth.K, p_opt)
+    u = u_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
+    v = v_true + rng.normal(0.0, spec.pixel_noise_px, t_cam.size)
+    depth_measured = np.round(p_opt[:, 2] * (1.0 + rng.normal(0.0, spec.depth_noise_rel, t_cam.size)), 3)
+    # Pixel centres at integers: the image spans -0.5 .. size - 0.5 (what the replay accepts).
+    inside = (u >= -0.5) & (u < spec.width - 0.5) & (v >= -0.5) & (v < spec.height - 0.5)
+    visible = inside & (p_opt[:, 2] > 0.1)
+    return _Seen(capture_ns[visible], u[visible], v[visible], depth_measured[visible], world_from_optical[visible])
+
+
+def _recorded_detections(spec: SceneSpec, rng: np.random.Generator, recorded: _ChainParams, seen: _Seen
+                         ) -> tuple[ObservationTable, CameraTable, IntArray, IntArray]:
+    """The detections and CameraInfo as logged (a late camera clock is a data latency fault), with their
+    header stamps and log delays."""
+    n = seen.capture_ns.size
+    detections_frame = recorded.detections_frame or spec.optical_frame
+    stamp_shift = -recorded.pose_offset_ns  # stamps late by -offset so the right pose is at tau + offset
+    obs_stamp = seen.capture_ns + stamp_shift
+    log_delay = rng.integers(3_000_000, 12_000_000, n)
+    recorded_depth = np.round(seen.depth_m * recorded.depth_factor, 3)
+    observations = ObservationTable(
+        obs_id=np.arange(n),
+        stamp_ns=obs_stamp,
+        log_time_ns=obs_stamp + log_delay,
+        camera_frame=np.full(n, detections_frame),
+        u=seen.u,
+        v=seen.v,
+        depth_m=np.full(n, np.nan) if spec.depth_images else recorded_depth,
+        label=np.full(n, "cup"),
+        score=np.full(n, 0.9),
+        source=np.full(n, TOPICS.detections or ""),
+    )
+    cameras = CameraTable(
+        frame=np.full(n, detections_frame),
+        stamp_ns=obs_stamp,
+        log_time_ns=obs_stamp + log_delay,
+        width=np.full(n, spec.width),
+        height=np.full(n, spec.height),
+        K=np.tile(recorded.K, (n, 1, 1)),
+        distortion_model=np.full(n, "plumb_bob"),
+        distortion=np.zeros((n, 14)),
+        n_distortion=np.full(n, 5),
+        source=np.full(n, TOPICS.camera_info or ""),
+    )
+    return observations, cameras, obs_stamp, log_delay
+
+
+def _robot_points(spec: SceneSpec, robot: _ChainParams, motion: _Motion, seen: _Seen, body_from_footprint: FloatArray
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The robot's own computation, from the same pixels and measured depth, with its parameters:
+    its camera, body and world points."""
+    robot_cam = rigid.back_project(robot.K, seen.u, seen.v, seen.depth_m * robot.depth_factor)
+    body_from_camera = _base_from_camera(spec, robot)
+    if robot.invert_camera:
+        body_from_camera = rigid.inverse(body_from_camera)
+    robot_body = rigid.apply(body_from_camera, robot_cam @ robot.cam_permutation.T)
+    pose_ns = seen.capture_ns + robot.pose_offset_ns
+    if robot.hold_ns is not None:
+        pose_ns = rigid.held(motion.odom_ns, seen.capture_ns - robot.hold_ns)
+    world_from_body = motion.world_from_base(robot.world, pose_ns)
+    if robot.body == FOOTPRINT_FRAME:
+        world_from_body = world_from_body @ body_from_footprint
+    if robot.invert_pose:
+        world_from_body = rigid.inverse(world_from_body)
+    return robot_cam, robot_body, rigid.apply(world_from_body, robot_body)
 
 
 def _render_color(

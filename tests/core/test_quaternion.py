@@ -14,14 +14,18 @@ from framechain.geometry.rotations import (
     homogeneous,
     invert,
     quat_angle,
+    quat_angle_between,
     quat_conjugate,
     quat_from_matrix,
     quat_from_rotvec,
     quat_from_rpy,
     quat_multiply,
     quat_rotate,
+    quat_to_matrix,
     quat_to_rotvec,
+    quat_to_rpy,
 )
+from framechain.geometry.transforms import invert_rows, transform_points
 
 N = 2000
 
@@ -90,11 +94,13 @@ def test_from_rpy_is_scipy_fixed_axis_euler(rng: np.random.Generator) -> None:
 
 
 def test_chain_mount_rotations_use_the_shared_maths(rng: np.random.Generator) -> None:
-    from framechain.config.chain import quat_xyzw_from_rotvec, quat_xyzw_from_rpy
+    from framechain.config.chain import ChainConfig
 
     for rpy, rotvec in zip(rng.uniform(-3, 3, (20, 3)), rng.uniform(-2, 2, (20, 3)), strict=True):
-        assert_same_rotation(np.array([quat_xyzw_from_rpy(*rpy)]), Rotation.from_euler("xyz", rpy).as_quat()[None])
-        assert_same_rotation(np.array([quat_xyzw_from_rotvec(*rotvec)]), Rotation.from_rotvec(rotvec).as_quat()[None])
+        mounts = ChainConfig.from_dict({"mounts": [{"parent": "a", "child": "b", "rpy": rpy.tolist()},
+                                                   {"parent": "b", "child": "c", "rotvec": rotvec.tolist()}]}).mounts
+        assert_same_rotation(np.array([mounts[0].quat_xyzw]), Rotation.from_euler("xyz", rpy).as_quat()[None])
+        assert_same_rotation(np.array([mounts[1].quat_xyzw]), Rotation.from_rotvec(rotvec).as_quat()[None])
 
 
 @pytest.mark.parametrize("angle", [a for a in ANGLES if a < np.pi - 1e-7])
@@ -161,3 +167,38 @@ def test_homogeneous_and_from_matrix_match_scipy(rng: np.random.Generator) -> No
     np.testing.assert_array_equal(m[:, 3], np.tile([0.0, 0.0, 0.0, 1.0], (N, 1)))
     assert_same_rotation(quat_from_matrix(m[:, :3, :3]).T, q, atol=1e-14)
     assert quat_from_matrix(np.eye(3)).shape == (4,)
+
+
+def test_to_rpy_is_tf2_get_rpy_and_inverts_from_rpy(rng: np.random.Generator) -> None:
+    q = random_quats(rng, N)
+    rpy = quat_to_rpy(q.T).T
+    np.testing.assert_allclose(rpy, Rotation.from_quat(q).as_euler("xyz"), atol=1e-12)
+    assert_same_rotation(quat_from_rpy(rpy.T).T, q, atol=1e-14)
+    assert quat_to_rpy(q[0]).shape == (3,)
+    # Looking straight down (pitch pi/2): any split of roll and yaw is right, and no warning is raised.
+    down = quat_from_rpy(np.array([0.3, np.pi / 2, -0.2]))
+    assert_same_rotation(quat_from_rpy(quat_to_rpy(down))[None], down[None], atol=1e-12)
+    # By hand: a quarter turn about z is yaw pi/2.
+    h = np.sqrt(0.5)
+    np.testing.assert_allclose(quat_to_rpy(np.array([0.0, 0.0, h, h])), [0.0, 0.0, np.pi / 2], atol=1e-15)
+
+
+def test_to_matrix_and_angle_between_match_scipy(rng: np.random.Generator) -> None:
+    a, b = random_quats(rng, N), random_quats(rng, N)
+    np.testing.assert_allclose(quat_to_matrix(a.T), Rotation.from_quat(a).as_matrix(), atol=1e-14)
+    np.testing.assert_allclose(quat_to_matrix(a[0]), Rotation.from_quat(a[0]).as_matrix(), atol=1e-14)
+    theirs = (Rotation.from_quat(a).inv() * Rotation.from_quat(b)).magnitude()
+    np.testing.assert_allclose(quat_angle_between(a.T, b.T), theirs, atol=1e-12)
+    np.testing.assert_allclose(quat_angle_between(a.T, -a.T), 0.0, atol=1e-7)  # q and -q: the same rotation
+
+
+def test_row_transforms_match_scipy(rng: np.random.Generator) -> None:
+    q, t, p = random_quats(rng, N), rng.normal(size=(N, 3)), rng.normal(size=(N, 3))
+    r = Rotation.from_quat(q)
+    np.testing.assert_allclose(transform_points(t, q, p), r.apply(p) + t, atol=1e-13)
+    t_inv, q_inv = invert_rows(t, q)
+    np.testing.assert_allclose(t_inv, -r.inv().apply(t), atol=1e-13)
+    assert_same_rotation(q_inv, r.inv().as_quat(), atol=1e-15)
+    np.testing.assert_allclose(transform_points(t_inv, q_inv, transform_points(t, q, p)), p, atol=1e-12)
+    # One transform for every point broadcasts.
+    np.testing.assert_allclose(transform_points(t[0], q[0], p), Rotation.from_quat(q[0]).apply(p) + t[0], atol=1e-13)

@@ -24,10 +24,10 @@ from lerobot_scene import (
 
 from framechain.adapters.lerobot.format import DatasetError
 from framechain.adapters.lerobot.reader import open_dataset
-from framechain.adapters.robot.config import RobotConfig, RobotConfigError
 from framechain.analysis.estimates import estimate_to_json
 from framechain.catalogue import HopName
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
+from framechain.config.robot import RobotConfig, RobotConfigError
 from framechain.replay import TransformBuffer, replay
 from framechain.timeline import Timeline
 

@@ -10,8 +10,9 @@ import pytest
 import yourdfpy
 from lerobot_scene import ARM6
 
-from framechain.adapters.robot.config import JointMapping, JointUnit, RobotConfig, RobotConfigError
+from framechain.adapters.robot.binding import convert_joint, joint_positions, robot_model
 from framechain.adapters.robot.kinematics import JointType, RobotModel, RobotModelError
+from framechain.config.robot import JointMapping, JointUnit, RobotConfig, RobotConfigError
 
 SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 
@@ -123,11 +124,11 @@ def test_so101_degrees_and_gripper_range_match_yourdfpy(so101_urdf: Path, rng: n
                     "gripper.pos": {"joint": "gripper", "unit": "range_0_100"}}},
         source="so101",
     )
-    model = cfg.model()
+    model = robot_model(cfg)
     names = [f"{j}.pos" for j in SO101_JOINTS]
     n = 25
     state = np.hstack([rng.uniform(-80, 80, size=(n, 5)), rng.uniform(0, 100, size=(n, 1))])
-    q = cfg.joint_positions(model, state, names)
+    q = joint_positions(cfg, model, state, names)
     lo, hi = _limits_from_xml(so101_urdf)["gripper"]
     # Independent conversion: degrees by hand, the gripper 0..100 onto the URDF's limits.
     expected = {j: state[:, i] * np.pi / 180.0 for i, j in enumerate(SO101_JOINTS[:5])}
@@ -158,12 +159,12 @@ def test_so101_degrees_and_gripper_range_match_yourdfpy(so101_urdf: Path, rng: n
 def test_unit_conversions(unit: JointUnit, value: float, limits: tuple[float | None, float | None],
                           expected: float) -> None:
     m = JointMapping("x.pos", "x", unit)
-    assert m.convert([value], *limits)[0] == pytest.approx(expected, abs=1e-15)
+    assert convert_joint(m, [value], *limits)[0] == pytest.approx(expected, abs=1e-15)
 
 
 def test_sign_and_offset_apply_after_conversion() -> None:
     m = JointMapping("x.pos", "x", JointUnit.DEG, sign=-1.0, offset=0.1)
-    assert m.convert([180.0], None, None)[0] == pytest.approx(-np.pi + 0.1)
+    assert convert_joint(m, [180.0], None, None)[0] == pytest.approx(-np.pi + 0.1)
 
 
 def test_model_errors(tmp_path: Path) -> None:
@@ -190,9 +191,9 @@ def test_config_errors_name_the_problem(tmp_path: Path) -> None:
         RobotConfig.from_mapping({**base, "default_unit": "degrees"})
     cfg = RobotConfig.from_mapping({**base, "joints": {"a.pos": {"joint": "nope", "unit": "rad"}}})
     with pytest.raises(RobotConfigError, match="the URDF has no joint 'nope'"):
-        cfg.model()
+        robot_model(cfg)
     cfg = RobotConfig.from_mapping({**base, "joints": {"a.pos": {"joint": "shoulder_pan", "unit": "rad"}}})
     with pytest.raises(RobotConfigError, match=r"state names \['a.pos'\] are not in observation.state"):
-        cfg.joint_positions(cfg.model(), np.zeros((1, 2)), ["b.pos", "c.pos"])
+        joint_positions(cfg, robot_model(cfg), np.zeros((1, 2)), ["b.pos", "c.pos"])
     with pytest.raises(RobotConfigError, match="unknown keys"):
         RobotConfig.from_mapping({**base, "default_unit": "rad", "urdf_path": "x"})

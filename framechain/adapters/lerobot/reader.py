@@ -48,11 +48,12 @@ from framechain.adapters.lerobot.format import (
     is_lerobot_dataset,
 )
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.robot.config import DetectionSource, RobotConfig, RobotConfigError
+from framechain.adapters.robot.binding import joint_positions, robot_model
 from framechain.adapters.robot.kinematics import RobotModel
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
 from framechain.config.chain import ChainConfig
+from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
@@ -86,7 +87,7 @@ def open_dataset(
     """
     cfg = robot if isinstance(robot, RobotConfig) else RobotConfig.load(robot)
     reader = DatasetReader(path, strict=strict)
-    model = cfg.model()
+    model = robot_model(cfg)
     sources = list(cfg.detections)
     if detections is not None:
         sources.append(DetectionSource(table=Path(detections)))
@@ -98,7 +99,7 @@ def open_dataset(
     if bad.any():
         k = int(np.flatnonzero(bad.any(axis=1))[0])
         raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
-    q = cfg.joint_positions(model, state, names)
+    q = joint_positions(cfg, model, state, names)
     state_ns = frames.stamp_ns
     source_name = f"{Path(path).name}:{cfg.state_feature}"
 
@@ -184,7 +185,7 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
         "chain_frames": None if chain is None else {"camera": chain.frames.camera, "body": chain.frames.body,
                                                     "world": chain.frames.world},
         "chain": None if chain is None else chain.to_dict(),
-        "notes": list(reader.notes),
+        "notes": [*reader.notes, *cfg.notes],
     }
 
 

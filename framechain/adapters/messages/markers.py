@@ -30,7 +30,7 @@ def dictionary_id(name: str, where: str = "chain") -> int:
         key = f"DICT_{key}"
     known = sorted({d.upper() for d in dir(cv2.aruco) if d.startswith("DICT_")})
     if key not in known:
-        raise ChainConfigError(f"{where}: evidence.markers.dictionary {name!r} is not an OpenCV dictionary; "
+        raise ChainConfigError(where, f"evidence.markers.dictionary {name!r} is not an OpenCV dictionary; "
                                f"known: {', '.join(known)}")
     return int(getattr(cv2.aruco, next(d for d in dir(cv2.aruco) if d.upper() == key)))
 

@@ -27,10 +27,13 @@ revolute and continuous joints, metres for prismatic ones); a mimic joint follow
 
 from __future__ import annotations
 
+import io
+import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -48,6 +51,9 @@ __all__ = [
     "Mimic",
     "RobotModel",
     "RobotModelError",
+    "UrdfJoints",
+    "read_urdf",
+    "read_urdf_text",
 ]
 
 
@@ -160,47 +166,12 @@ class RobotModel:
     @classmethod
     def from_urdf(cls, path: str | Path) -> RobotModel:
         """Parse a URDF file with yourdfpy (meshes not loaded; missing mesh files are fine)."""
-        import yourdfpy
-
-        p = Path(path)
-        if not p.is_file():
-            raise RobotModelError(str(p), "URDF file not found")
-        try:
-            urdf = yourdfpy.URDF.load(
-                str(p), build_scene_graph=False, load_meshes=False,
-                build_collision_scene_graph=False, load_collision_meshes=False,
-            )
-        except Exception as err:  # yourdfpy raises lxml, ValueError, KeyError... on bad files
-            raise RobotModelError(str(p), f"cannot parse URDF ({type(err).__name__}: {err})") from err
-        joints: list[Joint] = []
-        for raw in urdf.robot.joints:
-            try:
-                jtype = JointType(raw.type)
-            except ValueError:
-                raise RobotModelError(
-                    str(p), f"joint {raw.name!r} has type {raw.type!r}; supported: {[t.value for t in JointType]}"
-                ) from None
-            origin = np.eye(4) if raw.origin is None else np.asarray(raw.origin, dtype=float)
-            axis = np.array([1.0, 0.0, 0.0]) if raw.axis is None else np.asarray(raw.axis, dtype=float)
-            if jtype is not JointType.FIXED:
-                norm = float(np.linalg.norm(axis))
-                if not np.isfinite(norm) or norm < 1e-12:
-                    raise RobotModelError(str(p), f"joint {raw.name!r} has a zero axis")
-                axis = axis / norm
-            lower = upper = None
-            if raw.limit is not None and jtype is not JointType.CONTINUOUS:
-                lower = None if raw.limit.lower is None else float(raw.limit.lower)
-                upper = None if raw.limit.upper is None else float(raw.limit.upper)
-            mimic = None
-            if raw.mimic is not None:
-                mimic = Mimic(
-                    str(raw.mimic.joint),
-                    1.0 if raw.mimic.multiplier is None else float(raw.mimic.multiplier),
-                    0.0 if raw.mimic.offset is None else float(raw.mimic.offset),
-                )
-            joints.append(Joint(str(raw.name), jtype, str(raw.parent), str(raw.child), origin, axis,
-                                lower, upper, mimic))
-        return cls(joints, source=str(p), name=str(urdf.robot.name or ""))
+        urdf = read_urdf(Path(path))
+        if urdf.unsupported:
+            name, jtype = urdf.unsupported[0]
+            raise RobotModelError(urdf.source, f"joint {name!r} has type {jtype!r}; supported: "
+                                  f"{[t.value for t in JointType]}")
+        return cls(urdf.joints, source=urdf.source, name=urdf.name)
 
     # ----------------------------------------------------------------------------- structure
 
@@ -222,11 +193,6 @@ class RobotModel:
 
     def has_link(self, link: str) -> bool:
         return link == self.root or link in self._by_child
-
-    def parent_joint(self, link: str) -> Joint | None:
-        """The joint whose child is ``link`` (None for the root)."""
-        self._check_link(link)
-        return self._by_child.get(link)
 
     def path_joints(self, link: str, *, base: str | None = None) -> tuple[Joint, ...]:
         """Joints from ``base`` (default the root) down to ``link``; ``base`` must be an ancestor."""
@@ -404,6 +370,76 @@ class RobotModel:
             trans[lo:lo + m] = _stack(acc[1], m)
             quat[lo:lo + m] = _stack(acc[0], m)
         return trans, quat
+
+
+class UrdfJoints(NamedTuple):
+    """The joints of a URDF as parsed (not yet checked to be a tree), and those of types framechain
+    cannot move (floating, planar) by name and type."""
+
+    source: str
+    name: str
+    joints: list[Joint]
+    unsupported: list[tuple[str, str]]
+
+
+def read_urdf(path: Path) -> UrdfJoints:
+    """The joints of a URDF file, parsed once by yourdfpy (meshes not loaded)."""
+    if not path.is_file():
+        raise RobotModelError(str(path), "URDF file not found")
+    return _parse_urdf(str(path), str(path))
+
+
+def read_urdf_text(text: str, source: str) -> UrdfJoints:
+    """The joints of URDF text (a log's ``/robot_description``); ``source`` names it in messages."""
+    return _parse_urdf(io.BytesIO(text.encode()), source)
+
+
+def _parse_urdf(file: str | io.BytesIO, source: str) -> UrdfJoints:
+    import yourdfpy
+
+    quiet = logging.getLogger("yourdfpy")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL + 1)  # yourdfpy logs parse errors on stderr before raising: one line is ours
+    try:
+        urdf = yourdfpy.URDF.load(file, build_scene_graph=False, load_meshes=False, build_collision_scene_graph=False,
+                                  load_collision_meshes=False)
+    except Exception as err:  # yourdfpy raises lxml, ValueError, KeyError... on bad files
+        raise RobotModelError(source, f"cannot parse URDF ({type(err).__name__}: {' '.join(str(err).split())})"
+                              ) from err
+    finally:
+        quiet.setLevel(level)
+    joints: list[Joint] = []
+    unsupported: list[tuple[str, str]] = []
+    for raw in urdf.robot.joints:
+        origin = np.eye(4) if raw.origin is None else np.asarray(raw.origin, dtype=float)
+        if not np.isfinite(origin).all():
+            raise RobotModelError(source, f"joint {raw.name!r}: its origin is not finite")
+        try:
+            jtype = JointType(raw.type)
+        except ValueError:
+            unsupported.append((str(raw.name), str(raw.type)))
+            continue
+        joints.append(_joint(raw, jtype, origin, source))
+    return UrdfJoints(source, str(urdf.robot.name or ""), joints, unsupported)
+
+
+def _joint(raw: Any, jtype: JointType, origin: FloatArray, source: str) -> Joint:
+    """A yourdfpy joint as a :class:`Joint` (axis normalised, limits and mimic read)."""
+    axis = np.array([1.0, 0.0, 0.0]) if raw.axis is None else np.asarray(raw.axis, dtype=float)
+    if jtype is not JointType.FIXED:
+        norm = float(np.linalg.norm(axis))
+        if not np.isfinite(norm) or norm < 1e-12:
+            raise RobotModelError(source, f"joint {raw.name!r} has a zero axis")
+        axis = axis / norm
+    lower = upper = None
+    if raw.limit is not None and jtype is not JointType.CONTINUOUS:
+        lower = None if raw.limit.lower is None else float(raw.limit.lower)
+        upper = None if raw.limit.upper is None else float(raw.limit.upper)
+    mimic = None
+    if raw.mimic is not None:
+        mimic = Mimic(str(raw.mimic.joint), 1.0 if raw.mimic.multiplier is None else float(raw.mimic.multiplier),
+                      0.0 if raw.mimic.offset is None else float(raw.mimic.offset))
+    return Joint(str(raw.name), jtype, str(raw.parent), str(raw.child), origin, axis, lower, upper, mimic)
 
 
 def _step(joint: Joint) -> _Step:

@@ -15,14 +15,16 @@ Precedence, decided once here and documented in the README:
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
+from framechain.adapters.robot.kinematics import JointType, RobotModelError, UrdfJoints, read_urdf, read_urdf_text
 from framechain.config.calibration import CalibrationError, Intrinsics, read_intrinsics_file
-from framechain.config.chain import ChainConfig, quat_xyzw_from_rpy
+from framechain.config.chain import ChainConfig
+from framechain.config.errors import ChainConfigError
+from framechain.geometry.rotations import invert, quat_angle_between, quat_from_matrix
 from framechain.timeline import CameraTable, TransformTable
 
 
@@ -53,13 +55,17 @@ class ChainAdditions(NamedTuple):
 
 
 def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
-    """Read the calibration files and URDF the chain names; raise a one-line error if one is unusable."""
+    """Read the calibration files and URDF the chain names; raise a one-line error if one is unusable.
+
+    The notes say what the chain's own values look unusual for (plausible, but worth a look)."""
     if chain is None:
         return ChainAdditions([], [], [])
+    notes: list[str] = list(chain.notes)
     cameras: list[FileCamera] = []
     for entry in chain.calibration:
         path = chain.resolve(entry.file)
         intrinsics = read_intrinsics_file(path, camera=entry.camera)
+        notes.extend(intrinsics.notes)
         which = intrinsics.source[len(str(path)):]  # " [cam0]" for a Kalibr camera, else ""
         cameras.append(FileCamera(entry.frame or chain.frames.camera, intrinsics, path.name + which))
     seen: dict[str, str] = {}
@@ -73,16 +79,15 @@ def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
     children: dict[str, str] = {}
     for e in edges:
         if e.child in children:
-            raise CalibrationError(e.source, f"frame {e.child!r} is already the child of {children[e.child]}")
+            raise ChainConfigError(e.source, f"frame {e.child!r} is already the child of {children[e.child]}")
         children[e.child] = e.source
-    notes: list[str] = []
     if chain.urdf:
         path = chain.resolve(chain.urdf)
         try:
-            text = path.read_text()
-        except OSError as err:
-            raise CalibrationError(str(path), f"cannot read the URDF ({err.strerror})") from err
-        for e in urdf_fixed_edges(text, path.name):
+            urdf = read_urdf(path)
+        except RobotModelError as err:
+            raise ChainConfigError(err.source, err.what) from err
+        for e in urdf_fixed_edges(urdf, path.name):
             if e.child in children:
                 notes.append(f"{path.name}: fixed joint {e.parent} -> {e.child} not used; {children[e.child]} "
                              "gives that frame")
@@ -91,41 +96,18 @@ def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
     return ChainAdditions(cameras, edges, notes)
 
 
-def urdf_fixed_edges(text: str, source: str) -> list[StaticEdge]:
-    """The fixed joints of a URDF as static edges ``T_parent_link_child_link`` (origin xyz, rpy)."""
-    try:
-        root = ET.fromstring(text)  # a URDF the user or the robot itself gave, not untrusted input
-    except ET.ParseError as err:
-        raise CalibrationError(source, f"not a valid URDF ({err})") from err
-    if root.tag != "robot":
-        raise CalibrationError(source, f"not a URDF (the root element is <{root.tag}>, not <robot>)")
+def urdf_fixed_edges(urdf: UrdfJoints, source: str) -> list[StaticEdge]:
+    """The fixed joints of a URDF as static edges ``T_parent_link_child_link`` (the joint's origin)."""
     out: list[StaticEdge] = []
-    for joint in root.findall("joint"):  # direct children only: <transmission> also holds <joint>
-        if joint.get("type") != "fixed":
+    for joint in urdf.joints:
+        if joint.type is not JointType.FIXED:
             continue
-        name = joint.get("name", "?")
-        parent, child = joint.find("parent"), joint.find("child")
-        if parent is None or child is None or not parent.get("link") or not child.get("link"):
-            raise CalibrationError(source, f"fixed joint {name!r} lacks <parent link=...> or <child link=...>")
-        origin = joint.find("origin")
-        xyz = _triple(origin.get("xyz") if origin is not None else None, source, name, "xyz")
-        rpy = _triple(origin.get("rpy") if origin is not None else None, source, name, "rpy")
-        out.append(StaticEdge(str(parent.get("link")).lstrip("/"), str(child.get("link")).lstrip("/"), xyz,
-                              quat_xyzw_from_rpy(*rpy), source))
+        t = joint.origin[:3, 3]
+        q = quat_from_matrix(joint.origin[:3, :3])
+        out.append(StaticEdge(joint.parent.lstrip("/"), joint.child.lstrip("/"),
+                              (float(t[0]), float(t[1]), float(t[2])),
+                              (float(q[0]), float(q[1]), float(q[2]), float(q[3])), source))
     return out
-
-
-def _triple(text: str | None, source: str, joint: str, what: str) -> tuple[float, float, float]:
-    if not text:
-        return (0.0, 0.0, 0.0)
-    try:
-        values = [float(x) for x in text.split()]
-    except ValueError:
-        values = []
-    if len(values) != 3 or not all(math.isfinite(v) for v in values):
-        raise CalibrationError(source, f"joint {joint!r}: origin {what}={text!r} is not three numbers")
-    return (values[0], values[1], values[2])
-
 
 
 def log_urdf_edges(descriptions: dict[str, str]) -> tuple[list[StaticEdge], list[str]]:
@@ -134,8 +116,8 @@ def log_urdf_edges(descriptions: dict[str, str]) -> tuple[list[StaticEdge], list
     notes: list[str] = []
     for topic, text in sorted(descriptions.items()):
         try:
-            edges.extend(urdf_fixed_edges(text, topic))
-        except CalibrationError as err:
+            edges.extend(urdf_fixed_edges(read_urdf_text(text, topic), topic))
+        except RobotModelError as err:
             notes.append(f"topic {topic}: robot description not used ({err.what})")
     return edges, notes
 
@@ -153,8 +135,6 @@ def merge_static_edges(
 ) -> tuple[TransformTable, list[str]]:
     """The log's edges plus the chain's (``explicit``: they replace the log's edge with the same child,
     or the same edge reversed) and the log's URDF joints (``described``: only where the log has none)."""
-    from scipy.spatial.transform import Rotation
-
     notes: list[str] = []
     keep = np.ones(len(table), dtype=bool)
     for e in explicit:
@@ -168,17 +148,15 @@ def merge_static_edges(
         moving = hit & ~table.is_static & (table.parent != e.parent)
         if moving.any():  # replacing a moving parent would cut the tree, never what a mount means
             r = int(np.flatnonzero(moving)[0])
-            raise CalibrationError(
+            raise ChainConfigError(
                 e.source, f"frame {e.child!r} already has the moving parent {str(table.parent[r])!r} in the log "
                 f"({table.source[r]}); a frame has one parent: give the mount the other way round "
                 f"(parent: {e.child}, child: {e.parent}, the inverse transform)")
-        rot = Rotation.from_quat(table.quat_xyzw[first])
-        t = table.translation[first]
+        t, q = table.translation[first], table.quat_xyzw[first]
         if reverse[first]:  # compare like with like: T_parent_child both
-            rot, t = rot.inv(), -rot.inv().apply(t)
-        mount = Rotation.from_quat(e.quat_xyzw)
+            t, q = invert(t, q)
         moved_mm = float(np.linalg.norm(np.asarray(e.xyz) - t)) * 1e3
-        turned_deg = float(np.degrees((rot.inv() * mount).magnitude()))
+        turned_deg = float(np.degrees(quat_angle_between(q, np.asarray(e.quat_xyzw))))
         how = "static" if table.is_static[rows].all() else f"dynamic, {rows.size} samples, the first shown"
         logged = _edge_text(str(table.parent[first]), str(table.child[first]), table.translation[first],
                             table.quat_xyzw[first])

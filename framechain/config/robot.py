@@ -1,0 +1,278 @@
+"""robot.yaml: the URDF, how dataset state names map to its joints (with units), the cameras.
+
+The file (or the ``robot:`` section of CHAIN.yaml, whose paths resolve against CHAIN.yaml)::
+
+    urdf: so101_new_calib.urdf        # relative to this file
+    state_feature: observation.state  # dataset feature holding the joint-state vector
+    world_frame: world                # default "world"
+    world_from_base:                  # static world -> URDF root; default identity
+      xyz: [0.0, 0.0, 0.0]
+      rpy: [0.0, 0.0, 0.0]            # or quat_xyzw: [x, y, z, w], or rotvec: [x, y, z]
+    default_unit: deg                 # optional; every joint must get a unit from here or its own
+    joints:                           # dataset state name -> URDF joint, unit conversion
+      shoulder_pan.pos: shoulder_pan  # a bare joint name takes default_unit
+      elbow_flex.pos: {joint: elbow_flex, unit: deg, sign: -1, offset: 0.0}
+      gripper.pos: {joint: gripper, unit: range_0_100}
+    hold:                             # optional: joints the dataset does not record, fixed (SI)
+      wrist_roll: 0.0
+    cameras:                          # name -> calibration file, or the calibration inline
+      wrist: calib/wrist.yaml
+    detections:                       # optional, one or several sources
+      - table: detections.parquet     # Parquet or CSV: episode_index, frame_index | timestamp,
+                                      #   camera, u, v[, depth_m, label, score]
+      - feature: observation.detection.wrist   # per-frame [u, v] or [u, v, depth_m]; NaN = none
+        camera: wrist
+    chain:                            # optional: how to replay and attribute (as CHAIN.yaml)
+      camera: wrist                   # the camera (name); default the first one
+      body: base_link                 # the body frame; default the URDF root
+      latency_budget_s: 0.02
+      evidence: {reference_point: [0.4, 0.1, 0.02], static_target: true}   # CHAIN.yaml evidence
+
+Units (``unit``): ``rad`` and ``m`` as recorded; ``deg``; ``mm``; ``range_0_100`` maps 0..100 to the
+joint's [lower, upper] limits (LeRobot's gripper); ``range_m100_100`` maps -100..100 to [lower,
+upper]. The joint position is ``sign * convert(value) + offset`` (offset in radians or metres),
+so a calibration that puts the dataset's zero elsewhere than the URDF's is explicit too.
+
+This module reads and checks the file only; binding it to the URDF's model (joints that exist
+and move, the conversion of joint values) is the robot adapter's job
+(:mod:`framechain.adapters.robot.config`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any
+
+from framechain.config import plausible
+from framechain.config.calibration import CameraCalibration, load_calibration
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, latency_budget, parse_evidence
+from framechain.config.errors import RobotConfigError
+from framechain.config.schema import Section, read_yaml, show
+
+__all__ = [
+    "DetectionSource",
+    "JointMapping",
+    "JointUnit",
+    "RobotConfig",
+    "RobotConfigError",
+]
+
+
+class JointUnit(StrEnum):
+    """How a dataset records a joint; conversion to radians or metres is explicit."""
+
+    RAD = "rad"
+    DEG = "deg"
+    M = "m"
+    MM = "mm"
+    RANGE_0_100 = "range_0_100"
+    RANGE_M100_100 = "range_m100_100"
+
+
+@dataclass(frozen=True)
+class JointMapping:
+    """One dataset state name driving one URDF joint: ``q = sign * convert(value) + offset``."""
+
+    state: str
+    joint: str
+    unit: JointUnit
+    sign: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class DetectionSource:
+    """Where detections come from: a side table (Parquet/CSV) or a per-frame dataset feature."""
+
+    table: Path | None = None
+    feature: str | None = None
+    camera: str | None = None
+
+
+_KEYS = {"urdf", "state_feature", "world_frame", "world_from_base", "default_unit", "joints", "hold", "cameras",
+         "detections", "chain"}
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """The parsed robot.yaml (see the module docstring for the schema)."""
+
+    urdf: Path
+    joints: tuple[JointMapping, ...]
+    cameras: Mapping[str, CameraCalibration] = field(default_factory=dict)
+    state_feature: str = "observation.state"
+    world_frame: str = "world"
+    world_from_base_translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    world_from_base_quat_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    hold: Mapping[str, float] = field(default_factory=dict)
+    detections: tuple[DetectionSource, ...] = ()
+    chain_camera: str | None = None
+    chain_body: str | None = None
+    latency_budget_s: float | None = None
+    #: The chain's evidence, as the ``evidence`` mapping of CHAIN.yaml reads it.
+    evidence: ChainEvidence | None = None
+    source: str = ""
+    #: Values that are plausible but unusual, one line each (the cameras' included).
+    notes: tuple[str, ...] = field(default=(), compare=False)
+
+    @classmethod
+    def load(cls, path: str | Path) -> RobotConfig:
+        """Read robot.yaml; relative paths in it resolve against its directory."""
+        p = Path(path)
+        raw = read_yaml(p, error=RobotConfigError, what="robot configuration")
+        return cls.from_mapping(raw if raw is not None else {}, base_dir=p.parent, source=str(p))
+
+    @classmethod
+    def from_mapping(
+        cls, raw: Mapping[str, Any], *, base_dir: str | Path = ".", source: str = "robot"
+    ) -> RobotConfig:
+        """Parse and check a configuration mapping (e.g. ``ChainConfig.robot``)."""
+        base = Path(base_dir)
+        top = Section(raw, source=source, known=_KEYS, error=RobotConfigError)
+        urdf = _resolve(top.name("urdf", required=True, hint="the path of the robot's URDF", what="a file name"), base)
+        joints = _joints(top)
+        pose = top.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
+            rotation_required=False, translation=plausible.position)
+        cameras = _cameras(top, base)
+        chain = top.section("chain", {"camera", "body", "latency_budget_s", "evidence"})
+        chain_camera = chain.name("camera", what="a camera name")
+        if chain_camera is not None and chain_camera not in cameras:
+            chain.fail_at(chain.path("camera"), f"{chain_camera!r} is not one of the cameras {sorted(cameras)}")
+        evidence = parse_evidence(chain)
+        if evidence is not None and evidence.markers is not None:
+            chain.fail("evidence.markers needs topics.image, which robot.yaml cannot give: use CHAIN.yaml")
+        return cls(
+            urdf=urdf, joints=joints, cameras=cameras,
+            state_feature=top.name("state_feature", "observation.state", what="a feature name") or "",
+            world_frame=top.frame("world_frame", "world") or "",
+            world_from_base_translation=pose.xyz, world_from_base_quat_xyzw=pose.quat_xyzw, hold=_hold(top),
+            detections=_detections(top, base, cameras), chain_camera=chain_camera,
+            chain_body=chain.frame("body"), latency_budget_s=latency_budget(chain),
+            evidence=evidence, source=source,
+            notes=(*(n for cam in cameras.values() for n in cam.notes), *top.notes),
+        )
+
+    def check_names(self, names: Sequence[str]) -> None:
+        """Every mapped state name is one of the dataset's ``names`` (raises, listing them)."""
+        known = set(names)
+        missing = [m.state for m in self.joints if m.state not in known]
+        if missing:
+            raise RobotConfigError(
+                self.source, f"state names {missing} are not in {self.state_feature}; it has {list(names)}"
+            )
+
+    def chain_config(self, camera: str | None = None, *, root: str) -> ChainConfig:
+        """The chain configuration to replay and attribute an episode with (frames, evidence, budget).
+
+        ``camera`` defaults to ``chain.camera``, else the first camera; the body to ``chain.body``,
+        else ``root`` (the URDF's root link). Its ``robot`` section points back at this file
+        (``config``) when it was read from one.
+        """
+        name = camera or self.chain_camera or (next(iter(self.cameras)) if self.cameras else None)
+        if name is None:
+            raise RobotConfigError(self.source, "no cameras configured")
+        if name not in self.cameras:
+            raise RobotConfigError(self.source, f"no camera {name!r}; cameras are {sorted(self.cameras)}")
+        frames = ChainFrames(camera=self.cameras[name].optical_frame, body=self.chain_body or root,
+                             world=self.world_frame)
+        if len({frames.camera, frames.body, frames.world}) < 3:
+            raise RobotConfigError(self.source, f"chain: camera, body and world must be three different frames, got "
+                                   f"{frames.camera!r}, {frames.body!r}, {frames.world!r}")
+        robot = {"config": str(Path(self.source).resolve())} if Path(self.source).is_file() else None
+        return ChainConfig(frames=frames, evidence=self.evidence or ChainEvidence(),
+                           latency_budget_s=0.02 if self.latency_budget_s is None else self.latency_budget_s,
+                           robot=robot, origin=Path(self.source).name, notes=self.notes)
+
+
+def _resolve(value: str | None, base: Path) -> Path:
+    p = Path(value or "").expanduser()
+    return p if p.is_absolute() else base / p
+
+
+def _unit(section: Section, key: str) -> JointUnit:
+    value = section.get(key)
+    try:
+        return JointUnit(value)
+    except (ValueError, TypeError):
+        units = [u.value for u in JointUnit]
+        section.fail_at(section.path(key), f"is an unknown unit {show(value)}; units are {units}")
+
+
+def _joints(top: Section) -> tuple[JointMapping, ...]:
+    joints = top.section("joints", what="a mapping of dataset state names to URDF joints")
+    if not joints.raw:
+        top.fail_at("joints", "must map dataset state names to URDF joints")
+    default_unit = _unit(top, "default_unit") if "default_unit" in top else None
+    out = tuple(_joint_mapping(joints, state, spec, default_unit) for state, spec in joints.entries())
+    seen: dict[str, str] = {}
+    for m in out:
+        if m.joint in seen:
+            joints.fail(f"joint {m.joint!r} is driven by both {seen[m.joint]!r} and {m.state!r}")
+        seen[m.joint] = m.state
+    return out
+
+
+def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUnit | None) -> JointMapping:
+    entry = joints.child({"joint": spec} if isinstance(spec, str) else spec, joints.path(state),
+                         {"joint", "unit", "sign", "offset"}, what="a joint name or {joint, unit, sign, offset}")
+    joint = entry.name("joint", required=True, what="a joint name") or ""
+    if "unit" in entry:
+        unit = _unit(entry, "unit")
+    elif default_unit is not None:
+        unit = default_unit
+    else:
+        entry.fail("no unit stated (give unit: rad | deg | m | mm | range_0_100 | range_m100_100, or a default_unit)")
+    sign = entry.get("sign", 1.0)
+    if isinstance(sign, bool) or sign not in (1, -1):
+        entry.fail_at(entry.path("sign"), f"must be 1 or -1, got {show(sign)}")
+    offset = entry.number("offset", 0.0, unit="rad or m", check=plausible.joint_value) or 0.0
+    return JointMapping(state, joint, unit, float(sign), offset)
+
+
+def _hold(top: Section) -> dict[str, float]:
+    hold = top.section("hold", what="a mapping of URDF joints to fixed positions (rad or m)")
+    return {joint: hold.number_value(value, hold.path(joint), unit="rad or m", check=plausible.joint_value)
+            for joint, value in hold.entries()}
+
+
+def _cameras(top: Section, base: Path) -> dict[str, CameraCalibration]:
+    cameras = top.section("cameras", what="a mapping of camera names to calibration files or mappings")
+    out: dict[str, CameraCalibration] = {}
+    for name, spec in cameras.entries():
+        if isinstance(spec, str):
+            out[name] = load_calibration(spec, name=name, base_dir=base)
+        elif isinstance(spec, Mapping):
+            out[name] = load_calibration(spec, name=name, base_dir=base, source=top.source,
+                                         where=cameras.path(name))
+        else:
+            cameras.fail_at(cameras.path(name), f"must be a file path or a mapping, got {show(spec)}")
+    return out
+
+
+def _detections(top: Section, base: Path, cameras: Mapping[str, CameraCalibration]) -> tuple[DetectionSource, ...]:
+    raw = top.get("detections")
+    if raw is None:
+        return ()
+    items = [raw] if isinstance(raw, Mapping) else raw
+    if not isinstance(items, list):
+        top.fail("detections must be a mapping or a list of {table} / {feature, camera}")
+    out: list[DetectionSource] = []
+    for i, item in enumerate(items):
+        entry = top.child(item, f"detections[{i}]", {"table", "feature", "camera"},
+                          what="{table: path} or {feature: name, camera: name}")
+        if ("table" in entry) == ("feature" in entry):
+            entry.fail("give exactly one of table or feature")
+        camera = entry.name("camera", what="a camera name")
+        if camera is not None and camera not in cameras:
+            entry.fail(f"camera {camera!r} is not one of {sorted(cameras)}")
+        if "feature" in entry:
+            feature = entry.name("feature", what="a feature name")
+            if camera is None:
+                entry.fail(f"feature {feature!r} needs camera: <name>")
+            out.append(DetectionSource(feature=feature, camera=camera))
+        else:
+            out.append(DetectionSource(table=_resolve(entry.name("table", what="a file name"), base), camera=camera))
+    return tuple(out)
