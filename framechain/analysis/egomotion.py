@@ -12,12 +12,20 @@ rotation), and the offset is the one that leaves the smallest misfit. Convention
 catalogue's latency: the pose that matches a frame stamped ``t`` is at ``t + offset_s``, so frames
 late by ``d`` (showing the world ``d`` before their stamp) give ``offset_s = -d``.
 
+A wrist camera over a table also translates, and near scenery moves with the translation: an
+image-only rotation reads part of it as rotation (tens of percent at 0.3 m). So
+:func:`fit_camera_motion` measures again with the translation direction forward kinematics
+predicts (:func:`translation_prior`: the link's motion, the declared mount's position, the
+current mount rotation and offset) and refits, a contraction towards the right values,
+accelerated with Anderson mixing; three to five measurements usually settle it.
+
 What each candidate link explains tells which link (which arm) the camera moves with. A link that
 turns about one axis only leaves the mount's rotation about that axis unobservable; a camera that
 does not turn (a fixed camera, a still arm) shows neither offset nor mount.
 
 Intervals are 95% moving-block bootstrap intervals over the frame pairs (blocks of ``block_s``),
-the mount's and offset's jointly. When the intrinsics are not known, the ratio of measured to
+the mount's and offset's jointly (on synthetic rotations they hold the truth in about 85% of
+episodes: a little narrow). When the intrinsics are not known, the ratio of measured to
 predicted rotation across the optical axis is the ratio of true to assumed focal length.
 """
 

@@ -144,6 +144,8 @@ def test_the_gripper_pads_are_left_out(faulted: tuple[VideoDatasetTruth, Episode
     mask = np.zeros((truth.spec.height, truth.spec.width), dtype=np.uint8)
     for pad in gripper_pads(truth.spec.width, truth.spec.height):
         cv2.fillPoly(mask, [np.asarray(pad.polygon, dtype=np.int32)], 255)
+    # Inside the pads by more than a pixel or two (a track on the edge follows the scene beside it).
+    mask = cv2.erode(mask, np.ones((5, 5), np.uint8))
     tracks = evidence.tracks
     kept = 0
     for ids, pixels in zip(tracks.ids, tracks.pixels, strict=True):

@@ -121,10 +121,10 @@ def test_rows_between_frames_take_the_nearest_and_beyond_the_tolerance_none(vide
 def test_health_names_missing_repeated_and_black_frames(tmp_path: Path) -> None:
     frames = numbered_frames(60)
     frames[:4] = 0  # a camera that delivered nothing at first
-    frames[20] = frames[19]  # resent frames: pixel for pixel the previous one (MPEG-4 may code a residual)
+    frames[20] = frames[19]  # resent frames: pixel for pixel the previous one
     frames[33] = frames[32]
     frames[34] = frames[32]
-    path = encode_video(tmp_path / "health.mp4", frames, fps=FPS, codec="mpeg4")
+    path = encode_video(tmp_path / "health.mp4", frames, fps=FPS, codec="libx264")
     # The dataset has 62 rows at 30 fps: the last two have no frame.
     got = read_frames(path, episode_frame_times_ns(np.arange(62) / FPS))
     health = video_health(got, np.arange(62), "observation.images.wrist")
@@ -136,6 +136,22 @@ def test_health_names_missing_repeated_and_black_frames(tmp_path: Path) -> None:
     assert notes[0].startswith("video observation.images.wrist: 2 of 62 frames missing: frame_index 60, 61")
     assert "6 of 62 frames duplicated" in notes[1]
     assert "4 of 62 frames black" in notes[2]
+
+
+def test_a_repeat_coded_with_a_residual_needs_a_repeat_level(tmp_path: Path) -> None:
+    # MPEG-4 Part 2 codes frame 33, sent twice, with a small residual: not pixel for pixel (PyAV 18.1).
+    frames = numbered_frames(60)
+    frames[:4] = 0
+    frames[20] = frames[19]
+    frames[33] = frames[32]
+    path = encode_video(tmp_path / "residual.mp4", frames, fps=FPS, codec="mpeg4")
+    times = episode_frame_times_ns(np.arange(60) / FPS)
+    exact = read_frames(path, times)
+    tolerant = read_frames(path, times, repeat_level=1.0)
+    residual = np.abs(exact.image(33).astype(int) - exact.image(32).astype(int)).mean()
+    assert 0 < residual <= 1.0
+    assert not exact.duplicate[33]
+    assert np.flatnonzero(tolerant.duplicate).tolist() == [1, 2, 3, 20, 33]
 
 
 def test_rows_sharing_a_frame_are_duplicates_and_it_is_decoded_once(videos: dict[str, Path]) -> None:

@@ -11,9 +11,12 @@ converts only the frames some row wants, each once; it seeks again over gaps lon
 ``reseek_s``. A row takes the frame whose presentation time is nearest its time, within
 ``tolerance_s`` (default: half the stream's frame period); a row with none is missing. A row
 whose frame repeats the previous row's is duplicated (real recordings resend a frame when the
-camera is late: it shows an earlier moment than its stamp; "repeats" within ``REPEAT_LEVEL``, as
-lossy codecs return an exact repeat almost exactly), and a frame with hardly a pixel above
-``black_level`` is black (a camera that delivered nothing).
+camera is late: it shows an earlier moment than its stamp), and a frame with hardly a pixel
+above ``black_level`` is black (a camera that delivered nothing). "Repeats" means pixel for
+pixel by default, as H.264, HEVC and AV1 return a frame sent twice; an encoder may instead code a
+small residual for it (MPEG-4 Part 2 did here: 0.7 grey levels on average), which
+``repeat_level`` (mean absolute difference) tolerates, at the price of taking a nearly still
+scene (a static camera watching a small arm: 0.4 levels) for repeats.
 :func:`video_health` counts them by ``frame_index``.
 
 :func:`encode_video` writes frames as an mp4 with PyAV (tests, the scene generator).
@@ -48,10 +51,7 @@ __all__ = [
 
 #: A frame is black when fewer than this share of its pixels exceed ``black_level``.
 BLACK_SHARE = 0.01
-#: A frame repeats the previous one when they differ by less than this on average (grey levels): an
-#: exact repeat in the camera can come back from a lossy codec a fraction of a level off (MPEG-4
-#: Part 2 codes a small residual), while two frames of a moving scene differ by several levels.
-REPEAT_LEVEL = 1.0
+
 PixelFormat = Literal["gray", "rgb24"]
 
 
@@ -179,6 +179,7 @@ def read_frames(
     tolerance_s: float | None = None,
     pixel_format: PixelFormat = "gray",
     black_level: int = 32,
+    repeat_level: float = 0.0,
     reseek_s: float = 2.0,
 ) -> VideoFrames:
     """The frame of each wanted time (ns from the file's start), decoded once; see the module text."""
@@ -201,7 +202,8 @@ def read_frames(
     frame_time[order] = matcher.picked_time
     images = np.stack(matcher.images) if matcher.images else np.zeros((0, 0, 0), dtype=np.uint8)
     return VideoFrames(path=str(path), time_ns=wanted, frame_time_ns=frame_time, image_index=picked, images=images,
-                       duplicate=_duplicates(picked, images), black=_black(picked, images, black_level),
+                       duplicate=_duplicates(picked, images, repeat_level),
+                       black=_black(picked, images, black_level),
                        decoded=matcher.decoded)
 
 
@@ -283,8 +285,8 @@ def _decode_segment(container: Any, stream: Any, matcher: _Matcher, start: int, 
     matcher.finish(stop)
 
 
-def _duplicates(picked: IntArray, images: npt.NDArray[np.uint8]) -> BoolArray:
-    """Rows whose frame is the previous present row's frame, or equal to it within ``REPEAT_LEVEL``."""
+def _duplicates(picked: IntArray, images: npt.NDArray[np.uint8], level: float) -> BoolArray:
+    """Rows whose frame is the previous present row's frame, or within ``level`` of it (mean absolute difference)."""
     out = np.zeros(picked.size, dtype=bool)
     present = np.flatnonzero(picked >= 0)
     if present.size < 2:
@@ -295,7 +297,7 @@ def _duplicates(picked: IntArray, images: npt.NDArray[np.uint8]) -> BoolArray:
     if differ.any():
         flat = images.reshape(images.shape[0], -1)
         gap = np.abs(flat[a[differ]].astype(np.int16) - flat[b[differ]].astype(np.int16)).mean(axis=1)
-        same[differ] = gap < REPEAT_LEVEL
+        same[differ] = gap <= level
     out[present[1:]] = same
     return out
 

@@ -283,7 +283,7 @@ def _fixed_region(images: list[GreyImage], opts: EgoMotionOptions) -> BoolArray:
     if not still.any():
         return np.zeros(still.shape, dtype=bool)
     # Specks (a textureless spot of the scene) are dropped before widening the region.
-    still = cv2.morphologyEx(still, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
+    still = cv2.morphologyEx(still, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     size = 2 * opts.fixed_mask_radius_px + 1
     widened = cv2.dilate(still, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
     return np.asarray(widened, dtype=bool)
