@@ -375,24 +375,64 @@ def fit_camera_motion(
     if not ranked:
         notes.append(f"camera {camera}: fewer than {opts.min_pairs} measured frame pairs inside the links' span")
         return _unobservable(camera, declared_link, turning, notes)
-    chosen = declared_link if declared_link in _similar(ranked, ranked[0], opts) else ranked[0].link
-    start = (np.asarray(declared_q_link_cam, dtype=float), 0.0)
-    xyz = np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam, dtype=float)
-    for _attempt in range(2):
-        link = next(item for item in links if item.link == chosen)
-        fit = next(f for f in ranked if f.link == chosen)
-        if link.xyz is not None and refinements > 0:
-            table, fit = _refine_with_translation(measure, link, start, xyz, refinements, opts)
-        ranked = _rank(table, links, opts)
-        mine = next((f for f in ranked if f.link == chosen), fit)
-        if ranked[0].link == chosen or ranked[0].residual_deg * opts.same_fit_ratio >= mine.residual_deg:
-            break
-        notes.append(f"camera {camera}: measured with {chosen}'s translation, its motion fits {ranked[0].link} "
-                     "better; refined again on that link")
-        chosen = ranked[0].link
-    similar = _similar(ranked, mine, opts)
+    declared = _Start(np.asarray(declared_q_link_cam, dtype=float), 0.0,
+                      np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam, dtype=float))
+    by_name = {link.link: link for link in links}
+    first = (table, ranked)
+    candidates: list[str] = []
+    if declared_link in _similar(ranked, ranked[0], opts):
+        table, fit, ranked = _refined(measure, by_name[declared_link], [declared], first, links, refinements, opts)
+        if ranked[0].link != declared_link and ranked[0].residual_deg * opts.same_fit_ratio < fit.residual_deg:
+            notes.append(f"camera {camera}: measured with {declared_link}'s translation, its motion fits "
+                         f"{ranked[0].link} better; refined on the links that fit best")
+            candidates = [f.link for f in ranked if f.link != declared_link][:_MAX_CANDIDATES]
+    else:
+        candidates = list(_similar(ranked, ranked[0], opts))[:_MAX_CANDIDATES]
+    if candidates:
+        # Each candidate from the declared mount (the same link on another arm) and from its rotation-only
+        # fit (another link); the one its own refined measurement fits best wins.
+        tried = [_refined(measure, by_name[name], [declared, _Start(f.q_link_cam, f.offset_s, np.zeros(3))],
+                          first, links, refinements, opts)
+                 for name in candidates for f in first[1] if f.link == name]
+        table, fit, ranked = min(tried, key=lambda item: item[1].residual_deg)
+    link = by_name[fit.link]
+    similar = _similar(ranked, next((f for f in ranked if f.link == fit.link), fit), opts)
     return _final(table, link, fit, ranked, similar, declared_link, np.asarray(declared_q_link_cam, dtype=float),
                   camera, turning, notes, opts)
+
+
+#: At most this many candidate links are refined when the declared one does not fit.
+_MAX_CANDIDATES = 3
+
+
+@dataclass(frozen=True)
+class _Start:
+    """Where a refinement starts: mount rotation (xyzw), offset (s), the camera's position on the link (m)."""
+
+    q_link_cam: FloatArray
+    offset_s: float
+    xyz: FloatArray
+
+
+def _refined(
+    measure: Measure, link: LinkMotion, starts: Sequence[_Start], first: tuple[EgoMotionTable, list[LinkFit]],
+    links: Sequence[LinkMotion], refinements: int, opts: EgoMotionFitOptions,
+) -> tuple[EgoMotionTable, LinkFit, list[LinkFit]]:
+    """The link's fit on a measurement made with its own translation prior, and every candidate ranked on it.
+
+    With several starts, two refinements from each pick the one to finish from. Without link positions
+    (or refinements) the rotation-only fit stands.
+    """
+    own = next(f for f in first[1] if f.link == link.link)
+    if link.xyz is None or refinements <= 0:
+        return first[0], own, first[1]
+    trials = [(*_refine_with_translation(measure, link, (s.q_link_cam, s.offset_s), s.xyz,
+                                         min(2, refinements), opts), s) for s in starts]
+    table, fit, start = min(trials, key=lambda item: item[1].residual_deg)
+    if refinements > 2:
+        table, fit = _refine_with_translation(measure, link, (fit.q_link_cam, fit.offset_s), start.xyz,
+                                              refinements - 2, opts)
+    return table, fit, _rank(table, links, opts)
 
 
 def _rank(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:
