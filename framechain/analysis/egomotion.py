@@ -39,7 +39,7 @@ from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.geometry.rotations import quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
-from framechain.timeline import EgoMotionTable
+from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = [
     "EgoMotionFit",
@@ -48,14 +48,11 @@ __all__ = [
     "LinkMotion",
     "Measure",
     "MountError",
-    "TranslationPrior",
     "fit_camera_motion",
     "fit_link",
     "translation_prior",
 ]
 
-#: Expected translation direction of the camera between stamps, in the earlier optical frame (P, 3).
-TranslationPrior = Callable[[IntArray, IntArray], FloatArray]
 #: Measures the camera's motion from its images, given a translation prior (None: rotation only).
 Measure = Callable[[TranslationPrior | None], EgoMotionTable]
 

@@ -13,7 +13,7 @@ quaternions are ``quat_xyzw`` (scalar last, as ROS and scipy).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, ClassVar, Self
@@ -499,3 +499,10 @@ class EgoMotionTable(ColumnTable):
         object.__setattr__(self, "frame", normalize_frames(self.frame))
         if np.any(self.stamp1_ns <= self.stamp0_ns):
             raise TimelineError("EgoMotionTable: every pair needs stamp1_ns > stamp0_ns")
+
+
+#: The translation direction a camera is expected to move in between two of its frames, in the
+#: optical frame of the earlier one: ``prior(stamp0_ns (P,), stamp1_ns (P,)) -> (P, 3)``, rows of NaN
+#: where it is not known. The analysis builds it from forward kinematics; the ego-motion measurement
+#: uses it to tell the camera's translation from its rotation.
+TranslationPrior = Callable[[IntArray, IntArray], FloatArray]

@@ -32,13 +32,12 @@ from framechain.analysis.egomotion import (
     EgoMotionFit,
     EgoMotionFitOptions,
     LinkMotion,
-    TranslationPrior,
     fit_camera_motion,
 )
 from framechain.arrays import IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetTruth
-from framechain.timeline import EgoMotionTable
+from framechain.timeline import EgoMotionTable, TranslationPrior
 
 #: The links every test offers as candidates (per arm).
 CANDIDATE_LINKS = ("gripper_link", "wrist_link", "lower_arm_link")

@@ -31,7 +31,7 @@ frame shows an earlier moment than its stamp says.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,12 +48,11 @@ from framechain.adapters.messages.two_view import (
 )
 from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
-from framechain.timeline import EgoMotionTable
+from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = [
     "EgoMotionOptions",
     "FeatureTracks",
-    "TranslationPrior",
     "measure_egomotion",
     "track_features",
 ]
@@ -95,11 +94,6 @@ class EgoMotionOptions:
     still_grey_levels: float = 3.0
     fixed_mask_radius_px: int = 8
     seed: int = 0
-
-
-#: The expected translation direction of the camera between two stamps, in the earlier optical frame:
-#: ``prior(stamp0_ns (P,), stamp1_ns (P,)) -> (P, 3)`` (rows of NaN: not known).
-TranslationPrior = Callable[[IntArray, IntArray], FloatArray]
 
 
 @dataclass(frozen=True)
