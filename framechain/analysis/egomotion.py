@@ -38,7 +38,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray, IntArray
-from framechain.geometry.rotations import quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
+from framechain.geometry.rotations import kabsch, quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = [
@@ -190,16 +190,6 @@ def _link_rotvecs(orientations: _Orientations, pairs: _Pairs, offsets: FloatArra
     return out
 
 
-def _kabsch(cross: FloatArray) -> FloatArray:
-    """Rotations ``X`` maximising ``tr(X^T C)`` for a stack ``C`` (..., 3, 3)."""
-    u, _s, vt = np.linalg.svd(cross)
-    d = np.sign(np.linalg.det(u @ vt))
-    u = u.copy()
-    u[..., :, 2] *= d[..., None]
-    out: FloatArray = u @ vt
-    return out
-
-
 class _Scatter:
     """The products ``a b^T`` and ``|a|^2 + |b|^2`` of every pair at every trial offset, built once.
 
@@ -221,7 +211,7 @@ class _Scatter:
         """
         w = np.atleast_2d(weights)
         cross = (w @ self.outer).reshape(w.shape[0], self.offsets, 3, 3)
-        mounts = _kabsch(cross)
+        mounts = kabsch(cross)
         cost = w @ self.norms - 2.0 * (mounts * cross).sum(axis=(-1, -2))
         if weights.ndim == 1:
             return mounts[0], cost[0], cross[0]
@@ -583,7 +573,7 @@ def _bootstrap(pairs: _Pairs, solved: _Solved, opts: EgoMotionFitOptions) -> _Bo
     k = where.astype(np.int64)
     alpha = (where - k)[:, None, None]
     rows = np.arange(opts.bootstrap)
-    mounts = _kabsch((1.0 - alpha) * cross[rows, k] + alpha * cross[rows, k + 1])
+    mounts = kabsch((1.0 - alpha) * cross[rows, k] + alpha * cross[rows, k + 1])
     return _Boot(offsets=offsets, mounts=mounts, weights=weights, at_edge=at_edge)
 
 
@@ -606,7 +596,7 @@ def _focal_scale(pairs: _Pairs, solved: _Solved, link_rv: FloatArray, boot: _Boo
     num = den = np.zeros_like(weights)
     for _ in range(4):
         unscaled = pairs.rotvec * np.array([1.0 / scale, 1.0 / scale, 1.0])
-        mount = _kabsch(np.einsum("n,ni,nj->ij", weights, link_rv, unscaled))
+        mount = kabsch(np.einsum("n,ni,nj->ij", weights, link_rv, unscaled))
         predicted = (link_rv @ mount)[:, :2]
         num = (predicted * pairs.rotvec[:, :2]).sum(axis=1)
         den = (predicted**2).sum(axis=1)

@@ -13,6 +13,7 @@ from framechain.geometry.rotations import (
     compose,
     homogeneous,
     invert,
+    kabsch,
     quat_angle,
     quat_conjugate,
     quat_from_matrix,
@@ -161,3 +162,16 @@ def test_homogeneous_and_from_matrix_match_scipy(rng: np.random.Generator) -> No
     np.testing.assert_array_equal(m[:, 3], np.tile([0.0, 0.0, 0.0, 1.0], (N, 1)))
     assert_same_rotation(quat_from_matrix(m[:, :3, :3]).T, q, atol=1e-14)
     assert quat_from_matrix(np.eye(3)).shape == (4,)
+
+
+def test_kabsch_matches_scipy_align_vectors() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        b = rng.normal(size=(30, 3))
+        truth = Rotation.random(random_state=rng)
+        a = truth.apply(b) + 0.01 * rng.normal(size=b.shape)
+        w = rng.uniform(0.5, 2.0, 30)
+        expected, _rssd = Rotation.align_vectors(a, b, weights=w)
+        got = kabsch(np.einsum("n,ni,nj->ij", w, a, b)[None])[0]
+        assert np.allclose(got, expected.as_matrix(), atol=1e-10)
+        assert np.linalg.det(got) == pytest.approx(1.0)

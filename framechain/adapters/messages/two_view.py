@@ -16,10 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from framechain.arrays import BoolArray, FloatArray
+from framechain.geometry.rotations import kabsch
 
 __all__ = [
     "PairBatch",
-    "kabsch",
     "off_flow_residuals",
     "rotation_matrices",
     "rotations_along_translation",
@@ -35,21 +35,6 @@ class PairBatch:
     b0: FloatArray
     b1: FloatArray
     valid: BoolArray
-
-    @property
-    def counts(self) -> FloatArray:
-        out: FloatArray = self.valid.sum(axis=1).astype(np.float64)
-        return out
-
-
-def kabsch(cross: FloatArray) -> FloatArray:
-    """Rotations ``R`` maximising ``tr(R^T C)`` for a stack of cross-covariances ``C`` (..., 3, 3)."""
-    u, _s, vt = np.linalg.svd(cross)
-    d = np.sign(np.linalg.det(u @ vt))
-    u = u.copy()
-    u[..., :, 2] *= d[..., None]
-    out: FloatArray = u @ vt
-    return out
 
 
 def rotation_matrices(rotvec: FloatArray) -> FloatArray:
