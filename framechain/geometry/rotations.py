@@ -278,3 +278,17 @@ def quat_rotate_into(
             t1 += t2
         t1 *= 2.0
         np.add(t1, vk, out=out[k])
+
+
+def kabsch(cross: FloatArray) -> FloatArray:
+    """Rotations ``R`` maximising ``tr(R^T C)`` for a stack of cross-covariances ``C`` (..., 3, 3).
+
+    With ``C = sum w a b^T`` this is the rotation taking the vectors ``b`` nearest to ``a`` in least
+    squares (Kabsch/Wahba), a reflection never: ``R = U diag(1, 1, det(U V^T)) V^T`` from ``C = U S V^T``.
+    """
+    u, _s, vt = np.linalg.svd(cross)
+    d = np.sign(np.linalg.det(u @ vt))
+    u = u.copy()
+    u[..., :, 2] *= d[..., None]
+    out: FloatArray = u @ vt
+    return out

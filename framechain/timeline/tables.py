@@ -13,7 +13,7 @@ quaternions are ``quat_xyzw`` (scalar last, as ROS and scipy).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, ClassVar, Self
@@ -458,3 +458,51 @@ class PointTable(ColumnTable):
     def with_role(self, role: PointRole) -> PointTable:
         """The rows of one role."""
         return self.take(self.role == role.value)
+
+
+@dataclass(frozen=True)
+class EgoMotionTable(ColumnTable):
+    """A camera's motion between two of its frames, measured from the images alone.
+
+    One row per frame pair: ``quat_xyzw`` is ``R_cam(t0)_cam(t1)``, the rotation that maps vectors
+    in the optical frame at the later frame ``stamp1_ns`` into the optical frame at ``stamp0_ns``
+    (frame stamps, the camera's clock). ``direction`` is the unit translation of the later camera
+    centre in the earlier optical frame, NaN where the parallax is too small to show it.
+    ``tracks`` features were matched between the two frames, ``inliers`` of them agree with the
+    motion; ``residual_px`` is the inliers' RMS misfit and ``parallax_px`` their median image
+    displacement due to translation (both in pixels at the camera's focal length).
+    """
+
+    COLUMNS: ClassVar[dict[str, Column]] = {
+        "frame": Column("str"),
+        "stamp0_ns": Column("i8"),
+        "stamp1_ns": Column("i8"),
+        "quat_xyzw": Column("f8", (4,)),
+        "direction": Column("f8", (3,)),
+        "tracks": Column("i8"),
+        "inliers": Column("i8"),
+        "residual_px": Column("f8"),
+        "parallax_px": Column("f8"),
+    }
+    frame: StrArray
+    stamp0_ns: IntArray
+    stamp1_ns: IntArray
+    quat_xyzw: FloatArray
+    direction: FloatArray
+    tracks: IntArray
+    inliers: IntArray
+    residual_px: FloatArray
+    parallax_px: FloatArray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "frame", normalize_frames(self.frame))
+        if np.any(self.stamp1_ns <= self.stamp0_ns):
+            raise TimelineError("EgoMotionTable: every pair needs stamp1_ns > stamp0_ns")
+
+
+#: The translation direction a camera is expected to move in between two of its frames, in the
+#: optical frame of the earlier one: ``prior(stamp0_ns (P,), stamp1_ns (P,)) -> (P, 3)``, rows of NaN
+#: where it is not known. The analysis builds it from forward kinematics; the ego-motion measurement
+#: uses it to tell the camera's translation from its rotation.
+TranslationPrior = Callable[[IntArray, IntArray], FloatArray]

@@ -13,6 +13,7 @@ from framechain.geometry.rotations import (
     compose,
     homogeneous,
     invert,
+    kabsch,
     quat_angle,
     quat_angle_between,
     quat_conjugate,
@@ -202,3 +203,16 @@ def test_row_transforms_match_scipy(rng: np.random.Generator) -> None:
     np.testing.assert_allclose(transform_points(t_inv, q_inv, transform_points(t, q, p)), p, atol=1e-12)
     # One transform for every point broadcasts.
     np.testing.assert_allclose(transform_points(t[0], q[0], p), Rotation.from_quat(q[0]).apply(p) + t[0], atol=1e-13)
+
+
+def test_kabsch_matches_scipy_align_vectors() -> None:
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        b = rng.normal(size=(30, 3))
+        truth = Rotation.random(random_state=rng)
+        a = truth.apply(b) + 0.01 * rng.normal(size=b.shape)
+        w = rng.uniform(0.5, 2.0, 30)
+        expected, _rssd = Rotation.align_vectors(a, b, weights=w)
+        got = kabsch(np.einsum("n,ni,nj->ij", w, a, b)[None])[0]
+        assert np.allclose(got, expected.as_matrix(), atol=1e-10)
+        assert np.linalg.det(got) == pytest.approx(1.0)

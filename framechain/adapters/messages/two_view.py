@@ -1,0 +1,167 @@
+"""A camera's rotation between two frames from matched bearing vectors, for many frame pairs at once.
+
+Every function works on a :class:`PairBatch`: P frame pairs, each with up to M matched unit
+bearings ``b0`` (earlier frame) and ``b1`` (later frame) in the optical frame, padded to ``(P, M, 3)``
+with a ``valid`` mask, so one NumPy pass serves all pairs (no Python loop per pair).
+
+The rotation ``R = R_cam0_cam1`` maps the later frame's bearings to the earlier one's: for a far
+point ``b0 = R b1``; a point at inverse distance ``rho`` when the camera centre moves by ``t``
+(earlier frame) gives ``b0 ~ R b1 + rho t``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from framechain.arrays import BoolArray, FloatArray
+from framechain.geometry.rotations import kabsch
+
+__all__ = [
+    "PairBatch",
+    "off_flow_residuals",
+    "rotation_matrices",
+    "rotations_along_translation",
+    "rotations_ransac",
+    "translation_directions",
+]
+
+
+@dataclass(frozen=True)
+class PairBatch:
+    """P pairs of matched unit bearings, padded: ``b0``, ``b1`` (P, M, 3), ``valid`` (P, M)."""
+
+    b0: FloatArray
+    b1: FloatArray
+    valid: BoolArray
+
+
+def rotation_matrices(rotvec: FloatArray) -> FloatArray:
+    """Rodrigues: rotation vectors (..., 3) to matrices (..., 3, 3)."""
+    angle = np.linalg.norm(rotvec, axis=-1)
+    safe = np.where(angle > 1e-12, angle, 1.0)
+    axis = rotvec / safe[..., None]
+    k = np.zeros((*rotvec.shape[:-1], 3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -axis[..., 2], axis[..., 1], -axis[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = axis[..., 2], -axis[..., 1], axis[..., 0]
+    s = np.where(angle > 1e-12, np.sin(angle), angle)[..., None, None]
+    c = (1.0 - np.cos(angle))[..., None, None]
+    out: FloatArray = np.eye(3) + s * k + c * (k @ k)
+    return out
+
+
+def rotations_ransac(
+    batch: PairBatch, threshold_rad: float, *, hypotheses: int, rng: np.random.Generator
+) -> tuple[FloatArray, BoolArray]:
+    """Rotation-only RANSAC per pair: ``R`` (P, 3, 3) with ``b0 ~ R b1``, inliers (P, M) within ``threshold_rad``.
+
+    Two-point Kabsch hypotheses (two distinct valid matches of the pair), all scored at once; the
+    best of each pair is refitted on its inliers twice.
+    """
+    p = batch.b0.shape[0]
+    count = np.maximum(batch.valid.sum(axis=1), 2)
+    # Valid matches come first in each row, so indices below the count are valid.
+    first = (rng.random((p, hypotheses)) * count[:, None]).astype(np.int64)
+    second = (first + 1 + (rng.random((p, hypotheses)) * (count[:, None] - 1)).astype(np.int64)) % count[:, None]
+    rows = np.arange(p)[:, None]
+    cross = (batch.b0[rows, first][..., :, None] * batch.b1[rows, first][..., None, :]
+             + batch.b0[rows, second][..., :, None] * batch.b1[rows, second][..., None, :])
+    candidates = kabsch(cross)  # (P, H, 3, 3)
+    cos_limit = np.cos(threshold_rad)
+    # b0 . R b1 = sum_ij R_ij (b0 b1^T)_ij: one batched product of (H, 9) by (9, M) per pair.
+    outer = (batch.b0[..., :, None] * batch.b1[..., None, :]).reshape(p, -1, 9)
+    scores = np.empty((p, hypotheses), dtype=np.int64)
+    for lo in range(0, p, _CHUNK):
+        agree = candidates[lo:lo + _CHUNK].reshape(-1, hypotheses, 9) @ np.swapaxes(outer[lo:lo + _CHUNK], 1, 2)
+        scores[lo:lo + _CHUNK] = ((agree > cos_limit) & batch.valid[lo:lo + _CHUNK, None, :]).sum(axis=2)
+    best = candidates[np.arange(p), np.argmax(scores, axis=1)]
+    inliers = _agreeing(outer, batch.valid, best, cos_limit)
+    for _ in range(2):
+        best = kabsch((inliers[:, None, :] @ outer).reshape(p, 3, 3))
+        inliers = _agreeing(outer, batch.valid, best, cos_limit)
+    return best, inliers
+
+
+#: Pairs scored per batched product in :func:`rotations_ransac` (bounds the (P, H, M) scores in memory).
+_CHUNK = 64
+
+
+def _agreeing(outer: FloatArray, valid: BoolArray, rotation: FloatArray, cos_limit: float) -> BoolArray:
+    cosine = (outer @ rotation.reshape(-1, 9, 1))[..., 0]
+    out: BoolArray = (cosine > cos_limit) & valid
+    return out
+
+
+def _across(b0: FloatArray, v: FloatArray) -> FloatArray:
+    """The part of ``v`` (..., 3) across the unit bearings ``b0`` (the tangent plane at ``b0``)."""
+    out: FloatArray = v - (v * b0).sum(axis=-1, keepdims=True) * b0
+    return out
+
+
+def off_flow_residuals(batch: PairBatch, rotation: FloatArray, direction: FloatArray) -> FloatArray:
+    """Per match, the part of ``R b1`` across ``b0`` that no positive depth along ``direction`` explains (P, M, 3)."""
+    u = batch.b1 @ np.swapaxes(rotation, 1, 2)
+    across_u = _across(batch.b0, u)
+    across_t = _across(batch.b0, direction[:, None, :])
+    rho = np.clip(-(across_u * across_t).sum(-1) / np.maximum((across_t**2).sum(-1), 1e-18), 0.0, None)
+    out: FloatArray = across_u + rho[..., None] * across_t
+    return out
+
+
+def rotations_along_translation(
+    batch: PairBatch, rotation: FloatArray, direction: FloatArray, weights: FloatArray, threshold_rad: float,
+    iterations: int,
+) -> FloatArray:
+    """``R`` (P, 3, 3) with ``b0 ~ R b1 + rho t`` for known translation directions ``t`` (P, 3), ``rho >= 0``.
+
+    The inverse depths are projected out: a match's residual is the part of ``R b1`` across ``b0``
+    that is not along the translation's flow at ``b0`` (all of it where that would need a negative
+    depth). Gauss-Newton on the rotation from ``rotation``, with Cauchy weights whose scale anneals
+    from eight times ``threshold_rad`` down to it (halving per step); ``weights`` (P, M) zero the
+    matches left out. Stops when no pair's step exceeds 1e-7 rad.
+    """
+    across_t = _across(batch.b0, direction[:, None, :])
+    along = across_t / np.maximum(np.linalg.norm(across_t, axis=-1, keepdims=True), 1e-12)
+    rot = rotation
+    for it in range(iterations):
+        scale = threshold_rad * max(1.0, 8.0 * 0.5**it)
+        u = batch.b1 @ np.swapaxes(rot, 1, 2)
+        err = _across(batch.b0, u)
+        flow_part = (err * along).sum(-1, keepdims=True)
+        ahead = ((err * across_t).sum(-1) < 0)[..., None]  # a positive depth explains part of it
+        err = np.where(ahead, err - flow_part * along, err)
+        w = (weights / (1.0 + (np.linalg.norm(err, axis=-1) / scale) ** 2))[..., None]
+        # err = Proj u with Proj = I - b0 b0^T (- along along^T when ahead), d(u) = omega x u, so
+        # J^T J = |u|^2 I - u u^T - (u x b0)(u x b0)^T (- (u x along)(u x along)^T), J^T err = u x err.
+        cross_b0 = np.cross(u, batch.b0)
+        cross_along = np.where(ahead, np.cross(u, along), 0.0)
+        normal = (np.eye(3) * (w * (u * u).sum(-1, keepdims=True)).sum(1)[:, :, None]
+                  - _gram(w, u) - _gram(w, cross_b0) - _gram(w, cross_along) + 1e-15 * np.eye(3))
+        step = np.linalg.solve(normal, -(w * np.cross(u, err)).sum(1)[..., None])[..., 0]
+        rot = rotation_matrices(step) @ rot
+        if float(np.abs(step).max(initial=0.0)) < 1e-7:
+            break
+    return rot
+
+
+def _gram(weights: FloatArray, v: FloatArray) -> FloatArray:
+    """``sum_m w v v^T`` per pair (P, 3, 3), for ``weights`` (P, M, 1) and ``v`` (P, M, 3)."""
+    out: FloatArray = np.swapaxes(weights * v, 1, 2) @ v
+    return out
+
+
+def translation_directions(batch: PairBatch, rotation: FloatArray, weights: FloatArray) -> FloatArray:
+    """Per pair, the epipolar translation direction given the rotation, signed by the flow (P, 3).
+
+    The direction is normal to every ``R b1 x b0`` (weighted scatter's smallest eigenvector); a near
+    point's derotated bearing moves away from the translation, which fixes the sign.
+    """
+    u = batch.b1 @ np.swapaxes(rotation, 1, 2)
+    normals = np.cross(u, batch.b0)
+    _values, vectors = np.linalg.eigh(_gram(weights[..., None], normals))
+    t = vectors[..., 0]
+    flow = u - batch.b0
+    sign = (weights * (flow * _across(batch.b0, t[:, None, :])).sum(-1)).sum(1)
+    out: FloatArray = np.where(sign[:, None] > 0, -t, t)
+    return out

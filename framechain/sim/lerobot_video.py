@@ -1,0 +1,224 @@
+"""LeRobot episodes with wrist video, generated with known faults: the camera-motion evidence's truth.
+
+One or two SO-101 arms (bimanual: link and joint names prefixed ``left_``/``right_``) move along
+smooth joint trajectories; a wrist camera rides on a ``gripper_link``. Each frame is rendered by
+:class:`framechain.sim.video_scene.TexturedScene` from the camera's pose at the moment the frame
+was taken, computed with this package's own URDF maths (:mod:`framechain.sim.urdf_chain`; never
+framechain's kinematics, replay or camera model), encoded with PyAV, and written as a LeRobot
+v3.0 or v2.1 dataset with :func:`framechain.adapters.lerobot.writer.write_lerobot_dataset`.
+
+Faults, all known to the returned :class:`VideoDatasetTruth`:
+
+- ``video_delay_s``: frames late by this (frame k, stamped ``k / fps``, shows the scene at
+  ``k / fps - delay``): the expected offset is ``-delay`` (framechain's latency sign);
+- ``mount_error_deg`` about ``mount_error_axis`` (optical frame): the declared mount is
+  ``R_declared = R_true exp(angle * axis)``;
+- ``declared_arm``: the camera is declared on another arm than the one carrying it;
+- ``focal_scale``: the declared intrinsics' focal length is this times the true one;
+- ``repeat_share``: this share of frames repeat the previous frame exactly (a late camera).
+
+State is LeRobot's SO-101 convention: joints in degrees (``shoulder_pan.pos``, ...), the gripper
+0-100; actions are the next frame's state.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from framechain.adapters.lerobot.video import encode_video
+from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+from framechain.arrays import FloatArray
+from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
+from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
+
+__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads"]
+
+ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
+#: A pose with the gripper reaching forward and down over the table.
+_Q_HOME = np.array([0.0, -0.6, 0.5, 0.6, 0.0])
+#: Amplitudes (rad) of each joint's motion; frequencies (rad/s) are drawn per episode.
+_AMPLITUDE = np.array([0.45, 0.2, 0.2, 0.3, 0.6])
+#: Optical axes in gripper_link: looking along the jaws (-z), image up +x, then tilted down 25 degrees.
+_OPTICAL_IN_GRIPPER = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]) @ rpy_matrix((-0.436, 0, 0))
+
+
+@dataclass(frozen=True)
+class VideoDatasetSpec:
+    """What to generate: arms, camera, episodes, format, and the faults to inject."""
+
+    urdf: Path
+    seed: int = 0
+    episodes: int = 1
+    duration_s: float = 6.0
+    fps: int = 30
+    version: str = "v3.0"
+    codec: str = "libx264"
+    bimanual: bool = False
+    #: The arm carrying the camera and the arm it is declared on ("" single arm; "left_"/"right_").
+    camera_arm: str = ""
+    declared_arm: str | None = None
+    width: int = 224
+    height: int = 224
+    focal_px: float = 180.0
+    mount_xyz: tuple[float, float, float] = (0.05, 0.0, -0.03)
+    video_delay_s: float = 0.0
+    mount_error_deg: float = 0.0
+    mount_error_axis: tuple[float, float, float] = (0.6, 0.8, 0.0)
+    focal_scale: float = 1.0
+    repeat_share: float = 0.0
+    pads: bool = True
+
+
+@dataclass(frozen=True)
+class VideoDatasetTruth:
+    """The dataset written and everything true about it (frames in the camera's optical frame)."""
+
+    root: Path
+    spec: VideoDatasetSpec
+    video_key: str
+    arms: tuple[str, ...]
+    state_names: tuple[str, ...]
+    camera_link: str
+    declared_link: str
+    q_link_cam: FloatArray  # true R_link_cam (xyzw)
+    declared_q_link_cam: FloatArray
+    xyz_link_cam: FloatArray
+    #: True fx, fy, cx, cy and the declared focal length.
+    intrinsics: tuple[float, float, float, float]
+    declared_focal_px: float
+    #: Per episode: the frames (in order) that repeat the previous one.
+    repeated: tuple[tuple[int, ...], ...] = field(default_factory=tuple)
+
+    @property
+    def expected_offset_s(self) -> float:
+        """framechain's latency offset for the injected delay: frames late by d give ``-d``."""
+        return -self.spec.video_delay_s
+
+
+def _trajectory(rng: np.random.Generator) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed)."""
+    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2))
+    omega = rng.uniform(0.8, 2.2, (5, 2))
+    phase = rng.uniform(0.0, 2 * np.pi, (5, 2))
+    return amplitude, omega, phase
+
+
+def _joints(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
+    """(T, 5) arm joint angles (rad) at times ``t_s``."""
+    amplitude, omega, phase = motion
+    waves = amplitude[None] * np.sin(omega[None] * t_s[:, None, None] + phase[None])
+    out: FloatArray = _Q_HOME + waves.sum(axis=2)
+    return out
+
+
+def _base_poses(arms: Sequence[str]) -> dict[str, FloatArray]:
+    """``T_world_base`` per arm: side by side 0.4 m apart, both facing +x."""
+    out = {}
+    for arm in arms:
+        pose = np.eye(4)
+        pose[1, 3] = {"left_": 0.2, "right_": -0.2}.get(arm, 0.0)
+        out[arm] = pose
+    return out
+
+
+def _mounts(spec: VideoDatasetSpec) -> tuple[FloatArray, FloatArray]:
+    """True and declared ``T_link_cam`` (4x4, optical frame)."""
+    true = np.eye(4)
+    true[:3, :3] = _OPTICAL_IN_GRIPPER
+    true[:3, 3] = spec.mount_xyz
+    axis = np.asarray(spec.mount_error_axis, dtype=float)
+    error = Rotation.from_rotvec(np.deg2rad(spec.mount_error_deg) * axis / np.linalg.norm(axis)).as_matrix()
+    declared = true.copy()
+    declared[:3, :3] = true[:3, :3] @ error
+    return true, declared
+
+
+def gripper_pads(width: int, height: int) -> tuple[PadRegion, ...]:
+    """The gripper's jaws in the lower corners of the image."""
+    w, h = width, height
+    left = ((0, h), (0, int(0.83 * h)), (int(0.22 * w), int(0.76 * h)), (int(0.36 * w), h))
+    right = ((w, h), (w, int(0.83 * h)), (int(0.78 * w), int(0.76 * h)), (int(0.64 * w), h))
+    return PadRegion(left, 1), PadRegion(right, 2)
+
+
+def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDatasetTruth:
+    """Render, encode and write the dataset under ``root`` (created); return its truth."""
+    rng = np.random.default_rng(spec.seed)
+    arms = ("left_", "right_") if spec.bimanual else ("",)
+    if spec.camera_arm not in arms or (spec.declared_arm is not None and spec.declared_arm not in arms):
+        raise ValueError(f"camera arm {spec.camera_arm!r} / declared {spec.declared_arm!r}: arms are {arms}")
+    chain = UrdfChain(spec.urdf, prefix=spec.camera_arm)
+    scene = TexturedScene(rng)
+    cx, cy = (spec.width - 1) / 2.0, (spec.height - 1) / 2.0
+    rays = pixel_rays(spec.focal_px, spec.focal_px, cx, cy, spec.width, spec.height)
+    mount, declared_mount = _mounts(spec)
+    bases = _base_poses(arms)
+    pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
+    names = tuple(f"{arm}{joint}.pos" for arm in arms for joint in (*ARM_JOINTS, "gripper"))
+    key = "observation.images.wrist"
+    n = round(spec.duration_s * spec.fps)
+    t = np.arange(n) / spec.fps
+    episodes, videos, repeated = [], [], []
+    for _e in range(spec.episodes):
+        motions = {arm: _trajectory(rng) for arm in arms}
+        state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
+        captured = _joints(motions[spec.camera_arm], t - spec.video_delay_s)
+        world_from_cam = bases[spec.camera_arm] @ chain.root_from_link(
+            dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{spec.camera_arm}gripper_link") @ mount
+        frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
+        repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
+        repeats = repeats[repeats > 0]
+        for k in repeats:  # in order, so runs of repeats all show the frame before the run
+            frames[k] = frames[k - 1]
+        repeated.append(tuple(int(k) for k in repeats))
+        videos.append(frames)
+        action = np.concatenate([state[1:], state[-1:]])
+        episodes.append(EpisodeData(frames={"observation.state": state, "action": action}))
+    out = Path(root)
+    features = {
+        "observation.state": FeatureSpec("float32", (len(names),), list(names)),
+        "action": FeatureSpec("float32", (len(names),), list(names)),
+        key: FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
+                         {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
+                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False}),
+    }
+    write_lerobot_dataset(out, episodes, features=features, fps=spec.fps, version=spec.version,
+                          robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")
+    _write_videos(out, key, videos, spec)
+    declared_arm = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
+    return VideoDatasetTruth(
+        root=out, spec=spec, video_key=key, arms=arms, state_names=names,
+        camera_link=f"{spec.camera_arm}gripper_link", declared_link=f"{declared_arm}gripper_link",
+        q_link_cam=Rotation.from_matrix(mount[:3, :3]).as_quat(),
+        declared_q_link_cam=Rotation.from_matrix(declared_mount[:3, :3]).as_quat(),
+        xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float), intrinsics=(spec.focal_px, spec.focal_px, cx, cy),
+        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated),
+    )
+
+
+_CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
+#: Fast encoder presets: generation time, not file size, matters here.
+_FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"}}
+
+
+def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
+    """(T, 6) LeRobot SO-101 state: five joints in degrees, the gripper 0-100."""
+    gripper = 50.0 + 20.0 * np.sin(0.7 * t_s)
+    out: FloatArray = np.concatenate([np.rad2deg(_joints(motion, t_s)), gripper[:, None]], axis=1)
+    return out
+
+
+def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDatasetSpec) -> None:
+    """One mp4 per episode (v2.1), or the episodes back to back in one file (v3.0, as the writer's metadata says)."""
+    if spec.version == "v2.1":
+        for e, frames in enumerate(videos):
+            encode_video(root / f"videos/chunk-000/{key}/episode_{e:06d}.mp4", frames, fps=spec.fps, codec=spec.codec,
+                         options=_FAST.get(spec.codec))
+    else:
+        encode_video(root / f"videos/{key}/chunk-000/file-000.mp4", np.concatenate(videos), fps=spec.fps,
+                     codec=spec.codec, options=_FAST.get(spec.codec))
