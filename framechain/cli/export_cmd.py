@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter
-from framechain.timeline import FramechainError
 
 DESCRIPTION = """\
 Replay (and attribute) the chain of a log and write one MCAP holding the log's own messages and the
@@ -40,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain.pipeline import load_log
     from framechain.replay import replay
     from framechain.sinks.foxglove_export import foxglove_messages
+    from framechain.timeline import FramechainError
 
     out = Path(args.out)
     if out.suffix.lower() != ".mcap":

@@ -15,7 +15,6 @@ from types import ModuleType
 from typing import Any
 
 from framechain import __version__
-from framechain.timeline import FramechainError
 
 #: Command modules, in the order ``--help`` lists them.
 COMMANDS = ("info", "tf", "replay", "attribute", "batch", "report", "export", "demo", "lab")
@@ -86,6 +85,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_USAGE
+    from framechain.timeline import FramechainError  # after parsing, so that --help loads no tables
+
     try:
         return int(args.run(args))
     except FramechainError as err:
