@@ -172,13 +172,26 @@ def arrow_array(values: npt.NDArray[Any]) -> pa.Array:
         return pa.Array.from_buffers(pa.bool_(), n, [None, pa.py_buffer(np.packbits(values, bitorder="little"))])
     if kind != "str":
         return pa.Array.from_buffers(_arrow_type(kind), n, [None, pa.py_buffer(np.ascontiguousarray(values))])
-    encoded = np.char.encode(values, "utf-8")
+    data, lengths = _utf8(values)
     offsets = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.char.str_len(encoded), out=offsets[1:])
+    np.cumsum(lengths, out=offsets[1:])
     if offsets[-1] > np.iinfo(np.int32).max:
         raise TimelineError(f"a string column of {offsets[-1]} bytes is beyond an Arrow string array")
-    data = b"".join(encoded.tolist())
     return pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(data)])
+
+
+def _utf8(values: npt.NDArray[np.str_]) -> tuple[bytes, IntArray]:
+    """The strings of a unicode column as UTF-8, end to end, and each one's length in bytes; a string
+    ends at its first NUL, as ``pa.array`` reads NumPy's NUL-padded unicode."""
+    n, width = values.shape[0], values.dtype.itemsize // 4
+    codes = np.ascontiguousarray(values).view(np.uint32).reshape(n, width)
+    if codes.size and int(codes.max()) >= 0x80:  # beyond ASCII: encode string by string
+        encoded = [text.split("\x00", 1)[0].encode() for text in values.tolist()]
+        return b"".join(encoded), np.fromiter(map(len, encoded), dtype=np.int64, count=n)
+    # ASCII: one byte per code point
+    nul = codes == 0
+    lengths = np.where(nul.any(axis=1), np.argmax(nul, axis=1), width).astype(np.int64)
+    return codes[np.arange(width) < lengths[:, None]].astype(np.uint8).tobytes(), lengths
 
 
 #: NumPy dtypes (without byte order) of the column kinds :func:`arrow_array` builds.
