@@ -274,6 +274,9 @@ def figure_png(fig: Any, name: str, caption: str) -> Figure:
 
     buf = io.BytesIO()
     fig.tight_layout()
+    # tight_layout leaves a placeholder layout engine, for which savefig lays out in one more (blind)
+    # draw before the real one; the layout is done, so none is needed.
+    fig.set_layout_engine(None)
     fig.savefig(buf, format="png")
     plt.close(fig)
     return Figure(name=name, caption=caption, png=buf.getvalue())
