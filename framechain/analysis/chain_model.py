@@ -29,6 +29,9 @@ from framechain.geometry.transforms import invert_rows, transform_points
 from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer
 from framechain.replay.composition import compose_hops
 
+#: Shifted pose lookups :class:`ChainInputs` keeps (a few: each holds N poses).
+_SHIFTED_POSES_KEPT = 4
+
 
 @dataclass(frozen=True)
 class Perturbation:
@@ -165,9 +168,23 @@ class ChainInputs:
         same_frames = (world is None or world == self.frames.world) and (body is None or body == self.frames.body)
         if offset_s == 0.0 and same_frames:
             return self.t_wb, self.q_wb, np.ones(len(self), dtype=bool)
-        times = self.stamp_ns + round(offset_s * 1e9)
-        lookup = self.buffer.lookup(world or self.frames.world, body or self.frames.body, times)
-        return lookup.translation, lookup.quat_xyzw, lookup.ok
+        key = (round(offset_s * 1e9), world or self.frames.world, body or self.frames.body)
+        poses = self._shifted_poses.get(key)
+        if poses is None:
+            lookup = self.buffer.lookup(key[1], key[2], self.stamp_ns + key[0])
+            poses = (lookup.translation, lookup.quat_xyzw, lookup.ok)
+            for array in poses:
+                array.setflags(write=False)  # shared by every later call with the same key
+            if len(self._shifted_poses) >= _SHIFTED_POSES_KEPT:
+                del self._shifted_poses[next(iter(self._shifted_poses))]
+            self._shifted_poses[key] = poses
+        return poses
+
+    @cached_property
+    def _shifted_poses(self) -> dict[tuple[int, str, str], tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]]:
+        """Poses looked up by (offset ns, world, body), oldest first: while further faults are fitted on
+        top of a latency found before, every evaluation asks for the same shifted pose."""
+        return {}
 
     def body_from_camera(
         self, offset_s: float, invert_edge: str | None = None, camera_frame: str | None = None

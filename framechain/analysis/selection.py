@@ -197,7 +197,7 @@ def select(
         confidences.append(float(posterior_weights(bics)[0]))
         runner_up = next((m.name for f, m in quick if m.name != best_model.name), "none")
         alternatives.append(runner_up)
-        current = best_fit if current.models else fit_models([best_model], objective, inputs)
+        current = best_fit  # (alone, it is the quick fit on top of nothing: the same fit)
     return Selected(
         fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode,
         inputs=inputs,

@@ -15,7 +15,6 @@ from framechain.cli.common import (
     print_suggested_chain,
     progress_reporter,
 )
-from framechain.timeline import FramechainError
 
 FORMATS = ("json", "md", "html")
 
@@ -39,6 +38,8 @@ def register(sub: Any) -> None:
 
 
 def parse_formats(text: str) -> list[str]:
+    from framechain.timeline import FramechainError
+
     formats = [f.strip() for f in text.split(",") if f.strip()]
     unknown = sorted(set(formats) - set(FORMATS))
     if unknown or not formats:

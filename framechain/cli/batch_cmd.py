@@ -10,7 +10,6 @@ from pathlib import Path
 from typing import Any
 
 from framechain.cli.common import make_out_dir, non_negative_int
-from framechain.timeline import FramechainError
 
 EPILOG = """exit codes:
   0    the batch ran: every log has its row in DIR/fleet.parquet (a log that failed is a row with its error)
@@ -93,6 +92,8 @@ def episode_set(text: str) -> frozenset[int]:
 
 
 def parse_report_formats(text: str) -> list[str]:
+    from framechain.timeline import FramechainError
+
     formats = [f.strip() for f in text.split(",") if f.strip()]
     if formats == ["none"]:
         return []

@@ -9,8 +9,6 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from framechain.timeline import FramechainError
-
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
 
@@ -48,6 +46,8 @@ def non_negative_int(text: str) -> int:
 
 def make_out_dir(out: Path) -> None:
     """Create ``--out``; a path that exists and is not a directory is a user mistake, said in one line."""
+    from framechain.timeline import FramechainError
+
     if out.exists() and not out.is_dir():
         raise FramechainError(f"--out {out}: exists and is not a directory (give a directory for the outputs)")
     out.mkdir(parents=True, exist_ok=True)

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 from framechain.cli.common import make_out_dir
-from framechain.timeline import FramechainError
 
 DEFAULT_FAULTS = ("missing_rotation", "latency:-0.03")
 
@@ -56,6 +55,7 @@ def register(sub: Any) -> None:
 def parse_fault(text: str) -> Any:
     from framechain.catalogue import Fault
     from framechain.sim.scene import InjectedFault
+    from framechain.timeline import FramechainError
 
     where = "robot"
     if text.endswith("@data"):

@@ -9,7 +9,6 @@ from pathlib import Path
 from typing import Any
 
 from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter, say_unattributed
-from framechain.timeline import FramechainError
 
 DESCRIPTION = """\
 Replay (and attribute) the chain of a log and write one MCAP holding the log's own messages and the
@@ -37,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
     from framechain.adapters.formats.mcap.export import write_mcap_with
     from framechain.sinks.foxglove_export import foxglove_messages
+    from framechain.timeline import FramechainError
 
     out = Path(args.out)
     if out.suffix.lower() != ".mcap":

@@ -6,8 +6,6 @@ import argparse
 import json
 from typing import Any
 
-from framechain.timeline import FramechainError
-
 
 def register(sub: Any) -> None:
     lab = sub.add_parser("lab", help="labs: sensitivity sweeps that need no log")
@@ -29,6 +27,8 @@ def register(sub: Any) -> None:
 
 
 def _depths(text: str) -> list[float]:
+    from framechain.timeline import FramechainError
+
     try:
         values = [float(x) for x in text.split(",") if x.strip()]
     except ValueError as err:
@@ -42,6 +42,7 @@ def run_tilt(args: argparse.Namespace) -> int:
     import numpy as np
 
     from framechain.analysis.lab import crossing_pitch_deg, tilt_sweep
+    from framechain.timeline import FramechainError
 
     if args.max_pitch < 0 or args.max_pitch > 89 or args.step <= 0:
         raise FramechainError("--max-pitch must be within 0..89 degrees and --step positive")

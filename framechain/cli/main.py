@@ -15,7 +15,6 @@ from types import ModuleType
 from typing import Any
 
 from framechain import __version__
-from framechain.timeline import FramechainError
 
 #: Command modules, in the order ``--help`` lists them.
 COMMANDS = ("info", "tf", "replay", "attribute", "batch", "report", "export", "demo", "lab")
@@ -24,6 +23,8 @@ EXIT_OK = 0
 EXIT_INPUT_ERROR = 1  # the log, chain or options could not be used: one line on stderr says why
 EXIT_USAGE = 2  # the command line itself is wrong (argparse)
 EXIT_INTERRUPTED = 130
+#: The BLAS thread pools (OpenBLAS as NumPy and SciPy ship it, MKL) a command runs with one thread.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 EPILOG = """exit codes:
   0    success (for attribute: the log was analysed, whatever was found)
@@ -86,6 +87,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_USAGE
+    # framechain's matrices are tall and thin (observations x a few parameters): a BLAS thread pool
+    # only spins on them, costing more CPU than the attribution itself. Set before NumPy loads; a value
+    # the user set wins.
+    for variable in BLAS_THREAD_VARIABLES:
+        os.environ.setdefault(variable, "1")
+    from framechain.timeline import FramechainError  # after parsing, so that --help loads no tables
+
     try:
         return int(args.run(args))
     except FramechainError as err:

@@ -9,8 +9,6 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from framechain.timeline import FramechainError, format_stamp
-
 if TYPE_CHECKING:
     import numpy as np
     import numpy.typing as npt
@@ -54,6 +52,8 @@ def parse_stamp(text: str, log_start_ns: int) -> int:
     """``--at`` in ns: seconds since the epoch (>= 1e8), else seconds after ``log_start_ns``."""
     from decimal import Decimal, InvalidOperation
 
+    from framechain.timeline import FramechainError
+
     try:
         seconds = Decimal(text.strip())
     except InvalidOperation as err:
@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain.adapters import LeRobotAdapter
     from framechain.adapters.api import TREE_KINDS
     from framechain.replay import LATEST, TransformBuffer
+    from framechain.timeline import FramechainError
 
     show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
     salvage: dict[str, Any] | None = None
@@ -165,6 +166,7 @@ def _series(args: argparse.Namespace, buffer: TransformBuffer, log_start: int) -
     import numpy as np
 
     from framechain.replay import ConnectivityError
+    from framechain.timeline import FramechainError
 
     path = buffer.path(args.target, args.source)
     if not path.connected:
@@ -207,6 +209,8 @@ def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
+
+    from framechain.timeline import format_stamp
 
     console = Console()
     name = f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/]"

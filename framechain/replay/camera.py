@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray
+from framechain.arrays import FloatArray, IntArray
 from framechain.replay.errors import CameraModelError
 from framechain.timeline import CameraTable
 
@@ -166,6 +166,27 @@ class CameraModel:
             x, y = x * radial + dx, y * radial + dy
         k = self.K
         return k[0, 0] * x + k[0, 1] * y + k[0, 2], k[1, 1] * y + k[1, 2]
+
+
+def distinct_models(table: CameraTable, rows: IntArray) -> tuple[list[CameraModel], IntArray]:
+    """The distinct camera models among ``rows`` (all >= 0) of ``table`` and, per row, its model's index.
+
+    A log republishes its CameraInfo at the camera's rate, so thousands of rows are usually one
+    model: rows with the same frame, size, K, distortion model and coefficients share one.
+    """
+    used, row_of = np.unique(rows, return_inverse=True)
+    if used.size == 0:
+        return [], np.zeros(0, dtype=np.int64)
+    n_coeffs = table.n_distortion[used]
+    coeffs = np.where(np.arange(table.distortion.shape[1]) < n_coeffs[:, None], table.distortion[used], 0.0)
+    codes = [np.unique(column[used].astype(str), return_inverse=True)[1].reshape(-1)
+             for column in (table.frame, table.distortion_model)]
+    key = np.column_stack([table.K[used].reshape(used.size, 9), coeffs, n_coeffs, table.width[used],
+                           table.height[used], *codes])
+    _, first, model_of_used = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    models = [CameraModel.from_table(table, int(used[i])) for i in first.tolist()]
+    which: IntArray = model_of_used.reshape(-1)[row_of.reshape(-1)].astype(np.int64)
+    return models, which
 
 
 def _max_abs(values: FloatArray) -> float:

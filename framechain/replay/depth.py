@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,23 +53,30 @@ def sample_depth(
     stamp[near] = frame_stamps[pick[near]]
     half = window // 2
     offsets = np.arange(-half, half + 1)
-    for frame_row in np.unique(index[near]):
-        obs = np.flatnonzero(index == frame_row)
-        h, w = int(frames.height[frame_row]), int(frames.width[frame_row])
-        centre_rows = np.rint(v[obs]).astype(np.int64)
-        centre_cols = np.rint(u[obs]).astype(np.int64)
-        # The windows kept while the log was read when there, else cut from the frame (same values).
-        windows = frames.load_windows(int(frame_row), centre_rows, centre_cols, half)
-        rows = centre_rows[:, None] + offsets[None, :]
-        cols = centre_cols[:, None] + offsets[None, :]
-        # Window pixels outside the image do not exist: they must not repeat the border pixels.
-        rows_in = (rows >= 0) & (rows < h)
-        cols_in = (cols >= 0) & (cols < w)
-        inside = rows_in[:, :, None] & cols_in[:, None, :]
-        patch = windows.reshape(obs.size, -1).astype(np.float64)
-        good = inside.reshape(obs.size, -1) & np.isfinite(patch) & (patch > 0)
-        valid = good.any(axis=1)
-        depth[obs[valid]] = _median_of_good(patch[valid], good[valid])
+    # Observations grouped by frame in one sort; a frame's windows come in one call (kept at read time
+    # or cut from the frame), then the medians of every observation are computed together.
+    used = np.flatnonzero(near)
+    if used.size == 0:
+        return DepthSamples(depth, index, stamp)
+    used = used[np.argsort(index[used], kind="stable")]
+    rows_used = index[used]
+    centre_rows = np.rint(v[used]).astype(np.int64)
+    centre_cols = np.rint(u[used]).astype(np.int64)
+    windows = np.empty((used.size, offsets.size, offsets.size), dtype=np.float32)
+    bounds = np.flatnonzero(np.r_[True, rows_used[1:] != rows_used[:-1], True]).tolist()
+    for start, end in itertools.pairwise(bounds):
+        windows[start:end] = frames.load_windows(int(rows_used[start]), centre_rows[start:end],
+                                                 centre_cols[start:end], half)
+    rows = centre_rows[:, None] + offsets[None, :]
+    cols = centre_cols[:, None] + offsets[None, :]
+    # Window pixels outside the image do not exist: they must not repeat the border pixels.
+    rows_in = (rows >= 0) & (rows < frames.height[rows_used][:, None])
+    cols_in = (cols >= 0) & (cols < frames.width[rows_used][:, None])
+    inside = rows_in[:, :, None] & cols_in[:, None, :]
+    patch = windows.reshape(used.size, -1).astype(np.float64)
+    good = inside.reshape(used.size, -1) & np.isfinite(patch) & (patch > 0)
+    valid = good.any(axis=1)
+    depth[used[valid]] = _median_of_good(patch[valid], good[valid])
     return DepthSamples(depth, index, stamp)
 
 

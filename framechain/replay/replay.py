@@ -19,7 +19,7 @@ from framechain.catalogue import HopName, NothingReplayed, RejectReason
 from framechain.config.chain import ChainFrames
 from framechain.geometry.transforms import transform_points
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
-from framechain.replay.camera import CameraModel
+from framechain.replay.camera import CameraModel, distinct_models
 from framechain.replay.depth import sample_depth
 from framechain.timeline import CameraTable, Column, ColumnTable, ObservationTable, Timeline, normalize_frame
 
@@ -295,9 +295,9 @@ def _rays(
         model_row = np.zeros(n, dtype=np.int64)
     else:
         status.reject(rows < 0, RejectReason.NO_CAMERA_INFO)
-        unique_rows = np.unique(rows[rows >= 0])
-        models = [CameraModel.from_table(timeline.cameras, int(r)) for r in unique_rows]
-        model_row = np.searchsorted(unique_rows, rows)
+        models, model_of = distinct_models(timeline.cameras, rows[rows >= 0])
+        model_row = np.zeros(n, dtype=np.int64)
+        model_row[rows >= 0] = model_of
     # Observations grouped by camera model in one sort (a mask per model is quadratic: a CameraInfo
     # per frame makes as many models as observations).
     live = np.flatnonzero(status.live)

@@ -20,6 +20,7 @@ from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.arrays import rows_of
 from framechain.catalogue import HopName
+from framechain.timeline import arrow_array
 
 METRICS = {
     "logged_hops": "distance between the robot's logged world point and the recomputed one, per observation",
@@ -70,11 +71,12 @@ def evidence_table(result: Attribution) -> pa.Table:
     for hop, departure in result.hop_errors.items():
         sel = matched & (hops.hop == hop)
         hop_error[sel] = departure[row[sel]]
-    table = table.append_column("evidence_xyz", pa.FixedSizeListArray.from_arrays(pa.array(evidence.reshape(-1)), 3))
-    table = table.append_column("hop_error_m", pa.array(hop_error))
-    table = table.append_column("chain_error_m", pa.array(chain_error))
-    table = table.append_column("chain_error_after_m", pa.array(chain_error_after))
-    return table.append_column("metric", pa.array([result.metric] * n_rows))
+    evidence_xyz = pa.FixedSizeListArray.from_arrays(arrow_array(evidence.reshape(-1)), 3)
+    table = table.append_column("evidence_xyz", evidence_xyz)
+    table = table.append_column("hop_error_m", arrow_array(hop_error))
+    table = table.append_column("chain_error_m", arrow_array(chain_error))
+    table = table.append_column("chain_error_after_m", arrow_array(chain_error_after))
+    return table.append_column("metric", arrow_array(np.full(n_rows, result.metric)))
 
 
 def inputs_record(result: Attribution) -> dict[str, Any]:

@@ -24,7 +24,8 @@ import numpy.typing as npt
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
-from framechain.replay import CameraModel, ReplayResult
+from framechain.replay import ReplayResult
+from framechain.replay.camera import distinct_models
 from framechain.replay.stamps import nearest
 from framechain.timeline import PointRole, Timeline, normalize_frame
 
@@ -120,9 +121,10 @@ def project_world_points(timeline: Timeline, result: ReplayResult, p_world: Floa
     # p_cam = R^T (p_world - t), vectorised over observations
     p_cam = np.einsum("nji,nj->ni", rot, p_world[usable] - trans)
     idx = np.flatnonzero(usable)
-    for row in np.unique(rows[usable]).tolist():  # one projection per camera model, not per observation
-        sel = rows[usable] == row
-        u, v = CameraModel.from_table(timeline.cameras, int(row)).project(p_cam[sel])
+    models, model_of = distinct_models(timeline.cameras, rows[usable])
+    for k, model in enumerate(models):  # one projection per camera model, not per CameraInfo message
+        sel = model_of == k
+        u, v = model.project(p_cam[sel])
         out[idx[sel], 0], out[idx[sel], 1] = u, v
     return out
 

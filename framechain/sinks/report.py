@@ -22,7 +22,7 @@ import numpy as np
 from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.analysis.sensitivity import robot_speed, sensitivity
-from framechain.arrays import FloatArray
+from framechain.arrays import FloatArray, IntArray
 from framechain.sinks.evidence_files import inputs_record
 from framechain.sinks.text import CSS, FindingView, mm
 
@@ -145,12 +145,12 @@ def make_figures(result: Attribution) -> list[Figure]:
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     # The world error goes underneath, wide and pale, so a hop that carries all of it stays visible.
-    ax.plot(t, result.error_before * 1e3, lw=4, color="k", alpha=0.25,
-            label=f"world error ({result.metric.replace('_', ' ')})")
+    _line(ax, t, result.error_before * 1e3, lw=4, color="k", alpha=0.25,
+          label=f"world error ({result.metric.replace('_', ' ')})")
     for (hop, errors), style in zip(result.hop_errors.items(), ("-", "--", ":"), strict=False):
-        ax.plot(t, errors * 1e3, lw=1.2, ls=style, label=f"{hop} (logged vs recomputed)")
+        _line(ax, t, errors * 1e3, lw=1.2, ls=style, label=f"{hop} (logged vs recomputed)")
     if result.findings:
-        ax.plot(t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label=_after_label(result))
+        _line(ax, t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label=_after_label(result))
     ax.set_xlabel("time since first observation (s)")
     ax.set_ylabel("error (mm)")
     ax.grid(True, alpha=0.3)
@@ -159,9 +159,9 @@ def make_figures(result: Attribution) -> list[Figure]:
 
     speed = robot_speed(result)
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
-    ax.scatter(speed, result.error_before * 1e3, s=8, alpha=0.6, label="as recorded")
+    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, label="as recorded")
     if result.findings:
-        ax.scatter(speed, result.error_after * 1e3, s=8, alpha=0.6, color="tab:green", label=_after_label(result))
+        _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color="tab:green", label=_after_label(result))
     ax.set_xlabel("robot speed (m/s)")
     ax.set_ylabel("error (mm)")
     ax.set_title("A latency grows with speed", fontsize=9)
@@ -171,15 +171,15 @@ def make_figures(result: Attribution) -> list[Figure]:
 
     recomputed = _recomputed_world(result)
     fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
-    ax.scatter(recomputed[:, 0], recomputed[:, 1], s=8, label="recomputed from the log", alpha=0.7)
+    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7)
     ev = result.evidence_points
     if np.isfinite(ev).any() and result.metric != "static_spread":
         label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
             result.metric, "evidence"
         )
-        ax.scatter(ev[:, 0], ev[:, 1], s=8, marker="x", label=label, alpha=0.7)
+        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7)
     if result.findings and result.metric in ("reference", "static_spread"):
-        ax.scatter(result.corrected_world[:, 0], result.corrected_world[:, 1], s=8, label="corrected", alpha=0.7)
+        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7)
     ax.set_xlabel(f"x in {result.config.frames.world} (m)")
     ax.set_ylabel(f"y in {result.config.frames.world} (m)")
     ax.set_aspect("equal", adjustable="datalim")
@@ -204,6 +204,43 @@ def make_figures(result: Attribution) -> list[Figure]:
     return figures
 
 
+#: Marker of the scatter plots: scatter(s=8)'s size (the square root of its area in points^2) and edge.
+_DOT_PT = 8.0**0.5
+_DOT_EDGE_PT = 1.0
+#: A line of more points than this many per column of the plot is thinned to what draws the same.
+_LINE_COLUMNS = 1000
+
+
+def _dots(ax: Any, x: FloatArray, y: FloatArray, **style: Any) -> None:
+    """A scatter of one colour as a line of markers: drawn the same as ``ax.scatter(x, y, s=8)``, but
+    one path instead of a collection, which the legend places ("best") without a Python loop per point."""
+    ax.plot(x, y, ls="none", marker=style.pop("marker", "o"), ms=_DOT_PT, mew=_DOT_EDGE_PT, **style)
+
+
+def _line(ax: Any, t: FloatArray, y: FloatArray, **style: Any) -> None:
+    """``ax.plot(t, y)`` thinned to the points that draw it: per run of points narrower than a column
+    of the plot, its first, last, lowest and highest (and where a gap starts), in order."""
+    keep = _drawn_points(y, _LINE_COLUMNS)
+    ax.plot(t[keep], y[keep], **style)
+
+
+def _drawn_points(y: FloatArray, columns: int) -> IntArray:
+    """Indices of a series that draw the same line as all of it at ``columns`` runs (see :func:`_line`)."""
+    n = y.shape[0]
+    if n <= 4 * columns:
+        return np.arange(n)
+    run = np.arange(n) * columns // n  # runs of consecutive points
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    finite = np.isfinite(y)
+    low = np.where(finite, y, np.inf)
+    high = np.where(finite, y, -np.inf)
+    lowest = np.lexsort((low, run))[starts]  # sorted by run, then value: a run's first is its lowest
+    highest = np.lexsort((-high, run))[starts]
+    gaps = np.flatnonzero(~finite & np.r_[True, finite[:-1]])
+    out: IntArray = np.unique(np.concatenate([starts, np.r_[starts[1:], n] - 1, lowest, highest, gaps]))
+    return out
+
+
 def _after_label(result: Attribution) -> str:
     """What the second error curve is: corrected data, or what the findings leave unexplained."""
     if result.metric in ("reference", "static_spread"):
@@ -223,6 +260,9 @@ def figure_png(fig: Any, name: str, caption: str) -> Figure:
 
     buf = io.BytesIO()
     fig.tight_layout()
+    # tight_layout leaves a placeholder layout engine, for which savefig lays out in one more (blind)
+    # draw before the real one; the layout is done, so none is needed.
+    fig.set_layout_engine(None)
     fig.savefig(buf, format="png")
     plt.close(fig)
     return Figure(name=name, caption=caption, png=buf.getvalue())

@@ -31,17 +31,19 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.compute as pc
-import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
 from framechain.arrays import FloatArray, IntArray
+
+if TYPE_CHECKING:
+    import pyarrow.dataset as pads
 
 #: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
 TIMESTAMP_TOLERANCE_S = 1e-4
@@ -296,7 +298,7 @@ class DatasetReader:
         if self.layout is Layout.V2:
             return {e: int(row["length"]) for e, row in sorted(self._episodes_v2.items())}
         files = self._episodes_files_v3()
-        table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index", "length"])
+        table = _parquet_dataset(files).to_table(columns=["episode_index", "length"])
         pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
         return {int(e): int(n) for e, n in sorted(pairs)}
 
@@ -325,7 +327,7 @@ class DatasetReader:
 
     def _read_episode_ids_v3(self) -> list[int]:
         files = self._episodes_files_v3()
-        table = pads.dataset([str(f) for f in files], format="parquet").to_table(columns=["episode_index"])
+        table = _parquet_dataset(files).to_table(columns=["episode_index"])
         ids = table.column("episode_index").to_numpy()
         if np.unique(ids).size != ids.size:
             raise DatasetError(files[0].parent.parent, "an episode_index appears in two episode rows")
@@ -397,7 +399,7 @@ class DatasetReader:
 
     def _episode_v3(self, index: int) -> EpisodeInfo:
         files = self._episodes_files_v3()
-        dataset = pads.dataset([str(f) for f in files], format="parquet")
+        dataset = _parquet_dataset(files)
         names = set(dataset.schema.names)
         wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
                   "dataset_from_index", "dataset_to_index"]
@@ -522,6 +524,13 @@ class DatasetReader:
                 self.note(path, f"timestamps depart from frame_index / fps by up to "
                           f"{np.abs(dev).max():.6g} s (variable rate)")
         return ts
+
+
+def _parquet_dataset(files: Sequence[Path]) -> pads.Dataset:
+    """Parquet files as one dataset. pyarrow.dataset loads pandas, so only v3 episode tables import it."""
+    import pyarrow.dataset as pads
+
+    return pads.dataset([str(f) for f in files], format="parquet")
 
 
 def _jsonl(path: Path) -> list[dict[str, Any]]:

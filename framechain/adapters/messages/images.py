@@ -7,6 +7,7 @@ logged: nothing here decodes a picture.
 
 from __future__ import annotations
 
+import functools
 import io
 from collections.abc import Sequence
 from typing import Any
@@ -21,6 +22,8 @@ from framechain.timeline.frames import RAW_IMAGE_ENCODINGS, ImageLoader
 CACHE_IMAGES = 4
 _JPEG_MAGIC = b"\xff\xd8\xff"
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: JPEG markers without a length (fill, TEM, RSTn, SOI, EOI): none belongs before the scan.
+_STANDALONE_MARKERS = frozenset({0x00, 0x01, 0xFF, *range(0xD0, 0xDA)})
 _ALIASES = {"8uc1": "mono8", "8uc3": "bgr8", "16uc1": "16UC1", "32fc1": "32FC1", "8uc4": "bgra8"}
 
 
@@ -48,18 +51,43 @@ def image_metadata(msg: Any) -> tuple[int, int, str] | None:
         kind = "jpeg" if data.startswith(_JPEG_MAGIC) else "png" if data.startswith(_PNG_MAGIC) else None
         if kind is None:
             return None
-        from PIL import Image
-
-        try:
-            with Image.open(io.BytesIO(data)) as img:
-                width, height = img.size
-        except (OSError, ValueError):
-            return None
-        return int(width), int(height), kind
+        # A camera's JPEGs share their header (tables, size): Pillow sizes each header once.
+        size = _header_size(header) if kind == "jpeg" and (header := _jpeg_header(data)) else _header_size(data)
+        return None if size is None else (*size, kind)
     encoding = raw_encoding(str(msg.encoding))
     if encoding is None:
         return None
     return int(msg.width), int(msg.height), encoding
+
+
+@functools.lru_cache(maxsize=8)
+def _header_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) of a JPEG or PNG as Pillow reads it from the header; None if it cannot."""
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            width, height = img.size
+    except (OSError, ValueError):
+        return None
+    return int(width), int(height)
+
+
+def _jpeg_header(data: bytes) -> bytes | None:
+    """A JPEG's bytes up to the end of its start-of-scan segment: all Pillow reads to size it (None when
+    the markers before the scan are not plain length-prefixed segments: Pillow then reads it all)."""
+    pos, end = 2, len(data)
+    while pos + 4 <= end:
+        marker = data[pos + 1]
+        if data[pos] != 0xFF or marker in _STANDALONE_MARKERS:
+            return None
+        segment_end = pos + 2 + ((data[pos + 2] << 8) | data[pos + 3])
+        if segment_end <= pos + 3:
+            return None
+        if marker == 0xDA:  # start of scan
+            return data[:segment_end] if segment_end <= end else None
+        pos = segment_end
+    return None
 
 
 def image_bytes(msg: Any, encoding: str) -> bytes:
