@@ -14,6 +14,7 @@ from framechain.cli.common import (
     print_findings,
     print_suggested_chain,
     progress_reporter,
+    say_warnings,
 )
 from framechain.timeline import FramechainError
 
@@ -56,6 +57,7 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress)
+    say_warnings(made, getattr(args, "command", None) or "attribute")
     result = made.attributed()  # none: one line saying why, exit 1
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)

@@ -35,7 +35,8 @@ def register(sub: Any) -> None:
                         "directory of any of these")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory (results are resumed from it)")
     parser.add_argument("--chain", metavar="CHAIN.yaml",
-                        help="chain configuration for every log; default: each log's suggested chain")
+                        help="chain configuration for the logs that have none beside them (<log name>.chain.yaml, "
+                        "or chain.yaml / CHAIN.yaml in the log's folder, wins); default: each log's suggested chain")
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     parser.add_argument("--episodes", type=episode_set, metavar="SPEC",
                         help="LeRobot datasets: only these episodes, e.g. 0-9,20 (default: all)")
@@ -156,12 +157,21 @@ def _print_summary(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from framechain.sinks.fleet_report import estimate_spread, fleet_logs, not_analysed_reasons, summary_line
+    from framechain.sinks.fleet_report import (
+        chains_line,
+        estimate_spread,
+        fleet_logs,
+        not_analysed_reasons,
+        summary_line,
+    )
 
     console = Console(width=None if sys.stdout.isatty() else 120)
     logs = fleet_logs(pq.read_table(result.table_path))
     console.print(f"[bold]{summary_line(logs)}[/bold]", highlight=False)
     console.print(f"computed {result.computed}, kept from an earlier run {result.skipped}", highlight=False)
+    console.print(chains_line(logs), markup=False, highlight=False, soft_wrap=True)
+    for note in result.notes:
+        console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
     spread = estimate_spread(logs)
     if spread:
         table = Table()

@@ -69,14 +69,36 @@ def progress_reporter(quiet: bool, label: str) -> Iterator[Callable[[str], None]
 def print_suggested_chain(chain: Any, quiet: bool) -> None:
     """Say which configuration was used when none was given (stderr, so --json stays clean).
 
-    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig."""
+    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig. The YAML is
+    written as it is, never wrapped: a comment wrapped onto a new line would not be a comment when pasted."""
     if quiet:
         return
-    from rich.console import Console
+    print("no --chain given; using the suggested configuration (edit it and pass --chain):", file=sys.stderr)
+    print(chain.to_yaml().rstrip(), file=sys.stderr)
 
-    console = Console(stderr=True)
-    console.print("[dim]no --chain given; using the suggested configuration (edit it and pass --chain):[/dim]")
-    console.print(chain.to_yaml().rstrip(), markup=False, highlight=False)
+
+def chain_text(run: Run) -> str:
+    """The chain a run used, one line: its frames (a suggestion's placeholders marked FILL IN)."""
+    frames = run.chain.frames
+    if run.chain_suggested and run.suggestion is not None and hasattr(run.suggestion, "frames_text"):
+        text: str = run.suggestion.frames_text()
+        return text
+    return f"{frames.camera} -> {frames.body} -> {frames.world}"
+
+
+def incomplete_chain_line(run: Run) -> str | None:
+    """When the run's chain was suggested and the log lacks pieces of it: one line saying so and what is missing."""
+    if not run.chain_suggested or run.suggestion is None or not hasattr(run.suggestion, "incomplete_line"):
+        return None
+    line: str | None = run.suggestion.incomplete_line()
+    return line
+
+
+def say_warnings(run: Run, command: str) -> None:
+    """What disagrees before any fit (a calibration of another camera's topic), on stderr before the results:
+    the findings that follow would measure it. Said even with --quiet; the notes of every output hold it too."""
+    for warning in run.warnings:
+        print(f"framechain {command}: warning: {warning}", file=sys.stderr)
 
 
 def say_unattributed(run: Run, command: str) -> list[str]:

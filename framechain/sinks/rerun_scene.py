@@ -119,7 +119,8 @@ def log_camera(
     frames = result.frames
     plane = frames.camera + IMAGE_PLANE_SUFFIX
     cams = timeline.cameras
-    mine = np.flatnonzero(cams.frame == normalize_frame(frames.camera))
+    # A model without an image (width 0: 3D points in the camera frame, no intrinsics) has no pinhole to show.
+    mine = np.flatnonzero((cams.frame == normalize_frame(frames.camera)) & (cams.width > 0))
     if mine.size:
         mine = mine[np.argsort(cams.stamp_ns[mine], kind="stable")]
         k = cams.K[mine]
@@ -147,7 +148,7 @@ def log_camera(
         rows["/camera"] = int(keep.size)
     log_depth(rec, timeline, result, opts, plane, rows)
     obs = result.observations
-    if len(obs):
+    if len(obs) and mine.size:  # without an image model the detections are camera-frame points, not pixels
         every = np.arange(len(obs), dtype=np.int64)
         colors = np.where(result.replayed[:, None], np.array(RECOMPUTED_COLOR), np.array(ERROR_COLOR))
         colors[result.stale] = STALE_COLOR

@@ -19,7 +19,13 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.messages.depth import DepthWindowKeeper, make_depth_loader
-from framechain.adapters.messages.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
+from framechain.adapters.messages.fiducials import (
+    FiducialRows,
+    ResolvedFiducials,
+    resolve_fiducials,
+    tag_size_lookup,
+    unprojected_cameras,
+)
 from framechain.adapters.messages.images import image_metadata, make_image_loader
 from framechain.adapters.messages.kinds import Kind
 from framechain.adapters.messages.locator import FrameFetch, FrameLocator
@@ -522,7 +528,7 @@ class Collector:
             )
         transforms = self._transforms_with_additions()
         cameras = self._cameras()
-        self._add_fiducial_observations(cameras)
+        cameras = self._add_fiducial_observations(cameras)
         observations = self._observations()
         points = self._points()
         joints = self._joints()
@@ -690,12 +696,13 @@ class Collector:
         )
         return table.take(_canonical(table.log_time_ns, table.source))
 
-    def _add_fiducial_observations(self, cameras: CameraTable) -> None:
-        """Fiducial detections as observation rows (tag PnP, projections) with the final camera models."""
+    def _add_fiducial_observations(self, cameras: CameraTable) -> CameraTable:
+        """Fiducial detections as observation rows (tag PnP, projections) with the final camera models; the
+        camera table, with a camera-less model for each camera whose 3D points needed no intrinsics."""
         if self.marker_finder is not None:
             self.notes.extend(self.marker_finder.notes())
         if not len(self.fiducials):
-            return
+            return cameras
         hint = ""
         if self.chain is not None and self.chain.calibration:
             hint = "the chain's calibration gives no camera with this frame; add calibration: {file:, camera:, frame:}"
@@ -711,6 +718,13 @@ class Collector:
         self.obs_label.extend(resolved.label.tolist())
         self.obs_score.extend(resolved.score.tolist())
         self.obs_topic.extend(resolved.source.tolist())
+        if not resolved.unprojected:
+            return cameras
+        for frame in sorted(resolved.unprojected):
+            self.notes.append(f"camera {frame}: no intrinsics; its detections are 3D points in the camera frame and "
+                              "are replayed as they are (intrinsics would only draw them on images)")
+        first = int(resolved.stamp_ns.min()) if resolved.stamp_ns.size else 0
+        return CameraTable.concat([cameras, unprojected_cameras(resolved.unprojected, stamp_ns=first)])
 
     def _fiducial_metadata(self) -> dict[str, Any]:
         """Counts per topic and the corner side table, keyed by obs_id (JSON-ready)."""
