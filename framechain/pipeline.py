@@ -22,6 +22,7 @@ from framechain.analysis.findings import AnalysisError, Attribution, Unattribute
 from framechain.analysis.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
 from framechain.config.chain import ChainConfig
+from framechain.progress import Progress
 from framechain.replay import ReplayResult
 from framechain.timeline import FramechainError, Timeline
 
@@ -65,7 +66,7 @@ def load_log(
     *,
     episode: int | None = None,
     robot: str | Path | None = None,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> LoadedRun:
     """Read MCAP, ROS 1 bag, ROS 2 bag, a LeRobot dataset or a saved Timeline directory, once.
 
@@ -102,7 +103,7 @@ def read_log(
     path: str | Path,
     chain: ChainConfig | None = None,
     *,
-    progress: bool = False,
+    progress: bool | Progress = False,
     kinds: Collection[str] | None = None,
     point_roles: Callable[[adapters.LogInfo], Mapping[str, str]] | None = None,
 ) -> adapters.LoadedLog:
@@ -287,7 +288,7 @@ def run(
     attribute: bool = True,
     seed: int = 0,
     bootstrap: int = 30,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> Run:
     """Read ``log`` once, replay it once through ``chain`` (suggested when None), align its evidence once
     and attribute its error (unless ``attribute`` is False): a :class:`Run`.
@@ -296,9 +297,9 @@ def run(
     observation replayed ``run.nothing_replayed`` says which chain key to add. A log that cannot be
     read, or a chain that does not fit it, raises :class:`FramechainError` (one line).
     """
-    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress is not None)
+    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress or False)
     if progress is not None:
-        progress("replaying observations")
+        progress(f"replaying {len(loaded.timeline.observations):,} observations")
     # A bearing-only static target is replayed as rays when attributed (decided here, before the replay).
     replayed = replay_chain(loaded.timeline, loaded.chain, rays=attribute)
     nothing = _why_nothing_replayed(loaded, replayed.replay)
@@ -327,7 +328,7 @@ def attribute_log(
     bootstrap: int = 30,
     episode: int | None = None,
     robot: str | Path | None = None,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> tuple[Run, Attribution]:
     """Read, replay and attribute one log: ``(run, attribution)``; raises :class:`AnalysisError` (one line
     naming the log and why) when it cannot be attributed."""

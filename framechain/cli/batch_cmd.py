@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import make_out_dir, non_negative_int
+from framechain.cli.common import PlainProgress, make_out_dir, non_negative_int
 from framechain.timeline import FramechainError
 
 EPILOG = """exit codes:
@@ -121,9 +121,24 @@ def run(args: argparse.Namespace) -> int:
 
 @contextmanager
 def _progress(quiet: bool) -> Iterator[tuple[Callable[[int, int], None], Callable[[dict[str, Any]], None]]]:
-    """A rich progress bar on stderr (or nothing when quiet or not a terminal)."""
-    if quiet or not sys.stderr.isatty():
+    """A rich progress bar on stderr; plain lines at most every few seconds when stderr is not a terminal (a CI
+    log); nothing when quiet."""
+    if quiet:
         yield (lambda total, skipped: None), (lambda record: None)
+        return
+    if not sys.stderr.isatty():
+        lines = PlainProgress("batch")
+        counts = [0, 0]  # done, to do
+
+        def start(total: int, skipped: int) -> None:
+            counts[:] = [0, total - skipped]
+            lines("attributing logs", 0, counts[1], "logs")
+
+        def done(record: dict[str, Any]) -> None:
+            counts[0] += 1
+            lines("attributing logs", counts[0], counts[1], "logs")
+
+        yield start, done
         return
     from rich.console import Console
     from rich.progress import (

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
-from collections.abc import Callable, Iterator
+import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -13,6 +16,7 @@ from framechain.timeline import FramechainError
 
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
+    from framechain.progress import Progress
 
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,17 +57,73 @@ def make_out_dir(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
 
+#: Plain progress lines (stderr not a terminal) come at most this often; FRAMECHAIN_PROGRESS_INTERVAL_S overrides.
+PROGRESS_INTERVAL_S = 5.0
+
+
 @contextmanager
-def progress_reporter(quiet: bool, label: str) -> Iterator[Callable[[str], None] | None]:
-    """A rich status line on stderr that follows the analysis steps (None when quiet)."""
-    if quiet or not sys.stderr.isatty():
+def progress_reporter(quiet: bool, label: str) -> Iterator[Progress | None]:
+    """Where a long run says how far it is (None when quiet): on a terminal a rich bar with counts, elapsed
+    time and time left; otherwise (a CI log) a plain line on stderr at most every few seconds."""
+    if quiet:
         yield None
         return
+    if not sys.stderr.isatty():
+        yield PlainProgress(label)
+        return
     from rich.console import Console
+    from rich.progress import BarColumn, SpinnerColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import Progress as Bar
 
-    console = Console(stderr=True)
-    with console.status(label) as status:
-        yield lambda message: status.update(f"{label}: {message}")
+    bar = Bar(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
+              TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+    task = bar.add_task(label, total=None, count="")
+    current: list[str] = []
+
+    def report(stage: str, /, done: int | None = None, total: int | None = None, unit: str = "") -> None:
+        count = f"{done:,} of {total:,} {unit}".rstrip() if done is not None and total else ""
+        if current != [stage]:  # a new stage: its own bar and clock
+            current[:] = [stage]
+            bar.reset(task, total=total or None, completed=done or 0, description=f"{label}: {stage}", count=count)
+        else:
+            bar.update(task, total=total or None, completed=done or 0, count=count)
+
+    with bar:
+        yield report
+
+
+class PlainProgress:
+    """Progress as plain lines on stderr (``framechain: reading run.bag 45% (123,456 of 270,000 messages), 12 s
+    left``), at most one every :data:`PROGRESS_INTERVAL_S`: readable in a CI log, never a flood."""
+
+    def __init__(self, label: str, *, interval_s: float | None = None) -> None:
+        self.label = label
+        env = os.environ.get("FRAMECHAIN_PROGRESS_INTERVAL_S")
+        self.interval_s = interval_s if interval_s is not None else float(env) if env else PROGRESS_INTERVAL_S
+        self._last = -math.inf
+        self._stage = ""
+        self._since = 0.0
+
+    def __call__(self, stage: str, /, done: int | None = None, total: int | None = None, unit: str = "") -> None:
+        now = time.monotonic()
+        if stage != self._stage:
+            self._stage, self._since = stage, now
+        if now - self._last < self.interval_s:
+            return
+        self._last = now
+        print(f"framechain: {stage}{_how_far(done, total, unit, now - self._since)}", file=sys.stderr, flush=True)
+
+
+def _how_far(done: int | None, total: int | None, unit: str, elapsed_s: float) -> str:
+    """`` 45% (123,456 of 270,000 messages), 12 s left`` ("" for a stage that does not count)."""
+    if done is None or not total:
+        return ""
+    text = f" {100 * done // total}% ({done:,} of {total:,} {unit})".replace(" )", ")")
+    if 0 < done < total and elapsed_s > 0:
+        left = elapsed_s * (total - done) / done
+        text += ", under 1 s left" if left < 1 else f", {left:.0f} s left" if left < 90 else \
+            f", {left / 60:.0f} min left"
+    return text
 
 
 def print_suggested_chain(chain: Any, quiet: bool) -> None:
