@@ -289,15 +289,20 @@ def run(
     seed: int = 0,
     bootstrap: int = 30,
     progress: Progress | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> Run:
     """Read ``log`` once, replay it once through ``chain`` (suggested when None), align its evidence once
-    and attribute its error (unless ``attribute`` is False): a :class:`Run`.
+    and attribute its error (unless ``attribute`` is False): a :class:`Run`. ``warn`` hears, as soon as the
+    log is read and before any fit, what disagrees (a calibration of another camera's topic).
 
     A log that cannot be attributed is still a run: ``run.not_attributed`` says why, and when no
     observation replayed ``run.nothing_replayed`` says which chain key to add. A log that cannot be
     read, or a chain that does not fit it, raises :class:`FramechainError` (one line).
     """
     loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress or False)
+    if warn is not None:
+        for warning in loaded.warnings:
+            warn(warning)
     if progress is not None:
         progress(f"replaying {len(loaded.timeline.observations):,} observations")
     # A bearing-only static target is replayed as rays when attributed (decided here, before the replay).
@@ -343,10 +348,11 @@ def _why_nothing_replayed(loaded: LoadedRun, result: ReplayResult) -> str | None
         return None
     log = adapters.LoadedLog(timeline=loaded.timeline, info=loaded.info, decoded_topics={})
     why = adapters.why_nothing_replayed(log, loaded.chain, nothing)
-    # What the reader noticed on the chain's topics (an undecodable topic) often is the cause; a topic the
-    # line already names is not named twice.
+    # What the reader noticed on the chain's topics (an undecodable topic) often is the cause; a topic the line
+    # already says the log lacks is not said twice.
     why += "".join(f"; {n}" for n in loaded.chain_topic_notes()
-                   if n.split(": ", 1)[0].removeprefix("topic ") not in why)
+                   if not ((": named by the chain as " in n or ": did you mean " in n)
+                           and n.split(": ", 1)[0].removeprefix("topic ") in why))
     if loaded.chain_suggested:
         why += " (the chain was suggested: `framechain info LOG` lists what the log lacks)"
     return why

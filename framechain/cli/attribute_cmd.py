@@ -14,7 +14,7 @@ from framechain.cli.common import (
     print_findings,
     print_suggested_chain,
     progress_reporter,
-    say_warnings,
+    warner,
 )
 from framechain.timeline import FramechainError
 
@@ -56,8 +56,8 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
-                            bootstrap=args.bootstrap, progress=progress)
-        say_warnings(made, getattr(args, "command", None) or "attribute")
+                            bootstrap=args.bootstrap, progress=progress,
+                            warn=warner(getattr(args, "command", None) or "attribute"))
         result = made.attributed()  # none: one line saying why, exit 1
         if progress is not None:
             progress("writing the outputs")

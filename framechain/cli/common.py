@@ -7,7 +7,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -94,13 +94,15 @@ def progress_reporter(quiet: bool, label: str) -> Iterator[Progress | None]:
 
 class PlainProgress:
     """Progress as plain lines on stderr (``framechain: reading run.bag 45% (123,456 of 270,000 messages), 12 s
-    left``), at most one every :data:`PROGRESS_INTERVAL_S`: readable in a CI log, never a flood."""
+    left``), at most one every :data:`PROGRESS_INTERVAL_S`: readable in a CI log, never a flood. The first
+    comes one interval into the run: a run shorter than that (or one that stops at once on bad input, whose
+    error is one line) prints none."""
 
     def __init__(self, label: str, *, interval_s: float | None = None) -> None:
         self.label = label
         env = os.environ.get("FRAMECHAIN_PROGRESS_INTERVAL_S")
         self.interval_s = interval_s if interval_s is not None else float(env) if env else PROGRESS_INTERVAL_S
-        self._last = -math.inf
+        self._last = time.monotonic() if self.interval_s > 0 else -math.inf
         self._stage = ""
         self._since = 0.0
 
@@ -154,11 +156,11 @@ def incomplete_chain_line(run: Run) -> str | None:
     return line
 
 
-def say_warnings(run: Run, command: str) -> None:
-    """What disagrees before any fit (a calibration of another camera's topic), on stderr before the results:
-    the findings that follow would measure it. Said even with --quiet; the notes of every output hold it too."""
-    for warning in run.warnings:
-        print(f"framechain {command}: warning: {warning}", file=sys.stderr)
+def warner(command: str) -> Callable[[str], None]:
+    """What disagrees before any fit (a calibration of another camera's topic), on stderr as soon as the log
+    is read (``pipeline.run(warn=)``), before the findings that would measure it. Said even with --quiet; the
+    notes of every output hold it too."""
+    return lambda warning: print(f"framechain {command}: warning: {warning}", file=sys.stderr)
 
 
 def say_unattributed(run: Run, command: str) -> list[str]:

@@ -15,7 +15,7 @@ from framechain.cli.common import (
     print_suggested_chain,
     progress_reporter,
     say_unattributed,
-    say_warnings,
+    warner,
 )
 from framechain.timeline import FramechainError
 
@@ -52,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     with progress_reporter(quiet, "exporting") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
-                            seed=args.seed, progress=progress)
-        say_warnings(made, "export")
+                            seed=args.seed, progress=progress, warn=warner("export"))
         say_unattributed(made, "export")  # the recomputed chain is still worth exporting
         if progress is not None:
             progress(f"writing {out}")

@@ -15,7 +15,7 @@ from framechain.cli.common import (
     print_suggested_chain,
     progress_reporter,
     say_unattributed,
-    say_warnings,
+    warner,
 )
 
 if TYPE_CHECKING:
@@ -77,8 +77,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     with progress_reporter(quiet, "replaying") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
-                            seed=args.seed, progress=progress)
-        say_warnings(made, "replay")
+                            seed=args.seed, progress=progress, warn=warner("replay"))
         notes = list(made.notes)
         if made.chain_suggested and made.info is not None:
             notes.extend(_unused_point_topics(made))

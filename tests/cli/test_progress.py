@@ -63,12 +63,16 @@ def test_piped_progress_counts_what_it_reads_and_resamples(episode: tuple[Path, 
         stats = make_reader(f).get_summary().statistics  # type: ignore[union-attr]
     (total,) = totals
     assert 4096 < total <= stats.message_count  # type: ignore[union-attr]  # the messages of the chain's topics
-    assert counts == sorted(counts) and counts[0] == 0 and counts[-1] == total and len(counts) > 2
-    assert reading[-1]["pct"] == "100" and all(m["unit"] == "messages" for m in reading)
+    assert counts == sorted(counts)
+    assert (counts[0], counts[-1]) == (0, total)
+    assert len(counts) > 2
+    assert reading[-1]["pct"] == "100"
+    assert all(m["unit"] == "messages" for m in reading)
     assert any(m["left"] for m in reading[1:-1])  # time left while it reads
     boot = [m for m in parsed if m and m["stage"].startswith("bootstrapping ")]
     assert [int(m["done"]) for m in boot][-1] == BOOTSTRAP
-    assert {m["total"] for m in boot} == {str(BOOTSTRAP)} and {m["unit"] for m in boot} == {"resamples"}
+    assert {m["total"] for m in boot} == {str(BOOTSTRAP)}
+    assert {m["unit"] for m in boot} == {"resamples"}
     assert any(m and m["stage"].startswith("fitting ") and m["unit"] == "models" for m in parsed)
     assert any(m and m["stage"].startswith("replaying ") for m in parsed)
     assert "writing the outputs" in {m["stage"] for m in parsed if m}
@@ -81,8 +85,8 @@ def test_piped_progress_is_a_line_every_few_seconds_and_quiet_silences_it(episod
     done, elapsed_s = _attribute(log, chain, tmp_path / "o")
     assert done.returncode == 0, done.stderr
     lines = [line for line in done.stderr.splitlines() if line.startswith("framechain: ")]
-    assert lines and lines[0].startswith(f"framechain: reading {log.name} 0% (0 of ")  # the first report is shown
-    assert len(lines) <= 1 + elapsed_s / PROGRESS_INTERVAL_S
+    assert len(lines) <= elapsed_s / PROGRESS_INTERVAL_S  # the first one interval into the run, then one per interval
+    assert all(LINE.match(line) for line in lines)
     quiet, _ = _attribute(log, chain, tmp_path / "q", "-q", interval_s=0)
     assert quiet.returncode == 0
     assert quiet.stderr == ""

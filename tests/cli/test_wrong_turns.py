@@ -146,7 +146,7 @@ def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: p
     assert main(["attribute", str(bag), "--chain", str(chain), "--out", str(tmp_path / "o"), "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "did you mean '/t265/fisheye1/tags'" in line
-    assert line.count("/t265/fisheye1/tag,") + line.count("/t265/fisheye1/tag ") == 1  # said once
+    assert line.count("did you mean") == 1  # said once
 
 
 def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> None:
@@ -228,8 +228,11 @@ def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Pa
     warning = ("calibration cameras.yaml [cam1]: its tagtopic is /t265/fisheye2/tags, but the chain's "
                "topics.detections is /t265/fisheye1/tags: these are another camera's intrinsics: use camera: cam0 "
                "(cameras.yaml gives /t265/fisheye1/tags to cam0)")
-    assert captured.err.splitlines()[0] == f"framechain attribute: warning: {warning}"
+    # First: before the fits (only the reader's progress may come before it in a slow run).
+    first = [line for line in captured.err.splitlines() if not line.startswith("framechain: reading ")][0]
+    assert first == f"framechain attribute: warning: {warning}"
     assert json.loads((out / "attribution.json").read_text())["notes"][0] == warning
+    assert pipeline.run(bag, chain, attribute=False).warnings == (warning,)  # the run holds it for any sink
     raw["calibration"]["camera"] = "cam0"
     chain.write_text(yaml.safe_dump(raw))
     assert main(["info", str(bag), "--chain", str(chain), "--json", "-q"]) == 0

@@ -24,7 +24,7 @@ from framechain.adapters.messages.fiducials import (
     ResolvedFiducials,
     resolve_fiducials,
     tag_size_lookup,
-    unprojected_cameras,
+    with_unprojected,
 )
 from framechain.adapters.messages.images import image_metadata, make_image_loader
 from framechain.adapters.messages.kinds import Kind
@@ -718,13 +718,9 @@ class Collector:
         self.obs_label.extend(resolved.label.tolist())
         self.obs_score.extend(resolved.score.tolist())
         self.obs_topic.extend(resolved.source.tolist())
-        if not resolved.unprojected:
-            return cameras
-        for frame in sorted(resolved.unprojected):
-            self.notes.append(f"camera {frame}: no intrinsics; its detections are 3D points in the camera frame and "
-                              "are replayed as they are (intrinsics would only draw them on images)")
-        first = int(resolved.stamp_ns.min()) if resolved.stamp_ns.size else 0
-        return CameraTable.concat([cameras, unprojected_cameras(resolved.unprojected, stamp_ns=first)])
+        cameras, notes = with_unprojected(cameras, resolved)
+        self.notes.extend(notes)
+        return cameras
 
     def _fiducial_metadata(self) -> dict[str, Any]:
         """Counts per topic and the corner side table, keyed by obs_id (JSON-ready)."""

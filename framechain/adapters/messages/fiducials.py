@@ -360,14 +360,19 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
 UNPROJECTED_SOURCE = "3D points in the camera frame, no intrinsics"
 
 
-def unprojected_cameras(frames: frozenset[str] | set[str], *, stamp_ns: int = 0) -> CameraTable:
-    """A camera-less model per frame whose 3D points were kept without intrinsics: K = I, no distortion,
-    width and height 0 (no image: the replay's hop 1 takes (x/z, y/z, z) back to the point exactly; sinks
-    draw nothing on images for it)."""
-    tables = [CameraTable.from_intrinsics(f, fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=0, height=0, stamp_ns=stamp_ns,
+def with_unprojected(cameras: CameraTable, resolved: ResolvedFiducials) -> tuple[CameraTable, list[str]]:
+    """The camera table with a camera-less model per camera whose 3D points were kept without intrinsics (K = I,
+    no distortion, width and height 0: no image; the replay's hop 1 takes (x/z, y/z, z) back to the point
+    exactly, and sinks draw nothing on images for it), and a note for each."""
+    if not resolved.unprojected:
+        return cameras, []
+    stamp = int(resolved.stamp_ns.min()) if resolved.stamp_ns.size else 0
+    tables = [CameraTable.from_intrinsics(f, fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=0, height=0, stamp_ns=stamp,
                                           distortion_model="none", source=UNPROJECTED_SOURCE)
-              for f in sorted(frames)]
-    return CameraTable.concat(tables) if tables else CameraTable.empty()
+              for f in sorted(resolved.unprojected)]
+    notes = [f"camera {f}: no intrinsics; its detections are 3D points in the camera frame and are replayed as they "
+             "are (intrinsics would only draw them on images)" for f in sorted(resolved.unprojected)]
+    return CameraTable.concat([cameras, *tables]), notes
 
 
 def _json_float(x: float) -> float | None:
