@@ -72,21 +72,21 @@ def progress_reporter(quiet: bool, label: str) -> Iterator[Progress | None]:
         yield PlainProgress(label)
         return
     from rich.console import Console
-    from rich.progress import BarColumn, SpinnerColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import BarColumn, SpinnerColumn, TextColumn, TimeElapsedColumn
     from rich.progress import Progress as Bar
 
     bar = Bar(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
-              TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True), transient=True)
+              TimeElapsedColumn(), console=Console(stderr=True), transient=True)
     task = bar.add_task(label, total=None, count="")
-    current: list[str] = []
+    current: list[str | float] = ["", 0.0]  # the stage and when it began
 
     def report(stage: str, /, done: int | None = None, total: int | None = None, unit: str = "") -> None:
-        count = f"{done:,} of {total:,} {unit}".rstrip() if done is not None and total else ""
-        if current != [stage]:  # a new stage: its own bar and clock
-            current[:] = [stage]
-            bar.reset(task, total=total or None, completed=done or 0, description=f"{label}: {stage}", count=count)
-        else:
-            bar.update(task, total=total or None, completed=done or 0, count=count)
+        now = time.monotonic()
+        if current[0] != stage:  # a new stage: its own bar and clock
+            current[:] = [stage, now]
+            bar.reset(task, total=total or None, completed=done or 0, description=f"{label}: {stage}", count="")
+        count = _how_far(done, total, unit, now - float(current[1])).lstrip()
+        bar.update(task, total=total or None, completed=done or 0, count=count)
 
     with bar:
         yield report
@@ -116,12 +116,16 @@ class PlainProgress:
         print(f"framechain: {stage}{_how_far(done, total, unit, now - self._since)}", file=sys.stderr, flush=True)
 
 
+#: Counted steps of very unequal cost (a latency search against a fixed rotation): no time left is guessed.
+_UNEVEN_UNITS = frozenset({"models"})
+
+
 def _how_far(done: int | None, total: int | None, unit: str, elapsed_s: float) -> str:
     """`` 45% (123,456 of 270,000 messages), 12 s left`` ("" for a stage that does not count)."""
     if done is None or not total:
         return ""
     text = f" {100 * done // total}% ({done:,} of {total:,} {unit})".replace(" )", ")")
-    if 0 < done < total and elapsed_s > 0:
+    if 0 < done < total and elapsed_s > 0 and unit not in _UNEVEN_UNITS:
         left = elapsed_s * (total - done) / done
         text += ", under 1 s left" if left < 1 else f", {left:.0f} s left" if left < 90 else \
             f", {left / 60:.0f} min left"
