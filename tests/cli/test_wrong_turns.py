@@ -229,7 +229,7 @@ def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Pa
                "topics.detections is /t265/fisheye1/tags: these are another camera's intrinsics: use camera: cam0 "
                "(cameras.yaml gives /t265/fisheye1/tags to cam0)")
     # First: before the fits (only the reader's progress may come before it in a slow run).
-    first = [line for line in captured.err.splitlines() if not line.startswith("framechain: reading ")][0]
+    first = next(line for line in captured.err.splitlines() if not line.startswith("framechain: reading "))
     assert first == f"framechain attribute: warning: {warning}"
     assert json.loads((out / "attribution.json").read_text())["notes"][0] == warning
     assert pipeline.run(bag, chain, attribute=False).warnings == (warning,)  # the run holds it for any sink
