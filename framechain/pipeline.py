@@ -77,7 +77,7 @@ def load_log(
     config = load_chain(chain)
     if isinstance(path, Timeline):
         return _stored_chain(IN_MEMORY, path, config)
-    target, found = the_log_in(Path(path))
+    target, found = _the_log_in(Path(path))
     if (target / "timeline.json").is_file():
         return _stored_chain(target, Timeline.load(target), config)
     if adapters.LeRobotAdapter().probe(target):
@@ -111,13 +111,13 @@ def read_log(
     ``chain`` needs (every topic framechain understands without one), narrowed to message ``kinds``
     (``framechain tf`` reads the frame tree alone). No chain is suggested (``framechain info`` shows
     the log whole). A folder of logs that is not itself a log holds one log, or it is an error that lists
-    them (see :func:`the_log_in`)."""
-    target, found = the_log_in(Path(path))
+    them."""
+    target, found = _the_log_in(Path(path))
     return _with_notes(adapters.open_log(target, chain, progress=progress, kinds=kinds, point_roles=point_roles),
                        found)
 
 
-def logs_in_folder(folder: Path) -> tuple[list[Path], list[str]]:
+def _logs_in_folder(folder: Path) -> tuple[list[Path], list[str]]:
     """The logs directly in ``folder`` (files with a log suffix, ROS 2 bag directories) and a note for each
     file framechain wrote (an exported MCAP holds a copy of a log: it is skipped, never taken for a log)."""
     logs: list[Path] = []
@@ -140,7 +140,7 @@ def logs_in_folder(folder: Path) -> tuple[list[Path], list[str]]:
     return logs, skipped
 
 
-def the_log_in(path: Path) -> tuple[Path, list[str]]:
+def _the_log_in(path: Path) -> tuple[Path, list[str]]:
     """The log ``path`` names, and notes on how it was found. A file, a ROS 2 bag, a LeRobot dataset or a saved
     timeline is itself; a folder of logs holding exactly one log (besides framechain's own outputs) is that
     log; a folder of several is an error that lists them and points to ``batch``."""
@@ -154,7 +154,7 @@ def the_log_in(path: Path) -> tuple[Path, list[str]]:
               or adapters.LeRobotAdapter().probe(path))
     if is_log:
         return path, []
-    logs, skipped = logs_in_folder(path)
+    logs, skipped = _logs_in_folder(path)
     if len(logs) == 1:
         return logs[0], [f"{path} is a folder, not a log; read its only log {logs[0].name}", *skipped]
     if len(logs) > 1:

@@ -130,12 +130,13 @@ def _check_frames(args: argparse.Namespace, transforms: Any) -> None:
     unknown = [n for n in dict.fromkeys((args.target, args.source)) if n not in known and n.lstrip("/") not in known]
     if not unknown:
         return
-    where = "the log" if args.chain is None else f"the log nor in the mounts or urdf of {args.chain}"
+    where = "the log (no transform names it)" if args.chain is None else \
+        f"the log (no transform names it) nor in the mounts or urdf of {args.chain}"
     parts = []
     for name in unknown:
         close = did_you_mean(name, known)
-        parts.append(f"frame {name!r} is in no transform of {where}" + (f"; did you mean {or_list(close)}?"
-                                                                          if close else ""))
+        parts.append(f"frame {name!r} does not exist in {where}" + (f"; did you mean {or_list(close)}?"
+                                                                      if close else ""))
     text = f"{args.log}: {'; '.join(parts)}"
     if args.chain is None:
         beside = chain_files_beside(Path(args.log))

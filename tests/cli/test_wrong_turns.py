@@ -153,8 +153,8 @@ def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> No
     log = _real(TF_EXAMPLE)
     assert main(["tf", str(log), "vision", "odm"]) == 1
     line = _one_line(capsys.readouterr().err)
-    assert "frame 'vision' is in no transform of the log" in line
-    assert "frame 'odm' is in no transform of the log; did you mean 'odom'?" in line
+    assert "frame 'vision' does not exist in the log (no transform names it)" in line
+    assert "frame 'odm' does not exist in the log (no transform names it); did you mean 'odom'?" in line
     assert "mounts: or urdf: need --chain" in line
 
 
