@@ -578,8 +578,7 @@ def run_batch(
         raise BatchError(f"--robot {robot}: no such file")
     found = find_units(inputs, episodes=episodes, robot_given=robot_given)
     if not found.units:
-        raise BatchError("no logs among the inputs" + (f" ({len(found.skipped)} files framechain wrote skipped)"
-                                                       if found.skipped else ""))
+        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.skipped)})" if found.skipped else ""))
     store = ResultStore(out_dir)
     chain_arg = None if chain is None else os.path.abspath(chain)
     robot_arg = None if robot is None else str(Path(robot).resolve())
