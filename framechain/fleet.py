@@ -42,9 +42,6 @@ if TYPE_CHECKING:
 SCHEMA = "framechain/batch@1"
 RESULTS_DIR = "results"
 TABLE_NAME = "fleet.parquet"
-#: File suffixes a directory walk takes for logs (a ROS 2 bag directory, a LeRobot dataset and a
-#: saved timeline are recognised by their metadata files instead).
-LOG_SUFFIXES = (".mcap", ".bag", ".db3")
 
 Status = Literal["findings", "clean", "no_evidence", "nothing_replayed", "error", "crashed"]
 #: Statuses a rerun keeps: the record is the answer for these inputs. "crashed" (a worker that
@@ -82,28 +79,41 @@ class UnitTask:
 
     unit: LogUnit
     key: str
-    chain: str | None = None  # CHAIN.yaml path; None: each log's suggested chain
+    chain: str | None = None  # CHAIN.yaml path (beside the log, else --chain); None: the log's suggested chain
     robot: str | None = None  # robot.yaml path (LeRobot datasets)
     seed: int = 0
     bootstrap: int = 30
 
 
 # -- finding the units ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FoundUnits:
+    """The units of work among the inputs, and a note for each file skipped as framechain's own output."""
+
+    units: list[LogUnit]
+    skipped: list[str] = field(default_factory=list)
+
+
 def find_units(
     inputs: Sequence[str | Path], *, episodes: Iterable[int] | None = None, robot_given: bool = False,
-) -> list[LogUnit]:
+) -> FoundUnits:
     """Every log among ``inputs``: files, ROS 2 bag directories, LeRobot datasets (one unit per episode,
-    only ``episodes`` when given), saved timelines, and directories walked for any of these."""
+    only ``episodes`` when given), saved timelines, and directories walked for any of these. Files framechain
+    wrote (an exported MCAP holds a copy of a log) are skipped with a note. Paths stay as the user gave them
+    (made absolute, symlinks kept): the table names the logs the way the user does."""
+    from framechain.pipeline import LOG_SUFFIXES
+
     wanted = None if episodes is None else frozenset(episodes)
     units: list[LogUnit] = []
+    skipped: list[str] = []
     for item in inputs:
-        path = Path(item).resolve()
+        path = Path(os.path.abspath(item))
         if not path.exists():
             raise BatchError(f"{item}: no such file or directory")
         if path.is_file():
-            units.append(_file_unit(path))
+            units.extend(_log_file(path, skipped))
         else:
-            found = list(_walk(path, wanted, robot_given))
+            found = list(_walk(path, wanted, robot_given, skipped))
             if not found:
                 raise BatchError(f"{item}: no logs in this directory (looked for {', '.join(LOG_SUFFIXES)} files, "
                                  "ROS 2 bag directories, LeRobot datasets and saved timelines)")
@@ -111,14 +121,16 @@ def find_units(
     seen: set[tuple[Path, int | None]] = set()
     unique = []
     for unit in units:  # an input named twice (or a file inside a walked directory) is one unit
-        if (unit.path, unit.episode) not in seen:
-            seen.add((unit.path, unit.episode))
+        if (unit.path.resolve(), unit.episode) not in seen:
+            seen.add((unit.path.resolve(), unit.episode))
             unique.append(unit)
-    return unique
+    return FoundUnits(unique, skipped)
 
 
-def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -> Iterator[LogUnit]:
+def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool, skipped: list[str],
+          ) -> Iterator[LogUnit]:
     from framechain import adapters
+    from framechain.pipeline import LOG_SUFFIXES
 
     if adapters.LeRobotAdapter().probe(directory):
         yield from _dataset_units(directory, episodes, robot_given)
@@ -130,18 +142,25 @@ def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -
         if child.name.startswith("."):
             continue
         if child.is_dir():
-            yield from _walk(child, episodes, robot_given)
+            yield from _walk(child, episodes, robot_given, skipped)
         elif child.suffix.lower() in LOG_SUFFIXES and not _inside_bag(child):
-            yield _file_unit(child)
+            yield from _log_file(child, skipped)
+
+
+def _log_file(path: Path, skipped: list[str]) -> list[LogUnit]:
+    """A log file's unit; none, with a note in ``skipped``, for a file framechain wrote."""
+    from framechain import adapters
+
+    wrote = adapters.framechain_output(path)
+    if wrote is not None:
+        skipped.append(f"{path} skipped: written by {wrote}, not a recording")
+        return []
+    st = path.stat()
+    return [LogUnit(path=path, size_bytes=st.st_size, mtime_ns=st.st_mtime_ns)]
 
 
 def _inside_bag(path: Path) -> bool:
     return (path.parent / "metadata.yaml").is_file()
-
-
-def _file_unit(path: Path) -> LogUnit:
-    st = path.stat()
-    return LogUnit(path=path, size_bytes=st.st_size, mtime_ns=st.st_mtime_ns)
 
 
 def _dir_unit(directory: Path, episode: int | None = None, problem: str | None = None) -> LogUnit:
@@ -182,7 +201,7 @@ def unit_key(unit: LogUnit, *, chain: str | Path | None, robot: str | Path | Non
     """The store key: a hash of everything the unit's record depends on (the log by path, size and mtime)."""
     identity = {
         "schema": SCHEMA,
-        "path": str(unit.path),
+        "path": str(unit.path.resolve()),  # the same log through a symlink is the same unit
         "episode": unit.episode,
         "size_bytes": unit.size_bytes,
         "mtime_ns": unit.mtime_ns,
@@ -254,8 +273,8 @@ def _record_head(task: UnitTask) -> dict[str, Any]:
     return {
         "schema": SCHEMA, "key": task.key, "log": str(unit.path), "episode": unit.episode, "unit": unit.label,
         "status": "crashed", "error": None, "error_type": None, "verdict": None, "metric": None,
-        "chain_suggested": task.chain is None, "start_ns": None, "end_ns": None, "observations": None,
-        "replayed": None, "error_median_m": None, "error_p95_m": None, "residual_median_m": None,
+        "chain": task.chain, "chain_suggested": task.chain is None, "start_ns": None, "end_ns": None,
+        "observations": None, "replayed": None, "error_median_m": None, "error_p95_m": None, "residual_median_m": None,
         "findings": [], "notes": [], "framechain": __version__, "pid": os.getpid(),
     }
 
@@ -514,6 +533,8 @@ class BatchResult:
     computed: int
     table_path: Path
     report_paths: dict[str, Path] = field(default_factory=dict)
+    #: What the batch left out and why (files framechain wrote among the inputs).
+    notes: list[str] = field(default_factory=list)
 
     def status_counts(self) -> dict[str, int]:
         counts: dict[str, int] = {}
@@ -545,21 +566,28 @@ def run_batch(
     main module again, so a script that calls this with ``jobs > 1`` needs the
     ``if __name__ == "__main__":`` guard, as for any process pool.
     ``on_start(total, skipped)`` is called once the units are known; ``on_record(record)`` for each
-    unit computed now, as it finishes.
+    unit computed now, as it finishes. Each log is analysed with the chain file beside it
+    (``<log name>.chain.yaml``, else ``chain.yaml`` or ``CHAIN.yaml`` in its folder), else ``chain``.
     """
+    from framechain import adapters
+
     chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
     robot_given = robot is not None or bool(chain_config and chain_config.robot and (
         "config" in chain_config.robot or "urdf" in chain_config.robot))
     if robot is not None and not Path(robot).is_file():
         raise BatchError(f"--robot {robot}: no such file")
-    units = find_units(inputs, episodes=episodes, robot_given=robot_given)
-    if not units:
-        raise BatchError("no logs among the inputs")
+    found = find_units(inputs, episodes=episodes, robot_given=robot_given)
+    if not found.units:
+        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.skipped)})" if found.skipped else ""))
     store = ResultStore(out_dir)
-    chain_arg = None if chain is None else str(Path(chain).resolve())
+    chain_arg = None if chain is None else os.path.abspath(chain)
     robot_arg = None if robot is None else str(Path(robot).resolve())
-    tasks = [UnitTask(unit=u, key=unit_key(u, chain=chain_arg, robot=robot_arg, seed=seed, bootstrap=bootstrap),
-                      chain=chain_arg, robot=robot_arg, seed=seed, bootstrap=bootstrap) for u in units]
+    tasks = []
+    for u in found.units:  # the chain beside a log (adapters.chain_files_beside) wins over --chain
+        unit_chain = next((str(c) for c in adapters.chain_files_beside(u.path)), chain_arg)
+        tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
+                                                   bootstrap=bootstrap),
+                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap))
     todo = [t for t in tasks if not store.is_done(t.key)]
     if on_start is not None:
         on_start(len(tasks), len(tasks) - len(todo))
@@ -578,9 +606,11 @@ def run_batch(
     if report_formats:
         from framechain.sinks.fleet_report import render_fleet_report
 
-        report_paths = render_fleet_report(pq.read_table(table_path), out_dir, formats=report_formats)
+        report_paths = render_fleet_report(pq.read_table(table_path), out_dir, formats=report_formats,
+                                           notes=found.skipped)
     return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
-                       table_path=table_path, report_paths=report_paths)
+                       table_path=table_path, report_paths=report_paths, notes=found.skipped)
+
 
 
 # -- the fleet table --------------------------------------------------------------------------
@@ -594,6 +624,7 @@ FLEET_SCHEMA = pa.schema([
     ("error_type", pa.string()),
     ("verdict", pa.string()),
     ("metric", pa.string()),
+    ("chain", pa.string()),  # the chain file the log was analysed with (null: the suggested chain)
     ("chain_suggested", pa.bool_()),
     ("start_ns", pa.int64()),
     ("end_ns", pa.int64()),
@@ -649,6 +680,7 @@ __all__ = [
     "FLEET_SCHEMA",
     "BatchError",
     "BatchResult",
+    "FoundUnits",
     "LogUnit",
     "ResultStore",
     "UnitTask",

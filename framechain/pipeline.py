@@ -22,11 +22,15 @@ from framechain.analysis.findings import AnalysisError, Attribution, Unattribute
 from framechain.analysis.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
 from framechain.config.chain import ChainConfig
+from framechain.progress import Progress
 from framechain.replay import ReplayResult
 from framechain.timeline import FramechainError, Timeline
 
 #: The path of a run made from a Timeline in memory rather than a file.
 IN_MEMORY = Path("<timeline>")
+#: File suffixes of logs among other files in a folder (a ROS 2 bag directory, a LeRobot dataset and a
+#: saved timeline are recognised by their metadata files instead).
+LOG_SUFFIXES = (".mcap", ".bag", ".db3")
 
 
 @dataclass(frozen=True)
@@ -41,6 +45,8 @@ class LoadedRun:
     notes: list[str] = field(default_factory=list)
     #: The suggestion (placeholders, what the log lacks) when no chain was given; None otherwise.
     suggestion: Any = None
+    #: What disagrees before any fit (a calibration of another camera's topic); first in ``notes`` too.
+    warnings: list[str] = field(default_factory=list)
 
     def chain_topic_notes(self) -> list[str]:
         """The reader's notes on the topics the chain names (an undecodable topic, say)."""
@@ -60,7 +66,7 @@ def load_log(
     *,
     episode: int | None = None,
     robot: str | Path | None = None,
-    progress: bool = False,
+    progress: bool | Progress = False,
 ) -> LoadedRun:
     """Read MCAP, ROS 1 bag, ROS 2 bag, a LeRobot dataset or a saved Timeline directory, once.
 
@@ -71,9 +77,7 @@ def load_log(
     config = load_chain(chain)
     if isinstance(path, Timeline):
         return _stored_chain(IN_MEMORY, path, config)
-    target = Path(path)
-    if not target.exists():
-        raise FramechainError(f"{target}: no such file or directory")
+    target, found = _the_log_in(Path(path))
     if (target / "timeline.json").is_file():
         return _stored_chain(target, Timeline.load(target), config)
     if adapters.LeRobotAdapter().probe(target):
@@ -81,30 +85,116 @@ def load_log(
     if episode is not None or robot is not None:
         raise FramechainError(f"{target}: --episode and --robot are for LeRobot datasets; this is not one")
     if config is not None:
-        loaded = read_log(target, config, progress=progress)
-        _check_frames(target, loaded.timeline, config)
+        loaded = _with_notes(read_log(target, config, progress=progress), found)
+        _check_frames(target, loaded.timeline, config, loaded.info)
+        warnings = _disagreements(loaded, config)
         return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=False,
-                         info=loaded.info, notes=list(loaded.info.notes))
-    loaded = read_log(target, None, progress=progress, point_roles=adapters.evidence_roles)
+                         info=loaded.info, notes=[*warnings, *_named_typos(loaded.info, config)], warnings=warnings)
+    loaded = _with_notes(read_log(target, None, progress=progress, point_roles=adapters.evidence_roles), found)
     suggestion = adapters.suggest(loaded)
     loaded = adapters.as_suggested(loaded, suggestion.config)
+    warnings = _disagreements(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
-                     info=loaded.info, notes=list(loaded.info.notes), suggestion=suggestion)
+                     info=loaded.info, notes=[*warnings, *loaded.info.notes, *_chain_beside(target)],
+                     suggestion=suggestion, warnings=warnings)
 
 
 def read_log(
     path: str | Path,
     chain: ChainConfig | None = None,
     *,
-    progress: bool = False,
+    progress: bool | Progress = False,
     kinds: Collection[str] | None = None,
     point_roles: Callable[[adapters.LogInfo], Mapping[str, str]] | None = None,
 ) -> adapters.LoadedLog:
     """Read a robot log (MCAP, ROS 1 bag, ROS 2 bag) into the model as it is: one pass over the topics
     ``chain`` needs (every topic framechain understands without one), narrowed to message ``kinds``
     (``framechain tf`` reads the frame tree alone). No chain is suggested (``framechain info`` shows
-    the log whole)."""
-    return adapters.open_log(path, chain, progress=progress, kinds=kinds, point_roles=point_roles)
+    the log whole). A folder of logs that is not itself a log holds one log, or it is an error that lists
+    them."""
+    target, found = _the_log_in(Path(path))
+    return _with_notes(adapters.open_log(target, chain, progress=progress, kinds=kinds, point_roles=point_roles),
+                       found)
+
+
+def _logs_in_folder(folder: Path) -> tuple[list[Path], list[str]]:
+    """The logs directly in ``folder`` (files with a log suffix, ROS 2 bag directories) and a note for each
+    file framechain wrote (an exported MCAP holds a copy of a log: it is skipped, never taken for a log)."""
+    logs: list[Path] = []
+    skipped: list[str] = []
+    try:
+        children = sorted(folder.iterdir())
+    except OSError as err:
+        raise FramechainError(f"{folder}: cannot list the directory ({err.strerror})") from err
+    for child in children:
+        if child.name.startswith("."):
+            continue
+        if child.is_dir() and (child / "metadata.yaml").is_file():
+            logs.append(child)
+        elif child.is_file() and child.suffix.lower() in LOG_SUFFIXES:
+            wrote = adapters.framechain_output(child)
+            if wrote is None:
+                logs.append(child)
+            else:
+                skipped.append(f"{child} skipped: written by {wrote}, not a recording")
+    return logs, skipped
+
+
+def _the_log_in(path: Path) -> tuple[Path, list[str]]:
+    """The log ``path`` names, and notes on how it was found. A file, a ROS 2 bag, a LeRobot dataset or a saved
+    timeline is itself; a folder of logs holding exactly one log (besides framechain's own outputs) is that
+    log; a folder of several is an error that lists them and points to ``batch``."""
+    if not path.exists():
+        raise FramechainError(f"{path}: no such file or directory")
+    if path.is_file():
+        wrote = adapters.framechain_output(path)
+        return path, [] if wrote is None else [
+            f"{path.name} was written by {wrote}: it holds a copy of that log and framechain's annotations"]
+    is_log = ((path / "metadata.yaml").is_file() or (path / "timeline.json").is_file()
+              or adapters.LeRobotAdapter().probe(path))
+    if is_log:
+        return path, []
+    logs, skipped = _logs_in_folder(path)
+    if len(logs) == 1:
+        return logs[0], [f"{path} is a folder, not a log; read its only log {logs[0].name}", *skipped]
+    if len(logs) > 1:
+        shown = ", ".join(p.name for p in logs[:6]) + (f" and {len(logs) - 6} more" if len(logs) > 6 else "")
+        raise FramechainError(f"{path}: a folder of {len(logs)} logs ({shown}), not one log: name one of them, or "
+                              f"run `framechain batch {path} --out DIR` to analyse them all")
+    return path, skipped  # no log in it: the reader says what it is not
+
+
+def _disagreements(loaded: adapters.LoadedLog, chain: ChainConfig) -> list[str]:
+    """What to say before any finding: a calibration of another topic's camera, and detections of the chain's
+    topic stamped with another camera's frame."""
+    topic = chain.topics.detections
+    stamped = [n for n in adapters.frame_id_disagreements(loaded) if topic and n.startswith(f"topic {topic}:")]
+    return [*adapters.calibration_disagreements(chain, loaded.info), *stamped]
+
+
+def _with_notes(loaded: adapters.LoadedLog, notes: list[str]) -> adapters.LoadedLog:
+    return replace(loaded, info=loaded.info.with_notes(notes)) if notes else loaded
+
+
+def _chain_beside(log: Path) -> list[str]:
+    """Without --chain, a chain file beside the log is not used silently: a note names it."""
+    beside = adapters.chain_files_beside(log)
+    if not beside:
+        return []
+    return [f"{beside[0]} lies beside the log but no --chain was given: the chain was suggested (pass --chain "
+            f"{beside[0]} to use it; `framechain batch` does)"]
+
+
+def _named_typos(info: adapters.LogInfo, chain: ChainConfig) -> list[str]:
+    """The reader's notes, a topic the chain names but the log lacks followed by what it may have meant."""
+    close = {m.topic: m.close for m in adapters.missing_topics(info, chain) if m.close}
+    out = []
+    for note in info.notes:
+        out.append(note)
+        topic = note.removeprefix("topic ").split(": named by the chain as ", 1)[0]
+        if note.startswith("topic ") and ": named by the chain as " in note and topic in close:
+            out.append(f"topic {topic}: did you mean {adapters.or_list(close[topic])}?")
+    return out
 
 
 def _stored_chain(target: Path, timeline: Timeline, config: ChainConfig | None) -> LoadedRun:
@@ -118,20 +208,30 @@ def _stored_chain(target: Path, timeline: Timeline, config: ChainConfig | None) 
     return LoadedRun(path=target, timeline=timeline, chain=chosen, chain_suggested=config is None)
 
 
-def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig) -> None:
-    """A frame the chain names but no transform mentions is a typo, not a missing edge 235 times."""
-    import difflib
+#: The chain keys whose topics give each frame of the chain its edges (or its name, for the camera).
+_FRAME_SOURCES = {"camera": ("topics.detections", "topics.camera_info", "topics.pixel_points"),
+                  "body": ("topics.odometry",), "world": ("topics.odometry",)}
 
+
+def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: adapters.LogInfo | None = None) -> None:
+    """A frame the chain names but no transform mentions is a typo, not a missing edge 235 times; when a topic
+    the chain names for that frame is not in the log, the topic is the typo."""
     transforms = timeline.transforms
     if not len(transforms):
         return  # said elsewhere, with the counts
     known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
+    missing = adapters.missing_topics(info, chain)
     for role in ("camera", "body", "world"):
         name = getattr(chain.frames, role)
-        if name not in known:
-            close = difflib.get_close_matches(name, sorted(known), n=3)
-            hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
-            raise FramechainError(f"{target}: the chain's {role} frame {name!r} is in no transform of the log{hint}")
+        if name in known:
+            continue
+        cause = next((m for m in missing if m.key in _FRAME_SOURCES[role]), None)
+        if cause is not None:
+            raise FramechainError(f"{target}: {cause.line()} (without it the chain's {role} frame {name!r} is in no "
+                                  "transform of the log)")
+        close = adapters.did_you_mean(name, known)
+        hint = f"; did you mean {adapters.or_list(close)}?" if close else ""
+        raise FramechainError(f"{target}: the chain's {role} frame {name!r} is in no transform of the log{hint}")
 
 
 def _load_lerobot(
@@ -155,7 +255,7 @@ def _load_lerobot(
     loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=section))
     suggested = config is None
     if config is not None:
-        _check_frames(target, loaded.timeline, config)
+        _check_frames(target, loaded.timeline, config, loaded.info)
     else:
         stored = loaded.timeline.metadata.get("chain")
         if not isinstance(stored, dict):
@@ -188,18 +288,23 @@ def run(
     attribute: bool = True,
     seed: int = 0,
     bootstrap: int = 30,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> Run:
     """Read ``log`` once, replay it once through ``chain`` (suggested when None), align its evidence once
-    and attribute its error (unless ``attribute`` is False): a :class:`Run`.
+    and attribute its error (unless ``attribute`` is False): a :class:`Run`. ``warn`` hears, as soon as the
+    log is read and before any fit, what disagrees (a calibration of another camera's topic).
 
     A log that cannot be attributed is still a run: ``run.not_attributed`` says why, and when no
     observation replayed ``run.nothing_replayed`` says which chain key to add. A log that cannot be
     read, or a chain that does not fit it, raises :class:`FramechainError` (one line).
     """
-    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress is not None)
+    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress or False)
+    if warn is not None:
+        for warning in loaded.warnings:
+            warn(warning)
     if progress is not None:
-        progress("replaying observations")
+        progress(f"replaying {len(loaded.timeline.observations):,} observations")
     # A bearing-only static target is replayed as rays when attributed (decided here, before the replay).
     replayed = replay_chain(loaded.timeline, loaded.chain, rays=attribute)
     nothing = _why_nothing_replayed(loaded, replayed.replay)
@@ -216,7 +321,7 @@ def run(
         path=loaded.path, timeline=loaded.timeline, chain=loaded.chain, buffer=replayed.buffer,
         replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
-        info=loaded.info, notes=tuple(loaded.notes),
+        info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings),
     )
 
 
@@ -228,7 +333,7 @@ def attribute_log(
     bootstrap: int = 30,
     episode: int | None = None,
     robot: str | Path | None = None,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress | None = None,
 ) -> tuple[Run, Attribution]:
     """Read, replay and attribute one log: ``(run, attribution)``; raises :class:`AnalysisError` (one line
     naming the log and why) when it cannot be attributed."""
@@ -243,8 +348,11 @@ def _why_nothing_replayed(loaded: LoadedRun, result: ReplayResult) -> str | None
         return None
     log = adapters.LoadedLog(timeline=loaded.timeline, info=loaded.info, decoded_topics={})
     why = adapters.why_nothing_replayed(log, loaded.chain, nothing)
-    # What the reader noticed on the chain's topics (an undecodable topic) often is the cause.
-    why += "".join(f"; {n}" for n in loaded.chain_topic_notes())
+    # What the reader noticed on the chain's topics (an undecodable topic) often is the cause; a topic the line
+    # already says the log lacks is not said twice.
+    why += "".join(f"; {n}" for n in loaded.chain_topic_notes()
+                   if not ((": named by the chain as " in n or ": did you mean " in n)
+                           and n.split(": ", 1)[0].removeprefix("topic ") in why))
     if loaded.chain_suggested:
         why += " (the chain was suggested: `framechain info LOG` lists what the log lacks)"
     return why

@@ -62,7 +62,7 @@ def log(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     scene = generate(SceneSpec(seed=2, duration_s=2.0, width=160, height=120, focal_px=150.0, evidence="hops",
                                faults=(InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),)))
     path = write_scene(scene, out / "episode.mcap")
-    chain = out / "chain.yaml"
+    chain = out / "given.yaml"  # not chain.yaml: batch would take a chain.yaml beside the log over --chain
     chain.write_text(scene.chain.to_yaml())
     # Every label declared moving: every observation rejected, nothing to attribute.
     labels = tuple(sorted(set(scene.timeline.observations.label.tolist())))

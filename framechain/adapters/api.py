@@ -17,6 +17,7 @@ from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgty
 from framechain.adapters.model import LoadedLog, LogInfo
 from framechain.adapters.robot.mounts import chain_additions
 from framechain.config.chain import ChainConfig
+from framechain.progress import Progress
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -138,13 +139,14 @@ def scan_log(path: str | Path) -> LogInfo:
 
 
 def open_log(
-    path: str | Path, chain: ChainConfig | None = None, *, progress: bool = False,
+    path: str | Path, chain: ChainConfig | None = None, *, progress: bool | Progress = False,
     kinds: Collection[str] | None = None, point_roles: Callable[[LogInfo], Mapping[str, str]] | None = None,
 ) -> LoadedLog:
     """Read a log into the Timeline: only the topics ``chain`` needs (all it understands if None).
 
     ``kinds`` narrows further to some message kinds (:class:`Kind` values, e.g. ``{"tf"}``);
-    ``progress`` shows a progress bar on stderr for large logs; ``point_roles``, given what the log
+    ``progress`` shows a progress bar on stderr for large logs (True), or is told the messages read (a
+    :class:`~framechain.progress.Progress`); ``point_roles``, given what the log
     holds, names point topics to read as evidence beside the chain's, with their roles (a suggested
     chain's evidence, so that a log without a chain is read once).
 
@@ -154,7 +156,7 @@ def open_log(
     p = Path(path)
     plugin = _plugin_for(p)
     if plugin is not None:
-        return plugin.open(p, chain, progress=progress)
+        return plugin.open(p, chain, progress=progress is True)
     fmt, target, notes = detect(p)
     additions = chain_additions(chain)  # a missing calibration file fails before the log is read
     if chain is not None and chain.evidence.markers is not None:  # a bad dictionary too, naming the chain file
@@ -179,8 +181,11 @@ def open_log(
         if chain is not None:
             notes.extend(_check_chain_topics(chain, types))
         total = sum(t.count for t in info.topics if t.name in selected)
-        with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
-            src.read(selected, col, advance)
+        if callable(progress):
+            _read_told(src, selected, col, progress, total, f"reading {p.name}")
+        else:
+            with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
+                src.read(selected, col, advance)
         info = info.with_notes(src.notes)
     col.notes[:0] = notes
     if chain is not None and chain.topics.detections_table:
@@ -227,6 +232,21 @@ def _check_chain_topics(chain: ChainConfig, types: dict[str, str]) -> list[str]:
         if p.topic in types and types[p.topic] not in POSE_TYPES and p.topic not in evidence
     )
     return notes
+
+
+def _read_told(src: McapLog | RosbagsLog, selected: dict[str, Kind], col: Collector, progress: Progress,
+               total: int, stage: str) -> None:
+    """Read, telling ``progress`` how many of the index's ``total`` messages are read."""
+    done = 0
+
+    def advance(n: int) -> None:
+        nonlocal done
+        done = min(done + n, total)
+        progress(stage, done, total, "messages")
+
+    progress(stage, 0, total, "messages")
+    src.read(selected, col, advance)
+    progress(stage, total, total, "messages")
 
 
 @contextmanager

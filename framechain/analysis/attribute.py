@@ -22,7 +22,6 @@ so that a run replays and aligns once and hands both to attribution and to the s
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -49,10 +48,11 @@ from framechain.analysis.static import RayObjective, StaticTargetError, static_o
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
+from framechain.progress import Progress, no_progress
 from framechain.replay import CameraModel, ReplayResult
 from framechain.timeline import PointRole, Timeline
 
-Say = Callable[[str], None]
+Say = Progress  # a stage's name, and for counted stages how far into it
 
 
 def attribute(
@@ -79,7 +79,7 @@ def attribute_replayed(
 ) -> Attribution:
     """Attribute the error of a replay (``replay_chain(timeline, chain)``); raises :class:`AnalysisError`
     with its :class:`Unattributed` reason when it cannot."""
-    say: Say = progress or (lambda _msg: None)
+    say: Say = progress or no_progress
     result = replayed.replay
     row = _camera_row(result, chain)
     inputs = ChainInputs.from_replay(result, replayed.buffer, CameraModel.from_table(replayed.timeline.cameras, row))

@@ -48,6 +48,8 @@ class Run:
     suggestion: Any = None  # the suggestion (placeholders, what the log lacks) when no chain was given
     info: Any = None  # the adapter's LogInfo (format, topics, span, notes) when read from a robot log
     notes: tuple[str, ...] = ()  # what the reader noticed (a topic the chain names but the log lacks, ...)
+    #: what disagrees before any fit (a calibration of another camera's topic): said first, also in ``notes``
+    warnings: tuple[str, ...] = ()
 
     @property
     def findings(self) -> tuple[Finding, ...]:

@@ -4,7 +4,7 @@ whitened along the viewing rays."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -18,6 +18,7 @@ from framechain.analysis.frame_swaps import swap_for_rotation
 from framechain.analysis.static import RayObjective, StaticObjective
 from framechain.arrays import FloatArray, IntArray
 from framechain.catalogue import Fault, HopName
+from framechain.progress import Progress
 from framechain.replay import transform_points
 from framechain.timeline import PointRole
 
@@ -103,7 +104,7 @@ def distances(residuals: FloatArray) -> FloatArray:
 
 
 def hops_level(
-    inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Callable[[str], None]
+    inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Progress
 ) -> tuple[list[Selected], dict[str, FloatArray], PointObjective]:
     """Logged hops: each logged stage fed with the robot's own logged input, compared with its output.
 
@@ -145,7 +146,7 @@ def select(
     objective: Objective,
     inputs: ChainInputs,
     mode: Mode,
-    say: Callable[[str], None],
+    say: Progress,
 ) -> Selected:
     """Forward selection on BIC: add the fault that explains most while it clearly pays for itself.
 
@@ -164,7 +165,9 @@ def select(
             break
         base = current.perturbation()
         quick: list[tuple[Fit, FaultModel]] = []
-        for candidate in candidates:  # each candidate alone on top of the faults already found
+        stage = f"fitting {len(candidates)} fault models" + (" on top of those found" if current.models else "")
+        for k, candidate in enumerate(candidates):  # each candidate alone on top of the faults already found
+            say(stage, k, len(candidates), "models")
             model = (
                 replace(candidate, starts=rotation_starts(inputs, mode))
                 if candidate.name.startswith("rotation")

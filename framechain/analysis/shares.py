@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from framechain.analysis.fit import fit_models, perturbation_of
 from framechain.analysis.selection import Objective, Selected, distances
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault
+from framechain.progress import Progress
 
 #: A fault found: its model, fitted parameters, confidence, the next-best explanation, and its selection.
 Found = tuple[FaultModel, FloatArray, float, str, Selected]
@@ -103,23 +104,25 @@ def bootstrap_interval(
     model: FaultModel,
     rng: np.random.Generator,
     draws: int,
-    say: Callable[[str], None],
+    say: Progress,
 ) -> dict[str, list[float]]:
     """95% intervals of the model's scalar estimates over observation resamples."""
     if model.n_params == 0:
         return {}
-    say(f"bootstrapping {model.name} ({draws} resamples)")
+    stage = f"bootstrapping {model.name}"
+    say(stage, 0, draws, "resamples")
     x_fit = np.concatenate(sel.fit.params)
     index = [m.name for m in sel.fit.models].index(model.name)
     samples: dict[str, list[float]] = {}
     inputs = sel.inputs
     n = len(inputs)
-    for _ in range(draws):
+    for draw in range(draws):
         idx = rng.integers(0, n, n)
         refit = fit_models(sel.fit.models, sel.objective.take(idx), inputs.take(idx), x_start=x_fit, grid=False)
         scalars = estimate_scalars(model.estimate(refit.params[index], sel.mode, inputs))
         for key, value in scalars.items():
             samples.setdefault(key, []).append(float(value))
+        say(stage, draw + 1, draws, "resamples")
     return {
         k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)] for k, v in samples.items()
     }

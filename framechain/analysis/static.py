@@ -439,6 +439,24 @@ def _too_few_sightings(
     return (
         f"static target: no object seen at least {needed} times in one {window_s:g} s window{how} "
         f"({n_labels} label{'s' if n_labels != 1 else ''} among {int(usable.sum())} observations, at most {most} "
-        f"sighting{'s' if most != 1 else ''} of one label in a window); lengthen evidence.static_window_s or "
-        "record more observations of each static object"
+        f"sighting{'s' if most != 1 else ''} of one label in a window); "
+        f"{_what_can_help(labels, stamp_ns, usable, needed)}"
     )
+
+
+def _what_can_help(labels: StrArray, stamp_ns: IntArray, usable: BoolArray, needed: int) -> str:
+    """The change that can give an object enough sightings: a longer window only when the whole log holds them."""
+    images = np.unique(stamp_ns[usable]).size
+    if images <= 1:
+        return ("the log holds one image, where each object is seen once: a longer evidence.static_window_s cannot "
+                "add sightings; record the static objects in more images, from other viewpoints (or give "
+                "evidence.reference_point)")
+    names, per_label = np.unique(labels[usable], return_counts=True)
+    whole = int(per_label.max()) if per_label.size else 0
+    if whole < needed:
+        return (f"the whole log holds at most {whole} sighting{'s' if whole != 1 else ''} of one label, so a longer "
+                "evidence.static_window_s cannot help: record more images of each static object")
+    best = str(names[np.argmax(per_label)])
+    span_s = (int(stamp_ns[usable].max()) - int(stamp_ns[usable].min())) * 1e-9
+    return (f"lengthen evidence.static_window_s (the whole log, {span_s:.3g} s, holds {whole} sightings of label "
+            f"{best}) or record more observations of each static object")

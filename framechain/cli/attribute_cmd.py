@@ -14,6 +14,7 @@ from framechain.cli.common import (
     print_findings,
     print_suggested_chain,
     progress_reporter,
+    warner,
 )
 
 FORMATS = ("json", "md", "html")
@@ -56,16 +57,21 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
-                            bootstrap=args.bootstrap, progress=progress)
-    result = made.attributed()  # none: one line saying why, exit 1
+                            bootstrap=args.bootstrap, progress=progress,
+                            warn=warner(getattr(args, "command", None) or "attribute"))
+        result = made.attributed()  # none: one line saying why, exit 1
+        if progress is not None:
+            progress("writing the outputs")
+        paths = write_attribution(made, out)
+        report_formats = [f for f in formats if f in ("md", "html")]
+        if report_formats:
+            from framechain.sinks.report import render_report
+
+            if progress is not None:
+                progress(f"writing the report ({', '.join(report_formats)})")
+            paths.update(render_report(made, out, formats=report_formats))
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)
-    paths = write_attribution(made, out)
-    report_formats = [f for f in formats if f in ("md", "html")]
-    if report_formats:
-        from framechain.sinks.report import render_report
-
-        paths.update(render_report(made, out, formats=report_formats))
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0

@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import make_out_dir, non_negative_int
+from framechain.cli.common import PlainProgress, make_out_dir, non_negative_int
 
 EPILOG = """exit codes:
   0    the batch ran: every log has its row in DIR/fleet.parquet (a log that failed is a row with its error)
@@ -34,7 +34,8 @@ def register(sub: Any) -> None:
                         "directory of any of these")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory (results are resumed from it)")
     parser.add_argument("--chain", metavar="CHAIN.yaml",
-                        help="chain configuration for every log; default: each log's suggested chain")
+                        help="chain configuration for the logs that have none beside them (<log name>.chain.yaml, "
+                        "or chain.yaml / CHAIN.yaml in the log's folder, wins); default: each log's suggested chain")
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     parser.add_argument("--episodes", type=episode_set, metavar="SPEC",
                         help="LeRobot datasets: only these episodes, e.g. 0-9,20 (default: all)")
@@ -121,9 +122,24 @@ def run(args: argparse.Namespace) -> int:
 
 @contextmanager
 def _progress(quiet: bool) -> Iterator[tuple[Callable[[int, int], None], Callable[[dict[str, Any]], None]]]:
-    """A rich progress bar on stderr (or nothing when quiet or not a terminal)."""
-    if quiet or not sys.stderr.isatty():
+    """A rich progress bar on stderr; plain lines at most every few seconds when stderr is not a terminal (a CI
+    log); nothing when quiet."""
+    if quiet:
         yield (lambda total, skipped: None), (lambda record: None)
+        return
+    if not sys.stderr.isatty():
+        lines = PlainProgress("batch")
+        counts = [0, 0]  # done, to do
+
+        def start(total: int, skipped: int) -> None:
+            counts[:] = [0, total - skipped]
+            lines("attributing logs", 0, counts[1], "logs")
+
+        def done(record: dict[str, Any]) -> None:
+            counts[0] += 1
+            lines("attributing logs", counts[0], counts[1], "logs")
+
+        yield start, done
         return
     from rich.console import Console
     from rich.progress import (
@@ -157,12 +173,21 @@ def _print_summary(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from framechain.sinks.fleet_report import estimate_spread, fleet_logs, not_analysed_reasons, summary_line
+    from framechain.sinks.fleet_report import (
+        chains_line,
+        estimate_spread,
+        fleet_logs,
+        not_analysed_reasons,
+        summary_line,
+    )
 
     console = Console(width=None if sys.stdout.isatty() else 120)
     logs = fleet_logs(pq.read_table(result.table_path))
     console.print(f"[bold]{summary_line(logs)}[/bold]", highlight=False)
     console.print(f"computed {result.computed}, kept from an earlier run {result.skipped}", highlight=False)
+    console.print(chains_line(logs), markup=False, highlight=False, soft_wrap=True)
+    for note in result.notes:
+        console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
     spread = estimate_spread(logs)
     if spread:
         table = Table()

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -11,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
+    from framechain.progress import Progress
 
 
 def add_log_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,30 +57,114 @@ def make_out_dir(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
 
+#: Plain progress lines (stderr not a terminal) come at most this often; FRAMECHAIN_PROGRESS_INTERVAL_S overrides.
+PROGRESS_INTERVAL_S = 5.0
+
+
 @contextmanager
-def progress_reporter(quiet: bool, label: str) -> Iterator[Callable[[str], None] | None]:
-    """A rich status line on stderr that follows the analysis steps (None when quiet)."""
-    if quiet or not sys.stderr.isatty():
+def progress_reporter(quiet: bool, label: str) -> Iterator[Progress | None]:
+    """Where a long run says how far it is (None when quiet): on a terminal a rich bar with counts, elapsed
+    time and time left; otherwise (a CI log) a plain line on stderr at most every few seconds."""
+    if quiet:
         yield None
         return
+    if not sys.stderr.isatty():
+        yield PlainProgress(label)
+        return
     from rich.console import Console
+    from rich.progress import BarColumn, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.progress import Progress as Bar
 
-    console = Console(stderr=True)
-    with console.status(label) as status:
-        yield lambda message: status.update(f"{label}: {message}")
+    bar = Bar(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[count]}"),
+              TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+    task = bar.add_task(label, total=None, count="")
+    current: list[str | float] = ["", 0.0]  # the stage and when it began
+
+    def report(stage: str, /, done: int | None = None, total: int | None = None, unit: str = "") -> None:
+        now = time.monotonic()
+        if current[0] != stage:  # a new stage: its own bar and clock
+            current[:] = [stage, now]
+            bar.reset(task, total=total or None, completed=done or 0, description=f"{label}: {stage}", count="")
+        count = _how_far(done, total, unit, now - float(current[1])).lstrip()
+        bar.update(task, total=total or None, completed=done or 0, count=count)
+
+    with bar:
+        yield report
+
+
+class PlainProgress:
+    """Progress as plain lines on stderr (``framechain: reading run.bag 45% (123,456 of 270,000 messages), 12 s
+    left``), at most one every :data:`PROGRESS_INTERVAL_S`: readable in a CI log, never a flood. The first
+    comes one interval into the run: a run shorter than that (or one that stops at once on bad input, whose
+    error is one line) prints none."""
+
+    def __init__(self, label: str, *, interval_s: float | None = None) -> None:
+        self.label = label
+        env = os.environ.get("FRAMECHAIN_PROGRESS_INTERVAL_S")
+        self.interval_s = interval_s if interval_s is not None else float(env) if env else PROGRESS_INTERVAL_S
+        self._last = time.monotonic() if self.interval_s > 0 else -math.inf
+        self._stage = ""
+        self._since = 0.0
+
+    def __call__(self, stage: str, /, done: int | None = None, total: int | None = None, unit: str = "") -> None:
+        now = time.monotonic()
+        if stage != self._stage:
+            self._stage, self._since = stage, now
+        if now - self._last < self.interval_s:
+            return
+        self._last = now
+        print(f"framechain: {stage}{_how_far(done, total, unit, now - self._since)}", file=sys.stderr, flush=True)
+
+
+#: Counted steps of very unequal cost (a latency search against a fixed rotation): no time left is guessed.
+_UNEVEN_UNITS = frozenset({"models"})
+
+
+def _how_far(done: int | None, total: int | None, unit: str, elapsed_s: float) -> str:
+    """`` 45% (123,456 of 270,000 messages), 12 s left`` ("" for a stage that does not count)."""
+    if done is None or not total:
+        return ""
+    text = f" {100 * done // total}% ({done:,} of {total:,} {unit})".replace(" )", ")")
+    if 0 < done < total and elapsed_s > 0 and unit not in _UNEVEN_UNITS:
+        left = elapsed_s * (total - done) / done
+        text += ", under 1 s left" if left < 1 else f", {left:.0f} s left" if left < 90 else \
+            f", {left / 60:.0f} min left"
+    return text
 
 
 def print_suggested_chain(chain: Any, quiet: bool) -> None:
     """Say which configuration was used when none was given (stderr, so --json stays clean).
 
-    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig."""
+    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig. The YAML is
+    written as it is, never wrapped: a comment wrapped onto a new line would not be a comment when pasted."""
     if quiet:
         return
-    from rich.console import Console
+    print("no --chain given; using the suggested configuration (edit it and pass --chain):", file=sys.stderr)
+    print(chain.to_yaml().rstrip(), file=sys.stderr)
 
-    console = Console(stderr=True)
-    console.print("[dim]no --chain given; using the suggested configuration (edit it and pass --chain):[/dim]")
-    console.print(chain.to_yaml().rstrip(), markup=False, highlight=False)
+
+def chain_text(run: Run) -> str:
+    """The chain a run used, one line: its frames (a suggestion's placeholders marked FILL IN)."""
+    frames = run.chain.frames
+    if run.chain_suggested and run.suggestion is not None and hasattr(run.suggestion, "frames_text"):
+        text: str = run.suggestion.frames_text()
+        return text
+    return f"{frames.camera} -> {frames.body} -> {frames.world}"
+
+
+def incomplete_chain_line(run: Run) -> str | None:
+    """When the run's chain was suggested and the log lacks pieces of it: one line saying so and what is missing."""
+    if not run.chain_suggested or run.suggestion is None or not hasattr(run.suggestion, "incomplete_line"):
+        return None
+    line: str | None = run.suggestion.incomplete_line()
+    return line
+
+
+def warner(command: str) -> Callable[[str], None]:
+    """What disagrees before any fit (a calibration of another camera's topic), on stderr as soon as the log
+    is read (``pipeline.run(warn=)``), before the findings that would measure it. Said even with --quiet; the
+    notes of every output hold it too."""
+    return lambda warning: print(f"framechain {command}: warning: {warning}", file=sys.stderr)
 
 
 def say_unattributed(run: Run, command: str) -> list[str]:

@@ -8,7 +8,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter, say_unattributed
+from framechain.cli.common import (
+    add_log_arguments,
+    chain_text,
+    incomplete_chain_line,
+    print_suggested_chain,
+    progress_reporter,
+    say_unattributed,
+    warner,
+)
 
 DESCRIPTION = """\
 Replay (and attribute) the chain of a log and write one MCAP holding the log's own messages and the
@@ -44,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     with progress_reporter(quiet, "exporting") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
-                            seed=args.seed, progress=progress)
+                            seed=args.seed, progress=progress, warn=warner("export"))
         say_unattributed(made, "export")  # the recomputed chain is still worth exporting
         if progress is not None:
             progress(f"writing {out}")
@@ -54,9 +62,14 @@ def run(args: argparse.Namespace) -> int:
     replay_counts = made.replay.counts()
     if args.json:
         print(json.dumps({"out": str(out), "copied": counts.copied, "added": counts.added,
-                          "observations": replay_counts, "findings": len(made.findings)}))
+                          "observations": replay_counts, "findings": len(made.findings),
+                          "chain_incomplete": incomplete_chain_line(made)}))
         return 0
     print(f"log           {made.path}")
+    print(f"chain         {chain_text(made)}{' (suggested)' if made.chain_suggested else ''}")
+    incomplete = incomplete_chain_line(made)
+    if incomplete is not None:
+        print(f"note          {incomplete}")
     print(f"copied        {sum(counts.copied.values())} messages on {len(counts.copied)} topics")
     for topic, n in sorted(counts.added.items()):
         print(f"added         {n:>6} on {topic}")

@@ -38,7 +38,16 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
-    from framechain.adapters import LeRobotAdapter, LoadedLog, SuggestedChain, chain_needs, frame_tree, suggest
+    from framechain.adapters import (
+        LeRobotAdapter,
+        LoadedLog,
+        SuggestedChain,
+        calibration_disagreements,
+        chain_needs,
+        frame_id_disagreements,
+        frame_tree,
+        suggest,
+    )
     from framechain.timeline import FramechainError
 
     chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
@@ -60,6 +69,11 @@ def run(args: argparse.Namespace) -> int:
     if suggestion is not None and not suggestion.needs:
         suggestion = SuggestedChain(config=suggestion.config,
                                     needs=tuple(chain_needs(loaded, suggestion.config)))
+    # Names that disagree (detections stamped with another camera's frame, a calibration of another topic).
+    warnings = [*(calibration_disagreements(suggestion.config, loaded.info) if suggestion is not None else []),
+                *frame_id_disagreements(loaded)]
+    loaded = LoadedLog(timeline=loaded.timeline, info=loaded.info.with_notes(warnings),
+                       decoded_topics=loaded.decoded_topics)
     edges = frame_tree(loaded.timeline.transforms)
     if print_chain:
         if suggestion is None:
@@ -127,6 +141,7 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
     from rich.table import Table
     from rich.tree import Tree
 
+    from framechain.adapters.suggest.facts import chain_files_beside
     from framechain.adapters.suggest.frame_tree import children_of, tree_roots
 
     console = Console()
@@ -184,5 +199,9 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
         console.print(f"  {escape(need.piece)}: [{colour[need.status.value]}]{need.status.value}[/] "
                       f"({escape(need.detail)}{fix})", highlight=False, soft_wrap=True)
     if not chain_given:
+        beside = chain_files_beside(Path(str(info.path)))
+        if beside:
+            console.print(f"[yellow]note:[/] {escape(str(beside[0]))} lies beside the log: `framechain info LOG "
+                          f"--chain {escape(str(beside[0]))}` checks it", highlight=False, soft_wrap=True)
         console.print("[bold]Suggested chain[/] (framechain info LOG --chain > chain.yaml):")
         console.print(escape(suggestion.to_yaml(source=str(info.path))), highlight=False, soft_wrap=True)

@@ -8,7 +8,15 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from framechain.cli.common import add_log_arguments, print_suggested_chain, progress_reporter, say_unattributed
+from framechain.cli.common import (
+    add_log_arguments,
+    chain_text,
+    incomplete_chain_line,
+    print_suggested_chain,
+    progress_reporter,
+    say_unattributed,
+    warner,
+)
 
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
@@ -69,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.quiet or args.json
     with progress_reporter(quiet, "replaying") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
-                            seed=args.seed, progress=progress)
+                            seed=args.seed, progress=progress, warn=warner("replay"))
         notes = list(made.notes)
         if made.chain_suggested and made.info is not None:
             notes.extend(_unused_point_topics(made))
@@ -133,6 +141,8 @@ def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, A
         "source": str(getattr(loaded.info, "format", "timeline")),
         "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
         "chain_suggested": loaded.chain_suggested,
+        "placeholders": sorted(getattr(loaded.suggestion, "placeholders", {}) or {}) if loaded.chain_suggested else [],
+        "chain_incomplete": incomplete_chain_line(loaded),
         "latency_budget_s": loaded.chain.latency_budget_s,
         "counts": loaded.replay.counts(),
         "findings": [FindingView.of(f).text() for f in loaded.findings],
@@ -148,7 +158,6 @@ def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, A
 def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     from framechain.sinks.text import FindingView
 
-    frames = loaded.chain.frames
     findings = loaded.findings
     counts = loaded.replay.counts()
     rejected = counts["rejected"]
@@ -156,8 +165,11 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     detail = ", ".join(f"{reason} {n}" for reason, n in sorted(rejected.items()))
     source = getattr(loaded.info, "format", "timeline")
     print(f"log           {loaded.path} ({source})")
-    print(f"chain         {frames.camera} -> {frames.body} -> {frames.world} "
-          f"(latency budget {loaded.chain.latency_budget_s * 1e3:g} ms)")
+    suggested = "suggested; " if loaded.chain_suggested else ""
+    print(f"chain         {chain_text(loaded)} ({suggested}latency budget {loaded.chain.latency_budget_s * 1e3:g} ms)")
+    incomplete = incomplete_chain_line(loaded)
+    if incomplete is not None:
+        print(f"note          {incomplete}")
     line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {sum(rejected.values())} rejected"
     if detail:
         line += f" ({detail})"

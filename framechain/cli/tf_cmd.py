@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if not len(transforms):
         raise FramechainError(
             f"{args.log}: no transforms in this log (no /tf, /tf_static, TransformStamped or Odometry)")
+    _check_frames(args, transforms)
     buffer = TransformBuffer(transforms)
     dynamic = ~transforms.is_static
     log_start = int(transforms.stamp_ns[dynamic].min()) if dynamic.any() else 0
@@ -119,6 +120,30 @@ def run(args: argparse.Namespace) -> int:
     else:
         _render(record, result.matrix()[0])
     return 0
+
+
+def _check_frames(args: argparse.Namespace, transforms: Any) -> None:
+    """A frame no transform mentions: one line with what it may have meant, and where else frames come from."""
+    from framechain.adapters import did_you_mean, or_list
+    from framechain.adapters.suggest.facts import chain_files_beside
+    from framechain.timeline import FramechainError
+
+    known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
+    unknown = [n for n in dict.fromkeys((args.target, args.source)) if n not in known and n.lstrip("/") not in known]
+    if not unknown:
+        return
+    where = "the log (no transform names it)" if args.chain is None else \
+        f"the log (no transform names it) nor in the mounts or urdf of {args.chain}"
+    parts = []
+    for name in unknown:
+        close = did_you_mean(name, known)
+        parts.append(f"frame {name!r} does not exist in {where}" + (f"; did you mean {or_list(close)}?"
+                                                                      if close else ""))
+    text = f"{args.log}: {'; '.join(parts)}"
+    if args.chain is None:
+        beside = chain_files_beside(Path(args.log))
+        text += f" (frames from a chain file's mounts: or urdf: need --chain {beside[0] if beside else 'CHAIN.yaml'})"
+    raise FramechainError(text)
 
 
 def _rpy_deg(quat_xyzw: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:

@@ -85,7 +85,10 @@ class CameraModel:
         return self.distortion_model != "none" and bool(np.any(self.distortion))
 
     def inside(self, u: FloatArray, v: FloatArray) -> npt.NDArray[np.bool_]:
-        """Pixels within the image (pixel centres at integers, edges at -0.5 and size - 0.5)."""
+        """Pixels within the image (pixel centres at integers, edges at -0.5 and size - 0.5). A model without
+        an image (width or height 0: 3D points in the camera frame, in normalised coordinates) bounds nothing."""
+        if self.width <= 0 or self.height <= 0:
+            return np.ones(np.shape(u), dtype=bool)
         return (u >= -0.5) & (u < self.width - 0.5) & (v >= -0.5) & (v < self.height - 0.5)
 
     # -- pixel -> ray ---------------------------------------------------------------------

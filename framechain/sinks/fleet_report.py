@@ -46,6 +46,11 @@ class FleetLog:
     verdict: str | None
     error_median_m: float | None
     findings: list[dict[str, Any]]
+    chain: str | None = None  # the chain file it was analysed with (None: the suggested chain)
+
+    @property
+    def chain_text(self) -> str:
+        return self.chain or "suggested"
 
 
 @dataclass(frozen=True)
@@ -77,7 +82,7 @@ def fleet_logs(table: pa.Table) -> list[FleetLog]:
         if log is None:
             log = logs[row["key"]] = FleetLog(
                 unit=row["unit"], log=row["log"], status=row["status"], error=row["error"], verdict=row["verdict"],
-                error_median_m=row["error_median_m"], findings=[])
+                error_median_m=row["error_median_m"], findings=[], chain=row.get("chain"))
         if row["fault"] is not None:
             log.findings.append(row)
     return list(logs.values())
@@ -154,9 +159,10 @@ def estimate_spread(logs: Sequence[FleetLog]) -> list[SpreadRow]:
 
 
 def render_fleet_report(
-    table: pa.Table, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
+    table: pa.Table, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"), notes: Sequence[str] = (),
 ) -> dict[str, Path]:
-    """Write fleet_report.md (with its PNGs) and/or fleet_report.html into ``out_dir``."""
+    """Write fleet_report.md (with its PNGs) and/or fleet_report.html into ``out_dir``; ``notes``: what the batch
+    left out and why (files framechain wrote among the inputs)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     logs = fleet_logs(table)
@@ -167,10 +173,10 @@ def render_fleet_report(
         for fig in figures:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["fleet_md"] = out / "fleet_report.md"
-        paths["fleet_md"].write_text(fleet_markdown(logs, spread, figures))
+        paths["fleet_md"].write_text(fleet_markdown(logs, spread, figures, notes))
     if "html" in formats:
         paths["fleet_html"] = out / "fleet_report.html"
-        paths["fleet_html"].write_text(fleet_html(logs, spread, figures))
+        paths["fleet_html"].write_text(fleet_html(logs, spread, figures, notes))
     return paths
 
 
@@ -232,12 +238,19 @@ def summary_line(logs: Sequence[FleetLog]) -> str:
     return f"{len(logs)} logs: " + "; ".join(parts) + "."
 
 
+def chains_line(logs: Sequence[FleetLog]) -> str:
+    """``Chains: logs/a/chain.yaml (2 logs); suggested (1 log).``: which chain the logs were analysed with."""
+    used = Counter(log.chain_text for log in logs)
+    return "Chains: " + "; ".join(f"{name} ({n} log{'s' if n != 1 else ''})"
+                                  for name, n in sorted(used.items(), key=lambda item: (-item[1], item[0]))) + "."
+
+
 def _spread_cells(row: SpreadRow) -> list[str]:
     return [row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text, row.range_text]
 
 
 SPREAD_COLUMNS = ("fault", "hop", "logs", "estimate (median log)", "p5 .. p95", "min .. max")
-LOG_COLUMNS = ("log", "faults (estimate, share)", "median error", "verdict")
+LOG_COLUMNS = ("log", "faults (estimate, share)", "median error", "verdict", "chain")
 
 
 def _with_findings(logs: Sequence[FleetLog]) -> list[FleetLog]:
@@ -249,11 +262,13 @@ def _fault_cell(log: FleetLog) -> str:
     return "; ".join(f"{f['fault']} at {f['hop']} ({f['estimate_text']}, {f['share']:.0%})" for f in log.findings)
 
 
-def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure]) -> str:
+def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],
+                   notes: Sequence[str] = ()) -> str:
     def cell(text: object) -> str:
         return str(text).replace("|", "\\|").replace("\n", " ")
 
-    lines = ["# framechain fleet report", "", f"**{summary_line(logs)}**", ""]
+    lines = ["# framechain fleet report", "", f"**{summary_line(logs)}**", "", chains_line(logs), ""]
+    lines += [f"- note: {n}" for n in notes] + ([""] if notes else [])
     lines += ["## Faults across the fleet", ""]
     if spread:
         lines += ["| " + " | ".join(SPREAD_COLUMNS) + " |", "|" + " --- |" * len(SPREAD_COLUMNS)]
@@ -266,8 +281,8 @@ def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
     lines += ["", "## Which logs have which fault", ""]
     if found:
         lines += ["| " + " | ".join(LOG_COLUMNS) + " |", "|" + " --- |" * len(LOG_COLUMNS)]
-        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {mm(log.error_median_m)} | {cell(log.verdict)} |"
-                  for log in found[:MAX_LISTED]]
+        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {mm(log.error_median_m)} | {cell(log.verdict)} "
+                  f"| {cell(log.chain_text)} |" for log in found[:MAX_LISTED]]
         lines += _more(len(found))
     else:
         lines.append("None.")
@@ -276,8 +291,10 @@ def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
         lines += ["", "## Why logs were not analysed", "", "| " + " | ".join(REASON_COLUMNS) + " |",
                   "|" + " --- |" * len(REASON_COLUMNS)]
         lines += ["| " + " | ".join(cell(c) for c in r.cells()) + " |" for r in not_analysed_reasons(logs)]
-        lines += ["", "## Logs that could not be analysed", "", "| log | status | error |", "| --- | --- | --- |"]
-        lines += [f"| {cell(log.unit)} | {log.status} | {cell(log.error)} |" for log in failed[:MAX_LISTED]]
+        lines += ["", "## Logs that could not be analysed", "", "| log | status | error | chain |",
+                  "| --- | --- | --- | --- |"]
+        lines += [f"| {cell(log.unit)} | {log.status} | {cell(log.error)} | {cell(log.chain_text)} |"
+                  for log in failed[:MAX_LISTED]]
         lines += _more(len(failed))
     lines += ["", "Every row of fleet.parquet is one log and finding; query it with DuckDB or pandas.", ""]
     return "\n".join(lines)
@@ -287,13 +304,16 @@ def _more(n: int) -> list[str]:
     return ["", f"... and {n - MAX_LISTED} more in fleet.parquet."] if n > MAX_LISTED else []
 
 
-def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure]) -> str:
+def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],
+               notes: Sequence[str] = ()) -> str:
     e = html.escape
     parts = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain fleet report</title>",
         f"<style>{CSS}</style></head><body>",
         "<h1>framechain fleet report</h1>",
         f"<div class='summary'>{e(summary_line(logs))}</div>",
+        f"<p>{e(chains_line(logs))}</p>",
+        *(f"<p class='muted'>note: {e(n)}</p>" for n in notes),
         "<h2>Faults across the fleet</h2>",
     ]
     if spread:
@@ -308,8 +328,8 @@ def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: S
     if found:
         parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in LOG_COLUMNS) + "</tr>")
         parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(_fault_cell(log))}</td>"
-                  f"<td class='num'>{mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td></tr>"
-                  for log in found[:MAX_LISTED]]
+                  f"<td class='num'>{mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td>"
+                  f"<td><code>{e(log.chain_text)}</code></td></tr>" for log in found[:MAX_LISTED]]
         parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(found)) if t))
     else:
         parts.append("<p>None.</p>")
@@ -320,9 +340,9 @@ def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: S
         parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in r.cells()) + "</tr>" for r in not_analysed_reasons(logs)]
         parts.append("</table>")
         parts.append("<h2>Logs that could not be analysed</h2>"
-                     "<table><tr><th>log</th><th>status</th><th>error</th></tr>")
-        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(log.status)}</td><td>{e(log.error or '')}</td></tr>"
-                  for log in failed[:MAX_LISTED]]
+                     "<table><tr><th>log</th><th>status</th><th>error</th><th>chain</th></tr>")
+        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(log.status)}</td><td>{e(log.error or '')}</td>"
+                  f"<td><code>{e(log.chain_text)}</code></td></tr>" for log in failed[:MAX_LISTED]]
         parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(failed)) if t))
     parts.append("<p class='muted'>Written by framechain batch. Every row of fleet.parquet is one log and finding; "
                  "query it with DuckDB or pandas.</p></body></html>")
@@ -333,6 +353,7 @@ __all__ = [
     "FleetLog",
     "ReasonRow",
     "SpreadRow",
+    "chains_line",
     "estimate_spread",
     "fleet_logs",
     "not_analysed_reasons",

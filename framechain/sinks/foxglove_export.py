@@ -27,7 +27,7 @@ import numpy as np
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.findings import Finding
 from framechain.analysis.run import Run
-from framechain.arrays import IntArray
+from framechain.arrays import BoolArray, IntArray
 from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
     AS_RUN_COLOR,
@@ -143,7 +143,11 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
     stamp = np.where(overlay.image_row >= 0, images.stamp_ns[np.maximum(overlay.image_row, 0)]
                      if len(images) else obs.stamp_ns, obs.stamp_ns)
     out: list[ProtobufMessage] = []
-    for when, rows in _by_stamp(stamp):
+    drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
+    for when, at_stamp in _by_stamp(stamp):
+        rows = at_stamp[drawn[at_stamp]]
+        if not rows.size:
+            continue
         msg = ImageAnnotations()
 
         def points(kind: int, uv: Any, color: tuple[int, int, int], size: float, *, msg: Any = msg,

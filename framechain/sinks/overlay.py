@@ -114,6 +114,7 @@ def project_world_points(timeline: Timeline, result: ReplayResult, p_world: Floa
     usable = np.isfinite(world_from_cam).all(axis=(1, 2)) & np.isfinite(p_world).all(axis=1)
     rows = result.camera_row
     usable &= rows >= 0
+    usable[usable] = timeline.cameras.width[rows[usable]] > 0  # a camera-less model (3D points) has no pixels
     if not usable.any():
         return out
     rot = world_from_cam[usable, :3, :3]
@@ -208,8 +209,10 @@ def image_overlay(
     height[have] = timeline.cameras.height[rows[have]]
     finding = explaining_finding(findings)
     color = UNEXPLAINED_COLOR if finding is None else FAULT_COLORS.get(finding.fault.value, UNEXPLAINED_COLOR)
+    detection_uv = np.stack([obs.u, obs.v], axis=1).astype(float)
+    detection_uv[have & (width <= 0)] = np.nan  # a camera-less model's (u, v) are x/z, y/z: not pixels
     return ImageOverlay(
-        detection_uv=np.stack([obs.u, obs.v], axis=1).astype(float), corners_px=fiducial_corners(timeline, obs.obs_id),
+        detection_uv=detection_uv, corners_px=fiducial_corners(timeline, obs.obs_id),
         recomputed_uv=recomputed, as_run_uv=as_run_uv, as_run_role=role,
         image_row=nearest_images(timeline, result, window_ns), width=width, height=height, finding=finding,
         color=color,

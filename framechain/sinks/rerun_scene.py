@@ -119,7 +119,11 @@ def log_camera(
     frames = result.frames
     plane = frames.camera + IMAGE_PLANE_SUFFIX
     cams = timeline.cameras
-    mine = np.flatnonzero(cams.frame == normalize_frame(frames.camera))
+    # A model without an image (width 0: 3D points in the camera frame, no intrinsics) has no pinhole to show,
+    # and its detections are no pixels.
+    on_frame = cams.frame == normalize_frame(frames.camera)
+    mine = np.flatnonzero(on_frame & (cams.width > 0))
+    points_only = bool(on_frame.any()) and not mine.size
     if mine.size:
         mine = mine[np.argsort(cams.stamp_ns[mine], kind="stable")]
         k = cams.K[mine]
@@ -147,7 +151,7 @@ def log_camera(
         rows["/camera"] = int(keep.size)
     log_depth(rec, timeline, result, opts, plane, rows)
     obs = result.observations
-    if len(obs):
+    if len(obs) and not points_only:
         every = np.arange(len(obs), dtype=np.int64)
         colors = np.where(result.replayed[:, None], np.array(RECOMPUTED_COLOR), np.array(ERROR_COLOR))
         colors[result.stale] = STALE_COLOR

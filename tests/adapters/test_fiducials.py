@@ -404,9 +404,10 @@ def test_pose_and_vertex_layouts_ros1(tmp_path: Path) -> None:
     assert obs.score[order][3] == 0.9
 
 
-def test_camera_points_need_intrinsics(tmp_path: Path) -> None:
-    """A PointStamped named as the detections is a camera-frame point; with no camera model the
-    detections are rejected with a reason naming the camera."""
+def test_camera_points_need_no_intrinsics(tmp_path: Path) -> None:
+    """A PointStamped named as the detections is a camera-frame point: with no camera model it is kept as it
+    is (in normalised image coordinates, with a camera-less model: intrinsics would only draw it); with a
+    CameraInfo it is projected to its pixel."""
     b = _Ros1()
     pts = np.array([[0.1, -0.05, 1.2], [-0.2, 0.1, 2.0], [0.0, 0.0, -1.0]])
     msgs = [("/target_cam", "geometry_msgs/msg/PointStamped", T0 + i,
@@ -416,9 +417,18 @@ def test_camera_points_need_intrinsics(tmp_path: Path) -> None:
     path = _write_ros1(tmp_path / "points.bag", msgs, b.ts)
     loaded = open_log(path, chain)
     assert loaded.decoded_topics["/target_cam"] == "camera_point"
-    assert len(loaded.timeline.observations) == 0
-    assert loaded.timeline.metadata["fiducials"]["counts"]["/target_cam"]["rejected"] == {"no_intrinsics": 3}
-    assert any("3 detections rejected: no intrinsics for camera cam_optical" in n for n in loaded.info.notes)
+    bare = loaded.timeline.observations
+    assert np.abs(np.column_stack([bare.u, bare.v]) - pts[:2, :2] / pts[:2, 2:]).max() < 1e-15
+    assert bare.depth_m.tolist() == pts[:2, 2].tolist()
+    assert loaded.timeline.metadata["fiducials"]["counts"]["/target_cam"]["rejected"] == {"behind_camera": 1}
+    cams = loaded.timeline.cameras
+    assert (cams.frame.tolist(), cams.width.tolist(), cams.height.tolist()) == (["cam_optical"], [0], [0])
+    assert any("no intrinsics; its detections are 3D points in the camera frame" in n for n in loaded.info.notes)
+    from framechain.replay.camera import CameraModel
+
+    model = CameraModel.from_table(cams)  # hop 1 of the replay gives the logged points back, unbounded by an image
+    assert model.inside(bare.u, bare.v).all()
+    assert np.abs(model.pixel_to_camera(bare.u, bare.v, bare.depth_m) - pts[:2]).max() < 1e-15
     with_info = _write_ros1(tmp_path / "points_info.bag", [
         ("/camera_info", "sensor_msgs/msg/CameraInfo", T0, b.camera_info(T0, "cam_optical", "plumb_bob")), *msgs],
         b.ts)

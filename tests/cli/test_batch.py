@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -14,6 +15,7 @@ from typing import Any
 
 import pyarrow.parquet as pq
 import pytest
+import yaml
 from mcap.reader import make_reader
 
 from framechain.catalogue import Fault
@@ -352,3 +354,98 @@ def test_fleet_spread_keeps_the_text_of_estimates_without_a_number() -> None:
                 "start_ns": 0, "end_ns": 1_000_000_000} for k in "ab"]
     (row,) = estimate_spread(fleet_logs(fleet_table(records)))
     assert (row.logs, row.median, row.median_text, row.p5_p95_text) == (2, None, swap, "-")
+
+
+# -- issue 19: each log's own chain, framechain's outputs skipped, paths as given ------------------------
+def _write_chain(path: Path, chain: Any, *, evidence: bool) -> Path:
+    raw = chain.to_dict()
+    if not evidence:
+        raw.pop("evidence", None)
+    path.write_text(yaml.safe_dump(raw))
+    return path
+
+
+def test_each_log_uses_the_chain_beside_it(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """chain.yaml in the log's folder, <log name>.chain.yaml beside it, --chain for the others: the chain
+    decides what is measured (the robot's hop points, or no evidence), and the table says which was used."""
+    logs = tmp_path / "logs"
+    for name in ("a", "b", "c"):
+        (logs / name).mkdir(parents=True)
+    fault = InjectedFault(Fault.LATENCY, "robot", {"offset_s": LATENCY_S})
+    scenes = {name: _scene(30 + i, fault) for i, name in enumerate("abc")}
+    for name, scene in scenes.items():
+        write_scene(scene, logs / name / f"{name}.mcap")
+    folder_chain = _write_chain(logs / "a" / "chain.yaml", scenes["a"].chain, evidence=True)
+    named_chain = _write_chain(logs / "b" / "b.chain.yaml", scenes["b"].chain, evidence=False)
+    default = _write_chain(tmp_path / "default.yaml", scenes["c"].chain, evidence=False)
+    out = tmp_path / "out"
+    assert main(["batch", str(logs), "--out", str(out), "--chain", str(default), "-j", "1", "--bootstrap", "0",
+                 "-q"]) == 0
+    rows = {Path(r["log"]).name: r for r in _rows(out)}
+    assert {n: (r["chain"], r["chain_suggested"]) for n, r in rows.items()} == {
+        "a.mcap": (str(folder_chain), False), "b.mcap": (str(named_chain), False), "c.mcap": (str(default), False)}
+    assert (rows["a.mcap"]["status"], rows["a.mcap"]["metric"], rows["a.mcap"]["fault"]) == (
+        "findings", "logged_hops", "latency")
+    assert rows["b.mcap"]["status"] == rows["c.mcap"]["status"] == "no_evidence"  # their chains name no evidence
+    stdout = capsys.readouterr().out
+    assert f"Chains: {default} (1 log); {folder_chain} (1 log); {named_chain} (1 log)." in stdout
+    md = (out / "fleet_report.md").read_text()
+    assert f"| {folder_chain} |" in md
+    # Without --chain the log that has none beside it gets its suggested chain (which finds the hop points).
+    assert main(["batch", str(logs), "--out", str(tmp_path / "out2"), "-j", "1", "--bootstrap", "0", "-q"]) == 0
+    rows = {Path(r["log"]).name: r for r in _rows(tmp_path / "out2")}
+    assert (rows["c.mcap"]["chain"], rows["c.mcap"]["chain_suggested"], rows["c.mcap"]["fault"]) == (
+        None, True, "latency")
+    assert rows["b.mcap"]["chain"] == str(named_chain)
+
+
+def test_framechain_exports_are_not_logs(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    scene = _scene(40, InjectedFault(Fault.LATENCY, "robot", {"offset_s": LATENCY_S}))
+    log = write_scene(scene, logs / "episode.mcap")
+    chain = _write_chain(tmp_path / "chain.yaml", scene.chain, evidence=True)
+    export = logs / "episode.annotated.mcap"
+    assert main(["export", str(log), "--chain", str(chain), "--out", str(export), "--no-attribute", "-q"]) == 0
+    with export.open("rb") as f:  # the export marks itself: an MCAP metadata record
+        (record,) = [m for m in make_reader(f).iter_metadata() if m.name == "framechain"]
+    assert record.metadata["command"] == "export"
+    assert record.metadata["source"] == str(log)
+    capsys.readouterr()
+    out = tmp_path / "out"
+    result = run_batch([logs], out, jobs=1, bootstrap=0, report_formats=("md",))
+    assert [Path(r["log"]).name for r in result.records] == ["episode.mcap"]  # one row: the recording's
+    assert result.notes == [f"{export} skipped: written by framechain {record.metadata['version']} export of {log}, "
+                            "not a recording"]
+    assert f"note: {result.notes[0]}" in (out / "fleet_report.md").read_text()
+    monkeypatch.setenv("FRAMECHAIN_PROGRESS_INTERVAL_S", "0")  # every report a line
+    assert main(["batch", str(logs), "--out", str(tmp_path / "out2"), "-j", "1", "--bootstrap", "0"]) == 0
+    captured = capsys.readouterr()
+    assert f"note: {result.notes[0]}" in captured.out
+    # Not a terminal: the progress is plain lines (issue 19, item 10).
+    assert captured.err.splitlines()[:2] == ["framechain: attributing logs 0% (0 of 1 logs)",
+                                             "framechain: attributing logs 100% (1 of 1 logs)"]
+
+
+def test_paths_stay_as_given_through_a_symlinked_folder(fleet: Path, tmp_path: Path) -> None:
+    link = tmp_path / "shared"
+    link.symlink_to(fleet)
+    result = run_batch([link], tmp_path / "out", jobs=1, bootstrap=0, report_formats=())
+    logs = {r["log"] for r in _rows(tmp_path / "out")}
+    assert logs == {str(link / "latency.mcap"), str(link / "rotation.mcap"), str(link / "day2" / "clean.mcap"),
+                    str(link / "day2" / "bag"), str(link / "day2" / "cut.mcap")}
+    # The same logs through the resolved path are the same units: nothing is computed again.
+    again = run_batch([fleet.resolve()], tmp_path / "out", jobs=1, bootstrap=0, report_formats=())
+    assert (again.computed, again.skipped) == (0, result.computed)
+
+
+def test_readme_names_the_fleet_table_columns() -> None:
+    from framechain.fleet import FLEET_SCHEMA
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme[readme.index("### `framechain batch"):readme.index("### `framechain demo")]
+    named = re.findall(r"`([a-z_]+)`", section.split("fleet.parquet", 1)[1].split(";", 1)[0])
+    assert named, "the README lists the fleet table's columns"
+    assert set(named) <= set(FLEET_SCHEMA.names), set(named) - set(FLEET_SCHEMA.names)
+    assert {"log", "chain"} <= set(named)

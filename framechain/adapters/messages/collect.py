@@ -20,7 +20,13 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.messages.depth import DepthWindowKeeper, make_depth_loader
-from framechain.adapters.messages.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
+from framechain.adapters.messages.fiducials import (
+    FiducialRows,
+    ResolvedFiducials,
+    resolve_fiducials,
+    tag_size_lookup,
+    with_unprojected,
+)
 from framechain.adapters.messages.images import image_metadata, make_image_loader
 from framechain.adapters.messages.kinds import Kind
 from framechain.adapters.messages.locator import FrameFetch
@@ -429,7 +435,7 @@ class Collector:
             )
         transforms = self._transforms()
         cameras = self._cameras()
-        self._add_fiducial_observations(cameras)
+        cameras = self._add_fiducial_observations(cameras)
         observations, self._obs_ids = self.observations.table(self.notes)
         points = self.points.table(self.roles)
         joints = self.joint_states.table()
@@ -472,12 +478,13 @@ class Collector:
         self.notes.extend(notes)
         return table
 
-    def _add_fiducial_observations(self, cameras: CameraTable) -> None:
-        """Fiducial detections as observation rows (tag PnP, projections) with the final camera models."""
+    def _add_fiducial_observations(self, cameras: CameraTable) -> CameraTable:
+        """Fiducial detections as observation rows (tag PnP, projections) with the final camera models; the
+        camera table, with a camera-less model for each camera whose 3D points needed no intrinsics."""
         if self.marker_finder is not None:
             self.notes.extend(self.marker_finder.notes())
         if not len(self.fiducials):
-            return
+            return cameras
         hint = ""
         if self.chain is not None and self.chain.calibration:
             hint = "the chain's calibration gives no camera with this frame; add calibration: {file:, camera:, frame:}"
@@ -490,6 +497,9 @@ class Collector:
             log_time_ns=resolved.log_time_ns.tolist(), frame=resolved.camera_frame.tolist(),
             uvd=np.column_stack([resolved.u, resolved.v, resolved.depth_m]).reshape(-1).tolist(),
             label=resolved.label.tolist(), score=resolved.score.tolist())
+        cameras, notes = with_unprojected(cameras, resolved)
+        self.notes.extend(notes)
+        return cameras
 
     def _fiducial_metadata(self) -> dict[str, Any]:
         """Counts per topic and the corner side table, keyed by obs_id (JSON-ready)."""

@@ -235,6 +235,9 @@ class ResolvedFiducials:
     side: dict[str, list[Any]]
     counts: dict[str, dict[str, Any]]
     notes: list[str]
+    #: Cameras without a model whose 3D points are kept in normalised image coordinates (u = x/z, v = y/z):
+    #: the reader gives each a camera-less model (:func:`unprojected_cameras`).
+    unprojected: frozenset[str] = frozenset()
 
 
 def camera_models_at(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> tuple[list[PinholeModel], IntArray]:
@@ -296,16 +299,26 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
     finite = np.where(is_corners, np.isfinite(corners).all(axis=(1, 2)), np.isfinite(point).all(axis=1))
     reason[~finite] = FiducialRejectReason.CORNERS_INVALID.value
     no_model_frames: set[str] = set()
+    unprojected: set[str] = set()
     for cam in np.unique(frame).tolist():
         in_cam = frame == cam
         models, which = camera_models_at(cameras, cam, stamp[in_cam])
         idx_cam = np.flatnonzero(in_cam)
         if not models:
-            # Bearing-only corners keep the detector's centre pixel; the rest need intrinsics.
-            need = idx_cam[(sized[idx_cam] | ~is_corners[idx_cam]) & finite[idx_cam]]
+            # Bearing-only corners keep the detector's centre pixel; sized corners need intrinsics for PnP.
+            # A 3D point in the camera frame needs none: it is kept in normalised image coordinates (x/z, y/z)
+            # with its z, for the camera-less model the reader adds (intrinsics would only draw it).
+            need = idx_cam[sized[idx_cam] & finite[idx_cam]]
             if need.size:
                 no_model_frames.add(cam)
             reason[need] = FiducialRejectReason.NO_INTRINSICS.value
+            points = idx_cam[~is_corners[idx_cam] & finite[idx_cam]]
+            front = points[point[points, 2] > 0]
+            reason[points[point[points, 2] <= 0]] = FiducialRejectReason.BEHIND_CAMERA.value
+            if front.size:
+                unprojected.add(cam)
+                z = point[front, 2]
+                u[front], v[front], depth[front] = point[front, 0] / z, point[front, 1] / z, z
             bearing = idx_cam[~sized[idx_cam] & is_corners[idx_cam] & finite[idx_cam]]
             given = np.isfinite(centre_px[bearing]).all(axis=1)
             centre = np.where(given[:, None], centre_px[bearing], _diagonal_centre(corners[bearing]))
@@ -339,8 +352,27 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
         log_time_ns=np.asarray(rows.log_time_ns, dtype=np.int64)[kept], camera_frame=frame[kept], u=u[kept],
         v=v[kept], depth_m=depth[kept], label=np.asarray(rows.label, dtype=str)[kept] if n else np.zeros(0, str),
         score=np.asarray(rows.score, dtype=np.float64)[kept], source=topic[kept], side=side, counts=counts,
-        notes=notes,
+        notes=notes, unprojected=frozenset(unprojected),
     )
+
+
+#: The source of a camera-less model in the camera table (width and height 0: no image to bound or draw).
+UNPROJECTED_SOURCE = "3D points in the camera frame, no intrinsics"
+
+
+def with_unprojected(cameras: CameraTable, resolved: ResolvedFiducials) -> tuple[CameraTable, list[str]]:
+    """The camera table with a camera-less model per camera whose 3D points were kept without intrinsics (K = I,
+    no distortion, width and height 0: no image; the replay's hop 1 takes (x/z, y/z, z) back to the point
+    exactly, and sinks draw nothing on images for it), and a note for each."""
+    if not resolved.unprojected:
+        return cameras, []
+    stamp = int(resolved.stamp_ns.min()) if resolved.stamp_ns.size else 0
+    tables = [CameraTable.from_intrinsics(f, fx=1.0, fy=1.0, cx=0.0, cy=0.0, width=0, height=0, stamp_ns=stamp,
+                                          distortion_model="none", source=UNPROJECTED_SOURCE)
+              for f in sorted(resolved.unprojected)]
+    notes = [f"camera {f}: no intrinsics; its detections are 3D points in the camera frame and are replayed as they "
+             "are (intrinsics would only draw them on images)" for f in sorted(resolved.unprojected)]
+    return CameraTable.concat([cameras, *tables]), notes
 
 
 def _json_float(x: float) -> float | None:

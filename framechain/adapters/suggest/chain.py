@@ -15,7 +15,7 @@ from framechain.adapters.messages.kinds import POSE_TYPES, normalize_msgtype
 from framechain.adapters.model import LoadedLog, LogInfo
 from framechain.adapters.suggest.facts import POINT_TYPES, LogFacts, detection_topics, log_facts
 from framechain.adapters.suggest.frame_tree import tree_roots
-from framechain.adapters.suggest.needs import REPLAY_PIECES, ChainNeed, NeedStatus, chain_needs
+from framechain.adapters.suggest.needs import PLACEHOLDER_FRAMES, REPLAY_PIECES, ChainNeed, NeedStatus, chain_needs
 from framechain.arrays import rows_of
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
 from framechain.timeline import ObservationTable, TransformTable
@@ -36,6 +36,20 @@ class SuggestedChain:
 
     def missing(self) -> list[ChainNeed]:
         return [n for n in self.needs if n.status != NeedStatus.FOUND]
+
+    def frames_text(self) -> str:
+        """``CAMERA_OPTICAL_FRAME (FILL IN) -> base_link -> odom``: the chain's frames, placeholders marked."""
+        frames = self.config.frames
+        return " -> ".join(f"{getattr(frames, slot)} (FILL IN)" if slot in self.placeholders
+                           else getattr(frames, slot) for slot in ("camera", "body", "world"))
+
+    def incomplete_line(self) -> str | None:
+        """One line saying the chain is incomplete and what is missing (None: ready to replay)."""
+        if self.ready:
+            return None
+        lacking = [n.piece for n in self.missing() if n.piece in REPLAY_PIECES]
+        return (f"the suggested chain is incomplete: this log lacks {', '.join(lacking)}; "
+                "`framechain info LOG --chain > chain.yaml` writes it with FILL IN comments naming the keys to add")
 
     def to_yaml(self, *, source: str = "") -> str:
         """CHAIN.yaml text: placeholder frames and missing keys as marked comments to fill in."""
@@ -120,10 +134,10 @@ def suggest(loaded: LoadedLog) -> SuggestedChain:
     if world is None:
         placeholders["world"] = ("no world frame in this log (map, odom, or the root of the body's tree): "
                                  "name it and add topics.odometry:")
-    defaults = ChainFrames()
-    frames = ChainFrames(camera=camera or defaults.camera, body=body or defaults.body, world=world or defaults.world)
-    if len({frames.camera, frames.body, frames.world}) < 3:  # a placeholder default met a real name
-        frames = ChainFrames(camera=camera or "CAMERA_FRAME", body=body or "BODY_FRAME", world=world or "WORLD_FRAME")
+    # A slot the log cannot fill holds a name in capitals, as the keys to add do: never a real-looking
+    # frame (camera_optical_frame, base_link, map) the log does not have.
+    frames = ChainFrames(camera=camera or PLACEHOLDER_FRAMES["camera"], body=body or PLACEHOLDER_FRAMES["body"],
+                         world=world or PLACEHOLDER_FRAMES["world"])
     config = ChainConfig(
         frames=frames,
         topics=ChainTopics(camera_info=camera_topic, detections=det_topic, depth=_depth_topic(loaded, frames.camera),
@@ -158,29 +172,33 @@ def _camera(loaded: LoadedLog, facts: LogFacts, det_topic: str | None) -> tuple[
 
 
 def _body(facts: LogFacts, camera: str | None) -> str | None:
-    if "base_link" in facts.frames:
-        return "base_link"
-    if "base_footprint" in facts.frames:
-        return "base_footprint"
-    base = [f for f in facts.frames if "base" in f.lower() and f != camera]
+    """base_link, base_footprint, another ``base`` frame, else the child of a pose topic's edge; never the
+    camera frame."""
+    frames = facts.frames - {camera}
+    for name in ("base_link", "base_footprint"):
+        if name in frames:
+            return name
+    base = [f for f in frames if "base" in f.lower()]
     if base:
         return _prefer(base, "base")
-    pose_edges = [e for e in facts.edges if not e.is_static and any(facts.msgtypes.get(s) in POSE_TYPES
-                                                                      for s in e.sources)]
+    pose_edges = [e for e in facts.edges if not e.is_static and e.child != camera
+                  and any(facts.msgtypes.get(s) in POSE_TYPES for s in e.sources)]
     if pose_edges:
         return sorted(pose_edges, key=lambda e: (-e.count, e.child))[0].child
     return None
 
 
 def _world(tf: TransformTable, facts: LogFacts, camera: str | None, body: str | None) -> str | None:
-    if "map" in facts.frames:
-        return "map"
-    if "odom" in facts.frames:
-        return "odom"
+    """map, odom, else the root of the body's tree; never the camera or the body frame (a pose topic
+    ``world -> odom`` makes odom the body: its world is then world, not odom again)."""
+    taken = {camera, body}
+    for name in ("map", "odom"):
+        if name in facts.frames and name not in taken:
+            return name
     if body is None:
         return None
     roots = [_root_of(tf, body), *tree_roots(facts.edges)]
-    return next((r for r in roots if r and r not in (camera, body)), None)
+    return next((r for r in roots if r and r not in taken), None)
 
 
 def _depth_topic(loaded: LoadedLog, camera: str) -> str | None:

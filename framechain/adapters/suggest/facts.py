@@ -141,34 +141,81 @@ def beside_yaml(log: Path) -> list[tuple[str, Any]]:
     return out
 
 
-def calibration_hint(beside: list[tuple[str, Any]], detection_topic: str | None) -> str | None:
-    """``calibration: {file: cameras.yaml, camera: cam0}`` when a Kalibr file beside the log names the
-    detections' camera (by rostopic or tagtopic)."""
+#: Names of a chain file beside a log (``<log name>.chain.yaml`` too; see :func:`chain_files_beside`).
+CHAIN_FILE_NAMES = ("chain.yaml", "CHAIN.yaml")
+
+
+def chain_files_beside(log: Path) -> list[Path]:
+    """Chain files for ``log``, most specific first: ``<log name>.chain.yaml`` (``x.bag.chain.yaml`` or
+    ``x.chain.yaml``) beside it, then ``chain.yaml`` or ``CHAIN.yaml`` in its folder (a bag directory's
+    own folder first, then the one holding it)."""
+    folders = [log, log.parent] if log.is_dir() else [log.parent]
+    named = [log.parent / f"{log.name}.chain.yaml", log.parent / f"{log.stem}.chain.yaml"]
+    plain = [folder / name for folder in folders for name in CHAIN_FILE_NAMES]
+    return [p for p in dict.fromkeys([*named, *plain]) if p.is_file()]
+
+
+def is_chain_file(name: str) -> bool:
+    return name in CHAIN_FILE_NAMES or name.endswith(".chain.yaml")
+
+
+@dataclass(frozen=True)
+class BesideHint:
+    """A value for a chain key taken from a file beside the log, and where it was found."""
+
+    key: str  # ``calibration: {file: cameras.yaml, camera: cam1}``
+    source: str  # ``cameras.yaml beside the log: cam1's tagtopic is /t265/fisheye2/tags``
+
+    def as_key(self) -> str:
+        """The key with its source as a note, ``key  (source)`` (the form ``needs.quote_key`` reads)."""
+        return f"{self.key}  ({self.source})"
+
+
+def _from_file(name: str, what: str) -> str:
+    tail = f": `--chain {name}` uses that chain" if is_chain_file(name) else ""
+    return f"{what} in {name} beside the log{tail}"
+
+
+def calibration_hint(beside: list[tuple[str, Any]], detection_topic: str | None) -> BesideHint | None:
+    """``calibration: {file: cameras.yaml, camera: cam0}`` when a calibration file lies beside the log
+    (a Kalibr camchain: the camera whose rostopic or tagtopic is the detections' topic)."""
     for name, raw in beside:
         if not isinstance(raw, Mapping):
             continue
         cams = {str(k): v for k, v in raw.items() if isinstance(v, Mapping) and isinstance(v.get("intrinsics"), list)}
         if not cams:
             if isinstance(raw.get("camera_matrix"), Mapping):
-                return f"calibration: {{file: {name}}}"
+                return BesideHint(f"calibration: {{file: {name}}}", _from_file(name, "camera_matrix"))
             continue
         hit = [k for k, v in cams.items()
                if detection_topic and detection_topic in (v.get("tagtopic"), v.get("rostopic"))]
-        return f"calibration: {{file: {name}, camera: {(hit or sorted(cams))[0]}}}"
+        if hit:
+            entry = cams[hit[0]]
+            which = "tagtopic" if entry.get("tagtopic") == detection_topic else "rostopic"
+            return BesideHint(f"calibration: {{file: {name}, camera: {hit[0]}}}",
+                              f"{name} beside the log: {hit[0]}'s {which} is {detection_topic}")
+        first = sorted(cams)[0]
+        return BesideHint(f"calibration: {{file: {name}, camera: {first}}}",
+                          f"{name} beside the log holds {', '.join(sorted(cams))}, none with "
+                          f"{detection_topic or 'the detections topic'} as rostopic or tagtopic: pick the "
+                          "detections' camera")
     return None
 
 
-def tag_size_hint(beside: list[tuple[str, Any]]) -> float | None:
-    """A default tag size written in a config beside the log (TagSLAM's ``default_tag_size``)."""
+def tag_size_hint(beside: list[tuple[str, Any]]) -> BesideHint | None:
+    """A tag size written in a config beside the log (TagSLAM's ``default_tag_size``, a chain file's
+    ``tag_size_m``), as ``evidence.tag_size_m: SIZE`` with the file and key it came from."""
 
-    def find(value: Any, depth: int = 0) -> float | None:
+    def find(value: Any, depth: int = 0) -> tuple[float, str] | None:
         if depth > 6:
             return None
         if isinstance(value, Mapping):
             for key in ("default_tag_size", "tag_size", "tag_size_m"):
                 size = value.get(key)
+                if isinstance(size, Mapping):  # a chain's {default: 0.16, 100: 0.1}
+                    size = size.get("default")
                 if isinstance(size, int | float) and not isinstance(size, bool) and 0 < size < 10:
-                    return float(size)
+                    return float(size), key
             for v in value.values():
                 if (hit := find(v, depth + 1)) is not None:
                     return hit
@@ -178,8 +225,8 @@ def tag_size_hint(beside: list[tuple[str, Any]]) -> float | None:
                     return hit
         return None
 
-    for _, raw in beside:
-        if (size := find(raw)) is not None:
-            return size
+    for name, raw in beside:
+        if (found := find(raw)) is not None:
+            size, key = found
+            return BesideHint(f"evidence.tag_size_m: {size:g}", _from_file(name, key))
     return None
-

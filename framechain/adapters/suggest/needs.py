@@ -28,6 +28,7 @@ from framechain.adapters.suggest.facts import (
     tag_size_hint,
 )
 from framechain.adapters.suggest.marker_probe import MarkerProbe, probe_markers
+from framechain.adapters.suggest.typos import did_you_mean, or_list
 from framechain.config.chain import ChainConfig, ChainFrames
 
 
@@ -76,6 +77,8 @@ def quote_key(key: str) -> str:
 
 #: The pieces a replay cannot do without (evidence is for attribution).
 REPLAY_PIECES = ("camera frame", "intrinsics", "detections", "depth", "mount", "pose")
+#: What a suggested chain names a frame the log cannot give (capitals, as every placeholder of a key).
+PLACEHOLDER_FRAMES = {"camera": "CAMERA_OPTICAL_FRAME", "body": "BODY_FRAME", "world": "WORLD_FRAME"}
 
 
 # -- what the chain needs -------------------------------------------------------------------------------
@@ -102,7 +105,8 @@ def chain_needs(
 
 def _camera_need(camera: str, holes: Mapping[str, str], facts: LogFacts, loaded: LoadedLog) -> ChainNeed:
     if "camera" in holes:
-        return ChainNeed("camera frame", NeedStatus.MISSING, holes["camera"], "frames: {camera: CAMERA_OPTICAL_FRAME}")
+        return ChainNeed("camera frame", NeedStatus.MISSING, holes["camera"],
+                         f"frames: {{camera: {PLACEHOLDER_FRAMES['camera']}}}")
     if camera not in facts.frames:
         return ChainNeed("camera frame", NeedStatus.MISSING, f"{camera} is in no transform, CameraInfo or detection "
                          "of the log", "frames: {camera: CAMERA_OPTICAL_FRAME}")
@@ -159,19 +163,41 @@ def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: LogFacts) -> 
                                f"the chain names none (the log has {', '.join(candidates)})",
                                key if not candidates else f"topics.detections: {candidates[0]}")
     if named not in facts.msgtypes and len(obs) == 0:
-        also = f" (detection topics in the log: {', '.join(candidates)})" if candidates else ""
+        close = did_you_mean(named, candidates) or did_you_mean(named, facts.msgtypes)
+        also = (f"; did you mean {or_list(close)}?" if close else
+                f" (detection topics in the log: {', '.join(candidates)})" if candidates else "")
+        best = close[0] if close else candidates[0] if candidates else "DETECTIONS_TOPIC"
         return named, ChainNeed("detections", NeedStatus.MISSING, f"the chain names {named}, which the log lacks{also}",
-                                f"topics.detections: {candidates[0] if candidates else 'DETECTIONS_TOPIC'}")
+                                f"topics.detections: {best}")
     n_obs = int((obs.source == named).sum()) if len(obs) else 0
     n_msg = facts.counts.get(named, 0)
     others = [c for c in candidates if c != named]
     also = f"; also {', '.join(others)}" if others else ""
+    read = _read_counts(loaded, named)
+    if n_obs == 0 and read is not None and read["detections"]:
+        # Detections were read and all rejected at read (no intrinsics for PnP, say): the topic is right; the
+        # piece that is missing says what to add.
+        why = ", ".join(f"{reason} {n}" for reason, n in sorted(read["rejected"].items()))
+        return named, ChainNeed("detections", NeedStatus.FOUND, f"{facts.describe(named)}: {n_msg} messages, "
+                                f"{read['detections']} detections, none usable (rejected at read: {why}){also}")
     if n_obs == 0 and len(obs) == 0:
+        key = (f"topics.detections: {others[0]}" if others else
+               "topics.detections: DETECTIONS_TOPIC  (a topic whose messages hold detections)")
         return named, ChainNeed("detections", NeedStatus.MISSING,
-                                f"{facts.describe(named)} has {n_msg} messages but no detection was read from them",
-                                f"topics.detections: {others[0] if others else 'DETECTIONS_TOPIC'}")
+                                f"{facts.describe(named)} has {n_msg} messages but no detection in them", key)
     return named, ChainNeed("detections", NeedStatus.FOUND,
                             f"{facts.describe(named)}: {n_msg} messages, {n_obs or len(obs)} detections{also}")
+
+
+def _read_counts(loaded: LoadedLog, topic: str) -> Mapping[str, Any] | None:
+    """The reader's counts of a fiducial topic (detections, observations, rejected by reason), if it has them."""
+    fiducials = loaded.timeline.metadata.get("fiducials")
+    counts = fiducials.get("counts", {}).get(topic) if isinstance(fiducials, Mapping) else None
+    return counts if isinstance(counts, Mapping) else None
+
+
+def _of(topic: str | None) -> str:
+    return f" of {topic}" if topic else ""
 
 
 def _probe(loaded: LoadedLog, topic: str) -> MarkerProbe | None:
@@ -195,9 +221,17 @@ def _intrinsics_need(
 ) -> ChainNeed:
     camera = chain.frames.camera
     cams = loaded.timeline.cameras
-    hint = calibration_hint(beside, detections) or "calibration: {file: CAMERAS.yaml, camera: NAME}"
+    hint = calibration_hint(beside, detections)
+    key = hint.as_key() if hint is not None else \
+        "calibration: {file: CAMERAS.yaml, camera: NAME}  (ROS camera_info, Kalibr or OpenCV YAML)"
+
     if "camera" not in holes and len(cams) and (cams.frame == camera).any():
-        i = int(np.flatnonzero(cams.frame == camera)[0])
+        mine = np.flatnonzero(cams.frame == camera)
+        imaged = mine[cams.width[mine] > 0]
+        if not imaged.size:  # only the reader's camera-less model: the detections are 3D camera-frame points
+            return ChainNeed("intrinsics", NeedStatus.FOUND, f"not needed: the detections{_of(detections)} are 3D "
+                             "points in the camera frame (intrinsics would only draw them on images)")
+        i = int(imaged[0])
         return ChainNeed("intrinsics", NeedStatus.FOUND,
                          f"{cams.source[i]} ({int(cams.width[i])}x{int(cams.height[i])}, {cams.distortion_model[i]})")
     infos = facts.topics_of(CAMERA_INFO_TYPES)
@@ -205,9 +239,8 @@ def _intrinsics_need(
         other = sorted({str(f) for f in cams.frame.tolist()}) if len(cams) else []
         detail = (f"no CameraInfo for {camera}; the log's ({', '.join(infos)}) are for "
                   f"{', '.join(other) or 'other frames'}")
-        return ChainNeed("intrinsics", NeedStatus.MISSING, detail, f"{hint}  (or topics.camera_info: TOPIC)")
-    return ChainNeed("intrinsics", NeedStatus.MISSING, "no CameraInfo in the log",
-                     f"{hint}  (ROS camera_info, Kalibr or OpenCV YAML)")
+        return ChainNeed("intrinsics", NeedStatus.MISSING, detail, f"{key}; or topics.camera_info: TOPIC")
+    return ChainNeed("intrinsics", NeedStatus.MISSING, "no CameraInfo in the log", key)
 
 
 def _depth_need(
@@ -225,7 +258,7 @@ def _depth_need(
         return ChainNeed("depth", NeedStatus.FOUND, f"the detections of {detections} carry a 3D position")
     tag_size = chain.evidence.tag_size_m
     markers = chain.evidence.markers
-    if tag_size is not None and (msgtype in CORNER_DETECTION_TYPES or detections is None):
+    if tag_size is not None and (msgtype in CORNER_DETECTION_TYPES or not msgtype):  # none named, or not in the log
         return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP)")
     if markers is not None and detections == chain.topics.image:
         if markers.size_m is not None:
@@ -240,9 +273,9 @@ def _depth_need(
         return ChainNeed("depth", NeedStatus.FOUND, f"a depth in the detections themselves ({share:.0%} of them)")
     if msgtype in CORNER_DETECTION_TYPES:
         size = tag_size_hint(beside)
-        size_text = f"{size:g}" if size is not None else "TAG_EDGE_M"
         return ChainNeed("depth", NeedStatus.MISSING, "tag corners but no tag size (AprilTag/ArUco corners give a "
-                         "depth by PnP)", f"evidence.tag_size_m: {size_text}")
+                         "depth by PnP)", size.as_key() if size is not None else
+                         "evidence.tag_size_m: TAG_EDGE_M  (the printed tags' edge in metres)")
     depth_images = [t for t in facts.topics_of(IMAGE_TYPES) if "depth" in t.lower()]
     if depth_images:
         return ChainNeed("depth", NeedStatus.MISSING, f"depth images on {depth_images[0]} but the chain names none",
@@ -257,8 +290,8 @@ def _mount_key(body: str, camera: str) -> str:
 
 
 def _mount_need(frames: ChainFrames, holes: Mapping[str, str], facts: LogFacts) -> ChainNeed:
-    body = "BODY_FRAME" if "body" in holes else frames.body
-    camera = "CAMERA_OPTICAL_FRAME" if "camera" in holes else frames.camera
+    body = PLACEHOLDER_FRAMES["body"] if "body" in holes else frames.body
+    camera = PLACEHOLDER_FRAMES["camera"] if "camera" in holes else frames.camera
     if "camera" in holes or "body" in holes:
         return ChainNeed("mount", NeedStatus.MISSING, "no camera -> body path without both frames",
                          _mount_key(body, camera))
@@ -276,8 +309,12 @@ def _pose_need(chain: ChainConfig, holes: Mapping[str, str], facts: LogFacts) ->
     named = [p.topic for p in chain.pose_topics()]
     lacking = [p for p in named if p not in facts.msgtypes]
     if lacking:
+        close = did_you_mean(lacking[0], poses)
+        mean = f"; did you mean {or_list(close)}?" if close else ""
+        if close:
+            key = f"topics.odometry: {close[0]}  (Odometry, PoseStamped, ... as world -> body)"
         return ChainNeed("pose", NeedStatus.MISSING, f"the chain names pose topic {', '.join(lacking)}, which the "
-                         "log lacks", key)
+                         f"log lacks{mean}", key)
     if "body" in holes or "world" in holes:
         return ChainNeed("pose", NeedStatus.MISSING, "no body -> world path without both frames", key)
     path = frame_path(facts.edges, frames.world, frames.body)

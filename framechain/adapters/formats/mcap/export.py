@@ -14,8 +14,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from framechain import __version__
 from framechain.adapters.api import detect
 from framechain.adapters.errors import AdapterError
+from framechain.adapters.formats.mcap.reader import MCAP_MAGIC
+
+#: The name of the MCAP metadata record that marks a file framechain wrote (not a recording to analyse).
+FRAMECHAIN_METADATA = "framechain"
+#: The MCAP header's ``library`` of framechain's exports (older exports carry it without the metadata).
+FRAMECHAIN_LIBRARY = "framechain"
 
 
 class ExtraMessage(Protocol):
@@ -63,7 +70,10 @@ def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[
     target.parent.mkdir(parents=True, exist_ok=True)
     with target.open("wb") as f:
         writer: Any = Writer(f, compression=CompressionType.ZSTD)
-        writer.start(profile="", library="framechain")
+        writer.start(profile="", library=FRAMECHAIN_LIBRARY)
+        # Marks the file as framechain's output: batch and folder discovery skip it (it holds a log's copy).
+        writer.add_metadata(FRAMECHAIN_METADATA, {"version": __version__, "command": "export",
+                                                  "source": "" if source is None else str(source)})
         if source is not None:
             _copy_log(Path(source), writer, copied)
         schemas: dict[tuple[str, str], int] = {}
@@ -135,3 +145,31 @@ def _copy_rosbag(path: Path, writer: Any, copied: dict[str, int]) -> None:
         for conn, t, raw in reader.messages():
             w.add_message(channel_ids[conn.id], log_time=t, publish_time=t, data=bytes(raw))
             copied[conn.topic] = copied.get(conn.topic, 0) + 1
+
+
+def framechain_output(path: str | Path) -> str | None:
+    """What framechain wrote ``path`` as (``framechain 0.1 export of /logs/run.bag``), or None for a file it
+    did not write: the ``framechain`` metadata record of an MCAP (its header's library, for exports older
+    than the record). Reads the header and the summary only; a file that cannot be read is None."""
+    from mcap.reader import make_reader
+
+    p = Path(path)
+    try:
+        if not p.is_file():
+            return None
+        with p.open("rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                return None
+            f.seek(0)
+            reader = make_reader(f)
+            library = reader.get_header().library
+            summary = reader.get_summary()
+            marked = summary is not None and any(i.name == FRAMECHAIN_METADATA for i in summary.metadata_indexes)
+            record = next((m.metadata for m in reader.iter_metadata() if m.name == FRAMECHAIN_METADATA), None) \
+                if marked else None
+    except Exception:  # a damaged file is not ours to diagnose here: the reader says what is wrong with it
+        return None
+    if record is not None:
+        source = f" of {record['source']}" if record.get("source") else ""
+        return f"framechain {record.get('version', '?')} {record.get('command', 'output')}{source}"
+    return "a framechain export" if library == FRAMECHAIN_LIBRARY else None
