@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import REALDATA
 from ros1_bags import Ros1Bag
 from scipy.spatial.transform import Rotation
-from test_dead_ends import REAL_LOGS, REALDATA
+from test_dead_ends import REAL_LOGS
 
 from framechain import pipeline
 from framechain.cli.main import main
