@@ -7,10 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-PROJECT = Path(__file__).resolve().parents[1]
-#: The real robot logs (never copied into the project). Tests reach them through the ``realdata``
-#: fixture only, so each skips cleanly on a machine without them.
-REALDATA = PROJECT.parent / "shared" / "realdata"
+from shared_paths import REALDATA
+
+# Tests reach the real logs through the ``realdata`` fixture, so each skips cleanly without them.
 
 
 @pytest.fixture

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from conftest import REALDATA
+from shared_paths import REALDATA
 from ros1_bags import Ros1Bag
 from scipy.spatial.transform import Rotation
 from test_dead_ends import REAL_LOGS
