@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from shared_paths import REALDATA
 
 # Tests reach the real logs through the ``realdata`` fixture, so each skips cleanly without them.

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from shared_paths import REALDATA
 from ros1_bags import Ros1Bag
 from scipy.spatial.transform import Rotation
+from shared_paths import REALDATA
 from test_dead_ends import REAL_LOGS
 
 from framechain import pipeline
