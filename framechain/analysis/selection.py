@@ -104,12 +104,13 @@ def distances(residuals: FloatArray) -> FloatArray:
 
 def hops_level(
     inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Callable[[str], None]
-) -> tuple[list[Selected], dict[str, FloatArray], PointObjective]:
+) -> tuple[list[Selected], dict[str, FloatArray], PointObjective, list[tuple[tuple[HopName, ...], PointObjective]]]:
     """Logged hops: each logged stage fed with the robot's own logged input, compared with its output.
 
     A stage whose input was not logged is fed from the raw inputs, and the faults of every hop
-    upstream of it are candidates. Returns the selections, each logged hop's departure, and the
-    objective of the deepest logged stage (what the error is measured against).
+    upstream of it are candidates. Returns the selections, each logged hop's departure, the
+    objective of the deepest logged stage (what the error is measured against), and each logged
+    stage's objective with the hops whose faults it is examined for (what the bounds measure).
     """
     stages = (
         ("camera", HopName.PIXEL_TO_CAMERA, matched[PointRole.HOP_CAMERA]),
@@ -122,6 +123,7 @@ def hops_level(
     previous_stage: Literal["camera", "body"] | None = None
     upstream: list[HopName] = []
     deepest: PointObjective | None = None
+    examined: list[tuple[tuple[HopName, ...], PointObjective]] = []
     for stage, hop, logged in stages:
         upstream.append(hop)
         if not np.isfinite(logged).all(axis=1).any():
@@ -129,6 +131,7 @@ def hops_level(
         objective = PointObjective(stage, logged, previous, previous_stage)  # type: ignore[arg-type]
         departure = distances(objective(inputs, Perturbation()))
         hop_errors[hop.value] = departure
+        examined.append((tuple(upstream), objective))
         if np.nanmedian(departure) > HOP_DIVERGENCE_M:
             say(f"classifying the departure at {hop.value}")
             sel = select(models_for(inputs, tuple(upstream)), objective, inputs, "as_run", say)
@@ -137,7 +140,7 @@ def hops_level(
         previous, previous_stage, upstream, deepest = logged, stage, [], objective  # type: ignore[assignment]
     assert deepest is not None  # the caller checked that some hop was logged
     # The deepest stage, fed from the raw inputs, is what the robot's chain did end to end.
-    return selections, hop_errors, PointObjective(deepest.stage, deepest.evidence)
+    return selections, hop_errors, PointObjective(deepest.stage, deepest.evidence), examined
 
 
 def select(
