@@ -58,8 +58,7 @@ def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: b
     from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
 
-    titles = [(entity, f"RMS error (mm) against {entity.rsplit('/', 1)[-1]}: grey the bound, red the estimate")
-              for entity in curves]
+    titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in curves]
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
                                   collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first)
     blueprint.save("framechain", path)

@@ -23,8 +23,8 @@ out its nuisance parameters, such as each static target's position):
    eigenvalue), and axes whose Jacobian vanishes are named as not observable. A family whose
    signal stays under the thresholds over the whole range searched (a second of time offset,
    90 deg, a factor of 0.2..1.8) is not observable.
-4. **Checked by injection.** A fault of that size is written into this log's own observations (the
-   pixels and depths a static target's objective sees, or the logged points) and refitted from no
+4. **Checked by injection.** A fault of that size is written into this log's own data (the pixels
+   and depths a static target's objective sees, or the logged points, target or reference) and refitted from no
    fault, either way round; when neither refit clears the thresholds the bound is raised by half and
    checked again (twice at most).
 """
@@ -42,7 +42,7 @@ from framechain.analysis.estimates import axis_text
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.faults import LATENCY_BOUND_S, models_for
 from framechain.analysis.fit import NOISE_FLOOR_M, fit_models, perturbation_of
-from framechain.analysis.selection import MIN_BIC_GAIN, Objective, PointObjective
+from framechain.analysis.selection import MIN_BIC_GAIN, Objective, PointObjective, at_bound
 from framechain.analysis.shares import MIN_SHARE
 from framechain.arrays import BoolArray, FloatArray
 from framechain.catalogue import Fault, HopName
@@ -319,6 +319,7 @@ class _Result:
     best: float | None = None  # the rotation's best-seen axis size (rad)
     refound: float | None = None  # what the injection check's refit gave (the estimate's key)
     injected: float | None = None
+    confirmed: bool = True  # the injection check's refit cleared the thresholds
 
 
 def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
@@ -394,8 +395,8 @@ def refound(stage: Stage, noise: _Noise, base: Perturbation, model: FaultModel, 
     before, after = float(np.median(without.distances)), float(np.median(fitted.distances))
     floor = 2.0 * 1.2533 * float(np.std(fitted.distances)) / np.sqrt(max(fitted.distances.size, 1))
     share = before - after
-    ok = without.bic - fitted.bic >= MIN_BIC_GAIN and share > 0 and not (share < MIN_SHARE * before
-                                                                            and share < floor)
+    ok = (without.bic - fitted.bic >= MIN_BIC_GAIN and share > 0 and not (share < MIN_SHARE * before and share < floor)
+          and not at_bound(model, fitted.params[-1]))  # a fit on its plausible range's edge is no finding
     if ok and noise.gate_m is not None and _median_norm(noise.departure) <= noise.gate_m:
         ok = _median_norm(objective(inputs, Perturbation())) > noise.gate_m
     return ok, fitted.params[-1]
@@ -410,7 +411,7 @@ def _checked(noise: _Noise, probe: _Probe, direction: FloatArray, size: float, b
     """
     stage, model, theta0 = probe.stage, probe.model, probe.theta0
     first = _worse_sign(probe, direction, size)
-    theta, fitted = theta0, theta0
+    theta, fitted, ok = theta0, theta0, False
     for attempt in range(INJECTION_RETRIES + 1):
         for sign in (first, -first):
             theta = _params(model, theta0, sign * direction, size)
@@ -421,7 +422,7 @@ def _checked(noise: _Noise, probe: _Probe, direction: FloatArray, size: float, b
             break
         size *= 1.5
     return _Result(model, size, direction, blind, best, _size_of(model, theta0, fitted, stage.mode),
-                   _size_of(model, theta0, theta, stage.mode))
+                   _size_of(model, theta0, theta, stage.mode), ok)
 
 
 def _worse_sign(probe: _Probe, direction: FloatArray, size: float) -> float:
@@ -449,10 +450,13 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
         return Bound(hop, fault, False, None, _why_blind(stage, fault, hop))
     worst = max(results, key=lambda r: r.size or 0.0)
     assert worst.size is not None
-    size = float(np.rad2deg(worst.size)) if fault == Fault.ROTATION_ERROR else worst.size
+    size = _estimate_size(fault, worst.size, stage.mode)
     axes = tuple(axis_text(_unit(v).tolist()) for v in worst.unobservable)
     n_obs = len(stage.inputs)
     rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
+    noise_text = f"{rms_mm:.2g} mm rms of residual"
+    if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
+        noise_text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
     what = f"{size_text(fault, size)} is the smallest {family_name(fault, hop)}"
     if fault == Fault.ROTATION_ERROR:
         what += f" (about {axis_text(_unit(worst.direction).tolist())}, the weakest axis seen"
@@ -461,15 +465,28 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
         what += f" (of K's variants, {worst.model.name} is the harder to see)"
     check = ""
     if worst.refound is not None and worst.injected is not None:
-        check = (f"; written into this log's observations at {_key_text(fault, worst.injected)} and refitted from no "
+        where = "observations" if stage.static else "logged points"
+        check = (f"; written into this log's {where} at {_key_text(fault, worst.injected)} and refitted from no "
                  f"fault: {_key_text(fault, worst.refound)}")
+        if not worst.confirmed:
+            check += " (not a finding even there: this bound is optimistic)"
     axis = None
     if fault == Fault.ROTATION_ERROR:
         ax, ay, az = (round(float(v), 4) + 0.0 for v in _unit(worst.direction))
         axis = (ax, ay, az)
     return Bound(hop, fault, True, {SIZE_KEYS[fault]: round(size, 6)},
                  f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
-                 f"{rms_mm:.2g} mm rms of residual over {n_obs} observations{check}.", axes, axis)
+                 f"{noise_text} over {n_obs} observations{check}.", axes, axis)
+
+
+def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
+    """A parameter size (s, rad, a scale's deviation ``a``) in the estimate's key: degrees; a corrected
+    scale ``1 +- a`` is the fault ``1 / (1 +- a)``, whose larger deviation from 1 is ``a / (1 - a)``."""
+    if fault == Fault.ROTATION_ERROR:
+        return float(np.rad2deg(size))
+    if fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS) and mode == "correction":
+        return size / (1.0 - size)
+    return size
 
 
 def _key_text(fault: Fault, value: float) -> str:

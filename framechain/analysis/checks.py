@@ -37,8 +37,8 @@ def size_text(fault: Fault, value: float) -> str:
     if fault == Fault.LATENCY:
         return f"{value * 1e3:.2g} ms" if value < 0.01 else f"{value * 1e3:.0f} ms"
     if fault == Fault.ROTATION_ERROR:
-        return f"{value:.2g} deg"
-    return f"{value * 100:.2g}%"
+        return f"{value:.2g} deg" if value < 10 else f"{value:.0f} deg"
+    return f"{value * 100:.2g}%" if value < 0.1 else f"{value * 100:.0f}%"
 
 
 @dataclass(frozen=True)

@@ -175,7 +175,7 @@ def select(
             )
             quick.append((fit_models([model], objective, inputs, base=base), model))
         # A fit that runs to the edge of its range explains by degenerating, not by a fault.
-        quick = [(fit, model) for fit, model in quick if not _at_bound(model, fit.params[-1])]
+        quick = [(fit, model) for fit, model in quick if not at_bound(model, fit.params[-1])]
         if not quick:
             break
         quick.sort(key=lambda item: item[0].bic)
@@ -186,7 +186,7 @@ def select(
             for fit, model in quick[:3]:
                 x_start = np.concatenate([x_prev, fit.params[0]])
                 joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
-            joint = [(fit, model) for fit, model in joint if not _at_bound(model, fit.params[-1])]
+            joint = [(fit, model) for fit, model in joint if not at_bound(model, fit.params[-1])]
             if not joint:
                 break
             joint.sort(key=lambda item: item[0].bic)
@@ -226,7 +226,7 @@ def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs)
     return [quick[swap], *(item for i, item in enumerate(quick) if i != swap)]
 
 
-def _at_bound(model: FaultModel, x: FloatArray) -> bool:
+def at_bound(model: FaultModel, x: FloatArray) -> bool:
     """Whether a fitted parameter sits on a bound of its plausible range (to 0.1 %)."""
     if not model.lower or not model.plausibility_bounds:
         return False

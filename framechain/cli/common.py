@@ -114,7 +114,7 @@ def print_findings(result: Any) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from framechain.sinks.checks_view import BOUND_COLUMNS, LABEL_COLUMNS, bound_rows, label_rows, label_summary
+    from framechain.sinks.checks_view import BOUND_COLUMNS, bound_rows, label_columns, label_rows, label_summary
     from framechain.sinks.report import HOP_COLUMNS, hop_rows
     from framechain.sinks.text import FindingView
 
@@ -136,7 +136,7 @@ def print_findings(result: Any) -> None:
         console.print(table)
     _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
     if result.labels.suggest_ignore:  # every label only when some disagree
-        _print_table(console, LABEL_COLUMNS, label_rows(result))
+        _print_table(console, label_columns(result), label_rows(result))
     if result.labels.rows:
         console.print(label_summary(result), markup=False, highlight=False, soft_wrap=True)
     hops = Table()

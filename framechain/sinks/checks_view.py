@@ -20,6 +20,13 @@ from framechain.sinks.text import mm
 ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
 BOUND_COLUMNS = ("fault family", "hop", "smallest fault it would find", "why")
 LABEL_COLUMNS = ("label", "observations", "used", "spread (median)", "spread (p90)", "verdict")
+
+
+def label_columns(result: Attribution) -> tuple[str, ...]:
+    """The per-label table's header: a static target's spread, else the error against the evidence."""
+    if result.metric == "static_spread":
+        return LABEL_COLUMNS
+    return ("label", "observations", "used", "error (median)", "error (p90)", "verdict")
 #: What the label table measures, per evidence.
 LABEL_NOTE = {
     "static_spread": "each label's distance from its own object's position (per window, after the findings)",
@@ -56,7 +63,8 @@ def label_summary(result: Attribution) -> str:
     counts: dict[str, int] = {}
     for r in rows:
         counts[r.verdict] = counts.get(r.verdict, 0) + 1
-    text = f"labels: {len(rows)} ({', '.join(f'{n} {v}' for v, n in counts.items())}), median spread " \
+    what = "spread" if result.metric == "static_spread" else "error"
+    text = f"labels: {len(rows)} ({', '.join(f'{n} {v}' for v, n in counts.items())}), median {what} " \
            f"{mm(result.labels.overall_m)}"
     line = result.labels.ignore_line()
     return text + (f"; to leave out the ones that disagree add `{line}`" if line else "")
@@ -126,8 +134,9 @@ def checks_markdown(result: Attribution, figures: Sequence[Any]) -> str:
     for fig in figures:
         lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
     if result.labels.rows:
-        lines += ["## Per label", "", f"Spread: {_what_labels_measure(result)}. {label_summary(result)}.", "",
-                  "| " + " | ".join(LABEL_COLUMNS) + " |", "| " + " | ".join("---" for _ in LABEL_COLUMNS) + " |",
+        what = "Spread" if result.metric == "static_spread" else "Error"
+        lines += ["## Per label", "", f"{what}: {_what_labels_measure(result)}. {label_summary(result)}.", "",
+                  "| " + " | ".join(label_columns(result)) + " |", "|" + " --- |" * len(LABEL_COLUMNS),
                   *("| " + " | ".join(row) + " |" for row in label_rows(result)), ""]
     return "\n".join(lines) + "\n"
 
@@ -145,9 +154,10 @@ def checks_html(result: Attribution, figures: Sequence[Any], figure_html: Any) -
     if figures:
         parts.append("<div class='plots'>" + "".join(figure_html(f) for f in figures) + "</div>")
     if result.labels.rows:
-        parts.append(f"<h2>Per label</h2><p>Spread: {e(_what_labels_measure(result))}. "
+        what = "Spread" if result.metric == "static_spread" else "Error"
+        parts.append(f"<h2>Per label</h2><p>{what}: {e(_what_labels_measure(result))}. "
                      f"{_code(label_summary(result))}.</p><table><tr>"
-                     + "".join(f"<th>{e(c)}</th>" for c in LABEL_COLUMNS) + "</tr>")
+                     + "".join(f"<th>{e(c)}</th>" for c in label_columns(result)) + "</tr>")
         for cells in label_rows(result):
             style = "" if cells[-1] in ("static", "agrees") else " style='background:#fff0f0'"
             parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in cells) + "</tr>")
@@ -160,5 +170,14 @@ def _code(text: str) -> str:
     return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(pieces))
 
 
-__all__ = ["BOUND_COLUMNS", "LABEL_COLUMNS", "bound_rows", "checks_html", "checks_markdown", "curve_plots",
-           "label_rows", "label_summary"]
+__all__ = [
+    "BOUND_COLUMNS",
+    "LABEL_COLUMNS",
+    "bound_rows",
+    "checks_html",
+    "checks_markdown",
+    "curve_plots",
+    "label_columns",
+    "label_rows",
+    "label_summary",
+]

@@ -10,7 +10,14 @@ import numpy as np
 
 from framechain.analysis.checks import Curve, family_name
 from framechain.analysis.findings import Attribution
-from framechain.sinks.checks_view import BOUND_COLUMNS, LABEL_COLUMNS, bound_rows, label_rows, label_summary
+from framechain.sinks.checks_view import (
+    BOUND_COLUMNS,
+    LABEL_COLUMNS,
+    bound_rows,
+    label_columns,
+    label_rows,
+    label_summary,
+)
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -29,10 +36,9 @@ def curve_entity(curve: Curve) -> str:
 
 
 def curve_title(curve: Curve) -> str:
-    """The chart's title says its axes and colours (the viewer's legend would name entity paths)."""
+    """The chart's tab: short; what the colours are is in the "What this log can show" document."""
     unit = {"offset_s": " (ms)", "angle_deg": " (deg)"}.get(curve.key, "")
-    return (f"RMS error (mm) against the {family_name(curve.fault, curve.hop)}{unit}: grey the bound, red the "
-            "estimate")
+    return f"Error vs {family_name(curve.fault, curve.hop)}{unit}"
 
 
 def log_checks(rec: rr.RecordingStream, result: Attribution, rows: dict[str, int]) -> None:
@@ -72,8 +78,8 @@ def _log_curve(rec: rr.RecordingStream, curve: Curve, rows: dict[str, int]) -> N
         marks += [("bound_low", edges[0], BOUND_COLOR), ("bound_high", edges[1], BOUND_COLOR)]
     for name, value, color in marks:
         assert value is not None
-        rec.log(f"{entity}/{name}", rr.BarChart([top], abscissa=[curve.display(value)], widths=[float(widths.min())],
-                                                color=color), static=True)
+        mark = rr.BarChart([top], abscissa=[curve.display(value)], widths=[0.3 * float(widths.min())], color=color)
+        rec.log(f"{entity}/{name}", mark, static=True)
         rows[f"{entity}/{name}"] = 1
     if curve.key == "offset_s":
         everywhere = np.isfinite(curve.median_error_m)
@@ -96,7 +102,7 @@ def checks_markdown(result: Attribution) -> str:
                   "family found)."]
     if result.labels.rows:
         lines += ["", "## Per label", "", label_summary(result), "",
-                  "| " + " | ".join(LABEL_COLUMNS) + " |", "| " + " | ".join("---" for _ in LABEL_COLUMNS) + " |",
+                  "| " + " | ".join(label_columns(result)) + " |", "|" + " --- |" * len(LABEL_COLUMNS),
                   *("| " + " | ".join(row) + " |" for row in label_rows(result))]
     return "\n".join(lines) + "\n"
 
