@@ -137,7 +137,7 @@ def print_findings(result: Any) -> None:
     _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
     if result.labels.suggest_ignore:  # every label only when some disagree
         _print_table(console, label_columns(result), label_rows(result))
-    if result.labels.rows:
+    if len(result.labels.rows) > 1:  # one label (one object) has nothing to compare
         console.print(label_summary(result), markup=False, highlight=False, soft_wrap=True)
     hops = Table()
     for col in HOP_COLUMNS:
