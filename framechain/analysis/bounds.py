@@ -15,10 +15,12 @@ out its nuisance parameters, such as each static target's position):
    gain (:data:`~framechain.analysis.selection.MIN_BIC_GAIN` plus ``k log n`` plus the model's
    choice penalty, against the residual variance left by the findings with the noise floor),
    survives the Shapley drop rule (its share of the median error is above 1 % of it or above the
-   noise floor of a median) and, with logged hops, lifts the hop's median departure past
+   noise floor of a median, by the share's own standard error: it is a noisy statistic) and, with
+   logged hops, lifts the hop's median departure past
    :data:`~framechain.analysis.selection.HOP_DIVERGENCE_M`.
 3. **The smallest such size**, searched from the linearised one (the Jacobian of the objective by
-   central differences) outwards, then bisected, in either direction (the worse is kept); a
+   central differences) outwards, then bisected, in either direction (the worse is kept), and
+   detected at every larger size checked (up to four times it); a
    rotation is searched along its weakest axis (the eigenvector of ``J^T J`` with the smallest
    eigenvalue), and axes whose Jacobian vanishes are named as not observable. A family whose
    signal stays under the thresholds over the whole range searched (a second of time offset,
@@ -57,6 +59,10 @@ MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2, Fau
 STEP = {Fault.LATENCY: 2e-3, Fault.ROTATION_ERROR: 1e-3, Fault.DEPTH_SCALE: 1e-3, Fault.INTRINSICS: 1e-3}
 #: Bisection steps between the last undetected and the first detected size (each halves a factor of 1.5).
 BISECT = 6
+#: A bound must also be detected at these multiples of it (up to 4x: twice the test's 2x), and the
+#: search restarts past a failure at most this many times.
+STABLE_FACTORS = (1.25, 1.5, 2.0, 3.0, 4.0)
+STABLE_RESTARTS = 6
 #: Times the injection check raises a bound (by half) when the refit does not find the fault.
 INJECTION_RETRIES = 2
 #: A body whose pose changes by less than this (m, and radians times a metre) over the observations is still.
@@ -130,8 +136,15 @@ class _Noise:
         s = np.nan_to_num(signal)
         if float(np.sum(s * s)) < self.needed_ss(model):
             return False
-        share = _median_norm(self.residual + s) - _median_norm(self.residual)
-        if share <= 0 or (share < MIN_SHARE * self.total_m and share < self.floor_m):
+        with_fault, without = np.linalg.norm(self.residual + s, axis=1), np.linalg.norm(self.residual, axis=1)
+        both = np.isfinite(with_fault) & np.isfinite(without)
+        if not both.any():
+            return False
+        # The share a finding keeps is a difference of medians: another draw of the noise moves it by about
+        # its standard error (paired), which the predicted share must clear as well as the rule.
+        share = float(np.median(with_fault[both]) - np.median(without[both]))
+        spread = 1.2533 * float(np.std(with_fault[both] - without[both])) / np.sqrt(both.sum())
+        if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
             return False
         if self.gate_m is not None and _median_norm(self.departure) <= self.gate_m:
             return _median_norm(self.departure + s) > self.gate_m
@@ -350,9 +363,27 @@ def _detected_at(probe: _Probe, noise: _Noise, direction: FloatArray, a: float) 
 
 
 def _smallest(probe: _Probe, noise: _Noise, direction: FloatArray, start: float, limit: float) -> float | None:
-    """The smallest size detected in both directions: from ``start`` down (or up) by factors of 1.5 to a
-    crossing, then bisected; None when nothing up to ``limit`` is detected."""
+    """The smallest size detected in both directions and at every larger size checked (the median share
+    of a small fault jumps with the noise: a size detected once may not be at 1.5 times it), from
+    ``start`` down (or up) by factors of 1.5 to a crossing, then bisected; None when nothing up to
+    ``limit`` is detected."""
     a = max(start, 1e-9)
+    for _ in range(STABLE_RESTARTS):
+        crossing = _crossing(probe, noise, direction, a, limit)
+        if crossing is None:
+            return None
+        failing = next((f * crossing for f in STABLE_FACTORS if f * crossing <= limit
+                        and not _detected_at(probe, noise, direction, f * crossing)), None)
+        if failing is None:
+            return crossing
+        a = failing * 1.5  # undetected above the crossing: search on from past where it failed
+        if a > limit:
+            return None
+    return None
+
+
+def _crossing(probe: _Probe, noise: _Noise, direction: FloatArray, a: float, limit: float) -> float | None:
+    """A size where detection starts (the first detected going up, or the last going down from ``a``)."""
     if _detected_at(probe, noise, direction, a):
         low, high = a / 1.5, a
         while low > 1e-9 and _detected_at(probe, noise, direction, low):
