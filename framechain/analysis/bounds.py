@@ -482,7 +482,7 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
     worst = max(results, key=lambda r: r.size or 0.0)
     assert worst.size is not None
     size = _estimate_size(fault, worst.size, stage.mode)
-    axes = tuple(axis_text(_unit(v).tolist()) for v in worst.unobservable)
+    axes = tuple(_axis3(v) for v in worst.unobservable)
     n_obs = len(stage.inputs)
     rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
     noise_text = f"{rms_mm:.2g} mm rms of residual"
@@ -501,10 +501,7 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
                  f"fault: {_key_text(fault, worst.refound)}")
         if not worst.confirmed:
             check += " (not a finding even there: this bound is optimistic)"
-    axis = None
-    if fault == Fault.ROTATION_ERROR:
-        ax, ay, az = (round(float(v), 4) + 0.0 for v in _unit(worst.direction))
-        axis = (ax, ay, az)
+    axis = _axis3(worst.direction) if fault == Fault.ROTATION_ERROR else None
     return Bound(hop, fault, True, {SIZE_KEYS[fault]: round(size, 6)},
                  f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
                  f"{noise_text} over {n_obs} observations{check}.", axes, axis)
@@ -526,6 +523,12 @@ def _key_text(fault: Fault, value: float) -> str:
     if fault == Fault.ROTATION_ERROR:
         return f"{value:.3g} deg"
     return f"{value * 100:+.3g}%"
+
+
+def _axis3(v: FloatArray) -> tuple[float, float, float]:
+    """A unit axis, rounded (``+ 0.0`` drops negative zeros)."""
+    x, y, z = (round(float(c), 4) + 0.0 for c in _unit(v))
+    return x, y, z
 
 
 def _unit(v: FloatArray) -> FloatArray:

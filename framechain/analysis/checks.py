@@ -47,7 +47,7 @@ class Bound:
 
     ``min_detectable`` is the smallest fault (in the estimate's own key and unit; for a factor or a
     scale its deviation from 1) that framechain's own thresholds would have made a finding, None
-    when the family is not observable here. ``unobservable_axes`` names the rotation axes (in the
+    when the family is not observable here. ``unobservable_axes`` are the rotation axes (unit, in the
     mount's link frame) the evidence cannot see when the others are observable.
     """
 
@@ -56,7 +56,7 @@ class Bound:
     observable: bool
     min_detectable: dict[str, float] | None
     why: str
-    unobservable_axes: tuple[str, ...] = ()
+    unobservable_axes: tuple[tuple[float, float, float], ...] = ()
     #: a rotation's weakest axis seen (unit, in the mount's link frame): ``min_detectable`` is about it
     axis: tuple[float, float, float] | None = None
 
@@ -71,8 +71,13 @@ class Bound:
         name = family_name(self.fault, self.hop)
         if self.size is None:
             return name
-        axes = f" (not about {', '.join(self.unobservable_axes)})" if self.unobservable_axes else ""
-        return f"{size_text(self.fault, self.size)} {name}{axes}"
+        return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
+
+    def axes_text(self) -> str:
+        """`` (not about [0.25, 0.06, -0.97])`` when some rotation axes cannot be seen, else empty."""
+        if not self.unobservable_axes:
+            return ""
+        return f" (not about {', '.join(axis_text(a) for a in self.unobservable_axes)})"
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value, "observable": self.observable,
@@ -82,7 +87,7 @@ class Bound:
         if self.axis is not None:
             out["axis"] = list(self.axis)
         if self.unobservable_axes:
-            out["unobservable_axes"] = list(self.unobservable_axes)
+            out["unobservable_axes"] = [list(a) for a in self.unobservable_axes]
         return out
 
 

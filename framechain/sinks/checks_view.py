@@ -45,8 +45,7 @@ def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
 def _bound_cell(bound: Bound, found: bool) -> str:
     if bound.size is None:
         return "not observable"
-    axes = f" (not about {', '.join(bound.unobservable_axes)})" if bound.unobservable_axes else ""
-    return f"{size_text(bound.fault, bound.size)}{axes}" + (" beyond the finding" if found else "")
+    return f"{size_text(bound.fault, bound.size)}{bound.axes_text()}" + (" beyond the finding" if found else "")
 
 
 def label_rows(result: Attribution) -> list[tuple[str, str, str, str, str, str]]:

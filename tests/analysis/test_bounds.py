@@ -23,7 +23,7 @@ from framechain.analysis.bounds import observations_for
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
 from framechain.analysis.replayed import replay_chain
 from framechain.catalogue import Fault
-from framechain.config.chain import ChainEvidence
+from framechain.config.chain import ChainConfig, ChainEvidence
 from framechain.pipeline import load_log
 from framechain.replay import CameraModel
 from framechain.sim import InjectedFault, SceneSpec, generate
@@ -186,3 +186,29 @@ def test_observations_for_turns_world_points_back_into_pixels_and_depths() -> No
     clean = observations_for(inputs, Perturbation(), np.tile(scene.object_world, (len(inputs), 1)))
     np.testing.assert_allclose(evaluate(clean, Perturbation())[2], np.tile(scene.object_world, (len(inputs), 1)),
                                atol=1e-9)
+
+
+def test_one_image_of_markers_cannot_show_a_latency(realdata: Path) -> None:
+    """The fiducials bag holds one JPEG (seven ArUco markers) against a declared reference point: no
+    motion, so no latency; the other families only at sizes a single view allows."""
+    chain = ChainConfig.from_dict({
+        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
+        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
+        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
+                    "quat_xyzw": [-0.5, 0.5, -0.5, 0.5]},
+                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
+        "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
+    })
+    result = attribute(load_log(realdata / "fiducials" / "aruco_images.bag", chain).timeline, chain, bootstrap=0)
+    assert result.counts()["replayed"] == 7
+    bounds = _bounds(result)
+    assert bounds[("latency", "body_to_world")]["observable"] is False
+    assert "does not move" in bounds[("latency", "body_to_world")]["why"]
+    rotation = bounds[("rotation_error", "camera_to_body")]
+    # One view of markers in front of the camera: a turn about the line of sight (near the optical z
+    # axis, the camera's own frame being the mount's link here) moves them by the noise only.
+    (blind,) = rotation["unobservable_axes"]
+    assert np.linalg.norm(blind) == pytest.approx(1.0, abs=1e-3)
+    assert abs(blind[2]) > np.cos(np.deg2rad(30.0))
+    assert _size(rotation) > 5.0  # the other axes, from seven points: only a coarse bound
+    assert "not observable here: pose latency" in result.verdict
