@@ -9,7 +9,8 @@ nearly always, at 0.5x rarely.
 
 Logs: the shared tagslam_stairs bag with the README's chain (the faults written into the log as
 read: the odometry re-stamped, the mount turned, the tag depths scaled, the focal length scaled;
-both signs), and generated scenes from :mod:`framechain.sim` (static targets and a reference with
+both signs, or away from no fault for a family found as recorded, its estimate then checked to move
+by the size injected), and generated scenes from :mod:`framechain.sim` (static targets and a reference with
 the faults in the recorded data, logged hops with the faults in the robot; the generator's own
 maths, several seeds).
 
@@ -161,6 +162,8 @@ def scene_cases(level: str, seed: int) -> list[dict[str, Any]]:
         size = float(next(iter(bound["min_detectable"].values())))
         as_recorded = finding_of(result, family, hop)
         clean_value = None if as_recorded is None else _value(family, as_recorded)
+        if clean_value is not None:
+            sign = _away(family, clean_value)
         for factor in (2.0, 0.5):
             fault = scene_fault(family, LEVELS[level], factor * size, sign, bound.get("axis"), spec.mount_pitch_deg)
             scene = generate(scene_spec(level, seed, fault))
@@ -184,10 +187,17 @@ def _stairs_jobs() -> list[Job]:
             size = float(next(iter(bound["min_detectable"].values())))
             as_recorded = finding_of(result, bound["fault"], bound["hop"])
             clean = None if as_recorded is None else _value(bound["fault"], as_recorded)
+            # A family found as recorded is moved away from no fault: towards it, the fault would cancel.
+            signs = (1.0, -1.0) if clean is None else (_away(bound["fault"], clean),)
             for factor in (2.0, 0.5):
-                jobs += [(bound["fault"], factor, sign, size, bound["hop"], bound.get("axis"), clean)
-                         for sign in (1.0, -1.0)]
+                jobs += [(bound["fault"], factor, sign, size, bound["hop"], bound.get("axis"), clean) for sign in signs]
     return jobs
+
+
+def _away(family: str, clean: float) -> float:
+    """The sign that moves a found estimate further from no fault."""
+    no_fault = 0.0 if family in ("latency", "rotation_error") else 1.0
+    return 1.0 if clean >= no_fault else -1.0
 
 
 def _print(rows: list[dict[str, Any]]) -> None:

@@ -549,8 +549,8 @@ def _why_blind(stage: Stage, fault: Fault, hop: HopName) -> str:
         return f"the camera does not move relative to the static targets: {_article(family_name(fault, hop))} {what}"
     limit = MAX_SIZE[fault]
     largest = float(np.rad2deg(limit)) if fault == Fault.ROTATION_ERROR else limit
-    return (f"no {family_name(fault, hop)} up to {size_text(fault, largest)} changes the error beyond framechain's "
-            "thresholds here")
+    return (f"too weak a signal here: no {family_name(fault, hop)} up to {size_text(fault, largest)} changes the "
+            "error beyond framechain's thresholds")
 
 
 def _article(noun: str) -> str:

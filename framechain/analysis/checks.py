@@ -100,7 +100,12 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopNam
     families_found = {(_family(f), h) for f, h in found}
     rest = [b for b in bounds if (_family(b.fault), b.hop) not in families_found]
     seen = [b.text() for b in rest if b.observable]
-    blind = [f"{b.text()} ({b.why.rstrip('.')})" for b in rest if not b.observable]
+    # Families not observable for one cause are named together, with the cause (the why up to its colon).
+    causes: dict[str, list[str]] = {}
+    for b in rest:
+        if not b.observable:
+            causes.setdefault(b.why.split(":")[0].rstrip("."), []).append(b.text())
+    blind = [f"{_and(names)} ({cause})" for cause, names in causes.items()]
     parts = []
     if seen:
         parts.append(f"No {'other ' if found else ''}fault above {', '.join(seen)}")
@@ -110,6 +115,10 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopNam
         return ""
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
+
+
+def _and(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def _family(fault: Fault) -> Fault:
