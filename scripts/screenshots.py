@@ -35,6 +35,7 @@ import tempfile
 import time
 import urllib.parse
 import urllib.request
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -51,14 +52,24 @@ def free_port() -> int:
 
 
 def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
-                    bounds: tuple[float, float, float, float] | None) -> None:
+                    bounds: tuple[float, float, float, float] | None, curves: Sequence[str] = (),
+                    curves_first: bool = False) -> None:
     """framechain's default blueprint with the side panels collapsed, for application ``framechain``."""
     from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
 
+    titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in curves]
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
-                                  collapse_panels=True, image_bounds=bounds)
+                                  collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first)
     blueprint.save("framechain", path)
+
+
+def recorded_curves(rrd: Path) -> list[str]:
+    """The error-against-size curves the recording holds (``/curves/<fault>_<hop>``), latency first."""
+    from rerun.chunk import RrdReader
+
+    paths = {str(chunk.entity_path).rsplit("/", 1)[0] for chunk in RrdReader(rrd).stream().filter(content="/curves/**")}
+    return sorted(paths, key=lambda p: ("latency" not in p, p))
 
 
 def recorded_bounds(rrd: Path) -> tuple[float, float, float, float] | None:
@@ -272,6 +283,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--body", default="base_link")
     parser.add_argument("--world", default="map")
     parser.add_argument("--no-images", action="store_true", help="the recording has no camera images")
+    parser.add_argument("--curves-first", action="store_true",
+                        help="show the error-against-size curves before the per-hop error (static targets)")
     parser.add_argument("--size", default="1600x900")
     parser.add_argument("--settle", type=float, default=20.0, metavar="S",
                         help="seconds to wait once the data shows, for images to decode (default 20)")
@@ -293,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
             rrd, out = args.rrd, args.out
         blueprint = work / "view.rbl"
         write_blueprint(blueprint, args.camera, args.body, args.world, images=not args.no_images,
-                        bounds=recorded_bounds(rrd))
+                        bounds=recorded_bounds(rrd), curves=recorded_curves(rrd), curves_first=args.curves_first)
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

@@ -1,7 +1,8 @@
-"""The analysis room: one replay and its aligned evidence, fault models, fitting, attribution, the run
-every sink renders, the tilt lab."""
+"""The analysis room: one replay and its aligned evidence, fault models, fitting, attribution (with the
+bounds of what the evidence could see), the run every sink renders, the tilt lab."""
 
 from framechain.analysis.attribute import AnalysisError, Attribution, Finding, attribute, attribute_replayed
+from framechain.analysis.checks import Bound, Curve, LabelTable
 from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
 from framechain.analysis.findings import Unattributed
 from framechain.analysis.lab import TiltRow, crossing_pitch_deg, tilt_sweep
@@ -11,7 +12,10 @@ from framechain.analysis.run import NotAttributed, Run
 __all__ = [
     "AnalysisError",
     "Attribution",
+    "Bound",
+    "Curve",
     "Finding",
+    "LabelTable",
     "NotAttributed",
     "NothingToCorrectError",
     "Replayed",

@@ -27,14 +27,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
+from framechain.analysis.bounds import Stage, bounds, without_evidence
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
+from framechain.analysis.curves import curves, label_table
 from framechain.analysis.estimates import format_estimate
+from framechain.analysis.fault_model import FaultModel
 from framechain.analysis.faults import LATENCY_BOUND_S, classify_rotation, models_for
 from framechain.analysis.findings import AnalysisError, Attribution, Finding, Metric, Unattributed
 from framechain.analysis.fit import perturbation_of
 from framechain.analysis.fixes import FixContext, fix_for
 from framechain.analysis.replayed import Replayed, replay_chain
 from framechain.analysis.selection import (
+    HOP_DIVERGENCE_M,
     Objective,
     PointObjective,
     Selected,
@@ -43,10 +47,10 @@ from framechain.analysis.selection import (
     reweighted,
     select,
 )
-from framechain.analysis.shares import Found, bootstrap_interval, drop_unexplaining, evidence_sentence
+from framechain.analysis.shares import Found, bootstrap_interval, drop_unexplaining, evidence_sentence, weakened
 from framechain.analysis.static import RayObjective, StaticTargetError, static_objective
 from framechain.arrays import FloatArray
-from framechain.catalogue import Fault
+from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.progress import Progress, no_progress
 from framechain.replay import CameraModel, ReplayResult
@@ -94,10 +98,14 @@ def attribute_replayed(
     )
     if level is None:
         return replace(base, notes=(*notes, "no evidence: log hop points, a target, a reference or declare a static "
-                                    "target"))
+                                    "target"), bounds=without_evidence(inputs))
     context = _fix_context(replayed.timeline, chain, result, row)
     assembled = _findings(level, inputs, context, np.random.default_rng(seed), bootstrap,
                           rays=replayed.bearing_only, say=say)
+    found_bounds = bounds(level.stages, assembled.kept, say=say, no_depth=replayed.bearing_only)
+    say("the error against each family's size, and per label")
+    labels = label_table(result.observations.label[result.replayed], assembled.error_after,
+                         static=level.metric == "static_spread")
     # Corrections move the recomputed chain towards the truth; as-run faults describe what the
     # robot did, and the recomputed chain stays as it is.
     corrected = evaluate(inputs, assembled.combined)[2] if level.metric in ("reference", "static_spread") \
@@ -105,8 +113,10 @@ def attribute_replayed(
     return Attribution(
         source=base.source, config=chain, replay=result, inputs=inputs, metric=level.metric,
         error_before=assembled.error_before, error_after=assembled.error_after, hop_errors=level.hop_errors,
-        evidence_points=level.evidence_world, corrected_world=corrected, findings=assembled.findings, seed=seed,
+        evidence_points=level.evidence_world, corrected_world=corrected,
+        findings=weakened(assembled.findings, found_bounds), seed=seed,
         aligned=replayed.aligned, notes=(*notes, *level.notes, *assembled.notes), stage=level.stage,
+        bounds=found_bounds, curves=curves(level.stages, assembled.kept, found_bounds), labels=labels,
     )
 
 
@@ -139,6 +149,8 @@ class _Level:
     hop_errors: dict[str, FloatArray] = field(default_factory=dict)
     stage: str = "world"
     notes: tuple[str, ...] = ()
+    #: where each hop's faults are fitted (what the bounds measure)
+    stages: tuple[Stage, ...] = ()
 
 
 def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, replayed: Replayed,
@@ -148,20 +160,25 @@ def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, r
                for role in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD, PointRole.TARGET)}
     if any(_present(matched[r]) for r in (PointRole.HOP_CAMERA, PointRole.HOP_BODY, PointRole.HOP_WORLD)):
         say("comparing the robot's logged hops with the recomputed ones")
-        selections, hop_errors, deepest = hops_level(inputs, matched, say)
+        selections, hop_errors, deepest, examined = hops_level(inputs, matched, say)
         evidence_world = deepest.evidence if deepest.stage == "world" else np.full((len(inputs), 3), np.nan)
-        return _Level("logged_hops", deepest, evidence_world, selections, hop_errors, deepest.stage)
+        stages = tuple(Stage.over_evidence(hops, objective, inputs, "as_run", gate_m=HOP_DIVERGENCE_M)
+                       for hops, objective in examined)
+        return _Level("logged_hops", deepest, evidence_world, selections, hop_errors, deepest.stage, stages=stages)
+    every_hop = tuple(HopName)
     if _present(matched[PointRole.TARGET]):
         say("fitting fault models to the logged target")
         objective = PointObjective("world", matched[PointRole.TARGET])
         return _Level("target", objective, objective.evidence,
-                      [select(models_for(inputs), objective, inputs, "as_run", say)])
+                      [select(models_for(inputs), objective, inputs, "as_run", say)],
+                      stages=(Stage.over_evidence(every_hop, objective, inputs, "as_run"),))
     reference = _reference(evidence.points(PointRole.REFERENCE), chain)
     if reference is not None:
         say("fitting corrections against the reference")
         objective = PointObjective("world", reference)
         return _Level("reference", objective, reference,
-                      [reweighted(select(models_for(inputs), objective, inputs, "correction", say))])
+                      [reweighted(select(models_for(inputs), objective, inputs, "correction", say))],
+                      stages=(Stage.over_evidence(every_hop, objective, inputs, "correction"),))
     if chain.evidence.static_target:
         return _static_level(inputs, chain, replayed, say)
     return None
@@ -191,7 +208,9 @@ def _static_level(inputs: ChainInputs, chain: ChainConfig, replayed: Replayed, s
         objective = static.at_range_of(inputs, selected.fit.perturbation())
         # Where the corrected rays meet: a faulty chain's rays may meet far off, or not at all.
         evidence_world = static.points(inputs, selected.fit.perturbation())
-    return _Level("static_spread", objective, evidence_world, [reweighted(selected)], notes=tuple(notes_used))
+    stage = Stage.over_evidence(tuple(HopName), static, inputs, "correction", rays=rays)
+    return _Level("static_spread", objective, evidence_world, [reweighted(selected)], notes=tuple(notes_used),
+                  stages=(stage,))
 
 
 def _reference(matched: FloatArray, chain: ChainConfig) -> FloatArray | None:
@@ -211,6 +230,7 @@ class _Assembled:
     error_after: FloatArray
     combined: Perturbation  # every finding's fault applied at once
     notes: tuple[str, ...]  # the faults fitted but dropped, and why
+    kept: tuple[tuple[FaultModel, FloatArray], ...] = ()  # each finding's model and parameters
 
 
 def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.random.Generator, draws: int, *,
@@ -247,7 +267,7 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
         ))
     findings.sort(key=lambda f: f.share, reverse=True)
     return _Assembled(tuple(findings), error_before, distances(level.objective(inputs, combined)), combined,
-                      tuple(notes))
+                      tuple(notes), tuple((f[0], f[1]) for f in found))
 
 
 def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, row: int) -> FixContext:

@@ -3,7 +3,7 @@ contract, and the error raised (with its typed reason) when a log cannot be attr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Literal
 
@@ -11,6 +11,7 @@ import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.chain_model import ChainInputs
+from framechain.analysis.checks import Bound, Curve, LabelTable, bounds_sentence, nothing_observable
 from framechain.analysis.estimates import Estimate, estimate_to_json, format_estimate
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
@@ -54,6 +55,10 @@ class Finding:
     evidence: str
     fix: str
     model: str
+    #: "weak" when its 95% interval holds "no fault", its confidence is low or it is under the bound of
+    #: its family (``weak_because`` says which): the fix is then a hint to check, not a change to make
+    strength: Literal["strong", "weak"] = "strong"
+    weak_because: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -66,6 +71,8 @@ class Finding:
             "confidence": round(self.confidence, 4),
             "evidence": self.evidence,
             "fix": self.fix,
+            "strength": self.strength,
+            "weak_because": list(self.weak_because),
         }
 
 
@@ -90,6 +97,12 @@ class Attribution:
     notes: tuple[str, ...] = ()
     #: where the error is measured: the world point, or the deepest hop the robot logged
     stage: str = "world"
+    #: per fault family and hop: whether this log could show it and the smallest fault it would have found
+    bounds: tuple[Bound, ...] = ()
+    #: the error against each fitted family's size (latency: the time offsets searched)
+    curves: tuple[Curve, ...] = ()
+    #: per label: observations, spread and verdict (static, moving, outlier), and the labels to ignore
+    labels: LabelTable = field(default_factory=LabelTable)
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
@@ -134,23 +147,24 @@ class Attribution:
 
     @property
     def verdict(self) -> str:
-        """The answer in one sentence."""
+        """The answer in one sentence: the findings first, then the bounds of the families not found and
+        what this log cannot show."""
         summary = self.error_summary()
         if self.metric == "none":
-            return (
-                "No evidence in this log to measure the chain against (no logged points, reference or static target)."
-            )
+            return ("No evidence in this log to measure the chain against (no logged points, reference or static "
+                    "target): nothing could be checked.")
+        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
         if not self.findings:
-            return (
-                f"No fault beyond noise: median error {summary['median'] * 1e3:.1f} mm against the "
-                f"{self.metric.replace('_', ' ')}."
-            )
+            against = f"median error {summary['median'] * 1e3:.1f} mm against the {self.metric.replace('_', ' ')}"
+            if self.bounds and nothing_observable(self.bounds):
+                return f"Nothing could be checked ({against}): {bounds[0].lower()}{bounds[1:]}"
+            return f"No fault beyond noise: {against}." + (f" {bounds}" if bounds else "")
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
-        return (
-            f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}) explains "
-            f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}."
-        )
+        weak = f" (weak: {'; '.join(top.weak_because)})" if top.strength == "weak" else ""
+        found = (f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}){weak} explains "
+                 f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}.")
+        return found + (f" {bounds}" if bounds else "")
 
     def to_json(self) -> dict[str, Any]:
         """The attribution.json contract (schema framechain/attribution@1)."""
@@ -166,6 +180,9 @@ class Attribution:
             "verdict": self.verdict,
             "findings": [f.to_json() for f in self.findings],
             "hops": self.hop_summary(),
+            "bounds": [b.to_json() for b in self.bounds],
+            "curves": [c.to_json() for c in self.curves],
+            "labels": self.labels.to_json(),
             "notes": list(self.notes),
         }
 

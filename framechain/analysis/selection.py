@@ -105,12 +105,13 @@ def distances(residuals: FloatArray) -> FloatArray:
 
 def hops_level(
     inputs: ChainInputs, matched: Mapping[PointRole, FloatArray], say: Progress
-) -> tuple[list[Selected], dict[str, FloatArray], PointObjective]:
+) -> tuple[list[Selected], dict[str, FloatArray], PointObjective, list[tuple[tuple[HopName, ...], PointObjective]]]:
     """Logged hops: each logged stage fed with the robot's own logged input, compared with its output.
 
     A stage whose input was not logged is fed from the raw inputs, and the faults of every hop
-    upstream of it are candidates. Returns the selections, each logged hop's departure, and the
-    objective of the deepest logged stage (what the error is measured against).
+    upstream of it are candidates. Returns the selections, each logged hop's departure, the
+    objective of the deepest logged stage (what the error is measured against), and each logged
+    stage's objective with the hops whose faults it is examined for (what the bounds measure).
     """
     stages = (
         ("camera", HopName.PIXEL_TO_CAMERA, matched[PointRole.HOP_CAMERA]),
@@ -123,6 +124,7 @@ def hops_level(
     previous_stage: Literal["camera", "body"] | None = None
     upstream: list[HopName] = []
     deepest: PointObjective | None = None
+    examined: list[tuple[tuple[HopName, ...], PointObjective]] = []
     for stage, hop, logged in stages:
         upstream.append(hop)
         if not np.isfinite(logged).all(axis=1).any():
@@ -130,6 +132,7 @@ def hops_level(
         objective = PointObjective(stage, logged, previous, previous_stage)  # type: ignore[arg-type]
         departure = distances(objective(inputs, Perturbation()))
         hop_errors[hop.value] = departure
+        examined.append((tuple(upstream), objective))
         if np.nanmedian(departure) > HOP_DIVERGENCE_M:
             say(f"classifying the departure at {hop.value}")
             sel = select(models_for(inputs, tuple(upstream)), objective, inputs, "as_run", say)
@@ -138,7 +141,7 @@ def hops_level(
         previous, previous_stage, upstream, deepest = logged, stage, [], objective  # type: ignore[assignment]
     assert deepest is not None  # the caller checked that some hop was logged
     # The deepest stage, fed from the raw inputs, is what the robot's chain did end to end.
-    return selections, hop_errors, PointObjective(deepest.stage, deepest.evidence)
+    return selections, hop_errors, PointObjective(deepest.stage, deepest.evidence), examined
 
 
 def select(
@@ -175,7 +178,7 @@ def select(
             )
             quick.append((fit_models([model], objective, inputs, base=base), model))
         # A fit that runs to the edge of its range explains by degenerating, not by a fault.
-        quick = [(fit, model) for fit, model in quick if not _at_bound(model, fit.params[-1])]
+        quick = [(fit, model) for fit, model in quick if not at_bound(model, fit.params[-1])]
         if not quick:
             break
         quick.sort(key=lambda item: item[0].bic)
@@ -186,7 +189,7 @@ def select(
             for fit, model in quick[:3]:
                 x_start = np.concatenate([x_prev, fit.params[0]])
                 joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
-            joint = [(fit, model) for fit, model in joint if not _at_bound(model, fit.params[-1])]
+            joint = [(fit, model) for fit, model in joint if not at_bound(model, fit.params[-1])]
             if not joint:
                 break
             joint.sort(key=lambda item: item[0].bic)
@@ -226,7 +229,7 @@ def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs)
     return [quick[swap], *(item for i, item in enumerate(quick) if i != swap)]
 
 
-def _at_bound(model: FaultModel, x: FloatArray) -> bool:
+def at_bound(model: FaultModel, x: FloatArray) -> bool:
     """Whether a fitted parameter sits on a bound of its plausible range (to 0.1 %)."""
     if not model.lower or not model.plausibility_bounds:
         return False

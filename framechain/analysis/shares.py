@@ -6,13 +6,15 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.estimates import Estimate, estimate_scalars, format_estimate
+from framechain.analysis.checks import Bound, size_text
+from framechain.analysis.estimates import Estimate, estimate_scalars, format_estimate, format_interval
 from framechain.analysis.fault_model import FaultModel, Mode
-from framechain.analysis.findings import Metric
+from framechain.analysis.findings import Finding, Metric
 from framechain.analysis.fit import fit_models, perturbation_of
 from framechain.analysis.selection import Objective, Selected, distances
 from framechain.arrays import FloatArray
@@ -24,6 +26,9 @@ Found = tuple[FaultModel, FloatArray, float, str, Selected]
 #: A fault that explains less than this fraction of the median error, and less than the noise floor
 #: of a median (two standard errors of the residual's median), is not a finding: its fit moved noise.
 MIN_SHARE = 0.01
+#: A finding whose confidence (the BIC weight of its explanation against the next best) is under this is
+#: weak: another explanation is about as likely, and its fix is worded as a hint to check.
+WEAK_CONFIDENCE = 0.5
 
 
 def drop_unexplaining(
@@ -148,3 +153,55 @@ def evidence_sentence(
         f"next-best explanation: {alternative}."
     )
 
+
+
+#: What to check before acting on a weak finding, per fault.
+_CHECK = {
+    Fault.LATENCY: "the header stamps of the detections against those of the poses (`framechain info` shows "
+                   "each topic's stamp delay)",
+    Fault.ROTATION_ERROR: "the mount against a fresh extrinsic calibration",
+    Fault.MISSING_ROTATION: "the mount against a fresh extrinsic calibration",
+    Fault.DEPTH_SCALE: "the declared tag size or the depth units against a measured distance",
+    Fault.INTRINSICS: "the calibration against the camera's own (a fresh calibration or the driver's CameraInfo)",
+}
+
+
+def weakened(findings: Sequence[Finding], bounds: Sequence[Bound]) -> tuple[Finding, ...]:
+    """The findings, those that are weak marked and their fix worded as a hint.
+
+    Weak: a 95% interval that holds "no fault" (an offset of 0, a factor or scale of 1), a
+    confidence under :data:`WEAK_CONFIDENCE`, or an estimate smaller than the bound of its family
+    (the smallest fault of it this log shows reliably: a finding under it cleared the thresholds by
+    the luck of the noise).
+    """
+    out = []
+    for finding in findings:
+        why = _weak_because(finding, bounds)
+        if not why:
+            out.append(finding)
+            continue
+        check = _CHECK.get(finding.fault, "the frame names and directions of the chain against the robot's URDF "
+                           "or /tf")
+        fix = (f"weak ({'; '.join(why)}): check {check} before changing anything; if it holds up: "
+               f"{finding.fix[:1].lower()}{finding.fix[1:]}")
+        out.append(replace(finding, fix=fix, strength="weak", weak_because=why))
+    return tuple(out)
+
+
+def _weak_because(finding: Finding, bounds: Sequence[Bound]) -> tuple[str, ...]:
+    why = []
+    scalars = estimate_scalars(finding.estimate)
+    for key, (lo, hi) in finding.interval.items():
+        none = 0.0 if key == "offset_s" else 1.0 if key in ("factor", "scale") else None
+        if none is not None and lo <= none <= hi:
+            why.append(f"its 95% interval {format_interval({key: [lo, hi]})} holds no fault")
+    if finding.confidence < WEAK_CONFIDENCE:
+        why.append(f"confidence {finding.confidence:.2f} under {WEAK_CONFIDENCE:g}")
+    family = Fault.ROTATION_ERROR if finding.fault == Fault.MISSING_ROTATION else finding.fault
+    bound = next((b for b in bounds if b.fault == family and b.hop == finding.hop and b.size is not None), None)
+    if bound is not None and bound.size is not None and scalars:
+        value = next(iter(scalars.values()))
+        size = abs(value) if family in (Fault.LATENCY, Fault.ROTATION_ERROR) else abs(value - 1.0)
+        if size < bound.size:
+            why.append(f"under the {size_text(family, bound.size)} this log shows reliably")
+    return tuple(why)

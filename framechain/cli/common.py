@@ -7,7 +7,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -184,11 +184,25 @@ def say_unattributed(run: Run, command: str) -> list[str]:
     return notes
 
 
+def _print_table(console: Any, columns: Sequence[str], rows: Sequence[Sequence[str]]) -> None:
+    from rich.table import Table
+
+    if not rows:
+        return
+    table = Table()
+    for col in columns:
+        table.add_column(col, overflow="fold")
+    for row in rows:
+        table.add_row(*row)
+    console.print(table)
+
+
 def print_findings(result: Any) -> None:
     """The verdict, the counts, the findings, the per-hop summary, the fixes and the notes, with rich."""
     from rich.console import Console
     from rich.table import Table
 
+    from framechain.sinks.checks_view import BOUND_COLUMNS, bound_rows, label_columns, label_rows, label_summary
     from framechain.sinks.report import HOP_COLUMNS, hop_rows
     from framechain.sinks.text import FindingView
 
@@ -201,12 +215,18 @@ def print_findings(result: Any) -> None:
     )
     if result.findings:
         table = Table()
-        for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
+        for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence", "strength"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
-            table.add_row(str(i), c.fault, c.hop, c.estimate, c.interval, c.share, c.confidence)
+            table.add_row(str(i), c.fault, c.hop, c.estimate, c.interval, c.share, c.confidence, c.strength,
+                          style="dim" if c.strength == "weak" else None)
         console.print(table)
+    _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
+    if result.labels.suggest_ignore:  # every label only when some disagree
+        _print_table(console, label_columns(result), label_rows(result))
+    if len(result.labels.rows) > 1:  # one label (one object) has nothing to compare
+        console.print(label_summary(result), markup=False, highlight=False, soft_wrap=True)
     hops = Table()
     for col in HOP_COLUMNS:
         hops.add_column(col, overflow="fold")

@@ -176,6 +176,8 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     print(f"{line}, {counts['stale']} stale")
     for note in notes:
         print(f"note          {note}")
+    if loaded.attribution is not None:  # the findings and what the log could not show
+        print(f"verdict       {loaded.attribution.verdict}")
     for i, finding in enumerate(findings, start=1):
         print(f"finding {i}     {FindingView.of(finding).headline()}")
     if findings:

@@ -93,7 +93,8 @@ class InjectedFault:
       scene's ``optical_xyz`` must not be zero.
     - depth_scale ``factor`` (as-run / true).
     - intrinsics ``scale`` (as-run K / true K: ``scale=2`` is the camera_info of a 1280x960
-      calibration used for 640x480 images, fx, fy, cx, cy all doubled).
+      calibration used for 640x480 images, fx, fy, cx, cy all doubled; with ``variant="focal"`` the
+      focal length alone, another lens).
     - wrong_world_frame ``used`` (robot only): ``"odom"`` (the default, odom used for map) or
       ``"base_footprint"`` (the robot looked up base_footprint instead of base_link: the scene
       then publishes base_link -> base_footprint, ``footprint_height_m`` (default 0.08) below).
@@ -183,6 +184,9 @@ class SceneSpec:
     orbit_radius_m: float = 2.4
     orbit_rate: float | None = None  # rad/s; None: drawn from the seed
     wobble_rad: float | None = None
+    #: the base stays where the orbit starts (a fixed camera over a static target: no motion to show
+    #: a latency, and nothing to tell a mount rotation or a scale from the target's position)
+    fixed_camera: bool = False
     pixel_noise_px: float = 0.5
     depth_noise_rel: float = 0.003
     reference_noise_m: float = 0.002
@@ -280,6 +284,8 @@ class _Motion:
         phase0 = rng.uniform(-np.pi, np.pi)
 
         def map_from_base(t_s: FloatArray) -> FloatArray:
+            if spec.fixed_camera:
+                t_s = np.zeros_like(t_s)
             radius = spec.orbit_radius_m + 0.5 * np.sin(radius_freq * t_s)
             phi = phase0 + orbit_rate * t_s + 0.3 * np.sin(0.5 * t_s)
             pos = np.stack([obj[0] + radius * np.cos(phi), obj[1] + radius * np.sin(phi), np.zeros_like(t_s)], 1)
@@ -558,7 +564,10 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
         return replace(params, depth_factor=float(p["factor"]))
     if kind == Fault.INTRINSICS:
         k = truth.K.copy()
-        k[:2, :] *= float(p["scale"])  # the K of another resolution: focal and principal point scale
+        if p.get("variant") == "focal":  # another lens: the focal length alone
+            k[:2, :2] *= float(p["scale"])
+        else:
+            k[:2, :] *= float(p["scale"])  # the K of another resolution: focal and principal point scale
         return replace(params, K=k)
     if kind == Fault.WRONG_WORLD_FRAME:
         if fault.used_frame == FOOTPRINT_FRAME:

@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from framechain.analysis.checks import nothing_observable
 from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
+from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots
 from framechain.sinks.evidence_files import inputs_record
 from framechain.sinks.text import CSS, FindingView, mm
 
@@ -44,21 +46,24 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figures = make_figures(result)
+    checks = [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
     sections = image_crops(run)
     paths: dict[str, Path] = {}
     if "md" in formats:
-        for fig in figures:
+        for fig in [*figures, *checks]:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["md"] = out / "report.md"
         for _, crops in sections:
             for crop in crops:
                 (out / f"{crop.name}.png").write_bytes(crop.png)
-        paths["md"].write_text(markdown(result, figures) + _crops_markdown(result, sections))
+        text = markdown(result, figures).replace("## Provenance", checks_markdown(result, checks) + "## Provenance", 1)
+        paths["md"].write_text(text + _crops_markdown(result, sections))
     if "html" in formats:
         paths["html"] = out / "report.html"
         page = html_page(result, figures)
         provenance = "<h2>Provenance</h2>"
-        paths["html"].write_text(page.replace(provenance, _crops_html(result, sections) + provenance, 1))
+        inserted = checks_html(result, checks, figure_html) + _crops_html(result, sections) + provenance
+        paths["html"].write_text(page.replace(provenance, inserted, 1))
     return paths
 
 
@@ -196,11 +201,15 @@ def make_figures(result: Attribution) -> list[Figure]:
             ax.axhline(10.0, color="k", ls="--", lw=1, label="1 cm gripper tolerance")
             ax.axvline(x[-1] / 1.5, color="tab:gray", ls=":", lw=1, label="found")
             ax.set_xlabel(label)
-            ax.set_ylabel("median world error (mm)")
-            ax.set_title(f"Sensitivity: {top.fault.value} at {top.hop.value}", fontsize=9)
+            # How far the world points move, not the error against the evidence the findings share out
+            # (that is the curves' measure): a depth scale moves points far and static spreads little.
+            ax.set_ylabel("median displacement of the world points (mm)")
+            ax.set_title(f"Sensitivity: how far {top.fault.value} at {top.hop.value} moves the world points",
+                         fontsize=9)
             ax.grid(True, alpha=0.3)
             ax.legend(fontsize=7)
-            figures.append(figure_png(fig, "sensitivity", f"How fast {top.fault.value} hurts on this episode"))
+            figures.append(figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this "
+                                      "episode (a displacement, not the error the findings share out)"))
     return figures
 
 
@@ -348,15 +357,15 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         lines += [
-            "| fault | hop | estimate | 95% interval | share | error | confidence | fix |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- |",
+            "| fault | hop | estimate | 95% interval | share | error | confidence | strength | fix |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
         for c in (FindingView.of(f).cells() for f in result.findings):
             lines.append(f"| {c.fault} | {c.hop} | {c.estimate} | {c.interval} | {c.share} | {c.error} | "
-                         f"{c.confidence} | {c.fix.replace('|', '/')} |")
+                         f"{c.confidence} | {c.strength} | {c.fix.replace('|', '/')} |")
         lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
     else:
-        lines.append("No fault beyond noise.")
+        lines.append("No fault beyond noise." if _clean(result) else "Nothing could be checked.")
     lines += [
         "",
         "## Error",
@@ -389,23 +398,24 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain: {e(title)}</title>",
         f"<style>{CSS}</style></head><body>",
         f"<h1>framechain report: {e(title)}</h1>",
-        f"<div class='verdict{'' if result.findings else ' clean'}'>{e(result.verdict)}</div>",
+        f"<div class='verdict{' clean' if _clean(result) else ''}'>{e(result.verdict)}</div>",
         "<h2>Findings</h2>",
     ]
     if result.findings:
         parts.append(
             "<table><tr><th>fault</th><th>hop</th><th>estimate</th><th>95% interval</th><th>share</th>"
-            "<th>error</th><th>confidence</th><th>evidence</th><th>fix</th></tr>"
+            "<th>error</th><th>confidence</th><th>strength</th><th>evidence</th><th>fix</th></tr>"
         )
         for c in (FindingView.of(f).cells() for f in result.findings):
+            weak = " style='color:#777'" if c.strength == "weak" else ""
             parts.append(
-                f"<tr><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.estimate)}</td><td>{e(c.interval)}</td>"
-                f"<td>{c.share}</td><td>{c.error}</td><td>{c.confidence}</td><td>{e(c.evidence)}</td>"
-                f"<td>{_code(c.fix)}</td></tr>"
+                f"<tr{weak}><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.estimate)}</td>"
+                f"<td>{e(c.interval)}</td><td>{c.share}</td><td>{c.error}</td><td>{c.confidence}</td>"
+                f"<td>{c.strength}</td><td>{e(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
             )
         parts.append("</table>")
     else:
-        parts.append("<p>No fault beyond noise.</p>")
+        parts.append("<p>No fault beyond noise.</p>" if _clean(result) else "<p>Nothing could be checked.</p>")
     counts = result.counts()
     parts.append(
         f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {mm(s['median'])}, "
@@ -428,6 +438,11 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         "bootstrap 95% intervals over observations.</p></body></html>"
     )
     return "\n".join(parts)
+
+
+def _clean(result: Attribution) -> bool:
+    """No finding, and something could have been found (a log where nothing is observable is not clean)."""
+    return not result.findings and not nothing_observable(result.bounds)
 
 
 def _code(text: str) -> str:

@@ -57,6 +57,7 @@ from framechain.analysis.run import Run
 from framechain.arrays import FloatArray
 from framechain.sinks.overlay import ImageOverlay, ImageSelection, image_overlay
 from framechain.sinks.rerun_blueprint import default_blueprint, image_view_bounds
+from framechain.sinks.rerun_checks import curve_entity, curve_title, log_checks
 from framechain.sinks.rerun_common import (
     LOG_TIME,
     OBS_INDEX,
@@ -209,7 +210,10 @@ def stream_replay(
     rec = rr.RecordingStream(opts.application_id, recording_id=opts.recording_id)
     overlay = image_overlay(run.timeline, run.replay, run.aligned, run.findings)
     shows_images = opts.images is not ImageSelection.NONE and len(run.timeline.image_frames) > 0
-    blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay))
+    curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
+    blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
+                                  curves=curves, curves_first=run.attribution is not None
+                                  and run.attribution.metric == "static_spread")
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -291,6 +295,8 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_images(rec, timeline, result, opts, rows)
     log_overlay(rec, overlay, result, rows)
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
+    if run.attribution is not None:
+        log_checks(rec, run.attribution, rows)
     return rows
 
 

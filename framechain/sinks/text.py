@@ -31,6 +31,7 @@ class FindingCells(NamedTuple):
     confidence: str
     evidence: str
     fix: str
+    strength: str = "strong"  # "weak": its interval holds no fault, its confidence is low or it is under its bound
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ class FindingView:
         f = self.finding
         return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
                             interval=format_interval(f.interval), share=f"{f.share:.0%}", error=mm(f.error_m),
-                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix)
+                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix, strength=f.strength)
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
@@ -66,7 +67,8 @@ class FindingView:
         if self.finding.interval:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
-        return f"{c.fault} on {c.hop}; {estimate}; {size}."
+        weak = f"weak ({'; '.join(self.finding.weak_because)}): " if self.finding.strength == "weak" else ""
+        return f"{weak}{c.fault} on {c.hop}; {estimate}; {size}."
 
 
 #: The style of the HTML reports (one log's and the fleet's).

@@ -152,13 +152,12 @@ def test_the_mount_is_the_other_way_round_from_how_tagslam_applies_it(
     assert not [f for f in other.findings if f.fault == Fault.INVERTED_TRANSFORM]
 
 
-@pytest.mark.parametrize("shift_ms", [300, -450])
-def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path, shift_ms: int) -> None:
+def restamped_bag(realdata: Path, shifted: Path, shift_ns: int) -> Path:
+    """A copy of the bag with the odometry's header stamps moved by ``shift_ns`` (rosbags' own writer)."""
     from rosbags.highlevel import AnyReader
     from rosbags.rosbag1 import Writer
     from rosbags.typesys import Stores, get_typestore
 
-    shifted = tmp_path / "shifted.bag"
     store = get_typestore(Stores.ROS1_NOETIC)
     with AnyReader([realdata / BAG]) as reader, Writer(shifted) as writer:
         out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
@@ -167,10 +166,16 @@ def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path,
             data = raw
             if conn.topic == ODOM:
                 msg = reader.deserialize(raw, conn.msgtype)
-                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ms * 1_000_000
+                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
                 msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
                 data = store.serialize_ros1(msg, conn.msgtype)
             writer.write(out[conn.id], t, data)
+    return shifted
+
+
+@pytest.mark.parametrize("shift_ms", [300, -450])
+def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path, shift_ms: int) -> None:
+    shifted = restamped_bag(realdata, tmp_path / "shifted.bag", shift_ms * 1_000_000)
     chain = _chain(realdata)
     result = attribute(load_log(shifted, chain).timeline, chain, bootstrap=0)
     top = result.findings[0]

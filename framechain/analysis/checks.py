@@ -1,0 +1,248 @@
+"""What a verdict can be checked against: the bounds of each fault family on this log (what it could
+see, and the smallest fault it would have found), the error against each family's size, and the
+per-label table; with the one text of each that every output shows.
+
+The values are computed by :mod:`~framechain.analysis.bounds` and :mod:`~framechain.analysis.curves`;
+these are the typed results, their attribution.json form and their words.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from framechain.analysis.estimates import axis_text
+from framechain.catalogue import Fault, HopName
+
+#: The estimate key each sized fault family is measured in (``min_detectable`` and the curves use it).
+SIZE_KEYS: dict[Fault, str] = {
+    Fault.LATENCY: "offset_s",
+    Fault.ROTATION_ERROR: "angle_deg",
+    Fault.DEPTH_SCALE: "factor",
+    Fault.INTRINSICS: "scale",
+}
+
+
+def family_name(fault: Fault, hop: HopName) -> str:
+    """The family in words: ``pose latency``, ``camera latency``, ``mount rotation``, ``depth scale``."""
+    if fault == Fault.LATENCY:
+        return "camera latency" if hop == HopName.CAMERA_TO_BODY else "pose latency"
+    return {Fault.ROTATION_ERROR: "mount rotation", Fault.DEPTH_SCALE: "depth scale",
+            Fault.INTRINSICS: "intrinsics scale"}.get(fault, fault.value.replace("_", " "))
+
+
+def size_text(fault: Fault, value: float) -> str:
+    """A fault size in its display unit: ``4.1 ms``, ``0.3 deg``, ``1.2%`` (a factor's deviation from 1)."""
+    if fault == Fault.LATENCY:
+        return f"{value * 1e3:.2g} ms" if value < 0.01 else f"{value * 1e3:.0f} ms"
+    if fault == Fault.ROTATION_ERROR:
+        return f"{value:.2g} deg" if value < 10 else f"{value:.0f} deg"
+    return f"{value * 100:.2g}%" if value < 0.1 else f"{value * 100:.0f}%"
+
+
+@dataclass(frozen=True)
+class Bound:
+    """What this log's evidence can show of one fault family at one hop.
+
+    ``min_detectable`` is the smallest fault (in the estimate's own key and unit; for a factor or a
+    scale its deviation from 1) that framechain's own thresholds would have made a finding, None
+    when the family is not observable here. ``unobservable_axes`` are the rotation axes (unit, in the
+    mount's link frame) the evidence cannot see when the others are observable.
+    """
+
+    hop: HopName
+    fault: Fault
+    observable: bool
+    min_detectable: dict[str, float] | None
+    why: str
+    unobservable_axes: tuple[tuple[float, float, float], ...] = ()
+    #: a rotation's weakest axis seen (unit, in the mount's link frame): ``min_detectable`` is about it
+    axis: tuple[float, float, float] | None = None
+
+    @property
+    def size(self) -> float | None:
+        if self.min_detectable is None:
+            return None
+        return self.min_detectable[SIZE_KEYS[self.fault]]
+
+    def text(self) -> str:
+        """``4.1 ms pose latency`` (observable) or ``pose latency`` (not)."""
+        name = family_name(self.fault, self.hop)
+        if self.size is None:
+            return name
+        return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
+
+    def axes_text(self) -> str:
+        """`` (not about [0.25, 0.06, -0.97])`` when some rotation axes cannot be seen, else empty."""
+        if not self.unobservable_axes:
+            return ""
+        return f" (not about {', '.join(axis_text(a) for a in self.unobservable_axes)})"
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value, "observable": self.observable,
+                               "min_detectable": None if self.min_detectable is None else
+                               {k: round(v, 6) for k, v in self.min_detectable.items()},
+                               "why": self.why}
+        if self.axis is not None:
+            out["axis"] = list(self.axis)
+        if self.unobservable_axes:
+            out["unobservable_axes"] = [list(a) for a in self.unobservable_axes]
+        return out
+
+
+def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName]] = ()) -> str:
+    """``No fault above 4 ms pose latency, 0.3 deg mount rotation; not observable here: depth scale (...)``.
+
+    Families with a finding (``found``) are left out; with findings the sentence says "no other
+    fault". Empty when there are no bounds.
+    """
+    families_found = {(_family(f), h) for f, h in found}
+    rest = [b for b in bounds if (_family(b.fault), b.hop) not in families_found]
+    seen = [b.text() for b in rest if b.observable]
+    # Families not observable for one cause are named together, with the cause (the why up to its colon).
+    causes: dict[str, list[str]] = {}
+    for b in rest:
+        if not b.observable:
+            causes.setdefault(b.why.split(":")[0].rstrip("."), []).append(b.text())
+    blind = [f"{_and(names)} ({cause})" for cause, names in causes.items()]
+    parts = []
+    if seen:
+        parts.append(f"No {'other ' if found else ''}fault above {', '.join(seen)}")
+    if blind:
+        parts.append(f"not observable here: {'; '.join(blind)}")
+    if not parts:
+        return ""
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
+
+
+def _and(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
+def _family(fault: Fault) -> Fault:
+    """A rotation finding (missing or wrong) is of the mount-rotation family."""
+    return Fault.ROTATION_ERROR if fault == Fault.MISSING_ROTATION else fault
+
+
+def nothing_observable(bounds: Sequence[Bound]) -> bool:
+    """Whether no fault family could be checked on this log (no bounds at all counts as none)."""
+    return not any(b.observable for b in bounds)
+
+
+@dataclass(frozen=True)
+class Curve:
+    """The error against the evidence as one fault family's size is varied (the other findings applied).
+
+    ``x`` is in the estimate's key (``offset_s``; ``angle_deg`` signed about ``axis``; the ``factor``
+    or ``scale`` itself); ``median_error_m`` is what the findings' millimetres are shares of and
+    ``rms_error_m`` what the fit minimises (its dip is the estimate; the median's bottom is flatter);
+    ``estimate`` is the finding's value (None: not found) and ``bound`` the family's
+    ``min_detectable`` (a deviation from 1 for a factor or scale).
+    """
+
+    hop: HopName
+    fault: Fault
+    key: str
+    x: tuple[float, ...]
+    median_error_m: tuple[float, ...]
+    rms_error_m: tuple[float, ...]
+    estimate: float | None = None
+    bound: float | None = None
+    axis: tuple[float, float, float] | None = None
+
+    @property
+    def no_fault(self) -> float:
+        return 1.0 if self.key in ("factor", "scale") else 0.0
+
+    def axis_label(self) -> str:
+        return {
+            "offset_s": "time offset of the pose (ms)" if self.hop == HopName.BODY_TO_WORLD
+            else "time offset of the camera pose (ms)",
+            "angle_deg": f"mount rotation about {axis_text(self.axis or (0.0, 0.0, 1.0))} (deg)",
+            "factor": "depth factor", "scale": "intrinsics scale",
+        }[self.key]
+
+    def bound_edges(self) -> tuple[float, float] | None:
+        """Where the bound lies either side of the estimate (a family found: a further fault) or of no fault."""
+        if self.bound is None:
+            return None
+        centre = self.no_fault if self.estimate is None else self.estimate
+        if self.key in ("factor", "scale"):
+            return centre * (1.0 - self.bound), centre * (1.0 + self.bound)
+        return centre - self.bound, centre + self.bound
+
+    def display(self, value: float) -> float:
+        """A value of ``x`` in the plot's unit (ms for offsets)."""
+        return value * 1e3 if self.key == "offset_s" else value
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "hop": self.hop.value, "fault": self.fault.value, "key": self.key,
+            "x": [round(v, 7) for v in self.x], "median_error_m": [round(v, 7) for v in self.median_error_m],
+            "rms_error_m": [round(v, 7) for v in self.rms_error_m], "estimate": self.estimate, "bound": self.bound,
+        }
+        if self.axis is not None:
+            out["axis"] = list(self.axis)
+        return out
+
+
+LabelVerdict = Literal["static", "moving", "outlier", "too few", "agrees"]
+
+
+@dataclass(frozen=True)
+class LabelRow:
+    """One label (tag id, class) of the evidence: how often it was seen and used, its spread (the
+    median distance of its points from its own object's position, or from the evidence), a verdict."""
+
+    label: str
+    observations: int
+    used: int
+    spread_m: float | None
+    p90_m: float | None
+    verdict: LabelVerdict
+
+    def to_json(self) -> dict[str, Any]:
+        return {"label": self.label, "observations": self.observations, "used": self.used,
+                "spread_m": None if self.spread_m is None else round(self.spread_m, 6),
+                "p90_m": None if self.p90_m is None else round(self.p90_m, 6), "verdict": self.verdict}
+
+
+@dataclass(frozen=True)
+class LabelTable:
+    """The per-label table and the labels framechain would suggest ignoring (moving or outliers)."""
+
+    rows: tuple[LabelRow, ...] = ()
+    overall_m: float | None = None  # the median spread over every used observation
+
+    @property
+    def suggest_ignore(self) -> tuple[str, ...]:
+        return tuple(r.label for r in self.rows if r.verdict in ("moving", "outlier"))
+
+    def ignore_line(self) -> str | None:
+        """``evidence.ignore_labels: [3, 7]`` ready to paste (None: nothing to ignore)."""
+        labels = self.suggest_ignore
+        if not labels:
+            return None
+        items = ", ".join(label if label.lstrip("-").isdigit() else repr(label) for label in labels)
+        return f"evidence.ignore_labels: [{items}]"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"rows": [r.to_json() for r in self.rows],
+                "overall_m": None if self.overall_m is None else round(self.overall_m, 6),
+                "suggest_ignore": list(self.suggest_ignore), "ignore_line": self.ignore_line()}
+
+
+__all__ = [
+    "SIZE_KEYS",
+    "Bound",
+    "Curve",
+    "LabelRow",
+    "LabelTable",
+    "LabelVerdict",
+    "bounds_sentence",
+    "family_name",
+    "nothing_observable",
+    "size_text",
+]

@@ -1,0 +1,182 @@
+"""What a verdict can be checked against, as every output shows it: the bounds of each fault family
+(what this log could see and the smallest fault it would have found), the error against each
+family's size with the estimate and the bound marked, and the per-label table with the labels to
+ignore. The CLI, both reports and Rerun take their rows and words from here.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from framechain.analysis.checks import Bound, Curve, family_name, size_text
+from framechain.analysis.findings import Attribution
+from framechain.catalogue import Fault
+from framechain.sinks.text import mm
+
+ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
+BOUND_COLUMNS = ("fault family", "hop", "smallest fault it would find", "why")
+LABEL_COLUMNS = ("label", "observations", "used", "spread (median)", "spread (p90)", "verdict")
+
+
+def label_columns(result: Attribution) -> tuple[str, ...]:
+    """The per-label table's header: a static target's spread, else the error against the evidence."""
+    if result.metric == "static_spread":
+        return LABEL_COLUMNS
+    return ("label", "observations", "used", "error (median)", "error (p90)", "verdict")
+#: What the label table measures, per evidence.
+LABEL_NOTE = {
+    "static_spread": "each label's distance from its own object's position (per window, after the findings)",
+    "none": "",
+}
+
+
+def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
+    """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
+    observable", and why."""
+    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop) for f in result.findings}
+    return [(family_name(b.fault, b.hop), b.hop.value, _bound_cell(b, (b.fault, b.hop) in found), b.why)
+            for b in result.bounds]
+
+
+def _bound_cell(bound: Bound, found: bool) -> str:
+    if bound.size is None:
+        return "not observable"
+    return f"{size_text(bound.fault, bound.size)}{bound.axes_text()}" + (" beyond the finding" if found else "")
+
+
+def label_rows(result: Attribution) -> list[tuple[str, str, str, str, str, str]]:
+    """The per-label table as text cells."""
+    return [(r.label, str(r.observations), str(r.used), mm(r.spread_m), mm(r.p90_m), r.verdict)
+            for r in result.labels.rows]
+
+
+def label_summary(result: Attribution) -> str:
+    """One line: how many labels of each verdict, and the ready line to ignore the moving ones."""
+    rows = result.labels.rows
+    if not rows:
+        return ""
+    counts: dict[str, int] = {}
+    for r in rows:
+        counts[r.verdict] = counts.get(r.verdict, 0) + 1
+    what = "spread" if result.metric == "static_spread" else "error"
+    text = f"labels: {len(rows)} ({', '.join(f'{n} {v}' for v, n in counts.items())}), median {what} " \
+           f"{mm(result.labels.overall_m)}"
+    line = result.labels.ignore_line()
+    return text + (f"; to leave out the ones that disagree add `{line}`" if line else "")
+
+
+def _what_labels_measure(result: Attribution) -> str:
+    return LABEL_NOTE.get(result.metric, f"each label's error against the {result.metric.replace('_', ' ')} "
+                                         "(after the findings)")
+
+
+# -- curves -----------------------------------------------------------------------------------
+def curve_plots(result: Attribution) -> list[tuple[str, str, Any]]:
+    """(name, caption, matplotlib figure) per curve: the error (rms and median) against the family's size,
+    the estimate and the bound marked."""
+    if not result.curves:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = []
+    for curve in result.curves:
+        fig, axes = plt.subplots(1, 2 if curve.key == "offset_s" else 1, figsize=(6.4, 3.4), dpi=100, squeeze=False)
+        _plot_curve(axes[0][0], curve, zoom=False)
+        if curve.key == "offset_s":
+            _plot_curve(axes[0][1], curve, zoom=True)
+        name = family_name(curve.fault, curve.hop)
+        fig.suptitle(f"Error against the {name} ({curve.hop.value})", fontsize=9)
+        caption = (f"{name.capitalize()}: the error against the {result.metric.replace('_', ' ')} as the fault is "
+                   "varied, the other findings applied: its root mean square is what the fit minimises (its dip is "
+                   "the estimate), its median what the findings' millimetres are shares of")
+        out.append((f"curve_{curve.fault.value}_{curve.hop.value}", caption, fig))
+    return out
+
+
+def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
+    x = np.array([curve.display(v) for v in curve.x])
+    rms, median = np.array(curve.rms_error_m) * 1e3, np.array(curve.median_error_m) * 1e3
+    centre = curve.display(curve.estimate if curve.estimate is not None else curve.no_fault)
+    if zoom:
+        half = max(4.0 * curve.display(curve.bound or 0.0), 20.0)
+        keep = np.abs(x - centre) <= half
+        x, rms, median = x[keep], rms[keep], median[keep]
+    ax.plot(x, rms, color="tab:blue", lw=1.2, label="rms (fitted)")
+    ax.plot(x, median, color="tab:orange", lw=1.0, ls="-.", label="median (shared out)")
+    for i, edge in enumerate(curve.bound_edges() or ()):
+        ax.axvline(curve.display(edge), color="tab:gray", ls=":", lw=1, label="bound" if i else None)
+    ax.axvline(curve.display(curve.no_fault), color="k", lw=0.6, alpha=0.5)
+    if curve.estimate is not None:
+        ax.axvline(curve.display(curve.estimate), color="tab:red", ls="--", lw=1, label="estimate")
+    ax.set_xlabel(curve.axis_label() + (" (zoom)" if zoom else ""), fontsize=8)
+    ax.set_ylabel("error (mm)", fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=6)
+
+
+# -- report sections --------------------------------------------------------------------------
+def checks_markdown(result: Attribution, figures: Sequence[Any]) -> str:
+    """The report's sections: what this log can show (bounds), the curves, the labels (Markdown)."""
+    lines = ["## What this log can show", "",
+             "The smallest fault of each family framechain's own thresholds would have made a finding here, "
+             "or why the evidence cannot show it.", "",
+             "| " + " | ".join(BOUND_COLUMNS) + " |", "| " + " | ".join("---" for _ in BOUND_COLUMNS) + " |",
+             *("| " + " | ".join(c.replace("|", "/") for c in row) + " |" for row in bound_rows(result)), ""]
+    for fig in figures:
+        lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
+    if result.labels.rows:
+        what = "Spread" if result.metric == "static_spread" else "Error"
+        lines += ["## Per label", "", f"{what}: {_what_labels_measure(result)}. {label_summary(result)}.", "",
+                  "| " + " | ".join(label_columns(result)) + " |", "|" + " --- |" * len(LABEL_COLUMNS),
+                  *("| " + " | ".join(row) + " |" for row in label_rows(result)), ""]
+    return "\n".join(lines) + "\n"
+
+
+def checks_html(result: Attribution, figures: Sequence[Any], figure_html: Any) -> str:
+    """The same sections as HTML (``figure_html`` embeds a figure)."""
+    e = html.escape
+    parts = ["<h2>What this log can show</h2><p>The smallest fault of each family framechain's own thresholds "
+             "would have made a finding here, or why the evidence cannot show it.</p><table><tr>",
+             "".join(f"<th>{e(c)}</th>" for c in BOUND_COLUMNS), "</tr>"]
+    for row in bound_rows(result):
+        style = "" if row[2] != "not observable" else " style='color:#777'"
+        parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>")
+    parts.append("</table>")
+    if figures:
+        parts.append("<div class='plots'>" + "".join(figure_html(f) for f in figures) + "</div>")
+    if result.labels.rows:
+        what = "Spread" if result.metric == "static_spread" else "Error"
+        parts.append(f"<h2>Per label</h2><p>{what}: {e(_what_labels_measure(result))}. "
+                     f"{_code(label_summary(result))}.</p><table><tr>"
+                     + "".join(f"<th>{e(c)}</th>" for c in label_columns(result)) + "</tr>")
+        for cells in label_rows(result):
+            style = "" if cells[-1] in ("static", "agrees") else " style='background:#fff0f0'"
+            parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in cells) + "</tr>")
+        parts.append("</table>")
+    return "".join(parts)
+
+
+def _code(text: str) -> str:
+    pieces = html.escape(text).split("`")
+    return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(pieces))
+
+
+__all__ = [
+    "BOUND_COLUMNS",
+    "LABEL_COLUMNS",
+    "bound_rows",
+    "checks_html",
+    "checks_markdown",
+    "curve_plots",
+    "label_columns",
+    "label_rows",
+    "label_summary",
+]
