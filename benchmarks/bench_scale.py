@@ -17,11 +17,13 @@ a fresh process so that its peak resident memory is its own:
   interpreter's start and their imports).
 
 The ratios should stay flat from 10 to 30 minutes (linear cost). Wall seconds are what a user
-waits; CPU seconds are steadier on a shared machine. Children run with one BLAS thread, as the
-command sets for itself.
+waits; CPU seconds are steadier on a shared machine. The three figures run in turn for a few
+rounds and each figure's least is kept: another process's load only ever adds time. Children run
+with one BLAS thread, as the command sets for itself.
 
     python benchmarks/run.py scale
     FRAMECHAIN_BENCH_SCALE_MINUTES=10 python benchmarks/run.py scale     # lengths, comma-separated
+    FRAMECHAIN_BENCH_SCALE_ROUNDS=1 python benchmarks/run.py scale       # rounds (default 3), least kept
     FRAMECHAIN_BENCH_SCALE_CACHE=/tmp/framechain-bench-scale              # where the logs are kept
 
 The logs are written by a streaming writer here (not ``write_scene``, which holds every image in
@@ -50,6 +52,8 @@ import numpy as np
 
 CACHE = Path(os.environ.get("FRAMECHAIN_BENCH_SCALE_CACHE", "/tmp/framechain-bench-scale"))
 MINUTES = tuple(int(m) for m in os.environ.get("FRAMECHAIN_BENCH_SCALE_MINUTES", "10,30").split(","))
+#: Rounds of the three figures; each figure's least is reported (a shared machine's load only adds).
+ROUNDS = max(1, int(os.environ.get("FRAMECHAIN_BENCH_SCALE_ROUNDS", "3")))
 DEPTH_TOPIC = "/camera/depth/image_raw"
 COLOR_TOPIC = "/camera/color/image_raw/compressed"
 #: Bumped when the generated log changes, so cached logs are rewritten.
@@ -277,21 +281,23 @@ def _command() -> list[str]:
     return [str(script)] if script.is_file() else [sys.executable, "-m", "framechain.cli.main"]
 
 
-def measure(path: Path, chain_path: Path) -> dict[str, Process]:
-    """The floor, attribute in-process and the command end to end, one fresh process each, side by side."""
+def measure(path: Path, chain_path: Path) -> dict[str, list[Process]]:
+    """The floor, attribute in-process and the command end to end, one fresh process each, side by side;
+    :data:`ROUNDS` rounds, the three in turn in each (so that the machine's load falls on all alike)."""
     topics = chain_topics(path, chain_path)
-    out = {
-        "floor": run_process([sys.executable, __file__, "floor", str(path), ",".join(topics)], f"floor on {path.name}"),
-        "attribute": run_process([sys.executable, __file__, "attribute", str(path), str(chain_path)],
-                                 f"attribute on {path.name}"),
-    }
-    with tempfile.TemporaryDirectory(dir=CACHE) as tmp:
-        report = Path(tmp) / "out"
-        out["command"] = run_process([*_command(), "attribute", str(path), "--chain", str(chain_path),
-                                      "--out", str(report), "-q"], f"framechain attribute on {path.name}")
-        missing = [n for n in ("attribution.json", "report.md", "report.html") if not (report / n).is_file()]
-        if missing:
-            raise RuntimeError(f"framechain attribute on {path.name} wrote no {', '.join(missing)}")
+    out: dict[str, list[Process]] = {"floor": [], "attribute": [], "command": []}
+    for _ in range(ROUNDS):
+        out["floor"].append(run_process([sys.executable, __file__, "floor", str(path), ",".join(topics)],
+                                        f"floor on {path.name}"))
+        out["attribute"].append(run_process([sys.executable, __file__, "attribute", str(path), str(chain_path)],
+                                            f"attribute on {path.name}"))
+        with tempfile.TemporaryDirectory(dir=CACHE) as tmp:
+            report = Path(tmp) / "out"
+            out["command"].append(run_process([*_command(), "attribute", str(path), "--chain", str(chain_path),
+                                               "--out", str(report), "-q"], f"framechain attribute on {path.name}"))
+            missing = [n for n in ("attribution.json", "report.md", "report.html") if not (report / n).is_file()]
+            if missing:
+                raise RuntimeError(f"framechain attribute on {path.name} wrote no {', '.join(missing)}")
     return out
 
 
@@ -302,23 +308,26 @@ def main() -> None:
         path, chain_path = write_long_log(minutes)
         made = time.perf_counter() - start
         runs = measure(path, chain_path)
-        floor, attribute = runs["floor"].figure(), runs["attribute"].figure()
+        floor = [p.figure() for p in runs["floor"]]
+        attribute = [p.figure() for p in runs["attribute"]]
         rows.append((minutes, runs, floor, attribute))
         print(f"   {minutes} min log: {path.stat().st_size / 1e6:.0f} MB ({made:.0f} s to make or find), "
-              f"{floor['messages']} messages on {floor['topics']} topics, "
-              f"{attribute['observations']} observations, findings {attribute['findings']}", flush=True)
+              f"{floor[0]['messages']} messages on {floor[0]['topics']} topics, "
+              f"{attribute[0]['observations']} observations, findings {attribute[0]['findings']}", flush=True)
     print("   floor: mcap + rosbags over the chain's topics; in-process: attribute_log after imports, no reports;\n"
           "   end to end: `framechain attribute LOG --chain C --out D` from process start to exit (reports written)\n"
-          "   against the floor's process from start to exit (interpreter and imports included in both)")
+          "   against the floor's process from start to exit (interpreter and imports included in both);\n"
+          f"   each figure the least of {ROUNDS} rounds (CPU s: the process tree's user + system time, steadier\n"
+          "   than wall s on a shared machine); peak RSS the most of the rounds")
     for unit, key, process_key in (("wall s", "seconds", "wall_s"), ("CPU s", "cpu_s", "cpu_s")):
         print(f"   {unit:<6} {'floor':>7} {'in-process':>10} {'ratio':>6}   {'floor':>7} {'end to end':>10} "
               f"{'ratio':>6}   peak RSS MB (floor / in-process / end to end)")
         for minutes, runs, floor, attribute in rows:
-            floor_p, command = getattr(runs["floor"], process_key), getattr(runs["command"], process_key)
-            print(f"   {minutes:>2} min {floor[key]:>7.2f} {attribute[key]:>10.2f} {attribute[key] / floor[key]:>6.2f}"
-                  f"   {floor_p:>7.2f} {command:>10.2f} {command / floor_p:>6.2f}   "
-                  f"{runs['floor'].peak_rss_mb:.0f} / {runs['attribute'].peak_rss_mb:.0f} / "
-                  f"{runs['command'].peak_rss_mb:.0f}")
+            floor_in, attribute_in = min(f[key] for f in floor), min(a[key] for a in attribute)
+            floor_p, command = (min(getattr(p, process_key) for p in runs[k]) for k in ("floor", "command"))
+            peak = " / ".join(f"{max(p.peak_rss_mb for p in runs[k]):.0f}" for k in ("floor", "attribute", "command"))
+            print(f"   {minutes:>2} min {floor_in:>7.2f} {attribute_in:>10.2f} {attribute_in / floor_in:>6.2f}"
+                  f"   {floor_p:>7.2f} {command:>10.2f} {command / floor_p:>6.2f}   {peak}")
 
 
 if __name__ == "__main__":

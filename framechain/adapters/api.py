@@ -108,23 +108,25 @@ class _KeptOpenFetcher:
 
     Depth frames are fetched one at a time as observations need them; re-opening the file and
     rebuilding its decoders for every frame cost 50 ms a frame. The reader closes with this object.
+    An MCAP is re-opened with the summary the read parsed (``summary``), not parsed again.
     """
 
-    def __init__(self, fmt: str, target: Path) -> None:
+    def __init__(self, fmt: str, target: Path, summary: Any = None) -> None:
         self._fmt = fmt
         self._target = target
+        self._summary = summary
         self._log: McapLog | RosbagsLog | None = None
         self._finalizer: weakref.finalize[Any, Any] | None = None
 
     def __call__(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         if self._log is None:
-            self._log = McapLog(self._target) if self._fmt == "mcap" else RosbagsLog(self._target)
+            self._log = McapLog(self._target, self._summary) if self._fmt == "mcap" else RosbagsLog(self._target)
             self._finalizer = weakref.finalize(self, self._log.close)
         return self._log.fetch(topic, log_time_ns, ordinal)
 
 
-def _fetcher(fmt: str, target: Path) -> Callable[[str, int, int], Any]:
-    return _KeptOpenFetcher(fmt, target)
+def _fetcher(fmt: str, target: Path, summary: Any = None) -> Callable[[str, int, int], Any]:
+    return _KeptOpenFetcher(fmt, target, summary)
 
 
 def scan_log(path: str | Path) -> LogInfo:
@@ -187,6 +189,7 @@ def open_log(
             with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
                 src.read(selected, col, advance)
         info = info.with_notes(src.notes)
+        summary = src.summary if isinstance(src, McapLog) else None
     col.notes[:0] = notes
     if chain is not None and chain.topics.detections_table:
         from framechain.adapters.messages.side_table import read_side_table, resolve_side_table
@@ -197,7 +200,7 @@ def open_log(
         "source_path": str(p), "format": info.format, "container": info.container,
         "start_ns": info.start_ns, "end_ns": info.end_ns,
     }
-    timeline, found = col.build(_fetcher(fmt, target), metadata)
+    timeline, found = col.build(_fetcher(fmt, target, summary), metadata)
     info = info.with_notes(found)
     timeline = timeline.replace(metadata={**timeline.metadata, "notes": list(info.notes)})
     if chain is not None and chain.topics.camera_info and not len(timeline.cameras):

@@ -109,6 +109,8 @@ class ChainInputs:
     buffer: TransformBuffer
     frames: ChainFrames
     camera_is_dynamic: bool
+    #: A resample's source and its rows there (see :meth:`take`); None for inputs taken from a replay.
+    resampled_from: tuple[ChainInputs, IntArray] | None = field(default=None, compare=False, repr=False)
 
     def __len__(self) -> int:
         return int(self.stamp_ns.shape[0])
@@ -134,10 +136,19 @@ class ChainInputs:
         )
 
     def take(self, index: npt.ArrayLike) -> ChainInputs:
-        """A subset of observations (bootstrap resamples)."""
+        """A subset of observations (bootstrap resamples).
+
+        A resample as large as its source looks its shifted poses up through the source: the rows'
+        poses are the same, and every resample of a bootstrap asks for the same few offsets.
+        """
         i = np.asarray(index)
+        source: tuple[ChainInputs, IntArray] | None = None
+        if i.dtype.kind in "iu" and i.ndim == 1 and i.shape[0] >= len(self):
+            source = (self, i) if self.resampled_from is None else \
+                (self.resampled_from[0], self.resampled_from[1][i])
         return replace(
             self,
+            resampled_from=source,
             obs_id=self.obs_id[i],
             stamp_ns=self.stamp_ns[i],
             u=self.u[i],
@@ -171,8 +182,13 @@ class ChainInputs:
         key = (round(offset_s * 1e9), world or self.frames.world, body or self.frames.body)
         poses = self._shifted_poses.get(key)
         if poses is None:
-            lookup = self.buffer.lookup(key[1], key[2], self.stamp_ns + key[0])
-            poses = (lookup.translation, lookup.quat_xyzw, lookup.ok)
+            if self.resampled_from is not None:
+                source, rows = self.resampled_from
+                t, q, ok = source.world_from_body(offset_s, world, body)
+                poses = (t[rows], q[rows], ok[rows])
+            else:
+                lookup = self.buffer.lookup(key[1], key[2], self.stamp_ns + key[0])
+                poses = (lookup.translation, lookup.quat_xyzw, lookup.ok)
             for array in poses:
                 array.setflags(write=False)  # shared by every later call with the same key
             if len(self._shifted_poses) >= _SHIFTED_POSES_KEPT:

@@ -178,8 +178,14 @@ def _subsample(objective: Objective, inputs: ChainInputs, size: int) -> tuple[Ob
     n = len(inputs)
     if n <= size:
         return objective, inputs
-    index = np.unique(np.linspace(0, n - 1, size).round().astype(np.int64))
+    index = even_rows(n, size)
     return objective.take(index), inputs.take(index)
+
+
+def even_rows(n: int, size: int) -> IntArray:
+    """``size`` of ``n`` rows, evenly spaced from the first to the last (all of them when fewer)."""
+    out: IntArray = np.unique(np.linspace(0, n - 1, min(size, n)).round().astype(np.int64))
+    return out
 
 
 def _grid_costs(

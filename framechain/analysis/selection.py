@@ -13,7 +13,7 @@ import numpy as np
 from framechain.analysis.chain_model import ChainInputs, Perturbation, hop1, hop2, hop3
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.faults import models_for, rotation_starts
-from framechain.analysis.fit import Fit, fit_models, posterior_weights
+from framechain.analysis.fit import NOISE_FLOOR_M, Fit, even_rows, fit_models, posterior_weights
 from framechain.analysis.frame_swaps import swap_for_rotation
 from framechain.analysis.static import RayObjective, StaticObjective
 from framechain.arrays import FloatArray, IntArray
@@ -27,6 +27,11 @@ MIN_BIC_GAIN = 10.0
 #: A hop is divergent when its median departure exceeds this (m).
 HOP_DIVERGENCE_M = 2e-3
 MAX_FAULTS = 3
+#: A joint refit on more than twice this many observations is first made on this many, evenly
+#: spaced; when its mean squared residual there (above the BIC's noise floor) is this many times
+#: that of the faults already found, it is not made on them all (it could not lower the BIC).
+SCREEN_SUBSAMPLE = 2000
+SCREEN_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -188,6 +193,8 @@ def select(
             joint = []
             for fit, model in quick[:3]:
                 x_start = np.concatenate([x_prev, fit.params[0]])
+                if _hopeless_jointly(current, model, objective, inputs, x_start):
+                    continue
                 joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
             joint = [(fit, model) for fit, model in joint if not at_bound(model, fit.params[-1])]
             if not joint:
@@ -208,6 +215,26 @@ def select(
         fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode,
         inputs=inputs,
     )
+
+
+def _hopeless_jointly(current: Fit, model: FaultModel, objective: Objective, inputs: ChainInputs,
+                      x_start: FloatArray) -> bool:
+    """Whether ``model`` refitted jointly with the faults found cannot pay for itself: on an even
+    subsample of a long log it explains the evidence far worse than they already do.
+
+    A refit over every observation of a long log can take hundreds of evaluations of the chain
+    (a discrete fault such as an inverted pose drags a latency along a rugged cost), and after a
+    first fault most candidates are hopeless by orders of magnitude. A refit that passes is made
+    over every observation from the same start, as before.
+    """
+    n = len(inputs)
+    if n <= 2 * SCREEN_SUBSAMPLE:
+        return False
+    rows = even_rows(n, SCREEN_SUBSAMPLE)
+    trial = fit_models([*current.models, model], objective.take(rows), inputs.take(rows), x_start=x_start)
+    floor = NOISE_FLOOR_M**2
+    found = float(np.sum(current.distances[rows] ** 2)) / trial.n_residuals
+    return trial.rss / trial.n_residuals + floor >= SCREEN_RATIO * (found + floor)
 
 
 def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs) -> list[tuple[Fit, FaultModel]]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,8 +52,8 @@ def sample_depth(
     stamp[near] = frame_stamps[pick[near]]
     half = window // 2
     offsets = np.arange(-half, half + 1)
-    # Observations grouped by frame in one sort; a frame's windows come in one call (kept at read time
-    # or cut from the frame), then the medians of every observation are computed together.
+    # Observations grouped by frame in one sort; their windows come in one call (kept at read time, or
+    # cut from their frames, each loaded once), then the medians of every observation are computed together.
     used = np.flatnonzero(near)
     if used.size == 0:
         return DepthSamples(depth, index, stamp)
@@ -62,11 +61,7 @@ def sample_depth(
     rows_used = index[used]
     centre_rows = np.rint(v[used]).astype(np.int64)
     centre_cols = np.rint(u[used]).astype(np.int64)
-    windows = np.empty((used.size, offsets.size, offsets.size), dtype=np.float32)
-    bounds = np.flatnonzero(np.r_[True, rows_used[1:] != rows_used[:-1], True]).tolist()
-    for start, end in itertools.pairwise(bounds):
-        windows[start:end] = frames.load_windows(int(rows_used[start]), centre_rows[start:end],
-                                                 centre_cols[start:end], half)
+    windows = frames.load_windows(rows_used, centre_rows, centre_cols, half)
     rows = centre_rows[:, None] + offsets[None, :]
     cols = centre_cols[:, None] + offsets[None, :]
     # Window pixels outside the image do not exist: they must not repeat the border pixels.

@@ -31,6 +31,9 @@ from framechain.timeline import PointRole, Timeline, normalize_frame
 
 #: An image within this of an observation's stamp is the one shown with it.
 IMAGE_WINDOW_NS = 50_000_000
+#: zlib level of the report's PNGs (crops and plots): the same pixels as the default 6, smaller for
+#: plots, in less than half the time.
+PNG_COMPRESS_LEVEL = 3
 
 #: Colour of an error line, by the fault of the finding that explains it (RGB): none is the
 #: detection's green, the recomputed blue or the as-run orange, nor the grey of a floor.
@@ -310,6 +313,6 @@ def render_crops(
         if np.isfinite(overlay.recomputed_uv[i]).all():
             dot(overlay.recomputed_uv[i], RECOMPUTED_COLOR, 4)
         buf = io.BytesIO()
-        canvas.save(buf, format="PNG")
+        canvas.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
         out.append((i, buf.getvalue()))
     return out

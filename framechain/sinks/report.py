@@ -26,6 +26,7 @@ from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
 from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots
 from framechain.sinks.evidence_files import inputs_record
+from framechain.sinks.overlay import PNG_COMPRESS_LEVEL
 from framechain.sinks.text import CSS, FindingView, mm
 
 
@@ -272,7 +273,7 @@ def figure_png(fig: Any, name: str, caption: str) -> Figure:
     # tight_layout leaves a placeholder layout engine, for which savefig lays out in one more (blind)
     # draw before the real one; the layout is done, so none is needed.
     fig.set_layout_engine(None)
-    fig.savefig(buf, format="png")
+    fig.savefig(buf, format="png", pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
     plt.close(fig)
     return Figure(name=name, caption=caption, png=buf.getvalue())
 

@@ -4,6 +4,7 @@ on demand (only the frames a detection or a sink needs are ever decoded)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
@@ -17,9 +18,10 @@ from framechain.timeline.tables import Column, ColumnTable, normalize_frames
 
 #: Loads depth frame ``i`` of a table as metres, shape (height, width), float32; NaN or 0 = none.
 DepthLoader = Callable[[int], npt.NDArray[np.float32]]
-#: Pixel windows of frame ``index`` kept from the read: (index, centre rows, centre cols, half) ->
-#: (k, 2 half + 1, 2 half + 1) metres, or None when any of them was not kept.
-DepthWindows = Callable[[int, IntArray, IntArray, int], "npt.NDArray[np.float32] | None"]
+#: Pixel windows kept from the read: (frame per window, centre rows, centre cols, half) ->
+#: ((k, 2 half + 1, 2 half + 1) metres, (k,) which were kept; the others hold nothing meaningful).
+DepthWindows = Callable[[IntArray, IntArray, IntArray, int],
+                        "tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]"]
 
 
 def pixel_windows(image: npt.NDArray[Any], centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[Any]:
@@ -103,17 +105,28 @@ class DepthFrameTable(ColumnTable):
         return self.loader(index)
 
     def load_windows(
-        self, index: int, centre_rows: IntArray, centre_cols: IntArray, half: int
+        self, frames: IntArray, centre_rows: IntArray, centre_cols: IntArray, half: int
     ) -> npt.NDArray[np.float32]:
-        """(k, 2 half + 1, 2 half + 1) metres around the centres of frame ``index`` (see :func:`pixel_windows`).
+        """(k, 2 half + 1, 2 half + 1) metres around each centre in its frame ``frames[i]`` (see
+        :func:`pixel_windows`).
 
-        The windows kept at read time when all are there, else cut from the whole frame: the same values.
+        The windows kept at read time where they were, all at once; the others cut from their whole
+        frames, each frame loaded once: the same values.
         """
-        if self.windows is not None:
-            kept = self.windows(index, centre_rows, centre_cols, half)
-            if kept is not None:
-                return kept
-        windows: npt.NDArray[np.float32] = pixel_windows(self.load(index), centre_rows, centre_cols, half)
+        frames = np.asarray(frames, dtype=np.int64)
+        size = 2 * half + 1
+        windows = np.empty((frames.size, size, size), dtype=np.float32)
+        found = np.zeros(frames.size, dtype=bool)
+        if self.windows is not None and frames.size:
+            kept, found = self.windows(frames, centre_rows, centre_cols, half)
+            windows[found] = kept[found]
+        missing = np.flatnonzero(~found)
+        missing = missing[np.argsort(frames[missing], kind="stable")]
+        of_frame = frames[missing]
+        bounds = np.flatnonzero(np.r_[True, of_frame[1:] != of_frame[:-1], True]).tolist() if missing.size else []
+        for start, end in itertools.pairwise(bounds):
+            mine = missing[start:end]
+            windows[mine] = pixel_windows(self.load(int(frames[mine[0]])), centre_rows[mine], centre_cols[mine], half)
         return windows
 
     def take(self, index: npt.ArrayLike) -> DepthFrameTable:
@@ -125,8 +138,9 @@ class DepthFrameTable(ColumnTable):
             return table
         windows: DepthWindows | None = None
         if base_windows is not None:
-            def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
-                return base_windows(int(rows[i]), r, c, half)
+            def windows(i: IntArray, r: IntArray, c: IntArray, half: int) -> tuple[npt.NDArray[np.float32],
+                                                                                  npt.NDArray[np.bool_]]:
+                return base_windows(rows[i], r, c, half)
         return dataclasses.replace(table, loader=_rows_loader(base, rows), windows=windows)
 
     @classmethod
@@ -151,10 +165,16 @@ class DepthFrameTable(ColumnTable):
         load = _concat_loader([t.loader for t in parts], offsets, "DepthFrameTable part has no pixel loader")
         kept = [t.windows for t in parts]
 
-        def windows(i: int, r: IntArray, c: IntArray, half: int) -> npt.NDArray[np.float32] | None:
-            k, row = _part_of(offsets, i)
-            inner = kept[k]
-            return None if inner is None else inner(row, r, c, half)
+        def windows(i: IntArray, r: IntArray, c: IntArray, half: int) -> tuple[npt.NDArray[np.float32],
+                                                                              npt.NDArray[np.bool_]]:
+            size = 2 * half + 1
+            out, found = np.empty((i.size, size, size), dtype=np.float32), np.zeros(i.size, dtype=bool)
+            part = np.searchsorted(offsets, i, side="right") - 1
+            for k, inner in enumerate(kept):
+                mine = np.flatnonzero(part == k)
+                if inner is not None and mine.size:
+                    out[mine], found[mine] = inner(i[mine] - offsets[k], r[mine], c[mine], half)
+            return out, found
 
         any_kept = any(w is not None for w in kept)
         return dataclasses.replace(merged, loader=load if parts else None, windows=windows if any_kept else None)

@@ -23,8 +23,9 @@ def _tf_log(path: Path, n: int = 200) -> Path:
     return write_log(Timeline(transforms=tf), path, container="mcap-ros2", chain=CHAIN)
 
 
-def _small_chunks_mcap(path: Path, n: int = 300) -> Path:
-    """An MCAP with many small chunks (so a cut or a corrupt chunk loses only part)."""
+def _small_chunks_mcap(path: Path, n: int = 300, compression: str = "") -> Path:
+    """An MCAP with many small chunks (so a cut or a corrupt chunk loses only part), stored uncompressed
+    or compressed (``zstd``, ``lz4``)."""
     from mcap.writer import CompressionType, Writer
 
     from framechain.adapters.formats.msgdefs import typestore
@@ -33,7 +34,7 @@ def _small_chunks_mcap(path: Path, n: int = 300) -> Path:
     T = ts.types
     text = ts.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0]
     with path.open("wb") as f:
-        w = Writer(f, chunk_size=2048, compression=CompressionType.NONE)
+        w = Writer(f, chunk_size=2048, compression=CompressionType[compression.upper() or "NONE"])
         w.start(profile="ros2")
         sid = w.register_schema("tf2_msgs/msg/TFMessage", "ros2msg", text.encode())
         cid = w.register_channel("/tf", "cdr", sid)
@@ -85,6 +86,33 @@ def test_corrupt_chunk_is_skipped_and_counted(tmp_path: Path) -> None:
     assert len(loaded.timeline.transforms) == 300 - lost
     note = next(x for x in loaded.info.notes if "CRC mismatch" in x)
     assert f"chunk at byte {victim.chunk_start_offset}" in note
+    assert f"{lost} messages lost (/tf {lost})" in note
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4"])
+def test_damaged_compressed_chunk_is_skipped_and_counted(tmp_path: Path, compression: str) -> None:
+    """A compressed chunk is checked by its decompressor (not its CRC): a damaged frame loses that
+    chunk's messages, counted, and nothing else."""
+    from mcap.reader import make_reader
+
+    src = _small_chunks_mcap(tmp_path / "c.mcap", compression=compression)
+    with src.open("rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    victim = sorted(chunks, key=lambda c: c.chunk_start_offset)[2]
+    assert victim.compression == compression
+    data = bytearray(src.read_bytes())
+    # The chunk record: opcode, length, start and end times, uncompressed size, CRC, compression, records,
+    # which start with the frame's magic number.
+    records = victim.chunk_start_offset + 9 + 8 + 8 + 8 + 4 + 4 + len(compression) + 8
+    data[records : records + 4] = b"\x00\x00\x00\x00"
+    src.write_bytes(bytes(data))
+    loaded = open_log(src)
+    times = T0 + np.arange(300) * 10_000_000
+    lost = int(((times >= victim.message_start_time) & (times <= victim.message_end_time)).sum())
+    assert lost > 0
+    assert len(loaded.timeline.transforms) == 300 - lost
+    note = next(x for x in loaded.info.notes if f"chunk at byte {victim.chunk_start_offset}" in x)
+    assert "unreadable" in note
     assert f"{lost} messages lost (/tf {lost})" in note
 
 

@@ -114,3 +114,38 @@ def test_a_larger_window_than_kept_is_cut_from_the_frame(tmp_path: Path) -> None
     b = replay(loaded.timeline.replace(depth_frames=without), frames, options=opts)
     _same_depths(a, b)
     assert kept_calls  # 9 x 9 is more than the read kept
+
+
+def test_kept_windows_are_the_frames_cut_whole_wherever_they_were_kept() -> None:
+    """The keeper's windows for many frames at once (repeated centres, centres at the border, frames in
+    depth units and in metres, windows never kept) equal the windows cut from the converted frames."""
+    from framechain.adapters.messages.depth import DepthWindowKeeper, pixels_to_metres
+    from framechain.timeline import pixel_windows
+
+    rng = np.random.default_rng(3)
+    h, w, n = 12, 16, 6
+    raws = [rng.integers(0, 5000, (h, w)).astype(np.uint16) if i % 2 else rng.random((h, w)).astype(np.float32)
+            for i in range(n)]
+    keeper = DepthWindowKeeper()
+    for i, raw in enumerate(raws):
+        keeper.add_frame(i, "cam", 1000 * i, 1000 * i, raw)
+    # Per frame two detections at its stamp (one at the image's corner), and one repeated.
+    u = np.array([[3.0, 15.4, 3.0][k] for _ in range(n) for k in range(3)])
+    v = np.array([[5.0, 0.2, 5.0][k] for _ in range(n) for k in range(3)])
+    stamps = [1000 * i for i in range(n) for _ in range(3)]
+    keeper.add_observations(["cam"] * len(stamps), stamps, stamps, u, v)
+    keeper.settle(final=True)
+    read_rows = [4, 2, 0, 1, 3, 5]  # table row -> read row
+    units = [0.001, 0.002, 0.001, 0.003, 0.001, 0.001]
+    windows = keeper.lookup(read_rows, units)
+    frames = np.array([0, 0, 1, 5, 5, 3, 3, 2, 4, 4])
+    rows = np.array([5, 0, 5, 0, 7, 5, 5, 0, 5, 0])  # (7, 15) and (0, 3) were never kept
+    cols = np.array([3, 15, 3, 15, 15, 3, 3, 15, 3, 3])
+    for half in (0, 2, 3, 4):
+        got, found = windows(frames, rows, cols, half)
+        assert found.tolist() == ([half <= 3] * 4 + [False] + [half <= 3] * 4 + [False])
+        for k in np.flatnonzero(found).tolist():
+            table_row = int(frames[k])
+            image = pixels_to_metres(raws[read_rows[table_row]], units[table_row])
+            want = pixel_windows(image, rows[k : k + 1], cols[k : k + 1], half)[0]
+            assert got[k].tobytes() == want.tobytes()

@@ -351,3 +351,41 @@ def test_depth_frames_fetched_by_location_equal_the_written_ones(
         # 16UC1 millimetres: the written metres rounded to the millimetre.
         want = np.where(np.isfinite(expected.load(i)) & (expected.load(i) > 0), np.rint(expected.load(i) * 1000), 0)
         np.testing.assert_array_equal(depth.load(i), (want * np.float32(0.001)).astype(np.float32))
+
+
+@pytest.mark.parametrize("index", ["message indexes", "chunk index only"])
+def test_fetch_finds_each_of_equal_log_times_across_chunks(index: str, tmp_path: Path) -> None:
+    """Messages sharing a log time, in several chunks and beside another topic at the same times:
+    the ordinal-th fetched at a time is the ordinal-th written at it (file order)."""
+    from mcap.writer import IndexType, Writer
+
+    msgs = Msgs(ros1=False)
+    text = msgs.ts.generate_msgdef(POINT, ros_version=2)[0]
+    path = tmp_path / "equal_times.mcap"
+    written: list[tuple[int, float]] = []
+    with path.open("wb") as f:
+        w = Writer(f, chunk_size=512, index_types=IndexType.ALL if index == "message indexes" else IndexType.CHUNK)
+        w.start(profile="ros2")
+        sid = w.register_schema(POINT, "ros2msg", text.encode())
+        wanted, other = w.register_channel("/wanted", "cdr", sid), w.register_channel("/other", "cdr", sid)
+        for i in range(60):
+            t = NS + (i // 7) * 1000  # runs of 7 messages at one log time, spanning chunks
+            for channel, k in ((other, 100 + i), (wanted, i)):
+                data = msgs.ts.serialize_cdr(msgs.point(k, "cam"), POINT)
+                w.add_message(channel, log_time=t, publish_time=t, data=bytes(data))
+            written.append((t, 1.0 / (i + 1)))
+        w.finish()
+    log = mcap_log.McapLog(path)
+    try:
+        assert len(log.summary.chunk_indexes) > 5
+        assert any(ci.message_index_offsets for ci in log.summary.chunk_indexes) == (index == "message indexes")
+        for i in (59, 0, 13, 14, 20, 6, 7, 33):  # out of order too
+            t = written[i][0]
+            ordinal = sum(1 for s, _ in written[:i] if s == t)
+            assert log.fetch("/wanted", t, ordinal).point.x == written[i][1]
+        with pytest.raises(mcap_log.CorruptLogError, match="not found on re-read"):
+            log.fetch("/wanted", written[0][0], 7)
+        with pytest.raises(mcap_log.CorruptLogError, match="not found on re-read"):
+            log.fetch("/wanted", NS + 1, 0)
+    finally:
+        log.close()

@@ -110,8 +110,8 @@ def test_depth_frames_are_decoded_lazily_and_only_where_needed(
     calls: list[tuple[str, int]] = []
     real = api._fetcher
 
-    def counting(fmt: str, target: Path):  # type: ignore[no-untyped-def]
-        inner = real(fmt, target)
+    def counting(fmt: str, target: Path, *more: object):  # type: ignore[no-untyped-def]
+        inner = real(fmt, target, *more)
 
         def fetch(topic: str, log_ns: int, ordinal: int) -> object:
             calls.append((topic, log_ns))

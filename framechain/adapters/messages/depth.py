@@ -199,32 +199,52 @@ class DepthWindowKeeper:
 
     def lookup(self, read_rows: Sequence[int], units_m: Sequence[float]) -> DepthWindows:
         """DepthFrameTable.windows for table row i = read row ``read_rows[i]`` in depth units ``units_m[i]``."""
-        order = np.argsort(np.concatenate([np.zeros(0, dtype=np.int64), *self._rows]), kind="stable")
-        rows = np.concatenate([np.zeros(0, dtype=np.int64), *self._rows])[order]
-        centres = np.concatenate([np.zeros((0, 2), dtype=np.int64), *self._centres])[order]
+        rows = np.concatenate([np.zeros(0, dtype=np.int64), *self._rows])
+        centres = np.concatenate([np.zeros((0, 2), dtype=np.int64), *self._centres])
         size = 2 * KEEP_HALF + 1
-        kept = np.concatenate([np.zeros((0, size, size), dtype=np.float32), *self._windows])[order]
-        in_units = np.concatenate([np.zeros(0, dtype=bool), *self._in_units])[order]
+        kept = np.concatenate([np.zeros((0, size, size), dtype=np.float32), *self._windows])
+        in_units = np.concatenate([np.zeros(0, dtype=bool), *self._in_units])
         self._rows, self._centres, self._windows, self._in_units = [], [], [], []
+        read_of = np.asarray(read_rows, dtype=np.int64).reshape(-1)
+        units = np.asarray(units_m, dtype=np.float32).reshape(-1)  # as np.float32(units) would round each
 
-        def windows(i: int, centre_rows: IntArray, centre_cols: IntArray, half: int) -> npt.NDArray[np.float32] | None:
-            read_row = int(read_rows[i])
-            lo, hi = np.searchsorted(rows, [read_row, read_row + 1])
-            if lo == hi or half > KEEP_HALF:
-                return None
-            mine = centres[lo:hi]
-            same = (mine[None, :, 0] == centre_rows[:, None]) & (mine[None, :, 1] == centre_cols[:, None])
-            if not same.any(axis=1).all():
-                return None
-            at = lo + same.argmax(axis=1)
+        def windows(frames: IntArray, centre_rows: IntArray, centre_cols: IntArray,
+                    half: int) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+            out = np.zeros((frames.size, 2 * half + 1, 2 * half + 1), dtype=np.float32)
+            if half > KEEP_HALF or not rows.size:
+                return out, np.zeros(frames.size, dtype=bool)
+            at = _first_match(rows, centres, read_of[frames], centre_rows, centre_cols)
+            found = at >= 0
+            hit = at[found]
             cut = KEEP_HALF - half
-            part = kept[at, cut : size - cut, cut : size - cut]
-            if in_units[lo]:  # as pixels_to_metres converts the frame: float32 values times float32 units
-                metres: npt.NDArray[np.float32] = np.multiply(part, np.float32(units_m[i]), dtype=np.float32)
-                return metres
-            return part
+            part = kept[hit, cut : size - cut, cut : size - cut]
+            # As pixels_to_metres converts the frame: float32 values times float32 units.
+            scaled = in_units[hit]
+            part[scaled] = np.multiply(part[scaled], units[frames[found][scaled]][:, None, None], dtype=np.float32)
+            out[found] = part
+            return out, found
 
         return windows
+
+
+def _first_match(rows: IntArray, centres: IntArray, want_rows: IntArray, want_r: IntArray,
+                 want_c: IntArray) -> IntArray:
+    """Per wanted (read row, centre row, centre col): the first kept window with those, in keeping order (-1: none)."""
+    k = rows.size
+    key_row = np.concatenate([rows, want_rows])
+    key_r = np.concatenate([centres[:, 0], np.asarray(want_r, dtype=np.int64)])
+    key_c = np.concatenate([centres[:, 1], np.asarray(want_c, dtype=np.int64)])
+    wanted = np.r_[np.zeros(k, dtype=bool), np.ones(want_rows.size, dtype=bool)]
+    position = np.r_[np.arange(k), np.arange(want_rows.size)]
+    # Equal keys together, kept windows first and in keeping order: a group's first is the match.
+    order = np.lexsort((position, wanted, key_c, key_r, key_row))
+    r, c, w = key_row[order], key_r[order], key_c[order]
+    starts = np.r_[True, (r[1:] != r[:-1]) | (c[1:] != c[:-1]) | (w[1:] != w[:-1])]
+    first = order[np.maximum.accumulate(np.where(starts, np.arange(order.size), 0))]
+    match = np.full(want_rows.size, -1, dtype=np.int64)
+    asks = wanted[order]
+    match[position[order][asks]] = np.where(first[asks] < k, first[asks], -1)
+    return match
 
 
 def parse_ros1_image(raw: bytes | memoryview) -> SimpleNamespace:

@@ -1,9 +1,9 @@
 """Standalone MCAP files: ROS 2 (cdr), ROS 1 (ros1) and Foxglove (protobuf, JSON) encodings.
 
 Reading is one pass, chunk by chunk through the chunk index: topics nobody asked for are skipped
-without decompression where the index allows, each chunk is decompressed once and its CRC
-checked (zlib-ng's crc32), and a corrupt chunk is skipped and counted (from its message index)
-instead of ending the read. Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo,
+without decompression where the index allows, each chunk is decompressed once (an uncompressed
+one has its CRC checked with zlib-ng's crc32, a compressed one is checked by its decompressor),
+and a corrupt chunk is skipped and counted (from its message index) instead of ending the read. Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo,
 PointStamped, Detection2DArray) are decoded many at a time by their byte layout. The pixel
 windows the detections need are cut from the depth frames during the pass (the collector's
 DepthWindowKeeper); a frame whose window was not kept is fetched later by its location (chunk
@@ -60,9 +60,13 @@ class _Channel:
 
 
 class McapLog:
-    """One MCAP file opened for reading (a context manager)."""
+    """One MCAP file opened for reading (a context manager).
 
-    def __init__(self, path: Path) -> None:
+    ``summary``: the file's summary section as an earlier reader of the same file parsed it (a
+    reader that re-opens the file to fetch frames need not parse it again).
+    """
+
+    def __init__(self, path: Path, summary: Any = None) -> None:
         from mcap.exceptions import McapError
 
         self.path = path
@@ -85,7 +89,7 @@ class McapLog:
 
             reader = SeekingReader(self._f)
             self.profile = reader.get_header().profile
-            self.summary = reader.get_summary()
+            self.summary = summary if summary is not None else reader.get_summary()
         except (McapError, struct.error, ValueError, OSError):
             self.truncated = True
             self.summary = None
@@ -97,7 +101,8 @@ class McapLog:
         self._stores: dict[int, tuple[Any, str, bool]] = {}
         self._scanned = False
         self._where: dict[str, _Locations] = {}
-        self._chunk_by_offset: dict[int, Any] = {}
+        #: The chunk indexes in file order, with their (first, last) log times (built on the first fetch).
+        self._chunk_order: tuple[list[Any], npt.NDArray[np.uint64]] | None = None
         self._fetch_chunk: tuple[int, bytes] | None = None
         self._zstd: Any = None
         #: What a linear scan salvaged and lost (None until one ran, or when nothing was damaged).
@@ -261,7 +266,13 @@ class McapLog:
         return compression, memoryview(body)[pos : pos + records_len], uncompressed_size, crc
 
     def _chunk_data(self, ci: Any, *, check_crc: bool = True) -> bytes:
-        """The decompressed records of a chunk, its CRC checked (CRCValidationError when it differs)."""
+        """The decompressed records of a chunk, checked for damage (an exception when damaged).
+
+        A chunk stored uncompressed has its CRC checked (CRCValidationError): nothing else would see
+        damage. A compressed one is checked by its decompressor, which rejects a damaged frame; its
+        CRC is not computed, as mcap's own readers do not by default: over a log of depth images it
+        cost a tenth of the read. (The salvage scan of a file without a usable index checks every CRC.)
+        """
         from mcap.stream_reader import CRCValidationError
 
         compression, raw, uncompressed_size, crc = self._chunk_body(ci)
@@ -273,7 +284,7 @@ class McapLog:
             data: bytes = self._zstd.decompress(raw, max_output_size=uncompressed_size)
         else:
             data = _decompress(compression, raw, uncompressed_size)
-        if check_crc and crc != 0 and _crc32(data) != crc:
+        if check_crc and not compression and crc != 0 and _crc32(data) != crc:
             from mcap.records import Chunk
 
             chunk = Chunk(compression=compression, data=b"", message_end_time=0, message_start_time=0,
@@ -367,22 +378,14 @@ class McapLog:
         """The decoded message of ``topic`` at ``log_time_ns`` (the ordinal-th of equal times)."""
         if not self.indexed:
             return self._fetch_linear(topic, log_time_ns, ordinal)
-        where = self._locations(topic)
-        times = where.log_time_ns
-        first = int(np.searchsorted(times, log_time_ns, side="left"))
-        row = first + ordinal
-        if row >= times.size or int(times[row]) != log_time_ns:
-            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read",
-                                  topic=topic)
-        chunk_offset = int(where.chunk_offset[row])
+        chunk, start = self._locate(topic, log_time_ns, ordinal)
+        chunk_offset = int(chunk.chunk_start_offset)
         if self._fetch_chunk is None or self._fetch_chunk[0] != chunk_offset:
             # Frames are asked for in time order and neighbours share chunks: keep the last one.
             # The read that found this frame checked the chunk's CRC: a re-read does not again.
             # (zstd's streaming reader could stop at the frame, but measured 7x slower than one call.)
-            chunk = self._chunk_by_offset[chunk_offset]
             self._fetch_chunk = (chunk_offset, self._chunk_data(chunk, check_crc=False))
         data = self._fetch_chunk[1]
-        start = int(where.record_offset[row])
         body = start + _RECORD_HEAD.size + _MESSAGE_HEAD.size
         if body > len(data):
             raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns is past its chunk's end",
@@ -394,6 +397,58 @@ class McapLog:
             raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not where its index says",
                                   topic=topic)
         return self.decoder(cid)(memoryview(data)[body:end])
+
+    def _locate(self, topic: str, log_time_ns: int, ordinal: int) -> tuple[Any, int]:
+        """The chunk holding the ``ordinal``-th message of ``topic`` at ``log_time_ns`` (equal times in
+        file order) and the message's offset in it.
+
+        Only the chunks whose time range holds that time are looked at, through their message index
+        records (a chunk written without them is searched once decompressed): a fetch reads a few
+        small records, not the index of the whole topic.
+        """
+        if self._chunk_order is None:
+            chunks = sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+            spans = np.array([(c.message_start_time, c.message_end_time) for c in chunks], dtype=np.uint64)
+            self._chunk_order = (chunks, spans.reshape(-1, 2))
+        chunks, spans = self._chunk_order
+        cids = {cid for cid, ch in self.channels.items() if ch.topic == topic}
+        t = np.uint64(log_time_ns)
+        candidates = np.flatnonzero((spans[:, 0] <= t) & (spans[:, 1] >= t)).tolist()
+        found: list[tuple[int, int]] = []  # (chunk, offset in it), in file order
+        for k in candidates:
+            found.extend((k, int(offset)) for offset in self._offsets_at(chunks[k], cids, log_time_ns))
+        found.sort()
+        if ordinal >= len(found):
+            raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not found on re-read",
+                                  topic=topic)
+        k, offset = found[ordinal]
+        return chunks[k], offset
+
+    def _offsets_at(self, ci: Any, cids: set[int], log_time_ns: int) -> npt.NDArray[np.int64]:
+        """Offsets in chunk ``ci`` of the channels' messages logged at ``log_time_ns``."""
+        if not ci.message_index_offsets:  # written without message indexes: find them in the chunk
+            try:
+                found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
+            except Exception:  # noted when the read met it
+                return np.zeros(0, dtype=np.int64)
+            return found[found[:, 0] == log_time_ns, 1]
+        offsets: list[npt.NDArray[np.int64]] = [np.zeros(0, dtype=np.int64)]
+        for cid, off in ci.message_index_offsets.items():
+            if cid in cids:
+                pairs = self._index_pairs(off)
+                offsets.append(pairs[pairs[:, 0] == log_time_ns, 1])
+        return np.concatenate(offsets)
+
+    def _index_pairs(self, offset: int) -> npt.NDArray[np.int64]:
+        """The (log time, offset in chunk) pairs of the message index record at file ``offset``, shape (n, 2)."""
+        # A MessageIndex record: opcode, length, channel id, entries length, (log time, offset) pairs.
+        self._f.seek(offset)
+        head = self._f.read(_RECORD_HEAD.size + 6)
+        if len(head) < _RECORD_HEAD.size + 6:
+            return np.zeros((0, 2), dtype=np.int64)
+        (entries_len,) = struct.unpack_from("<I", head, _RECORD_HEAD.size + 2)
+        entries = np.frombuffer(self._f.read(entries_len), dtype="<u8")
+        return entries[: entries.size // 2 * 2].reshape(-1, 2).astype(np.int64)
 
     def _locations(self, topic: str) -> _Locations:
         """Where each message of a topic lives (chunk, offset in it), sorted by log time then file order.
@@ -408,7 +463,6 @@ class McapLog:
         chunks: list[npt.NDArray[np.int64]] = []
         offsets: list[npt.NDArray[np.int64]] = []
         for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-            self._chunk_by_offset[int(ci.chunk_start_offset)] = ci
             if not ci.message_index_offsets:  # written without message indexes: find them in the chunk once
                 try:
                     found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
@@ -421,14 +475,7 @@ class McapLog:
             for cid, off in ci.message_index_offsets.items():
                 if cid not in cids:
                     continue
-                # A MessageIndex record: opcode, length, channel id, entries length, (log time, offset) pairs.
-                self._f.seek(off)
-                head = self._f.read(_RECORD_HEAD.size + 6)
-                if len(head) < _RECORD_HEAD.size + 6:
-                    continue
-                (entries_len,) = struct.unpack_from("<I", head, _RECORD_HEAD.size + 2)
-                entries = np.frombuffer(self._f.read(entries_len), dtype="<u8")
-                pairs = entries[: entries.size // 2 * 2].reshape(-1, 2).astype(np.int64)
+                pairs = self._index_pairs(off)
                 times.append(pairs[:, 0])
                 offsets.append(pairs[:, 1])
                 chunks.append(np.full(pairs.shape[0], int(ci.chunk_start_offset), dtype=np.int64))
