@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from framechain.analysis.alignment import AlignedEvidence
+from framechain.analysis.egomotion_run import CameraMotionEvidence
 from framechain.analysis.findings import AnalysisError, Attribution, Finding, Unattributed
 from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer
@@ -48,6 +49,8 @@ class Run:
     suggestion: Any = None  # the suggestion (placeholders, what the log lacks) when no chain was given
     info: Any = None  # the adapter's LogInfo (format, topics, span, notes) when read from a robot log
     notes: tuple[str, ...] = ()  # what the reader noticed (a topic the chain names but the log lacks, ...)
+    #: each camera's own motion against the frame tree (None: no camera has images, or not attributed)
+    camera_motion: CameraMotionEvidence | None = None
 
     @property
     def findings(self) -> tuple[Finding, ...]:

@@ -36,7 +36,8 @@ from framechain.arrays import FloatArray
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
 from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
 
-__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads"]
+__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads",
+           "write_robot_yaml"]
 
 ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 #: A pose with the gripper reaching forward and down over the table.
@@ -72,6 +73,8 @@ class VideoDatasetSpec:
     focal_scale: float = 1.0
     repeat_share: float = 0.0
     pads: bool = True
+    #: The arms hold still (a camera that shows nothing of its motion).
+    still: bool = False
 
 
 @dataclass(frozen=True)
@@ -100,9 +103,9 @@ class VideoDatasetTruth:
         return -self.spec.video_delay_s
 
 
-def _trajectory(rng: np.random.Generator) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _trajectory(rng: np.random.Generator, *, still: bool = False) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed)."""
-    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2))
+    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2)) * (0.0 if still else 1.0)
     omega = rng.uniform(0.8, 2.2, (5, 2))
     phase = rng.uniform(0.0, 2 * np.pi, (5, 2))
     return amplitude, omega, phase
@@ -165,7 +168,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     t = np.arange(n) / spec.fps
     episodes, videos, repeated = [], [], []
     for _e in range(spec.episodes):
-        motions = {arm: _trajectory(rng) for arm in arms}
+        motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
         captured = _joints(motions[spec.camera_arm], t - spec.video_delay_s)
         world_from_cam = bases[spec.camera_arm] @ chain.root_from_link(
@@ -222,3 +225,40 @@ def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDat
     else:
         encode_video(root / f"videos/{key}/chunk-000/file-000.mp4", np.concatenate(videos), fps=spec.fps,
                      codec=spec.codec, options=_FAST.get(spec.codec))
+
+
+def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[str, object] | None = None) -> Path:
+    """robot.yaml as a user would write it for the dataset: the URDF, the joints (degrees, the gripper
+    0-100), each arm's base, and the wrist camera with its *declared* intrinsics, mount and arm."""
+    import yaml
+
+    spec = truth.spec
+    _fx, _fy, cx, cy = truth.intrinsics
+
+    def joints(arm: str) -> dict[str, object]:
+        out: dict[str, object] = {f"{arm}{j}.pos": j for j in ARM_JOINTS}
+        out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
+        return out
+
+    camera = {
+        "intrinsics": {"fx": truth.declared_focal_px, "fy": truth.declared_focal_px, "cx": cx, "cy": cy,
+                       "width": spec.width, "height": spec.height},
+        "mount": {"parent": truth.declared_link, "xyz": [float(v) for v in truth.xyz_link_cam],
+                  "quat_xyzw": [float(v) for v in truth.declared_q_link_cam], "optical": True},
+        "video_key": truth.video_key,
+    }
+    config: dict[str, object] = {"state_feature": "observation.state"}
+    if truth.arms == ("",):
+        config.update(urdf=str(spec.urdf), default_unit="deg", joints=joints(""))
+    else:
+        bases = _base_poses(truth.arms)
+        config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": "deg",
+                                            "world_from_base": {"xyz": [float(v) for v in bases[arm][:3, 3]],
+                                                                "rpy": [0.0, 0.0, 0.0]},
+                                            "joints": joints(arm)}
+                          for arm in truth.arms}
+    config["cameras"] = {"wrist": camera}
+    config.update(extra or {})
+    out = Path(path)
+    out.write_text(yaml.safe_dump(config, sort_keys=False))
+    return out

@@ -46,8 +46,13 @@ class FindingView:
     def cells(self) -> FindingCells:
         f = self.finding
         return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
-                            interval=format_interval(f.interval), share=f"{f.share:.0%}", error=mm(f.error_m),
+                            interval=format_interval(f.interval), share=f"{f.share:.0%}", error=self.error(),
                             confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix)
+
+    def error(self) -> str:
+        """The error the finding explains: millimetres, or deg/s of a camera's rotation rate."""
+        f = self.finding
+        return mm(f.error_m) if f.error_unit == "m" else f"{f.error_m:.2f} {f.error_unit}"
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
@@ -66,7 +71,8 @@ class FindingView:
         if self.finding.interval:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
-        return f"{c.fault} on {c.hop}; {estimate}; {size}."
+        camera = f" on camera {self.finding.camera}" if self.finding.camera else ""
+        return f"{c.fault} on {c.hop}{camera}; {estimate}; {size}."
 
 
 #: The style of the HTML reports (one log's and the fleet's).

@@ -48,7 +48,7 @@ from framechain.adapters.lerobot.format import (
     is_lerobot_dataset,
 )
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.robot.binding import joint_positions, robot_model
+from framechain.adapters.robot.binding import arm_root, joint_positions, robot_model
 from framechain.adapters.robot.kinematics import RobotModel
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
@@ -152,7 +152,9 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
     zeroed = [j for j in model.actuated if j not in driven and j not in held]
-    chain = cfg.chain_config(root=model.root) if cfg.cameras else None
+    camera = cfg.cameras.get(cfg.chain_camera or next(iter(cfg.cameras), ""))
+    chain = cfg.chain_config(root=arm_root(cfg, model, camera.mount.parent if camera else None)) \
+        if cfg.cameras else None
     state_ns = frames.stamp_ns
     return {
         "format": FORMAT,
@@ -175,6 +177,7 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
         "cameras": {
             name: {
                 "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
+                "xyz": list(cam.mount.translation), "source": cam.source,
                 "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
                                                        "timestamp_column": cam.timing.timestamp_column},
                 "video_file": _video_file(frames, cam.video_key),
@@ -205,6 +208,8 @@ def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArr
 
 
 def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
+    if model.root == cfg.world_frame:  # several arms: their bases hang from the world in the model
+        return TransformTable.empty()
     return TransformTable.from_rows(
         cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
         is_static=True, source=f"{cfg.source}:world_from_base",
