@@ -219,10 +219,13 @@ def run(
             why = None
         except AnalysisError as err:
             why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
-        if motion is not None:
+        if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
+            # A camera that moves is measured: evidence whatever else the log lacks.
             unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)
             attribution, why = with_camera_motion(replayed, loaded.chain, attribution, motion, seed=seed), None
             attribution = replace(attribution, notes=(*unattributed, *attribution.notes))
+        elif motion is not None and why is not None:  # only fixed cameras: they cannot stand in for detections
+            why = NotAttributed(why.reason, "; ".join([why.detail, *(c.why_not for c in motion.cameras)]))
         if attribution is not None:
             attribution = _as_read(loaded, attribution)
     return Run(

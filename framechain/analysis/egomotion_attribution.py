@@ -4,7 +4,7 @@ A run with points to measure the chain against (logged hops, a target, a referen
 is attributed from them; what each measured camera's motion says then travels with it as the
 ``camera_motion`` entries and notes (its metric is another one: shares do not mix). A run with none
 (an episode as recorded: joint states and videos, no detections) is attributed from the cameras'
-motion alone: metric ``camera_motion``, findings with shares of the rotation-rate misfit
+motion alone when some camera moves (a camera fixed in the world cannot stand in for them): metric ``camera_motion``, findings with shares of the rotation-rate misfit
 (:mod:`framechain.analysis.egomotion_findings`).
 """
 
@@ -31,7 +31,8 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
                        evidence: CameraMotionEvidence, *, seed: int = 0) -> Attribution:
     """``attribution`` (None: there is none) with what the cameras' motion says (see the module docstring)."""
     metadata = replayed.timeline.metadata
-    if attribution is not None and attribution.metric != "none":
+    moving = any(c.fit is not None for c in evidence.cameras)
+    if attribution is not None and (attribution.metric != "none" or not moving):
         measured = CameraMotionEvidence(cameras=tuple(c for c in evidence.cameras if c.fit is not None))
         if not measured.cameras:
             return attribution

@@ -75,6 +75,8 @@ class VideoDatasetSpec:
     pads: bool = True
     #: The arms hold still (a camera that shows nothing of its motion).
     still: bool = False
+    #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
+    codec_options: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -218,13 +220,14 @@ def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -
 
 def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDatasetSpec) -> None:
     """One mp4 per episode (v2.1), or the episodes back to back in one file (v3.0, as the writer's metadata says)."""
+    options = {**_FAST.get(spec.codec, {}), **dict(spec.codec_options)}
     if spec.version == "v2.1":
         for e, frames in enumerate(videos):
             encode_video(root / f"videos/chunk-000/{key}/episode_{e:06d}.mp4", frames, fps=spec.fps, codec=spec.codec,
-                         options=_FAST.get(spec.codec))
+                         options=options)
     else:
         encode_video(root / f"videos/{key}/chunk-000/file-000.mp4", np.concatenate(videos), fps=spec.fps,
-                     codec=spec.codec, options=_FAST.get(spec.codec))
+                     codec=spec.codec, options=options)
 
 
 def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[str, object] | None = None) -> Path:
