@@ -4,7 +4,8 @@ A run with points to measure the chain against (logged hops, a target, a referen
 is attributed from them; what each measured camera's motion says then travels with it as the
 ``camera_motion`` entries and notes (its metric is another one: shares do not mix). A run with none
 (an episode as recorded: joint states and videos, no detections) is attributed from the cameras'
-motion alone when some camera moves (a camera fixed in the world cannot stand in for them): metric ``camera_motion``, findings with shares of the rotation-rate misfit
+motion alone when some camera moves (a camera fixed in the world cannot stand in for them): metric
+``camera_motion``, findings with shares of the rotation-rate misfit
 (:mod:`framechain.analysis.egomotion_findings`).
 """
 

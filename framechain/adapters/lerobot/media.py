@@ -99,7 +99,8 @@ def _remux(path: str, file_ns: IntArray, stamps_ns: IntArray) -> EncodedFrames |
             return f"{codec} is not H.264 or H.265"
         start, end = int(file_ns.min()), int(file_ns.max())
         half = round(0.5e9 / float(stream.average_rate or 30))
-        container.seek(max(int(Fraction(start - half, 1_000_000_000) / stream.time_base), 0), stream=stream,
+        base = stream.time_base or Fraction(1, 90_000)
+        container.seek(max(int(Fraction(start - half, 1_000_000_000) / base), 0), stream=stream,
                        backward=True, any_frame=False)
         packets = _annexb_packets(container, stream, _ANNEXB[codec][0], start - half, end + half)
         rate = float(stream.average_rate or 30)
