@@ -69,7 +69,14 @@ from typing import Any
 
 from framechain.config import plausible
 from framechain.config.calibration import CameraCalibration, load_calibration
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, latency_budget, parse_evidence
+from framechain.config.chain import (
+    ChainConfig,
+    ChainEvidence,
+    ChainFrames,
+    ChainTopics,
+    latency_budget,
+    parse_evidence,
+)
 from framechain.config.errors import RobotConfigError
 from framechain.config.schema import Section, read_yaml, show
 
@@ -236,7 +243,10 @@ class RobotConfig:
             raise RobotConfigError(self.source, f"chain: camera, body and world must be three different frames, got "
                                    f"{frames.camera!r}, {frames.body!r}, {frames.world!r}")
         robot = {"config": str(Path(self.source).resolve())} if Path(self.source).is_file() else None
-        return ChainConfig(frames=frames, evidence=self.evidence or ChainEvidence(),
+        evidence = self.evidence or ChainEvidence()
+        # Markers are searched in the chain camera's frames: its video (or image) feature is the image topic.
+        topics = ChainTopics(image=self.cameras[name].video_key) if evidence.markers is not None else ChainTopics()
+        return ChainConfig(frames=frames, evidence=evidence, topics=topics,
                            latency_budget_s=0.02 if self.latency_budget_s is None else self.latency_budget_s,
                            robot=robot, origin=Path(self.source).name, notes=self.notes)
 

@@ -75,6 +75,10 @@ class VideoDatasetSpec:
     pads: bool = True
     #: The arms hold still (a camera that shows nothing of its motion).
     still: bool = False
+    #: A marker lying on the table under the camera's mean view (0: none): its side (m), id, dictionary.
+    marker_size_m: float = 0.0
+    marker_id: int = 7
+    marker_dictionary: str = "DICT_4X4_50"
     #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
     codec_options: tuple[tuple[str, str], ...] = ()
 
@@ -98,6 +102,8 @@ class VideoDatasetTruth:
     declared_focal_px: float
     #: Per episode: the frames (in order) that repeat the previous one.
     repeated: tuple[tuple[int, ...], ...] = field(default_factory=tuple)
+    #: The marker's centre in the world (NaN: none).
+    marker_xyz: tuple[float, float, float] = (float("nan"), float("nan"), float("nan"))
 
     @property
     def expected_offset_s(self) -> float:
@@ -169,12 +175,15 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     n = round(spec.duration_s * spec.fps)
     t = np.arange(n) / spec.fps
     episodes, videos, repeated = [], [], []
-    for _e in range(spec.episodes):
+    marker = (float("nan"),) * 3
+    for e in range(spec.episodes):
         motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
         captured = _joints(motions[spec.camera_arm], t - spec.video_delay_s)
         world_from_cam = bases[spec.camera_arm] @ chain.root_from_link(
             dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{spec.camera_arm}gripper_link") @ mount
+        if e == 0 and spec.marker_size_m > 0:
+            marker = _place_marker(scene, world_from_cam, spec)
         frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
@@ -202,8 +211,22 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         q_link_cam=Rotation.from_matrix(mount[:3, :3]).as_quat(),
         declared_q_link_cam=Rotation.from_matrix(declared_mount[:3, :3]).as_quat(),
         xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float), intrinsics=(spec.focal_px, spec.focal_px, cx, cy),
-        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated),
+        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated), marker_xyz=marker,
     )
+
+
+def _place_marker(scene: TexturedScene, world_from_cam: FloatArray, spec: VideoDatasetSpec) -> tuple[float, ...]:
+    """Paint the marker where the optical axis meets the table, on median over the first episode."""
+    import cv2
+
+    axis = world_from_cam[:, :3, 2]
+    centre = world_from_cam[:, :3, 3]
+    down = axis[:, 2] < -0.1
+    depth = -centre[down, 2] / axis[down, 2]
+    hits = centre[down, :2] + depth[:, None] * axis[down, :2]
+    x, y = (float(v) for v in np.median(hits, axis=0))
+    scene.paint_marker(int(getattr(cv2.aruco, spec.marker_dictionary)), spec.marker_id, (x, y), spec.marker_size_m)
+    return (x, y, 0.0)
 
 
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}

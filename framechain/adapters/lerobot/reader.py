@@ -47,12 +47,13 @@ from framechain.adapters.lerobot.format import (
     Layout,
     is_lerobot_dataset,
 )
+from framechain.adapters.lerobot.markers import video_markers
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.adapters.robot.binding import arm_root, joint_positions, robot_model
 from framechain.adapters.robot.kinematics import RobotModel
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
-from framechain.config.chain import ChainConfig
+from framechain.config.chain import ChainConfig, MarkerSpec
 from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
 from framechain.timeline import (
     CameraTable,
@@ -78,12 +79,15 @@ def open_dataset(
     robot: RobotConfig | str | Path,
     detections: str | Path | None = None,
     strict: bool = False,
+    markers: MarkerSpec | None = None,
 ) -> Timeline:
     """Read episode ``episode`` of the LeRobot dataset at ``path`` into a Timeline.
 
     ``robot`` is a :class:`RobotConfig` or the path of robot.yaml; ``detections`` adds a side
     table (Parquet or CSV) to those robot.yaml names. ``strict`` turns metadata notes (harmless
-    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`.
+    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`. ``markers`` (else
+    robot.yaml's ``chain.evidence.markers``) are searched in the chain camera's frames
+    (:mod:`framechain.adapters.lerobot.markers`) and become observations too.
     """
     cfg = robot if isinstance(robot, RobotConfig) else RobotConfig.load(robot)
     reader = DatasetReader(path, strict=strict)
@@ -119,9 +123,34 @@ def open_dataset(
         _video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
         if cam.video_key is not None and cam.video_key in frames.episode.video_files
     ])
+    metadata = _metadata(Path(path), episode, cfg, model, reader, frames)
+    spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
+    if spec is not None:
+        observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
     return Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                    joint_states=joint_states, depth_frames=depth, image_frames=videos,
-                    metadata=_metadata(Path(path), episode, cfg, model, reader, frames))
+                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
+
+
+def _with_markers(observations: ObservationTable, images: ImageFrameTable, cameras: CameraTable, cfg: RobotConfig,
+                  spec: MarkerSpec, metadata: dict[str, Any]) -> ObservationTable:
+    """The markers in the chain camera's frames added as observations (their corners in the metadata)."""
+    name = cfg.chain_camera or next((n for n, c in cfg.cameras.items() if c.video_key is not None), None)
+    cam = cfg.cameras.get(name or "")
+    if cam is None or cam.video_key is None:
+        raise RobotConfigError(cfg.source, "evidence.markers are searched in the chain camera's frames: give it a "
+                               "video_key")
+    found = video_markers(images, cameras, cam.optical_frame, spec, source=cam.video_key)
+    metadata["notes"] = [*metadata["notes"], *found.notes]
+    r = found.resolved
+    first = len(observations)
+    table = ObservationTable(
+        obs_id=np.arange(first, first + r.stamp_ns.size, dtype=np.int64), stamp_ns=r.stamp_ns,
+        log_time_ns=r.log_time_ns, camera_frame=r.camera_frame, u=r.u, v=r.v, depth_m=r.depth_m, label=r.label,
+        score=r.score, source=r.source)
+    side = dict(r.side)
+    position = np.searchsorted(r.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
+    metadata["fiducials"] = {"counts": r.counts, "corners": {"obs_id": (first + position).tolist(), **side}}
+    return ObservationTable.concat([observations, table])
 
 
 def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
@@ -496,7 +525,8 @@ class LeRobotAdapter:
         else:
             raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
                                "{episode: N, config: robot.yaml}")
-        timeline = open_dataset(path, episode=episode, robot=robot)
+        markers = chain.evidence.markers if chain is not None else None
+        timeline = open_dataset(path, episode=episode, robot=robot, markers=markers)
         info = scan_dataset(path, episode).with_notes(list(timeline.metadata.get("notes", [])))
         decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
         return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)

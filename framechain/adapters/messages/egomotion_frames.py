@@ -41,6 +41,7 @@ __all__ = [
     "camera_image_rows",
     "camera_motion_source",
     "camera_tracks",
+    "decode_grey",
     "image_cameras",
     "window_rows",
 ]
@@ -168,7 +169,7 @@ def camera_frames(images: ImageFrameTable, frame: str, *, max_frames: int = 600,
         total = camera_image_rows(images, frame).size
         notes.append(f"camera {frame}: {total} frames; its motion is measured on {picked.size} of them "
                      f"({windows.max() + 1} runs of {window} consecutive frames spread over the recording)")
-    grey, missing, decoded = _decode(images, rows)
+    grey, missing, decoded = decode_grey(images, rows)
     duplicate, black = _repeats_and_black(grey, missing)
     for what, flags in (("missing (no frame within half a frame period of the row's time)", missing),
                         ("duplicated (a repeat of the previous frame)", duplicate), ("black", black)):
@@ -210,7 +211,7 @@ def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTrac
                          fixed=np.concatenate(fixed).astype(np.int64) if fixed else np.zeros(0, dtype=np.int64))
 
 
-def _decode(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:
+def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:
     """Grey pixels of each row (black where missing), the missing rows, and how many frames were decoded."""
     grey: list[npt.NDArray[np.uint8] | None] = [None] * rows.size
     decoded = 0
