@@ -175,7 +175,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     n = round(spec.duration_s * spec.fps)
     t = np.arange(n) / spec.fps
     episodes, videos, repeated = [], [], []
-    marker = (float("nan"),) * 3
+    marker = (float("nan"), float("nan"), float("nan"))
     for e in range(spec.episodes):
         motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
@@ -215,7 +215,8 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     )
 
 
-def _place_marker(scene: TexturedScene, world_from_cam: FloatArray, spec: VideoDatasetSpec) -> tuple[float, ...]:
+def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
+                  spec: VideoDatasetSpec) -> tuple[float, float, float]:
     """Paint the marker where the optical axis meets the table, on median over the first episode."""
     import cv2
 

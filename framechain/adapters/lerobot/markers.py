@@ -56,4 +56,4 @@ def video_markers(images: ImageFrameTable, cameras: CameraTable, camera: str, sp
     if missing.any():
         notes.append(f"{source}: {int(missing.sum())} of {searched.size} frames could not be decoded for markers")
     resolved = resolve_fiducials(fiducials, cameras)
-    return VideoMarkers(resolved=resolved, notes=tuple((*notes, *resolved.notes)))
+    return VideoMarkers(resolved=resolved, notes=(*notes, *resolved.notes))
