@@ -79,6 +79,8 @@ class VideoDatasetSpec:
     marker_size_m: float = 0.0
     marker_id: int = 7
     marker_dictionary: str = "DICT_4X4_50"
+    #: Frames as an mp4 per key ("video"), or PNG bytes in the Parquet ("image", an HF Image feature).
+    storage: str = "video"
     #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
     codec_options: tuple[tuple[str, str], ...] = ()
 
@@ -192,18 +194,23 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         repeated.append(tuple(int(k) for k in repeats))
         videos.append(frames)
         action = np.concatenate([state[1:], state[-1:]])
-        episodes.append(EpisodeData(frames={"observation.state": state, "action": action}))
+        columns = {"observation.state": state, "action": action}
+        if spec.storage == "image":
+            columns[key] = np.array([_png(f) for f in frames], dtype=object)
+        episodes.append(EpisodeData(frames=columns))
     out = Path(root)
     features = {
         "observation.state": FeatureSpec("float32", (len(names),), list(names)),
         "action": FeatureSpec("float32", (len(names),), list(names)),
         key: FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
                          {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
-                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False}),
+                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
+        if spec.storage == "video" else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]),
     }
     write_lerobot_dataset(out, episodes, features=features, fps=spec.fps, version=spec.version,
                           robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")
-    _write_videos(out, key, videos, spec)
+    if spec.storage == "video":
+        _write_videos(out, key, videos, spec)
     declared_arm = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
     return VideoDatasetTruth(
         root=out, spec=spec, video_key=key, arms=arms, state_names=names,
@@ -233,6 +240,15 @@ def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
 #: Fast encoder presets: generation time, not file size, matters here.
 _FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"}}
+
+
+def _png(rgb: FloatArray) -> bytes:
+    import cv2
+
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError("cannot encode a frame as PNG")
+    return bytes(data.tobytes())
 
 
 def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:

@@ -120,8 +120,10 @@ def open_dataset(
     ])
     joint_states = _joint_states(cfg, q, state_ns, source_name)
     videos = ImageFrameTable.concat([
-        _video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
-        if cam.video_key is not None and cam.video_key in frames.episode.video_files
+        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
+          if cam.video_key is not None and cam.video_key in frames.episode.video_files),
+        *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
+          if cam.video_key is not None and cam.video_key in frames.columns),
     ])
     metadata = _metadata(Path(path), episode, cfg, model, reader, frames)
     spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
@@ -163,6 +165,9 @@ def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[Detectio
                                        f"{feat.dtype} feature, not video or image")
     columns = [cfg.state_feature]
     columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
+    # Frames stored in the Parquet (image features: PNG/JPEG bytes) rather than in an mp4.
+    columns += [c.video_key for c in cfg.cameras.values()
+                if c.video_key is not None and reader.feature(c.video_key).dtype == "image"]
     columns += [s.feature for s in sources if s.feature is not None]
     for cam in cfg.cameras.values():
         if cam.depth is not None:
@@ -460,6 +465,40 @@ def _video_frames(
         width=np.full(n, width), height=np.full(n, height),
         encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
         video_time_ns=in_file + VIDEO_REFERENCE_NUDGE_NS,
+    )
+
+
+_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
+
+
+def _stored_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, root: Path
+) -> ImageFrameTable:
+    """One row per frame of an image feature: the PNG/JPEG bytes stored in the Parquet (HF ``Image``: a struct
+    of ``bytes`` and ``path``; a path is read relative to the dataset when there are no bytes)."""
+    assert cam.video_key is not None
+    cells = frames.columns[cam.video_key].reshape(len(frames))
+    encoded: list[bytes] = []
+    for k, cell in enumerate(cells.tolist()):
+        data = cell.get("bytes") if isinstance(cell, dict) else cell if isinstance(cell, bytes) else None
+        if not data and isinstance(cell, dict) and cell.get("path"):
+            file = root / str(cell["path"])
+            data = file.read_bytes() if file.is_file() else None
+        if not data:
+            raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} has no bytes at frame {k}")
+        encoded.append(bytes(data))
+    kinds = [next((kind for magic, kind in _MAGIC.items() if data.startswith(magic)), "") for data in encoded]
+    if "" in kinds:
+        k = kinds.index("")
+        raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} holds neither PNG nor JPEG at "
+                           f"frame {k}")
+    n = len(frames)
+    size = cam.camera_table()
+    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
+    return ImageFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, width),
+        height=np.full(n, height), encoding=np.array(kinds), source=np.full(n, cam.video_key),
+        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: encoded[i],
     )
 
 
