@@ -205,7 +205,8 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         key: FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
                          {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
                           "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
-        if spec.storage == "video" else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]),
+        if spec.storage == "video"
+        else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]),
     }
     write_lerobot_dataset(out, episodes, features=features, fps=spec.fps, version=spec.version,
                           robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")

@@ -305,11 +305,10 @@ class DatasetReader:
             raise DatasetError(path, "missing: a v2 dataset lists its episodes here")
         out: dict[int, dict[str, Any]] = {}
         for lineno, row in _jsonl(path, self.note):
-            episode, length = row.get("episode_index"), row.get("length")
-            if not _whole(episode) or not _whole(length) or int(length) < 0:
+            ep, length = _whole(row.get("episode_index")), _whole(row.get("length"))
+            if ep is None or length is None or length < 0:
                 self.note(path, f"line {lineno} lacks a whole episode_index or length; left out")
                 continue
-            ep = int(episode)
             if ep in out:
                 self.note(path, f"line {lineno}: episode {ep} is listed twice; the first is kept")
                 continue
@@ -417,7 +416,7 @@ class DatasetReader:
         videos: dict[str, Path] = {}
         if self.video_path is not None:
             for key in self.video_keys:
-                vf = self._fill("video_path", self.video_path, {**fields, "video_key": key}, required=False)
+                vf = self._fill_if_found("video_path", self.video_path, {**fields, "video_key": key})
                 if vf is not None and vf.is_file():
                     videos[key] = vf
         tasks = row.get("tasks") or []
@@ -447,9 +446,8 @@ class DatasetReader:
             c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
             if c is None or f is None or self.video_path is None:
                 continue
-            vf = self._fill("video_path", self.video_path, {"video_key": key, "chunk_index": int(c),
-                                                             "file_index": int(f), "episode_index": index},
-                            required=False)
+            vf = self._fill_if_found("video_path", self.video_path, {"video_key": key, "chunk_index": int(c),
+                                                                      "file_index": int(f), "episode_index": index})
             if vf is not None and vf.is_file():
                 videos[key] = vf
                 video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
@@ -461,9 +459,16 @@ class DatasetReader:
             video_files=videos, video_from_s=video_from,
         )
 
-    def _fill(self, key: str, template: str, fields: Mapping[str, Any], *, required: bool = True) -> Path | None:
+    def _fill(self, key: str, template: str, fields: Mapping[str, Any]) -> Path:
         """``template`` (info.json's ``key``) filled with ``fields``; a variable LeRobot does not define (a
         recorder's own, ``{robot_id}``) is matched against the files on disk (with a note), which must be one."""
+        path = self._fill_if_found(key, template, fields, required=True)
+        assert path is not None  # required: raised otherwise
+        return path
+
+    def _fill_if_found(self, key: str, template: str, fields: Mapping[str, Any], *,
+                       required: bool = False) -> Path | None:
+        """:meth:`_fill`, None when a template with a variable LeRobot does not define matches no single file."""
         import glob
         import string
 
@@ -585,9 +590,11 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split()) or type(err).__name__
 
 
-def _whole(value: Any) -> bool:
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value) \
-        and float(value).is_integer()
+def _whole(value: Any) -> int | None:
+    """``value`` as an int when it is a finite whole number (JSON may write 12 as 12.0), else None."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return None
+    return int(value) if float(value).is_integer() else None
 
 
 def _jsonl(path: Path, note: Callable[[Path, str], None]) -> list[tuple[int, dict[str, Any]]]:

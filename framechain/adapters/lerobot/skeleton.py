@@ -45,7 +45,7 @@ def guess_unit(name: str, values: np.ndarray) -> str:
     if finite.size == 0:
         return "deg"
     lo, hi = float(finite.min()), float(finite.max())
-    if "gripper" in name.lower() and 0.0 <= lo and hi <= 100.0 and hi - lo > 2 * math.pi:
+    if "gripper" in name.lower() and lo >= 0.0 and hi <= 100.0 and hi - lo > 2 * math.pi:
         return "range_0_100"
     if -2 * math.pi <= lo and hi <= 2 * math.pi:
         return "rad"
@@ -146,8 +146,8 @@ def _camera_lines(reader: DatasetReader, arms: Sequence[str]) -> list[str]:
         codec = feature.info.get("video.codec", "image" if feature.dtype == "image" else "?")
         lines += [f"  {name}:  # {feature.key}: {codec}, {width}x{height}",
                   f"    video_key: {feature.key}",
-                  f"    intrinsics: {{fx: {focal:.1f}, fy: {focal:.1f}, cx: {(width - 1) / 2:g}, cy: {(height - 1) / 2:g}, "
-                  f"width: {width}, height: {height}}}  # GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
+                  f"    intrinsics: {{fx: {focal:.1f}, fy: {focal:.1f}, cx: {(width - 1) / 2:g}, "
+                  f"cy: {(height - 1) / 2:g}, width: {width}, height: {height}}}  # GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
                   f"    mount: {{parent: {link}, xyz: [0.0, 0.0, 0.0], "
                   "rpy: [0.0, 0.0, 0.0], optical: true}  # FILL IN: the link (or world) and the measured mount"]
     return lines
