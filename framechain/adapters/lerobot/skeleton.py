@@ -147,7 +147,8 @@ def _camera_lines(reader: DatasetReader, arms: Sequence[str]) -> list[str]:
         lines += [f"  {name}:  # {feature.key}: {codec}, {width}x{height}",
                   f"    video_key: {feature.key}",
                   f"    intrinsics: {{fx: {focal:.1f}, fy: {focal:.1f}, cx: {(width - 1) / 2:g}, "
-                  f"cy: {(height - 1) / 2:g}, width: {width}, height: {height}}}  # GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
+                  f"cy: {(height - 1) / 2:g}, width: {width}, height: {height}}}  "
+                  f"# GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
                   f"    mount: {{parent: {link}, xyz: [0.0, 0.0, 0.0], "
                   "rpy: [0.0, 0.0, 0.0], optical: true}  # FILL IN: the link (or world) and the measured mount"]
     return lines
