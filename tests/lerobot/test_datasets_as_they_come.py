@@ -172,3 +172,31 @@ def test_no_detections_hint_names_robot_yaml_keys(tmp_path: Path, capsys: pytest
     assert len(err.splitlines()) == 1
     assert "topics.detections" not in err
     assert "detections: [{table: DETECTIONS.parquet}]" in err
+
+
+def test_a_cut_episodes_file_keeps_the_episodes_of_the_others(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """v3.0 with its episodes index in two files, one cut: the other file's episodes are still read."""
+    import pyarrow as pa
+
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(URDF, seed=83, duration_s=0.5, episodes=3,
+                                                                          version="v3.0"))
+    robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
+    index = sorted((truth.root / "meta" / "episodes").rglob("*.parquet"))
+    assert len(index) == 1
+    rows = pq.read_table(index[0]).to_pylist()
+    pq.write_table(pa.Table.from_pylist(rows[:2]), index[0])
+    second = index[0].with_name("file-001.parquet")
+    pq.write_table(pa.Table.from_pylist(rows[2:]), second)
+    data = index[0].read_bytes()
+    index[0].write_bytes(data[: len(data) // 2])  # cut: episodes 0 and 1 are lost, episode 2 is not
+    assert main(["info", str(truth.root), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert any("file-000.parquet: cannot read" in n and "its episodes are left out" in n for n in info["notes"])
+    assert main(["tf", str(truth.root), "world", "gripper_link", "--episode", "2", "--robot", str(robot),
+                 "--json"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(truth.root), "--episode", "0", "--robot", str(robot)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "no episode 0; episodes are 2..2" in err

@@ -61,10 +61,11 @@ __all__ = [
 
 
 class DatasetError(AdapterError):
-    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency."""
+    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency (one line:
+    pyarrow's and FFmpeg's messages may span several)."""
 
     def __init__(self, path: str | Path, what: str) -> None:
-        super().__init__(path, what)
+        super().__init__(path, " ".join(what.split()))
 
 
 class Layout(StrEnum):
@@ -171,15 +172,10 @@ def flatten_names(raw: Any) -> tuple[str, ...] | None:
 
 
 def is_lerobot_dataset(path: str | Path) -> bool:
-    """True when ``path`` is a directory with ``meta/info.json`` naming a LeRobot codebase version."""
-    info = Path(path) / "meta" / "info.json"
-    if not info.is_file():
-        return False
-    try:
-        version = json.loads(info.read_text()).get("codebase_version", "")
-    except (OSError, ValueError, AttributeError):
-        return False
-    return isinstance(version, str) and version.startswith(("v2", "v3"))
+    """True when ``path`` is a directory with ``meta/info.json``: a LeRobot dataset, perhaps a damaged one
+    (an info.json that cannot be read, or of another codebase version, is for :class:`DatasetReader` to
+    say in one line, not a reason to read the folder as something else)."""
+    return (Path(path) / "meta" / "info.json").is_file()
 
 
 class DatasetReader:
@@ -509,7 +505,7 @@ class DatasetReader:
         try:
             schema = pq.read_schema(path)
         except (OSError, pa.ArrowException) as err:
-            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
         present = set(schema.names)
         for col in columns:
             if col in self.features and self.features[col].is_video:
@@ -523,7 +519,7 @@ class DatasetReader:
         try:
             table = pq.read_table(path, columns=read_cols, filters=filters)
         except (OSError, pa.ArrowException) as err:
-            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
         if "index" in present:
             table = table.sort_by("index")
         n = table.num_rows
