@@ -65,6 +65,7 @@ from framechain.sinks.rerun_common import (
     SENSOR_TIME,
     RerunOptions,
 )
+from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_videos
 from framechain.sinks.rerun_scene import (
     log_camera,
     log_frame_tree,
@@ -209,7 +210,8 @@ def stream_replay(
     rec = rr.RecordingStream(opts.application_id, recording_id=opts.recording_id)
     overlay = image_overlay(run.timeline, run.replay, run.aligned, run.findings)
     shows_images = opts.images is not ImageSelection.NONE and len(run.timeline.image_frames) > 0
-    blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay))
+    blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
+                                  camera_motion=run.camera_motion is not None)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -289,6 +291,9 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_points(rec, result, as_run, opts, rows)
     log_series(rec, result, as_run, rows)
     log_images(rec, timeline, result, opts, rows)
+    if opts.images is not ImageSelection.NONE:
+        log_camera_videos(rec, run, rows)
+    log_camera_motion(rec, run, rows)
     log_overlay(rec, overlay, result, rows)
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
     return rows

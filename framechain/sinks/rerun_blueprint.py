@@ -35,12 +35,14 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
 
 
 def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
-                      image_bounds: tuple[float, float, float, float] | None = None) -> rrb.Blueprint:
+                      image_bounds: tuple[float, float, float, float] | None = None,
+                      camera_motion: bool = False) -> rrb.Blueprint:
     """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
     (its images with the chain drawn on them when ``images``, else the depth frames); below them the
     per-hop error, the error in the image and the time gaps as series, and the findings.
     ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
-    v_min, v_max) frames the camera view (see :func:`image_view_bounds`)."""
+    v_min, v_max) frames the camera view (see :func:`image_view_bounds`); ``camera_motion`` puts the cameras'
+    rotation rate, from their images against forward kinematics, first beside the per-hop error."""
     import rerun.blueprint as rrb
 
     # With colour images, the depth cloud would bury the points: it stays in the depth tab.
@@ -71,7 +73,11 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
                                   contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
         cameras = rrb.Tabs(camera, depth)
-    errors = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
+    errors: rrb.TimeSeriesView | rrb.Tabs = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
+    if camera_motion:
+        rates = rrb.TimeSeriesView(name="Camera rotation rate: images vs forward kinematics (deg/s)",
+                                   origin="/series/rotation_rate_deg_s")
+        errors = rrb.Tabs(rates, errors)
     pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
     gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
     text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
