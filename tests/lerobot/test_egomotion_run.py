@@ -161,3 +161,26 @@ def test_a_still_arm_says_not_observable(tmp_path_factory: pytest.TempPathFactor
     assert [o["observable"] for o in entry["observable"]] == [False, False, False]
     assert "does not turn" in entry["observable"][0]["why"]
     assert "not observable" in result["verdict"] or "no camera turned" in " ".join(result["notes"])
+
+
+@pytest.mark.parametrize("case", ["axis_flip", "missing_rotation"])
+def test_a_flipped_or_bare_mount_is_named_and_fixed(case: str, tmp_path_factory: pytest.TempPathFactory,
+                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A camera mounted upside down (180 deg about its optical axis), or a mount declared without rotation."""
+    spec = VideoDatasetSpec(URDF, seed=25, duration_s=DURATION_S, version="v2.1",
+                            mount_error_deg=180.0 if case == "axis_flip" else 0.0, mount_error_axis=(0.0, 0.0, 1.0))
+    truth, robot = generated(tmp_path_factory, f"run_{case}", spec)
+    if case == "missing_rotation":
+        config = yaml.safe_load(robot.read_text())
+        config["cameras"]["wrist"]["mount"]["quat_xyzw"] = [0.0, 0.0, 0.0, 1.0]
+        robot.write_text(yaml.safe_dump(config))
+    result = attribute(truth.root, robot, tmp_path, capsys)
+    top = result["findings"][0]
+    assert top["fault"] == case
+    assert top["share"] > 0.9
+    if case == "axis_flip":
+        assert top["estimate"]["permutation"] == [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]
+    mount = yaml.safe_load(top["fix"].split(": ", 1)[1].split(" (")[0])
+    fixed = Rotation.from_euler("xyz", mount["rpy"])
+    assert np.rad2deg((fixed.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude()) < 1.0
+    assert mount["parent"] == "gripper_link"
