@@ -68,6 +68,7 @@ class MountDeclaration:
     optical: bool  # the mount gives the optical frame (else a camera_link, with the REP-103 rotation below)
     xyz: tuple[float, float, float]
     timing_offset_s: float
+    focal_px: tuple[float, float] | None = None  # the declared fx, fy
 
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any], camera: str) -> MountDeclaration | None:
@@ -80,9 +81,11 @@ class MountDeclaration:
                 source = str(entry.get("source") or metadata.get("robot_config") or "robot.yaml")
                 xyz = tuple(float(v) for v in entry.get("xyz") or (0.0, 0.0, 0.0))
                 timing = entry.get("timing") or {}
+                focal = entry.get("focal_px")
                 return cls(name=str(name), source=source, in_robot_yaml=source == metadata.get("robot_config"),
                            optical=bool(entry.get("optical_mount", True)), xyz=(xyz[0], xyz[1], xyz[2]),
-                           timing_offset_s=float(timing.get("offset_s") or 0.0))
+                           timing_offset_s=float(timing.get("offset_s") or 0.0),
+                           focal_px=None if not focal else (float(focal[0]), float(focal[1])))
         return None
 
     def key(self, leaf: str) -> str:
@@ -106,6 +109,7 @@ class _Proposal:
 
     kind: str  # latency | link | mount | focal
     fault: Fault
+    hop: HopName
     estimate: Estimate
     interval: dict[str, list[float]]
     confidence: float
@@ -128,8 +132,10 @@ class _Misfit:
         moved = "link" in kinds and fit.link != m.declared_link
         link = m.link_motion(fit.link if moved else m.declared_link)
         mount = fit.q_link_cam if moved or "mount" in kinds else m.declared_q_link_cam
+        # The table was measured with the focal length scaled by measured_focal: undo it to see the declared one.
+        focal = fit.focal_scale if "focal" in kinds else 1.0
         rates = rotation_rates(m.table, link, mount, fit.offset_s if "latency" in kinds else 0.0,
-                               focal_scale=fit.focal_scale if "focal" in kinds else 1.0)
+                               focal_scale=focal / m.measured_focal)
         out: FloatArray = np.rad2deg(rates.residual[self.rows])
         return out
 
@@ -166,7 +172,7 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
         for proposal, value in zip(proposals, values, strict=True):
             found.append((proposal, value, motion.camera))
-        notes.extend(n for n in (*motion.notes, *fit.notes) if n not in notes)
+        notes.extend(n for n in (*motion.notes, *fit.notes, *_focal_notes(motion, fit, proposals)) if n not in notes)
         entries.append(_entry(motion, declaration, misfit, proposals))
     findings = []
     for proposal, value, camera in found:
@@ -175,7 +181,7 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
             notes.append(f"{proposal.fault.value} on camera {camera} ({format_estimate(proposal.estimate)}) is no "
                          f"finding: it removes {value:.3f} deg/s ({share:.1%}) of the rotation-rate misfit")
             continue
-        findings.append(Finding(fault=proposal.fault, hop=HopName.CAMERA_TO_BODY, estimate=proposal.estimate,
+        findings.append(Finding(fault=proposal.fault, hop=proposal.hop, estimate=proposal.estimate,
                                 interval=proposal.interval, share=share, error_m=value,
                                 confidence=proposal.confidence, evidence=proposal.evidence, fix=proposal.fix,
                                 model=f"camera_motion_{proposal.kind}", camera=camera, error_unit="deg/s"))
@@ -233,8 +239,23 @@ def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclar
     scale_low, scale_high = fit.focal_scale_interval
     if (abs(fit.focal_scale - 1.0) > FOCAL_CLEAR and scale_high - scale_low < FOCAL_CLEAR
             and not scale_low <= 1.0 <= scale_high):
-        out.append(_focal(motion, fit))
+        out.append(_focal(motion, fit, declaration))
     return out
+
+
+def _focal_notes(motion: CameraMotion, fit: EgoMotionFit, proposals: Sequence[_Proposal]) -> list[str]:
+    """The focal length the camera's motion implies, as a note when it is no finding (assumed intrinsics, or a
+    departure not clear enough to fix)."""
+    low, high = fit.focal_scale_interval
+    if any(p.kind == "focal" for p in proposals) or not np.isfinite(fit.focal_scale):
+        return []
+    implied = f"{fit.focal_scale:.3f} ({low:.3f} .. {high:.3f}) times the declared focal length"
+    if not motion.intrinsics_known:
+        return [f"camera {motion.camera}: its motion implies a focal length {implied} (intrinsics assumed)"]
+    if not low <= 1.0 <= high:
+        return [f"camera {motion.camera}: its motion implies a focal length {implied}; not clear enough to fix, "
+                "calibrate the intrinsics to be sure"]
+    return []
 
 
 def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
@@ -251,7 +272,7 @@ def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclarat
         fix = (f"The images of {motion.camera} are stamped {abs(ms):.1f} ms {'late' if ms < 0 else 'early'} against "
                f"the transforms: correct the camera's time offset (stamp its images {abs(ms):.1f} ms "
                f"{'earlier' if ms < 0 else 'later'}).")
-    return _Proposal("latency", Fault.LATENCY, LatencyEstimate(offset_s=fit.offset_s),
+    return _Proposal("latency", Fault.LATENCY, HopName.CAMERA_TO_BODY, LatencyEstimate(offset_s=fit.offset_s),
                      {"offset_s": list(fit.offset_interval_s)}, 0.95, evidence, fix)
 
 
@@ -268,7 +289,7 @@ def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration
                f"{declaration.key('mount')}: {mount}.")
     else:
         fix = f"Hang {motion.camera} from {fit.link}, not {motion.declared_link}: {mount}."
-    return _Proposal("link", Fault.WRONG_CAMERA_FRAME,
+    return _Proposal("link", Fault.WRONG_CAMERA_FRAME, HopName.CAMERA_TO_BODY,
                      FrameEstimate(used=motion.declared_link, meant=fit.link, hop=HopName.CAMERA_TO_BODY.value),
                      {}, float(np.clip(1.0 - ratio, 0.0, 0.99)), evidence, fix)
 
@@ -284,7 +305,8 @@ def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaratio
         fix = f"In {declaration.source}, set {declaration.key('mount')}: {mount} (the mount the images show)."
     else:
         fix = f"Publish the measured mount of {motion.camera}: {mount}."
-    return _Proposal("mount", fault, estimate, {"angle_deg": list(error.interval_deg)}, 0.95, evidence, fix)
+    return _Proposal("mount", fault, HopName.CAMERA_TO_BODY, estimate, {"angle_deg": list(error.interval_deg)}, 0.95,
+                     evidence, fix)
 
 
 def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
@@ -309,15 +331,22 @@ def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
                                    faulty="recorded data")
 
 
-def _focal(motion: CameraMotion, fit: EgoMotionFit) -> _Proposal:
+def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
     scale = 1.0 / fit.focal_scale
     low, high = fit.focal_scale_interval
-    evidence = (f"the images of {motion.camera} turn {fit.focal_scale:.3f} times as far across the optical axis as "
-                f"{fit.link} does: the focal length used is {scale:.3f} times the true one")
-    fix = (f"Calibrate {motion.camera}'s intrinsics: its motion implies a focal length {fit.focal_scale:.3f} times the "
-           "declared one.")
-    return _Proposal("focal", Fault.INTRINSICS, ScaleEstimate(name="scale", value=scale, variant="focal"),
-                     {"scale": [1.0 / high, 1.0 / low]}, 0.95, evidence, fix)
+    evidence = (f"the images of {motion.camera} turn {1.0 / fit.focal_scale:.3f} times as far across the optical axis "
+                f"as {fit.link} does (measured with the declared focal length): it is {scale:.3f} times the true one")
+    implied = f"a focal length {fit.focal_scale:.3f} times the declared one"
+    if declaration is not None and declaration.focal_px is not None:
+        fx, fy = (v * fit.focal_scale for v in declaration.focal_px)
+        fix = (f"In {declaration.source}, set {declaration.key('intrinsics.fx')}: {fx:.1f} and "
+               f"{declaration.key('intrinsics.fy')}: {fy:.1f} (its motion implies {implied}); better, calibrate the "
+               "camera.")
+    else:
+        fix = f"Calibrate {motion.camera}'s intrinsics: its motion implies {implied}."
+    return _Proposal("focal", Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA,
+                     ScaleEstimate(name="scale", value=scale, variant="focal"), {"scale": [1.0 / high, 1.0 / low]},
+                     0.95, evidence, fix)
 
 
 def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: MountDeclaration | None) -> str:

@@ -48,6 +48,9 @@ class CameraImages(Protocol):
 
     def measure(self, prior: TranslationPrior | None) -> EgoMotionTable: ...
 
+    def rescale_focal(self, factor: float) -> None:
+        """Measure from now on with the focal length scaled by ``factor``."""
+
 
 #: Decodes and tracks the images of a camera (its frame), only when its motion is worth measuring.
 ImagesOf = Callable[[str], CameraImages]
@@ -69,6 +72,8 @@ class CameraMotion:
     seconds: float = 0.0
     intrinsics_known: bool = True
     notes: tuple[str, ...] = ()
+    #: The focal length ``table`` was measured with, over the declared one (1: as declared).
+    measured_focal: float = 1.0
 
     @property
     def observable(self) -> bool:
@@ -134,12 +139,48 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
         why = f"camera {camera}: the poses of {link} cannot be looked up in {chain.frames.world} at its samples"
         return replace(empty, notes=(why,), seconds=time.perf_counter() - start)
     source = images(camera)
-    fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
-                            declared_xyz_link_cam=xyz_link_cam, options=options)
+    fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options)
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
                         declared_xyz_link_cam=xyz_link_cam, fit=fit, table=source.last, links=links,
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
-                        intrinsics_known=source.intrinsics_known, notes=source.notes)
+                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *notes), measured_focal=focal)
+
+
+#: Rounds of measuring again with the focal length the motion implies, when it is clearly not the declared one.
+FOCAL_ROUNDS = 3
+
+
+def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: str,
+                    declared: tuple[str, FloatArray, FloatArray], options: EgoMotionFitOptions
+                    ) -> tuple[EgoMotionFit, float, list[str]]:
+    """The fit, measured again with the focal length it implies while that clearly differs from the one used.
+
+    A wrong focal length scales the rotation seen across the optical axis; the mount and offset fits
+    absorb part of it (a few degrees, ten milliseconds). Measuring again with the implied one takes
+    it out; the step is squared because each round recovers about half of what is left. Returns the
+    fit (its focal scale over the *declared* focal length), the factor the final measurement used,
+    and a note when it was measured again.
+    """
+    used = 1.0
+    notes: list[str] = []
+    link, q_link_cam, xyz_link_cam = declared
+    fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
+                            declared_xyz_link_cam=xyz_link_cam, options=options)
+    for _ in range(FOCAL_ROUNDS):
+        low, high = fit.focal_scale_interval
+        if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
+            break
+        step = fit.focal_scale**2
+        source.rescale_focal(step)
+        used *= step
+        fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link,
+                                declared_q_link_cam=q_link_cam, declared_xyz_link_cam=xyz_link_cam, options=options)
+    if used != 1.0:
+        notes.append(f"camera {camera}: its motion implied another focal length; measured again with "
+                     f"{used:.3f} times the declared one")
+        low, high = fit.focal_scale_interval
+        fit = replace(fit, focal_scale=fit.focal_scale * used, focal_scale_interval=(low * used, high * used))
+    return fit, used, notes
 
 
 # -- the frame tree ------------------------------------------------------------------------------------

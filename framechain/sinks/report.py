@@ -265,7 +265,7 @@ def motion_figures(run: Run) -> list[Figure]:
         t = (table.stamp0_ns[pairs] + span[pairs] / 2) * 1e-9
         declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
         fitted = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                                focal_scale=fit.focal_scale)
+                                focal_scale=fit.focal_scale / motion.measured_focal)
         measured, predicted, corrected = (np.rad2deg(np.linalg.norm(r[pairs], axis=1))
                                           for r in (declared.measured, declared.predicted, fitted.predicted))
         fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)

@@ -108,7 +108,7 @@ def _log_rates(rec: rr.RecordingStream, motion: CameraMotion, rows: dict[str, in
     pairs = _consecutive(table.stamp0_ns, table.stamp1_ns)
     declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
     corrected = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                               focal_scale=fit.focal_scale)
+                               focal_scale=fit.focal_scale / motion.measured_focal)
     middle = (table.stamp0_ns[pairs] + (table.stamp1_ns[pairs] - table.stamp0_ns[pairs]) // 2).astype(np.int64)
     base = f"{RATE_ENTITY}/{entity_part(camera_name(motion.camera))}"
     series = {"measured": declared.measured, "declared": declared.predicted, "corrected": corrected.predicted}

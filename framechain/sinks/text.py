@@ -45,7 +45,8 @@ class FindingView:
 
     def cells(self) -> FindingCells:
         f = self.finding
-        return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
+        hop = f.hop.value + (f" on camera {f.camera}" if f.camera else "")
+        return FindingCells(fault=f.fault.value, hop=hop, estimate=format_estimate(f.estimate),
                             interval=format_interval(f.interval), share=f"{f.share:.0%}", error=self.error(),
                             confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix)
 
@@ -71,8 +72,7 @@ class FindingView:
         if self.finding.interval:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
-        camera = f" on camera {self.finding.camera}" if self.finding.camera else ""
-        return f"{c.fault} on {c.hop}{camera}; {estimate}; {size}."
+        return f"{c.fault} on {c.hop}; {estimate}; {size}."
 
 
 #: The style of the HTML reports (one log's and the fleet's).

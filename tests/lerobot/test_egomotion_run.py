@@ -184,3 +184,37 @@ def test_a_flipped_or_bare_mount_is_named_and_fixed(case: str, tmp_path_factory:
     fixed = Rotation.from_euler("xyz", mount["rpy"])
     assert np.rad2deg((fixed.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude()) < 1.0
     assert mount["parent"] == "gripper_link"
+
+
+def test_a_fixed_camera_is_not_observable_and_not_decoded(faulted: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A second camera declared fixed in the world (on the same video): its motion says nothing, and says why."""
+    truth, robot = faulted
+    config = yaml.safe_load(robot.read_text())
+    front = {**config["cameras"]["wrist"], "mount": {"parent": "world", "xyz": [0.5, 0.0, 0.4],
+                                                     "rpy": [0.0, 0.0, 0.0], "optical": True}}
+    config["cameras"]["front"] = front
+    config["chain"] = {"camera": "wrist"}
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
+    result = attribute(truth.root, tmp_path / "robot.yaml", tmp_path / "out", capsys)
+    (entry,) = [e for e in result["camera_motion"] if e["camera"] == "front_optical_frame"]
+    assert entry["frames"] == 0  # not decoded
+    assert [o["observable"] for o in entry["observable"]] == [False, False, False]
+    assert "fixed in world" in entry["observable"][0]["why"]
+    assert {f["camera"] for f in result["findings"]} == {"wrist_optical_frame"}
+
+
+def test_intrinsics_off_by_a_clear_factor_are_a_finding(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    truth, robot = generated(tmp_path_factory, "run_focal", VideoDatasetSpec(
+        URDF, seed=26, duration_s=DURATION_S, version="v2.1", focal_scale=1.3))
+    result = attribute(truth.root, robot, tmp_path, capsys)
+    found = {f["fault"]: f for f in result["findings"]}
+    assert "intrinsics" in found
+    # The focal length used is 1.3 times the true one; the fix gives the true one, and no mount or offset
+    # is made up to absorb the scaled rotation.
+    assert found["intrinsics"]["estimate"]["scale"] == pytest.approx(1.3, rel=0.05)
+    assert found["intrinsics"]["hop"] == "pixel_to_camera"
+    fx = float(found["intrinsics"]["fix"].split("cameras.wrist.intrinsics.fx: ")[1].split(" ")[0])
+    assert fx == pytest.approx(truth.intrinsics[0], rel=0.03)
+    assert set(found) == {"intrinsics"}

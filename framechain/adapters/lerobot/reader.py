@@ -212,6 +212,7 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
             name: {
                 "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
                 "xyz": list(cam.mount.translation), "source": cam.source,
+                "focal_px": [cam.intrinsics.fx, cam.intrinsics.fy],
                 "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
                                                        "timestamp_column": cam.timing.timestamp_column},
                 "video_file": _video_file(frames, cam.video_key),

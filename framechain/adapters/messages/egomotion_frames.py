@@ -16,7 +16,7 @@ camera's frames decoded and tracked once, measured against any translation prior
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -100,6 +100,11 @@ class ImageMotion:
                          "reported")
         self.notes = tuple(notes)
         self.last = EgoMotionTable.empty()
+
+    def rescale_focal(self, factor: float) -> None:
+        """Measure from now on with the focal length scaled by ``factor`` (the one the motion implies)."""
+        i = self.intrinsics
+        self.intrinsics = replace(i, fx=i.fx * factor, fy=i.fy * factor)
 
     def measure(self, prior: TranslationPrior | None) -> EgoMotionTable:
         self.last = measure_egomotion(self.tracks, self.stamps_ns, self.intrinsics, frame=self.camera,
