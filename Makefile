@@ -30,13 +30,16 @@ bench: $(STAMP)
 
 # Damaged copies of the real logs (../shared/realdata) through info, tf, replay and attribute,
 # then mutated chain, calibration and robot.yaml files (tools/fuzz_config.py) through info and
-# attribute: fails on a traceback, a hang, memory beyond the bound or an exit code other than 0 or
-# 1 (and for a configuration, an exit 1 that is not one line). Not part of `make test` (about 20
+# attribute, then damaged LeRobot datasets (tools/fuzz_datasets.py) through info, tf and attribute:
+# fails on a traceback, a hang, memory beyond the bound or an exit code other than 0 or 1 (and for
+# a configuration or a dataset, an exit 1 that is not one line). Not part of `make test` (about 25
 # minutes on 2 cores); the tests run a short fixed-seed part of each.
 FUZZ_CASES ?= 10000
 FUZZ_CONFIG_CASES ?= 1500
+FUZZ_DATASET_CASES ?= 300
 fuzz: $(STAMP)
-	$(PY) tools/fuzz.py --cases $(FUZZ_CASES) --config-cases $(FUZZ_CONFIG_CASES) --seed 0 --progress
+	$(PY) tools/fuzz.py --cases $(FUZZ_CASES) --config-cases $(FUZZ_CONFIG_CASES) \
+		--dataset-cases $(FUZZ_DATASET_CASES) --seed 0 --progress
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache

@@ -264,8 +264,18 @@ def _outcome(made: Run) -> dict[str, Any]:
         **span, "observations": int(counts["total"]), "replayed": int(counts["replayed"]),
         "error_median_m": result.error_summary()["median"], "error_p95_m": result.error_summary()["p95"],
         "residual_median_m": result.error_summary(result.error_after)["median"],
-        "findings": findings, "notes": list(result.notes),
+        "findings": findings, "notes": list(result.notes), **_video_offset(result.camera_motion),
     }
+
+
+def _video_offset(entries: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The video/state time offset the first measured camera's own motion shows, and its 95% interval."""
+    for entry in entries:
+        if entry.get("offset_s") is not None:
+            low, high = entry.get("offset_interval_s") or (None, None)
+            return {"video_camera": entry["camera"], "video_offset_s": entry["offset_s"], "video_offset_low_s": low,
+                    "video_offset_high_s": high}
+    return {}
 
 
 def _record_head(task: UnitTask) -> dict[str, Any]:
@@ -647,6 +657,11 @@ FLEET_SCHEMA = pa.schema([
     ("confidence", pa.float64()),
     ("fix", pa.string()),
     ("elapsed_s", pa.float64()),
+    # the first camera's video/state time offset from its own motion, and its 95% interval (null: none measured)
+    ("video_camera", pa.string()),
+    ("video_offset_s", pa.float64()),
+    ("video_offset_low_s", pa.float64()),
+    ("video_offset_high_s", pa.float64()),
 ])
 _FINDING_COLUMNS = ("fault", "hop", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
                     "estimate_unit", "share", "finding_error_m", "confidence", "fix")

@@ -13,11 +13,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import astuple, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 from framechain import adapters
+from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.attribute import attribute_replayed
+from framechain.analysis.egomotion_attribution import with_camera_motion
+from framechain.analysis.egomotion_run import measure_cameras
 from framechain.analysis.findings import AnalysisError, Attribution, Unattributed
 from framechain.analysis.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
@@ -310,18 +314,30 @@ def run(
     nothing = _why_nothing_replayed(loaded, replayed.replay)
     attribution: Attribution | None = None
     why: NotAttributed | None = NotAttributed(Unattributed.NOT_ASKED, "attribution was not asked for")
+    motion = None
     if attribute:
+        # The cameras' own motion: the evidence of an episode as recorded (joints and video, no detections).
+        motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
+                                 partial(camera_motion_source, loaded.timeline), progress=progress)
         try:
-            attribution = _as_read(loaded, attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap,
-                                                              progress=progress))
+            attribution = attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap, progress=progress)
             why = None
         except AnalysisError as err:
             why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
+        if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
+            # A camera that moves is measured: evidence whatever else the log lacks.
+            unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)
+            attribution, why = with_camera_motion(replayed, loaded.chain, attribution, motion, seed=seed), None
+            attribution = replace(attribution, notes=(*unattributed, *attribution.notes))
+        elif motion is not None and why is not None:  # only fixed cameras: they cannot stand in for detections
+            why = NotAttributed(why.reason, "; ".join([why.detail, *(c.why_not for c in motion.cameras)]))
+        if attribution is not None:
+            attribution = _as_read(loaded, attribution)
     return Run(
         path=loaded.path, timeline=loaded.timeline, chain=loaded.chain, buffer=replayed.buffer,
         replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
-        info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings),
+        info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
     )
 
 

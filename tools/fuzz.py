@@ -21,6 +21,8 @@ Cases are numbered and reproducible: ``--only N`` reruns case N (its damaged fil
 
 ``--config-cases N`` adds N cases of mutated configuration files (CHAIN.yaml, calibration files,
 robot.yaml) through the commands that read them: ``tools/fuzz_config.py``, the same verdicts.
+``--dataset-cases N`` adds N damaged LeRobot datasets (generated v3.0 and v2.1 ones with video, and
+the real ones) through ``info``, ``info --episode``, ``tf`` and ``attribute``: ``tools/fuzz_datasets.py``.
 """
 
 from __future__ import annotations
@@ -571,6 +573,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--progress", action="store_true")
     parser.add_argument("--config-cases", type=int, default=0,
                         help="cases of mutated configuration files (tools/fuzz_config.py) after the logs")
+    parser.add_argument("--dataset-cases", type=int, default=0,
+                        help="cases of damaged LeRobot datasets (tools/fuzz_datasets.py) after the logs")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--sources", default="", help=argparse.SUPPRESS)
     parser.add_argument("--indices", default="", help=argparse.SUPPRESS)
@@ -603,6 +607,13 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         config = fuzz_config.summarise(fuzz_config.run_workers(list(range(args.config_cases)), config_args),
                                        time.perf_counter() - start)
+    datasets: dict[str, Any] = {}
+    if args.dataset_cases:
+        import fuzz_datasets  # beside this file
+
+        dataset_args = fuzz_datasets.parse_args(["--cases", str(args.dataset_cases), "--seed", str(args.seed),
+                                                 *(["--keep", args.keep] if args.keep else [])])
+        datasets = fuzz_datasets.summary(dataset_args)
     if not args.no_property:
         rng = random.Random(args.seed)
         properties = [check_cuts(s.path, s.kind, rng, args.random_cuts, args.max_boundaries)
@@ -618,6 +629,7 @@ def main(argv: list[str] | None = None) -> int:
         "cut_property": properties,
         "cut_property_problems": sum(p["problem_count"] for p in properties),
         "config": config,
+        "datasets": datasets,
     }
     if args.json:
         print(json.dumps(summary, indent=1))
@@ -635,7 +647,10 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"    {text}")
         if config:
             print(fuzz_config_line(config))
-    return 0 if not failures and not summary["cut_property_problems"] and not config.get("failure_count") else 1
+        if datasets:
+            print(fuzz_config_line(datasets).replace("configuration cases", "dataset cases", 1))
+    bad = config.get("failure_count") or datasets.get("failure_count")
+    return 0 if not failures and not summary["cut_property_problems"] and not bad else 1
 
 
 def fuzz_config_line(config: dict[str, Any]) -> str:

@@ -48,8 +48,10 @@ __all__ = [
     "LinkMotion",
     "Measure",
     "MountError",
+    "RotationRates",
     "fit_camera_motion",
     "fit_link",
+    "rotation_rates",
     "translation_prior",
 ]
 
@@ -326,6 +328,47 @@ def translation_prior(
         return out
 
     return prior
+
+
+@dataclass(frozen=True)
+class RotationRates:
+    """A camera's rotation between frame pairs, measured and as a link's forward kinematics predicts it.
+
+    Rates (rad/s) are rotation vectors in the camera's optical frame over the pair's time; the
+    prediction is the link's rotation between the pair's stamps shifted by ``offset_s``, carried into
+    the camera by the mount (NaN outside the link's span). The measured rates are corrected for a focal
+    scale (measured over true rotation across the optical axis).
+    """
+
+    stamp0_ns: IntArray
+    stamp1_ns: IntArray
+    measured: FloatArray  # (N, 3)
+    predicted: FloatArray  # (N, 3)
+
+    @property
+    def residual(self) -> FloatArray:
+        """``|measured - predicted|`` per pair (rad/s; NaN where nothing is predicted)."""
+        out: FloatArray = np.linalg.norm(self.measured - self.predicted, axis=1)
+        return out
+
+
+def rotation_rates(
+    measured: EgoMotionTable, link: LinkMotion, q_link_cam: FloatArray, offset_s: float, *, focal_scale: float = 1.0
+) -> RotationRates:
+    """The measured pairs of ``measured`` against ``link`` carrying the camera by the mount ``q_link_cam``."""
+    origin = int(link.stamps_ns[0])
+    orientations = _Orientations(link, origin)
+    t0: FloatArray = ((measured.stamp0_ns - origin) * 1e-9).astype(np.float64)
+    t1: FloatArray = ((measured.stamp1_ns - origin) * 1e-9).astype(np.float64)
+    dt = t1 - t0
+    camera = Rotation.from_quat(measured.quat_xyzw).as_rotvec() if len(measured) else np.zeros((0, 3))
+    camera = camera * np.array([1.0 / focal_scale, 1.0 / focal_scale, 1.0])
+    pairs = _Pairs(t0=t0, t1=t1, rotvec=camera, weight=np.ones(t0.size))
+    link_rv = _link_rotvecs(orientations, pairs, np.array([offset_s]))[0]
+    inside = (t0 + offset_s >= orientations.times[0]) & (t1 + offset_s <= orientations.times[-1])
+    predicted = np.where(inside[:, None], link_rv @ Rotation.from_quat(q_link_cam).as_matrix(), np.nan)
+    return RotationRates(stamp0_ns=measured.stamp0_ns, stamp1_ns=measured.stamp1_ns, measured=camera / dt[:, None],
+                         predicted=predicted / dt[:, None])
 
 
 def fit_camera_motion(

@@ -19,7 +19,7 @@ from framechain.config.chain import ChainConfig
 from framechain.replay import REPLAYED, ReplayResult
 from framechain.timeline import FramechainError
 
-Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
+Metric = Literal["logged_hops", "target", "reference", "static_spread", "camera_motion", "none"]
 SCHEMA = "framechain/attribution@1"
 
 
@@ -59,21 +59,30 @@ class Finding:
     #: its family (``weak_because`` says which): the fix is then a hint to check, not a change to make
     strength: Literal["strong", "weak"] = "strong"
     weak_because: tuple[str, ...] = ()
+    #: The camera the finding is about (its frame as in the chain); None: the chain's one camera.
+    camera: str | None = None
+    #: The unit of ``error_m``: metres, or deg/s for a camera's rotation rate (evidence from its own motion).
+    error_unit: str = "m"
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "fault": self.fault.value,
             "hop": self.hop.value,
             "estimate": estimate_to_json(self.estimate),
             "interval": self.interval,
             "share": round(self.share, 4),
-            "error_m": round(self.error_m, 6),
+            "error_m": round(self.error_m, 6) if self.error_unit == "m" else None,
             "confidence": round(self.confidence, 4),
             "evidence": self.evidence,
             "fix": self.fix,
             "strength": self.strength,
             "weak_because": list(self.weak_because),
         }
+        if self.error_unit != "m":
+            out["error_deg_s"] = round(self.error_m, 6)
+        if self.camera is not None:
+            out["camera"] = self.camera
+        return out
 
 
 @dataclass(frozen=True)
@@ -103,18 +112,30 @@ class Attribution:
     curves: tuple[Curve, ...] = ()
     #: per label: observations, spread and verdict (static, moving, outlier), and the labels to ignore
     labels: LabelTable = field(default_factory=LabelTable)
+    #: What each camera's own motion says (time offset, mount, link, observability), one JSON entry per
+    #: camera: the findings of a run measured against it (metric camera_motion), else corroboration.
+    camera_motion: tuple[dict[str, Any], ...] = ()
+    #: Metric camera_motion: the rotation-rate residual per frame pair (deg/s), before and after the findings.
+    rate_residual: tuple[FloatArray, FloatArray] | None = None
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
 
     def error_summary(self, errors: FloatArray | None = None) -> dict[str, Any]:
+        """Median, p95 and max of the error (metres; deg/s of camera rotation rate for metric camera_motion,
+        where ``error_before`` / ``error_after`` stand for the rate residual before and after the findings)."""
         e = self.error_before if errors is None else errors
+        unit: dict[str, str] = {}
+        if self.metric == "camera_motion" and self.rate_residual is not None:
+            e = self.rate_residual[1] if errors is self.error_after else self.rate_residual[0]
+            unit = {"unit": "deg/s"}
         e = e[np.isfinite(e)]
         if e.size == 0:
-            return {"metric": self.metric, "stage": self.stage, "median": None, "p95": None, "max": None}
+            return {"metric": self.metric, "stage": self.stage, **unit, "median": None, "p95": None, "max": None}
         return {
             "metric": self.metric,
             "stage": self.stage,
+            **unit,
             "median": round(float(np.median(e)), 6),
             "p95": round(float(np.percentile(e, 95)), 6),
             "max": round(float(e.max()), 6),
@@ -140,7 +161,7 @@ class Attribution:
                 "gap_ms": None if gaps_ms.size == 0 else {
                     "median": round(float(np.median(gaps_ms)), 3), "max": round(float(gaps_ms.max()), 3)},
                 "stale": int(records.stale[sel].sum()),
-                "attributed_m": round(sum(f.error_m for f in self.findings if f.hop == hop), 6),
+                "attributed_m": round(sum(f.error_m for f in self.findings if f.hop == hop and f.error_unit == "m"), 6),
                 "faults": [f.fault.value for f in self.findings if f.hop == hop],
             })
         return rows
@@ -153,6 +174,8 @@ class Attribution:
         if self.metric == "none":
             return ("No evidence in this log to measure the chain against (no logged points, reference or static "
                     "target): nothing could be checked.")
+        if self.metric == "camera_motion":
+            return self._motion_verdict(summary)
         bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
         if not self.findings:
             against = f"median error {summary['median'] * 1e3:.1f} mm against the {self.metric.replace('_', ' ')}"
@@ -165,6 +188,21 @@ class Attribution:
         found = (f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}){weak} explains "
                  f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}.")
         return found + (f" {bounds}" if bounds else "")
+
+    def _motion_verdict(self, summary: dict[str, Any]) -> str:
+        """The verdict of a run measured by the cameras' own motion against forward kinematics."""
+        rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
+        observable = [o for entry in self.camera_motion for o in entry.get("observable", ()) if o["observable"]]
+        if not self.findings and not observable:
+            why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
+            return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
+        if not self.findings:
+            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}."
+        top = self.findings[0]
+        more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+        on = f" on camera {top.camera}" if top.camera else ""
+        return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
+                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.")
 
     def to_json(self) -> dict[str, Any]:
         """The attribution.json contract (schema framechain/attribution@1)."""
@@ -184,6 +222,7 @@ class Attribution:
             "curves": [c.to_json() for c in self.curves],
             "labels": self.labels.to_json(),
             "notes": list(self.notes),
+            **({"camera_motion": list(self.camera_motion)} if self.camera_motion else {}),
         }
 
 

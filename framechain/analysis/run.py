@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from framechain.analysis.alignment import AlignedEvidence
+from framechain.analysis.egomotion_run import CameraMotionEvidence
 from framechain.analysis.findings import AnalysisError, Attribution, Finding, Unattributed
 from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer
@@ -50,6 +51,8 @@ class Run:
     notes: tuple[str, ...] = ()  # what the reader noticed (a topic the chain names but the log lacks, ...)
     #: what disagrees before any fit (a calibration of another camera's topic): said first, also in ``notes``
     warnings: tuple[str, ...] = ()
+    #: each camera's own motion against the frame tree (None: no camera has images, or not attributed)
+    camera_motion: CameraMotionEvidence | None = None
 
     @property
     def findings(self) -> tuple[Finding, ...]:

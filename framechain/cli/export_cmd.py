@@ -19,8 +19,10 @@ from framechain.cli.common import (
 )
 
 DESCRIPTION = """\
-Replay (and attribute) the chain of a log and write one MCAP holding the log's own messages and the
-replay as Foxglove schemas: /framechain/tf (FrameTransforms of the recomputed chain),
+Replay (and attribute) the chain of a log and write one MCAP holding the log's own messages (a LeRobot
+episode, which has none: its frame tree on /tf and /tf_static, /joint_states, each camera's
+/<camera>/calibration and its frames as /<camera>/video or /<camera>/image) and the replay as Foxglove
+schemas: /framechain/tf (FrameTransforms of the recomputed chain),
 /framechain/annotations (ImageAnnotations on the camera images: detection, projected as-run and
 recomputed points, the line between them), /framechain/scene (SceneUpdate: as-run vs recomputed
 world points and error lines) and /framechain/findings (a Log message per finding). Open it in
@@ -42,8 +44,10 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
-    from framechain.adapters.formats.mcap.export import write_mcap_with
+    from framechain.adapters.formats.mcap.export import copies_messages, write_mcap_with
+    from framechain.adapters.lerobot.media import encoded_frames
     from framechain.sinks.foxglove_export import foxglove_messages
+    from framechain.sinks.foxglove_timeline import timeline_messages
     from framechain.timeline import FramechainError
 
     out = Path(args.out)
@@ -54,9 +58,21 @@ def run(args: argparse.Namespace) -> int:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
                             seed=args.seed, progress=progress, warn=warner("export"))
         say_unattributed(made, "export")  # the recomputed chain is still worth exporting
+        extra = foxglove_messages(made)
+        if not copies_messages(made.path):  # a dataset: its frame tree, joints and cameras are the log
+            content, notes = timeline_messages(made, encoded_frames)
+            extra += content
+            for note in notes:
+                print(f"framechain export: {note}", file=sys.stderr)
+        if not extra and not copies_messages(made.path):
+            raise FramechainError(f"{made.path}: nothing to export (no transforms, joint states, cameras or replay)")
         if progress is not None:
             progress(f"writing {out}")
-        counts = write_mcap_with(made.path, out, foxglove_messages(made))
+        counts = write_mcap_with(made.path, out, extra)
+        if not counts.copied and not counts.added:
+            out.unlink(missing_ok=True)
+            raise FramechainError(f"{made.path}: nothing to export: the log has no messages and nothing was "
+                                  "replayed; no file written")
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, quiet)
     replay_counts = made.replay.counts()

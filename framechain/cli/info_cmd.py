@@ -55,12 +55,18 @@ def run(args: argparse.Namespace) -> int:
     if print_chain and args.json:
         raise FramechainError("--chain alone prints the suggested chain as YAML; it does not go with --json")
     suggestion: SuggestedChain | None = None
-    if LeRobotAdapter().probe(Path(args.log)) and (args.episode is not None or args.robot is not None
-                                                    or chain_file is not None):
+    skeleton: str | None = None
+    dataset = LeRobotAdapter().probe(Path(args.log))
+    if dataset and args.episode is not None and args.robot is None and chain_file is None:
+        from framechain.adapters.lerobot.skeleton import robot_yaml_skeleton
+
+        # No robot.yaml yet: the dataset's episode, and a robot.yaml to start from.
+        loaded, skeleton = _dataset_summary(args.log, args.episode), robot_yaml_skeleton(args.log, args.episode)
+    elif dataset and (args.episode is not None or args.robot is not None or chain_file is not None):
         run_ = pipeline.load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
         loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
         suggestion = SuggestedChain(config=run_.chain)
-    elif LeRobotAdapter().probe(Path(args.log)):
+    elif dataset:
         loaded = _dataset_summary(args.log)
     else:
         given = pipeline.load_chain(chain_file)
@@ -75,6 +81,16 @@ def run(args: argparse.Namespace) -> int:
     loaded = LoadedLog(timeline=loaded.timeline, info=loaded.info.with_notes(warnings),
                        decoded_topics=loaded.decoded_topics)
     edges = frame_tree(loaded.timeline.transforms)
+    if skeleton is not None:
+        if print_chain:
+            print(skeleton, end="")
+        elif args.json:
+            print(json.dumps({**_as_json(loaded, edges, None), "robot_yaml": skeleton}, indent=2))
+        else:
+            _render(loaded, edges, None, chain_given=False)
+            print("Suggested robot.yaml (framechain info DATASET --episode N --chain > robot.yaml):")
+            print(skeleton, end="")
+        return 0
     if print_chain:
         if suggestion is None:
             raise FramechainError(f"{args.log}: a LeRobot dataset's chain comes from --episode N --robot robot.yaml")
@@ -87,12 +103,12 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _dataset_summary(path: str) -> LoadedLog:
-    """A LeRobot dataset without --episode/--robot: what its metadata says, no frame tree."""
-    from framechain.adapters import LoadedLog, scan_log
+def _dataset_summary(path: str, episode: int | None = None) -> LoadedLog:
+    """A LeRobot dataset without --robot: what its metadata says (of one episode), no frame tree."""
+    from framechain.adapters import LoadedLog, scan_dataset
     from framechain.timeline import Timeline
 
-    info = scan_log(path)
+    info = scan_dataset(path, episode)
     note = "pass --episode N --robot robot.yaml to see the frame tree that forward kinematics gives"
     return LoadedLog(timeline=Timeline(), info=info.with_notes([note]), decoded_topics={})
 

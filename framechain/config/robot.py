@@ -30,8 +30,29 @@ The file (or the ``robot:`` section of CHAIN.yaml, whose paths resolve against C
 
 Units (``unit``): ``rad`` and ``m`` as recorded; ``deg``; ``mm``; ``range_0_100`` maps 0..100 to the
 joint's [lower, upper] limits (LeRobot's gripper); ``range_m100_100`` maps -100..100 to [lower,
-upper]. The joint position is ``sign * convert(value) + offset`` (offset in radians or metres),
-so a calibration that puts the dataset's zero elsewhere than the URDF's is explicit too.
+upper]; ``ticks``: raw servo counts, ``(value - zero_ticks) * 2 pi / ticks_per_turn`` (defaults 2048
+and 4096, Feetech STS servos: ``{joint: shoulder_pan, unit: ticks, zero_ticks: 2011}``). The joint
+position is ``sign * convert(value) + offset`` (offset in radians or metres), so a calibration that
+puts the dataset's zero elsewhere than the URDF's is explicit too.
+
+Several arms (a bimanual SO-101, ALOHA) replace ``urdf``, ``joints``, ``world_from_base``,
+``default_unit`` and ``hold`` with ``arms``, one entry per arm; every link and joint of an arm is
+named with its ``prefix`` (default ``<arm>_``) in the frame tree, so cameras mount on
+``left_gripper_link``::
+
+    arms:
+      left:
+        urdf: so101_new_calib.urdf
+        prefix: left_                   # default "left_"
+        world_from_base: {xyz: [0.0, 0.2, 0.0], rpy: [0.0, 0.0, 0.0]}
+        default_unit: ticks
+        joints: {left_shoulder_pan.pos: shoulder_pan, ...}   # the URDF's own joint names
+        calibration: left_follower.json # optional: LeRobot's calibration of the arm (ticks)
+
+A LeRobot calibration JSON (``{motor: {id, drive_mode, homing_offset, range_min, range_max}}``,
+the motors named as the URDF's joints) sets each ``ticks`` joint's ``zero_ticks`` to ``2048 +
+homing_offset`` (the state recorded as the encoder's raw counts, the servo's homing offset not
+applied) and flips its sign where ``drive_mode`` is 1; a joint's own ``zero_ticks`` wins.
 
 This module reads and checks the file only; binding it to the URDF's model (joints that exist
 and move, the conversion of joint values) is the robot adapter's job
@@ -48,11 +69,19 @@ from typing import Any
 
 from framechain.config import plausible
 from framechain.config.calibration import CameraCalibration, load_calibration
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, latency_budget, parse_evidence
+from framechain.config.chain import (
+    ChainConfig,
+    ChainEvidence,
+    ChainFrames,
+    ChainTopics,
+    latency_budget,
+    parse_evidence,
+)
 from framechain.config.errors import RobotConfigError
 from framechain.config.schema import Section, read_yaml, show
 
 __all__ = [
+    "ArmConfig",
     "DetectionSource",
     "JointMapping",
     "JointUnit",
@@ -70,6 +99,12 @@ class JointUnit(StrEnum):
     MM = "mm"
     RANGE_0_100 = "range_0_100"
     RANGE_M100_100 = "range_m100_100"
+    TICKS = "ticks"
+
+
+#: Feetech STS servos: counts per turn and the count at the middle of the range.
+TICKS_PER_TURN = 4096.0
+ZERO_TICKS = 2048.0
 
 
 @dataclass(frozen=True)
@@ -81,6 +116,20 @@ class JointMapping:
     unit: JointUnit
     sign: float = 1.0
     offset: float = 0.0
+    #: unit ticks: the count at the joint's zero and the counts per turn
+    zero_ticks: float = ZERO_TICKS
+    ticks_per_turn: float = TICKS_PER_TURN
+
+
+@dataclass(frozen=True)
+class ArmConfig:
+    """One arm of several: its URDF, the prefix of its frames and joints, where its base stands."""
+
+    name: str
+    urdf: Path
+    prefix: str
+    world_from_base_translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    world_from_base_quat_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -93,7 +142,9 @@ class DetectionSource:
 
 
 _KEYS = {"urdf", "state_feature", "world_frame", "world_from_base", "default_unit", "joints", "hold", "cameras",
-         "detections", "chain"}
+         "detections", "chain", "arms"}
+_ARM_KEYS = {"urdf", "prefix", "world_from_base", "default_unit", "joints", "hold", "calibration"}
+_JOINT_KEYS = {"joint", "unit", "sign", "offset", "zero_ticks", "ticks_per_turn"}
 
 
 @dataclass(frozen=True)
@@ -117,6 +168,8 @@ class RobotConfig:
     source: str = ""
     #: Values that are plausible but unusual, one line each (the cameras' included).
     notes: tuple[str, ...] = field(default=(), compare=False)
+    #: Several arms (``arms:``): joints and hold then name prefixed joints; empty for one URDF.
+    arms: tuple[ArmConfig, ...] = ()
 
     @classmethod
     def load(cls, path: str | Path) -> RobotConfig:
@@ -132,10 +185,15 @@ class RobotConfig:
         """Parse and check a configuration mapping (e.g. ``ChainConfig.robot``)."""
         base = Path(base_dir)
         top = Section(raw, source=source, known=_KEYS, error=RobotConfigError)
-        urdf = _resolve(top.name("urdf", required=True, hint="the path of the robot's URDF", what="a file name"), base)
-        joints = _joints(top)
-        pose = top.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
-            rotation_required=False, translation=plausible.position)
+        if "arms" in top:
+            arms, joints, hold = _arms(top, base)
+            urdf, pose = arms[0].urdf, None
+        else:
+            urdf = _resolve(top.name("urdf", required=True, hint="the path of the robot's URDF", what="a file name"),
+                            base)
+            joints, hold, arms = _joints(top), _hold(top), ()
+            pose = top.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
+                rotation_required=False, translation=plausible.position)
         cameras = _cameras(top, base)
         chain = top.section("chain", {"camera", "body", "latency_budget_s", "evidence"})
         chain_camera = chain.name("camera", what="a camera name")
@@ -143,12 +201,15 @@ class RobotConfig:
             chain.fail_at(chain.path("camera"), f"{chain_camera!r} is not one of the cameras {sorted(cameras)}")
         evidence = parse_evidence(chain)
         if evidence is not None and evidence.markers is not None:
-            chain.fail("evidence.markers needs topics.image, which robot.yaml cannot give: use CHAIN.yaml")
+            camera = cameras.get(chain_camera or next(iter(cameras), ""))
+            if camera is None or camera.video_key is None:
+                chain.fail("evidence.markers are searched in the chain camera's images: give that camera a video_key")
         return cls(
             urdf=urdf, joints=joints, cameras=cameras,
             state_feature=top.name("state_feature", "observation.state", what="a feature name") or "",
             world_frame=top.frame("world_frame", "world") or "",
-            world_from_base_translation=pose.xyz, world_from_base_quat_xyzw=pose.quat_xyzw, hold=_hold(top),
+            world_from_base_translation=pose.xyz if pose else (0.0, 0.0, 0.0),
+            world_from_base_quat_xyzw=pose.quat_xyzw if pose else (0.0, 0.0, 0.0, 1.0), hold=hold, arms=arms,
             detections=_detections(top, base, cameras), chain_camera=chain_camera,
             chain_body=chain.frame("body"), latency_budget_s=latency_budget(chain),
             evidence=evidence, source=source,
@@ -182,7 +243,10 @@ class RobotConfig:
             raise RobotConfigError(self.source, f"chain: camera, body and world must be three different frames, got "
                                    f"{frames.camera!r}, {frames.body!r}, {frames.world!r}")
         robot = {"config": str(Path(self.source).resolve())} if Path(self.source).is_file() else None
-        return ChainConfig(frames=frames, evidence=self.evidence or ChainEvidence(),
+        evidence = self.evidence or ChainEvidence()
+        # Markers are searched in the chain camera's frames: its video (or image) feature is the image topic.
+        topics = ChainTopics(image=self.cameras[name].video_key) if evidence.markers is not None else ChainTopics()
+        return ChainConfig(frames=frames, evidence=evidence, topics=topics,
                            latency_budget_s=0.02 if self.latency_budget_s is None else self.latency_budget_s,
                            robot=robot, origin=Path(self.source).name, notes=self.notes)
 
@@ -201,12 +265,14 @@ def _unit(section: Section, key: str) -> JointUnit:
         section.fail_at(section.path(key), f"is an unknown unit {show(value)}; units are {units}")
 
 
-def _joints(top: Section) -> tuple[JointMapping, ...]:
+def _joints(top: Section, prefix: str = "", calibration: Mapping[str, Any] | None = None
+            ) -> tuple[JointMapping, ...]:
     joints = top.section("joints", what="a mapping of dataset state names to URDF joints")
     if not joints.raw:
         top.fail_at("joints", "must map dataset state names to URDF joints")
     default_unit = _unit(top, "default_unit") if "default_unit" in top else None
-    out = tuple(_joint_mapping(joints, state, spec, default_unit) for state, spec in joints.entries())
+    out = tuple(_joint_mapping(joints, state, spec, default_unit, prefix, calibration or {})
+                for state, spec in joints.entries())
     seen: dict[str, str] = {}
     for m in out:
         if m.joint in seen:
@@ -215,9 +281,10 @@ def _joints(top: Section) -> tuple[JointMapping, ...]:
     return out
 
 
-def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUnit | None) -> JointMapping:
+def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUnit | None, prefix: str = "",
+                   calibration: Mapping[str, Any] | None = None) -> JointMapping:
     entry = joints.child({"joint": spec} if isinstance(spec, str) else spec, joints.path(state),
-                         {"joint", "unit", "sign", "offset"}, what="a joint name or {joint, unit, sign, offset}")
+                         _JOINT_KEYS, what="a joint name or {joint, unit, sign, offset}")
     joint = entry.name("joint", required=True, what="a joint name") or ""
     if "unit" in entry:
         unit = _unit(entry, "unit")
@@ -229,13 +296,71 @@ def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUn
     if isinstance(sign, bool) or sign not in (1, -1):
         entry.fail_at(entry.path("sign"), f"must be 1 or -1, got {show(sign)}")
     offset = entry.number("offset", 0.0, unit="rad or m", check=plausible.joint_value) or 0.0
-    return JointMapping(state, joint, unit, float(sign), offset)
+    motor = (calibration or {}).get(joint)
+    zero = ZERO_TICKS + float(motor["homing_offset"]) if motor is not None else ZERO_TICKS
+    if motor is not None and motor.get("drive_mode"):
+        sign = -sign
+    given = entry.number("zero_ticks", unit="ticks")
+    per_turn = entry.number("ticks_per_turn", TICKS_PER_TURN, positive=True, unit="ticks") or TICKS_PER_TURN
+    return JointMapping(state, prefix + joint, unit, float(sign), offset, zero if given is None else given,
+                        float(per_turn))
 
 
-def _hold(top: Section) -> dict[str, float]:
+def _hold(top: Section, prefix: str = "") -> dict[str, float]:
     hold = top.section("hold", what="a mapping of URDF joints to fixed positions (rad or m)")
-    return {joint: hold.number_value(value, hold.path(joint), unit="rad or m", check=plausible.joint_value)
+    return {prefix + joint: hold.number_value(value, hold.path(joint), unit="rad or m", check=plausible.joint_value)
             for joint, value in hold.entries()}
+
+
+def _arms(top: Section, base: Path) -> tuple[tuple[ArmConfig, ...], tuple[JointMapping, ...], dict[str, float]]:
+    """``arms``: each arm's URDF, prefix, base pose, joints (prefixed) and held joints (prefixed)."""
+    for key in ("urdf", "joints", "world_from_base", "default_unit", "hold"):
+        if key in top:
+            top.fail_at(key, f"goes under each arm when arms are given (arms.<name>.{key})")
+    section = top.section("arms", what="a mapping of arm names to {urdf, prefix, world_from_base, joints}")
+    if not section.raw:
+        top.fail_at("arms", "must name at least one arm")
+    arms: list[ArmConfig] = []
+    joints: list[JointMapping] = []
+    hold: dict[str, float] = {}
+    for name, spec in section.entries():
+        arm = section.child(spec, section.path(name), _ARM_KEYS, what="{urdf, prefix, world_from_base, joints}")
+        prefix = arm.name("prefix", f"{name}_", what="a frame prefix") or ""
+        urdf = _resolve(arm.name("urdf", required=True, hint="the arm's URDF", what="a file name"), base)
+        pose = arm.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
+            rotation_required=False, translation=plausible.position)
+        calibration = _calibration(arm, base) if "calibration" in arm else None
+        arms.append(ArmConfig(name, urdf, prefix, pose.xyz, pose.quat_xyzw))
+        joints.extend(_joints(arm, prefix, calibration))
+        hold.update(_hold(arm, prefix))
+    prefixes = [a.prefix for a in arms]
+    if len(set(prefixes)) != len(prefixes):
+        section.fail(f"arms share a prefix ({prefixes}): give each arm its own prefix")
+    seen: dict[str, str] = {}
+    for m in joints:
+        if m.state in seen:
+            section.fail(f"state {m.state!r} drives joints of two arms ({seen[m.state]!r} and {m.joint!r})")
+        seen[m.state] = m.joint
+    return tuple(arms), tuple(joints), hold
+
+
+def _calibration(arm: Section, base: Path) -> dict[str, Any]:
+    """A LeRobot calibration JSON: ``{motor: {homing_offset, drive_mode, ...}}`` (one line per problem)."""
+    import json
+
+    path = _resolve(arm.name("calibration", what="a file name"), base)
+    where = arm.path("calibration")
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as err:
+        arm.fail_at(where, f"cannot read the calibration JSON {path} ({err})")
+    if not isinstance(raw, dict) or not all(isinstance(v, dict) for v in raw.values()):
+        arm.fail_at(where, f"{path}: expected {{motor: {{homing_offset, drive_mode, range_min, range_max}}}}")
+    for motor, entry in raw.items():
+        offset = entry.get("homing_offset", 0)
+        if isinstance(offset, bool) or not isinstance(offset, int | float) or not abs(offset) < 1e5:
+            arm.fail_at(where, f"{path}: {motor}.homing_offset must be a number of ticks, got {show(offset)}")
+    return {str(k): v for k, v in raw.items()}
 
 
 def _cameras(top: Section, base: Path) -> dict[str, CameraCalibration]:

@@ -36,7 +36,8 @@ from framechain.arrays import FloatArray
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
 from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
 
-__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads"]
+__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads",
+           "write_robot_yaml"]
 
 ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 #: A pose with the gripper reaching forward and down over the table.
@@ -72,6 +73,16 @@ class VideoDatasetSpec:
     focal_scale: float = 1.0
     repeat_share: float = 0.0
     pads: bool = True
+    #: The arms hold still (a camera that shows nothing of its motion).
+    still: bool = False
+    #: A marker lying on the table under the camera's mean view (0: none): its side (m), id, dictionary.
+    marker_size_m: float = 0.0
+    marker_id: int = 7
+    marker_dictionary: str = "DICT_4X4_50"
+    #: Frames as an mp4 per key ("video"), or PNG bytes in the Parquet ("image", an HF Image feature).
+    storage: str = "video"
+    #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
+    codec_options: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -93,6 +104,8 @@ class VideoDatasetTruth:
     declared_focal_px: float
     #: Per episode: the frames (in order) that repeat the previous one.
     repeated: tuple[tuple[int, ...], ...] = field(default_factory=tuple)
+    #: The marker's centre in the world (NaN: none).
+    marker_xyz: tuple[float, float, float] = (float("nan"), float("nan"), float("nan"))
 
     @property
     def expected_offset_s(self) -> float:
@@ -100,9 +113,9 @@ class VideoDatasetTruth:
         return -self.spec.video_delay_s
 
 
-def _trajectory(rng: np.random.Generator) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _trajectory(rng: np.random.Generator, *, still: bool = False) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed)."""
-    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2))
+    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2)) * (0.0 if still else 1.0)
     omega = rng.uniform(0.8, 2.2, (5, 2))
     phase = rng.uniform(0.0, 2 * np.pi, (5, 2))
     return amplitude, omega, phase
@@ -164,12 +177,15 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     n = round(spec.duration_s * spec.fps)
     t = np.arange(n) / spec.fps
     episodes, videos, repeated = [], [], []
-    for _e in range(spec.episodes):
-        motions = {arm: _trajectory(rng) for arm in arms}
+    marker = (float("nan"), float("nan"), float("nan"))
+    for e in range(spec.episodes):
+        motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
         captured = _joints(motions[spec.camera_arm], t - spec.video_delay_s)
         world_from_cam = bases[spec.camera_arm] @ chain.root_from_link(
             dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{spec.camera_arm}gripper_link") @ mount
+        if e == 0 and spec.marker_size_m > 0:
+            marker = _place_marker(scene, world_from_cam, spec)
         frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
@@ -178,18 +194,24 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         repeated.append(tuple(int(k) for k in repeats))
         videos.append(frames)
         action = np.concatenate([state[1:], state[-1:]])
-        episodes.append(EpisodeData(frames={"observation.state": state, "action": action}))
+        columns = {"observation.state": state, "action": action}
+        if spec.storage == "image":
+            columns[key] = np.array([_png(f) for f in frames], dtype=object)
+        episodes.append(EpisodeData(frames=columns))
     out = Path(root)
     features = {
         "observation.state": FeatureSpec("float32", (len(names),), list(names)),
         "action": FeatureSpec("float32", (len(names),), list(names)),
         key: FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
                          {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
-                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False}),
+                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
+        if spec.storage == "video"
+        else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]),
     }
     write_lerobot_dataset(out, episodes, features=features, fps=spec.fps, version=spec.version,
                           robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")
-    _write_videos(out, key, videos, spec)
+    if spec.storage == "video":
+        _write_videos(out, key, videos, spec)
     declared_arm = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
     return VideoDatasetTruth(
         root=out, spec=spec, video_key=key, arms=arms, state_names=names,
@@ -197,13 +219,37 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         q_link_cam=Rotation.from_matrix(mount[:3, :3]).as_quat(),
         declared_q_link_cam=Rotation.from_matrix(declared_mount[:3, :3]).as_quat(),
         xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float), intrinsics=(spec.focal_px, spec.focal_px, cx, cy),
-        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated),
+        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated), marker_xyz=marker,
     )
+
+
+def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
+                  spec: VideoDatasetSpec) -> tuple[float, float, float]:
+    """Paint the marker where the optical axis meets the table, on median over the first episode."""
+    import cv2
+
+    axis = world_from_cam[:, :3, 2]
+    centre = world_from_cam[:, :3, 3]
+    down = axis[:, 2] < -0.1
+    depth = -centre[down, 2] / axis[down, 2]
+    hits = centre[down, :2] + depth[:, None] * axis[down, :2]
+    x, y = (float(v) for v in np.median(hits, axis=0))
+    scene.paint_marker(int(getattr(cv2.aruco, spec.marker_dictionary)), spec.marker_id, (x, y), spec.marker_size_m)
+    return (x, y, 0.0)
 
 
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
 #: Fast encoder presets: generation time, not file size, matters here.
 _FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"}}
+
+
+def _png(rgb: FloatArray) -> bytes:
+    import cv2
+
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError("cannot encode a frame as PNG")
+    return bytes(data.tobytes())
 
 
 def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
@@ -215,10 +261,48 @@ def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -
 
 def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDatasetSpec) -> None:
     """One mp4 per episode (v2.1), or the episodes back to back in one file (v3.0, as the writer's metadata says)."""
+    options = {**_FAST.get(spec.codec, {}), **dict(spec.codec_options)}
     if spec.version == "v2.1":
         for e, frames in enumerate(videos):
             encode_video(root / f"videos/chunk-000/{key}/episode_{e:06d}.mp4", frames, fps=spec.fps, codec=spec.codec,
-                         options=_FAST.get(spec.codec))
+                         options=options)
     else:
         encode_video(root / f"videos/{key}/chunk-000/file-000.mp4", np.concatenate(videos), fps=spec.fps,
-                     codec=spec.codec, options=_FAST.get(spec.codec))
+                     codec=spec.codec, options=options)
+
+
+def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[str, object] | None = None) -> Path:
+    """robot.yaml as a user would write it for the dataset: the URDF, the joints (degrees, the gripper
+    0-100), each arm's base, and the wrist camera with its *declared* intrinsics, mount and arm."""
+    import yaml
+
+    spec = truth.spec
+    _fx, _fy, cx, cy = truth.intrinsics
+
+    def joints(arm: str) -> dict[str, object]:
+        out: dict[str, object] = {f"{arm}{j}.pos": j for j in ARM_JOINTS}
+        out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
+        return out
+
+    camera = {
+        "intrinsics": {"fx": truth.declared_focal_px, "fy": truth.declared_focal_px, "cx": cx, "cy": cy,
+                       "width": spec.width, "height": spec.height},
+        "mount": {"parent": truth.declared_link, "xyz": [float(v) for v in truth.xyz_link_cam],
+                  "quat_xyzw": [float(v) for v in truth.declared_q_link_cam], "optical": True},
+        "video_key": truth.video_key,
+    }
+    config: dict[str, object] = {"state_feature": "observation.state"}
+    if truth.arms == ("",):
+        config.update(urdf=str(spec.urdf), default_unit="deg", joints=joints(""))
+    else:
+        bases = _base_poses(truth.arms)
+        config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": "deg",
+                                            "world_from_base": {"xyz": [float(v) for v in bases[arm][:3, 3]],
+                                                                "rpy": [0.0, 0.0, 0.0]},
+                                            "joints": joints(arm)}
+                          for arm in truth.arms}
+    config["cameras"] = {"wrist": camera}
+    config.update(extra or {})
+    out = Path(path)
+    out.write_text(yaml.safe_dump(config, sort_keys=False))
+    return out

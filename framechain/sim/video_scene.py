@@ -83,6 +83,20 @@ class TexturedScene:
         self._frames = 0
         self._pad_cache: dict[tuple[int, int, PadRegion], tuple[npt.NDArray[np.bool_], Image]] = {}
 
+    def paint_marker(self, dictionary: int, marker_id: int, centre_xy_m: tuple[float, float], size_m: float) -> None:
+        """An ArUco/AprilTag marker of OpenCV's predefined ``dictionary`` lying on the table, its black square
+        ``size_m`` wide centred at ``centre_xy_m``, with a white margin of one cell, readable from above: its
+        image x axis along the world +x, its image y axis (down the printed marker) along the world -y. The
+        table texture's rows follow +y, so the marker is painted upside down in it."""
+        scale = self.table_px_per_m
+        side = round(size_m * scale)
+        marker = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(dictionary), marker_id, side)
+        cell = max(1, side // 6)
+        patch = cv2.copyMakeBorder(marker, cell, cell, cell, cell, cv2.BORDER_CONSTANT, value=255)
+        x0 = round((centre_xy_m[0] + self.half_size_m) * scale - patch.shape[1] / 2)
+        y0 = round((centre_xy_m[1] + self.half_size_m) * scale - patch.shape[0] / 2)
+        self.table[y0:y0 + patch.shape[0], x0:x0 + patch.shape[1]] = patch[::-1, :, None]
+
     def render(self, world_from_cam: FloatArray, rays: FloatArray, pads: tuple[PadRegion, ...] = ()) -> Image:
         """One RGB frame: ``rays`` from :func:`pixel_rays`, ``world_from_cam`` a 4x4 pose."""
         rot, centre = world_from_cam[:3, :3], world_from_cam[:3, 3]

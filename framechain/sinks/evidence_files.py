@@ -27,6 +27,8 @@ METRICS = {
     "target": "distance between the logged target and the recomputed world point, per observation",
     "reference": "distance between the reference (ground truth) and the recomputed world point, per observation",
     "static_spread": "distance of each recomputed world point of the static target from their centroid",
+    "camera_motion": "robust RMS over frame pairs of each camera's measured rotation rate (from its images) against "
+                     "the rate forward kinematics predicts through the declared link, mount and time (deg/s)",
     "none": "no evidence to measure against",
 }
 

@@ -17,6 +17,7 @@ import numpy as np
 import pyarrow as pa
 
 from framechain.analysis.estimates import format_interval
+from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets
 from framechain.sinks.report import Figure, figure_html, figure_png
 from framechain.sinks.text import CSS, mm
 
@@ -168,15 +169,20 @@ def render_fleet_report(
     logs = fleet_logs(table)
     spread = estimate_spread(logs)
     figures = make_fleet_figures(logs)
+    offsets = video_offsets(table)
     paths: dict[str, Path] = {}
+    marker = "\n\n## Which logs have which fault"
     if "md" in formats:
         for fig in figures:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["fleet_md"] = out / "fleet_report.md"
-        paths["fleet_md"].write_text(fleet_markdown(logs, spread, figures, notes))
+        page = fleet_markdown(logs, spread, figures, notes)
+        paths["fleet_md"].write_text(page.replace(marker, "\n".join(offset_markdown(offsets)) + marker, 1))
     if "html" in formats:
         paths["fleet_html"] = out / "fleet_report.html"
-        paths["fleet_html"].write_text(fleet_html(logs, spread, figures, notes))
+        page = fleet_html(logs, spread, figures, notes)
+        heading = "<h2>Which logs have which fault</h2>"
+        paths["fleet_html"].write_text(page.replace(heading, "".join(offset_html(offsets)) + heading, 1))
     return paths
 
 

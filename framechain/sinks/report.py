@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.checks import nothing_observable
+from framechain.analysis.egomotion import rotation_rates
 from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.analysis.sensitivity import robot_speed, sensitivity
@@ -46,7 +47,8 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     result = run.attributed()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figures = make_figures(result)
+    # Measured against the cameras' own motion, the world-error pictures would be empty.
+    figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
     checks = [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
     sections = image_crops(run)
     paths: dict[str, Path] = {}
@@ -251,6 +253,54 @@ def _drawn_points(y: FloatArray, columns: int) -> IntArray:
     return out
 
 
+def motion_figures(run: Run) -> list[Figure]:
+    """Per measured camera: |rotation rate| over time from its images, from forward kinematics as declared and
+    as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`)."""
+    if run.camera_motion is None:
+        return []
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = []
+    for motion in run.camera_motion.cameras:
+        fit = motion.fit
+        if fit is None or not fit.link or not len(motion.table):
+            continue
+        table = motion.table
+        span = table.stamp1_ns - table.stamp0_ns
+        pairs = np.flatnonzero(span <= 1.5 * np.percentile(span, 10))
+        pairs = pairs[np.argsort(table.stamp0_ns[pairs], kind="stable")]
+        t = (table.stamp0_ns[pairs] + span[pairs] / 2) * 1e-9
+        declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
+        fitted = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
+                                focal_scale=fit.focal_scale / motion.measured_focal)
+        measured, predicted, corrected = (np.rad2deg(np.linalg.norm(r[pairs], axis=1))
+                                          for r in (declared.measured, declared.predicted, fitted.predicted))
+        fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+        ax.plot(t, measured, color="k", lw=1.6, label="from the images")
+        ax.plot(t, predicted, color="tab:orange", lw=1.0,
+                label=f"forward kinematics of {motion.declared_link} as declared")
+        ax.plot(t, corrected, color="tab:green", lw=1.0, ls="--",
+                label=f"{fit.link} shifted {fit.offset_s * 1e3:+.1f} ms, fitted mount")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("rotation rate (deg/s)")
+        ax.set_title(f"Camera {motion.camera}: its own motion against forward kinematics", fontsize=9)
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7)
+        name = "rotation_rate_" + "".join(c if c.isalnum() else "_" for c in motion.camera)
+        out.append(figure_png(fig, name, f"Rotation rate of {motion.camera}: images against forward kinematics"))
+    return out
+
+
+def _size(value: float | None, summary: dict[str, Any]) -> str:
+    """An error summary's value in its unit: millimetres, or deg/s of a camera's rotation rate."""
+    if summary.get("unit") == "deg/s":
+        return "n/a" if value is None else f"{value:.2f} deg/s"
+    return mm(value)
+
+
 def _after_label(result: Attribution) -> str:
     """What the second error curve is: corrected data, or what the findings leave unexplained."""
     if result.metric in ("reference", "static_spread"):
@@ -297,12 +347,13 @@ def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
         dep = r["departure_m"]
         gap = r["gap_ms"]
         faults = f" ({', '.join(r['faults'])})" if r["faults"] else ""
+        rate = sum(f.error_m for f in result.findings if f.hop.value == r["hop"] and f.error_unit == "deg/s")
         rows.append((
             r["hop"],
             "not logged" if dep is None else f"{mm(dep['median'])} / {mm(dep['p95'])} / {mm(dep['max'])}",
             "-" if gap is None else f"{gap['median']:.1f} / {gap['max']:.1f} ms",
             str(r["stale"]),
-            f"{mm(r['attributed_m'])}{faults}",
+            f"{rate:.2f} deg/s{faults}" if rate else f"{mm(r['attributed_m'])}{faults}",
         ))
     return rows
 
@@ -371,9 +422,9 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "",
         "## Error",
         "",
-        f"Against the {s['metric'].replace('_', ' ')}: median {mm(s['median'])}, p95 {mm(s['p95'])}, "
-        f"max {mm(s['max'])}; {_after_label(result)}: "
-        f"median {mm(result.error_summary(result.error_after)['median'])}.",
+        f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
+        f"max {_size(s['max'], s)}; {_after_label(result)}: "
+        f"median {_size(result.error_summary(result.error_after)['median'], s)}.",
         "",
         "### Per hop",
         "",
@@ -419,9 +470,9 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         parts.append("<p>No fault beyond noise.</p>" if _clean(result) else "<p>Nothing could be checked.</p>")
     counts = result.counts()
     parts.append(
-        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {mm(s['median'])}, "
-        f"p95 {mm(s['p95'])}, max {mm(s['max'])}; {_after_label(result)}: median "
-        f"{mm(result.error_summary(result.error_after)['median'])}. Observations: {counts['total']} total, "
+        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {_size(s['median'], s)}, "
+        f"p95 {_size(s['p95'], s)}, max {_size(s['max'], s)}; {_after_label(result)}: median "
+        f"{_size(result.error_summary(result.error_after)['median'], s)}. Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
     parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")

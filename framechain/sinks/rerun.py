@@ -66,6 +66,7 @@ from framechain.sinks.rerun_common import (
     SENSOR_TIME,
     RerunOptions,
 )
+from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_videos
 from framechain.sinks.rerun_scene import (
     log_camera,
     log_frame_tree,
@@ -293,6 +294,9 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_points(rec, result, as_run, opts, rows)
     log_series(rec, result, as_run, rows)
     log_images(rec, timeline, result, opts, rows)
+    if opts.images is not ImageSelection.NONE:
+        log_camera_videos(rec, run, rows)
+    log_camera_motion(rec, run, rows)
     log_overlay(rec, overlay, result, rows)
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
     if run.attribution is not None:

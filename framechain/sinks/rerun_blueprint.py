@@ -37,14 +37,17 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
 
 def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
                       image_bounds: tuple[float, float, float, float] | None = None,
-                      curves: Sequence[tuple[str, str]] = (), curves_first: bool = False) -> rrb.Blueprint:
+                      curves: Sequence[tuple[str, str]] = (), curves_first: bool = False,
+                      camera_motion: bool = False) -> rrb.Blueprint:
     """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
     (its images with the chain drawn on them when ``images``, else the depth frames); below them the
     per-hop error, the error in the image and the time gaps as series, and the findings.
     ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
     v_min, v_max) frames the camera view (see :func:`image_view_bounds`). ``curves`` (entity, title): the
     error against each fault family's size, as bar charts beside the per-hop error (``curves_first``: shown
-    first, where no hop error is logged); what the log can show and the labels are a tab beside the findings."""
+    first, where no hop error is logged); what the log can show and the labels are a tab beside the findings.
+    ``camera_motion`` puts the cameras' rotation rate, from their images against forward kinematics, first
+    beside the per-hop error."""
     import rerun.blueprint as rrb
 
     # With colour images, the depth cloud would bury the points: it stays in the depth tab.
@@ -81,6 +84,10 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         charts = [rrb.BarChartView(name=title, origin=entity, plot_legend=rrb.PlotLegend(visible=False))
                   for entity, title in curves]
         errors = rrb.Tabs(errors, *charts, active_tab=1 if curves_first else 0)
+    if camera_motion:
+        rates = rrb.TimeSeriesView(name="Camera rotation rate: images vs forward kinematics (deg/s)",
+                                   origin="/series/rotation_rate_deg_s")
+        errors = rrb.Tabs(rates, errors)
     pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
     gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
     text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),

@@ -46,9 +46,15 @@ class FindingView:
 
     def cells(self) -> FindingCells:
         f = self.finding
-        return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
-                            interval=format_interval(f.interval), share=f"{f.share:.0%}", error=mm(f.error_m),
+        hop = f.hop.value + (f" on camera {f.camera}" if f.camera else "")
+        return FindingCells(fault=f.fault.value, hop=hop, estimate=format_estimate(f.estimate),
+                            interval=format_interval(f.interval), share=f"{f.share:.0%}", error=self.error(),
                             confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix, strength=f.strength)
+
+    def error(self) -> str:
+        """The error the finding explains: millimetres, or deg/s of a camera's rotation rate."""
+        f = self.finding
+        return mm(f.error_m) if f.error_unit == "m" else f"{f.error_m:.2f} {f.error_unit}"
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""

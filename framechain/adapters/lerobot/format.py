@@ -27,11 +27,11 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypedDict
+from typing import Any, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -41,9 +41,6 @@ import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
 from framechain.arrays import FloatArray, IntArray
-
-if TYPE_CHECKING:
-    import pyarrow.dataset as pads
 
 #: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
 TIMESTAMP_TOLERANCE_S = 1e-4
@@ -64,10 +61,11 @@ __all__ = [
 
 
 class DatasetError(AdapterError):
-    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency."""
+    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency (one line:
+    pyarrow's and FFmpeg's messages may span several)."""
 
     def __init__(self, path: str | Path, what: str) -> None:
-        super().__init__(path, what)
+        super().__init__(path, " ".join(what.split()))
 
 
 class Layout(StrEnum):
@@ -174,15 +172,10 @@ def flatten_names(raw: Any) -> tuple[str, ...] | None:
 
 
 def is_lerobot_dataset(path: str | Path) -> bool:
-    """True when ``path`` is a directory with ``meta/info.json`` naming a LeRobot codebase version."""
-    info = Path(path) / "meta" / "info.json"
-    if not info.is_file():
-        return False
-    try:
-        version = json.loads(info.read_text()).get("codebase_version", "")
-    except (OSError, ValueError, AttributeError):
-        return False
-    return isinstance(version, str) and version.startswith(("v2", "v3"))
+    """True when ``path`` is a directory with ``meta/info.json``: a LeRobot dataset, perhaps a damaged one
+    (an info.json that cannot be read, or of another codebase version, is for :class:`DatasetReader` to
+    say in one line, not a reason to read the folder as something else)."""
+    return (Path(path) / "meta" / "info.json").is_file()
 
 
 class DatasetReader:
@@ -232,6 +225,7 @@ class DatasetReader:
         self.data_path = data_path
         video_path = raw.get("video_path")
         self.video_path = video_path if isinstance(video_path, str) else None
+        self._episodes_v3: pa.Table | None = None
         if self.layout is Layout.V2:
             self._episodes_v2 = self._read_episodes_v2()
             self._episode_ids = sorted(self._episodes_v2)
@@ -297,8 +291,7 @@ class DatasetReader:
         """Declared frame count of every episode (episodes.jsonl or the episodes parquet)."""
         if self.layout is Layout.V2:
             return {e: int(row["length"]) for e, row in sorted(self._episodes_v2.items())}
-        files = self._episodes_files_v3()
-        table = _parquet_dataset(files).to_table(columns=["episode_index", "length"])
+        table = self._episodes_table_v3()
         pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
         return {int(e): int(n) for e, n in sorted(pairs)}
 
@@ -307,15 +300,17 @@ class DatasetReader:
         if not path.is_file():
             raise DatasetError(path, "missing: a v2 dataset lists its episodes here")
         out: dict[int, dict[str, Any]] = {}
-        for lineno, row in enumerate(_jsonl(path), start=1):
-            if "episode_index" not in row or "length" not in row:
-                raise DatasetError(path, f"line {lineno} lacks episode_index or length")
-            ep = int(row["episode_index"])
+        for lineno, row in _jsonl(path, self.note):
+            ep, length = _whole(row.get("episode_index")), _whole(row.get("length"))
+            if ep is None or length is None or length < 0:
+                self.note(path, f"line {lineno} lacks a whole episode_index or length; left out")
+                continue
             if ep in out:
-                raise DatasetError(path, f"episode {ep} is listed twice")
+                self.note(path, f"line {lineno}: episode {ep} is listed twice; the first is kept")
+                continue
             out[ep] = row
         if not out:
-            raise DatasetError(path, "lists no episodes")
+            raise DatasetError(path, "lists no episode that can be read")
         return out
 
     def _episodes_files_v3(self) -> list[Path]:
@@ -325,12 +320,41 @@ class DatasetReader:
             raise DatasetError(folder, "no episodes parquet files (chunk-*/file-*.parquet): not a v3 dataset?")
         return files
 
+    def _episodes_table_v3(self) -> pa.Table:
+        """Every readable episodes parquet file as one table (read once); a file that cannot be read is a note
+        and its episodes are left out, the others kept."""
+        if self._episodes_v3 is not None:
+            return self._episodes_v3
+        folder = self.root / "meta" / "episodes"
+        tables = []
+        for path in self._episodes_files_v3():
+            try:
+                table = pq.read_table(path)
+            except (OSError, pa.ArrowException) as err:
+                self.note(path, f"cannot read ({_one_line(err)}); its episodes are left out")
+                continue
+            missing = [c for c in ("episode_index", "length", "data/chunk_index", "data/file_index")
+                       if c not in table.column_names]
+            if missing:
+                self.note(path, f"lacks columns {missing}; its episodes are left out")
+                continue
+            tables.append(table)
+        if not tables:
+            raise DatasetError(folder, "no episodes parquet file can be read (see above): no episode is known")
+        try:
+            self._episodes_v3 = pa.concat_tables(tables, promote_options="permissive")
+        except pa.ArrowException as err:
+            raise DatasetError(folder, f"the episodes parquet files disagree on their columns ({_one_line(err)})") \
+                from err
+        return self._episodes_v3
+
     def _read_episode_ids_v3(self) -> list[int]:
-        files = self._episodes_files_v3()
-        table = _parquet_dataset(files).to_table(columns=["episode_index"])
-        ids = table.column("episode_index").to_numpy()
+        table = self._episodes_table_v3()
+        ids = table.column("episode_index").to_numpy(zero_copy_only=False)
+        if not np.isfinite(ids.astype(np.float64)).all():
+            raise DatasetError(self.root / "meta" / "episodes", "an episode row has no episode_index")
         if np.unique(ids).size != ids.size:
-            raise DatasetError(files[0].parent.parent, "an episode_index appears in two episode rows")
+            raise DatasetError(self.root / "meta" / "episodes", "an episode_index appears in two episode rows")
         return sorted(int(i) for i in ids)
 
     def _check_totals(self) -> None:
@@ -383,49 +407,44 @@ class DatasetReader:
     def _episode_v2(self, index: int) -> EpisodeInfo:
         row = self._episodes_v2[index]
         chunk = index // self.chunks_size
-        try:
-            data_file = self.root / self.data_path.format(episode_chunk=chunk, episode_index=index)
-        except (KeyError, IndexError, ValueError) as err:
-            raise DatasetError(self._info_path, f"data_path {self.data_path!r} cannot be filled ({err})") from err
+        fields = {"episode_chunk": chunk, "chunk_index": chunk, "episode_index": index}
+        data_file = self._fill("data_path", self.data_path, fields)
         videos: dict[str, Path] = {}
         if self.video_path is not None:
             for key in self.video_keys:
-                vf = self.root / self.video_path.format(episode_chunk=chunk, video_key=key, episode_index=index)
-                if vf.is_file():
+                vf = self._fill_if_found("video_path", self.video_path, {**fields, "video_key": key})
+                if vf is not None and vf.is_file():
                     videos[key] = vf
         tasks = row.get("tasks") or []
         return EpisodeInfo(index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks),
                            data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0))
 
     def _episode_v3(self, index: int) -> EpisodeInfo:
-        files = self._episodes_files_v3()
-        dataset = _parquet_dataset(files)
-        names = set(dataset.schema.names)
+        episodes = self._episodes_table_v3()
+        names = set(episodes.column_names)
         wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
                   "dataset_from_index", "dataset_to_index"]
         for key in self.video_keys:
             wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp"]
-        required = ["episode_index", "length", "data/chunk_index", "data/file_index"]
-        missing = [c for c in required if c not in names]
         where = self.root / "meta" / "episodes"
-        if missing:
-            raise DatasetError(where, f"episodes parquet lacks columns {missing}")
-        table = dataset.to_table(columns=[c for c in wanted if c in names],
-                                 filter=pc.field("episode_index") == index)
+        table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
+        if table.num_rows == 0:
+            raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
         row = {k: v[0] for k, v in table.to_pydict().items()}
-        try:
-            data_file = self.root / self.data_path.format(
-                chunk_index=int(row["data/chunk_index"]), file_index=int(row["data/file_index"]))
-        except (KeyError, IndexError, ValueError) as err:
-            raise DatasetError(self._info_path, f"data_path {self.data_path!r} cannot be filled ({err})") from err
+        if any(row.get(c) is None for c in ("length", "data/chunk_index", "data/file_index")):
+            raise DatasetError(where, f"episode {index}'s row lacks its length or data file")
+        fields = {"chunk_index": int(row["data/chunk_index"]), "file_index": int(row["data/file_index"]),
+                  "episode_index": index}
+        data_file = self._fill("data_path", self.data_path, fields)
         videos: dict[str, Path] = {}
         video_from: dict[str, float] = {}
         for key in self.video_keys:
             c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
             if c is None or f is None or self.video_path is None:
                 continue
-            vf = self.root / self.video_path.format(video_key=key, chunk_index=int(c), file_index=int(f))
-            if vf.is_file():
+            vf = self._fill_if_found("video_path", self.video_path, {"video_key": key, "chunk_index": int(c),
+                                                                      "file_index": int(f), "episode_index": index})
+            if vf is not None and vf.is_file():
                 videos[key] = vf
                 video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
         tasks = row.get("tasks") or []
@@ -435,6 +454,43 @@ class DatasetReader:
             to_index=None if row.get("dataset_to_index") is None else int(row["dataset_to_index"]),
             video_files=videos, video_from_s=video_from,
         )
+
+    def _fill(self, key: str, template: str, fields: Mapping[str, Any]) -> Path:
+        """``template`` (info.json's ``key``) filled with ``fields``; a variable LeRobot does not define (a
+        recorder's own, ``{robot_id}``) is matched against the files on disk (with a note), which must be one."""
+        path = self._fill_if_found(key, template, fields, required=True)
+        assert path is not None  # required: raised otherwise
+        return path
+
+    def _fill_if_found(self, key: str, template: str, fields: Mapping[str, Any], *,
+                       required: bool = False) -> Path | None:
+        """:meth:`_fill`, None when a template with a variable LeRobot does not define matches no single file."""
+        import glob
+        import string
+
+        try:
+            parsed = list(string.Formatter().parse(template))
+        except ValueError as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} is not a path template ({err})") from err
+        unknown = sorted({name for _text, name, _spec, _conv in parsed if name and name not in fields})
+        try:
+            if not unknown:
+                return self.root / template.format(**fields)
+            pattern = "".join(glob.escape(text) + ("" if name is None else "*" if name in unknown
+                                                   else format(fields[name], spec or ""))
+                              for text, name, spec, _conv in parsed)
+        except (KeyError, IndexError, ValueError) as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} cannot be filled ({err})") from err
+        matches = sorted(self.root.glob(pattern))
+        if len(matches) == 1:
+            self.note(self._info_path, f"{key} uses {', '.join('{' + u + '}' for u in unknown)}, which LeRobot does "
+                      "not define; matched by the other fields")
+            return matches[0]
+        if not required:
+            return None
+        found = "no file" if not matches else f"{len(matches)} files ({matches[0].name}, ...)"
+        raise DatasetError(self._info_path, f"{key} {template!r} uses {', '.join(unknown)}, which LeRobot does not "
+                           f"define, and {found} on disk match{'es' if len(matches) == 1 else ''} the rest")
 
     def read(self, index: int, columns: Sequence[str] = ()) -> EpisodeFrames:
         """One episode's frames: timestamps, frame and global indices, and ``columns`` as arrays.
@@ -448,8 +504,8 @@ class DatasetReader:
             raise DatasetError(path, f"data file of episode {index} is missing")
         try:
             schema = pq.read_schema(path)
-        except (OSError, pa.ArrowInvalid) as err:
-            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+        except (OSError, pa.ArrowException) as err:
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
         present = set(schema.names)
         for col in columns:
             if col in self.features and self.features[col].is_video:
@@ -462,8 +518,8 @@ class DatasetReader:
         filters = [("episode_index", "=", index)] if self.layout is Layout.V3 and "episode_index" in present else None
         try:
             table = pq.read_table(path, columns=read_cols, filters=filters)
-        except (OSError, pa.ArrowInvalid) as err:
-            raise DatasetError(path, f"cannot read Parquet ({err})") from err
+        except (OSError, pa.ArrowException) as err:
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
         if "index" in present:
             table = table.sort_by("index")
         n = table.num_rows
@@ -526,17 +582,23 @@ class DatasetReader:
         return ts
 
 
-def _parquet_dataset(files: Sequence[Path]) -> pads.Dataset:
-    """Parquet files as one dataset. pyarrow.dataset loads pandas, so only v3 episode tables import it."""
-    import pyarrow.dataset as pads
-
-    return pads.dataset([str(f) for f in files], format="parquet")
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split()) or type(err).__name__
 
 
-def _jsonl(path: Path) -> list[dict[str, Any]]:
-    rows: list[dict[str, Any]] = []
+def _whole(value: Any) -> int | None:
+    """``value`` as an int when it is a finite whole number (JSON may write 12 as 12.0), else None."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return None
+    return int(value) if float(value).is_integer() else None
+
+
+def _jsonl(path: Path, note: Callable[[Path, str], None]) -> list[tuple[int, dict[str, Any]]]:
+    """(line number, object) of each line that is a JSON object; every other line is a note (a cut file
+    loses its last line, not its episodes)."""
+    rows: list[tuple[int, dict[str, Any]]] = []
     try:
-        lines = path.read_text().splitlines()
+        lines = path.read_bytes().decode("utf-8", errors="replace").splitlines()
     except OSError as err:
         raise DatasetError(path, f"cannot read ({err.strerror})") from err
     for lineno, line in enumerate(lines, start=1):
@@ -545,10 +607,12 @@ def _jsonl(path: Path) -> list[dict[str, Any]]:
         try:
             row = json.loads(line)
         except ValueError as err:
-            raise DatasetError(path, f"line {lineno} is not JSON ({err})") from err
+            note(path, f"line {lineno} is not JSON ({err}); left out")
+            continue
         if not isinstance(row, dict):
-            raise DatasetError(path, f"line {lineno} is not a JSON object")
-        rows.append(row)
+            note(path, f"line {lineno} is not a JSON object; left out")
+            continue
+        rows.append((lineno, row))
     return rows
 
 

@@ -47,12 +47,13 @@ from framechain.adapters.lerobot.format import (
     Layout,
     is_lerobot_dataset,
 )
+from framechain.adapters.lerobot.markers import video_markers
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.robot.binding import joint_positions, robot_model
+from framechain.adapters.robot.binding import arm_root, joint_positions, robot_model
 from framechain.adapters.robot.kinematics import RobotModel
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
-from framechain.config.chain import ChainConfig
+from framechain.config.chain import ChainConfig, MarkerSpec
 from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
 from framechain.timeline import (
     CameraTable,
@@ -78,12 +79,15 @@ def open_dataset(
     robot: RobotConfig | str | Path,
     detections: str | Path | None = None,
     strict: bool = False,
+    markers: MarkerSpec | None = None,
 ) -> Timeline:
     """Read episode ``episode`` of the LeRobot dataset at ``path`` into a Timeline.
 
     ``robot`` is a :class:`RobotConfig` or the path of robot.yaml; ``detections`` adds a side
     table (Parquet or CSV) to those robot.yaml names. ``strict`` turns metadata notes (harmless
-    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`.
+    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`. ``markers`` (else
+    robot.yaml's ``chain.evidence.markers``) are searched in the chain camera's frames
+    (:mod:`framechain.adapters.lerobot.markers`) and become observations too.
     """
     cfg = robot if isinstance(robot, RobotConfig) else RobotConfig.load(robot)
     reader = DatasetReader(path, strict=strict)
@@ -116,12 +120,39 @@ def open_dataset(
     ])
     joint_states = _joint_states(cfg, q, state_ns, source_name)
     videos = ImageFrameTable.concat([
-        _video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
-        if cam.video_key is not None and cam.video_key in frames.episode.video_files
+        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
+          if cam.video_key is not None and cam.video_key in frames.episode.video_files),
+        *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
+          if cam.video_key is not None and cam.video_key in frames.columns),
     ])
+    metadata = _metadata(Path(path), episode, cfg, model, reader, frames)
+    spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
+    if spec is not None:
+        observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
     return Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                    joint_states=joint_states, depth_frames=depth, image_frames=videos,
-                    metadata=_metadata(Path(path), episode, cfg, model, reader, frames))
+                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
+
+
+def _with_markers(observations: ObservationTable, images: ImageFrameTable, cameras: CameraTable, cfg: RobotConfig,
+                  spec: MarkerSpec, metadata: dict[str, Any]) -> ObservationTable:
+    """The markers in the chain camera's frames added as observations (their corners in the metadata)."""
+    name = cfg.chain_camera or next((n for n, c in cfg.cameras.items() if c.video_key is not None), None)
+    cam = cfg.cameras.get(name or "")
+    if cam is None or cam.video_key is None:
+        raise RobotConfigError(cfg.source, "evidence.markers are searched in the chain camera's frames: give it a "
+                               "video_key")
+    found = video_markers(images, cameras, cam.optical_frame, spec, source=cam.video_key)
+    metadata["notes"] = [*metadata["notes"], *found.notes]
+    r = found.resolved
+    first = len(observations)
+    table = ObservationTable(
+        obs_id=np.arange(first, first + r.stamp_ns.size, dtype=np.int64), stamp_ns=r.stamp_ns,
+        log_time_ns=r.log_time_ns, camera_frame=r.camera_frame, u=r.u, v=r.v, depth_m=r.depth_m, label=r.label,
+        score=r.score, source=r.source)
+    side = dict(r.side)
+    position = np.searchsorted(r.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
+    metadata["fiducials"] = {"counts": r.counts, "corners": {"obs_id": (first + position).tolist(), **side}}
+    return ObservationTable.concat([observations, table])
 
 
 def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
@@ -134,6 +165,9 @@ def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[Detectio
                                        f"{feat.dtype} feature, not video or image")
     columns = [cfg.state_feature]
     columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
+    # Frames stored in the Parquet (image features: PNG/JPEG bytes) rather than in an mp4.
+    columns += [c.video_key for c in cfg.cameras.values()
+                if c.video_key is not None and reader.feature(c.video_key).dtype == "image"]
     columns += [s.feature for s in sources if s.feature is not None]
     for cam in cfg.cameras.values():
         if cam.depth is not None:
@@ -152,7 +186,9 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
     zeroed = [j for j in model.actuated if j not in driven and j not in held]
-    chain = cfg.chain_config(root=model.root) if cfg.cameras else None
+    camera = cfg.cameras.get(cfg.chain_camera or next(iter(cfg.cameras), ""))
+    chain = cfg.chain_config(root=arm_root(cfg, model, camera.mount.parent if camera else None)) \
+        if cfg.cameras else None
     state_ns = frames.stamp_ns
     return {
         "format": FORMAT,
@@ -175,6 +211,8 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
         "cameras": {
             name: {
                 "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
+                "xyz": list(cam.mount.translation), "source": cam.source,
+                "focal_px": [cam.intrinsics.fx, cam.intrinsics.fy],
                 "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
                                                        "timestamp_column": cam.timing.timestamp_column},
                 "video_file": _video_file(frames, cam.video_key),
@@ -205,6 +243,8 @@ def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArr
 
 
 def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
+    if model.root == cfg.world_frame:  # several arms: their bases hang from the world in the model
+        return TransformTable.empty()
     return TransformTable.from_rows(
         cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
         is_static=True, source=f"{cfg.source}:world_from_base",
@@ -429,6 +469,40 @@ def _video_frames(
     )
 
 
+_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
+
+
+def _stored_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, root: Path
+) -> ImageFrameTable:
+    """One row per frame of an image feature: the PNG/JPEG bytes stored in the Parquet (HF ``Image``: a struct
+    of ``bytes`` and ``path``; a path is read relative to the dataset when there are no bytes)."""
+    assert cam.video_key is not None
+    cells = frames.columns[cam.video_key].reshape(len(frames))
+    encoded: list[bytes] = []
+    for k, cell in enumerate(cells.tolist()):
+        data = cell.get("bytes") if isinstance(cell, dict) else cell if isinstance(cell, bytes) else None
+        if not data and isinstance(cell, dict) and cell.get("path"):
+            file = root / str(cell["path"])
+            data = file.read_bytes() if file.is_file() else None
+        if not data:
+            raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} has no bytes at frame {k}")
+        encoded.append(bytes(data))
+    kinds = [next((kind for magic, kind in _MAGIC.items() if data.startswith(magic)), "") for data in encoded]
+    if "" in kinds:
+        k = kinds.index("")
+        raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} holds neither PNG nor JPEG at "
+                           f"frame {k}")
+    n = len(frames)
+    size = cam.camera_table()
+    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
+    return ImageFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, width),
+        height=np.full(n, height), encoding=np.array(kinds), source=np.full(n, cam.video_key),
+        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: encoded[i],
+    )
+
+
 def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     path = frames.episode.video_files.get(key) if key is not None else None
     return None if path is None else str(path)
@@ -491,7 +565,8 @@ class LeRobotAdapter:
         else:
             raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
                                "{episode: N, config: robot.yaml}")
-        timeline = open_dataset(path, episode=episode, robot=robot)
+        markers = chain.evidence.markers if chain is not None else None
+        timeline = open_dataset(path, episode=episode, robot=robot, markers=markers)
         info = scan_dataset(path, episode).with_notes(list(timeline.metadata.get("notes", [])))
         decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
         return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)

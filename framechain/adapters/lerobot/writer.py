@@ -207,6 +207,9 @@ def _episode_table(
 
 
 def _arrow_column(arr: npt.NDArray[Any], spec: FeatureSpec, key: str) -> pa.Array:
+    if spec.dtype == "image":  # HF datasets.Image: the encoded file's bytes (PNG/JPEG), no path
+        return pa.array([{"bytes": bytes(b), "path": None} for b in arr],
+                        pa.struct([("bytes", pa.binary()), ("path", pa.string())]))
     if spec.dtype not in _ARROW:
         raise DatasetError(key, f"cannot write dtype {spec.dtype!r}; supported: {sorted(_ARROW)}")
     typ = _ARROW[spec.dtype]
@@ -225,6 +228,8 @@ def _arrow_column(arr: npt.NDArray[Any], spec: FeatureSpec, key: str) -> pa.Arra
 
 def _hf_features(schema: pa.Schema) -> dict[str, Any]:
     def convert(t: pa.DataType) -> dict[str, Any]:
+        if pa.types.is_struct(t) and {f.name for f in t} == {"bytes", "path"}:
+            return {"_type": "Image"}
         if pa.types.is_fixed_size_list(t):
             return {"feature": convert(t.value_type), "length": t.list_size, "_type": "Sequence"}
         return {"dtype": {"float": "float32", "double": "float64"}.get(str(t), str(t)), "_type": "Value"}
@@ -243,7 +248,7 @@ def _write_parquet(table: pa.Table, path: Path, *, hf: bool = True) -> None:
 def _stats(table: pa.Table, features: Mapping[str, FeatureSpec]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key in [*features, "timestamp", "frame_index", "episode_index", "index", "task_index"]:
-        if key not in table.column_names:
+        if key not in table.column_names or features.get(key, FeatureSpec("float32", (1,))).dtype == "image":
             continue
         col = table.column(key).combine_chunks()
         n = len(col)

@@ -82,16 +82,20 @@ class MarkerFinder:
         if grey is None:
             self.unreadable[topic] = self.unreadable.get(topic, 0) + 1
             return
+        header = msg.header
+        stamp = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+        self.search(topic, log_ns, stamp, header.frame_id, grey)
+
+    def search(self, topic: str, log_ns: int, stamp_ns: int, frame: str, grey: npt.NDArray[np.uint8]) -> None:
+        """Find the markers in one grey image (a decoded message, a video frame) taken at ``stamp_ns`` by ``frame``."""
         self.images[topic] = self.images.get(topic, 0) + 1
         corners, ids, _ = self.detector.detectMarkers(grey)
         if ids is None:
             return
-        header = msg.header
-        stamp = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
         for marker_id, quad in zip(np.asarray(ids).reshape(-1).tolist(), corners, strict=True):
             # ArUco reports corners on the pixel grid whose centre of the top-left pixel is (0, 0).
             flat = np.asarray(quad, dtype=np.float64).reshape(-1).tolist()
-            self.rows.add_corners(topic, log_ns, stamp, header.frame_id, str(int(marker_id)), flat, from_image=True)
+            self.rows.add_corners(topic, log_ns, stamp_ns, frame, str(int(marker_id)), flat, from_image=True)
 
     def notes(self) -> list[str]:
         out = [f"topic {t}: {n} image{'s' if n != 1 else ''} in an encoding markers cannot be searched in "

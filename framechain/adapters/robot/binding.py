@@ -11,19 +11,53 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.robot.kinematics import RobotModel
+from framechain.adapters.robot.kinematics import Joint, JointType, Mimic, RobotModel
 from framechain.arrays import FloatArray
 from framechain.config.errors import RobotConfigError
-from framechain.config.robot import JointMapping, JointUnit, RobotConfig
+from framechain.config.robot import ArmConfig, JointMapping, JointUnit, RobotConfig
+from framechain.geometry.rotations import homogeneous
 
-__all__ = ["check_robot", "convert_joint", "joint_positions", "robot_model"]
+__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "robot_model"]
 
 
 def robot_model(config: RobotConfig) -> RobotModel:
-    """The URDF's kinematic model, checked against the joint mapping and the camera mounts."""
-    model = RobotModel.from_urdf(config.urdf)
+    """The URDF's kinematic model (several arms: one tree under the world frame, each arm's frames and
+    joints prefixed, its base placed by a fixed joint), checked against the joint mapping and the mounts."""
+    if not config.arms:
+        model = RobotModel.from_urdf(config.urdf)
+    else:
+        joints: list[Joint] = []
+        for arm in config.arms:
+            joints.extend(_arm_joints(config.world_frame, arm, RobotModel.from_urdf(arm.urdf)))
+        model = RobotModel(joints, source=config.source, name="+".join(a.name for a in config.arms))
     check_robot(config, model)
     return model
+
+
+def arm_root(config: RobotConfig, model: RobotModel, link: str | None = None) -> str:
+    """The root link of the arm ``link`` belongs to (the first arm's by default; the model's root for one URDF)."""
+    if not config.arms:
+        return model.root
+    arms = [a for a in config.arms if link is not None and link.startswith(a.prefix)] or [config.arms[0]]
+    return next(j.child for j in model.joints.values() if j.name == _base_joint(config.world_frame, arms[0]))
+
+
+def _base_joint(world: str, arm: ArmConfig) -> str:
+    return f"{world}_to_{arm.prefix}base"
+
+
+def _arm_joints(world: str, arm: ArmConfig, model: RobotModel) -> list[Joint]:
+    """One arm's joints, names prefixed, below a fixed joint from the world frame to its root."""
+    p = arm.prefix
+    origin = homogeneous(np.asarray(arm.world_from_base_quat_xyzw, dtype=float),
+                         np.asarray(arm.world_from_base_translation, dtype=float), n=1)[0]
+    out = [Joint(name=_base_joint(world, arm), type=JointType.FIXED, parent=world, child=p + model.root,
+                 origin=origin, axis=np.array([0.0, 0.0, 1.0]))]
+    for j in model.joints.values():
+        mimic = None if j.mimic is None else Mimic(p + j.mimic.joint, j.mimic.multiplier, j.mimic.offset)
+        out.append(Joint(name=p + j.name, type=j.type, parent=p + j.parent, child=p + j.child, origin=j.origin,
+                         axis=j.axis, lower=j.lower, upper=j.upper, mimic=mimic))
+    return out
 
 
 def convert_joint(mapping: JointMapping, values: npt.ArrayLike, lower: float | None, upper: float | None
@@ -36,6 +70,8 @@ def convert_joint(mapping: JointMapping, values: npt.ArrayLike, lower: float | N
         si = np.deg2rad(x)
     elif mapping.unit is JointUnit.MM:
         si = x * 1e-3
+    elif mapping.unit is JointUnit.TICKS:
+        si = (x - mapping.zero_ticks) * (2.0 * np.pi / mapping.ticks_per_turn)
     else:
         if lower is None or upper is None:
             raise RobotConfigError(
@@ -70,6 +106,8 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
                                    f"{list(model.actuated)}")
         if not joint.moves or joint.mimic is not None:
             raise RobotConfigError(fail, f"joints.{m.state}: joint {m.joint!r} is fixed or a mimic joint")
+        if m.unit is JointUnit.TICKS and joint.type is JointType.PRISMATIC:
+            raise RobotConfigError(fail, f"joints.{m.state}: unit ticks turns a revolute joint; {m.joint!r} slides")
         if m.unit in (JointUnit.RANGE_0_100, JointUnit.RANGE_M100_100) and (joint.lower is None or joint.upper is None):
             raise RobotConfigError(fail, f"joints.{m.state}: unit {m.unit.value} needs limits on joint {m.joint!r}, "
                                    "which has none")

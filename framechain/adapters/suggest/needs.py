@@ -86,6 +86,8 @@ def chain_needs(
     loaded: LoadedLog, chain: ChainConfig, *, placeholders: Mapping[str, str] | None = None,
 ) -> list[ChainNeed]:
     """Each piece of ``chain`` checked against the log (read with or without that chain)."""
+    if getattr(loaded.info, "format", "") == "lerobot":
+        return _dataset_needs(loaded, chain)
     holes = dict(placeholders or {})
     facts = log_facts(loaded)
     frames = chain.frames
@@ -100,6 +102,52 @@ def chain_needs(
     needs.append(_mount_need(frames, holes, facts))
     needs.append(_pose_need(chain, holes, facts))
     needs.append(_evidence_need(chain, detections, facts))
+    return needs
+
+
+def _dataset_needs(loaded: LoadedLog, chain: ChainConfig) -> list[ChainNeed]:
+    """A LeRobot episode's pieces: every key named is one robot.yaml has (a dataset has no topics)."""
+    tl = loaded.timeline
+    meta = tl.metadata
+    cameras: Mapping[str, Any] = meta.get("cameras") or {}
+    name = next((n for n, c in cameras.items() if c.get("frame") == chain.frames.camera), "CAMERA")
+    where = "  (in robot.yaml)"
+    found, missing, none = NeedStatus.FOUND, NeedStatus.MISSING, NeedStatus.NONE
+    needs = [ChainNeed("camera frame", found, f"{chain.frames.camera} (robot.yaml camera {name})")]
+    has_model = bool((tl.cameras.frame == chain.frames.camera).any())
+    needs.append(ChainNeed("intrinsics", found, f"robot.yaml camera {name}") if has_model else ChainNeed(
+        "intrinsics", missing, f"camera {name} has no intrinsics",
+        f"cameras.{name}.intrinsics: {{fx: FX, fy: FY, cx: CX, cy: CY, width: W, height: H}}{where}"))
+    videos = {n: c.get("video_key") for n, c in cameras.items() if c.get("video_file")}
+    obs = tl.observations
+    mine = obs.camera_frame == chain.frames.camera
+    if mine.any():
+        sources = sorted({str(s) for s in obs.source[mine].tolist()})
+        needs.append(ChainNeed("detections", found, f"{int(mine.sum())} in {', '.join(sources)}"))
+    else:
+        key = (f"detections: [{{table: DETECTIONS.parquet}}]{where}; or detections: [{{feature: FEATURE, camera: "
+               f"{name}}}]{where}; or chain.evidence.markers: {{dictionary: DICT_5X5_1000, size_m: MARKER_M}}{where}")
+        if videos:
+            shown = ", ".join(f"{n} ({k})" for n, k in videos.items())
+            needs.append(ChainNeed("detections", none, f"no detections; the motion of cameras {shown} in their video "
+                                   "is evidence of its own (offset, mount, link)", key))
+        else:
+            needs.append(ChainNeed("detections", missing, "no detections and no camera video", key))
+    depth = bool(np.isfinite(obs.depth_m[mine]).any()) or bool((tl.depth_frames.frame == chain.frames.camera).any())
+    needs.append(ChainNeed("depth", found, "in the detections or a depth feature") if depth or not mine.any() else
+                 ChainNeed("depth", missing, "the detections have no depth",
+                           f"cameras.{name}.depth: {{feature: DEPTH_FEATURE, scale_m: 0.001}}{where}; or "
+                           f"chain.evidence.markers.size_m: MARKER_M{where}"))
+    parent = cameras.get(name, {}).get("parent", "?")
+    needs.append(ChainNeed("mount", found, f"{chain.frames.camera} on {parent} (robot.yaml)"))
+    needs.append(ChainNeed("pose", found, f"forward kinematics of {meta.get('state_feature', 'the joint states')}"))
+    evidence = chain.evidence
+    if evidence.static_target or evidence.reference_point is not None:
+        needs.append(ChainNeed("evidence", found, "static target" if evidence.static_target else "reference point"))
+    else:
+        needs.append(ChainNeed("evidence", none, "attribution needs evidence beside the cameras' own motion: a static "
+                               "target or a reference", "chain.evidence.static_target: true  (in robot.yaml; the "
+                               f"detected object does not move); or chain.evidence.reference_point: [X, Y, Z]{where}"))
     return needs
 
 

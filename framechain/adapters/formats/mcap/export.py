@@ -3,12 +3,14 @@
 The log's own messages keep their bytes, schemas and encodings: an MCAP is copied record for
 record; a ROS 1 bag becomes ``ros1`` messages with ``ros1msg`` schemas, a ROS 2 bag ``cdr`` messages
 with ``ros2msg``/``ros2idl`` schemas (the definitions stored in the bag), so Foxglove and Rerun read
-the copy as they read the original. A LeRobot dataset has no messages to copy. The added messages
+the copy as they read the original. A LeRobot dataset (or a saved timeline) has no messages to copy
+(:func:`copies_messages`): its content comes as added messages. The added messages
 come already serialised with their schema (protobuf: a ``FileDescriptorSet``), one channel per topic.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,13 +56,19 @@ class ExportCounts:
     added: dict[str, int]
 
 
+def copies_messages(source: str | Path) -> bool:
+    """Whether the log ``source`` has messages of its own to copy (a LeRobot dataset, a saved timeline: no)."""
+    from framechain.adapters.lerobot.reader import is_lerobot_dataset
+
+    path = Path(source)
+    return not (path.is_dir() and (is_lerobot_dataset(path) or (path / "timeline.json").is_file()))
+
+
 def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[ExtraMessage]) -> ExportCounts:
     """Write ``out``: every message of the log ``source`` (None: none) and the ``extra`` messages.
 
     ``out`` must not be the source itself.
     """
-    from mcap.writer import CompressionType, Writer
-
     target = Path(out)
     if source is not None and Path(source).resolve() == target.resolve():
         raise AdapterError(str(out), "the export would overwrite the log it reads; choose another --out")
@@ -68,7 +76,21 @@ def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[
     added: dict[str, int] = {}
     extra_list = sorted(extra, key=lambda m: m.log_time_ns)
     target.parent.mkdir(parents=True, exist_ok=True)
-    with target.open("wb") as f:
+    partial = target.with_name(f".{target.name}.{os.getpid()}.part")  # a failed export leaves no half file
+    try:
+        _write(partial, source, extra_list, copied, added)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    os.replace(partial, target)
+    return ExportCounts(copied=copied, added=added)
+
+
+def _write(path: Path, source: str | Path | None, extra: list[ExtraMessage], copied: dict[str, int],
+           added: dict[str, int]) -> None:
+    from mcap.writer import CompressionType, Writer
+
+    with path.open("wb") as f:
         writer: Any = Writer(f, compression=CompressionType.ZSTD)
         writer.start(profile="", library=FRAMECHAIN_LIBRARY)
         # Marks the file as framechain's output: batch and folder discovery skip it (it holds a log's copy).
@@ -78,7 +100,7 @@ def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[
             _copy_log(Path(source), writer, copied)
         schemas: dict[tuple[str, str], int] = {}
         channels: dict[str, int] = {}
-        for m in extra_list:
+        for m in extra:
             key = (m.schema_name, m.schema_encoding)
             if key not in schemas:
                 schemas[key] = writer.register_schema(m.schema_name, m.schema_encoding, m.schema_data)
@@ -88,14 +110,11 @@ def write_mcap_with(source: str | Path | None, out: str | Path, extra: Iterable[
                                data=m.data)
             added[m.topic] = added.get(m.topic, 0) + 1
         writer.finish()
-    return ExportCounts(copied=copied, added=added)
 
 
 def _copy_log(source: Path, writer: Any, copied: dict[str, int]) -> None:
-    from framechain.adapters.lerobot.reader import is_lerobot_dataset
-
-    if source.is_dir() and is_lerobot_dataset(source):
-        return  # a dataset of Parquet and video files: no messages to copy
+    if not copies_messages(source):
+        return  # a dataset of Parquet and video files, a saved timeline: no messages to copy
     fmt, target, _ = detect(source)
     if fmt == "mcap":
         _copy_mcap(target, writer, copied)

@@ -3,8 +3,9 @@
 Reading is one pass, chunk by chunk through the chunk index: topics nobody asked for are skipped
 without decompression where the index allows, each chunk is decompressed once (an uncompressed
 one has its CRC checked with zlib-ng's crc32, a compressed one is checked by its decompressor),
-and a corrupt chunk is skipped and counted (from its message index) instead of ending the read. Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo,
-PointStamped, Detection2DArray) are decoded many at a time by their byte layout. The pixel
+and a corrupt chunk is skipped and counted (from its message index) instead of ending the read.
+Messages of types :mod:`fast_cdr` knows (TFMessage, CameraInfo, PointStamped,
+Detection2DArray) are decoded many at a time by their byte layout. The pixel
 windows the detections need are cut from the depth frames during the pass (the collector's
 DepthWindowKeeper); a frame whose window was not kept is fetched later by its location (chunk
 and offset, from the message index records, found by a binary search on log time), its chunk
@@ -431,7 +432,8 @@ class McapLog:
                 found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
             except Exception:  # noted when the read met it
                 return np.zeros(0, dtype=np.int64)
-            return found[found[:, 0] == log_time_ns, 1]
+            at_time: npt.NDArray[np.int64] = found[found[:, 0] == log_time_ns, 1]
+            return at_time
         offsets: list[npt.NDArray[np.int64]] = [np.zeros(0, dtype=np.int64)]
         for cid, off in ci.message_index_offsets.items():
             if cid in cids:

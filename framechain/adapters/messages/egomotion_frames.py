@@ -1,0 +1,273 @@
+"""A camera's frames from a Timeline's image table, decoded for its ego-motion: grey, in time order, with health.
+
+Whatever the log stored: frames of a video file (a LeRobot mp4, decoded with PyAV, each wanted frame
+once: :func:`framechain.adapters.lerobot.video.read_frames`), raw images (packed pixels) or JPEG/PNG
+bytes (a LeRobot ``image`` feature, a ``CompressedImage`` topic). Long recordings are measured in
+windows of consecutive frames spread over the recording (``max_frames`` in all): tracks never cross
+a window's edge, and only the frames of the windows are decoded.
+
+:func:`camera_tracks` tracks features through each window (:func:`~framechain.adapters.messages.
+egomotion.track_features`) and merges them into one :class:`FeatureTracks` with disjoint track ids,
+so no frame pair spans two windows. :func:`camera_motion_source` puts it together for the analysis: a
+camera's frames decoded and tracked once, measured against any translation prior
+(:class:`ImageMotion`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.adapters.lerobot.video import read_frames
+from framechain.adapters.messages.egomotion import (
+    EgoMotionOptions,
+    FeatureTracks,
+    measure_egomotion,
+    track_features,
+)
+from framechain.adapters.messages.tag_pose import require_cv2
+from framechain.arrays import BoolArray, FloatArray, IntArray
+from framechain.config.calibration import Intrinsics
+from framechain.timeline import EgoMotionTable, ImageFrameTable, Timeline, TranslationPrior, normalize_frame
+from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
+
+__all__ = [
+    "CameraFrames",
+    "ImageMotion",
+    "camera_frames",
+    "camera_image_rows",
+    "camera_motion_source",
+    "camera_tracks",
+    "decode_grey",
+    "image_cameras",
+    "window_rows",
+]
+
+#: A frame with hardly a pixel above this grey level is black (a camera that delivered nothing).
+BLACK_LEVEL = 32
+#: Mean absolute difference (grey levels) under which a frame repeats the previous one: H.264, HEVC
+#: and AV1 return a frame sent twice pixel for pixel, MPEG-4 Part 2 within a level.
+REPEAT_LEVEL = 1.0
+#: Assumed horizontal field of view when a camera has no intrinsics (the focal length is then implied).
+ASSUMED_FOV_DEG = 70.0
+
+
+@dataclass(frozen=True)
+class CameraFrames:
+    """One camera's frames as decoded: grey pixels per row, their stamps, what is usable, the windows.
+
+    ``rows`` are rows of the image table (time order); ``window`` numbers the run of consecutive
+    frames each row belongs to. ``usable`` is False for frames missing, black or repeating the
+    previous one (a resent frame shows an earlier moment than its stamp).
+    """
+
+    frame: str
+    rows: IntArray
+    stamps_ns: IntArray
+    images: npt.NDArray[np.uint8]  # (N, H, W)
+    usable: BoolArray
+    window: IntArray
+    decoded: int
+    notes: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return int(self.rows.size)
+
+
+class ImageMotion:
+    """One camera's frames decoded and tracked once; :meth:`measure` measures its motion against a prior.
+
+    ``last`` is the most recent measurement (the one a fit ends on).
+    """
+
+    def __init__(self, frames: CameraFrames, tracks: FeatureTracks, intrinsics: Intrinsics, *, intrinsics_known: bool,
+                 options: EgoMotionOptions | None = None) -> None:
+        self.camera = frames.frame
+        self.frames = len(frames)
+        self.decoded = frames.decoded
+        self.stamps_ns = frames.stamps_ns
+        self.tracks = tracks
+        self.intrinsics = intrinsics
+        self.intrinsics_known = intrinsics_known
+        self.options = options
+        notes = list(frames.notes)
+        if not intrinsics_known:
+            notes.append(f"camera {frames.frame} has no intrinsics: measured with an assumed {ASSUMED_FOV_DEG:.0f} "
+                         f"deg field of view (fx = {intrinsics.fx:.1f} px); the focal length its motion implies is "
+                         "reported")
+        self.notes = tuple(notes)
+        self.last = EgoMotionTable.empty()
+
+    def rescale_focal(self, factor: float) -> None:
+        """Measure from now on with the focal length scaled by ``factor`` (the one the motion implies)."""
+        i = self.intrinsics
+        self.intrinsics = replace(i, fx=i.fx * factor, fy=i.fy * factor)
+
+    def measure(self, prior: TranslationPrior | None) -> EgoMotionTable:
+        self.last = measure_egomotion(self.tracks, self.stamps_ns, self.intrinsics, frame=self.camera,
+                                      translation=prior, options=self.options)
+        return self.last
+
+
+def image_cameras(timeline: Timeline) -> list[str]:
+    """The camera frames of ``timeline`` with images whose pixels can be had, in order of appearance."""
+    images = timeline.image_frames
+    return [str(f) for f in dict.fromkeys(images.frame.tolist()) if camera_image_rows(images, str(f)).size]
+
+
+def camera_motion_source(timeline: Timeline, camera: str, *, max_frames: int = 600, window: int = 150,
+                         options: EgoMotionOptions | None = None) -> ImageMotion:
+    """Camera ``camera``'s frames decoded (at most ``max_frames``) and tracked, ready to be measured."""
+    frames = camera_frames(timeline.image_frames, camera, max_frames=max_frames, window=window)
+    intrinsics, known = _intrinsics(timeline, camera, frames.images.shape)
+    return ImageMotion(frames, camera_tracks(frames, options), intrinsics, intrinsics_known=known, options=options)
+
+
+def _intrinsics(timeline: Timeline, camera: str, shape: tuple[int, ...]) -> tuple[Intrinsics, bool]:
+    """The camera's model (its first row), or an assumed one from the image size (False)."""
+    cams = timeline.cameras
+    rows = np.flatnonzero(cams.frame == normalize_frame(camera))
+    if rows.size:
+        i = int(rows[0])
+        k = cams.K[i]
+        n = int(cams.n_distortion[i])
+        return Intrinsics(fx=float(k[0, 0]), fy=float(k[1, 1]), cx=float(k[0, 2]), cy=float(k[1, 2]),
+                          width=int(cams.width[i]), height=int(cams.height[i]),
+                          distortion_model=str(cams.distortion_model[i]) if n else "none",
+                          distortion=tuple(float(d) for d in cams.distortion[i, :n])), True
+    height, width = int(shape[1]), int(shape[2])
+    focal = 0.5 * width / np.tan(np.deg2rad(ASSUMED_FOV_DEG / 2))
+    return Intrinsics(fx=focal, fy=focal, cx=(width - 1) / 2, cy=(height - 1) / 2, width=width, height=height,
+                      distortion_model="none"), False
+
+
+def camera_image_rows(images: ImageFrameTable, frame: str) -> IntArray:
+    """Rows of ``images`` of camera ``frame`` whose pixels can be had (video, raw, JPEG/PNG), by stamp."""
+    name = normalize_frame(frame)
+    known = (*RAW_IMAGE_ENCODINGS, *COMPRESSED_IMAGE_ENCODINGS, VIDEO_ENCODING)
+    rows = np.flatnonzero((images.frame == name) & np.isin(images.encoding, list(known)))
+    out: IntArray = rows[np.argsort(images.stamp_ns[rows], kind="stable")].astype(np.int64)
+    return out
+
+
+def window_rows(count: int, *, max_frames: int, window: int) -> tuple[IntArray, IntArray]:
+    """Which of ``count`` frames to decode: all when they fit, else windows of ``window`` consecutive
+    frames spread evenly (``max_frames`` in all); returns (positions, window number per position)."""
+    if count <= max_frames:
+        return np.arange(count, dtype=np.int64), np.zeros(count, dtype=np.int64)
+    windows = max(1, max_frames // window)
+    starts = np.round(np.linspace(0, count - window, windows)).astype(np.int64)
+    positions = (starts[:, None] + np.arange(window)[None, :]).ravel()
+    return positions, np.repeat(np.arange(windows, dtype=np.int64), window)
+
+
+def camera_frames(images: ImageFrameTable, frame: str, *, max_frames: int = 600, window: int = 150) -> CameraFrames:
+    """Decode camera ``frame``'s frames (grey), at most ``max_frames`` of them (windows of ``window``)."""
+    rows = camera_image_rows(images, frame)
+    picked, windows = window_rows(rows.size, max_frames=max_frames, window=window)
+    rows = rows[picked]
+    notes: list[str] = []
+    if picked.size < camera_image_rows(images, frame).size:
+        total = camera_image_rows(images, frame).size
+        notes.append(f"camera {frame}: {total} frames; its motion is measured on {picked.size} of them "
+                     f"({windows.max() + 1} runs of {window} consecutive frames spread over the recording)")
+    grey, missing, decoded = decode_grey(images, rows)
+    duplicate, black = _repeats_and_black(grey, missing)
+    for what, flags in (("missing (no frame within half a frame period of the row's time)", missing),
+                        ("duplicated (a repeat of the previous frame)", duplicate), ("black", black)):
+        if flags.any():
+            first = ", ".join(str(int(i)) for i in picked[np.flatnonzero(flags)][:8])
+            more = ", ..." if flags.sum() > 8 else ""
+            notes.append(f"camera {frame}: {int(flags.sum())} of {rows.size} frames {what}: frame {first}{more}")
+    return CameraFrames(frame=normalize_frame(frame), rows=rows, stamps_ns=images.stamp_ns[rows].astype(np.int64),
+                        images=grey, usable=~missing & ~duplicate & ~black, window=windows, decoded=decoded,
+                        notes=tuple(notes))
+
+
+def camera_tracks(frames: CameraFrames, options: EgoMotionOptions | None = None) -> FeatureTracks:
+    """Feature tracks through each window of usable frames, merged with disjoint ids (rows index ``frames``)."""
+    parts: list[FeatureTracks] = []
+    starts: list[int] = []
+    for w in np.unique(frames.window).tolist():
+        sel = np.flatnonzero(frames.window == w)
+        parts.append(track_features(frames.images[sel], usable=frames.usable[sel], options=options))
+        starts.append(int(sel[0]))
+    return _merge(parts, starts)
+
+
+def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTracks:
+    rows: list[IntArray] = []
+    ids: list[IntArray] = []
+    pixels: list[FloatArray] = []
+    fixed: list[IntArray] = []
+    base = 0
+    for part, start in zip(parts, starts, strict=True):
+        rows.append(part.rows + start)
+        ids.extend(i + base for i in part.ids)
+        pixels.extend(part.pixels)
+        fixed.append(part.fixed + base)
+        top = max((int(i.max()) for i in part.ids if i.size), default=-1)
+        base += max(top, int(part.fixed.max()) if part.fixed.size else -1) + 1
+    return FeatureTracks(rows=np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, dtype=np.int64),
+                         ids=tuple(ids), pixels=tuple(pixels),
+                         fixed=np.concatenate(fixed).astype(np.int64) if fixed else np.zeros(0, dtype=np.int64))
+
+
+def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:
+    """Grey pixels of each row (black where missing), the missing rows, and how many frames were decoded."""
+    grey: list[npt.NDArray[np.uint8] | None] = [None] * rows.size
+    decoded = 0
+    encoding = images.encoding[rows]
+    video = np.flatnonzero(encoding == VIDEO_ENCODING)
+    for path in np.unique(images.video_path[rows[video]]).tolist():
+        mine = video[images.video_path[rows[video]] == path]
+        got = read_frames(path, images.video_time_ns[rows[mine]], repeat_level=REPEAT_LEVEL)
+        decoded += got.decoded
+        for k, i in enumerate(mine.tolist()):
+            if got.image_index[k] >= 0:
+                grey[i] = got.image(k)
+    for i in np.flatnonzero(encoding != VIDEO_ENCODING).tolist():
+        grey[i] = _still(images, int(rows[i]))
+        decoded += 1
+    shape = next((g.shape for g in grey if g is not None), (1, 1))
+    missing = np.array([g is None or g.shape != shape for g in grey], dtype=bool)
+    stack = np.zeros((rows.size, *shape), dtype=np.uint8)
+    for i in np.flatnonzero(~missing).tolist():
+        stack[i] = grey[i]
+    return stack, missing, decoded
+
+
+def _still(images: ImageFrameTable, row: int) -> npt.NDArray[np.uint8] | None:
+    """One raw or JPEG/PNG image as grey (None when it cannot be decoded)."""
+    cv2 = require_cv2()
+    encoding = str(images.encoding[row])
+    if encoding in COMPRESSED_IMAGE_ENCODINGS:
+        data = np.frombuffer(images.load(row), dtype=np.uint8)
+        out = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+        return None if out is None else np.asarray(out, dtype=np.uint8)
+    pixels = images.pixels(row)
+    if pixels.dtype != np.uint8:  # 16-bit or float images are depth, not scenery to track
+        return None
+    if pixels.ndim == 2:
+        return np.ascontiguousarray(pixels)
+    code = {("rgb8", 3): cv2.COLOR_RGB2GRAY, ("bgr8", 3): cv2.COLOR_BGR2GRAY, ("rgba8", 4): cv2.COLOR_RGBA2GRAY,
+            ("bgra8", 4): cv2.COLOR_BGRA2GRAY}.get((encoding, pixels.shape[2]))
+    return None if code is None else np.asarray(cv2.cvtColor(pixels, code), dtype=np.uint8)
+
+
+def _repeats_and_black(grey: npt.NDArray[np.uint8], missing: BoolArray) -> tuple[BoolArray, BoolArray]:
+    """Rows repeating the previous present row (within :data:`REPEAT_LEVEL`), and black rows."""
+    n = grey.shape[0]
+    duplicate = np.zeros(n, dtype=bool)
+    present = np.flatnonzero(~missing)
+    for lo in range(0, max(present.size - 1, 0), 64):  # in blocks: int16 copies of a whole episode are large
+        a = grey[present[lo:lo + 64]].astype(np.int16)
+        b = grey[present[lo + 1:lo + 65]].astype(np.int16)
+        gap = np.abs(a[: b.shape[0]] - b).reshape(b.shape[0], -1).mean(axis=1)
+        duplicate[present[lo + 1:lo + 1 + b.shape[0]]] = gap <= REPEAT_LEVEL
+    flat = grey.reshape(n, -1)
+    black = ~missing & ((flat > BLACK_LEVEL).mean(axis=1) < 0.01) if n else np.zeros(0, dtype=bool)
+    return duplicate, black

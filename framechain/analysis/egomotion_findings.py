@@ -1,0 +1,421 @@
+"""What each camera's own motion says, as findings: time offset, mount rotation, carrying link, focal length.
+
+Each camera's fit (:mod:`framechain.analysis.egomotion_run`) proposes corrections of what the run
+declares: the video/state time offset (``latency`` on camera_to_body), the mount's rotation on its
+link (``rotation_error``, ``missing_rotation`` or ``axis_flip``), the link the camera moves with
+(``wrong_camera_frame``: another link, another arm) and, when it is clear, the focal length
+(``intrinsics``; otherwise a note). A correction is proposed when its interval excludes "nothing
+wrong" by more than the smallest size worth a fix (:data:`MIN_OFFSET_S`, :data:`MIN_ANGLE_DEG`).
+
+The error they share is the camera's rotation-rate misfit: per frame pair, the measured rotation
+against the rotation forward kinematics predicts as declared (declared link and mount, no offset),
+in deg/s; its robust RMS over the pairs is the camera's error. Shares are Shapley values of the
+misfit each correction removes (every subset of the corrections applied, as attribution does for
+points); a correction that removes less than :data:`MIN_SHARE` of it is a note, not a finding.
+
+Every fix names the key to change in the file that declares the camera (robot.yaml, or the
+camera's calibration file), in that file's own form.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
+from framechain.analysis.egomotion_run import CameraMotion, CameraMotionEvidence
+from framechain.analysis.estimates import (
+    Estimate,
+    FrameEstimate,
+    LatencyEstimate,
+    PermutationEstimate,
+    RotationEstimate,
+    ScaleEstimate,
+    format_estimate,
+)
+from framechain.analysis.findings import Finding
+from framechain.arrays import FloatArray
+from framechain.catalogue import Fault, HopName
+from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
+
+__all__ = ["MIN_ANGLE_DEG", "MIN_OFFSET_S", "MIN_SHARE", "MotionFindings", "MountDeclaration", "motion_findings"]
+
+#: A time offset smaller than this (s) is not worth a fix.
+MIN_OFFSET_S = 0.005
+#: A mount rotation whose interval does not clear this (deg) is not worth a fix.
+MIN_ANGLE_DEG = 1.0
+#: A correction removing less than this share of the rotation-rate misfit is a note, not a finding.
+MIN_SHARE = 0.05
+#: A focal length off by more than this (ratio), with an interval narrower than it, is a finding.
+FOCAL_CLEAR = 0.10
+#: Off a signed axis permutation by less than this (deg): the mount's axes were swapped or flipped.
+FLIP_TOLERANCE_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class MountDeclaration:
+    """Where a camera is declared (robot.yaml or its calibration file) and how: for fixes in that file's form."""
+
+    name: str
+    source: str  # the file declaring the mount and timing
+    in_robot_yaml: bool  # declared inline under robot.yaml's cameras (keys are cameras.<name>.*)
+    optical: bool  # the mount gives the optical frame (else a camera_link, with the REP-103 rotation below)
+    xyz: tuple[float, float, float]
+    timing_offset_s: float
+    focal_px: tuple[float, float] | None = None  # the declared fx, fy
+
+    @classmethod
+    def from_metadata(cls, metadata: Mapping[str, Any], camera: str) -> MountDeclaration | None:
+        """The declaration of the camera whose optical frame is ``camera`` (a LeRobot episode's metadata)."""
+        cameras = metadata.get("cameras")
+        if not isinstance(cameras, Mapping):
+            return None
+        for name, entry in cameras.items():
+            if isinstance(entry, Mapping) and entry.get("frame") == camera:
+                source = str(entry.get("source") or metadata.get("robot_config") or "robot.yaml")
+                xyz = tuple(float(v) for v in entry.get("xyz") or (0.0, 0.0, 0.0))
+                timing = entry.get("timing") or {}
+                focal = entry.get("focal_px")
+                return cls(name=str(name), source=source, in_robot_yaml=source == metadata.get("robot_config"),
+                           optical=bool(entry.get("optical_mount", True)), xyz=(xyz[0], xyz[1], xyz[2]),
+                           timing_offset_s=float(timing.get("offset_s") or 0.0),
+                           focal_px=None if not focal else (float(focal[0]), float(focal[1])))
+        return None
+
+    def key(self, leaf: str) -> str:
+        return f"cameras.{self.name}.{leaf}" if self.in_robot_yaml else leaf
+
+
+@dataclass(frozen=True)
+class MotionFindings:
+    """The cameras' findings (largest share first), the misfit before and after, notes and JSON entries."""
+
+    findings: tuple[Finding, ...]
+    residual_before: FloatArray  # (P,) deg/s per frame pair, every observable camera
+    residual_after: FloatArray
+    notes: tuple[str, ...]
+    entries: tuple[dict[str, Any], ...]  # attribution.json ``camera_motion``
+
+
+@dataclass(frozen=True)
+class _Proposal:
+    """One correction a camera's fit proposes, before its share is known."""
+
+    kind: str  # latency | link | mount | focal
+    fault: Fault
+    hop: HopName
+    estimate: Estimate
+    interval: dict[str, list[float]]
+    confidence: float
+    evidence: str
+    fix: str
+
+
+@dataclass(frozen=True)
+class _Misfit:
+    """The rotation-rate misfit of one camera under any subset of its corrections."""
+
+    motion: CameraMotion
+    fit: EgoMotionFit
+    weights: FloatArray
+    rows: np.ndarray
+
+    def residual(self, kinds: frozenset[str]) -> FloatArray:
+        """Per pair (deg/s) with the corrections ``kinds`` applied and the rest as declared."""
+        m, fit = self.motion, self.fit
+        moved = "link" in kinds and fit.link != m.declared_link
+        link = m.link_motion(fit.link if moved else m.declared_link)
+        mount = fit.q_link_cam if moved or "mount" in kinds else m.declared_q_link_cam
+        # The table was measured with the focal length scaled by measured_focal: undo it to see the declared one.
+        focal = fit.focal_scale if "focal" in kinds else 1.0
+        rates = rotation_rates(m.table, link, mount, fit.offset_s if "latency" in kinds else 0.0,
+                               focal_scale=focal / m.measured_focal)
+        out: FloatArray = np.rad2deg(rates.residual[self.rows])
+        return out
+
+    def rms(self, kinds: frozenset[str]) -> float:
+        r = self.residual(kinds)
+        return float(np.sqrt((self.weights * r**2).sum() / self.weights.sum()))
+
+
+def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any]) -> MotionFindings:
+    """Findings of every camera whose motion was measured, with shares of their summed misfit."""
+    found: list[tuple[_Proposal, float, str]] = []
+    before: list[FloatArray] = []
+    after: list[FloatArray] = []
+    notes: list[str] = []
+    entries: list[dict[str, Any]] = []
+    totals = 0.0
+    for motion in evidence.cameras:
+        declaration = MountDeclaration.from_metadata(metadata, motion.camera)
+        if not motion.observable or motion.fit is None:
+            notes.extend(motion.notes if not motion.fit else motion.fit.notes)
+            entries.append(_entry(motion, declaration, None, ()))
+            continue
+        fit = motion.fit
+        misfit = _misfit(motion, fit)
+        if misfit.rows.size == 0:
+            notes.append(f"camera {motion.camera}: no measured frame pair inside the span of its links' poses")
+            entries.append(_entry(motion, declaration, None, ()))
+            continue
+        proposals = _proposals(motion, fit, declaration)
+        values = _shapley(misfit, [p.kind for p in proposals])
+        total = misfit.rms(frozenset())
+        totals += total
+        before.append(misfit.residual(frozenset()))
+        after.append(misfit.residual(frozenset(p.kind for p in proposals)))
+        for proposal, value in zip(proposals, values, strict=True):
+            found.append((proposal, value, motion.camera))
+        notes.extend(n for n in (*motion.notes, *fit.notes, *_focal_notes(motion, fit, proposals)) if n not in notes)
+        entries.append(_entry(motion, declaration, misfit, proposals))
+    findings = []
+    for proposal, value, camera in found:
+        share = value / totals if totals > 0 else 0.0
+        if share < MIN_SHARE:
+            notes.append(f"{proposal.fault.value} on camera {camera} ({format_estimate(proposal.estimate)}) is no "
+                         f"finding: it removes {value:.3f} deg/s ({share:.1%}) of the rotation-rate misfit")
+            continue
+        findings.append(Finding(fault=proposal.fault, hop=proposal.hop, estimate=proposal.estimate,
+                                interval=proposal.interval, share=share, error_m=value,
+                                confidence=proposal.confidence, evidence=proposal.evidence, fix=proposal.fix,
+                                model=f"camera_motion_{proposal.kind}", camera=camera, error_unit="deg/s"))
+    findings.sort(key=lambda f: f.share, reverse=True)
+    empty = np.zeros(0)
+    return MotionFindings(findings=tuple(findings), residual_before=np.concatenate(before) if before else empty,
+                          residual_after=np.concatenate(after) if after else empty, notes=tuple(notes),
+                          entries=tuple(entries))
+
+
+def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
+    """The pairs every subset can predict, weighted robustly by their misfit with every correction applied."""
+    probe = _Misfit(motion, fit, np.ones(len(motion.table)), np.arange(len(motion.table)))
+    corrected = probe.residual(frozenset({"latency", "link", "mount", "focal"}))
+    plain = probe.residual(frozenset())
+    rows = np.flatnonzero(np.isfinite(corrected) & np.isfinite(plain))
+    scale = max(1.4826 * float(np.median(corrected[rows])) if rows.size else 0.0, 0.05)
+    weights = 1.0 / (1.0 + (corrected[rows] / (2.5 * scale)) ** 2)
+    return _Misfit(motion, fit, weights, rows)
+
+
+def _shapley(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:
+    """Each correction's Shapley value of the misfit removed (deg/s), over every subset of the others."""
+    n = len(kinds)
+    cache: dict[frozenset[str], float] = {}
+
+    def value(subset: frozenset[str]) -> float:
+        if subset not in cache:
+            cache[subset] = misfit.rms(frozenset()) - misfit.rms(subset)
+        return cache[subset]
+
+    out = []
+    for kind in kinds:
+        others = [k for k in kinds if k != kind]
+        total = 0.0
+        for size in range(n):
+            weight = math.factorial(size) * math.factorial(n - size - 1) / math.factorial(n)
+            for subset in itertools.combinations(others, size):
+                base = frozenset(subset)
+                total += weight * (value(base | {kind}) - value(base))
+        out.append(total)
+    return out
+
+
+# -- the corrections proposed ----------------------------------------------------------------------
+def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> list[_Proposal]:
+    out: list[_Proposal] = []
+    low, high = fit.offset_interval_s
+    if fit.offset_observable and abs(fit.offset_s) >= MIN_OFFSET_S and (low > 0 or high < 0):
+        out.append(_latency(motion, fit, declaration))
+    if fit.wrong_link:
+        out.append(_link(motion, fit, declaration))
+    elif fit.mount_error is not None and fit.mount_observable and fit.mount_error.interval_deg[0] >= MIN_ANGLE_DEG:
+        out.append(_mount(motion, fit, declaration))
+    scale_low, scale_high = fit.focal_scale_interval
+    if (abs(fit.focal_scale - 1.0) > FOCAL_CLEAR and scale_high - scale_low < FOCAL_CLEAR
+            and not scale_low <= 1.0 <= scale_high):
+        out.append(_focal(motion, fit, declaration))
+    return out
+
+
+def _focal_notes(motion: CameraMotion, fit: EgoMotionFit, proposals: Sequence[_Proposal]) -> list[str]:
+    """The focal length the camera's motion implies, as a note when it is no finding (assumed intrinsics, or a
+    departure not clear enough to fix)."""
+    low, high = fit.focal_scale_interval
+    if any(p.kind == "focal" for p in proposals) or not np.isfinite(fit.focal_scale):
+        return []
+    implied = f"{fit.focal_scale:.3f} ({low:.3f} .. {high:.3f}) times the declared focal length"
+    if not motion.intrinsics_known:
+        return [f"camera {motion.camera}: its motion implies a focal length {implied} (intrinsics assumed)"]
+    if not low <= 1.0 <= high:
+        return [f"camera {motion.camera}: its motion implies a focal length {implied}; not clear enough to fix, "
+                "calibrate the intrinsics to be sure"]
+    return []
+
+
+def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+    ms = fit.offset_s * 1e3
+    when = "before" if ms < 0 else "after"
+    evidence = (f"the images of {motion.camera} turn as {fit.link} did {abs(ms):.1f} ms {when} their stamps "
+                f"({motion.frames} frames, {len(motion.table)} frame pairs against forward kinematics)")
+    if declaration is not None:
+        new = declaration.timing_offset_s + fit.offset_s
+        fix = (f"In {declaration.source}, set {declaration.key('timing.offset_s')}: {new:.3f} (now "
+               f"{declaration.timing_offset_s:.3f}): its frames show the robot {abs(ms):.1f} ms {when} the state "
+               "row they are stored with.")
+    else:
+        fix = (f"The images of {motion.camera} are stamped {abs(ms):.1f} ms {'late' if ms < 0 else 'early'} against "
+               f"the transforms: correct the camera's time offset (stamp its images {abs(ms):.1f} ms "
+               f"{'earlier' if ms < 0 else 'later'}).")
+    return _Proposal("latency", Fault.LATENCY, HopName.CAMERA_TO_BODY, LatencyEstimate(offset_s=fit.offset_s),
+                     {"offset_s": list(fit.offset_interval_s)}, 0.95, evidence, fix)
+
+
+def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+    declared = next((f for f in fit.links if f.link == motion.declared_link), None)
+    best = fit.links[0]
+    ratio = best.residual_deg / declared.residual_deg if declared is not None and declared.residual_deg > 0 else 0.0
+    evidence = (f"the images of {motion.camera} turn as {fit.link} does "
+                f"({best.residual_deg:.3f} deg misfit per frame pair), not as the declared {motion.declared_link}"
+                + (f" ({declared.residual_deg:.3f} deg)" if declared is not None else ""))
+    mount = _yaml_mount(fit.link, fit.q_link_cam, motion.declared_xyz_link_cam, declaration)
+    if declaration is not None:
+        fix = (f"In {declaration.source}, mount camera {declaration.name} on {fit.link}: "
+               f"{declaration.key('mount')}: {mount}.")
+    else:
+        fix = f"Hang {motion.camera} from {fit.link}, not {motion.declared_link}: {mount}."
+    return _Proposal("link", Fault.WRONG_CAMERA_FRAME, HopName.CAMERA_TO_BODY,
+                     FrameEstimate(used=motion.declared_link, meant=fit.link, hop=HopName.CAMERA_TO_BODY.value),
+                     {}, float(np.clip(1.0 - ratio, 0.0, 0.99)), evidence, fix)
+
+
+def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+    error = fit.mount_error
+    assert error is not None
+    fault, estimate = _mount_fault(motion, fit, declaration)
+    evidence = (f"the images of {motion.camera} turn about axes {error.angle_deg:.2f} deg away from those "
+                f"{motion.declared_link}'s turns give through the declared mount")
+    mount = _yaml_mount(motion.declared_link, fit.q_link_cam, motion.declared_xyz_link_cam, declaration)
+    if declaration is not None:
+        fix = f"In {declaration.source}, set {declaration.key('mount')}: {mount} (the mount the images show)."
+    else:
+        fix = f"Publish the measured mount of {motion.camera}: {mount}."
+    return _Proposal("mount", fault, HopName.CAMERA_TO_BODY, estimate, {"angle_deg": list(error.interval_deg)}, 0.95,
+                     evidence, fix)
+
+
+def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
+                 declaration: MountDeclaration | None) -> tuple[Fault, Estimate]:
+    """axis_flip (the mounts differ by a signed axis permutation), missing_rotation (the declared mount has
+    no rotation of its own) or rotation_error."""
+    error = fit.mount_error
+    assert error is not None
+    declared = Rotation.from_quat(motion.declared_q_link_cam)
+    change = (declared.inv() * Rotation.from_quat(fit.q_link_cam)).as_matrix()
+    permutation = np.round(change)
+    is_permutation = bool((np.abs(permutation).sum(axis=0) == 1).all() and (np.abs(permutation).sum(axis=1) == 1).all())
+    off = np.rad2deg((Rotation.from_matrix(change).inv() * Rotation.from_matrix(permutation)).magnitude()) \
+        if is_permutation and np.isclose(np.linalg.det(permutation), 1.0) else 180.0
+    if error.angle_deg > 45.0 and off < FLIP_TOLERANCE_DEG:
+        rows = tuple((int(row[0]), int(row[1]), int(row[2])) for row in permutation.astype(int))
+        return Fault.AXIS_FLIP, PermutationEstimate(permutation=rows)
+    optical = declaration.optical if declaration is not None else True
+    own = declared if optical else declared * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
+    fault = Fault.MISSING_ROTATION if np.rad2deg(own.magnitude()) < 0.5 else Fault.ROTATION_ERROR
+    return fault, RotationEstimate(angle_deg=error.angle_deg, axis=error.axis, axis_frame=motion.camera,
+                                   faulty="recorded data")
+
+
+def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+    scale = 1.0 / fit.focal_scale
+    low, high = fit.focal_scale_interval
+    evidence = (f"the images of {motion.camera} turn {1.0 / fit.focal_scale:.3f} times as far across the optical axis "
+                f"as {fit.link} does (measured with the declared focal length): it is {scale:.3f} times the true one")
+    implied = f"a focal length {fit.focal_scale:.3f} times the declared one"
+    if declaration is not None and declaration.focal_px is not None:
+        fx, fy = (v * fit.focal_scale for v in declaration.focal_px)
+        fix = (f"In {declaration.source}, set {declaration.key('intrinsics.fx')}: {fx:.1f} and "
+               f"{declaration.key('intrinsics.fy')}: {fy:.1f} (its motion implies {implied}); better, calibrate the "
+               "camera.")
+    else:
+        fix = f"Calibrate {motion.camera}'s intrinsics: its motion implies {implied}."
+    return _Proposal("focal", Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA,
+                     ScaleEstimate(name="scale", value=scale, variant="focal"), {"scale": [1.0 / high, 1.0 / low]},
+                     0.95, evidence, fix)
+
+
+def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: MountDeclaration | None) -> str:
+    """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}``."""
+    optical = declaration.optical if declaration is not None else True
+    rotation = Rotation.from_quat(q_link_cam)
+    if not optical:  # the file gives camera_link; the optical rotation hangs below it
+        rotation = rotation * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
+    rpy = rotation.as_euler("xyz")
+    position = declaration.xyz if declaration is not None else tuple(float(v) for v in xyz)
+    return (f"{{parent: {link}, xyz: [{', '.join(f'{v:.4f}' for v in position)}], "
+            f"rpy: [{', '.join(f'{v:.5f}' for v in rpy)}], optical: {str(optical).lower()}}}")
+
+
+# -- the JSON entry ---------------------------------------------------------------------------------
+def _entry(motion: CameraMotion, declaration: MountDeclaration | None, misfit: _Misfit | None,
+           proposals: Sequence[_Proposal]) -> dict[str, Any]:
+    """One camera's ``camera_motion`` entry: the measurement, and what it can and cannot observe."""
+    fit = motion.fit
+    entry: dict[str, Any] = {
+        "camera": motion.camera, "name": declaration.name if declaration else None,
+        "declared_link": motion.declared_link, "frames": motion.frames, "pairs": len(motion.table),
+        "seconds": round(motion.seconds, 3), "observable": _observability(motion),
+    }
+    if fit is None or not fit.link:
+        return {**entry, "notes": list(motion.notes if fit is None else (*motion.notes, *fit.notes))}
+    error = fit.mount_error
+    entry.update({
+        "link": fit.link, "alternatives": list(fit.alternatives),
+        "offset_s": _num(fit.offset_s), "offset_interval_s": [_num(v) for v in fit.offset_interval_s],
+        "q_link_cam": [_num(v) for v in fit.q_link_cam],
+        "mount_error_deg": None if error is None else _num(error.angle_deg),
+        "mount_error_interval_deg": None if error is None else [_num(v) for v in error.interval_deg],
+        "mount_error_axis": None if error is None else [_num(v) for v in error.axis],
+        "focal_scale": _num(fit.focal_scale), "focal_scale_interval": [_num(v) for v in fit.focal_scale_interval],
+        "rotation_deg_per_pair": _num(fit.camera_rotation_deg),
+        "corrections": [p.kind for p in proposals],
+        "notes": list(dict.fromkeys((*motion.notes, *fit.notes))),
+    })
+    if misfit is not None:
+        entry["misfit_deg_s"] = {"declared": _num(misfit.rms(frozenset())),
+                                 "corrected": _num(misfit.rms(frozenset(p.kind for p in proposals)))}
+    return entry
+
+
+def _observability(motion: CameraMotion) -> list[dict[str, Any]]:
+    """What the camera's motion can show, in the shape of attribution bounds: hop, fault, observable,
+    min_detectable (the interval's half-width), why."""
+    fit = motion.fit
+    hop = HopName.CAMERA_TO_BODY.value
+    if fit is None or not fit.link:
+        why = motion.why_not
+        return [{"hop": hop, "fault": fault.value, "observable": False, "min_detectable": None, "why": why}
+                for fault in (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.WRONG_CAMERA_FRAME)]
+    low, high = fit.offset_interval_s
+    out = [{"hop": hop, "fault": Fault.LATENCY.value, "observable": fit.offset_observable,
+            "min_detectable": {"offset_s": _num(max(MIN_OFFSET_S, 0.5 * (high - low)))},
+            "why": "" if fit.offset_observable else next((n for n in fit.notes if "offset" in n), "")}]
+    spread = None if fit.mount_error is None else fit.mount_error.interval_deg
+    out.append({"hop": hop, "fault": Fault.ROTATION_ERROR.value, "observable": fit.mount_observable,
+                "min_detectable": None if spread is None else {"angle_deg": _num(max(MIN_ANGLE_DEG, spread[1]
+                                                                                   - spread[0]))},
+                "why": "" if fit.mount_observable else next((n for n in fit.notes if "one axis" in n), "")})
+    ambiguous = bool(fit.alternatives)
+    out.append({"hop": hop, "fault": Fault.WRONG_CAMERA_FRAME.value, "observable": not ambiguous,
+                "min_detectable": None,
+                "why": "" if not ambiguous else f"{', '.join(fit.alternatives)} move(s) as {fit.link} does"})
+    return out
+
+
+def _num(value: float) -> float | None:
+    return round(float(value), 6) if np.isfinite(value) else None

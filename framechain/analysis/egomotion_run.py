@@ -1,0 +1,264 @@
+"""Each camera's own motion in a run: its frames decoded, its motion measured and fitted against the frame tree.
+
+A camera whose images are in the timeline and whose frame hangs, through static edges, from a frame
+that moves (a link driven by joint states, a base driven by odometry) turns as that frame turns. For
+each such camera :func:`measure_cameras` has its frames decoded and tracked once (by the adapters,
+handed in as ``images``: only the frames needed, long recordings in windows) and fits its time
+offset, mount rotation and carrying link (:func:`~framechain.analysis.egomotion.fit_camera_motion`)
+against candidate frames of the tree: the
+declared link, its moving ancestors, and the same link of another arm (a frame named alike after a
+prefix, ``left_gripper_link`` / ``right_gripper_link``). Poses come from the run's transform buffer
+(forward kinematics of a LeRobot episode, a log's tf), so nothing here knows the format.
+
+A camera fixed in the world (a static chain up to the world frame) is said to be not observable,
+without decoding anything.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, LinkMotion, fit_camera_motion
+from framechain.arrays import FloatArray
+from framechain.config.chain import ChainConfig
+from framechain.replay import TransformBuffer
+from framechain.timeline import EgoMotionTable, TranslationPrior
+
+__all__ = ["CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "measure_cameras"]
+
+#: At most this many candidate frames are fitted per camera.
+MAX_CANDIDATES = 9
+
+
+class CameraImages(Protocol):
+    """A camera's frames, decoded and tracked once (the adapters' :class:`~framechain.adapters.messages.
+    egomotion_frames.ImageMotion`): measured against any translation prior."""
+
+    frames: int  # frames used
+    decoded: int  # frames decoded
+    intrinsics_known: bool
+    notes: tuple[str, ...]
+    last: EgoMotionTable  # the latest measurement
+
+    def measure(self, prior: TranslationPrior | None) -> EgoMotionTable: ...
+
+    def rescale_focal(self, factor: float) -> None:
+        """Measure from now on with the focal length scaled by ``factor``."""
+
+
+#: Decodes and tracks the images of a camera (its frame), only when its motion is worth measuring.
+ImagesOf = Callable[[str], CameraImages]
+
+
+@dataclass(frozen=True)
+class CameraMotion:
+    """One camera's motion evidence: what it is declared on, the fit (None: not measured) and why not."""
+
+    camera: str  # the optical frame, as in the chain
+    declared_link: str  # the moving frame the camera hangs from through static edges ("" fixed in the world)
+    declared_q_link_cam: FloatArray  # (4,) xyzw
+    declared_xyz_link_cam: FloatArray  # (3,)
+    fit: EgoMotionFit | None
+    table: EgoMotionTable  # the final measurement (empty when not measured)
+    links: tuple[LinkMotion, ...]  # the candidates, declared first
+    frames: int = 0  # frames used (0: none decoded)
+    decoded: int = 0
+    seconds: float = 0.0
+    intrinsics_known: bool = True
+    notes: tuple[str, ...] = ()
+    #: The focal length ``table`` was measured with, over the declared one (1: as declared).
+    measured_focal: float = 1.0
+
+    @property
+    def observable(self) -> bool:
+        """The camera turned enough to measure its offset or mount."""
+        return self.fit is not None and bool(self.fit.link)
+
+    @property
+    def why_not(self) -> str:
+        """Why the camera's motion says nothing ("" when it does)."""
+        if self.observable:
+            return ""
+        if self.fit is not None and self.fit.notes:
+            return self.fit.notes[0]
+        return next(iter(self.notes), f"camera {self.camera}: its motion was not measured")
+
+    def link_motion(self, name: str) -> LinkMotion:
+        return next(link for link in self.links if link.link == name)
+
+
+@dataclass(frozen=True)
+class CameraMotionEvidence:
+    """Every camera's motion evidence in a run (chain camera first)."""
+
+    cameras: tuple[CameraMotion, ...]
+
+    def of(self, camera: str) -> CameraMotion | None:
+        return next((c for c in self.cameras if c.camera == camera), None)
+
+    @property
+    def observable(self) -> tuple[CameraMotion, ...]:
+        return tuple(c for c in self.cameras if c.observable)
+
+
+def measure_cameras(
+    chain: ChainConfig, buffer: TransformBuffer, cameras: Sequence[str], images: ImagesOf, *,
+    options: EgoMotionFitOptions | None = None, progress: Callable[[str], None] | None = None,
+) -> CameraMotionEvidence | None:
+    """Each of ``cameras`` (frames with images; ``images`` decodes them) measured (None: no camera)."""
+    if not cameras:
+        return None
+    order = sorted(cameras, key=lambda f: f != chain.frames.camera)  # the chain's camera first
+    out = []
+    for camera in order:
+        if progress is not None:
+            progress(f"measuring the motion of camera {camera} from its images")
+        out.append(_measure_camera(chain, buffer, camera, images, options or EgoMotionFitOptions()))
+    return CameraMotionEvidence(cameras=tuple(out))
+
+
+def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, images: ImagesOf,
+                    options: EgoMotionFitOptions) -> CameraMotion:
+    start = time.perf_counter()
+    link, q_link_cam, xyz_link_cam = _declared_mount(buffer, camera)
+    empty = CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
+                         declared_xyz_link_cam=xyz_link_cam, fit=None, table=EgoMotionTable.empty(), links=())
+    if not link or not _moves(buffer, chain.frames.world, link):
+        why = (f"camera {camera} is fixed in {chain.frames.world} (no moving frame above it): its time offset, mount "
+               "and link are not observable from its own motion")
+        return replace(empty, notes=(why,), seconds=time.perf_counter() - start)
+    candidates = _candidates(buffer, link)
+    links = tuple(m for m in (_link_motion(buffer, chain.frames.world, name) for name in candidates) if m is not None)
+    if not links or links[0].link != link:
+        why = f"camera {camera}: the poses of {link} cannot be looked up in {chain.frames.world} at its samples"
+        return replace(empty, notes=(why,), seconds=time.perf_counter() - start)
+    source = images(camera)
+    fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options)
+    return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
+                        declared_xyz_link_cam=xyz_link_cam, fit=fit, table=source.last, links=links,
+                        frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
+                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *notes), measured_focal=focal)
+
+
+#: Rounds of measuring again with the focal length the motion implies, when it is clearly not the declared one.
+FOCAL_ROUNDS = 3
+
+
+def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: str,
+                    declared: tuple[str, FloatArray, FloatArray], options: EgoMotionFitOptions
+                    ) -> tuple[EgoMotionFit, float, list[str]]:
+    """The fit, measured again with the focal length it implies while that clearly differs from the one used.
+
+    A wrong focal length scales the rotation seen across the optical axis; the mount and offset fits
+    absorb part of it (a few degrees, ten milliseconds). Measuring again with the implied one takes
+    it out; the step is squared because each round recovers about half of what is left. Returns the
+    fit (its focal scale over the *declared* focal length), the factor the final measurement used,
+    and a note when it was measured again.
+    """
+    used = 1.0
+    notes: list[str] = []
+    link, q_link_cam, xyz_link_cam = declared
+    fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
+                            declared_xyz_link_cam=xyz_link_cam, options=options)
+    for _ in range(FOCAL_ROUNDS):
+        low, high = fit.focal_scale_interval
+        if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
+            break
+        step = fit.focal_scale**2
+        source.rescale_focal(step)
+        used *= step
+        fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link,
+                                declared_q_link_cam=q_link_cam, declared_xyz_link_cam=xyz_link_cam, options=options)
+    if used != 1.0:
+        notes.append(f"camera {camera}: its motion implied another focal length; measured again with "
+                     f"{used:.3f} times the declared one")
+        low, high = fit.focal_scale_interval
+        fit = replace(fit, focal_scale=fit.focal_scale * used, focal_scale_interval=(low * used, high * used))
+    return fit, used, notes
+
+
+# -- the frame tree ------------------------------------------------------------------------------------
+def _declared_mount(buffer: TransformBuffer, camera: str) -> tuple[str, FloatArray, FloatArray]:
+    """The first frame above ``camera`` reached through a moving edge, and the static ``T_link_cam`` to it.
+
+    ("", identity, zeros) when the camera is not in the tree; the root when every edge above is static.
+    """
+    edges = buffer.edges
+    rotation, translation = Rotation.identity(), np.zeros(3)
+    current = camera
+    if current not in edges:
+        return "", np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
+    while current in edges and edges[current].is_static:
+        edge = edges[current]
+        step = Rotation.from_quat(edge.quat_xyzw[-1])
+        translation = edge.translation[-1] + step.apply(translation)
+        rotation = step * rotation
+        current = edge.parent
+    return current, rotation.as_quat(), translation
+
+
+def _moves(buffer: TransformBuffer, world: str, link: str) -> bool:
+    """Some edge between ``world`` and ``link`` is dynamic."""
+    path = buffer.path(world, link)
+    return path.connected and any(not hop.is_static for hop in path.hops)
+
+
+def _moving_ancestors(buffer: TransformBuffer, link: str, count: int) -> list[str]:
+    """Up to ``count`` frames above ``link`` that are children of moving edges."""
+    edges = buffer.edges
+    out: list[str] = []
+    current = edges[link].parent if link in edges else None
+    while current is not None and len(out) < count:
+        edge = edges.get(current)
+        if edge is None:
+            break
+        if not edge.is_static:
+            out.append(current)
+        current = edge.parent
+    return out
+
+
+def _alike(a: str, b: str) -> bool:
+    """``a`` and ``b`` name the same part after a different prefix (``left_gripper_link``, ``right_gripper_link``)."""
+    k = 0
+    while k < min(len(a), len(b)) and a[-1 - k] == b[-1 - k]:
+        k += 1
+    while k > 0 and not (_boundary(a, len(a) - k) and _boundary(b, len(b) - k)):
+        k -= 1
+    return 0 < k < min(len(a), len(b)) and 2 * k >= max(len(a), len(b)) - 1
+
+
+def _boundary(name: str, position: int) -> bool:
+    return position == 0 or name[position - 1] in "_/:."
+
+
+def _candidates(buffer: TransformBuffer, link: str) -> list[str]:
+    """The declared link, its two moving ancestors, and the same of each alike frame (another arm)."""
+    moving = [child for child, edge in buffer.edges.items() if not edge.is_static]
+    out = [link, *_moving_ancestors(buffer, link, 2)]
+    for other in sorted(m for m in moving if m != link and _alike(m, link)):
+        out += [other, *_moving_ancestors(buffer, other, 2)]
+    return list(dict.fromkeys(out))[:MAX_CANDIDATES]
+
+
+def _link_motion(buffer: TransformBuffer, world: str, link: str) -> LinkMotion | None:
+    """``T_world_link`` at the samples of the link's own moving edge (None: fewer than ten usable)."""
+    edges = buffer.edges
+    frame: str | None = link
+    while frame is not None and frame in edges and edges[frame].is_static:
+        frame = edges[frame].parent
+    if frame is None or frame not in edges:
+        return None
+    stamps = edges[frame].stamps_ns
+    found = buffer.lookup(world, link, stamps)
+    ok = found.ok
+    if int(ok.sum()) < 10:
+        return None
+    return LinkMotion(link=link, stamps_ns=stamps[ok].astype(np.int64), quat_xyzw=found.quat_xyzw[ok],
+                      xyz=found.translation[ok])

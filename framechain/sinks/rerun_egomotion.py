@@ -1,0 +1,126 @@
+"""The cameras' own motion in Rerun: every camera's video under its pinhole, and its rotation rate from the images
+against the rate forward kinematics predicts, as series (a time offset shows as a shift between the curves).
+
+What it adds to a recording (:mod:`framechain.sinks.rerun`):
+
+- ``/cameras/<camera>``: each camera other than the chain's (which is ``/camera``) as a ``Pinhole``
+  under its optical frame, its video as ``AssetVideo`` with one ``VideoFrameReference`` per frame
+  (decoded by the viewer) under its image plane; the chain camera's video under ``/camera/video``
+  when the replay logged none (an episode without detections);
+- ``/series/rotation_rate_deg_s/<camera>/{measured,declared,corrected}``: the magnitude of the
+  camera's rotation rate per pair of consecutive frames, measured from its images, predicted by
+  forward kinematics through the declared link, mount and time, and through the fitted ones;
+  ``.../x|y|z/{measured,declared}`` the rate's components in the optical frame (the declared mount:
+  a mount error shows as a misfit of the components, not of the magnitude). Stamped at the middle of
+  the pair on ``sensor_time``.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from framechain.analysis.egomotion import rotation_rates
+from framechain.analysis.egomotion_run import CameraMotion
+from framechain.analysis.run import Run
+from framechain.arrays import IntArray
+from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, SENSOR_TIME, entity_part, stamp_column
+from framechain.timeline import Timeline
+from framechain.timeline.frames import VIDEO_ENCODING
+
+if TYPE_CHECKING:
+    import rerun as rr
+
+__all__ = ["RATE_ENTITY", "log_camera_motion", "log_camera_videos"]
+
+RATE_ENTITY = "/series/rotation_rate_deg_s"
+_COLOURS = {"measured": (40, 40, 40), "declared": (230, 120, 30), "corrected": (40, 160, 60)}
+
+
+def camera_name(frame: str) -> str:
+    return frame.removesuffix("_optical_frame").removesuffix("_optical") or frame
+
+
+def log_camera_videos(rec: rr.RecordingStream, run: Run, rows: dict[str, int]) -> None:
+    """Every other camera's pinhole and video; the chain camera's video when the replay logged none."""
+    import rerun as rr
+
+    timeline = run.timeline
+    chain_camera = run.replay.frames.camera
+    cams = timeline.cameras
+    for frame in (str(f) for f in dict.fromkeys(cams.frame.tolist())):
+        if frame == chain_camera:
+            if not any(k.startswith("/camera/video") for k in rows):
+                _log_video(rec, timeline, frame, "/camera/video", rows)
+            continue
+        entity = f"/cameras/{entity_part(camera_name(frame))}"
+        i = int(np.flatnonzero(cams.frame == frame)[0])
+        rec.log(entity, rr.Pinhole(image_from_camera=cams.K[i], resolution=[float(cams.width[i]),
+                                                                          float(cams.height[i])],
+                                   camera_xyz=rr.ViewCoordinates.RDF, parent_frame=frame,
+                                   child_frame=frame + IMAGE_PLANE_SUFFIX, image_plane_distance=0.3), static=True)
+        rows[entity] = 1
+        _log_video(rec, timeline, frame, f"{entity}/video", rows)
+
+
+def _log_video(rec: rr.RecordingStream, timeline: Timeline, frame: str, entity: str, rows: dict[str, int]) -> None:
+    """The camera's video frames as references into its mp4 (the first file of its rows)."""
+    import rerun as rr
+
+    images = timeline.image_frames
+    mine = np.flatnonzero((images.frame == frame) & (images.encoding == VIDEO_ENCODING))
+    if mine.size == 0:
+        return
+    path = str(images.video_path[mine[0]])
+    mine = mine[images.video_path[mine] == path]
+    mine = mine[np.argsort(images.stamp_ns[mine], kind="stable")]
+    rec.log(entity, rr.AssetVideo(path=path), rr.CoordinateFrame(frame + IMAGE_PLANE_SUFFIX), static=True)
+    rec.send_columns(entity, indexes=[stamp_column(SENSOR_TIME, images.stamp_ns[mine]),
+                                      stamp_column(LOG_TIME, images.log_time_ns[mine])],
+                     columns=rr.VideoFrameReference.columns_nanos(images.video_time_ns[mine]))
+    rows[entity] = int(mine.size)
+
+
+def log_camera_motion(rec: rr.RecordingStream, run: Run, rows: dict[str, int]) -> None:
+    """Each measured camera's rotation rate: from its images, as declared, as fitted (see the module docstring)."""
+    if run.camera_motion is None:
+        return
+    for motion in run.camera_motion.cameras:
+        if motion.fit is not None and motion.fit.link and len(motion.table):
+            _log_rates(rec, motion, rows)
+
+
+def _consecutive(stamp0_ns: IntArray, stamp1_ns: IntArray) -> IntArray:
+    """The pairs of neighbouring frames (the shortest spans), in time order."""
+    span = stamp1_ns - stamp0_ns
+    keep = np.flatnonzero(span <= 1.5 * np.percentile(span, 10))
+    out: IntArray = keep[np.argsort(stamp0_ns[keep], kind="stable")]
+    return out
+
+
+def _log_rates(rec: rr.RecordingStream, motion: CameraMotion, rows: dict[str, int]) -> None:
+    import rerun as rr
+
+    fit = motion.fit
+    assert fit is not None
+    table = motion.table
+    pairs = _consecutive(table.stamp0_ns, table.stamp1_ns)
+    declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
+    corrected = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
+                               focal_scale=fit.focal_scale / motion.measured_focal)
+    middle = (table.stamp0_ns[pairs] + (table.stamp1_ns[pairs] - table.stamp0_ns[pairs]) // 2).astype(np.int64)
+    base = f"{RATE_ENTITY}/{entity_part(camera_name(motion.camera))}"
+    series = {"measured": declared.measured, "declared": declared.predicted, "corrected": corrected.predicted}
+    for name, rates in series.items():
+        values = np.rad2deg(rates[pairs])
+        entities = {f"{base}/{name}": np.linalg.norm(values, axis=1)}
+        if name != "corrected":
+            entities.update({f"{base}/{axis}/{name}": values[:, k] for k, axis in enumerate("xyz")})
+        for entity, column in entities.items():
+            ok = np.isfinite(column)
+            label = f"{name}: {'images' if name == 'measured' else 'forward kinematics, ' + name}"
+            rec.log(entity, rr.SeriesLines(colors=[_COLOURS[name]], names=[label]), static=True)
+            rec.send_columns(entity, indexes=[stamp_column(SENSOR_TIME, middle[ok])],
+                             columns=rr.Scalars.columns(scalars=column[ok]))
+            rows[entity] = int(ok.sum())
