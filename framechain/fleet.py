@@ -278,7 +278,7 @@ def _span_of(unit: LogUnit) -> dict[str, int | None]:
 
 
 #: estimate_scalars' names and their units in the table
-_ESTIMATE_UNITS = {"offset_s": "s", "angle_deg": "deg", "factor": "ratio", "scale": "ratio"}
+_ESTIMATE_UNITS = {"offset_s": "s", "angle_deg": "deg", "factor": "ratio", "scale": "ratio", "distance_m": "m"}
 
 
 def _finding_row(finding: Any) -> dict[str, Any]:
@@ -288,7 +288,7 @@ def _finding_row(finding: Any) -> dict[str, Any]:
     scalars = estimate_scalars(finding.estimate)
     name, value = next(iter(scalars.items()), (None, None))
     return {
-        "fault": data["fault"], "hop": data["hop"],
+        "fault": data["fault"], "hop": data["hop"], "camera": data.get("camera"),
         "estimate_json": json.dumps(data["estimate"], sort_keys=True),
         "estimate_text": format_estimate(finding.estimate),
         "estimate_name": name, "estimate_value": None if value is None else float(value),
@@ -606,6 +606,7 @@ FLEET_SCHEMA = pa.schema([
     ("finding", pa.int64()),  # 1-based rank of the finding within its log; null: the log has none
     ("fault", pa.string()),
     ("hop", pa.string()),
+    ("camera", pa.string()),  # the camera a finding concerns (a rig's); null: the chain as a whole
     ("estimate_json", pa.string()),
     ("estimate_text", pa.string()),
     ("estimate_name", pa.string()),
@@ -617,7 +618,7 @@ FLEET_SCHEMA = pa.schema([
     ("fix", pa.string()),
     ("elapsed_s", pa.float64()),
 ])
-_FINDING_COLUMNS = ("fault", "hop", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
+_FINDING_COLUMNS = ("fault", "hop", "camera", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
                     "estimate_unit", "share", "finding_error_m", "confidence", "fix")
 
 

@@ -87,7 +87,10 @@ def load_log(
                          info=loaded.info, notes=list(loaded.info.notes))
     loaded = read_log(target, None, progress=progress, point_roles=adapters.evidence_roles)
     suggestion = adapters.suggest(loaded)
-    loaded = adapters.as_suggested(loaded, suggestion.config)
+    if suggestion.config.cameras:  # a rig calibrated by files beside the log: read through them
+        loaded = read_log(target, suggestion.config, progress=progress)
+    else:
+        loaded = adapters.as_suggested(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
                      info=loaded.info, notes=list(loaded.info.notes), suggestion=suggestion)
 

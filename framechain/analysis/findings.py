@@ -12,13 +12,16 @@ import numpy as np
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.estimates import Estimate, estimate_to_json, format_estimate
+from framechain.analysis.rig_layout import RigLayout
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.replay import REPLAYED, ReplayResult
 from framechain.timeline import FramechainError
 
-Metric = Literal["logged_hops", "target", "reference", "static_spread", "none"]
+Metric = Literal["logged_hops", "target", "reference", "static_spread", "cross_camera", "none"]
+#: What the error is measured against, as the verdict says it.
+METRIC_WORDS = {"static_spread": "static spread", "cross_camera": "other cameras of the rig"}
 SCHEMA = "framechain/attribution@1"
 
 
@@ -54,11 +57,15 @@ class Finding:
     evidence: str
     fix: str
     model: str
+    #: the camera (its frame as in the chain) the finding concerns; None: the chain as a whole
+    camera: str | None = None
 
     def to_json(self) -> dict[str, Any]:
+        where = {} if self.camera is None else {"camera": self.camera}
         return {
             "fault": self.fault.value,
             "hop": self.hop.value,
+            **where,
             "estimate": estimate_to_json(self.estimate),
             "interval": self.interval,
             "share": round(self.share, 4),
@@ -90,6 +97,8 @@ class Attribution:
     notes: tuple[str, ...] = ()
     #: where the error is measured: the world point, or the deepest hop the robot logged
     stage: str = "world"
+    #: a rig's cameras: which are compared with which, the gauges, what cannot be seen (None: one camera)
+    rig: RigLayout | None = None
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
@@ -140,17 +149,26 @@ class Attribution:
             return (
                 "No evidence in this log to measure the chain against (no logged points, reference or static target)."
             )
+        unseen = self._rig_unobservable()
         if not self.findings:
             return (
                 f"No fault beyond noise: median error {summary['median'] * 1e3:.1f} mm against the "
-                f"{self.metric.replace('_', ' ')}."
+                f"{METRIC_WORDS.get(self.metric, self.metric.replace('_', ' '))}{unseen}."
             )
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+        camera = f" on camera {top.camera}" if top.camera else ""
         return (
-            f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}) explains "
-            f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}."
+            f"{top.fault.value} at {top.hop.value}{camera} ({format_estimate(top.estimate)}) explains "
+            f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}."
         )
+
+    def _rig_unobservable(self) -> str:
+        """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""
+        if self.rig is None:
+            return ""
+        unseen = [u.removeprefix("not observable: ") for u in self.rig.unobservable() if u.startswith("not observ")]
+        return f"; not observable here: {'; '.join(unseen)}" if unseen else ""
 
     def to_json(self) -> dict[str, Any]:
         """The attribution.json contract (schema framechain/attribution@1)."""
@@ -166,6 +184,7 @@ class Attribution:
             "verdict": self.verdict,
             "findings": [f.to_json() for f in self.findings],
             "hops": self.hop_summary(),
+            **({"rig": self.rig.to_json()} if self.rig is not None else {}),
             "notes": list(self.notes),
         }
 

@@ -113,11 +113,14 @@ def print_findings(result: Any) -> None:
     )
     if result.findings:
         table = Table()
-        for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence"):
+        cameras = any(f.camera for f in result.findings)
+        for col in ("#", "fault", "hop", *(("camera",) if cameras else ()), "estimate", "95% interval", "share",
+                    "confidence"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
-            table.add_row(str(i), c.fault, c.hop, c.estimate, c.interval, c.share, c.confidence)
+            table.add_row(str(i), c.fault, c.hop, *((c.camera,) if cameras else ()), c.estimate, c.interval, c.share,
+                          c.confidence)
         console.print(table)
     hops = Table()
     for col in HOP_COLUMNS:
@@ -126,6 +129,7 @@ def print_findings(result: Any) -> None:
         hops.add_row(*row)
     console.print(hops)
     for i, f in enumerate(result.findings, start=1):
-        console.print(f"fix {i}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
+        on = f" (camera {f.camera})" if f.camera else ""
+        console.print(f"fix {i}{on}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
     for note in result.notes:
         console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)

@@ -348,13 +348,14 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         lines += [
-            "| fault | hop | estimate | 95% interval | share | error | confidence | fix |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- |",
+            "| fault | hop | camera | estimate | 95% interval | share | error | confidence | fix |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
         for c in (FindingView.of(f).cells() for f in result.findings):
-            lines.append(f"| {c.fault} | {c.hop} | {c.estimate} | {c.interval} | {c.share} | {c.error} | "
-                         f"{c.confidence} | {c.fix.replace('|', '/')} |")
-        lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
+            lines.append(f"| {c.fault} | {c.hop} | {c.camera or '-'} | {c.estimate} | {c.interval} | {c.share} | "
+                         f"{c.error} | {c.confidence} | {c.fix.replace('|', '/')} |")
+        lines += [""] + [f"- **{f.fault.value}**{FindingView.of(f).on_camera()}: {f.evidence}"
+                         for f in result.findings]
     else:
         lines.append("No fault beyond noise.")
     lines += [
@@ -394,12 +395,13 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         parts.append(
-            "<table><tr><th>fault</th><th>hop</th><th>estimate</th><th>95% interval</th><th>share</th>"
+            "<table><tr><th>fault</th><th>hop</th><th>camera</th><th>estimate</th><th>95% interval</th><th>share</th>"
             "<th>error</th><th>confidence</th><th>evidence</th><th>fix</th></tr>"
         )
         for c in (FindingView.of(f).cells() for f in result.findings):
             parts.append(
-                f"<tr><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.estimate)}</td><td>{e(c.interval)}</td>"
+                f"<tr><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.camera or '-')}</td>"
+                f"<td>{e(c.estimate)}</td><td>{e(c.interval)}</td>"
                 f"<td>{c.share}</td><td>{c.error}</td><td>{c.confidence}</td><td>{e(c.evidence)}</td>"
                 f"<td>{_code(c.fix)}</td></tr>"
             )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,24 +36,29 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
 
 
 def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
-                      image_bounds: tuple[float, float, float, float] | None = None) -> rrb.Blueprint:
+                      image_bounds: tuple[float, float, float, float] | None = None,
+                      cameras: Sequence[tuple[str, str, tuple[float, float, float, float] | None]] = ()
+                      ) -> rrb.Blueprint:
     """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
     (its images with the chain drawn on them when ``images``, else the depth frames); below them the
     per-hop error, the error in the image and the time gaps as series, and the findings.
     ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
-    v_min, v_max) frames the camera view (see :func:`image_view_bounds`)."""
+    v_min, v_max) frames the camera view (see :func:`image_view_bounds`). ``cameras`` (frame, entity root, image
+    bounds) of a rig: one view per camera beside the 3D view instead of the one camera's, and the distances
+    between cameras' sightings in place of the time gaps."""
     import rerun.blueprint as rrb
 
     # With colour images, the depth cloud would bury the points: it stays in the depth tab.
+    roots = [root for _frame, root, _bounds in cameras] or ["/camera"]
     world = rrb.Spatial3DView(
         name=f"World ({frames.world})", origin="/",
-        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", "- /camera/overlay/**",
-                  *(["- /camera/depth"] if images else [])],
+        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", *(f"- {r}/overlay/**" for r in roots),
+                  *([f"- {r}/depth" for r in roots] if images else [])],
         spatial_information=rrb.SpatialInformation(target_frame=frames.world),
     )
     history = rrb.Spatial3DView(
         name="All observations (world points)", origin="/",
-        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target",
+        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target", "+ /points/rig/**",
                   "+ /points/reference/**", "+ /points/error/world", "+ /frames/**", "+ /tf/**"],
         spatial_information=rrb.SpatialInformation(target_frame=frames.world),
         time_ranges=[rrb.VisibleTimeRange(name, start=rrb.TimeRangeBoundary.infinite(),
@@ -66,19 +72,29 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         contents=["+ /camera/**", "- /camera/depth"] if images else ["+ /camera/**"],
         spatial_information=plane, visual_bounds=bounds,
     )
-    cameras: rrb.Tabs | rrb.Spatial2DView = camera
+    views: rrb.Tabs | rrb.Spatial2DView | rrb.Grid = camera
     if images:
         depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
                                   contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
-        cameras = rrb.Tabs(camera, depth)
+        views = rrb.Tabs(camera, depth)
+    if cameras:
+        views = rrb.Grid(*(rrb.Spatial2DView(
+            name=f"Camera ({frame})", origin=root, contents=[f"+ {root}/**", f"- {root}/depth"],
+            spatial_information=rrb.SpatialInformation(target_frame=frame + IMAGE_PLANE_SUFFIX),
+            visual_bounds=None if box is None else rrb.VisualBounds2D(x_range=box[:2], y_range=box[2:]))
+            for frame, root, box in cameras))
+        gaps: rrb.TimeSeriesView | None = rrb.TimeSeriesView(name="Distance to another camera's sighting (mm)",
+                                                             origin="/series/rig")
+    else:
+        gaps = None
     errors = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
     pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
-    gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
+    gaps = gaps or rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
     text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
                     rrb.TextDocumentView(name="Summary", origin="/summary"))
     return rrb.Blueprint(
         rrb.Vertical(
-            rrb.Horizontal(rrb.Tabs(world, history), cameras, column_shares=[1, 1]),
+            rrb.Horizontal(rrb.Tabs(world, history), views, column_shares=[1, 1]),
             rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
             row_shares=[3, 2],
         ),

@@ -31,6 +31,7 @@ class FindingCells(NamedTuple):
     confidence: str
     evidence: str
     fix: str
+    camera: str = ""  # the camera the finding concerns ("" for the chain as a whole)
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ class FindingView:
         f = self.finding
         return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
                             interval=format_interval(f.interval), share=f"{f.share:.0%}", error=mm(f.error_m),
-                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix)
+                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix, camera=f.camera or "")
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
@@ -66,7 +67,11 @@ class FindingView:
         if self.finding.interval:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
-        return f"{c.fault} on {c.hop}; {estimate}; {size}."
+        return f"{c.fault} on {c.hop}{self.on_camera()}; {estimate}; {size}."
+
+    def on_camera(self) -> str:
+        """`` on camera <frame>`` for a finding that concerns one camera, else ""."""
+        return f" on camera {self.finding.camera}" if self.finding.camera else ""
 
 
 #: The style of the HTML reports (one log's and the fleet's).
