@@ -23,14 +23,15 @@ for by ``obs_id``, so a subset of rows (a bootstrap resample, a grid's subsample
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import NamedTuple
 
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
 from framechain.analysis.static import StaticGroups, fit_static_points
-from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray, rows_of
+from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
 
 #: A partner's two sightings around the instant compared may be this many of its frame periods apart.
 MAX_GAP_FRAMES = 1.5
@@ -160,13 +161,17 @@ class CrossCameraObjective:
     ``rig`` is every replayed observation of the rig; ``static`` groups the rows measured against their
     static object (unused rows -1), ``pairs`` the same-instant comparisons; ``range_m`` each camera's
     recorded median range, by which its static residuals are rescaled (a camera's depths scaled towards
-    it shrink its objects' spread without explaining it).
+    it shrink its objects' spread without explaining it). ``timeless_pose``: the rig's pose does not change
+    with time (fixed, or none), so a camera's stamp offset moves none of its points, only which sightings
+    are compared: the points of the last perturbation are kept and reused.
     """
 
     rig: ChainInputs
     static: StaticGroups
     pairs: PairIndex
     range_m: FloatArray  # (K,)
+    timeless_pose: bool = False
+    _kept: dict[str, object] = field(default_factory=dict, compare=False, repr=False)
 
     def __call__(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         return self.residuals(pert)[self._rows(inputs)]
@@ -175,53 +180,76 @@ class CrossCameraObjective:
         """The same objective: it picks the rows it is called with by their ``obs_id``."""
         return self
 
+    @cached_property
+    def _id_order(self) -> tuple[IntArray, IntArray]:
+        order = np.argsort(self.rig.obs_id, kind="stable")
+        return order, self.rig.obs_id[order]
+
+    @cached_property
+    def _anchors(self) -> tuple[IntArray, IntArray]:
+        """The rows compared at the same instant, and each pair's index among them."""
+        rows, slot = np.unique(self.pairs.anchor, return_inverse=True)
+        return rows, slot.astype(np.int64)
+
     def _rows(self, inputs: ChainInputs) -> IntArray:
-        rows = rows_of(self.rig.obs_id, inputs.obs_id)
-        if (rows < 0).any():
+        order, ids = self._id_order
+        pos = np.clip(np.searchsorted(ids, inputs.obs_id), 0, max(ids.size - 1, 0))
+        if ids.size == 0 or not np.array_equal(ids[pos], inputs.obs_id):
             raise ValueError("observations that are not the rig's")
-        return rows
+        out: IntArray = order[pos]
+        return out
 
     def residuals(self, pert: Perturbation) -> FloatArray:
         """(N, 3) residual of every observation of the rig under ``pert`` (NaN: compared with nothing)."""
-        p_cam, _, p = evaluate(self.rig, pert)
+        p_cam, p, static = self._points(pert)
         out = np.full((len(self.rig), 3), np.nan)
-        if self.static.used.any():
-            out[self.static.used] = (p - fit_static_points(p, self.static))[self.static.used]
-            out *= self._range_scale(p_cam)[:, None]
+        if static is not None:
+            out[self.static.used] = static * self._range_scale(p_cam, pert)[self.static.used, None]
         if self.pairs.size:
-            anchor, partner_points, valid = self._partners(p, pert)
-            diff = np.where(valid[:, None], p[anchor] - partner_points, 0.0)
-            counts = np.bincount(anchor, valid.astype(float), minlength=len(self.rig))
-            sums = np.stack([np.bincount(anchor, diff[:, j], minlength=len(self.rig)) for j in range(3)], axis=1)
-            compared = np.zeros(len(self.rig), dtype=bool)
-            compared[self.pairs.anchor] = True
-            mean = sums / np.maximum(counts, 1.0)[:, None]
-            out[compared] = np.where((counts[compared] > 0)[:, None], mean[compared], np.nan)
+            rows, mean = self._pair_means(p, pert)
+            out[rows] = mean
         return out
+
+    def _points(self, pert: Perturbation) -> tuple[FloatArray, FloatArray, FloatArray | None]:
+        """Camera-frame and compared points under ``pert`` and the static rows' residuals (kept for the next
+        call when only stamp offsets change on a timeless pose)."""
+        key = _points_key(pert, self.timeless_pose)
+        if self._kept.get("key") == key:
+            return self._kept["p_cam"], self._kept["p"], self._kept["static"]  # type: ignore[return-value]
+        p_cam, _, p = evaluate(self.rig, pert)
+        static = None
+        if self.static.used.any():
+            used = self.static.used
+            static = (p - fit_static_points(p, self.static))[used]
+        self._kept.update(key=key, p_cam=p_cam, p=p, static=static)
+        return p_cam, p, static
+
+    def _pair_means(self, p: FloatArray, pert: Perturbation) -> tuple[IntArray, FloatArray]:
+        """Each compared row and its point minus the mean of its partners' (NaN where none holds)."""
+        rows, slot = self._anchors
+        _anchor, partner_points, valid = self._partners(p, pert)
+        diff = np.where(valid[:, None], p[self.pairs.anchor] - partner_points, 0.0)
+        counts = np.bincount(slot, valid.astype(float), minlength=rows.size)
+        sums = np.stack([np.bincount(slot, diff[:, j], minlength=rows.size) for j in range(3)], axis=1)
+        mean = np.where((counts > 0)[:, None], sums / np.maximum(counts, 1.0)[:, None], np.nan)
+        return rows, mean
 
     def points(self, inputs: ChainInputs, pert: Perturbation) -> FloatArray:
         """What each observation is measured against: its static object's fitted position, or the mean of the
         other cameras' points at its instant (NaN: nothing)."""
-        p = evaluate(self.rig, pert)[2]
-        return (p - self.residuals_unscaled(pert, p))[self._rows(inputs)]
-
-    def residuals_unscaled(self, pert: Perturbation, p: FloatArray) -> FloatArray:
+        _p_cam, p, static = self._points(pert)
         out = np.full((len(self.rig), 3), np.nan)
-        if self.static.used.any():
-            out[self.static.used] = (p - fit_static_points(p, self.static))[self.static.used]
+        if static is not None:
+            out[self.static.used] = p[self.static.used] - static
         if self.pairs.size:
-            anchor, partner_points, valid = self._partners(p, pert)
-            counts = np.bincount(anchor, valid.astype(float), minlength=len(self.rig))
-            sums = np.stack([np.bincount(anchor, np.where(valid, partner_points[:, j], 0.0), minlength=len(self.rig))
-                             for j in range(3)], axis=1)
-            have = counts > 0
-            out[have] = p[have] - sums[have] / counts[have, None]
-        return out
+            rows, mean = self._pair_means(p, pert)
+            out[rows] = p[rows] - mean
+        return out[self._rows(inputs)]
 
     def partners(self, pert: Perturbation) -> tuple[IntArray, IntArray, FloatArray]:
         """Each same-instant comparison under ``pert`` that holds: (anchor row, partner camera, the partner's
         interpolated point); rows of the rig's inputs."""
-        p = evaluate(self.rig, pert)[2]
+        p = self._points(pert)[1]
         anchor, points, valid = self._partners(p, pert)
         return anchor[valid], self.pairs.partner[valid], points[valid]
 
@@ -235,17 +263,41 @@ class CrossCameraObjective:
         valid = b.valid & np.isfinite(points).all(axis=1) & np.isfinite(p[self.pairs.anchor]).all(axis=1)
         return self.pairs.anchor, points, valid
 
-    def _range_scale(self, p_cam: FloatArray) -> FloatArray:
-        """Per row: its camera's recorded median range over its median range now (1 for unused cameras)."""
+    def _range_scale(self, p_cam: FloatArray, pert: Perturbation) -> FloatArray:
+        """Per row: its camera's recorded median range over its median range now (1 for unused cameras, and for
+        every camera when the perturbation leaves the pixels and depths alone)."""
         index = _camera_index(self.rig)
         scale = np.ones(self.range_m.shape[0])
+        if not _moves_points_along_rays(pert):
+            out: FloatArray = scale[index]
+            return out
         ranges = np.linalg.norm(p_cam, axis=1)
         for k in range(scale.size):
             mine = (index == k) & self.static.used & np.isfinite(ranges)
             if mine.any() and self.range_m[k] > 0:
                 scale[k] = self.range_m[k] / max(float(np.median(ranges[mine])), 1e-9)
-        out: FloatArray = scale[index]
+        out = scale[index]
         return out
+
+
+def _moves_points_along_rays(pert: Perturbation) -> bool:
+    """Whether a perturbation changes the camera-frame points (depth or intrinsics scales)."""
+    return (pert.depth_factor != 1.0 or pert.focal_scale != 1.0 or pert.principal_scale != 1.0
+            or any(d.depth_factor != 1.0 or d.focal_scale != 1.0 for d in pert.cameras.values()))
+
+
+def _points_key(pert: Perturbation, timeless_pose: bool) -> tuple[object, ...]:
+    """What of a perturbation the rig's points depend on (a camera's stamp offset not, on a timeless pose)."""
+    fields_: list[object] = [pert.focal_scale, pert.principal_scale, pert.depth_factor,
+                             np.asarray(pert.rotvec_mount, dtype=float).tobytes(),
+                             None if pert.permutation is None else np.asarray(pert.permutation).tobytes(),
+                             pert.invert_camera, pert.invert_edge, pert.camera_offset_s, pert.pose_offset_s,
+                             pert.invert_pose, pert.world, pert.camera_frame, pert.body_frame]
+    for k, d in sorted(pert.cameras.items()):
+        fields_.append((k, np.asarray(d.rotvec_mount, dtype=float).tobytes(),
+                        np.asarray(d.translation_m, dtype=float).tobytes(), 0.0 if timeless_pose else d.offset_s,
+                        d.focal_scale, d.depth_factor))
+    return tuple(fields_)
 
 
 def camera_ranges(inputs: ChainInputs) -> FloatArray:

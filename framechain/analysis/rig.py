@@ -33,6 +33,8 @@ from framechain.config.chain import ChainConfig
 from framechain.replay import CameraModel
 
 Say = Callable[[str], None]
+#: A camera's mount turned less than this from the others' (degrees) is not worth a note.
+NOTED_DEG = 0.1
 
 
 def rig_inputs(replayed: Replayed, chain: ChainConfig) -> ChainInputs:
@@ -83,7 +85,8 @@ def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Sa
     notes: list[str] = []
     static = _static_groups(inputs, labels, static_rows, chain, pose, notes)
     pairs = pair_index(inputs, labels, ~static_rows)
-    objective = CrossCameraObjective(inputs, static, pairs, camera_ranges(inputs))
+    objective = CrossCameraObjective(inputs, static, pairs, camera_ranges(inputs),
+                                     timeless_pose=pose is not RigPose.MOVING)
     layout = _layout(inputs, pose, static, pairs)
     if not np.isfinite(objective(inputs, Perturbation())).all(axis=1).any():
         raise AnalysisError(_nothing_compared(inputs, pose), Unattributed.STATIC_TARGET)
@@ -124,6 +127,8 @@ def _left_within_tolerance(candidates: list[FaultModel], selected: Selected, obj
         mine = (index == k) & np.isfinite(before)
         after = np.linalg.norm(objective(inputs, model.apply(base, fit.params[0])), axis=1)
         angle = float(np.rad2deg(np.linalg.norm(fit.params[0])))
+        if angle < NOTED_DEG:
+            continue
         out.append(f"rig: {model.camera}'s mount agrees with the other cameras' to {angle:.2f} deg (turning it so "
                    f"would take the median disagreement of its observations from {np.median(before[mine]) * 1e3:.1f} "
                    f"to {np.nanmedian(after[mine]) * 1e3:.1f} mm): within the {ROTATION_TOLERANCE_DEG:g} deg a "

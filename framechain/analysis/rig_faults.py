@@ -160,7 +160,7 @@ def _focal(k: int, frame: str, source: str, note: str) -> FaultModel:
                 f"cy {cam.cy:.1f}{note}.")
 
     return _model(k, frame, "intrinsics", Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA, x0=(1.0,),
-                  lower=(SCALE_BOUNDS[0],), upper=(SCALE_BOUNDS[1],), x_scale=(0.01,), starts=((0.8,), (1.25,)),
+                  lower=(SCALE_BOUNDS[0],), upper=(SCALE_BOUNDS[1],), x_scale=(0.01,),
                   apply=lambda p, x: p.with_camera(k, focal_scale=float(x[0])),
                   estimate=lambda x, mode, inputs: ScaleEstimate(name="scale", value=round(1.0 / float(x[0]), 6),
                                                                  variant="focal"), fix=fix,
@@ -174,7 +174,7 @@ def _depth(k: int, frame: str, note: str) -> FaultModel:
                 f"evidence.tag_size_m, or its depth units){note}.")
 
     return _model(k, frame, "depth_scale", Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA, x0=(1.0,),
-                  lower=(SCALE_BOUNDS[0],), upper=(SCALE_BOUNDS[1],), x_scale=(0.01,), starts=((0.8,), (1.25,)),
+                  lower=(SCALE_BOUNDS[0],), upper=(SCALE_BOUNDS[1],), x_scale=(0.01,),
                   apply=lambda p, x: p.with_camera(k, depth_factor=float(x[0])),
                   estimate=lambda x, mode, inputs: ScaleEstimate(name="factor", value=round(1.0 / float(x[0]), 6)),
                   fix=fix, tolerance=_within_scale)
