@@ -276,8 +276,8 @@ class CrossCameraObjective:
             mine = (index == k) & self.static.used & np.isfinite(ranges)
             if mine.any() and self.range_m[k] > 0:
                 scale[k] = self.range_m[k] / max(float(np.median(ranges[mine])), 1e-9)
-        out = scale[index]
-        return out
+        scaled: FloatArray = scale[index]
+        return scaled
 
 
 def _moves_points_along_rays(pert: Perturbation) -> bool:

@@ -286,7 +286,8 @@ class ChainConfig:
         if cameras:
             given = sorted(k for k in ("detections", "camera_info", "image", "depth") if k in topics)
             if given:
-                topics.fail(f"{', '.join(given)}: a rig chain gives these per camera, under cameras:")
+                top.fail(f"{', '.join('topics.' + g for g in given)}: a rig chain gives these per camera, under "
+                         "cameras:")
         images = "image" in topics or any(c.image for c in cameras)
         if evidence.markers is not None and not images:
             top.fail("evidence.markers needs topics.image (the image topic to find them in)")

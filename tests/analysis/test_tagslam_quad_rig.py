@@ -217,7 +217,8 @@ def test_a_mount_turned_5_degrees_is_found_on_that_camera(rig: Path) -> None:
 def test_one_frame_late_is_a_latency_on_that_camera(rig: Path) -> None:
     result = _attributed(rig, "late")
     late = [f for f in result.findings if f.fault == Fault.LATENCY]
-    assert late and late[0] is result.findings[0], result.verdict
+    assert late, result.verdict
+    assert late[0] is result.findings[0]
     assert late[0].camera == CAMERAS[TURNED]
     estimate = late[0].estimate.offset_s  # type: ignore[union-attr]
     assert abs(estimate + FRAME_S) < 0.15

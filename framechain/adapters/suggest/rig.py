@@ -10,6 +10,7 @@ permuted between its topics): then each camera is named after its topic's namesp
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, TypeGuard
 
 import numpy as np
@@ -72,8 +73,10 @@ def rig_suggestion(loaded: LoadedLog, topics: list[str], beside: list[tuple[str,
         comments.append("no pose in the log: frames.world is left out, so the cameras are compared at the same "
                         "instant in the rig's frame")
     evidence = ChainEvidence(static_target=True, tag_size_m=tag_sizes(beside))
+    folder = Path(str(getattr(loaded.info, "path", ""))).parent
     config = ChainConfig(frames=ChainFrames(camera=frames[order[0]], body=rig_body, world=world or rig_body),
-                         cameras=cameras, mounts=mounts, evidence=evidence, has_pose=world is not None)
+                         cameras=cameras, mounts=mounts, evidence=evidence, has_pose=world is not None,
+                         base_dir=str(folder))
     return config, comments
 
 
