@@ -12,7 +12,7 @@ objective and models: each model is a function of its own camera's parameters on
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -74,11 +74,22 @@ class RigLevel:
     notes: tuple[str, ...]
 
 
-def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Say, *,
-              camera_sources: dict[int, str] | None = None) -> RigLevel:
-    """Select the per-camera faults that explain how the rig's cameras disagree (``labels``: the replayed
-    observations' labels, the rows of ``inputs``)."""
-    say("comparing the rig's cameras")
+@dataclass(frozen=True)
+class RigEvidence:
+    """What a rig's cameras can be measured against: the objective, the layout (groups, gauges, what cannot be
+    seen) and the fault models each camera can be fitted with. Each model changes its own camera only, so the
+    objective's Jacobian in one model's parameters, profiled over the others, bounds that camera's fault."""
+
+    objective: CrossCameraObjective
+    layout: RigLayout
+    candidates: tuple[FaultModel, ...]
+    notes: tuple[str, ...]
+
+
+def rig_evidence(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, *,
+                 camera_sources: dict[int, str] | None = None) -> RigEvidence:
+    """The rig's objective, layout and per-camera models (``labels``: the replayed observations' labels, the rows
+    of ``inputs``); raises :class:`AnalysisError` when no two cameras saw anything alike."""
     pose = rig_pose(inputs, chain)
     moving = np.isin(labels, list(chain.evidence.moving_labels))
     static_rows = ~moving if (pose is not RigPose.NONE and chain.evidence.static_target) else np.zeros_like(moving)
@@ -88,22 +99,30 @@ def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Sa
     objective = CrossCameraObjective(inputs, static, pairs, camera_ranges(inputs),
                                      timeless_pose=pose is not RigPose.MOVING)
     layout = _layout(inputs, pose, static, pairs)
-    if not np.isfinite(objective(inputs, Perturbation())).all(axis=1).any():
+    used = objective(inputs, Perturbation())
+    if not np.isfinite(used).all(axis=1).any():
         raise AnalysisError(_nothing_compared(inputs, pose), Unattributed.STATIC_TARGET)
     mounts = {m.child: m for m in chain.mounts}
     candidates: list[FaultModel] = rig_models(inputs, layout, mounts, camera_sources or {})
     if pose is RigPose.MOVING:  # the rig's pose itself late or early
         candidates += [m for m in models_for(inputs, blind=True)
                        if m.fault == Fault.LATENCY and m.hop == HopName.BODY_TO_WORLD]
-    selected = select(candidates, objective, inputs, "correction", say)
-    notes.extend(_left_within_tolerance(candidates, selected, objective, inputs, layout))
-    lines = _pair_lines(objective, inputs)
-    layout = RigLayout(layout.frames, layout.pose, layout.observations, layout.compared, layout.links, layout.groups,
-                       lines)
-    used = objective(inputs, Perturbation())
     notes.insert(0, f"rig: {int(np.isfinite(used).all(axis=1).sum())} of {len(inputs)} replayed observations "
                     f"compared ({int(static.used.sum())} against static objects, {_anchors(pairs)} with another "
                     "camera at the same instant)")
+    return RigEvidence(objective, layout, tuple(candidates), tuple(notes))
+
+
+def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Say, *,
+              camera_sources: dict[int, str] | None = None) -> RigLevel:
+    """Select the per-camera faults that explain how the rig's cameras disagree (``labels``: the replayed
+    observations' labels, the rows of ``inputs``)."""
+    say("comparing the rig's cameras")
+    evidence = rig_evidence(inputs, chain, labels, camera_sources=camera_sources)
+    objective, layout = evidence.objective, evidence.layout
+    selected = select(list(evidence.candidates), objective, inputs, "correction", say)
+    notes = [*evidence.notes, *_left_within_tolerance(list(evidence.candidates), selected, objective, inputs, layout)]
+    layout = replace(layout, lines=_pair_lines(objective, inputs))
     return RigLevel(objective, selected, objective.points(inputs, Perturbation()), layout,
                     (*notes, *layout.notes()))
 
@@ -217,4 +236,4 @@ def _nothing_compared(inputs: ChainInputs, pose: RigPose) -> str:
             "seeing the same tags")
 
 
-__all__ = ["RigLevel", "rig_inputs", "rig_level", "rig_pose"]
+__all__ = ["RigEvidence", "RigLevel", "rig_evidence", "rig_inputs", "rig_level", "rig_pose"]

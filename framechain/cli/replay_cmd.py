@@ -156,7 +156,9 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     detail = ", ".join(f"{reason} {n}" for reason, n in sorted(rejected.items()))
     source = getattr(loaded.info, "format", "timeline")
     print(f"log           {loaded.path} ({source})")
-    print(f"chain         {frames.camera} -> {frames.body} -> {frames.world} "
+    cameras = (f"{{{', '.join(loaded.chain.camera_frames())}}}" if loaded.chain.is_rig else frames.camera)
+    world = frames.world if loaded.chain.has_pose else "(no pose)"
+    print(f"chain         {cameras} -> {frames.body} -> {world} "
           f"(latency budget {loaded.chain.latency_budget_s * 1e3:g} ms)")
     line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {sum(rejected.values())} rejected"
     if detail:

@@ -8,7 +8,8 @@
 
 Every camera sees at its frame rate (hardware-synced by default); a detection is a pixel with depth
 (noisy). Faults live in the recorded data: a camera's recorded mount turned by an angle about an axis
-of its own frame, or its detections stamped late by some frames. The truth is computed with the
+of its own frame, its detections stamped late by some frames, its recorded focal length or its depths
+scaled. The truth is computed with the
 generator's own maths (:mod:`framechain.sim.rigid`: numpy and scipy), never framechain's replay.
 """
 
@@ -50,6 +51,10 @@ class RigSpec:
     turned: tuple[int, float, tuple[float, float, float]] | None = None
     #: camera ``late[0]``'s detections stamped ``late[1]`` frames late
     late: tuple[int, float] | None = None
+    #: camera ``focal[0]``'s recorded focal length ``focal[1]`` times the true one
+    focal: tuple[int, float] | None = None
+    #: camera ``depth[0]``'s recorded depths ``depth[1]`` times the true ones
+    depth: tuple[int, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -88,13 +93,18 @@ def generate_rig(spec: RigSpec) -> RigScene:
     rows: list[tuple[np.ndarray, ...]] = []
     for k, frame in enumerate(frames):
         late = spec.late[1] * period if spec.late is not None and spec.late[0] == k else 0.0
-        rows.append(_sightings(spec, rng, k, frame, mounts[k], times_s, world_from_body, tags, late))
+        seen = _sightings(spec, rng, k, frame, mounts[k], times_s, world_from_body, tags, late)
+        if spec.depth is not None and spec.depth[0] == k:
+            seen = (*seen[:4], seen[4] * spec.depth[1], *seen[5:])
+        rows.append(seen)
     observations = _observation_table(rows)
     transforms = _transforms(spec, frames, recorded, body, world)
-    cameras = CameraTable.concat([CameraTable.from_intrinsics(f, fx=FOCAL, fy=FOCAL, cx=WIDTH / 2 - 0.5,
+    focal = [FOCAL * (spec.focal[1] if spec.focal is not None and spec.focal[0] == k else 1.0)
+             for k in range(len(frames))]
+    cameras = CameraTable.concat([CameraTable.from_intrinsics(f, fx=fk, fy=fk, cx=WIDTH / 2 - 0.5,
                                                               cy=HEIGHT / 2 - 0.5, width=WIDTH, height=HEIGHT,
                                                               source=f"/{f.removesuffix('_optical_frame')}/info")
-                                  for f in frames])
+                                  for f, fk in zip(frames, focal, strict=True)])
     chain = ChainConfig(
         frames=ChainFrames(camera=frames[0], body=body, world=world if spec.pose != "none" else body),
         cameras=tuple(RigCamera(frame=f, detections=f"/{f.removesuffix('_optical_frame')}/tags") for f in frames),

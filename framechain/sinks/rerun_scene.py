@@ -40,6 +40,10 @@ from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENC
 if TYPE_CHECKING:
     import rerun as rr
 
+#: A rig's cameras sit centimetres apart: their frustums are drawn short.
+RIG_PLANE_DISTANCE_M = 0.1
+BORDER_COLOR = (160, 160, 160)
+
 
 def log_frame_tree(
     rec: rr.RecordingStream, timeline: Timeline, frames: ChainFrames, opts: RerunOptions, rows: dict[str, int],
@@ -140,7 +144,7 @@ def log_camera(
             rec.log(root, rr.Pinhole(
                 image_from_camera=cams.K[keep[0]], resolution=res[changes][0],
                 camera_xyz=rr.ViewCoordinates.RDF, parent_frame=view.frame, child_frame=plane,
-                image_plane_distance=0.5,
+                image_plane_distance=RIG_PLANE_DISTANCE_M if view.rig else 0.5,
             ), static=True)
         else:
             rec.send_columns(
@@ -154,6 +158,11 @@ def log_camera(
                 ),
             )
         rows[root] = int(keep.size)
+        if view.rig:  # without images a view shows where the image ends by its border
+            width, height = res[changes][-1]
+            rec.log(f"{root}/border", rr.LineStrips2D([[(0, 0), (width, 0), (width, height), (0, height), (0, 0)]],
+                                                      colors=[BORDER_COLOR]), rr.CoordinateFrame(plane), static=True)
+            rows[f"{root}/border"] = 1
     log_depth(rec, timeline, result, view, opts, rows)
     obs = result.observations
     if view.rows.size:

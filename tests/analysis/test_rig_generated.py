@@ -77,6 +77,19 @@ def test_a_late_camera_is_a_latency_on_that_camera(pose: str) -> None:
     assert abs(late[0].estimate.offset_s - truth_s) < 0.01  # type: ignore[union-attr]  # and well within a frame
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(("what", "fault", "key"), [("focal", Fault.INTRINSICS, "scale"),
+                                                    ("depth", Fault.DEPTH_SCALE, "factor")])
+def test_a_camera_s_scale_is_found_on_that_camera(what: str, fault: Fault, key: str) -> None:
+    """Camera 2's recorded focal length (or its depths) 8 % off: that camera's fault, x1.08 as recorded."""
+    scene = generate_rig(replace(BASE, **{what: (2, 1.08)}))
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
+    top = result.findings[0]
+    assert top.fault == fault
+    assert top.camera == scene.frame(2)
+    assert top.to_json()["estimate"][key] == pytest.approx(1.08, abs=0.01)
+
+
 def test_generator_truth_is_its_own() -> None:
     """The generator's recorded mount differs from its truth by exactly the turn it was asked for."""
     scene = generate_rig(replace(BASE, turned=TURN))

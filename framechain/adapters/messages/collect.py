@@ -457,8 +457,8 @@ class Collector:
             rows.frame = [self._camera_frame(t, f) for f, t in zip(rows.frame, rows.topic, strict=True)]
         self._relabel_observations()
         for (topic, frame, mine), n in sorted(self.relabelled.items()):
-            self.notes.append(f"topic {topic}: header.frame_id {frame!r} on {n} message rows, but the chain gives "
-                              f"this topic to camera {mine!r}: its rows are that camera's")
+            self.notes.append(f"topic {topic}: header.frame_id {frame!r} on {n} detections (or camera models, "
+                              f"images), but the chain gives this topic to camera {mine!r}: they are that camera's")
 
     # -- build ------------------------------------------------------------------------------------
     def build(self, fetch: FrameFetch | None, metadata: Mapping[str, Any]) -> tuple[Timeline, list[str]]:
