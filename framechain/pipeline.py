@@ -129,8 +129,9 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig) -> None:
     if not len(transforms):
         return  # said elsewhere, with the counts
     known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
-    for role in ("camera", "body", "world"):
-        name = getattr(chain.frames, role)
+    named = [(role, getattr(chain.frames, role)) for role in ("camera", "body", "world")]
+    named += [("camera", frame) for frame in chain.camera_frames()[1:]]  # a rig's other cameras
+    for role, name in named:
         if name not in known:
             close = difflib.get_close_matches(name, sorted(known), n=3)
             hint = f"; did you mean {' or '.join(repr(c) for c in close)}?" if close else ""
