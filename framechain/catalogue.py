@@ -35,6 +35,8 @@ class Fault(StrEnum):
     #: another frame of the camera at the same orientation looked up (a sibling camera's optical
     #: frame, the depth frame for the colour frame): the error is the offset between the two
     WRONG_CAMERA_FRAME = "wrong_camera_frame"
+    #: a camera's mount is off in position (found between the cameras of a rig)
+    TRANSLATION_ERROR = "translation_error"
 
 
 #: The hop each fault lives on (inverted_transform may live on either transform hop; latency also
@@ -49,6 +51,7 @@ FAULT_HOPS: dict[Fault, HopName] = {
     Fault.WRONG_WORLD_FRAME: HopName.BODY_TO_WORLD,
     Fault.INVERTED_TRANSFORM: HopName.CAMERA_TO_BODY,
     Fault.WRONG_CAMERA_FRAME: HopName.CAMERA_TO_BODY,
+    Fault.TRANSLATION_ERROR: HopName.CAMERA_TO_BODY,
 }
 
 

@@ -96,7 +96,10 @@ def load_log(
                          info=loaded.info, notes=[*warnings, *_named_typos(loaded.info, config)], warnings=warnings)
     loaded = _with_notes(read_log(target, None, progress=progress, point_roles=adapters.evidence_roles), found)
     suggestion = adapters.suggest(loaded)
-    loaded = adapters.as_suggested(loaded, suggestion.config)
+    if suggestion.config.cameras:  # a rig calibrated by files beside the log: read through them
+        loaded = read_log(target, suggestion.config, progress=progress)
+    else:
+        loaded = adapters.as_suggested(loaded, suggestion.config)
     warnings = _disagreements(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
                      info=loaded.info, notes=[*warnings, *loaded.info.notes, *_chain_beside(target)],
@@ -225,8 +228,9 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: ad
         return  # said elsewhere, with the counts
     known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
     missing = adapters.missing_topics(info, chain)
-    for role in ("camera", "body", "world"):
-        name = getattr(chain.frames, role)
+    named = [(role, getattr(chain.frames, role)) for role in ("camera", "body", "world")]
+    named += [("camera", frame) for frame in chain.camera_frames()[1:]]  # a rig's other cameras
+    for role, name in named:
         if name in known:
             continue
         cause = next((m for m in missing if m.key in _FRAME_SOURCES[role]), None)

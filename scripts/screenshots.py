@@ -15,6 +15,9 @@ native viewer under Xvfb with llvmpipe gave all-black captures on this machine. 
 
     .venv/bin/python scripts/screenshots.py --demo docs/images/demo_viewer.png
     .venv/bin/python scripts/screenshots.py --rrd aruco.rrd --camera raspicam --out docs/images/aruco_viewer.png
+    .venv/bin/python scripts/screenshots.py --rrd quad.rrd --no-images --body rig --world rig \
+        --rig quadruple/bottom_left,quadruple/bottom_right,quadruple/top_left,quadruple/top_right \
+        --image-size 1280x1024 --out quad.png
 
 Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``).
 """
@@ -53,14 +56,18 @@ def free_port() -> int:
 
 def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
                     bounds: tuple[float, float, float, float] | None, curves: Sequence[str] = (),
-                    curves_first: bool = False) -> None:
-    """framechain's default blueprint with the side panels collapsed, for application ``framechain``."""
+                    curves_first: bool = False, rig: tuple[str, ...] = (),
+                    rig_image: tuple[float, float, float, float] | None = None) -> None:
+    """framechain's default blueprint with the side panels collapsed, for application ``framechain`` (``rig``:
+    the camera frames of a rig, one view each)."""
     from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
+    from framechain.sinks.rerun_common import entity_part
 
     titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in curves]
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
-                                  collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first)
+                                  collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first,
+                                  cameras=[(f, f"/cameras/{entity_part(f)}", rig_image) for f in rig])
     blueprint.save("framechain", path)
 
 
@@ -280,6 +287,9 @@ def main(argv: list[str] | None = None) -> int:
     what.add_argument("--rrd", type=Path, help="a framechain recording to screenshot (with --out)")
     parser.add_argument("--out", type=Path, help="the PNG (with --rrd)")
     parser.add_argument("--camera", default="camera_optical_frame", help="the chain's camera frame")
+    parser.add_argument("--rig", default="", metavar="FRAME,FRAME,...",
+                        help="a rig's camera frames, in the chain's order (one view each)")
+    parser.add_argument("--image-size", default="", metavar="WxH", help="a rig's image size (frames its views)")
     parser.add_argument("--body", default="base_link")
     parser.add_argument("--world", default="map")
     parser.add_argument("--no-images", action="store_true", help="the recording has no camera images")
@@ -305,8 +315,12 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error("--rrd needs --out")
             rrd, out = args.rrd, args.out
         blueprint = work / "view.rbl"
-        write_blueprint(blueprint, args.camera, args.body, args.world, images=not args.no_images,
-                        bounds=recorded_bounds(rrd), curves=recorded_curves(rrd), curves_first=args.curves_first)
+        rig = tuple(f for f in args.rig.split(",") if f)
+        w, _, h = args.image_size.lower().partition("x")
+        write_blueprint(blueprint, rig[0] if rig else args.camera, args.body, args.world, images=not args.no_images,
+                        bounds=None if rig else recorded_bounds(rrd), curves=recorded_curves(rrd),
+                        curves_first=args.curves_first, rig=rig,
+                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None)
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

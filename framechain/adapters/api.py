@@ -225,6 +225,7 @@ def _check_chain_topics(chain: ChainConfig, types: dict[str, str]) -> list[str]:
         (t.camera_info, "camera_info"), (t.detections, "detections"), (t.depth, "depth"),
         (t.pixel_points, "pixel_points"), *((p.topic, "odometry") for p in chain.pose_topics()),
         *((topic, f"evidence {role}") for topic, role in chain.evidence_topics().items()),
+        *((topic, f"camera {c.frame}'s topic") for c in chain.cameras for topic in c.topics()),
     ]
     notes = [f"topic {topic}: named by the chain as {slot} but not in the log" for topic, slot in wanted
              if topic and topic not in types]

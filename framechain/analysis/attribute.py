@@ -37,6 +37,8 @@ from framechain.analysis.findings import AnalysisError, Attribution, Finding, Me
 from framechain.analysis.fit import perturbation_of
 from framechain.analysis.fixes import FixContext, fix_for
 from framechain.analysis.replayed import Replayed, replay_chain
+from framechain.analysis.rig import rig_inputs, rig_level
+from framechain.analysis.rig_layout import RigLayout
 from framechain.analysis.selection import (
     HOP_DIVERGENCE_M,
     Objective,
@@ -86,7 +88,8 @@ def attribute_replayed(
     say: Say = progress or no_progress
     result = replayed.replay
     row = _camera_row(result, chain)
-    inputs = ChainInputs.from_replay(result, replayed.buffer, CameraModel.from_table(replayed.timeline.cameras, row))
+    inputs = (rig_inputs(replayed, chain) if chain.is_rig else
+              ChainInputs.from_replay(result, replayed.buffer, CameraModel.from_table(replayed.timeline.cameras, row)))
     notes = [*replayed.buffer.warnings, *replayed.aligned.notes, *replayed.notes]
     level = _level(inputs, replayed.aligned.take(np.flatnonzero(result.replayed)), chain, replayed, say)
     recomputed_world = evaluate(inputs, Perturbation())[2]
@@ -108,15 +111,15 @@ def attribute_replayed(
                          static=level.metric == "static_spread")
     # Corrections move the recomputed chain towards the truth; as-run faults describe what the
     # robot did, and the recomputed chain stays as it is.
-    corrected = evaluate(inputs, assembled.combined)[2] if level.metric in ("reference", "static_spread") \
-        else recomputed_world
+    corrections = ("reference", "static_spread", "cross_camera")
+    corrected = evaluate(inputs, assembled.combined)[2] if level.metric in corrections else recomputed_world
     return Attribution(
         source=base.source, config=chain, replay=result, inputs=inputs, metric=level.metric,
         error_before=assembled.error_before, error_after=assembled.error_after, hop_errors=level.hop_errors,
         evidence_points=level.evidence_world, corrected_world=corrected,
         findings=weakened(assembled.findings, found_bounds), seed=seed,
         aligned=replayed.aligned, notes=(*notes, *level.notes, *assembled.notes), stage=level.stage,
-        bounds=found_bounds, curves=curves(level.stages, assembled.kept, found_bounds), labels=labels,
+        bounds=found_bounds, curves=curves(level.stages, assembled.kept, found_bounds), labels=labels, rig=level.rig,
     )
 
 
@@ -151,6 +154,7 @@ class _Level:
     notes: tuple[str, ...] = ()
     #: where each hop's faults are fitted (what the bounds measure)
     stages: tuple[Stage, ...] = ()
+    rig: RigLayout | None = None
 
 
 def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, replayed: Replayed,
@@ -179,9 +183,21 @@ def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, r
         return _Level("reference", objective, reference,
                       [reweighted(select(models_for(inputs), objective, inputs, "correction", say))],
                       stages=(Stage.over_evidence(every_hop, objective, inputs, "correction"),))
+    if inputs.rig_cameras:
+        result = replayed.replay
+        sources = {k: _camera_source(replayed.timeline, cam.frame) for k, cam in enumerate(inputs.rig_cameras)}
+        rig = rig_level(inputs, chain, result.observations.label[result.replayed], say, camera_sources=sources)
+        return _Level("cross_camera", rig.objective, rig.evidence_world, [rig.selected], notes=rig.notes,
+                      rig=rig.layout)
     if chain.evidence.static_target:
         return _static_level(inputs, chain, replayed, say)
     return None
+
+
+def _camera_source(timeline: Timeline, frame: str) -> str:
+    """Where a camera's model came from (a calibration file, a CameraInfo topic), "" when unknown."""
+    rows = np.flatnonzero(timeline.cameras.frame == frame)
+    return str(timeline.cameras.source[rows[0]]) if rows.size else ""
 
 
 def _present(points: FloatArray) -> bool:
@@ -256,6 +272,8 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
     for k, (model, x, confidence, alternative, sel) in enumerate(found):
         fault = classify_rotation(model, x, sel.mode, inputs)
         estimate = model.estimate(x, sel.mode, inputs)
+        fix = (model.fix(x, sel.mode, inputs) if model.fix is not None else
+               fix_for(fault, model.hop, estimate, inputs, x, sel.mode, context=context))
         findings.append(Finding(
             fault=fault, hop=model.hop, estimate=estimate,
             interval=bootstrap_interval(sel, model, rng, draws, say) if draws else {},
@@ -263,7 +281,7 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
             confidence=float(confidence),
             evidence=evidence_sentence(fault, model, level.metric, estimate, alternative, sel.mode,
                                        spread_m=(total, total - float(shapley[k])), rays=rays),
-            fix=fix_for(fault, model.hop, estimate, inputs, x, sel.mode, context=context), model=model.name,
+            fix=fix, model=model.name, camera=model.camera,
         ))
     findings.sort(key=lambda f: f.share, reverse=True)
     return _Assembled(tuple(findings), error_before, distances(level.objective(inputs, combined)), combined,

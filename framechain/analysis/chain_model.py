@@ -9,8 +9,10 @@ evaluating :func:`evaluate` many times on whole arrays of observations.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -31,6 +33,19 @@ from framechain.replay.composition import compose_hops
 
 #: Shifted pose lookups :class:`ChainInputs` keeps (a few: each holds N poses).
 _SHIFTED_POSES_KEPT = 4
+
+
+@dataclass(frozen=True)
+class CameraDelta:
+    """How one camera of a rig differs from the recorded chain (defaults: not at all)."""
+
+    #: its mount's rotation changed, the rotation vector in the mount's link frame (as ``rotvec_mount``)
+    rotvec_mount: FloatArray = field(default_factory=lambda: np.zeros(3))
+    #: added to the camera's position in the body frame (m)
+    translation_m: FloatArray = field(default_factory=lambda: np.zeros(3))
+    offset_s: float = 0.0  # its detections were taken at their stamp + offset_s
+    focal_scale: float = 1.0  # its fx, fy scaled
+    depth_factor: float = 1.0  # its depths scaled
 
 
 @dataclass(frozen=True)
@@ -55,6 +70,13 @@ class Perturbation:
     camera_frame: str | None = None
     #: body_to_world looked up for this frame instead of the chain's body (base_footprint for base_link)
     body_frame: str | None = None
+    #: per camera of a rig (the index into ``ChainInputs.rig_cameras``): how that camera differs
+    cameras: Mapping[int, CameraDelta] = field(default_factory=dict)
+
+    def with_camera(self, index: int, **changes: Any) -> Perturbation:
+        """This perturbation with rig camera ``index``'s :class:`CameraDelta` changed as ``changes`` say."""
+        delta = replace(self.cameras.get(index, CameraDelta()), **changes)
+        return replace(self, cameras={**self.cameras, index: delta})
 
 
 @dataclass(frozen=True)
@@ -93,8 +115,21 @@ def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
 
 
 @dataclass(frozen=True)
+class RigCamera:
+    """One camera of a rig as the analysis sees it: its optical frame, model and static mount."""
+
+    frame: str
+    camera: CameraModel
+    mount: Mount | None
+
+
+@dataclass(frozen=True)
 class ChainInputs:
-    """The replayed observations with everything a perturbed recomputation needs."""
+    """The replayed observations with everything a perturbed recomputation needs.
+
+    A rig's inputs hold every camera (``rig_cameras``) and each observation's camera (``camera_index``);
+    ``camera`` and ``frames.camera`` are then the first camera's.
+    """
 
     obs_id: IntArray
     stamp_ns: IntArray
@@ -111,9 +146,26 @@ class ChainInputs:
     camera_is_dynamic: bool
     #: A resample's source and its rows there (see :meth:`take`); None for inputs taken from a replay.
     resampled_from: tuple[ChainInputs, IntArray] | None = field(default=None, compare=False, repr=False)
+    rig_cameras: tuple[RigCamera, ...] = ()
+    camera_index: IntArray | None = None  # (N,) index into rig_cameras (None: one camera)
 
     def __len__(self) -> int:
         return int(self.stamp_ns.shape[0])
+
+    @classmethod
+    def from_rig_replay(cls, result: ReplayResult, buffer: TransformBuffer,
+                        models: Mapping[str, CameraModel]) -> ChainInputs:
+        """The inputs of a rig's replay: ``models`` gives each camera frame's model, in the rig's order
+        (the first is the chain's camera)."""
+        frames = list(models)
+        cameras = tuple(RigCamera(f, models[f], find_mount(buffer, result.frames.body, f)) for f in frames)
+        base = cls.from_replay(result, buffer, models[frames[0]])
+        observed = result.observations.camera_frame[result.replayed]
+        index = np.full(observed.shape[0], -1, dtype=np.int64)
+        for k, f in enumerate(frames):
+            index[observed == f] = k
+        dynamic = any(not h.is_static for f in frames for h in buffer.path(result.frames.body, f).hops)
+        return replace(base, rig_cameras=cameras, camera_index=index, camera_is_dynamic=dynamic)
 
     @classmethod
     def from_replay(cls, result: ReplayResult, buffer: TransformBuffer, camera: CameraModel) -> ChainInputs:
@@ -158,13 +210,34 @@ class ChainInputs:
             q_bc=self.q_bc[i],
             t_wb=self.t_wb[i],
             q_wb=self.q_wb[i],
+            camera_index=None if self.camera_index is None else self.camera_index[i],
         )
 
     @cached_property
     def ray(self) -> FloatArray:
         """Undistorted rays [x, y, 1] through the recorded intrinsics."""
-        x, y = self.camera.pixel_to_normalized(self.u, self.v)
-        return np.stack([x, y, np.ones_like(x)], axis=1)
+        return self.rays_scaled(1.0, {})
+
+    def rays_scaled(self, focal_scale: float, camera_scales: Mapping[int, float], principal_scale: float = 1.0
+                    ) -> FloatArray:
+        """Rays through intrinsics whose focal lengths are scaled (``camera_scales``: per rig camera, on top)."""
+        if self.camera_index is None:
+            return _rays(self.camera, self.u, self.v, focal_scale, principal_scale)
+        out = np.full((len(self), 3), np.nan)
+        for k, cam in enumerate(self.rig_cameras):
+            rows = self.camera_index == k
+            if rows.any():
+                out[rows] = _rays(cam.camera, self.u[rows], self.v[rows], focal_scale * camera_scales.get(k, 1.0),
+                                  principal_scale)
+        return out
+
+    def per_camera(self, values: Mapping[int, float], default: float) -> FloatArray:
+        """A value per observation from a value per rig camera (``default`` for the others)."""
+        out = np.full(len(self), default)
+        if self.camera_index is not None:
+            for k, value in values.items():
+                out[self.camera_index == k] = value
+        return out
 
     @cached_property
     def mount(self) -> Mount | None:
@@ -196,8 +269,29 @@ class ChainInputs:
             self._shifted_poses[key] = poses
         return poses
 
+    def world_from_body_rows(
+        self, offset_s: float, camera_offsets_s: Mapping[int, float], world: str | None, body: str | None = None
+    ) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]:
+        """T_world_body at tau + offset + the row's rig camera's own offset (see :meth:`world_from_body`)."""
+        shifts = {k: round((offset_s + v) * 1e9) for k, v in sorted(camera_offsets_s.items())}
+        key = (round(offset_s * 1e9), tuple(shifts.items()), world or self.frames.world, body or self.frames.body)
+        poses = self._shifted_poses.get(key)
+        if poses is None:
+            times = self.stamp_ns + key[0]
+            if self.camera_index is not None:
+                for k, shift in shifts.items():
+                    times = np.where(self.camera_index == k, self.stamp_ns + shift, times)
+            lookup = self.buffer.lookup(key[2], key[3], times)
+            poses = (lookup.translation, lookup.quat_xyzw, lookup.ok)
+            for array in poses:
+                array.setflags(write=False)
+            if len(self._shifted_poses) >= _SHIFTED_POSES_KEPT:
+                del self._shifted_poses[next(iter(self._shifted_poses))]
+            self._shifted_poses[key] = poses
+        return poses
+
     @cached_property
-    def _shifted_poses(self) -> dict[tuple[int, str, str], tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]]:
+    def _shifted_poses(self) -> dict[Any, tuple[FloatArray, FloatArray, npt.NDArray[np.bool_]]]:
         """Poses looked up by (offset ns, world, body), oldest first: while further faults are fitted on
         top of a latency found before, every evaluation asks for the same shifted pose."""
         return {}
@@ -238,17 +332,30 @@ class ChainInputs:
         return t_bc, q_bc, ok
 
 
+def _rays(camera: CameraModel, u: FloatArray, v: FloatArray, focal_scale: float, principal_scale: float
+          ) -> FloatArray:
+    """Undistorted rays [x, y, 1] of pixels through ``camera`` with its K scaled."""
+    model = camera
+    if focal_scale != 1.0 or principal_scale != 1.0:
+        k = camera.K.copy()
+        k[:2, :2] *= focal_scale
+        k[:2, 2] *= principal_scale
+        model = replace(camera, K=k)
+    x, y = model.pixel_to_normalized(u, v)
+    return np.stack([x, y, np.ones_like(x)], axis=1)
+
+
 def hop1(inputs: ChainInputs, pert: Perturbation) -> FloatArray:
     """pixel_to_camera under the perturbation: (N, 3) camera-frame points."""
     ray = inputs.ray
-    if pert.focal_scale != 1.0 or pert.principal_scale != 1.0:
-        k = inputs.camera.K.copy()
-        k[:2, :2] *= pert.focal_scale
-        k[:2, 2] *= pert.principal_scale
-        model = replace(inputs.camera, K=k)
-        x, y = model.pixel_to_normalized(inputs.u, inputs.v)
-        ray = np.stack([x, y, np.ones_like(x)], axis=1)
-    return ray * (inputs.depth_m * pert.depth_factor)[:, None]
+    scales = {k: d.focal_scale for k, d in pert.cameras.items() if d.focal_scale != 1.0}
+    if pert.focal_scale != 1.0 or pert.principal_scale != 1.0 or scales:
+        ray = inputs.rays_scaled(pert.focal_scale, scales, pert.principal_scale)
+    depth = inputs.depth_m * pert.depth_factor
+    factors = {k: d.depth_factor for k, d in pert.cameras.items() if d.depth_factor != 1.0}
+    if factors:
+        depth = depth * inputs.per_camera(factors, 1.0)
+    return ray * depth[:, None]
 
 
 def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
@@ -261,6 +368,8 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
         q_link_cam = inputs.mount.q_link_cam if inputs.mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
         rotvec_cam = quat_rotate(quat_conjugate(q_link_cam), np.asarray(pert.rotvec_mount, dtype=float))
         q_bc = quat_multiply(np.asarray(q_bc).T, quat_from_rotvec(rotvec_cam)[:, None]).T
+    if pert.cameras and inputs.camera_index is not None:
+        t_bc, q_bc = _rig_mounts(inputs, pert, t_bc, q_bc)
     if pert.invert_camera:
         t_bc, q_bc = invert_rows(t_bc, q_bc)
     out: FloatArray = transform_points(t_bc, q_bc, p_cam)
@@ -268,9 +377,36 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
     return out
 
 
+def _rig_mounts(inputs: ChainInputs, pert: Perturbation, t_bc: FloatArray, q_bc: FloatArray
+                ) -> tuple[FloatArray, FloatArray]:
+    """T_body_cam of every row with its rig camera's mount rotation and translation changed."""
+    index = inputs.camera_index
+    assert index is not None
+    q_out, t_out = q_bc, t_bc
+    for k, delta in pert.cameras.items():
+        turned, moved = bool(np.any(delta.rotvec_mount)), bool(np.any(delta.translation_m))
+        if not (turned or moved):
+            continue
+        rows = index == k
+        if turned:
+            mount = inputs.rig_cameras[k].mount
+            q_link_cam = mount.q_link_cam if mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
+            rotvec_cam = quat_rotate(quat_conjugate(q_link_cam), np.asarray(delta.rotvec_mount, dtype=float))
+            q_out = q_out.copy() if q_out is q_bc else q_out
+            q_out[rows] = quat_multiply(np.asarray(q_bc[rows]).T, quat_from_rotvec(rotvec_cam)[:, None]).T
+        if moved:
+            t_out = t_out.copy() if t_out is t_bc else t_out
+            t_out[rows] = t_bc[rows] + np.asarray(delta.translation_m, dtype=float)
+    return t_out, q_out
+
+
 def hop3(inputs: ChainInputs, pert: Perturbation, p_body: FloatArray) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
     """body_to_world under the perturbation, and which observations had a pose at the shifted time."""
-    t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world, pert.body_frame)
+    offsets = {k: d.offset_s for k, d in pert.cameras.items() if d.offset_s != 0.0}
+    if offsets:
+        t_wb, q_wb, ok = inputs.world_from_body_rows(pert.pose_offset_s, offsets, pert.world, pert.body_frame)
+    else:
+        t_wb, q_wb, ok = inputs.world_from_body(pert.pose_offset_s, pert.world, pert.body_frame)
     if pert.invert_pose:
         t_wb, q_wb = invert_rows(t_wb, q_wb)
     return transform_points(t_wb, q_wb, p_body), ok

@@ -33,6 +33,19 @@ class RotationEstimate:
 
 
 @dataclass(frozen=True)
+class TranslationEstimate:
+    """The faulty mount's position relative to the right one: ``offset_m`` (x, y, z) in ``frame``'s axes."""
+
+    offset_m: tuple[float, float, float]
+    frame: str
+    faulty: str  # "as run" | "recorded data"
+
+    @property
+    def distance_m(self) -> float:
+        return float(np.linalg.norm(self.offset_m))
+
+
+@dataclass(frozen=True)
 class ScaleEstimate:
     """A depth factor (``name="factor"``) or an intrinsics scale (``name="scale"``, variant
     ``"resolution"``: K of another resolution, ``"focal"``: the focal length of another lens)."""
@@ -67,7 +80,8 @@ class InvertedEstimate:
     edge: tuple[str, str] | None = None
 
 
-Estimate = LatencyEstimate | RotationEstimate | ScaleEstimate | PermutationEstimate | FrameEstimate | InvertedEstimate
+Estimate = (LatencyEstimate | RotationEstimate | ScaleEstimate | PermutationEstimate | FrameEstimate | InvertedEstimate
+            | TranslationEstimate)
 
 _VARIANT_TEXT = {"resolution": "K of another resolution", "focal": "focal length of another lens"}
 
@@ -93,6 +107,9 @@ def format_estimate(estimate: Estimate) -> str:
             return text
         case InvertedEstimate(hop=hop, edge=edge):
             return f"{hop} inverted" + (f" at edge {edge[0]}->{edge[1]}" if edge else "")
+        case TranslationEstimate(offset_m=offset, frame=frame):
+            direction = [float(v) / max(estimate.distance_m, 1e-12) for v in offset]
+            return f"{estimate.distance_m * 1e3:.1f} mm along {axis_text(direction)} of {frame}"
     raise TypeError(f"not an estimate: {estimate!r}")
 
 
@@ -129,6 +146,9 @@ def estimate_to_json(estimate: Estimate) -> dict[str, Any]:
             if edge is not None:
                 out["edge"] = list(edge)
             return out
+        case TranslationEstimate(offset_m=offset, frame=frame, faulty=faulty):
+            return {"distance_m": round(estimate.distance_m, 6), "offset_m": [round(v, 6) for v in offset],
+                    "frame": frame, "faulty": faulty}
     raise TypeError(f"not an estimate: {estimate!r}")
 
 
@@ -141,6 +161,8 @@ def estimate_scalars(estimate: Estimate) -> dict[str, float]:
             return {"angle_deg": angle}
         case ScaleEstimate(name=name, value=value):
             return {name: value}
+        case TranslationEstimate():
+            return {"distance_m": estimate.distance_m}
     return {}
 
 
@@ -152,6 +174,8 @@ def format_interval(interval: Mapping[str, Sequence[float]]) -> str:
             out.append(f"{lo * 1e3:+.2f} .. {hi * 1e3:+.2f} ms")
         elif key == "angle_deg":
             out.append(f"{lo:.3f} .. {hi:.3f} deg")
+        elif key == "distance_m":
+            out.append(f"{lo * 1e3:.1f} .. {hi * 1e3:.1f} mm")
         else:
             out.append(f"x{lo:.5g} .. x{hi:.5g}")
     return "; ".join(out) or "-"
@@ -165,6 +189,7 @@ __all__ = [
     "PermutationEstimate",
     "RotationEstimate",
     "ScaleEstimate",
+    "TranslationEstimate",
     "axis_text",
     "estimate_scalars",
     "estimate_to_json",

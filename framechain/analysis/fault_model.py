@@ -37,6 +37,13 @@ class FaultModel:
     #: whether the bounds mark the plausible range (a fit ending on one explains nothing) rather
     #: than the limits of the parametrisation (a rotation vector's |component| <= pi)
     plausibility_bounds: bool = True
+    #: the rig camera (its optical frame) whose chain the model changes (None: the chain as a whole)
+    camera: str | None = None
+    #: the fix of a fitted model, when the model words its own (a rig camera's mount in the chain's form)
+    fix: Callable[[FloatArray, Mode, ChainInputs], str] | None = None
+    #: whether fitted parameters stay within what the evidence can pin on this fault (then it is no finding,
+    #: however well it fits); None: any fit that pays for itself is one
+    tolerance: Callable[[FloatArray], bool] | None = None
 
     @property
     def n_params(self) -> int:

@@ -292,7 +292,7 @@ def rotation_verdict(x: FloatArray, mode: Mode, inputs: ChainInputs) -> tuple[Fa
 
 def classify_rotation(model: FaultModel, x: FloatArray, mode: Mode, inputs: ChainInputs) -> Fault:
     """The catalogue entry of a fitted model (rotation fits split into missing_rotation / rotation_error)."""
-    if model.fault != Fault.ROTATION_ERROR:
+    if model.fault != Fault.ROTATION_ERROR or model.camera is not None:  # a rig camera's model words its own
         return model.fault
     return rotation_verdict(x, mode, inputs)[0]
 

@@ -13,13 +13,16 @@ from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.checks import Bound, Curve, LabelTable, bounds_sentence, nothing_observable
 from framechain.analysis.estimates import Estimate, estimate_to_json, format_estimate
+from framechain.analysis.rig_layout import RigLayout
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.replay import REPLAYED, ReplayResult
 from framechain.timeline import FramechainError
 
-Metric = Literal["logged_hops", "target", "reference", "static_spread", "camera_motion", "none"]
+Metric = Literal["logged_hops", "target", "reference", "static_spread", "camera_motion", "cross_camera", "none"]
+#: What the error is measured against, as the verdict says it.
+METRIC_WORDS = {"static_spread": "static spread", "cross_camera": "other cameras of the rig"}
 SCHEMA = "framechain/attribution@1"
 
 
@@ -68,6 +71,7 @@ class Finding:
         out: dict[str, Any] = {
             "fault": self.fault.value,
             "hop": self.hop.value,
+            **({} if self.camera is None else {"camera": self.camera}),
             "estimate": estimate_to_json(self.estimate),
             "interval": self.interval,
             "share": round(self.share, 4),
@@ -80,8 +84,6 @@ class Finding:
         }
         if self.error_unit != "m":
             out["error_deg_s"] = round(self.error_m, 6)
-        if self.camera is not None:
-            out["camera"] = self.camera
         return out
 
 
@@ -117,6 +119,8 @@ class Attribution:
     camera_motion: tuple[dict[str, Any], ...] = ()
     #: Metric camera_motion: the rotation-rate residual per frame pair (deg/s), before and after the findings.
     rate_residual: tuple[FloatArray, FloatArray] | None = None
+    #: a rig's cameras: which are compared with which, the gauges, what cannot be seen (None: one camera)
+    rig: RigLayout | None = None
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
@@ -177,16 +181,19 @@ class Attribution:
         if self.metric == "camera_motion":
             return self._motion_verdict(summary)
         bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
+        unseen = self._rig_unobservable()
         if not self.findings:
-            against = f"median error {summary['median'] * 1e3:.1f} mm against the {self.metric.replace('_', ' ')}"
+            against = (f"median error {summary['median'] * 1e3:.1f} mm against the "
+                       f"{METRIC_WORDS.get(self.metric, self.metric.replace('_', ' '))}")
             if self.bounds and nothing_observable(self.bounds):
-                return f"Nothing could be checked ({against}): {bounds[0].lower()}{bounds[1:]}"
-            return f"No fault beyond noise: {against}." + (f" {bounds}" if bounds else "")
+                return f"Nothing could be checked ({against}{unseen}): {bounds[0].lower()}{bounds[1:]}"
+            return f"No fault beyond noise: {against}{unseen}." + (f" {bounds}" if bounds else "")
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+        camera = f" on camera {top.camera}" if top.camera else ""
         weak = f" (weak: {'; '.join(top.weak_because)})" if top.strength == "weak" else ""
-        found = (f"{top.fault.value} at {top.hop.value} ({format_estimate(top.estimate)}){weak} explains "
-                 f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}.")
+        found = (f"{top.fault.value} at {top.hop.value}{camera} ({format_estimate(top.estimate)}){weak} explains "
+                 f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}.")
         return found + (f" {bounds}" if bounds else "")
 
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
@@ -203,6 +210,13 @@ class Attribution:
         on = f" on camera {top.camera}" if top.camera else ""
         return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
                 f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.")
+
+    def _rig_unobservable(self) -> str:
+        """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""
+        if self.rig is None:
+            return ""
+        unseen = [u.removeprefix("not observable: ") for u in self.rig.unobservable() if u.startswith("not observ")]
+        return f"; not observable here: {'; '.join(unseen)}" if unseen else ""
 
     def to_json(self) -> dict[str, Any]:
         """The attribution.json contract (schema framechain/attribution@1)."""
@@ -221,6 +235,7 @@ class Attribution:
             "bounds": [b.to_json() for b in self.bounds],
             "curves": [c.to_json() for c in self.curves],
             "labels": self.labels.to_json(),
+            **({"rig": self.rig.to_json()} if self.rig is not None else {}),
             "notes": list(self.notes),
             **({"camera_motion": list(self.camera_motion)} if self.camera_motion else {}),
         }

@@ -14,6 +14,7 @@ from framechain.analysis.static import is_bearing_only, with_unit_depth
 from framechain.catalogue import RejectReason
 from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer, replay
+from framechain.replay.rig import replay_rig
 from framechain.timeline import Timeline
 
 
@@ -33,7 +34,7 @@ class Replayed:
 def bearing_only(timeline: Timeline, chain: ChainConfig) -> bool:
     """A static target with no depth source at all (and no other evidence): replayed as rays."""
     return (chain.evidence.static_target and not chain.evidence_topics() and chain.evidence.reference_point is None
-            and is_bearing_only(timeline, chain.frames.camera))
+            and not chain.is_rig and is_bearing_only(timeline, chain.frames.camera))
 
 
 def replay_chain(timeline: Timeline, chain: ChainConfig, *, rays: bool = True) -> Replayed:
@@ -51,8 +52,14 @@ def replay_chain(timeline: Timeline, chain: ChainConfig, *, rays: bool = True) -
         notes.append(f"bearing only: no depth for {chain.frames.camera} (none in the detections, no depth frames); "
                      f"its {n_rays} observations are replayed as rays at unit depth and the static targets' spread "
                      "measured as how far their rays pass from one point")
-    result = replay(replayed_timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s,
-                    ignore_labels=chain.evidence.ignore_labels)
+    if chain.is_rig:
+        result = replay_rig(replayed_timeline, chain.frames, chain.camera_frames(), buffer=buffer,
+                            latency_budget_s=chain.latency_budget_s,
+                            budgets_s={f: chain.latency_budget_for(f) for f in chain.camera_frames()},
+                            ignore_labels=chain.evidence.ignore_labels)
+    else:
+        result = replay(replayed_timeline, chain.frames, buffer=buffer, latency_budget_s=chain.latency_budget_s,
+                        ignore_labels=chain.evidence.ignore_labels)
     ignored = int((result.status == RejectReason.IGNORED_LABEL.value).sum())
     if ignored:
         notes.append(f"ignore_labels: {ignored} observations of labels {list(chain.evidence.ignore_labels)} "

@@ -11,6 +11,7 @@ from typing import Literal
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation, hop1, hop2, hop3
+from framechain.analysis.cross_camera import CrossCameraObjective
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.faults import models_for, rotation_starts
 from framechain.analysis.fit import NOISE_FLOOR_M, Fit, even_rows, fit_models, posterior_weights
@@ -88,7 +89,7 @@ class RayWeighting:
         return replace(self, rays_world=self.rays_world[index])
 
 
-Objective = PointObjective | StaticObjective
+Objective = PointObjective | StaticObjective | CrossCameraObjective
 
 
 @dataclass(frozen=True)
@@ -183,7 +184,7 @@ def select(
             )
             quick.append((fit_models([model], objective, inputs, base=base), model))
         # A fit that runs to the edge of its range explains by degenerating, not by a fault.
-        quick = [(fit, model) for fit, model in quick if not at_bound(model, fit.params[-1])]
+        quick = [(fit, model) for fit, model in quick if not _explains_nothing(model, fit.params[-1])]
         if not quick:
             break
         quick.sort(key=lambda item: item[0].bic)
@@ -196,7 +197,7 @@ def select(
                 if _hopeless_jointly(current, model, objective, inputs, x_start):
                     continue
                 joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
-            joint = [(fit, model) for fit, model in joint if not at_bound(model, fit.params[-1])]
+            joint = [(fit, model) for fit, model in joint if not _explains_nothing(model, fit.params[-1])]
             if not joint:
                 break
             joint.sort(key=lambda item: item[0].bic)
@@ -244,7 +245,7 @@ def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs)
     about as well (within the BIC margin a finding must clear), the swap goes first: it names the
     frame to look up, where the rotation would name a 120 degree "calibration error".
     """
-    if not quick or quick[0][1].fault != Fault.ROTATION_ERROR or quick[0][1].n_params == 0:
+    if not quick or quick[0][1].fault != Fault.ROTATION_ERROR or quick[0][1].n_params == 0 or quick[0][1].camera:
         return quick
     frame = swap_for_rotation(inputs, quick[0][0].params[-1])
     if frame is None:
@@ -254,6 +255,11 @@ def _prefer_edge_swaps(quick: list[tuple[Fit, FaultModel]], inputs: ChainInputs)
     if swap is None or quick[swap][0].bic - quick[0][0].bic > MIN_BIC_GAIN:
         return quick
     return [quick[swap], *(item for i, item in enumerate(quick) if i != swap)]
+
+
+def _explains_nothing(model: FaultModel, x: FloatArray) -> bool:
+    """A fit that ran to the edge of its range, or stayed within its evidence's tolerance."""
+    return at_bound(model, x) or (model.tolerance is not None and model.tolerance(x))
 
 
 def at_bound(model: FaultModel, x: FloatArray) -> bool:
@@ -273,7 +279,7 @@ def reweighted(sel: Selected) -> Selected:
     """
     if not sel.fit.models or all(m.n_params == 0 for m in sel.fit.models):
         return sel
-    if isinstance(sel.objective, RayObjective):  # residuals across rays only: nothing to whiten
+    if isinstance(sel.objective, RayObjective | CrossCameraObjective):  # across rays only, or between cameras
         return sel
     inputs = sel.inputs
     residual = sel.objective(inputs, sel.fit.perturbation())

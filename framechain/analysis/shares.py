@@ -146,6 +146,8 @@ def evidence_sentence(
         "target": "the logged target is reproduced from the raw inputs",
         "reference": "the error against the reference vanishes",
         "static_spread": f"{measured} (median {before * 1e3:.3g} mm) shrinks to {after * 1e3:.3g} mm",
+        "cross_camera": (f"the disagreement between the rig's cameras (median {before * 1e3:.3g} mm) shrinks to "
+                         f"{after * 1e3:.3g} mm"),
     }[metric]
     side = "recorded data" if mode == "correction" else "chain that produced the evidence"
     return (

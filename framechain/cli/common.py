@@ -149,7 +149,9 @@ def chain_text(run: Run) -> str:
     if run.chain_suggested and run.suggestion is not None and hasattr(run.suggestion, "frames_text"):
         text: str = run.suggestion.frames_text()
         return text
-    return f"{frames.camera} -> {frames.body} -> {frames.world}"
+    cameras = f"{{{', '.join(run.chain.camera_frames())}}}" if run.chain.is_rig else frames.camera
+    world = frames.world if run.chain.has_pose else "(no pose)"
+    return f"{cameras} -> {frames.body} -> {world}"
 
 
 def incomplete_chain_line(run: Run) -> str | None:
@@ -215,12 +217,14 @@ def print_findings(result: Any) -> None:
     )
     if result.findings:
         table = Table()
-        for col in ("#", "fault", "hop", "estimate", "95% interval", "share", "confidence", "strength"):
+        cameras = any(f.camera for f in result.findings)
+        for col in ("#", "fault", "hop", *(("camera",) if cameras else ()), "estimate", "95% interval", "share",
+                    "confidence", "strength"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
-            table.add_row(str(i), c.fault, c.hop, c.estimate, c.interval, c.share, c.confidence, c.strength,
-                          style="dim" if c.strength == "weak" else None)
+            table.add_row(str(i), c.fault, c.hop, *((c.camera,) if cameras else ()), c.estimate, c.interval, c.share,
+                          c.confidence, c.strength, style="dim" if c.strength == "weak" else None)
         console.print(table)
     _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
     if result.labels.suggest_ignore:  # every label only when some disagree
@@ -234,6 +238,7 @@ def print_findings(result: Any) -> None:
         hops.add_row(*row)
     console.print(hops)
     for i, f in enumerate(result.findings, start=1):
-        console.print(f"fix {i}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
+        on = f" (camera {f.camera})" if f.camera else ""
+        console.print(f"fix {i}{on}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
     for note in result.notes:
         console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)

@@ -29,6 +29,19 @@ Calibration, mounts and poses from outside the log (paths relative to the chain 
     topics:
       odometry: [/odom, {topic: /vio/pose, child: base_link}]  # Odometry, PoseStamped, PoseWithCovariance-
                                                      # Stamped or TransformStamped as dynamic edges
+
+A rig of several cameras lists them under ``cameras:`` (each camera's topics decide which camera an
+observation belongs to, whatever its header.frame_id says)::
+
+    frames: {body: rig, world: arena}   # world omitted: the rig has no pose (same-instant sightings only);
+                                        # world equal to body: a fixed rig
+    cameras:
+      - {frame: cam_sync/cam0, detections: /cam_sync/cam0/tags, calibration: {file: cameras.yaml, camera: cam0}}
+      - {frame: cam_sync/cam1, detections: /cam_sync/cam1/tags, calibration: {file: cameras.yaml, camera: cam1},
+         camera_info: /cam1/camera_info, image: /cam1/image_raw, depth: /cam1/depth, latency_budget_s: 0.05}
+    evidence:
+      static_target: true
+      moving_labels: [0, 1, 2]          # move: compared only between cameras at the same instant
 """
 
 from __future__ import annotations
@@ -103,6 +116,8 @@ class MountEdge:
     child: str
     xyz: tuple[float, float, float]
     quat_xyzw: tuple[float, float, float, float]
+    #: The rotation key the file gave (``quat_xyzw``, ``rpy`` or ``rotvec``): a fix writes the mount back in it.
+    form: str = field(default="quat_xyzw", compare=False)
 
 
 @dataclass(frozen=True)
@@ -123,6 +138,25 @@ class MarkerSpec:
 
 
 @dataclass(frozen=True)
+class RigCamera:
+    """One camera of a rig: its optical frame, the topics that are its own (its detections decide which
+    camera an observation belongs to), its calibration, markers and latency budget (None: the chain's)."""
+
+    frame: str
+    detections: str
+    calibration: CalibrationSource | None = None
+    camera_info: str | None = None
+    image: str | None = None
+    depth: str | None = None
+    markers: MarkerSpec | None = None
+    latency_budget_s: float | None = None
+
+    def topics(self) -> tuple[str, ...]:
+        """Every topic of this camera (detections, camera_info, image, depth)."""
+        return tuple(t for t in (self.detections, self.camera_info, self.image, self.depth) if t)
+
+
+@dataclass(frozen=True)
 class ChainEvidence:
     """The evidence a log holds beyond its raw inputs (every field optional)."""
 
@@ -133,6 +167,8 @@ class ChainEvidence:
     static_target: bool = False
     #: Labels (tag ids) of objects known to move: their observations are rejected as ``ignored_label``.
     ignore_labels: tuple[str, ...] = ()
+    #: Labels of objects that move but are still evidence where several cameras see them at the same instant.
+    moving_labels: tuple[str, ...] = ()
     #: Length of the windows a static target's spread is measured over (None: the default, 5 s).
     static_window_s: float | None = None
     #: Side length of square tags in metres: one number, or tag id -> size with an optional ``default``.
@@ -153,6 +189,11 @@ class ChainConfig:
     calibration: tuple[CalibrationSource, ...] = ()
     mounts: tuple[MountEdge, ...] = ()
     urdf: str | None = None
+    #: The cameras of a rig (empty: the one camera of ``frames.camera``); ``frames.camera`` is the first.
+    cameras: tuple[RigCamera, ...] = ()
+    #: False for a rig chain without ``frames.world``: the rig has no pose (``frames.world`` is then the
+    #: body frame) and sightings are compared only between cameras at the same instant.
+    has_pose: bool = True
     #: The directory relative paths (calibration, urdf) resolve against (None: the working directory).
     base_dir: str | None = field(default=None, compare=False)
     #: Where the configuration came from (the chain file's name), to name mounts' sources.
@@ -166,13 +207,21 @@ class ChainConfig:
         raw.pop("base_dir")
         raw.pop("origin")
         raw.pop("notes")
-        for key in ("calibration", "mounts"):
+        if not raw.pop("has_pose"):
+            raw["frames"].pop("world")
+        for key in ("calibration", "mounts", "cameras"):
             if not raw[key]:
                 raw.pop(key)
+        for mount in raw.get("mounts", []):
+            mount.pop("form")
+        for camera in raw.get("cameras", []):
+            if camera["calibration"] is not None:
+                camera["calibration"].pop("frame")
         if not raw["topics"]["poses"]:
             raw["topics"].pop("poses")
-        if not raw["evidence"]["ignore_labels"]:
-            raw["evidence"].pop("ignore_labels")
+        for key in ("ignore_labels", "moving_labels"):
+            if not raw["evidence"][key]:
+                raw["evidence"].pop(key)
         out: dict[str, Any] = _drop_none(raw)
         return out
 
@@ -187,6 +236,35 @@ class ChainConfig:
         named = {p.topic for p in t.poses}
         extra = (PoseTopic(t.odometry),) if t.odometry and t.odometry not in named else ()
         return (*t.poses, *extra)
+
+    @property
+    def is_rig(self) -> bool:
+        """Whether the chain lists several cameras under ``cameras:``."""
+        return len(self.cameras) > 1
+
+    def camera_frames(self) -> tuple[str, ...]:
+        """The optical frame of every camera of the chain (the rig's, in their order; else frames.camera)."""
+        return tuple(c.frame for c in self.cameras) if self.cameras else (self.frames.camera,)
+
+    def topic_frames(self) -> dict[str, str]:
+        """Topic -> camera frame for every topic a rig camera names (its messages belong to that camera)."""
+        return {topic: c.frame for c in self.cameras for topic in c.topics()}
+
+    def detection_topics(self) -> tuple[str, ...]:
+        """Every detections topic: the rig cameras', else ``topics.detections``."""
+        if self.cameras:
+            return tuple(c.detections for c in self.cameras)
+        return (self.topics.detections,) if self.topics.detections else ()
+
+    def calibration_sources(self) -> tuple[CalibrationSource, ...]:
+        """Every calibration file entry: ``calibration:`` and each rig camera's (its frame filled in)."""
+        own = tuple(c.calibration for c in self.cameras if c.calibration is not None)
+        return (*self.calibration, *own)
+
+    def latency_budget_for(self, frame: str) -> float:
+        """The latency budget of one camera (its own, else the chain's)."""
+        own = next((c.latency_budget_s for c in self.cameras if c.frame == frame), None)
+        return self.latency_budget_s if own is None else own
 
     def to_yaml(self) -> str:
         """The configuration as YAML text a user can edit."""
@@ -204,7 +282,14 @@ class ChainConfig:
         top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes"), error=ChainConfigError)
         topics = top.section("topics", _keys(ChainTopics))
         evidence = parse_evidence(top) or ChainEvidence()
-        if evidence.markers is not None and "image" not in topics:
+        cameras = _rig_cameras(top)
+        if cameras:
+            given = sorted(k for k in ("detections", "camera_info", "image", "depth") if k in topics)
+            if given:
+                top.fail(f"{', '.join('topics.' + g for g in given)}: a rig chain gives these per camera, under "
+                         "cameras:")
+        images = "image" in topics or any(c.image for c in cameras)
+        if evidence.markers is not None and not images:
             top.fail("evidence.markers needs topics.image (the image topic to find them in)")
         poses = _merge_pose_topics(_pose_topics(topics, "odometry") + _pose_topics(topics, "poses"), topics)
         odometry = poses[0].topic if poses else None
@@ -215,8 +300,9 @@ class ChainConfig:
             top.fail_at("robot", f"must be a mapping, got {show(robot)}")
         budget = latency_budget(top)
         named = {k: topics.name(k, what="a topic name") for k in _keys(ChainTopics, "odometry", "poses")}
+        frames_section = top.section("frames", _keys(ChainFrames))
         return cls(
-            frames=_frames(top.section("frames", _keys(ChainFrames))),
+            frames=_frames(frames_section, cameras),
             topics=ChainTopics(**named, odometry=odometry, poses=tuple(poses)),
             evidence=evidence,
             latency_budget_s=0.02 if budget is None else budget,
@@ -225,6 +311,8 @@ class ChainConfig:
             mounts=tuple(_mount_edge(top.child(m, f"mounts[{i}]", _MOUNT_KEYS, what=_MOUNT_WHAT))
                          for i, m in enumerate(_as_list(top.get("mounts")))),
             urdf=top.name("urdf", what="a file name"),
+            cameras=cameras,
+            has_pose=not cameras or "world" in frames_section,
             base_dir=None if base_dir is None else str(base_dir),
             origin=Path(where).name if where != "chain" else "chain",
             notes=tuple(top.notes),
@@ -270,37 +358,54 @@ def parse_evidence(parent: Section) -> ChainEvidence | None:
     hops = section.section("hops", _keys(HopTopics))
     point = section.vector("reference_point", 3, what="[x, y, z], three finite numbers in metres",
                            check=plausible.position)
+    both = sorted(set(_labels(section, "ignore_labels")) & set(_labels(section, "moving_labels")))
+    if both:
+        section.fail(f"labels {both} are both in ignore_labels (not used) and moving_labels (used when seen by "
+                     "several cameras at once): keep them in one")
     return ChainEvidence(
         hops=HopTopics(**{k: hops.name(k, what="a topic name") for k in _keys(HopTopics)}),
         target=section.name("target", what="a topic name"),
         reference=section.name("reference", what="a topic name"),
         reference_point=None if point is None else (point[0], point[1], point[2]),
         static_target=section.flag("static_target", False),
-        ignore_labels=_ignore_labels(section),
+        ignore_labels=_labels(section, "ignore_labels"),
+        moving_labels=_labels(section, "moving_labels"),
         static_window_s=section.number("static_window_s", positive=True, unit="s", check=plausible.static_window),
         tag_size_m=_tag_size(section),
         markers=_marker_spec(section),
     )
 
 
-def _frames(section: Section) -> ChainFrames:
+def _frames(section: Section, cameras: tuple[RigCamera, ...] = ()) -> ChainFrames:
+    """The chain's frames; a rig's camera is its first camera's (or one of them), its world may be its body
+    (a fixed rig) or left out (no pose: the body)."""
     default = ChainFrames()
-    frames = ChainFrames(camera=section.frame("camera") or default.camera, body=section.frame("body") or default.body,
-                         world=section.frame("world") or default.world)
-    if len({frames.camera, frames.body, frames.world}) < 3:
-        section.fail(f"camera, body and world must be three different frames, got {frames.camera!r}, "
-                     f"{frames.body!r}, {frames.world!r}")
-    return frames
+    body = section.frame("body") or default.body
+    if not cameras:
+        frames = ChainFrames(camera=section.frame("camera") or default.camera, body=body,
+                             world=section.frame("world") or default.world)
+        if len({frames.camera, frames.body, frames.world}) < 3:
+            section.fail(f"camera, body and world must be three different frames, got {frames.camera!r}, "
+                         f"{frames.body!r}, {frames.world!r}")
+        return frames
+    names = [c.frame for c in cameras]
+    camera = section.frame("camera") or names[0]
+    if camera not in names:
+        section.fail(f"camera {camera!r} is none of the rig's cameras ({', '.join(names)})")
+    world = section.frame("world") or body
+    if body in names or world in names:
+        section.fail(f"body {body!r} and world {world!r} must not be camera frames of the rig")
+    return ChainFrames(camera=camera, body=body, world=world)
 
 
-def _ignore_labels(section: Section) -> tuple[str, ...]:
+def _labels(section: Section, key: str) -> tuple[str, ...]:
     """Labels as strings (YAML reads tag ids as numbers); a single label is accepted too."""
-    raw = section.get("ignore_labels")
+    raw = section.get(key)
     if raw is None:
         return ()
     items = raw if isinstance(raw, list | tuple) else [raw]
     if not all(isinstance(x, str | int) and not isinstance(x, bool) for x in items):
-        section.expected("ignore_labels", "a list of labels (tag ids or class names)", raw)
+        section.expected(key, "a list of labels (tag ids or class names)", raw)
     return tuple(str(x) for x in items)
 
 
@@ -372,21 +477,66 @@ def _merge_pose_topics(poses: list[PoseTopic], topics: Section) -> list[PoseTopi
     return list(merged.values())
 
 
+def _calibration_source(top: Section, entry: Any, here: str, *, frame: str | None = None) -> CalibrationSource:
+    """``{file, camera, frame}`` (or a file name); a rig camera's entry has its frame and names none."""
+    known = _keys(CalibrationSource) - ({"frame"} if frame else set())
+    what = "a file name or {file, camera}" if frame else "a file name or {file, camera, frame}"
+    source = top.child({"file": entry} if isinstance(entry, str) else entry, here, known, what=what)
+    file = source.name("file", required=False, what="a file name")
+    if file is None:
+        source.fail("needs file: the calibration file (relative to the chain file)")
+    return CalibrationSource(file, source.name("camera", what="a camera name"), frame or source.frame("frame"))
+
+
 def _calibration_sources(top: Section) -> tuple[CalibrationSource, ...]:
     raw = top.get("calibration")
     out: list[CalibrationSource] = []
     for i, entry in enumerate(_as_list(raw)):
         here = f"calibration[{i}]" if isinstance(raw, list | tuple) else "calibration"
-        source = top.child({"file": entry} if isinstance(entry, str) else entry, here, _keys(CalibrationSource),
-                           what="a file name or {file, camera, frame}")
-        file = source.name("file", required=False, what="a file name")
-        if file is None:
-            source.fail("needs file: the calibration file (relative to the chain file)")
-        out.append(CalibrationSource(file, source.name("camera", what="a camera name"), source.frame("frame")))
+        out.append(_calibration_source(top, entry, here))
     defaulted = [i for i, c in enumerate(out) if c.frame is None]
     if len(defaulted) > 1:
         top.fail(f"calibration[{defaulted[1]}]: give frame: (the camera's optical frame); only one entry can "
                  "default to frames.camera")
+    return tuple(out)
+
+
+_RIG_CAMERA_KEYS = {f.name for f in fields(RigCamera)}
+
+
+def _rig_cameras(top: Section) -> tuple[RigCamera, ...]:
+    """``cameras:``, a list of ``{frame, detections, calibration, camera_info, image, depth, markers,
+    latency_budget_s}``; frames and topics are each one camera's."""
+    if "cameras" not in top:
+        return ()
+    raw = top.get("cameras")
+    if not isinstance(raw, list | tuple) or not raw:
+        top.expected("cameras", "a list of cameras, each {frame, detections, calibration, ...}", raw)
+    out: list[RigCamera] = []
+    for i, entry in enumerate(raw):
+        cam = top.child(entry, f"cameras[{i}]", _RIG_CAMERA_KEYS, what="{frame, detections, calibration, ...}")
+        frame = cam.frame("frame", required=True, hint="the camera's optical frame") or ""
+        calibration = cam.get("calibration")
+        markers = _marker_spec(cam)
+        out.append(RigCamera(
+            frame=frame,
+            detections=cam.name("detections", required=True, hint="the camera's detections topic",
+                                what="a topic name") or "",
+            calibration=None if calibration is None else _calibration_source(
+                top, calibration, cam.path("calibration"), frame=frame),
+            camera_info=cam.name("camera_info", what="a topic name"), image=cam.name("image", what="a topic name"),
+            depth=cam.name("depth", what="a topic name"), markers=markers,
+            latency_budget_s=latency_budget(cam),
+        ))
+        if markers is not None and out[-1].image is None:
+            cam.fail("markers needs image (the camera's image topic to find them in)")
+    for key in ("frame", "detections"):
+        seen: dict[str, int] = {}
+        for i, c in enumerate(out):
+            value = getattr(c, key)
+            if value in seen:
+                top.fail(f"cameras[{i}] and cameras[{seen[value]}] have the same {key} {value!r}")
+            seen[value] = i
     return tuple(out)
 
 
@@ -401,4 +551,5 @@ def _mount_edge(mount: Section) -> MountEdge:
     if parent == child:
         mount.fail(f"parent and child are the same frame {parent!r}")
     pose = mount.pose(rotation_required=True)
-    return MountEdge(parent, child, pose.xyz, pose.quat_xyzw)
+    form = next(k for k in ROTATION_KEYS if k in mount)
+    return MountEdge(parent, child, pose.xyz, pose.quat_xyzw, form)

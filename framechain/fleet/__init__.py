@@ -195,6 +195,7 @@ FLEET_SCHEMA = pa.schema([
     ("finding", pa.int64()),  # 1-based rank of the finding within its log; null: the log has none
     ("fault", pa.string()),
     ("hop", pa.string()),
+    ("camera", pa.string()),  # the camera a finding concerns (a rig's); null: the chain as a whole
     ("estimate_json", pa.string()),
     ("estimate_text", pa.string()),
     ("estimate_name", pa.string()),
@@ -211,7 +212,7 @@ FLEET_SCHEMA = pa.schema([
     ("video_offset_low_s", pa.float64()),
     ("video_offset_high_s", pa.float64()),
 ])
-_FINDING_COLUMNS = ("fault", "hop", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
+_FINDING_COLUMNS = ("fault", "hop", "camera", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
                     "estimate_unit", "share", "finding_error_m", "confidence", "fix")
 
 

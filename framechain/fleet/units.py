@@ -286,7 +286,7 @@ def _span_of(unit: LogUnit) -> dict[str, int | None]:
 
 
 #: estimate_scalars' names and their units in the table
-_ESTIMATE_UNITS = {"offset_s": "s", "angle_deg": "deg", "factor": "ratio", "scale": "ratio"}
+_ESTIMATE_UNITS = {"offset_s": "s", "angle_deg": "deg", "factor": "ratio", "scale": "ratio", "distance_m": "m"}
 
 
 def _finding_row(finding: Any) -> dict[str, Any]:
@@ -296,7 +296,7 @@ def _finding_row(finding: Any) -> dict[str, Any]:
     scalars = estimate_scalars(finding.estimate)
     name, value = next(iter(scalars.items()), (None, None))
     return {
-        "fault": data["fault"], "hop": data["hop"],
+        "fault": data["fault"], "hop": data["hop"], "camera": data.get("camera"),
         "estimate_json": json.dumps(data["estimate"], sort_keys=True),
         "estimate_text": format_estimate(finding.estimate),
         "estimate_name": name, "estimate_value": None if value is None else float(value),

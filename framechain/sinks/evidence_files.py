@@ -20,6 +20,7 @@ from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.arrays import rows_of
 from framechain.catalogue import HopName
+from framechain.replay import CameraModel
 from framechain.timeline import arrow_array
 
 METRICS = {
@@ -29,6 +30,9 @@ METRICS = {
     "static_spread": "distance of each recomputed world point of the static target from their centroid",
     "camera_motion": "robust RMS over frame pairs of each camera's measured rotation rate (from its images) against "
                      "the rate forward kinematics predicts through the declared link, mount and time (deg/s)",
+    "cross_camera": ("distance of each recomputed point of a rig's camera from the other cameras' points of its label: "
+                     "at the same instant (interpolated along each camera's track), or from its static object's fitted "
+                     "position"),
     "none": "no evidence to measure against",
 }
 
@@ -108,15 +112,16 @@ def inputs_record(result: Attribution) -> dict[str, Any]:
         "seed": result.seed,
         "metric": {"name": result.metric, "definition": METRICS[result.metric]},
         "labels": {str(k): int(v) for k, v in zip(labels, counts, strict=True)},
-        "camera": {
-            "frame": result.inputs.camera.frame,
-            "K": result.inputs.camera.K.tolist(),
-            "width": result.inputs.camera.width,
-            "height": result.inputs.camera.height,
-            "distortion_model": result.inputs.camera.distortion_model,
-        },
+        "camera": _camera_record(result.inputs.camera),
+        **({"cameras": [_camera_record(c.camera) for c in result.inputs.rig_cameras]} if result.inputs.rig_cameras
+           else {}),
         "observations": result.counts(),
         # What became of each logged point (matched by obs_id or stamp, or why not): see analysis.alignment.
         "evidence_alignment": result.aligned.counts(),
         "notes": list(result.notes),
     }
+
+
+def _camera_record(camera: CameraModel) -> dict[str, Any]:
+    return {"frame": camera.frame, "K": camera.K.tolist(), "width": camera.width, "height": camera.height,
+            "distortion_model": camera.distortion_model}

@@ -34,7 +34,8 @@ STATUS_TEXT = {
 }
 _NOT_ANALYSED = ("nothing_replayed", "error", "crashed")
 #: How an estimate is shown: (scale, unit) by estimate_name (offsets in ms, angles in deg, ratios as x).
-_DISPLAY = {"offset_s": (1e3, "ms"), "angle_deg": (1.0, "deg"), "factor": (1.0, "x"), "scale": (1.0, "x")}
+_DISPLAY = {"offset_s": (1e3, "ms"), "angle_deg": (1.0, "deg"), "factor": (1.0, "x"), "scale": (1.0, "x"),
+            "distance_m": (1e3, "mm")}
 
 @dataclass(frozen=True)
 class FleetLog:
@@ -127,7 +128,7 @@ def estimate_spread(logs: Sequence[FleetLog]) -> list[SpreadRow]:
     numeric: dict[tuple[str, str, str | None], list[tuple[float, str]]] = {}  # (SI value, its text)
     for log in logs:
         for f in log.findings:
-            key = (f["fault"], f["hop"], f["estimate_name"])
+            key = (f["fault"], f["hop"] + _on_camera(f), f["estimate_name"])
             text = f["estimate_text"] or "-"
             texts.setdefault(key, []).append(text)
             found = numeric.setdefault(key, [])
@@ -265,7 +266,14 @@ def _with_findings(logs: Sequence[FleetLog]) -> list[FleetLog]:
 
 
 def _fault_cell(log: FleetLog) -> str:
-    return "; ".join(f"{f['fault']} at {f['hop']} ({f['estimate_text']}, {f['share']:.0%})" for f in log.findings)
+    return "; ".join(f"{f['fault']} at {f['hop']}{_on_camera(f)} ({f['estimate_text']}, {f['share']:.0%})"
+                     for f in log.findings)
+
+
+def _on_camera(finding: dict[str, Any]) -> str:
+    """`` on camera <frame>`` for a finding on one camera of a rig, else ""."""
+    camera = finding.get("camera")
+    return f" on camera {camera}" if camera else ""
 
 
 def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],

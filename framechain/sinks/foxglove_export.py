@@ -7,9 +7,11 @@ One MCAP then opens in Foxglove with the log and the replay together:
 - ``/framechain/annotations`` (``foxglove.ImageAnnotations``): per image time, the detection
   (pixel and tag corners), the recomputed and as-run world points projected into the image and a
   line between them coloured by the finding that explains them (:mod:`framechain.sinks.overlay`);
-  stamped with the image's header stamp so Foxglove's Image panel pairs them with that image;
+  stamped with the image's header stamp so Foxglove's Image panel pairs them with that image; for a
+  rig, one topic per camera, ``/framechain/annotations/<camera frame>``, each with its own detections;
 - ``/framechain/scene`` (``foxglove.SceneUpdate``): as-run and recomputed world points and the
-  error line between them, in the world frame;
+  error line between them, in the world frame; for a rig also a line between two cameras' points of
+  one label at one instant;
 - ``/framechain/findings`` (``foxglove.Log``): one message per finding.
 
 Schemas are registered as protobuf ``FileDescriptorSet``s holding the message's file and every
@@ -26,8 +28,9 @@ import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.findings import Finding
+from framechain.analysis.rig_layout import PairLines
 from framechain.analysis.run import Run
-from framechain.arrays import BoolArray, IntArray
+from framechain.arrays import BoolArray, IntArray, rows_of
 from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
     AS_RUN_COLOR,
@@ -36,7 +39,7 @@ from framechain.sinks.overlay import (
     ImageOverlay,
     image_overlay,
 )
-from framechain.sinks.rerun_common import REPLAY_FRAME_SUFFIX
+from framechain.sinks.rerun_common import ERROR_COLOR, REPLAY_FRAME_SUFFIX
 from framechain.sinks.text import FindingView
 from framechain.timeline import PointRole, Timeline
 
@@ -93,8 +96,14 @@ def foxglove_messages(run: Run) -> list[ProtobufMessage]:
     result = run.replay
     overlay = image_overlay(run.timeline, result, run.aligned, run.findings)
     out = _transforms(result)
-    out += _annotations(run.timeline, result, overlay)
-    out += _scene(result, run.aligned, overlay)
+    if run.chain.is_rig:  # one annotations topic per camera, each with that camera's observations
+        for frame in run.chain.camera_frames():
+            rows = np.flatnonzero(result.observations.camera_frame == frame)
+            out += _annotations(run.timeline, result, overlay, rows, f"{ANNOTATIONS_TOPIC}/{frame.strip('/')}")
+    else:
+        out += _annotations(run.timeline, result, overlay, np.arange(len(result.observations)), ANNOTATIONS_TOPIC)
+    rig = run.attribution.rig if run.attribution is not None else None
+    out += _scene(result, run.aligned, overlay, rig.lines if rig is not None else None)
     out += _findings(result, run.findings)
     return out
 
@@ -114,26 +123,31 @@ def _transforms(result: ReplayResult) -> list[ProtobufMessage]:
     schema = file_descriptor_set(FrameTransforms)
     frames = result.frames
     obs = result.observations
-    body, camera = frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX
+    body = frames.body + REPLAY_FRAME_SUFFIX
     out: list[ProtobufMessage] = []
     ok = np.flatnonzero(result.replayed)
-    _, first = np.unique(obs.stamp_ns[ok], return_index=True)  # one message per observation time
-    for i in ok[first].tolist():
+    for when, in_ok in _by_stamp(obs.stamp_ns[ok]):  # one message per observation time
+        rows = ok[in_ok]
+        _, per_camera = np.unique(obs.camera_frame[rows], return_index=True)  # each camera of a rig once
         msg = FrameTransforms()
-        for lookup, parent, child in ((result.world_from_body, frames.world, body),
-                                      (result.body_from_cam, body, camera)):
+        used = [(result.world_from_body, frames.world, body, int(rows[0]))]
+        used += [(result.body_from_cam, body, str(obs.camera_frame[i]) + REPLAY_FRAME_SUFFIX, int(i))
+                 for i in rows[np.sort(per_camera)]]
+        for lookup, parent, child, i in used:
             t = msg.transforms.add()
-            _stamp(t.timestamp, obs.stamp_ns[i])
+            _stamp(t.timestamp, when)
             t.parent_frame_id, t.child_frame_id = parent, child
             t.translation.x, t.translation.y, t.translation.z = (float(v) for v in lookup.translation[i])
             t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w = (float(v) for v in lookup.quat_xyzw[i])
-        out.append(ProtobufMessage(TF_TOPIC, "foxglove.FrameTransforms", schema, int(obs.log_time_ns[i]),
-                                   int(obs.stamp_ns[i]), msg.SerializeToString()))
+        out.append(ProtobufMessage(TF_TOPIC, "foxglove.FrameTransforms", schema, int(obs.log_time_ns[rows].max()),
+                                   int(when), msg.SerializeToString()))
     return out
 
 
-def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay) -> list[ProtobufMessage]:
-    """One ImageAnnotations per image (or per observation time without an image)."""
+def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay, mine: IntArray,
+                 topic: str) -> list[ProtobufMessage]:
+    """One ImageAnnotations per image (or per observation time without an image) of the observations ``mine``
+    (one camera's), on ``topic``."""
     from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
     from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 
@@ -144,8 +158,9 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
                      if len(images) else obs.stamp_ns, obs.stamp_ns)
     out: list[ProtobufMessage] = []
     drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
-    for when, at_stamp in _by_stamp(stamp):
-        rows = at_stamp[drawn[at_stamp]]
+    for when, in_mine in _by_stamp(stamp[mine]):
+        rows = mine[in_mine]
+        rows = rows[drawn[rows]]
         if not rows.size:
             continue
         msg = ImageAnnotations()
@@ -177,13 +192,15 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
                 text.font_size = 14.0
                 _color(text.text_color, overlay.color)
         log_ns = int(obs.log_time_ns[rows].max())
-        out.append(ProtobufMessage(ANNOTATIONS_TOPIC, "foxglove.ImageAnnotations", schema, log_ns, int(when),
+        out.append(ProtobufMessage(topic, "foxglove.ImageAnnotations", schema, log_ns, int(when),
                                    msg.SerializeToString()))
     return out
 
 
-def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverlay) -> list[ProtobufMessage]:
-    """As-run and recomputed world points and the line between them, one SceneUpdate per observation time."""
+def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverlay,
+           lines: PairLines | None = None) -> list[ProtobufMessage]:
+    """As-run and recomputed world points and the line between them, one SceneUpdate per observation time (and
+    a rig's same-instant comparisons, ``lines``, between the two cameras' points)."""
     from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
@@ -195,6 +212,10 @@ def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverla
             if evidence.present(role):
                 as_run = evidence.points(role)
                 break
+    partner = np.full((len(obs), 3), np.nan)
+    if lines is not None and len(lines):
+        row = rows_of(obs.obs_id, lines.obs_id)
+        partner[row[row >= 0]] = lines.partner_point[row >= 0]
     out: list[ProtobufMessage] = []
     ok = np.flatnonzero(result.replayed & np.isfinite(result.p_world).all(axis=1))
     for when, in_ok in _by_stamp(obs.stamp_ns[ok]):
@@ -214,15 +235,17 @@ def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverla
                 sphere.pose.orientation.w = 1.0
                 sphere.size.x = sphere.size.y = sphere.size.z = 0.04
                 _color(sphere.color, color)
-            if np.isfinite(as_run[i]).all():
+            for other, color in ((as_run[i], overlay.color), (partner[i], ERROR_COLOR)):
+                if not np.isfinite(other).all():
+                    continue
                 line = entity.lines.add()
                 line.type = LinePrimitive.LINE_LIST
                 line.pose.orientation.w = 1.0
                 line.thickness = 0.01
-                for xyz in (result.p_world[i], as_run[i]):
+                for xyz in (result.p_world[i], other):
                     p = line.points.add()
                     p.x, p.y, p.z = (float(v) for v in xyz)
-                _color(line.color, overlay.color)
+                _color(line.color, color)
         out.append(ProtobufMessage(SCENE_TOPIC, "foxglove.SceneUpdate", schema, int(obs.log_time_ns[rows].max()),
                                    int(when), msg.SerializeToString()))
     return out

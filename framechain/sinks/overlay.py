@@ -134,42 +134,48 @@ def project_world_points(timeline: Timeline, result: ReplayResult, p_world: Floa
 
 
 def nearest_images(timeline: Timeline, result: ReplayResult, window_ns: int = IMAGE_WINDOW_NS) -> IntArray:
-    """Row of ``timeline.image_frames`` (of the chain camera) nearest each observation, -1 if none within
-    the window. Images of another frame count only when no image has the chain camera's frame."""
+    """Row of ``timeline.image_frames`` nearest each observation among its camera's images, -1 if none within
+    the window. With one camera, images of another frame count only when no image has the camera's frame."""
     images = timeline.image_frames
     obs = result.observations
     out = np.full(len(obs), -1, dtype=np.int64)
     if len(images) == 0 or len(obs) == 0:
         return out
-    mine = camera_image_rows(timeline, result.frames.camera)
-    if mine.size == 0:
-        return out
-    stamps = images.stamp_ns[mine]
-    pick = nearest(stamps, obs.stamp_ns)
-    close = np.abs(stamps[pick] - obs.stamp_ns) <= window_ns
-    out[close] = mine[pick[close]]
+    cameras = np.unique(obs.camera_frame).tolist()
+    for camera in cameras if len(cameras) > 1 else [result.frames.camera]:
+        mine = camera_image_rows(timeline, camera, own_only=len(cameras) > 1)
+        sel = np.flatnonzero(obs.camera_frame == camera) if len(cameras) > 1 else np.arange(len(obs))
+        if mine.size == 0 or sel.size == 0:
+            continue
+        stamps = images.stamp_ns[mine]
+        pick = nearest(stamps, obs.stamp_ns[sel])
+        close = np.abs(stamps[pick] - obs.stamp_ns[sel]) <= window_ns
+        out[sel[close]] = mine[pick[close]]
     return out
 
 
-def camera_image_rows(timeline: Timeline, camera: str) -> IntArray:
-    """Rows of ``timeline.image_frames`` of the chain camera, in stamp order (every image when none
-    carries the camera's frame: one image topic, named by the chain)."""
+def camera_image_rows(timeline: Timeline, camera: str, *, own_only: bool = False) -> IntArray:
+    """Rows of ``timeline.image_frames`` of a camera, in stamp order (every image when none carries the camera's
+    frame and not ``own_only``: one image topic, named by the chain)."""
     images = timeline.image_frames
     mine = np.flatnonzero(images.frame == normalize_frame(camera))
-    if mine.size == 0:
+    if mine.size == 0 and not own_only:
         mine = np.arange(len(images))
     order: IntArray = mine[np.argsort(images.stamp_ns[mine], kind="stable")]
     return order
 
 
 def select_images(timeline: Timeline, result: ReplayResult, selection: ImageSelection,
-                  window_ns: int = IMAGE_WINDOW_NS) -> IntArray:
-    """Rows of ``timeline.image_frames`` a sink shows: all the camera's, those nearest observations, or none."""
+                  window_ns: int = IMAGE_WINDOW_NS, *, camera: str | None = None) -> IntArray:
+    """Rows of ``timeline.image_frames`` a sink shows: all the camera's, those nearest observations, or none
+    (``camera``: one camera of a rig, its own images only; None: the chain's camera)."""
     if selection is ImageSelection.NONE:
         return np.zeros(0, dtype=np.int64)
     if selection is ImageSelection.ALL:
-        return camera_image_rows(timeline, result.frames.camera)
+        return camera_image_rows(timeline, camera or result.frames.camera, own_only=camera is not None)
     near = nearest_images(timeline, result, window_ns)
+    if camera is not None:
+        near = near[result.observations.camera_frame == normalize_frame(camera)]
     return np.unique(near[near >= 0])
 
 

@@ -409,13 +409,14 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         lines += [
-            "| fault | hop | estimate | 95% interval | share | error | confidence | strength | fix |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+            "| fault | hop | camera | estimate | 95% interval | share | error | confidence | strength | fix |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
         for c in (FindingView.of(f).cells() for f in result.findings):
-            lines.append(f"| {c.fault} | {c.hop} | {c.estimate} | {c.interval} | {c.share} | {c.error} | "
-                         f"{c.confidence} | {c.strength} | {c.fix.replace('|', '/')} |")
-        lines += [""] + [f"- **{f.fault.value}**: {f.evidence}" for f in result.findings]
+            lines.append(f"| {c.fault} | {c.hop} | {c.camera or '-'} | {c.estimate} | {c.interval} | {c.share} | "
+                         f"{c.error} | {c.confidence} | {c.strength} | {c.fix.replace('|', '/')} |")
+        lines += [""] + [f"- **{f.fault.value}**{FindingView.of(f).on_camera()}: {f.evidence}"
+                         for f in result.findings]
     else:
         lines.append("No fault beyond noise." if _clean(result) else "Nothing could be checked.")
     lines += [
@@ -455,15 +456,15 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         parts.append(
-            "<table><tr><th>fault</th><th>hop</th><th>estimate</th><th>95% interval</th><th>share</th>"
+            "<table><tr><th>fault</th><th>hop</th><th>camera</th><th>estimate</th><th>95% interval</th><th>share</th>"
             "<th>error</th><th>confidence</th><th>strength</th><th>evidence</th><th>fix</th></tr>"
         )
         for c in (FindingView.of(f).cells() for f in result.findings):
             weak = " style='color:#777'" if c.strength == "weak" else ""
             parts.append(
-                f"<tr{weak}><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.estimate)}</td>"
-                f"<td>{e(c.interval)}</td><td>{c.share}</td><td>{c.error}</td><td>{c.confidence}</td>"
-                f"<td>{c.strength}</td><td>{e(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
+                f"<tr{weak}><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.camera or '-')}</td>"
+                f"<td>{e(c.estimate)}</td><td>{e(c.interval)}</td><td>{c.share}</td><td>{c.error}</td>"
+                f"<td>{c.confidence}</td><td>{c.strength}</td><td>{e(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
             )
         parts.append("</table>")
     else:

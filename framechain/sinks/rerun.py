@@ -65,8 +65,10 @@ from framechain.sinks.rerun_common import (
     ROLE_LEAF,
     SENSOR_TIME,
     RerunOptions,
+    camera_views,
 )
 from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_videos
+from framechain.sinks.rerun_rig import log_rig
 from framechain.sinks.rerun_scene import (
     log_camera,
     log_frame_tree,
@@ -76,7 +78,7 @@ from framechain.sinks.rerun_scene import (
 )
 from framechain.sinks.rerun_series import log_points, log_series, log_text, summary_markdown
 from framechain.sinks.text import FindingView
-from framechain.timeline import FramechainError
+from framechain.timeline import FramechainError, Timeline
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -212,9 +214,12 @@ def stream_replay(
     overlay = image_overlay(run.timeline, run.replay, run.aligned, run.findings)
     shows_images = opts.images is not ImageSelection.NONE and len(run.timeline.image_frames) > 0
     curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
+    views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
+    boxes = [(v.frame, v.root, _image_box(run.timeline, v.frame)) for v in views if v.rig]
     blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
                                   curves=curves, curves_first=run.attribution is not None
-                                  and run.attribution.metric == "static_spread")
+                                  and run.attribution.metric == "static_spread",
+                                  camera_motion=run.camera_motion is not None, cameras=boxes)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -248,6 +253,15 @@ def stream_replay(
         mode=chosen.mode, path=chosen.path if chosen.mode is OutputMode.SAVE else None,
         url=chosen.url, fell_back=fell_back, notes=tuple(notes), rows=rows,
     )
+
+
+def _image_box(timeline: Timeline, frame: str) -> tuple[float, float, float, float] | None:
+    """(u_min, u_max, v_min, v_max) of a camera's whole image (None without a camera model)."""
+    rows = np.flatnonzero(timeline.cameras.frame == frame)
+    if rows.size == 0:
+        return None
+    width, height = float(timeline.cameras.width[rows[0]]), float(timeline.cameras.height[rows[0]])
+    return 0.0, width, 0.0, height
 
 
 def _release_dropped_recordings() -> None:
@@ -287,17 +301,22 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
         rec.send_recording_name(opts.recording_name)
     rows: dict[str, int] = {}
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    log_frame_tree(rec, timeline, result.frames, opts, rows)
-    log_used_transforms(rec, result, rows)
-    log_camera(rec, timeline, result, opts, rows)
+    views = camera_views(result, run.chain.camera_frames() if run.chain.is_rig else ())
+    log_frame_tree(rec, timeline, result.frames, opts, rows, tuple(v.frame for v in views))
+    log_used_transforms(rec, result, views, rows)
+    for view in views:
+        log_camera(rec, timeline, result, view, opts, rows)
     as_run = _as_run_points(rec, run, opts, rows)
-    log_points(rec, result, as_run, opts, rows)
+    log_points(rec, result, as_run, opts, rows, views)
     log_series(rec, result, as_run, rows)
-    log_images(rec, timeline, result, opts, rows)
+    for view in views:
+        log_images(rec, timeline, result, view, opts, rows)
+        log_overlay(rec, overlay, result, view, rows)
     if opts.images is not ImageSelection.NONE:
         log_camera_videos(rec, run, rows)
     log_camera_motion(rec, run, rows)
-    log_overlay(rec, overlay, result, rows)
+    if run.attribution is not None and run.attribution.rig is not None:
+        log_rig(rec, result, run.attribution.rig, opts, rows)
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
     if run.attribution is not None:
         log_checks(rec, run.attribution, rows)

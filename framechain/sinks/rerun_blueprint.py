@@ -38,7 +38,9 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
 def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
                       image_bounds: tuple[float, float, float, float] | None = None,
                       curves: Sequence[tuple[str, str]] = (), curves_first: bool = False,
-                      camera_motion: bool = False) -> rrb.Blueprint:
+                      camera_motion: bool = False,
+                      cameras: Sequence[tuple[str, str, tuple[float, float, float, float] | None]] = ()
+                      ) -> rrb.Blueprint:
     """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
     (its images with the chain drawn on them when ``images``, else the depth frames); below them the
     per-hop error, the error in the image and the time gaps as series, and the findings.
@@ -47,19 +49,22 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
     error against each fault family's size, as bar charts beside the per-hop error (``curves_first``: shown
     first, where no hop error is logged); what the log can show and the labels are a tab beside the findings.
     ``camera_motion`` puts the cameras' rotation rate, from their images against forward kinematics, first
-    beside the per-hop error."""
+    beside the per-hop error. ``cameras`` (frame, entity root, image bounds) of a rig: one view per camera
+    beside the 3D view instead of the one camera's, and the distances between cameras' sightings in place of
+    the time gaps."""
     import rerun.blueprint as rrb
 
     # With colour images, the depth cloud would bury the points: it stays in the depth tab.
+    roots = [root for _frame, root, _bounds in cameras] or ["/camera"]
     world = rrb.Spatial3DView(
         name=f"World ({frames.world})", origin="/",
-        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", "- /camera/overlay/**",
-                  *(["- /camera/depth"] if images else [])],
+        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", *(f"- {r}/overlay/**" for r in roots),
+                  *([f"- {r}/depth" for r in roots] if images else [])],
         spatial_information=rrb.SpatialInformation(target_frame=frames.world),
     )
     history = rrb.Spatial3DView(
         name="All observations (world points)", origin="/",
-        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target",
+        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target", "+ /points/rig/**",
                   "+ /points/reference/**", "+ /points/error/world", "+ /frames/**", "+ /tf/**"],
         spatial_information=rrb.SpatialInformation(target_frame=frames.world),
         time_ranges=[rrb.VisibleTimeRange(name, start=rrb.TimeRangeBoundary.infinite(),
@@ -73,11 +78,43 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         contents=["+ /camera/**", "- /camera/depth"] if images else ["+ /camera/**"],
         spatial_information=plane, visual_bounds=bounds,
     )
-    cameras: rrb.Tabs | rrb.Spatial2DView = camera
+    views: rrb.Tabs | rrb.Spatial2DView | rrb.Grid = camera
     if images:
         depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
                                   contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
-        cameras = rrb.Tabs(camera, depth)
+        views = rrb.Tabs(camera, depth)
+    if cameras:
+        views = rrb.Grid(*(rrb.Spatial2DView(
+            name=f"Camera ({frame})", origin=root, contents=[f"+ {root}/**", f"- {root}/depth"],
+            spatial_information=rrb.SpatialInformation(target_frame=frame + IMAGE_PLANE_SUFFIX),
+            visual_bounds=None if box is None else rrb.VisualBounds2D(x_range=box[:2], y_range=box[2:]))
+            for frame, root, box in cameras))
+        gaps: rrb.TimeSeriesView | None = rrb.TimeSeriesView(name="Distance to another camera's sighting (mm)",
+                                                             origin="/series/rig")
+    else:
+        gaps = None
+    errors = _error_views(curves, curves_first=curves_first, camera_motion=camera_motion)
+    pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
+    gaps = gaps or rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
+    text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
+                    rrb.TextDocumentView(name="Summary", origin="/summary"),
+                    rrb.TextDocumentView(name="What this log can show", origin="/checks"))
+    return rrb.Blueprint(
+        rrb.Vertical(
+            rrb.Horizontal(rrb.Tabs(world, history), views, column_shares=[1, 1]),
+            rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
+            row_shares=[3, 2],
+        ),
+        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
+        collapse_panels=collapse_panels,
+    )
+
+
+def _error_views(curves: Sequence[tuple[str, str]], *, curves_first: bool, camera_motion: bool
+                 ) -> rrb.TimeSeriesView | rrb.Tabs:
+    """The per-hop error series, with the error-against-size bar charts and the cameras' rotation rate as tabs."""
+    import rerun.blueprint as rrb
+
     errors: rrb.TimeSeriesView | rrb.Tabs = rrb.TimeSeriesView(name="Per-hop error (mm)", origin="/series/error_mm")
     if curves:
         # No legend: it names entity paths over the bars; the title says what each colour is.
@@ -88,17 +125,4 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         rates = rrb.TimeSeriesView(name="Camera rotation rate: images vs forward kinematics (deg/s)",
                                    origin="/series/rotation_rate_deg_s")
         errors = rrb.Tabs(rates, errors)
-    pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px")
-    gaps = rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms")
-    text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
-                    rrb.TextDocumentView(name="Summary", origin="/summary"),
-                    rrb.TextDocumentView(name="What this log can show", origin="/checks"))
-    return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.Horizontal(rrb.Tabs(world, history), cameras, column_shares=[1, 1]),
-            rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
-            row_shares=[3, 2],
-        ),
-        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
-        collapse_panels=collapse_panels,
-    )
+    return errors

@@ -62,6 +62,34 @@ class RerunOptions:
     images: ImageSelection = ImageSelection.NEAR
 
 
+@dataclass(frozen=True)
+class CameraView:
+    """One camera's part of a recording: its entity root, its optical frame and its observations (rows of the
+    replay). One camera is ``/camera``; each camera of a rig is ``/cameras/<frame>``."""
+
+    root: str
+    frame: str
+    rows: IntArray
+    rig: bool = False
+
+    @property
+    def plane(self) -> str:
+        return self.frame + IMAGE_PLANE_SUFFIX
+
+    def entity(self, base: str, single: str) -> str:
+        """A per-camera entity: ``single`` for one camera, ``<base>/<frame>`` in a rig."""
+        return f"{base}/{entity_part(self.frame)}" if self.rig else single
+
+
+def camera_views(result: ReplayResult, frames: tuple[str, ...]) -> list[CameraView]:
+    """The cameras of a recording: the chain's one camera, or every camera of a rig (``frames``)."""
+    obs = result.observations
+    if len(frames) <= 1:
+        return [CameraView("/camera", result.frames.camera, np.arange(len(obs), dtype=np.int64))]
+    return [CameraView(f"/cameras/{entity_part(f)}", f, np.flatnonzero(obs.camera_frame == f), rig=True)
+            for f in frames]
+
+
 ROLE_LEAF: dict[PointRole, str] = {
     PointRole.HOP_CAMERA: "camera", PointRole.HOP_BODY: "body", PointRole.HOP_WORLD: "world",
     PointRole.TARGET: "target", PointRole.REFERENCE: "reference",

@@ -22,12 +22,12 @@ from framechain.sinks.overlay import (
 )
 from framechain.sinks.rerun_common import (
     ERROR_COLOR,
-    IMAGE_PLANE_SUFFIX,
     LOG_TIME,
     OBS_INDEX,
     REPLAY_FRAME_SUFFIX,
     SENSOR_TIME,
     STALE_COLOR,
+    CameraView,
     RerunOptions,
     entity_part,
     obs_indexes,
@@ -40,15 +40,21 @@ from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENC
 if TYPE_CHECKING:
     import rerun as rr
 
+#: A rig's cameras sit centimetres apart: their frustums are drawn short.
+RIG_PLANE_DISTANCE_M = 0.1
+BORDER_COLOR = (160, 160, 160)
+
 
 def log_frame_tree(
-    rec: rr.RecordingStream, timeline: Timeline, frames: ChainFrames, opts: RerunOptions, rows: dict[str, int]
+    rec: rr.RecordingStream, timeline: Timeline, frames: ChainFrames, opts: RerunOptions, rows: dict[str, int],
+    cameras: tuple[str, ...] = (),
 ) -> None:
-    """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk."""
+    """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk (``cameras``: a rig's
+    other camera frames, named too)."""
     import rerun as rr
 
     tf = timeline.transforms
-    names: set[str] = {frames.world, frames.body, frames.camera}
+    names: set[str] = {frames.world, frames.body, frames.camera, *cameras}
     for child in np.unique(tf.child):
         sel = np.flatnonzero(tf.child == child)
         entity = f"/tf/{entity_part(str(child))}"
@@ -75,7 +81,8 @@ def log_frame_tree(
             ),
         )
         rows[entity] = int(use.size)
-    names.update({frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX})
+    names.update({frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX,
+                  *(c + REPLAY_FRAME_SUFFIX for c in cameras)})
     for name in sorted(names):
         if name.endswith(REPLAY_FRAME_SUFFIX):
             entity = f"/frames/replay/{entity_part(name.removesuffix(REPLAY_FRAME_SUFFIX))}"
@@ -86,42 +93,48 @@ def log_frame_tree(
         rows[entity] = 1
 
 
-def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, rows: dict[str, int]) -> None:
-    """The transforms the replay used, per replayed observation, at the observation's time."""
+def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, views: list[CameraView],
+                        rows: dict[str, int]) -> None:
+    """The transforms the replay used, per replayed observation, at the observation's time (body -> camera per
+    camera of a rig)."""
     import rerun as rr
 
     frames = result.frames
     body_replay = frames.body + REPLAY_FRAME_SUFFIX
-    cam_replay = frames.camera + REPLAY_FRAME_SUFFIX
     ok = np.flatnonzero(result.replayed)
     if ok.size == 0:
         return
-    for entity, lookup, parent, child in (
-        ("/replay/world_from_body", result.world_from_body, frames.world, body_replay),
-        ("/replay/body_from_cam", result.body_from_cam, body_replay, cam_replay),
-    ):
+    used = [("/replay/world_from_body", result.world_from_body, frames.world, body_replay, ok)]
+    for view in views:
+        mine = np.intersect1d(view.rows, ok)
+        used.append((view.entity("/replay/body_from_cam", "/replay/body_from_cam"), result.body_from_cam,
+                     body_replay, view.frame + REPLAY_FRAME_SUFFIX, mine))
+    for entity, lookup, parent, child, sel in used:
+        if sel.size == 0:
+            continue
         rec.send_columns(
-            entity, indexes=obs_indexes(result, ok),
+            entity, indexes=obs_indexes(result, sel),
             columns=rr.Transform3D.columns(
-                translation=lookup.translation[ok], quaternion=lookup.quat_xyzw[ok],
-                parent_frame=[parent] * ok.size, child_frame=[child] * ok.size,
+                translation=lookup.translation[sel], quaternion=lookup.quat_xyzw[sel],
+                parent_frame=[parent] * sel.size, child_frame=[child] * sel.size,
             ),
         )
-        rows[entity] = int(ok.size)
+        rows[entity] = int(sel.size)
 
 
 def log_camera(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, opts: RerunOptions, rows: dict[str, int]
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
+    rows: dict[str, int],
 ) -> None:
-    """Pinhole (static, or over time if the intrinsics change), depth frames, detections."""
+    """One camera: its pinhole (static, or over time if the intrinsics change), depth frames, detections."""
     import rerun as rr
 
-    frames = result.frames
-    plane = frames.camera + IMAGE_PLANE_SUFFIX
+    plane = view.plane
+    root = view.root
     cams = timeline.cameras
     # A model without an image (width 0: 3D points in the camera frame, no intrinsics) has no pinhole to show,
     # and its detections are no pixels.
-    on_frame = cams.frame == normalize_frame(frames.camera)
+    on_frame = cams.frame == normalize_frame(view.frame)
     mine = np.flatnonzero(on_frame & (cams.width > 0))
     points_only = bool(on_frame.any()) and not mine.size
     if mine.size:
@@ -132,73 +145,80 @@ def log_camera(
                                   | (np.diff(res, axis=0) != 0).any(axis=1)])
         keep = mine[changes]
         if keep.size == 1:
-            rec.log("/camera", rr.Pinhole(
+            rec.log(root, rr.Pinhole(
                 image_from_camera=cams.K[keep[0]], resolution=res[changes][0],
-                camera_xyz=rr.ViewCoordinates.RDF, parent_frame=frames.camera, child_frame=plane,
-                image_plane_distance=0.5,
+                camera_xyz=rr.ViewCoordinates.RDF, parent_frame=view.frame, child_frame=plane,
+                image_plane_distance=RIG_PLANE_DISTANCE_M if view.rig else 0.5,
             ), static=True)
         else:
             rec.send_columns(
-                "/camera",
+                root,
                 indexes=[stamp_column(SENSOR_TIME, cams.stamp_ns[keep]),
                          stamp_column(LOG_TIME, cams.log_time_ns[keep])],
                 columns=rr.Pinhole.columns(
                     image_from_camera=cams.K[keep], resolution=res[changes],
                     camera_xyz=[rr.ViewCoordinates.RDF] * keep.size,
-                    parent_frame=[frames.camera] * keep.size, child_frame=[plane] * keep.size,
+                    parent_frame=[view.frame] * keep.size, child_frame=[plane] * keep.size,
                 ),
             )
-        rows["/camera"] = int(keep.size)
-    log_depth(rec, timeline, result, opts, plane, rows)
+        rows[root] = int(keep.size)
+        if view.rig:  # without images a view shows where the image ends by its border
+            width, height = res[changes][-1]
+            rec.log(f"{root}/border", rr.LineStrips2D([[(0, 0), (width, 0), (width, height), (0, height), (0, 0)]],
+                                                      colors=[BORDER_COLOR]), rr.CoordinateFrame(plane), static=True)
+            rows[f"{root}/border"] = 1
+    log_depth(rec, timeline, result, view, opts, rows)
     obs = result.observations
-    if len(obs) and not points_only:
-        every = np.arange(len(obs), dtype=np.int64)
+    if view.rows.size and not points_only:
         colors = np.where(result.replayed[:, None], np.array(RECOMPUTED_COLOR), np.array(ERROR_COLOR))
         colors[result.stale] = STALE_COLOR
-        labels = [f"obs {i} {lab}".rstrip() + ("" if s == REPLAYED else f" ({s})")
-                  for i, lab, s in zip(obs.obs_id.tolist(), obs.label.tolist(), result.status.tolist(), strict=True)]
-        rec.log("/camera/detections", rr.CoordinateFrame(plane), static=True)
-        send_per_stamp(rec, "/camera/detections", result, every, lambda sel: rr.Points2D.columns(
+        labels = {int(r): f"obs {obs.obs_id[r]} {obs.label[r]}".rstrip()
+                  + ("" if result.status[r] == REPLAYED else f" ({result.status[r]})") for r in view.rows.tolist()}
+        entity = f"{root}/detections"
+        rec.log(entity, rr.CoordinateFrame(plane), static=True)
+        send_per_stamp(rec, entity, result, view.rows, lambda sel: rr.Points2D.columns(
             positions=np.stack([obs.u[sel], obs.v[sel]], axis=1), colors=colors[sel].astype(np.uint8),
             labels=[labels[i] for i in sel.tolist()], radii=np.full(sel.size, 6.0)))
-        rows["/camera/detections"] = len(obs)
+        rows[entity] = int(view.rows.size)
 
 
 def log_images(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, opts: RerunOptions, rows: dict[str, int]
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
+    rows: dict[str, int],
 ) -> None:
-    """The camera's images under its image plane: raw as ``Image``, JPEG/PNG as ``EncodedImage`` (bytes
+    """A camera's images under its image plane: raw as ``Image``, JPEG/PNG as ``EncodedImage`` (bytes
     as logged), frames of a video file as ``VideoFrameReference`` into one ``AssetVideo`` per file."""
     import rerun as rr
 
     images = timeline.image_frames
-    chosen = select_images(timeline, result, opts.images)
+    chosen = select_images(timeline, result, opts.images, camera=view.frame if view.rig else None)
     if chosen.size == 0:
         return
-    plane = result.frames.camera + IMAGE_PLANE_SUFFIX
+    plane = view.plane
+    image_entity = f"{view.root}/image"
     enc = images.encoding[chosen]
     raw = chosen[np.isin(enc, list(RAW_IMAGE_ENCODINGS))]
     compressed = chosen[np.isin(enc, list(COMPRESSED_IMAGE_ENCODINGS))]
     if raw.size or compressed.size:
-        rec.log("/camera/image", rr.CoordinateFrame(plane), static=True)
+        rec.log(image_entity, rr.CoordinateFrame(plane), static=True)
     if raw.size:
         rec.send_columns(
-            "/camera/image", indexes=_image_indexes(images, result, raw),
+            image_entity, indexes=_image_indexes(images, result, raw),
             columns=rr.Image.columns(buffer=[images.load(int(i)) for i in raw],
                                      format=[_image_format(str(images.encoding[i]), int(images.width[i]),
                                                            int(images.height[i])) for i in raw]),
         )
     if compressed.size:
         rec.send_columns(
-            "/camera/image", indexes=_image_indexes(images, result, compressed),
+            image_entity, indexes=_image_indexes(images, result, compressed),
             columns=rr.EncodedImage.columns(blob=[images.load(int(i)) for i in compressed],
                                             media_type=[f"image/{images.encoding[i]}" for i in compressed]),
         )
     if raw.size or compressed.size:
-        rows["/camera/image"] = int(raw.size + compressed.size)
+        rows[image_entity] = int(raw.size + compressed.size)
     video = chosen[enc == VIDEO_ENCODING]
     for k, path in enumerate(np.unique(images.video_path[video]).tolist()):
-        entity = "/camera/video" if k == 0 else f"/camera/video/{k}"
+        entity = f"{view.root}/video" if k == 0 else f"{view.root}/video/{k}"
         frames = video[images.video_path[video] == path]
         rec.log(entity, rr.AssetVideo(path=path), rr.CoordinateFrame(plane), static=True)
         rec.send_columns(entity, indexes=_image_indexes(images, result, frames),
@@ -233,20 +253,23 @@ def _image_indexes(images: ImageFrameTable, result: ReplayResult, rows: IntArray
             rr.TimeColumn(OBS_INDEX, sequence=near.astype(np.int64))]
 
 
-def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, rows: dict[str, int]) -> None:
-    """The chain on the image: corners, projected recomputed and as-run points, the line between them.
+def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, view: CameraView,
+                rows: dict[str, int]) -> None:
+    """The chain on a camera's image: corners, projected recomputed and as-run points, the line between them.
 
     Observations with one stamp (several tags in one image) share one row per entity, so the viewer
     shows all of them at that time (a later row at the same time would hide the earlier ones).
     """
     import rerun as rr
 
-    obs = result.observations
-    if len(obs) == 0:
+    if view.rows.size == 0:
         return
-    plane = result.frames.camera + IMAGE_PLANE_SUFFIX
+    plane = view.plane
+    mine = np.zeros(len(result.observations), dtype=bool)
+    mine[view.rows] = True
 
     def send(entity: str, sel: IntArray, columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
+        sel = sel[mine[sel]]
         if sel.size == 0:
             return
         rec.log(entity, rr.CoordinateFrame(plane), static=True)
@@ -255,7 +278,7 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
 
     radius = np.float32(max(2.0, float(np.nanmax(overlay.width, initial=320)) / 160.0))
     corners = np.flatnonzero(np.isfinite(overlay.corners_px).all(axis=(1, 2)))
-    send("/camera/overlay/corners", corners, lambda sel: rr.LineStrips2D.columns(
+    send(f"{view.root}/overlay/corners", corners, lambda sel: rr.LineStrips2D.columns(
         strips=[np.vstack([q, q[:1]]) for q in overlay.corners_px[sel]],
         colors=np.tile(np.array(DETECTION_COLOR, dtype=np.uint8), (sel.size, 1)),
         radii=np.full(sel.size, radius / 2, dtype=np.float32)))
@@ -272,16 +295,17 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
                             ("as_run", overlay.as_run_uv, AS_RUN_COLOR)):
         have = np.flatnonzero(np.isfinite(uv).all(axis=1))
         what = "recomputed world point" if name == "recomputed" else f"as-run {overlay.as_run_role} point"
-        send(f"/camera/overlay/{name}", have, points(uv, color, what))
+        send(f"{view.root}/overlay/{name}", have, points(uv, color, what))
     both = np.flatnonzero(np.isfinite(overlay.recomputed_uv).all(axis=1) & np.isfinite(overlay.as_run_uv).all(axis=1))
     error_px = overlay.error_px
-    send("/camera/overlay/error", both, lambda sel: rr.LineStrips2D.columns(
+    send(f"{view.root}/overlay/error", both, lambda sel: rr.LineStrips2D.columns(
         strips=[np.stack([overlay.recomputed_uv[i], overlay.as_run_uv[i]]) for i in sel.tolist()],
         colors=np.tile(np.array(overlay.color, dtype=np.uint8), (sel.size, 1)),
         radii=np.full(sel.size, radius / 2, dtype=np.float32),
         labels=[f"{error_px[i]:.0f} px: {overlay.label()}" for i in sel.tolist()]))
+    both = both[mine[both]]
     if both.size:
-        entity = "/series/error_px/as_run"
+        entity = view.entity("/series/error_px", "/series/error_px/as_run")
         rec.log(entity, rr.SeriesLines(names=["as-run vs recomputed in the image (px)"], colors=[overlay.color]),
                 static=True)
         rec.send_columns(entity, indexes=obs_indexes(result, both),
@@ -290,10 +314,10 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
 
 
 def log_depth(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, opts: RerunOptions, plane: str,
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
     rows: dict[str, int],
 ) -> None:
-    """Depth frames of the chain camera near observations, decimated to ``max_images``.
+    """Depth frames of a camera near its observations, decimated to ``max_images``.
 
     Logged as uint16 millimetres (``meter=1000``): a VGA frame is 0.6 MB, so the default cap of 30
     keeps a recording under about 20 MB; lazily decoded frames cost about 70 ms each from an MCAP.
@@ -301,14 +325,14 @@ def log_depth(
     import rerun as rr
 
     depth = timeline.depth_frames
-    mine = np.flatnonzero(depth.frame == normalize_frame(result.frames.camera))
+    mine = np.flatnonzero(depth.frame == normalize_frame(view.frame))
     obs = result.observations
-    if mine.size == 0 or len(obs) == 0 or opts.max_images <= 0 or depth.loader is None:
+    if mine.size == 0 or view.rows.size == 0 or opts.max_images <= 0 or depth.loader is None:
         return
     mine = mine[np.argsort(depth.stamp_ns[mine], kind="stable")]
     stamps = depth.stamp_ns[mine]
     # The frame each observation used (or the nearest within the window when depth came with it).
-    want = np.where(result.depth_stamp_ns > 0, result.depth_stamp_ns, obs.stamp_ns)
+    want = np.where(result.depth_stamp_ns > 0, result.depth_stamp_ns, obs.stamp_ns)[view.rows]
     pick = nearest(stamps, want)
     near = np.abs(stamps[pick] - want) <= opts.image_window_ns
     chosen = np.unique(mine[pick[near]])
@@ -318,15 +342,16 @@ def log_depth(
     images = [_depth_mm(depth.load(int(i))) for i in chosen]
     formats = [rr.components.ImageFormat(width=im.shape[1], height=im.shape[0], channel_datatype="U16")
                for im in images]
-    rec.log("/camera/depth", rr.CoordinateFrame(plane), static=True)
+    entity = f"{view.root}/depth"
+    rec.log(entity, rr.CoordinateFrame(view.plane), static=True)
     rec.send_columns(
-        "/camera/depth",
+        entity,
         indexes=[stamp_column(SENSOR_TIME, depth.stamp_ns[chosen]),
                  stamp_column(LOG_TIME, depth.log_time_ns[chosen])],
         columns=rr.DepthImage.columns(buffer=[im.tobytes() for im in images], format=formats,
                                       meter=np.full(chosen.size, 1000.0, dtype=np.float32)),
     )
-    rows["/camera/depth"] = int(chosen.size)
+    rows[entity] = int(chosen.size)
 
 
 def _depth_mm(image_m: npt.NDArray[np.float32]) -> npt.NDArray[np.uint16]:

@@ -20,6 +20,7 @@ from framechain.sinks.rerun_common import (
     HOP_POINTS,
     REFERENCE_COLOR,
     REPLAY_FRAME_SUFFIX,
+    CameraView,
     RerunOptions,
     obs_indexes,
 )
@@ -31,14 +32,16 @@ if TYPE_CHECKING:
 
 def log_points(
     rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], opts: RerunOptions,
-    rows: dict[str, int],
+    rows: dict[str, int], views: list[CameraView] | None = None,
 ) -> None:
-    """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run."""
+    """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run (camera-frame
+    points per camera of a rig, ``views``)."""
     import rerun as rr
 
     frames = result.frames
     hop_frame = {"camera": frames.camera + REPLAY_FRAME_SUFFIX, "body": frames.body + REPLAY_FRAME_SUFFIX,
                  "world": frames.world, "target": frames.world}
+    rig = [v for v in views or [] if v.rig]
     recomputed = {"camera": result.p_cam, "body": result.p_body, "world": result.p_world,
                   "target": result.p_world}
     obs_id = result.observations.obs_id
@@ -60,10 +63,17 @@ def log_points(
         )
         rows[entity] = int(sel.size)
 
-    for leaf in ("camera", "body", "world"):
+    for view in rig:  # each camera's points in its own frame
+        for name, xyz, color in (("recomputed", result.p_cam, RECOMPUTED_COLOR), ("as_run", as_run["camera"],
+                                                                                  AS_RUN_COLOR)):
+            mine = np.full_like(xyz, np.nan)
+            mine[view.rows] = xyz[view.rows]
+            send_points(view.entity(f"/points/{name}/camera", ""), view.frame + REPLAY_FRAME_SUFFIX, mine, color,
+                        f"{name.replace('_', '-')} (camera)")
+    for leaf in ("camera", "body", "world") if not rig else ("body", "world"):
         send_points(f"/points/recomputed/{leaf}", hop_frame[leaf], recomputed[leaf], RECOMPUTED_COLOR,
                     f"recomputed ({leaf})")
-    for leaf in ("camera", "body", "world", "target"):
+    for leaf in ("camera", "body", "world", "target") if not rig else ("body", "world", "target"):
         logged = as_run[leaf]
         send_points(f"/points/as_run/{leaf}", hop_frame[leaf], logged, AS_RUN_COLOR, f"as-run ({leaf})")
         both = np.flatnonzero(np.isfinite(logged).all(axis=1) & np.isfinite(recomputed[leaf]).all(axis=1))

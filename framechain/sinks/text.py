@@ -32,6 +32,7 @@ class FindingCells(NamedTuple):
     evidence: str
     fix: str
     strength: str = "strong"  # "weak": its interval holds no fault, its confidence is low or it is under its bound
+    camera: str = ""  # the camera the finding concerns ("" for the chain as a whole)
 
 
 @dataclass(frozen=True)
@@ -46,10 +47,10 @@ class FindingView:
 
     def cells(self) -> FindingCells:
         f = self.finding
-        hop = f.hop.value + (f" on camera {f.camera}" if f.camera else "")
-        return FindingCells(fault=f.fault.value, hop=hop, estimate=format_estimate(f.estimate),
+        return FindingCells(fault=f.fault.value, hop=f.hop.value, estimate=format_estimate(f.estimate),
                             interval=format_interval(f.interval), share=f"{f.share:.0%}", error=self.error(),
-                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix, strength=f.strength)
+                            confidence=f"{f.confidence:.2f}", evidence=f.evidence, fix=f.fix, strength=f.strength,
+                            camera=f.camera or "")
 
     def error(self) -> str:
         """The error the finding explains: millimetres, or deg/s of a camera's rotation rate."""
@@ -74,7 +75,11 @@ class FindingView:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
         weak = f"weak ({'; '.join(self.finding.weak_because)}): " if self.finding.strength == "weak" else ""
-        return f"{weak}{c.fault} on {c.hop}; {estimate}; {size}."
+        return f"{weak}{c.fault} on {c.hop}{self.on_camera()}; {estimate}; {size}."
+
+    def on_camera(self) -> str:
+        """`` on camera <frame>`` for a finding that concerns one camera, else ""."""
+        return f" on camera {self.finding.camera}" if self.finding.camera else ""
 
 
 #: The style of the HTML reports (one log's and the fleet's).

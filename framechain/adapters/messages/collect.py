@@ -117,7 +117,11 @@ class Collector:
         self.depth_from_pose: dict[str, int] = {}  # detections whose hypothesis pose carried a depth, by topic
         # fiducials (tags, markers in images, camera-frame points): resolved once the cameras are known
         self.fiducials = _fiducial_rows(chain)
-        self.marker_finder: Any = None  # a markers.MarkerFinder, made when an image topic is read
+        self.marker_finders: dict[str, Any] = {}  # a markers.MarkerFinder per dictionary, made when an image is read
+        #: A rig's topics -> the camera they belong to: their messages' header.frame_id is not what decides.
+        self.topic_frames = chain.topic_frames() if chain else {}
+        self.relabelled: Counter[tuple[str, str, str]] = Counter()  # (topic, header frame, camera frame)
+        self._relabelled_obs = 0  # observations relabelled so far
         self._fiducials_resolved: tuple[int, ResolvedFiducials] | None = None
         self._obs_ids: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)  # in append order
         self.transforms = TransformRows()
@@ -341,20 +345,22 @@ class Collector:
             return
         width, height, encoding = meta
         stamp = ros_stamp_ns(msg.header.stamp)
-        self.depth_frames.append(topic, log_ns, msg.header.frame_id, stamp, width, height, encoding)
+        frame = self._camera_frame(topic, msg.header.frame_id)
+        self.depth_frames.append(topic, log_ns, frame, stamp, width, height, encoding)
         if encoding.startswith("compressedDepth"):
             return  # a PNG: only the whole frame decodes, so it is fetched when needed
         try:
             raw = raw_depth_pixels(msg)
         except ValueError:  # pixels shorter than the header says: the fetch reports it if a detection needs it
             return
-        if self.depth_keeper.add_frame(len(self.depth_frames) - 1, msg.header.frame_id, stamp, log_ns, raw):
+        if self.depth_keeper.add_frame(len(self.depth_frames) - 1, frame, stamp, log_ns, raw):
             self.settle_depth(final=False)
 
     def settle_depth(self, *, final: bool) -> None:
         """Hand the detections read since the last call to the depth keeper and let it cut windows."""
         if self.flush_observations is not None and not final:
             self.flush_observations()
+        self._relabel_observations()
         start, end = self._kept_obs, len(self.observations)
         if end > start:
             frames, stamps, logs, uvd = self.observations.pixels(start, end)
@@ -406,19 +412,59 @@ class Collector:
             Kind.DETECTIONS_3D: f.detections_3d, Kind.CAMERA_POINT: f.camera_point,
         }
         table.update(fiducial_handlers)
-        if kind == Kind.MARKER_IMAGE and self.chain is not None and self.chain.evidence.markers is not None:
-            if self.marker_finder is None:  # here, not per message: a bad dictionary is one error
-                from framechain.adapters.messages.markers import MarkerFinder
-
-                self.marker_finder = MarkerFinder(self.chain.evidence.markers.dictionary, f)
-            find: Callable[[str, int, Any], None] = self.marker_finder.image
-
+        if kind == Kind.MARKER_IMAGE and self.chain is not None:
             def handle(topic: str, log_ns: int, msg: Any) -> None:  # searched for markers, and shown
-                find(topic, log_ns, msg)
+                finder = self._marker_finder(topic)
+                if finder is not None:
+                    finder.image(topic, log_ns, msg)
                 self.image(topic, log_ns, msg)
 
             return handle
         return table.get(kind)
+
+    def _marker_finder(self, topic: str) -> Any:
+        """The finder of the markers searched for in ``topic`` (a rig camera's own, else the chain's)."""
+        assert self.chain is not None
+        own = next((c.markers for c in self.chain.cameras if c.image == topic), None)
+        spec = own or self.chain.evidence.markers
+        if spec is None:
+            return None
+        if spec.dictionary not in self.marker_finders:
+            from framechain.adapters.messages.markers import MarkerFinder
+
+            self.marker_finders[spec.dictionary] = MarkerFinder(spec.dictionary, self.fiducials)
+        if own is not None and own.size_m is not None:
+            self.fiducials.marker_size_of_topic[topic] = own.size_m
+        return self.marker_finders[spec.dictionary]
+
+    def _camera_frame(self, topic: str, frame: str) -> str:
+        """The frame of a message: its rig camera's when the chain names its topic, else its header's."""
+        mine = self.topic_frames.get(topic)
+        if mine is None:
+            return frame
+        if frame.lstrip("/") != mine:
+            self.relabelled[(topic, frame, mine)] += 1
+        return mine
+
+    def _relabel_observations(self) -> None:
+        """Observations appended since the last call take their rig camera's frame (by topic)."""
+        if not self.topic_frames:
+            return
+        rows = self.observations
+        for i in range(self._relabelled_obs, len(rows)):
+            rows.frame[i] = self._camera_frame(rows.topic[i], rows.frame[i])
+        self._relabelled_obs = len(rows)
+
+    def _relabel_read_tables(self) -> None:
+        """Camera models, images and fiducials (not needed while reading) take their rig camera's frame."""
+        if not self.topic_frames:
+            return
+        for rows in (self.cameras, self.image_frames, self.fiducials):
+            rows.frame = [self._camera_frame(t, f) for f, t in zip(rows.frame, rows.topic, strict=True)]
+        self._relabel_observations()
+        for (topic, frame, mine), n in sorted(self.relabelled.items()):
+            self.notes.append(f"topic {topic}: header.frame_id {frame!r} on {n} detections (or camera models, "
+                              f"images), but the chain gives this topic to camera {mine!r}: they are that camera's")
 
     # -- build ------------------------------------------------------------------------------------
     def build(self, fetch: FrameFetch | None, metadata: Mapping[str, Any]) -> tuple[Timeline, list[str]]:
@@ -428,6 +474,7 @@ class Collector:
             self._apply_realsense_layout()
         for (topic, what), count in sorted(self.skipped.items()):
             self.notes.append(f"topic {topic}: {what} ({count} message{'s' if count != 1 else ''})")
+        self._relabel_read_tables()
         for topic, count in sorted(self.depth_from_pose.items()):
             self.notes.append(
                 f"topic {topic}: {count} detections carry a depth in results[0].pose.pose.position.z; it is used as "
@@ -481,12 +528,12 @@ class Collector:
     def _add_fiducial_observations(self, cameras: CameraTable) -> CameraTable:
         """Fiducial detections as observation rows (tag PnP, projections) with the final camera models; the
         camera table, with a camera-less model for each camera whose 3D points needed no intrinsics."""
-        if self.marker_finder is not None:
-            self.notes.extend(self.marker_finder.notes())
+        for finder in self.marker_finders.values():
+            self.notes.extend(finder.notes())
         if not len(self.fiducials):
             return cameras
         hint = ""
-        if self.chain is not None and self.chain.calibration:
+        if self.chain is not None and self.chain.calibration_sources():
             hint = "the chain's calibration gives no camera with this frame; add calibration: {file:, camera:, frame:}"
         resolved = resolve_fiducials(self.fiducials, cameras, calibration_hint=hint)
         self.notes.extend(resolved.notes)

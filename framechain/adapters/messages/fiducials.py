@@ -98,6 +98,8 @@ class FiducialRows:
 
     size_for_tag: Callable[[str], float] = field(default=lambda label: math.nan)
     size_for_marker: Callable[[str], float] = field(default=lambda label: math.nan)
+    #: A rig camera's own marker size, by its image topic (it wins over ``size_for_marker``).
+    marker_size_of_topic: dict[str, float] = field(default_factory=dict)
     stamp_ns: list[int] = field(default_factory=list)
     log_time_ns: list[int] = field(default_factory=list)
     frame: list[str] = field(default_factory=list)
@@ -118,8 +120,9 @@ class FiducialRows:
                     corners: Sequence[float], centre: tuple[float, float] = (math.nan, math.nan), *,
                     score: float = math.nan, from_image: bool = False) -> None:
         """One tag by its four pixel corners (u0, v0, .., u3, v3) in the detector's order."""
-        self._row(topic, log_ns, stamp_ns, frame, label, score, _CORNERS,
-                  self.size_for_marker(label) if from_image else self.size_for_tag(label))
+        size = (self.marker_size_of_topic.get(topic, self.size_for_marker(label)) if from_image
+                else self.size_for_tag(label))
+        self._row(topic, log_ns, stamp_ns, frame, label, score, _CORNERS, size)
         self.corners_px.extend(float(c) for c in corners)
         self.centre_px.extend(centre)
         self.point_cam.extend((math.nan, math.nan, math.nan))

@@ -110,6 +110,14 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
             named[t.detections] = Kind.DETECTIONS
         if t.image:  # markers are searched in it and it is shown; or only shown
             named[t.image] = Kind.MARKER_IMAGE if chain.evidence.markers is not None else Kind.IMAGE
+        for cam in chain.cameras:  # a rig: every camera's own topics
+            named[cam.detections] = Kind.DETECTIONS
+            for topic, kind in ((cam.camera_info, Kind.CAMERA_INFO), (cam.depth, Kind.DEPTH)):
+                if topic:
+                    named[topic] = kind
+            if cam.image:
+                markers = cam.markers or chain.evidence.markers
+                named[cam.image] = Kind.MARKER_IMAGE if markers is not None else Kind.IMAGE
         for topic in chain.evidence_topics():
             named[topic] = Kind.POINT
     for name, msgtype in norm.items():
@@ -139,7 +147,7 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
             # where the chain leaves the slot empty, so the tree stays complete).
             if kind_or_none in (Kind.TF, Kind.TRANSFORM, Kind.JOINT_STATE) or (
                 (kind_or_none == Kind.ODOMETRY and not chain.topics.odometry)
-                or (kind_or_none == Kind.CAMERA_INFO and (realsense or not chain.topics.camera_info))
+                or (kind_or_none == Kind.CAMERA_INFO and (realsense or not _names_camera_info(chain)))
             ):
                 out[name] = kind_or_none
             continue
@@ -148,3 +156,8 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
         elif msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
             out[name] = Kind.DEPTH
     return out
+
+
+def _names_camera_info(chain: ChainConfig) -> bool:
+    """Whether the chain names its CameraInfo topics (then only those are read)."""
+    return bool(chain.topics.camera_info) or any(c.camera_info for c in chain.cameras)

@@ -62,7 +62,7 @@ def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
         return ChainAdditions([], [], [])
     notes: list[str] = list(chain.notes)
     cameras: list[FileCamera] = []
-    for entry in chain.calibration:
+    for entry in chain.calibration_sources():
         path = chain.resolve(entry.file)
         intrinsics = read_intrinsics_file(path, camera=entry.camera)
         notes.extend(intrinsics.notes)

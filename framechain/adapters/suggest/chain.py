@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -13,9 +14,10 @@ import yaml
 
 from framechain.adapters.messages.kinds import POSE_TYPES, normalize_msgtype
 from framechain.adapters.model import LoadedLog, LogInfo
-from framechain.adapters.suggest.facts import POINT_TYPES, LogFacts, detection_topics, log_facts
+from framechain.adapters.suggest.facts import POINT_TYPES, LogFacts, beside_yaml, detection_topics, log_facts
 from framechain.adapters.suggest.frame_tree import tree_roots
 from framechain.adapters.suggest.needs import PLACEHOLDER_FRAMES, REPLAY_PIECES, ChainNeed, NeedStatus, chain_needs
+from framechain.adapters.suggest.rig import rig_suggestion, rig_yaml_body
 from framechain.arrays import rows_of
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
 from framechain.timeline import ObservationTable, TransformTable
@@ -28,6 +30,8 @@ class SuggestedChain:
     config: ChainConfig
     placeholders: Mapping[str, str] = field(default_factory=dict)
     needs: tuple[ChainNeed, ...] = ()
+    #: Where the suggestion's numbers came from, one comment line each (a rig's calibration files).
+    comments: tuple[str, ...] = ()
 
     @property
     def ready(self) -> bool:
@@ -59,8 +63,11 @@ class SuggestedChain:
                 else "# chain suggested by `framechain info`; edit before use"]
         if not self.ready:
             head.append("# NOT READY: this log lacks pieces of the chain (the FILL IN comments below)")
+        head.extend(f"# {c}" for c in self.comments)
         lines = ["frames:"]
-        for slot in ("camera", "body", "world"):
+        slots = ("camera", "body", "world") if not self.config.cameras else tuple(s for s in ("body", "world")
+                                                                                  if s in frames)
+        for slot in slots:
             if slot in self.placeholders:
                 lines.append(f"  # {slot}: FILL IN  # placeholder: {self.placeholders[slot]}")
             else:
@@ -73,7 +80,8 @@ class SuggestedChain:
                 del evidence[name]
         if "evidence" in raw and not evidence:
             del raw["evidence"]
-        body = yaml.safe_dump(raw, sort_keys=False).rstrip("\n")
+        body = ("\n".join(rig_yaml_body(self.config)) if self.config.cameras else
+                yaml.safe_dump(raw, sort_keys=False).rstrip("\n"))
         tail = []
         if todo:
             tail.append("# FILL IN what the log lacks: add these keys, replacing the CAPITALS")
@@ -144,6 +152,12 @@ def suggest(loaded: LoadedLog) -> SuggestedChain:
                            odometry=_odometry_topic(loaded, frames.body) if body is not None else None),
         evidence=evidence_from_names(loaded.info),
     )
+    if len(detections) > 1 and body is None:  # several cameras of a rig the files beside the log calibrate
+        path = Path(str(getattr(loaded.info, "path", "")))
+        rig = rig_suggestion(loaded, detections, beside_yaml(path) if str(path) not in ("", ".") else [], body=None,
+                             world=None)
+        if rig is not None:
+            return SuggestedChain(config=rig[0], needs=tuple(chain_needs(loaded, rig[0])), comments=tuple(rig[1]))
     needs = chain_needs(loaded, config, placeholders=placeholders)
     return SuggestedChain(config=config, placeholders=placeholders, needs=tuple(needs))
 

@@ -90,6 +90,8 @@ def chain_needs(
         return _dataset_needs(loaded, chain)
     holes = dict(placeholders or {})
     facts = log_facts(loaded)
+    if chain.cameras:
+        return rig_needs(loaded, chain, facts)
     frames = chain.frames
     path = Path(str(getattr(loaded.info, "path", "")))
     beside = beside_yaml(path) if str(path) not in ("", ".") else []
@@ -330,6 +332,49 @@ def _depth_need(
                          f"topics.depth: {depth_images[0]}")
     return ChainNeed("depth", NeedStatus.MISSING, "no depth images, no depth in the detections, no tag size",
                      "topics.depth: DEPTH_IMAGE_TOPIC; or evidence.tag_size_m: TAG_EDGE_M  (fiducial corners)")
+
+
+def rig_needs(loaded: LoadedLog, chain: ChainConfig, facts: LogFacts) -> list[ChainNeed]:
+    """Each piece of a rig chain, checked for every camera (the chain's calibration files and mounts count as
+    found: the log may have been read without them)."""
+    frames = chain.frames
+    cams = chain.cameras
+    obs = loaded.timeline.observations
+    mounted = {m.child for m in chain.mounts}
+    calibrated = {c.frame for c in cams if c.calibration is not None} | set(loaded.timeline.cameras.frame.tolist())
+    lacking_topics = [c.detections for c in cams if c.detections not in facts.msgtypes]
+    counts = ", ".join(f"{c.frame} {int((obs.source == c.detections).sum())}" for c in cams)
+    sized = chain.evidence.tag_size_m is not None or any(c.depth for c in cams)
+    unmounted = [c.frame for c in cams if c.frame not in mounted and frame_path(facts.edges, frames.body, c.frame)
+                 is None]
+    uncalibrated = [c.frame for c in cams if c.frame not in calibrated]
+    needs = [
+        ChainNeed("camera frame", NeedStatus.FOUND, f"{len(cams)} cameras: {', '.join(c.frame for c in cams)} "
+                  "(each the camera of its detections topic)"),
+        _rig_need("intrinsics", uncalibrated, "every camera's calibration", "calibration: {file: CAMERAS.yaml, "
+                  "camera: NAME} under each camera"),
+        _rig_need("detections", lacking_topics, f"detections per camera: {counts}", "detections: TOPIC under each "
+                  "camera (the log's topics)"),
+        ChainNeed("depth", NeedStatus.FOUND if sized else NeedStatus.MISSING,
+                  "tag sizes (depth by PnP)" if sized else "no tag size and no depth topic",
+                  "" if sized else "evidence.tag_size_m: TAG_EDGE_M"),
+        _rig_need("mount", unmounted, f"every camera mounted on {frames.body}",
+                  f"mounts: [{{parent: {frames.body}, child: CAMERA, xyz: [X, Y, Z], rotvec: [RX, RY, RZ]}}]"),
+    ]
+    if chain.has_pose:
+        needs.append(_pose_need(chain, {}, facts))
+    else:
+        needs.append(ChainNeed("pose", NeedStatus.FOUND, f"none: {frames.body} has no pose, its cameras are "
+                               "compared at the same instant in its frame"))
+    needs.append(_evidence_need(chain, cams[0].detections, facts) if not chain.evidence.moving_labels else
+                 ChainNeed("evidence", NeedStatus.FOUND, "labels seen by several cameras at once"))
+    return needs
+
+
+def _rig_need(piece: str, lacking: list[str], found: str, key: str) -> ChainNeed:
+    if lacking:
+        return ChainNeed(piece, NeedStatus.MISSING, f"not for {', '.join(lacking)}", key)
+    return ChainNeed(piece, NeedStatus.FOUND, found)
 
 
 def _mount_key(body: str, camera: str) -> str:
