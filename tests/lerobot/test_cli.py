@@ -65,7 +65,7 @@ def test_report_writes_html(latency_case: tuple[ArmDataset, Path], tmp_path: Pat
                  "--bootstrap", "5", "-q"])
     assert code == 0
     page = (tmp_path / "report.html").read_text()
-    assert "<td><b>latency</b></td><td>camera_to_body</td><td>+40" in page
+    assert "<td><b>latency</b></td><td>camera_to_body</td><td>-</td><td>+40" in page  # no camera named: the one
     assert page.count("<img ") >= 4  # the plots are embedded
 
 

@@ -9,6 +9,7 @@ permuted between its topics): then each camera is named after its topic's namesp
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeGuard
@@ -152,7 +153,7 @@ def rig_yaml_body(config: ChainConfig) -> list[str]:
     for c in config.cameras:
         entry: dict[str, Any] = {k: v for k, v in (("frame", c.frame), ("detections", c.detections)) if v}
         if c.calibration is not None:
-            entry["calibration"] = {"file": c.calibration.file, **({"camera": c.calibration.camera}
+            entry["calibration"] = {"file": _from_cwd(config, c.calibration.file), **({"camera": c.calibration.camera}
                                                                      if c.calibration.camera else {})}
         lines.append("  - " + _flow(entry))
     lines.append("mounts:")
@@ -170,3 +171,11 @@ def _flow(value: Mapping[str, Any]) -> str:
 
 
 __all__ = ["RIG_BODY", "kalibr_cameras", "rig_suggestion", "rig_yaml_body", "tag_sizes"]
+
+
+def _from_cwd(config: ChainConfig, file: str) -> str:
+    """A calibration file beside the log, as a path from the working directory: the printed chain is saved
+    there (``info LOG --chain > chain.yaml``), and a chain's relative paths are read from its own folder."""
+    if not config.base_dir or Path(file).is_absolute():
+        return file
+    return os.path.relpath(Path(config.base_dir) / file)
