@@ -48,7 +48,8 @@ class Bound:
     ``min_detectable`` is the smallest fault (in the estimate's own key and unit; for a factor or a
     scale its deviation from 1) that framechain's own thresholds would have made a finding, None
     when the family is not observable here. ``unobservable_axes`` are the rotation axes (unit, in the
-    mount's link frame) the evidence cannot see when the others are observable.
+    mount's link frame) the evidence cannot see when the others are observable. ``camera``: the
+    camera whose chain the bound is of ("" for the chain's one camera).
     """
 
     hop: HopName
@@ -59,6 +60,7 @@ class Bound:
     unobservable_axes: tuple[tuple[float, float, float], ...] = ()
     #: a rotation's weakest axis seen (unit, in the mount's link frame): ``min_detectable`` is about it
     axis: tuple[float, float, float] | None = None
+    camera: str = ""
 
     @property
     def size(self) -> float | None:
@@ -66,9 +68,10 @@ class Bound:
             return None
         return self.min_detectable[SIZE_KEYS[self.fault]]
 
-    def text(self) -> str:
-        """``4.1 ms pose latency`` (observable) or ``pose latency`` (not)."""
-        name = family_name(self.fault, self.hop)
+    def text(self, *, camera: bool = True) -> str:
+        """``4.1 ms pose latency`` (observable) or ``pose latency`` (not); ``... on camera X`` for a camera's
+        (unless ``camera`` is False: a sentence naming the camera once for several families)."""
+        name = family_name(self.fault, self.hop) + (f" on camera {self.camera}" if self.camera and camera else "")
         if self.size is None:
             return name
         return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
@@ -84,6 +87,8 @@ class Bound:
                                "min_detectable": None if self.min_detectable is None else
                                {k: round(v, 6) for k, v in self.min_detectable.items()},
                                "why": self.why}
+        if self.camera:
+            out["camera"] = self.camera
         if self.axis is not None:
             out["axis"] = list(self.axis)
         if self.unobservable_axes:
@@ -91,21 +96,30 @@ class Bound:
         return out
 
 
-def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName]] = ()) -> str:
+Found = tuple[Fault, HopName] | tuple[Fault, HopName, str]
+
+
+def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str:
     """``No fault above 4 ms pose latency, 0.3 deg mount rotation; not observable here: depth scale (...)``.
 
-    Families with a finding (``found``) are left out; with findings the sentence says "no other
-    fault". Empty when there are no bounds.
+    Families with a finding (``found``: fault, hop and, for a camera's finding, its camera) are left
+    out; with findings the sentence says "no other fault". Empty when there are no bounds.
     """
-    families_found = {(_family(f), h) for f, h in found}
-    rest = [b for b in bounds if (_family(b.fault), b.hop) not in families_found]
-    seen = [b.text() for b in rest if b.observable]
+    families_found = {(_family(f[0]), f[1], f[2] if len(f) > 2 else "") for f in found}
+    rest = [b for b in bounds if (_family(b.fault), b.hop, b.camera) not in families_found]
+    # A camera's families are named together, the camera once.
+    by_camera: dict[str, list[str]] = {}
+    for b in rest:
+        if b.observable:
+            by_camera.setdefault(b.camera, []).append(b.text(camera=False))
+    seen = [f"{_and(names)} on camera {camera}" if camera else ", ".join(names) for camera, names in by_camera.items()]
     # Families not observable for one cause are named together, with the cause (the why up to its colon).
-    causes: dict[str, list[str]] = {}
+    causes: dict[tuple[str, str], list[str]] = {}
     for b in rest:
         if not b.observable:
-            causes.setdefault(b.why.split(":")[0].rstrip("."), []).append(b.text())
-    blind = [f"{_and(names)} ({cause})" for cause, names in causes.items()]
+            causes.setdefault((b.why.split(":")[0].rstrip("."), b.camera), []).append(b.text(camera=False))
+    blind = [f"{_and(names)}{f' on camera {camera}' if camera else ''} ({cause})"
+             for (cause, camera), names in causes.items()]
     parts = []
     if seen:
         parts.append(f"No {'other ' if found else ''}fault above {', '.join(seen)}")

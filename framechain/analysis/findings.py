@@ -180,7 +180,7 @@ class Attribution:
                     "target): nothing could be checked.")
         if self.metric == "camera_motion":
             return self._motion_verdict(summary)
-        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
+        bounds = self._bounds_sentence()
         unseen = self._rig_unobservable()
         if not self.findings:
             against = (f"median error {summary['median'] * 1e3:.1f} mm against the "
@@ -196,6 +196,18 @@ class Attribution:
                  f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}.")
         return found + (f" {bounds}" if bounds else "")
 
+    def _bounds_sentence(self) -> str:
+        """The bounds of the families not found, or what was not bounded when nothing measured them."""
+        if not self.bounds:
+            words = METRIC_WORDS.get(self.metric, self.metric.replace("_", " "))
+            return (f"Not bounded: the smallest fault this log would have shown was not computed for evidence "
+                    f"from the {words}, so no finding does not mean no fault.")
+        return bounds_sentence(self.bounds, [(f.fault, f.hop, f.camera or "") for f in self.findings])
+
+    def _then_bounds(self) -> str:
+        bounds = self._bounds_sentence()
+        return f" {bounds}" if bounds else ""
+
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
         """The verdict of a run measured by the cameras' own motion against forward kinematics."""
         rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
@@ -204,12 +216,12 @@ class Attribution:
             why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
             return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
         if not self.findings:
-            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}."
+            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}." + self._then_bounds()
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
         on = f" on camera {top.camera}" if top.camera else ""
         return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
-                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.")
+                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}." + self._then_bounds())
 
     def _rig_unobservable(self) -> str:
         """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""

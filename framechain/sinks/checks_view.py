@@ -37,9 +37,14 @@ LABEL_NOTE = {
 def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
     """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
     observable", and why."""
-    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop) for f in result.findings}
-    return [(family_name(b.fault, b.hop), b.hop.value, _bound_cell(b, (b.fault, b.hop) in found), b.why)
-            for b in result.bounds]
+    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop, f.camera or "") for f in result.findings}
+    return [(family_name(b.fault, b.hop) + (f" on camera {b.camera}" if b.camera else ""), b.hop.value,
+             _bound_cell(b, (b.fault, b.hop, b.camera) in found), b.why) for b in result.bounds]
+
+
+#: In place of the bounds table when no bound was computed for the run's evidence.
+NOT_BOUNDED = ("Not computed for this evidence: the smallest fault this log would have shown is not known, so no "
+               "finding does not mean no fault.")
 
 
 def _bound_cell(bound: Bound, found: bool) -> str:
@@ -128,8 +133,9 @@ def checks_markdown(result: Attribution, figures: Sequence[Any]) -> str:
     lines = ["## What this log can show", "",
              "The smallest fault of each family framechain's own thresholds would have made a finding here, "
              "or why the evidence cannot show it.", "",
-             "| " + " | ".join(BOUND_COLUMNS) + " |", "| " + " | ".join("---" for _ in BOUND_COLUMNS) + " |",
-             *("| " + " | ".join(c.replace("|", "/") for c in row) + " |" for row in bound_rows(result)), ""]
+             *(["| " + " | ".join(BOUND_COLUMNS) + " |", "| " + " | ".join("---" for _ in BOUND_COLUMNS) + " |",
+                *("| " + " | ".join(c.replace("|", "/") for c in row) + " |" for row in bound_rows(result))]
+               if result.bounds else [NOT_BOUNDED]), ""]
     for fig in figures:
         lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
     if result.labels.rows:
@@ -144,12 +150,15 @@ def checks_html(result: Attribution, figures: Sequence[Any], figure_html: Any) -
     """The same sections as HTML (``figure_html`` embeds a figure)."""
     e = html.escape
     parts = ["<h2>What this log can show</h2><p>The smallest fault of each family framechain's own thresholds "
-             "would have made a finding here, or why the evidence cannot show it.</p><table><tr>",
-             "".join(f"<th>{e(c)}</th>" for c in BOUND_COLUMNS), "</tr>"]
-    for row in bound_rows(result):
-        style = "" if row[2] != "not observable" else " style='color:#777'"
-        parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>")
-    parts.append("</table>")
+             "would have made a finding here, or why the evidence cannot show it.</p>"]
+    if result.bounds:
+        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in BOUND_COLUMNS) + "</tr>")
+        for row in bound_rows(result):
+            style = "" if row[2] != "not observable" else " style='color:#777'"
+            parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>")
+        parts.append("</table>")
+    else:
+        parts.append(f"<p>{e(NOT_BOUNDED)}</p>")
     if figures:
         parts.append("<div class='plots'>" + "".join(figure_html(f) for f in figures) + "</div>")
     if result.labels.rows:
@@ -172,6 +181,7 @@ def _code(text: str) -> str:
 __all__ = [
     "BOUND_COLUMNS",
     "LABEL_COLUMNS",
+    "NOT_BOUNDED",
     "bound_rows",
     "checks_html",
     "checks_markdown",

@@ -13,6 +13,7 @@ from framechain.analysis.findings import Attribution
 from framechain.sinks.checks_view import (
     BOUND_COLUMNS,
     LABEL_COLUMNS,
+    NOT_BOUNDED,
     bound_rows,
     label_columns,
     label_rows,
@@ -93,9 +94,9 @@ def checks_markdown(result: Attribution) -> str:
     """The verdict, what this log can show and the per-label table, as Markdown."""
     rows = bound_rows(result)
     lines = ["# What this log can show", "", result.verdict, "",
-             "| " + " | ".join(BOUND_COLUMNS[:3]) + " |", "| --- | --- | --- |",
-             *("| " + " | ".join(c.replace("|", "/") for c in row[:3]) + " |" for row in rows), "",
-             *(f"- **{family}** ({hop}): {why}" for family, hop, _, why in rows)]
+             *(["| " + " | ".join(BOUND_COLUMNS[:3]) + " |", "| --- | --- | --- |",
+                *("| " + " | ".join(c.replace("|", "/") for c in row[:3]) + " |" for row in rows), "",
+                *(f"- **{family}** ({hop}): {why}" for family, hop, _, why in rows)] if rows else [NOT_BOUNDED])]
     if result.curves:
         lines += ["", "The error against each family's size is in the bar charts (blue: the rms error, what the fit "
                   "minimises; red: the estimate; grey: the bound either side of no fault, or of the estimate for a "

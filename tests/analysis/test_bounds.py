@@ -213,3 +213,60 @@ def test_one_image_of_markers_cannot_show_a_latency(realdata: Path) -> None:
     assert abs(blind[2]) > np.cos(np.deg2rad(30.0))
     assert _size(rotation) > 5.0  # the other axes, from seven points: only a coarse bound
     assert "not observable here: pose latency" in result.verdict
+
+
+def _held_bag(realdata: Path, out: Path, frames: int) -> Path:
+    """The fiducials bag's one real image (and its CameraInfo) as a fixed camera records it: ``frames``
+    copies 100 ms apart, header stamps moved with them (rosbags' own writer)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag1 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS1_NOETIC)
+    with AnyReader([realdata / "fiducials" / "aruco_images.bag"]) as reader, Writer(out) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                 for c in reader.connections}
+        image = next(m for m in reader.messages() if m[0].topic.endswith("image/compressed"))
+        info = next(m for m in reader.messages() if m[0].topic.endswith("camera_info"))
+        for k in range(frames):
+            for conn, t, raw in (info, image):
+                msg: Any = reader.deserialize(raw, conn.msgtype)
+                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + k * 100_000_000
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
+                writer.write(conns[conn.id], t + k * 100_000_000, store.serialize_ros1(msg, conn.msgtype))
+    return out
+
+
+@pytest.mark.parametrize("turned_deg", [0.0, 5.0])
+def test_a_real_fixed_camera_over_static_markers_cannot_show_latency_or_its_mount(
+    realdata: Path, tmp_path: Path, turned_deg: float,
+) -> None:
+    """The issue's case on a real image: a fixed camera over static markers (the fiducials bag's JPEG held
+    for 12 frames), its mount as declared or turned 5 deg: latency and the mount rotation are not
+    observable, and the verdict says nothing could be checked, not "no fault"."""
+    mount = Rotation.from_quat([-0.5, 0.5, -0.5, 0.5]) * Rotation.from_rotvec(np.deg2rad(turned_deg) * np.array(
+        [0.0, 1.0, 0.0]))
+    chain = ChainConfig.from_dict({
+        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
+        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
+        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
+                    "quat_xyzw": mount.as_quat().tolist()},
+                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
+        "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "static_target": True},
+    })
+    bag = _held_bag(realdata, tmp_path / "held.bag", 12)
+    result = attribute(load_log(bag, chain).timeline, chain, bootstrap=0)
+    assert result.metric == "static_spread"
+    assert result.counts()["replayed"] == 7 * 12  # seven markers in every frame
+    bounds = _bounds(result)
+    latency, rotation = bounds[("latency", "body_to_world")], bounds[("rotation_error", "camera_to_body")]
+    assert latency["observable"] is False
+    assert latency["min_detectable"] is None
+    assert "the body does not move" in latency["why"]
+    assert rotation["observable"] is False
+    assert rotation["min_detectable"] is None
+    assert "the camera does not move relative to the static targets" in rotation["why"]
+    assert result.findings == ()
+    assert result.verdict.startswith("Nothing could be checked")
+    assert "not observable here: pose latency" in result.verdict
+    assert "mount rotation, depth scale and intrinsics scale (the camera does not move" in result.verdict

@@ -67,6 +67,23 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
         "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
 
 
+def test_the_bounds_sentence_names_each_camera_once_and_leaves_out_only_that_camera_s_findings() -> None:
+    latency = Fault.LATENCY, HopName.CAMERA_TO_BODY
+    bounds = [Bound(HopName.CAMERA_TO_BODY, Fault.LATENCY, True, {"offset_s": 0.007}, "", camera="wrist"),
+              Bound(HopName.CAMERA_TO_BODY, Fault.ROTATION_ERROR, True, {"angle_deg": 1.2}, "", camera="wrist"),
+              Bound(HopName.CAMERA_TO_BODY, Fault.LATENCY, False, None, "front is fixed in world", camera="front"),
+              Bound(HopName.CAMERA_TO_BODY, Fault.ROTATION_ERROR, False, None, "front is fixed in world",
+                    camera="front")]
+    assert bounds_sentence(bounds) == (
+        "No fault above 7 ms camera latency and 1.2 deg mount rotation on camera wrist; not observable here: camera "
+        "latency and mount rotation on camera front (front is fixed in world).")
+    # A latency found on the wrist camera leaves out the wrist's latency bound only.
+    assert bounds_sentence(bounds, [(*latency, "wrist")]).startswith(
+        "No other fault above 1.2 deg mount rotation on camera wrist; not observable here: camera latency and")
+    assert bounds[0].to_json()["camera"] == "wrist"
+    assert "camera" not in Bound(HopName.BODY_TO_WORLD, Fault.LATENCY, True, {"offset_s": 0.004}, "").to_json()
+
+
 def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_shares() -> None:
     """A 30 ms stamp offset in the data of a static-target scene: the curve's dip is the generator's
     offset, and the curve at no offset less the curve at the estimate is the finding's millimetres."""

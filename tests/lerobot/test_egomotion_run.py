@@ -121,6 +121,26 @@ def test_a_clean_episode_has_no_finding_over_a_tenth(clean: tuple[VideoDatasetTr
     assert result["verdict"].startswith("No fault beyond noise")
 
 
+def test_a_clean_episode_states_its_bounds(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """attribution.json's bounds of a run measured by the camera's motion: the smallest offset and mount
+    rotation whose interval would exclude no fault, from the camera's own fitted intervals; the verdict says them."""
+    truth, robot = clean
+    result = attribute(truth.root, robot, tmp_path, capsys, episode=1)
+    entry = camera_entry(result)
+    bounds = {b["fault"]: b for b in result["bounds"] if b["camera"] == "wrist_optical_frame"}
+    assert set(bounds) == {"latency", "rotation_error"}  # the carrying link has no size and is seen
+    low, high = entry["offset_interval_s"]
+    latency = bounds["latency"]["min_detectable"]["offset_s"]
+    assert latency == pytest.approx(max(0.005, (high - low) / 2), abs=1e-6)
+    assert bounds["rotation_error"]["observable"] is True
+    angle = bounds["rotation_error"]["min_detectable"]["angle_deg"]
+    assert angle >= 1.0
+    assert bounds["latency"]["hop"] == "camera_to_body"
+    assert (f"No fault above {latency * 1e3:.2g} ms camera latency and {angle:.2g} deg mount rotation on camera "
+            "wrist_optical_frame.") in result["verdict"]
+
+
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path) -> None:
     truth, robot = clean
     before = pipeline.run(truth.root, episode=0, robot=robot, bootstrap=0)
@@ -202,6 +222,12 @@ def test_a_fixed_camera_is_not_observable_and_not_decoded(faulted: tuple[VideoDa
     assert [o["observable"] for o in entry["observable"]] == [False, False, False]
     assert "fixed in world" in entry["observable"][0]["why"]
     assert {f["camera"] for f in result["findings"]} == {"wrist_optical_frame"}
+    # The bounds say the same, per camera, and the verdict names what the fixed camera cannot show.
+    fixed = [b for b in result["bounds"] if b.get("camera") == "front_optical_frame"]
+    assert {b["fault"] for b in fixed} == {"latency", "rotation_error", "wrong_camera_frame"}
+    assert all(not b["observable"] and b["min_detectable"] is None and "fixed in world" in b["why"] for b in fixed)
+    assert ("Not observable here: camera latency, mount rotation and wrong camera frame on camera front_optical_frame "
+            "(camera front_optical_frame is fixed in world") in result["verdict"]
 
 
 def test_intrinsics_off_by_a_clear_factor_are_a_finding(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,

@@ -89,3 +89,26 @@ def test_the_cli_says_a_fixed_camera_could_check_nothing(tmp_path: Path, capsys:
         "latency": False, "rotation_error": False, "depth_scale": False, "intrinsics": False}
     page = (tmp_path / "out" / "report.html").read_text()
     assert "class='verdict'" in page  # not the green "clean" box: nothing could be checked
+
+
+def test_a_rig_without_bounds_says_so_in_every_output(tmp_path: Path) -> None:
+    """A rig is measured against its other cameras, where no bound is computed yet: the verdict, both
+    reports and the Rerun document say that the smallest fault it would have shown is not known."""
+    from framechain.sim.rig import RigSpec, generate_rig
+    from framechain.sinks.checks_view import NOT_BOUNDED
+    from framechain.sinks.rerun_checks import checks_markdown
+
+    scene = generate_rig(RigSpec(cameras=3, duration_s=4.0, rate_hz=15.0, static_tags=8, seed=3, pose="fixed"))
+    run = pipeline.run(scene.timeline, scene.chain, bootstrap=0)
+    result = run.attributed()
+    doc = result.to_json()
+    assert doc["error_m"]["metric"] == "cross_camera"
+    assert doc["bounds"] == []
+    assert doc["verdict"].startswith("No fault beyond noise")
+    assert "Not bounded: the smallest fault this log would have shown was not computed for evidence from the other " \
+           "cameras of the rig" in doc["verdict"]
+    paths = render_report(run, tmp_path)
+    for text in (paths["md"].read_text(), paths["html"].read_text(), checks_markdown(result)):
+        assert "Not bounded" in text  # the verdict
+        assert NOT_BOUNDED in text  # in place of an empty table
+        assert "smallest fault it would find" not in text
