@@ -200,6 +200,9 @@ def test_joint_offsets_and_holds_in_degrees_are_errors() -> None:
 @pytest.mark.parametrize(("edit", "expected"), [
     (("default: 0.16", "default: 160"), "evidence.tag_size_m.default is 160 m, too large for a tag: it looks like "
                                         "millimetres (160 mm is 0.16 m)"),
+    (("tag_size_m: {default: 0.16, 100: 0.10, 101: 0.10, 102: 0.10, 103: 0.10, 104: 0.10, 105: 0.10, 106: 0.10, "
+      "107: 0.10}", "tag_size_m: 160"),
+     "evidence.tag_size_m is 160 m, too large for a tag: it looks like millimetres (160 mm is 0.16 m)"),
     (("rotvec: [-0.0135696, 0.0062165, -3.1391944]", "rpy: [0, 0, 180]"),
      "mounts[0].rpy [0, 0, 180] has an angle of 180, beyond 2 pi: angles are radians, and this looks like degrees "
      "(180 deg is 3.14159 rad)"),
