@@ -59,6 +59,8 @@ class Bound:
     unobservable_axes: tuple[tuple[float, float, float], ...] = ()
     #: a rotation's weakest axis seen (unit, in the mount's link frame): ``min_detectable`` is about it
     axis: tuple[float, float, float] | None = None
+    #: the camera (its optical frame) whose own evidence this is; None: the chain's, from its points
+    camera: str | None = None
 
     @property
     def size(self) -> float | None:
@@ -68,7 +70,7 @@ class Bound:
 
     def text(self) -> str:
         """``4.1 ms pose latency`` (observable) or ``pose latency`` (not)."""
-        name = family_name(self.fault, self.hop)
+        name = family_name(self.fault, self.hop) + ("" if self.camera is None else f" on {self.camera}")
         if self.size is None:
             return name
         return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
@@ -80,7 +82,9 @@ class Bound:
         return f" (not about {', '.join(axis_text(a) for a in self.unobservable_axes)})"
 
     def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value, "observable": self.observable,
+        out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value,
+                               **({} if self.camera is None else {"camera": self.camera}),
+                               "observable": self.observable,
                                "min_detectable": None if self.min_detectable is None else
                                {k: round(v, 6) for k, v in self.min_detectable.items()},
                                "why": self.why}
@@ -91,14 +95,22 @@ class Bound:
         return out
 
 
-def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName]] = ()) -> str:
+def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName, str | None]] = ()) -> str:
     """``No fault above 4 ms pose latency, 0.3 deg mount rotation; not observable here: depth scale (...)``.
 
-    Families with a finding (``found``) are left out; with findings the sentence says "no other
-    fault". Empty when there are no bounds.
+    Families with a finding (``found``: fault, hop, camera) are left out (a camera's own bound only by
+    a finding on that camera); with findings the sentence says "no other fault". Empty when there
+    are no bounds.
     """
-    families_found = {(_family(f), h) for f, h in found}
-    rest = [b for b in bounds if (_family(b.fault), b.hop) not in families_found]
+    cameras_found: dict[tuple[Fault, HopName], set[str | None]] = {}
+    for fault, hop, camera in found:
+        cameras_found.setdefault((_family(fault), hop), set()).add(camera)
+
+    def covered(b: Bound) -> bool:
+        cameras = cameras_found.get((_family(b.fault), b.hop))
+        return cameras is not None and (b.camera is None or b.camera in cameras or None in cameras)
+
+    rest = [b for b in bounds if not covered(b)]
     seen = [b.text() for b in rest if b.observable]
     # Families not observable for one cause are named together, with the cause (the why up to its colon).
     causes: dict[str, list[str]] = {}

@@ -51,6 +51,7 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
                   "measure the chain against",)
     return replace(base, metric="camera_motion", stage="camera_rotation_rate", findings=found.findings,
                    camera_motion=found.entries, rate_residual=(found.residual_before, found.residual_after),
+                   bounds=found.bounds, curves=(),
                    notes=(*notes, *(n for n in found.notes if n not in notes)))
 
 

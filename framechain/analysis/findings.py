@@ -180,7 +180,7 @@ class Attribution:
                     "target): nothing could be checked.")
         if self.metric == "camera_motion":
             return self._motion_verdict(summary)
-        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
+        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop, f.camera) for f in self.findings])
         unseen = self._rig_unobservable()
         if not self.findings:
             against = (f"median error {summary['median'] * 1e3:.1f} mm against the "
@@ -199,17 +199,22 @@ class Attribution:
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
         """The verdict of a run measured by the cameras' own motion against forward kinematics."""
         rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
+        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop, f.camera) for f in self.findings])
+        said = f" {bounds}" if bounds else ""
         observable = [o for entry in self.camera_motion for o in entry.get("observable", ()) if o["observable"]]
         if not self.findings and not observable:
+            if bounds:
+                return ("Nothing could be checked: no camera's own motion can be measured against forward "
+                        f"kinematics; {bounds[0].lower()}{bounds[1:]}")
             why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
             return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
         if not self.findings:
-            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}."
+            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}.{said}"
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
         on = f" on camera {top.camera}" if top.camera else ""
         return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
-                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.")
+                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{said}")
 
     def _rig_unobservable(self) -> str:
         """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""

@@ -63,8 +63,19 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
               Bound(HopName.PIXEL_TO_CAMERA, Fault.INTRINSICS, False, None, "bearing only")]
     assert bounds_sentence(bounds) == ("No fault above 4 ms pose latency, 0.3 deg mount rotation, 1% depth scale; "
                                        "not observable here: intrinsics scale (bearing only).")
-    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY)]) == (
+    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY, None)]) == (
         "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
+
+
+def test_a_cameras_own_bounds_are_left_out_only_by_its_own_findings() -> None:
+    bounds = [Bound(HopName.CAMERA_TO_BODY, Fault.LATENCY, True, {"offset_s": 0.006}, "", camera="wrist"),
+              Bound(HopName.CAMERA_TO_BODY, Fault.LATENCY, False, None, "fixed in world: no motion", camera="front")]
+    assert bounds[0].to_json()["camera"] == "wrist"
+    assert bounds_sentence(bounds) == ("No fault above 6 ms camera latency on wrist; not observable here: camera "
+                                       "latency on front (fixed in world).")
+    assert bounds_sentence(bounds, [(Fault.LATENCY, HopName.CAMERA_TO_BODY, "wrist")]) == (
+        "Not observable here: camera latency on front (fixed in world).")
+    assert bounds_sentence(bounds, [(Fault.LATENCY, HopName.CAMERA_TO_BODY, None)]) == ""
 
 
 def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_shares() -> None:
