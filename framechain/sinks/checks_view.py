@@ -37,9 +37,14 @@ LABEL_NOTE = {
 def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
     """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
     observable", and why."""
-    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop) for f in result.findings}
-    return [(family_name(b.fault, b.hop), b.hop.value, _bound_cell(b, (b.fault, b.hop) in found), b.why)
-            for b in result.bounds]
+    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop, f.camera) for f in result.findings}
+
+    def beyond(b: Bound) -> bool:  # a camera's own bound is beyond a finding on that camera only
+        return any((fault, hop) == (b.fault, b.hop) and (b.camera is None or camera in (None, b.camera))
+                   for fault, hop, camera in found)
+
+    return [(family_name(b.fault, b.hop) + ("" if b.camera is None else f" on {b.camera}"), b.hop.value,
+             _bound_cell(b, beyond(b)), b.why) for b in result.bounds]
 
 
 def _bound_cell(bound: Bound, found: bool) -> str:
