@@ -143,16 +143,15 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
     obs = result.observations
     budget_ms = result.latency_budget_ns / 1e6
     found = list(findings)
-    texts = rr.TextLog.columns(text=[f.text() for f in found], level=[rr.TextLogLevel.ERROR] * len(found)) if found \
-        else None
-    if texts is not None and len(obs):
+    entries = rr.TextLog.columns(text=[f.text() for f in found], level=[rr.TextLogLevel.ERROR] * len(found))
+    if found and len(obs):
         first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
-        rec.send_columns("/log/findings", indexes=obs_indexes(result, first), columns=texts)
+        rec.send_columns("/log/findings", indexes=obs_indexes(result, first), columns=entries)
         rows["/log/findings"] = len(found)
-    elif texts is not None and start_ns is not None:
+    elif found and start_ns is not None:
         # An episode measured by its cameras' motion: the viewer's text log view shows timed entries, not static ones.
         rec.send_columns("/log/findings", indexes=[stamp_column(SENSOR_TIME, np.full(len(found), start_ns))],
-                         columns=texts)
+                         columns=entries)
         rows["/log/findings"] = len(found)
     elif found:
         rec.log("/log/findings", rr.TextLog("\n".join(f.text() for f in found), level=rr.TextLogLevel.ERROR),
