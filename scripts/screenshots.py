@@ -18,6 +18,8 @@ native viewer under Xvfb with llvmpipe gave all-black captures on this machine. 
     .venv/bin/python scripts/screenshots.py --rrd quad.rrd --no-images --body rig --world rig \
         --rig quadruple/bottom_left,quadruple/bottom_right,quadruple/top_left,quadruple/top_right \
         --image-size 1280x1024 --out quad.png
+    .venv/bin/python scripts/screenshots.py --rrd episode.rrd --camera wrist_optical_frame --body base_link \
+        --world world --camera-motion --out episode.png
 
 Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``).
 """
@@ -57,9 +59,9 @@ def free_port() -> int:
 def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
                     bounds: tuple[float, float, float, float] | None, curves: Sequence[str] = (),
                     curves_first: bool = False, rig: tuple[str, ...] = (),
-                    rig_image: tuple[float, float, float, float] | None = None) -> None:
+                    rig_image: tuple[float, float, float, float] | None = None, camera_motion: bool = False) -> None:
     """framechain's default blueprint with the side panels collapsed, for application ``framechain`` (``rig``:
-    the camera frames of a rig, one view each)."""
+    the camera frames of a rig, one view each; ``camera_motion``: the cameras' rotation rate first)."""
     from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
     from framechain.sinks.rerun_common import entity_part
@@ -67,6 +69,7 @@ def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: b
     titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in curves]
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
                                   collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first,
+                                  camera_motion=camera_motion,
                                   cameras=[(f, f"/cameras/{entity_part(f)}", rig_image) for f in rig])
     blueprint.save("framechain", path)
 
@@ -295,6 +298,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-images", action="store_true", help="the recording has no camera images")
     parser.add_argument("--curves-first", action="store_true",
                         help="show the error-against-size curves before the per-hop error (static targets)")
+    parser.add_argument("--camera-motion", action="store_true",
+                        help="a run measured by the cameras' own motion (a LeRobot episode as recorded): the "
+                             "rotation rate from the images against forward kinematics first")
     parser.add_argument("--size", default="1600x900")
     parser.add_argument("--settle", type=float, default=20.0, metavar="S",
                         help="seconds to wait once the data shows, for images to decode (default 20)")
@@ -320,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
         write_blueprint(blueprint, rig[0] if rig else args.camera, args.body, args.world, images=not args.no_images,
                         bounds=None if rig else recorded_bounds(rrd), curves=recorded_curves(rrd),
                         curves_first=args.curves_first, rig=rig,
-                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None)
+                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None, camera_motion=args.camera_motion)
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

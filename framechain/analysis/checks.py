@@ -83,7 +83,8 @@ class Bound:
         return f" (not about {', '.join(axis_text(a) for a in self.unobservable_axes)})"
 
     def to_json(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value, "observable": self.observable,
+        out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value,
+                               "observable": self.observable,
                                "min_detectable": None if self.min_detectable is None else
                                {k: round(v, 6) for k, v in self.min_detectable.items()},
                                "why": self.why}
@@ -96,7 +97,7 @@ class Bound:
         return out
 
 
-Found = tuple[Fault, HopName] | tuple[Fault, HopName, str]
+Found = tuple[Fault, HopName] | tuple[Fault, HopName, str | None]
 
 
 def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str:
@@ -105,7 +106,7 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str
     Families with a finding (``found``: fault, hop and, for a camera's finding, its camera) are left
     out; with findings the sentence says "no other fault". Empty when there are no bounds.
     """
-    families_found = {(_family(f[0]), f[1], f[2] if len(f) > 2 else "") for f in found}
+    families_found = {(_family(f[0]), f[1], (f[2] if len(f) > 2 else "") or "") for f in found}
     rest = [b for b in bounds if (_family(b.fault), b.hop, b.camera) not in families_found]
     # A camera's families are named together, the camera once.
     by_camera: dict[str, list[str]] = {}

@@ -11,25 +11,21 @@ motion alone when some camera moves (a camera fixed in the world cannot stand in
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.checks import SIZE_KEYS, Bound, family_name, size_text
-from framechain.analysis.egomotion_findings import MIN_ANGLE_DEG, MIN_OFFSET_S, motion_findings
+from framechain.analysis.egomotion_findings import motion_findings
 from framechain.analysis.egomotion_run import CameraMotionEvidence
 from framechain.analysis.estimates import format_estimate
 from framechain.analysis.findings import Attribution
 from framechain.analysis.replayed import Replayed
-from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.replay import CameraModel
 from framechain.timeline import CameraTable, Timeline
 
-__all__ = ["motion_bounds", "with_camera_motion"]
+__all__ = ["with_camera_motion"]
 
 
 def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attribution | None,
@@ -55,7 +51,8 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
                   "measure the chain against",)
     return replace(base, metric="camera_motion", stage="camera_rotation_rate", findings=found.findings,
                    camera_motion=found.entries, rate_residual=(found.residual_before, found.residual_after),
-                   bounds=motion_bounds(found.entries), notes=(*notes, *(n for n in found.notes if n not in notes)))
+                   bounds=found.bounds, curves=(),
+                   notes=(*notes, *(n for n in found.notes if n not in notes)))
 
 
 def _unmeasured(replayed: Replayed, chain: ChainConfig, seed: int) -> Attribution:
@@ -81,34 +78,3 @@ def _camera_model(timeline: Timeline, chain: ChainConfig) -> CameraModel:
         return CameraModel.from_table(cams, int(rows[0]))
     return CameraModel.from_table(CameraTable.from_intrinsics(chain.frames.camera, fx=1.0, fy=1.0, cx=0.0, cy=0.0,
                                                               width=1, height=1), 0)
-
-
-#: What a finding from a camera's motion needs besides its interval excluding no fault (estimate's key).
-_WORTH_A_FIX = {Fault.LATENCY: MIN_OFFSET_S, Fault.ROTATION_ERROR: MIN_ANGLE_DEG}
-
-
-def motion_bounds(entries: Sequence[Mapping[str, Any]]) -> tuple[Bound, ...]:
-    """The bounds of a run measured by the cameras' own motion, one per camera and family, from each
-    ``camera_motion`` entry's observability: the time offset and the mount rotation with the smallest
-    fault its interval lets a finding clear; the carrying link only when it cannot be told (it has no size)."""
-    out: list[Bound] = []
-    for entry in entries:
-        camera = str(entry["camera"])
-        for seen in entry.get("observable", ()):
-            fault = Fault(seen["fault"])
-            size = (seen.get("min_detectable") or {}).get(SIZE_KEYS.get(fault, ""))
-            if fault not in _WORTH_A_FIX:
-                if not seen["observable"]:
-                    out.append(Bound(HopName(seen["hop"]), fault, False, None, str(seen["why"]), camera=camera))
-                continue
-            hop = HopName(seen["hop"])
-            if not seen["observable"] or size is None:
-                why = str(seen["why"]) or f"this camera's motion gives no interval for its {family_name(fault, hop)}"
-                out.append(Bound(hop, fault, False, None, why, camera=camera))
-                continue
-            least = size_text(fault, _WORTH_A_FIX[fault])
-            out.append(Bound(hop, fault, True, {SIZE_KEYS[fault]: float(size)},
-                             f"the spread of the 95% interval of the {family_name(fault, hop)} fitted to the camera's "
-                             f"rotation rate against forward kinematics (at least {least}, the smallest worth a fix): "
-                             "a smaller fault leaves no fault inside its interval", camera=camera))
-    return tuple(out)

@@ -211,8 +211,12 @@ class Attribution:
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
         """The verdict of a run measured by the cameras' own motion against forward kinematics."""
         rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
+        bounds = self._bounds_sentence() if self.bounds else ""
         observable = [o for entry in self.camera_motion for o in entry.get("observable", ()) if o["observable"]]
         if not self.findings and not observable:
+            if bounds:
+                return ("Nothing could be checked: no camera's own motion can be measured against forward "
+                        f"kinematics; {bounds[0].lower()}{bounds[1:]}")
             why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
             return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
         if not self.findings:

@@ -317,7 +317,9 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_camera_motion(rec, run, rows)
     if run.attribution is not None and run.attribution.rig is not None:
         log_rig(rec, result, run.attribution.rig, opts, rows)
-    log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
+    moving = run.timeline.transforms.stamp_ns[~run.timeline.transforms.is_static]
+    log_text(rec, result, [FindingView.of(f) for f in run.findings], rows,
+             start_ns=int(moving.min()) if moving.size else None)
     if run.attribution is not None:
         log_checks(rec, run.attribution, rows)
     return rows

@@ -20,9 +20,11 @@ from framechain.sinks.rerun_common import (
     HOP_POINTS,
     REFERENCE_COLOR,
     REPLAY_FRAME_SUFFIX,
+    SENSOR_TIME,
     CameraView,
     RerunOptions,
     obs_indexes,
+    stamp_column,
 )
 from framechain.sinks.text import FindingView
 
@@ -133,18 +135,23 @@ def log_series(
 
 
 def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[FindingView],
-              rows: dict[str, int]) -> None:
-    """Findings (at the first observation), rejected and stale observations, and a summary."""
+              rows: dict[str, int], *, start_ns: int | None = None) -> None:
+    """Findings (at the first observation; without observations at ``start_ns``, the log's first moment),
+    rejected and stale observations, and a summary."""
     import rerun as rr
 
     obs = result.observations
     budget_ms = result.latency_budget_ns / 1e6
     found = list(findings)
+    entries = rr.TextLog.columns(text=[f.text() for f in found], level=[rr.TextLogLevel.ERROR] * len(found))
     if found and len(obs):
         first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
-        rec.send_columns("/log/findings", indexes=obs_indexes(result, first),
-                         columns=rr.TextLog.columns(text=[f.text() for f in found],
-                                                    level=[rr.TextLogLevel.ERROR] * len(found)))
+        rec.send_columns("/log/findings", indexes=obs_indexes(result, first), columns=entries)
+        rows["/log/findings"] = len(found)
+    elif found and start_ns is not None:
+        # An episode measured by its cameras' motion: the viewer's text log view shows timed entries, not static ones.
+        rec.send_columns("/log/findings", indexes=[stamp_column(SENSOR_TIME, np.full(len(found), start_ns))],
+                         columns=entries)
         rows["/log/findings"] = len(found)
     elif found:
         rec.log("/log/findings", rr.TextLog("\n".join(f.text() for f in found), level=rr.TextLogLevel.ERROR),

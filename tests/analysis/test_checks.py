@@ -63,7 +63,7 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
               Bound(HopName.PIXEL_TO_CAMERA, Fault.INTRINSICS, False, None, "bearing only")]
     assert bounds_sentence(bounds) == ("No fault above 4 ms pose latency, 0.3 deg mount rotation, 1% depth scale; "
                                        "not observable here: intrinsics scale (bearing only).")
-    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY)]) == (
+    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY, None)]) == (
         "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
 
 

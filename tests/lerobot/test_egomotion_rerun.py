@@ -48,6 +48,12 @@ def test_the_rotation_rate_curves_are_shifted_by_the_video_delay(tmp_path: Path)
     assert rows["/camera"] >= 1  # the pinhole
     assert rows["/camera/video"] >= 120  # the asset and one reference per frame
     assert rows.get("/tf/gripper_link", 0) >= 120  # the FK frame tree
+    # The findings are entries on the timeline (the viewer's text log view does not list static ones).
+    logged = [chunk for chunk in RrdReader(rrd).stream() if chunk.entity_path == "/log/findings"]
+    assert logged
+    assert not any(chunk.is_static for chunk in logged)
+    texts = [t for chunk in logged for t in chunk.to_record_batch().column("TextLog:text").to_pylist()]
+    assert any("latency" in str(t) for t in texts)
     measured = series(rrd, "/series/rotation_rate_deg_s/wrist/measured")
     declared = series(rrd, "/series/rotation_rate_deg_s/wrist/declared")
     corrected = series(rrd, "/series/rotation_rate_deg_s/wrist/corrected")

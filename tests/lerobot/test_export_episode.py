@@ -150,6 +150,26 @@ def test_other_codecs_become_jpeg_images(tmp_path: Path) -> None:
         assert np.abs(grey.astype(int) - source[k].astype(int)).mean() < 3.0
 
 
+def test_h264_with_b_frames_becomes_jpeg_images(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """x264's default (B-frames) cannot be remuxed for Foxglove, which does not reorder: each frame is a JPEG."""
+    import av
+    import cv2
+
+    spec = VideoDatasetSpec(URDF, seed=43, duration_s=FRAMES / 30, version="v2.1")
+    truth, messages = exported(tmp_path, spec, episode=0)
+    source = truth.root / "videos" / "chunk-000" / truth.video_key / "episode_000000.mp4"
+    with av.open(str(source)) as container:  # the premise: the stored stream has B-frames
+        pts = [p.pts for p in container.demux(video=0) if p.pts is not None]
+    assert (np.diff(pts) < 0).any()
+    assert "/wrist/video" not in messages
+    images = messages["/wrist/image"]
+    assert len(images) == FRAMES
+    frames = video_frames(source, 0.0, FRAMES)
+    grey = cv2.imdecode(np.frombuffer(images[FRAMES // 2][1].data, dtype=np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert np.abs(grey.astype(int) - frames[FRAMES // 2].astype(int)).mean() < 3.0
+    assert "B-frames" in capsys.readouterr().err
+
+
 def test_an_export_with_nothing_to_write_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from mcap.writer import Writer
 
