@@ -59,6 +59,8 @@ class Bound:
     unobservable_axes: tuple[tuple[float, float, float], ...] = ()
     #: a rotation's weakest axis seen (unit, in the mount's link frame): ``min_detectable`` is about it
     axis: tuple[float, float, float] | None = None
+    #: the rig camera (its frame as in the chain) whose fault this bounds; None: the chain's one camera
+    camera: str | None = None
 
     @property
     def size(self) -> float | None:
@@ -66,9 +68,17 @@ class Bound:
             return None
         return self.min_detectable[SIZE_KEYS[self.fault]]
 
-    def text(self) -> str:
-        """``4.1 ms pose latency`` (observable) or ``pose latency`` (not)."""
-        name = family_name(self.fault, self.hop)
+    @property
+    def family(self) -> str:
+        """The family in words; a rig camera's stamp offset against the others is its ``latency``."""
+        if self.camera is not None and self.fault == Fault.LATENCY:
+            return "latency"
+        return family_name(self.fault, self.hop)
+
+    def text(self, *, with_camera: bool = True) -> str:
+        """``4.1 ms pose latency`` (observable) or ``pose latency`` (not); a rig camera's ends ``on <frame>``
+        unless ``with_camera`` is False."""
+        name = self.family + ("" if self.camera is None or not with_camera else f" on {self.camera}")
         if self.size is None:
             return name
         return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
@@ -84,6 +94,8 @@ class Bound:
                                "min_detectable": None if self.min_detectable is None else
                                {k: round(v, 6) for k, v in self.min_detectable.items()},
                                "why": self.why}
+        if self.camera is not None:
+            out["camera"] = self.camera
         if self.axis is not None:
             out["axis"] = list(self.axis)
         if self.unobservable_axes:
@@ -91,30 +103,46 @@ class Bound:
         return out
 
 
-def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName]] = ()) -> str:
+def bounds_sentence(bounds: Sequence[Bound], found: Sequence[tuple[Fault, HopName, str | None]] = ()) -> str:
     """``No fault above 4 ms pose latency, 0.3 deg mount rotation; not observable here: depth scale (...)``.
 
-    Families with a finding (``found``) are left out; with findings the sentence says "no other
-    fault". Empty when there are no bounds.
+    Families with a finding (``found``: fault, hop and the rig camera it is on) are left out; with
+    findings the sentence says "no other fault". Empty when there are no bounds.
     """
-    families_found = {(_family(f), h) for f, h in found}
-    rest = [b for b in bounds if (_family(b.fault), b.hop) not in families_found]
-    seen = [b.text() for b in rest if b.observable]
+    families_found = {(_family(f), h, c) for f, h, c in found}
+    rest = [b for b in bounds if (_family(b.fault), b.hop, b.camera) not in families_found]
+    # A rig camera's families are named together, then the camera: "50 ms latency, 2 deg mount rotation on cam1".
+    seen = _per_camera([b for b in rest if b.observable])
     # Families not observable for one cause are named together, with the cause (the why up to its colon).
-    causes: dict[str, list[str]] = {}
+    causes: dict[str, list[Bound]] = {}
     for b in rest:
         if not b.observable:
-            causes.setdefault(b.why.split(":")[0].rstrip("."), []).append(b.text())
-    blind = [f"{_and(names)} ({cause})" for cause, names in causes.items()]
+            causes.setdefault(b.why.split(":")[0].rstrip("."), []).append(b)
+    blind = [f"{_and(_per_camera(names))} ({cause})" for cause, names in causes.items()]
     parts = []
     if seen:
-        parts.append(f"No {'other ' if found else ''}fault above {', '.join(seen)}")
+        joint = "; " if any(b.camera is not None for b in rest if b.observable) else ", "
+        parts.append(f"No {'other ' if found else ''}fault above {joint.join(seen)}")
     if blind:
         parts.append(f"not observable here: {'; '.join(blind)}")
     if not parts:
         return ""
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
+
+
+def _per_camera(bounds: Sequence[Bound]) -> list[str]:
+    """Each bound's text, a rig camera's families joined and the camera named once, in the order met."""
+    by_camera: dict[str | None, list[Bound]] = {}
+    for b in bounds:
+        by_camera.setdefault(b.camera, []).append(b)
+    out: list[str] = []
+    for camera, mine in by_camera.items():
+        if camera is None:
+            out += [b.text() for b in mine]
+        else:
+            out.append(f"{_and([b.text(with_camera=False) for b in mine])} on {camera}")
+    return out
 
 
 def _and(names: Sequence[str]) -> str:

@@ -180,7 +180,7 @@ class Attribution:
                     "target): nothing could be checked.")
         if self.metric == "camera_motion":
             return self._motion_verdict(summary)
-        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop) for f in self.findings])
+        bounds = bounds_sentence(self.bounds, [(f.fault, f.hop, f.camera) for f in self.findings])
         unseen = self._rig_unobservable()
         if not self.findings:
             against = (f"median error {summary['median'] * 1e3:.1f} mm against the "

@@ -200,7 +200,8 @@ def _weak_because(finding: Finding, bounds: Sequence[Bound]) -> tuple[str, ...]:
     if finding.confidence < WEAK_CONFIDENCE:
         why.append(f"confidence {finding.confidence:.2f} under {WEAK_CONFIDENCE:g}")
     family = Fault.ROTATION_ERROR if finding.fault == Fault.MISSING_ROTATION else finding.fault
-    bound = next((b for b in bounds if b.fault == family and b.hop == finding.hop and b.size is not None), None)
+    bound = next((b for b in bounds if b.fault == family and b.hop == finding.hop and b.camera == finding.camera
+                  and b.size is not None), None)
     if bound is not None and bound.size is not None and scalars:
         value = next(iter(scalars.values()))
         size = abs(value) if family in (Fault.LATENCY, Fault.ROTATION_ERROR) else abs(value - 1.0)

@@ -37,9 +37,9 @@ LABEL_NOTE = {
 def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
     """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
     observable", and why."""
-    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop) for f in result.findings}
-    return [(family_name(b.fault, b.hop), b.hop.value, _bound_cell(b, (b.fault, b.hop) in found), b.why)
-            for b in result.bounds]
+    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop, f.camera) for f in result.findings}
+    return [(b.family + ("" if b.camera is None else f" on {b.camera}"), b.hop.value,
+             _bound_cell(b, (b.fault, b.hop, b.camera) in found), b.why) for b in result.bounds]
 
 
 def _bound_cell(bound: Bound, found: bool) -> str:

@@ -63,8 +63,29 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
               Bound(HopName.PIXEL_TO_CAMERA, Fault.INTRINSICS, False, None, "bearing only")]
     assert bounds_sentence(bounds) == ("No fault above 4 ms pose latency, 0.3 deg mount rotation, 1% depth scale; "
                                        "not observable here: intrinsics scale (bearing only).")
-    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY)]) == (
+    assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY, None)]) == (
         "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
+
+
+def test_a_rig_s_bounds_are_said_per_camera() -> None:
+    """A rig camera's bounds name it once after its families; a finding on one camera leaves that camera's family out
+    only; a gauge camera's families not observable are named with their cause."""
+    def on(camera: str, fault: Fault, hop: HopName, size: dict[str, float] | None, why: str = "") -> Bound:
+        return Bound(hop, fault, size is not None, size, why, camera=camera)
+
+    gauge = "cam0 sets the gauge of its pair with cam1: its fault shows on cam1"
+    bounds = [on("cam1", Fault.LATENCY, HopName.BODY_TO_WORLD, {"offset_s": 0.025}),
+              on("cam1", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, {"angle_deg": 2.0}),
+              on("cam2", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, {"angle_deg": 9.5}),
+              on("cam0", Fault.LATENCY, HopName.BODY_TO_WORLD, None, gauge),
+              on("cam0", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, None, gauge)]
+    assert bounds_sentence(bounds) == (
+        "No fault above 25 ms latency and 2 deg mount rotation on cam1; 9.5 deg mount rotation on cam2; not observable "
+        "here: latency and mount rotation on cam0 (cam0 sets the gauge of its pair with cam1).")
+    assert bounds_sentence(bounds, [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, "cam2")]).startswith(
+        "No other fault above 25 ms latency and 2 deg mount rotation on cam1; not observable here")
+    assert bounds[0].to_json()["camera"] == "cam1"
+    assert "camera" not in Bound(HopName.BODY_TO_WORLD, Fault.LATENCY, True, {"offset_s": 0.004}, "").to_json()
 
 
 def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_shares() -> None:
