@@ -29,6 +29,12 @@ out its nuisance parameters, such as each static target's position):
    and depths a static target's objective sees, or the logged points, target or reference) and refitted from no
    fault, either way round; when neither refit clears the thresholds the bound is raised by half and
    checked again (twice at most).
+
+A rig (:mod:`~framechain.analysis.cross_camera`) is bounded per camera with that camera's own models
+(:attr:`Stage.models`): its noise-free observations are where the cameras meet
+(:meth:`~framechain.analysis.cross_camera.CrossCameraObjective.consensus`), a fault is written into one
+camera's pixels and depths, or into its stamps when the rig's pose does not change with time, and a fault
+within its model's tolerance is never a finding (so never under the bound).
 """
 
 from __future__ import annotations
