@@ -29,6 +29,7 @@ import numpy as np
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.bounds import Stage, bounds, without_evidence
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
+from framechain.analysis.checks import Bound
 from framechain.analysis.curves import curves, label_table
 from framechain.analysis.estimates import format_estimate
 from framechain.analysis.fault_model import FaultModel
@@ -37,7 +38,7 @@ from framechain.analysis.findings import AnalysisError, Attribution, Finding, Me
 from framechain.analysis.fit import perturbation_of
 from framechain.analysis.fixes import FixContext, fix_for
 from framechain.analysis.replayed import Replayed, replay_chain
-from framechain.analysis.rig import rig_inputs, rig_level
+from framechain.analysis.rig import rig_inputs, rig_level, unchecked_bounds
 from framechain.analysis.rig_layout import RigLayout
 from framechain.analysis.selection import (
     HOP_DIVERGENCE_M,
@@ -105,7 +106,7 @@ def attribute_replayed(
     context = _fix_context(replayed.timeline, chain, result, row)
     assembled = _findings(level, inputs, context, np.random.default_rng(seed), bootstrap,
                           rays=replayed.bearing_only, say=say)
-    found_bounds = bounds(level.stages, assembled.kept, say=say, no_depth=replayed.bearing_only)
+    found_bounds = (*bounds(level.stages, assembled.kept, say=say, no_depth=replayed.bearing_only), *level.unchecked)
     say("the error against each family's size, and per label")
     labels = label_table(result.observations.label[result.replayed], assembled.error_after,
                          static=level.metric == "static_spread")
@@ -155,6 +156,8 @@ class _Level:
     #: where each hop's faults are fitted (what the bounds measure)
     stages: tuple[Stage, ...] = ()
     rig: RigLayout | None = None
+    #: families no stage can bound, not observable (a rig's gauge cameras, and those compared with none)
+    unchecked: tuple[Bound, ...] = ()
 
 
 def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, replayed: Replayed,
@@ -187,8 +190,10 @@ def _level(inputs: ChainInputs, evidence: AlignedEvidence, chain: ChainConfig, r
         result = replayed.replay
         sources = {k: _camera_source(replayed.timeline, cam.frame) for k, cam in enumerate(inputs.rig_cameras)}
         rig = rig_level(inputs, chain, result.observations.label[result.replayed], say, camera_sources=sources)
+        # Each camera's own models, measured against the others: its bounds are per camera.
+        stage = Stage.over_evidence(every_hop, rig.objective, inputs, "correction", models=rig.candidates)
         return _Level("cross_camera", rig.objective, rig.evidence_world, [rig.selected], notes=rig.notes,
-                      rig=rig.layout)
+                      stages=(stage,), rig=rig.layout, unchecked=unchecked_bounds(rig.layout))
     if chain.evidence.static_target:
         return _static_level(inputs, chain, replayed, say)
     return None

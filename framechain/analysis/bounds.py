@@ -29,6 +29,12 @@ out its nuisance parameters, such as each static target's position):
    and depths a static target's objective sees, or the logged points, target or reference) and refitted from no
    fault, either way round; when neither refit clears the thresholds the bound is raised by half and
    checked again (twice at most).
+
+A rig (:mod:`~framechain.analysis.cross_camera`) is bounded per camera with that camera's own models
+(:attr:`Stage.models`): its noise-free observations are where the cameras meet
+(:meth:`~framechain.analysis.cross_camera.CrossCameraObjective.consensus`), a fault is written into one
+camera's pixels and depths, or into its stamps when the rig's pose does not change with time, and a fault
+within its model's tolerance is never a finding (so never under the bound).
 """
 
 from __future__ import annotations
@@ -38,8 +44,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from framechain.analysis.chain_model import ChainInputs, Perturbation, hop1, hop2, hop3
+from framechain.analysis.chain_model import CameraDelta, ChainInputs, Perturbation, hop1, hop2, hop3
 from framechain.analysis.checks import SIZE_KEYS, Bound, family_name, size_text
+from framechain.analysis.cross_camera import CrossCameraObjective
 from framechain.analysis.estimates import axis_text
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.faults import LATENCY_BOUND_S, models_for
@@ -48,6 +55,7 @@ from framechain.analysis.selection import MIN_BIC_GAIN, Objective, PointObjectiv
 from framechain.analysis.shares import MIN_SHARE
 from framechain.arrays import BoolArray, FloatArray
 from framechain.catalogue import Fault, HopName
+from framechain.replay import CameraModel
 
 #: Families with a size, the only ones a bound applies to (the others are discrete choices).
 SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)
@@ -83,6 +91,8 @@ class Stage:
     mode: Mode
     gate_m: float | None = None
     rays: bool = False
+    #: the models to bound instead of the catalogue's (a rig: each camera's own, bounded per camera)
+    models: tuple[FaultModel, ...] | None = None
 
     @property
     def static(self) -> bool:
@@ -90,14 +100,15 @@ class Stage:
 
     @classmethod
     def over_evidence(cls, hops: tuple[HopName, ...], objective: Objective, inputs: ChainInputs, mode: Mode,
-                      *, gate_m: float | None = None, rays: bool = False) -> Stage:
+                      *, gate_m: float | None = None, rays: bool = False,
+                      models: tuple[FaultModel, ...] | None = None) -> Stage:
         """Only the observations the selection uses (a finite residual without any fault)."""
         if isinstance(objective, PointObjective):
             objective = replace(objective, weighting=None)
         rows = np.flatnonzero(np.isfinite(objective(inputs, Perturbation())).all(axis=1))
         if rows.size < len(inputs):
             objective, inputs = objective.take(rows), inputs.take(rows)
-        return cls(hops, objective, inputs, mode, gate_m, rays)
+        return cls(hops, objective, inputs, mode, gate_m, rays, models)
 
 
 @dataclass(frozen=True)
@@ -131,8 +142,11 @@ class _Noise:
         penalty = MIN_BIC_GAIN + model.n_params * np.log(max(self.n, 2)) + 2.0 * model.choice_penalty
         return float(self.n * self.variance * np.expm1(penalty / self.n))
 
-    def detected(self, signal: FloatArray, model: FaultModel) -> bool:
-        """Whether a fault adding ``signal`` (N, 3) would be a finding at framechain's thresholds."""
+    def detected(self, signal: FloatArray, model: FaultModel, theta: FloatArray | None = None) -> bool:
+        """Whether a fault adding ``signal`` (N, 3) would be a finding at framechain's thresholds (a fault of
+        parameters ``theta`` within its model's tolerance never is)."""
+        if theta is not None and model.tolerance is not None and model.tolerance(theta):
+            return False
         s = np.nan_to_num(signal)
         if float(np.sum(s * s)) < self.needed_ss(model):
             return False
@@ -143,7 +157,12 @@ class _Noise:
         # The share a finding keeps is a difference of medians: another draw of the noise moves it by about
         # its standard error (paired), which the predicted share must clear as well as the rule.
         share = float(np.median(with_fault[both]) - np.median(without[both]))
-        spread = 1.2533 * float(np.std(with_fault[both] - without[both])) / np.sqrt(both.sum())
+        change = with_fault[both] - without[both]
+        if model.camera is not None:
+            # A rig camera's fault moves its own rows only, by sizes that differ from row to row: that spread is
+            # the signal's shape, not noise. Its noise part is how far each moved row lands from the signal itself.
+            change = np.minimum(np.abs(change), np.abs(with_fault[both] - np.linalg.norm(s[both], axis=1)))
+        spread = 1.2533 * float(np.std(change)) / np.sqrt(both.sum())
         if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
             return False
         if self.gate_m is not None and _median_norm(self.departure) <= self.gate_m:
@@ -173,16 +192,16 @@ def bounds(stages: Sequence[Stage], found: Found, *, say: Callable[[str], None] 
             continue
         say(f"bounding what the evidence can see at {', '.join(h.value for h in stage.hops)}")
         noise = _Noise.of(stage, base)
-        clean = _clean_inputs(stage, base)
+        clean = _clean(stage, base)
         for fault, hop, variants in candidates:
             others = [(m, x) for m, x in mine if m.n_params and m.family != variants[0][0].family]
-            results = [_bound_one(_Probe(stage, clean, base, model, theta0, others), noise)
+            results = [_bound_one(_Probe(stage, *clean, base, model, theta0, others), noise)
                        for model, theta0 in variants]
             out.append(_assemble(stage, fault, hop, results, noise))
     if no_depth:
         out.append(Bound(HopName.PIXEL_TO_CAMERA, Fault.DEPTH_SCALE, False, None,
                          "bearing only: the detections carry no depth to scale"))
-    return tuple(sorted(out, key=lambda b: family_order(b.fault, b.hop)))
+    return tuple(sorted(out, key=lambda b: (*family_order(b.fault, b.hop), b.camera or "")))
 
 
 def family_order(fault: Fault, hop: HopName) -> tuple[int, int]:
@@ -203,9 +222,10 @@ def without_evidence(inputs: ChainInputs) -> tuple[Bound, ...]:
 def bounds_candidates(stage: Stage, mine: Found) -> list[tuple[Fault, HopName, list[tuple[FaultModel, FloatArray]]]]:
     """The sized families at the stage's hops, each with its models (two intrinsics variants) and the
     parameters they start from (a finding's own, else no fault)."""
-    by_family: dict[tuple[Fault, HopName], list[tuple[FaultModel, FloatArray]]] = {}
+    by_family: dict[tuple[Fault, HopName, str | None], list[tuple[FaultModel, FloatArray]]] = {}
     found_by_family = {m.family: (m, x) for m, x in mine}
-    for model in models_for(stage.inputs, stage.hops, blind=stage.static):
+    models = stage.models if stage.models is not None else models_for(stage.inputs, stage.hops, blind=stage.static)
+    for model in models:
         if model.fault not in SIZED or model.n_params == 0 or (stage.rays and model.fault == Fault.DEPTH_SCALE):
             continue
         theta0 = np.asarray(model.x0, dtype=float)
@@ -215,8 +235,8 @@ def bounds_candidates(stage: Stage, mine: Found) -> list[tuple[Fault, HopName, l
                 continue  # another variant was found (intrinsics): its own model bounds the family
             if other.name == model.name:
                 theta0 = np.asarray(x, dtype=float)
-        by_family.setdefault((model.fault, model.hop), []).append((model, theta0))
-    return [(fault, hop, variants) for (fault, hop), variants in by_family.items()]
+        by_family.setdefault((model.fault, model.hop, model.camera), []).append((model, theta0))
+    return [(fault, hop, variants) for (fault, hop, _camera), variants in by_family.items()]
 
 
 # -- the signal of a fault, on noise-free observations ------------------------------------------
@@ -241,26 +261,45 @@ def observations_for(inputs: ChainInputs, pert: Perturbation, world: FloatArray,
     a = np.stack(columns, axis=2)  # a[:, i, k]: world component i of camera axis k
     p_cam = np.einsum("nik,ni->nk", a, world - origin)
     ok = np.isfinite(p_cam).all(axis=1) & (np.nan_to_num(p_cam[:, 2]) > 1e-9)
-    k_matrix = inputs.camera.K.copy()
-    k_matrix[:2, :2] *= pert.focal_scale
-    k_matrix[:2, 2] *= pert.principal_scale
     u, v = inputs.u.copy(), inputs.v.copy()
-    if ok.any():
-        u[ok], v[ok] = replace(inputs.camera, K=k_matrix).project(p_cam[ok])
+    factor = np.full(n, pert.depth_factor)
+    if inputs.camera_index is None:
+        _project(inputs.camera, pert.focal_scale, pert.principal_scale, p_cam, ok, u, v)
+    else:  # a rig: each camera through its own model, with its own focal and depth scales
+        for k, cam in enumerate(inputs.rig_cameras):
+            delta = pert.cameras.get(k, CameraDelta())
+            rows = inputs.camera_index == k
+            _project(cam.camera, pert.focal_scale * delta.focal_scale, pert.principal_scale, p_cam, ok & rows, u, v)
+            factor[rows] *= delta.depth_factor
     depth = inputs.depth_m.copy()
     if not keep_depth:
-        depth[ok] = p_cam[ok, 2] / pert.depth_factor
+        depth[ok] = p_cam[ok, 2] / factor[ok]
     return replace(inputs, u=u, v=v, depth_m=depth)
 
 
-def _clean_inputs(stage: Stage, base: Perturbation) -> ChainInputs:
-    """The observations without their noise: each static target's sightings moved onto its fitted
-    position (the objective's nuisance); logged points and references need none (their residual's
+def _project(camera: CameraModel, focal_scale: float, principal_scale: float, p_cam: FloatArray, rows: BoolArray,
+             u: FloatArray, v: FloatArray) -> None:
+    """Write the pixels of ``p_cam[rows]`` through ``camera`` with scaled intrinsics into ``u``, ``v``."""
+    if not rows.any():
+        return
+    k_matrix = camera.K.copy()
+    k_matrix[:2, :2] *= focal_scale
+    k_matrix[:2, 2] *= principal_scale
+    u[rows], v[rows] = replace(camera, K=k_matrix).project(p_cam[rows])
+
+
+def _clean(stage: Stage, base: Perturbation) -> tuple[Objective, ChainInputs]:
+    """The objective over the observations without their noise, and the rows to evaluate: each static
+    target's sightings moved onto its fitted position (the objective's nuisance), a rig's sightings at one
+    instant onto the point where they meet; logged points and references need none (their residual's
     change is the signal)."""
     objective = stage.objective
     if isinstance(objective, PointObjective):
-        return stage.inputs
-    return observations_for(stage.inputs, base, objective.points(stage.inputs, base), keep_depth=stage.rays)
+        return objective, stage.inputs
+    if isinstance(objective, CrossCameraObjective):
+        return objective.over(observations_for(objective.rig, base, objective.consensus(base))), stage.inputs
+    return objective, observations_for(stage.inputs, base, objective.points(stage.inputs, base),
+                                       keep_depth=stage.rays)
 
 
 def _params(model: FaultModel, theta0: FloatArray, direction: FloatArray, a: float) -> FloatArray:
@@ -277,6 +316,7 @@ class _Probe:
     parameters could absorb (the selection refits them jointly) projected out."""
 
     stage: Stage
+    objective: Objective  # the stage's, over the noise-free observations
     clean: ChainInputs
     base: Perturbation
     model: FaultModel
@@ -285,12 +325,12 @@ class _Probe:
 
     def __post_init__(self) -> None:
         self.start = self.model.apply(self.base, self.theta0)
-        self.at_zero = self.stage.objective(self.clean, self.start)
+        self.at_zero = self.objective(self.clean, self.start)
         columns = [self._column(m, np.asarray(x, dtype=float), k) for m, x in self.others for k in range(m.n_params)]
         self.nuisance = np.linalg.qr(np.stack(columns, axis=1))[0] if columns else None
 
     def _raw(self, pert: Perturbation) -> FloatArray:
-        out: FloatArray = self.stage.objective(self.clean, pert) - self.at_zero
+        out: FloatArray = self.objective(self.clean, pert) - self.at_zero
         out[~np.isfinite(out).all(axis=1)] = 0.0  # not evaluable at that offset: no evidence either way
         return out
 
@@ -333,6 +373,7 @@ class _Result:
     refound: float | None = None  # what the injection check's refit gave (the estimate's key)
     injected: float | None = None
     confirmed: bool = True  # the injection check's refit cleared the thresholds
+    tolerated: bool = False  # the model's tolerance, not the evidence, sets the size (a smaller fault is no finding)
 
 
 def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
@@ -358,8 +399,8 @@ def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
 
 def _detected_at(probe: _Probe, noise: _Noise, direction: FloatArray, a: float) -> bool:
     """Detected at size ``a`` in both directions (the worse counts)."""
-    return all(noise.detected(probe.signal(_params(probe.model, probe.theta0, s * direction, a)), probe.model)
-               for s in (1.0, -1.0))
+    thetas = [_params(probe.model, probe.theta0, s * direction, a) for s in (1.0, -1.0)]
+    return all(noise.detected(probe.signal(theta), probe.model, theta) for theta in thetas)
 
 
 def _smallest(probe: _Probe, noise: _Noise, direction: FloatArray, start: float, limit: float) -> float | None:
@@ -409,8 +450,23 @@ def _injected(stage: Stage, base: Perturbation, model: FaultModel, theta0: Float
     if isinstance(objective, PointObjective):
         change = objective(inputs, model.apply(base, theta)) - objective(inputs, model.apply(base, theta0))
         return replace(objective, evidence=objective.evidence + np.nan_to_num(change)), inputs
+    if isinstance(objective, CrossCameraObjective):
+        return _injected_rig(objective, model.apply(base, theta0), model.apply(base, theta)), inputs
     world = _world_of(inputs, model.apply(base, theta0), hop1(inputs, model.apply(base, theta0)))
     return objective, observations_for(inputs, model.apply(base, theta), world, keep_depth=stage.rays)
+
+
+def _injected_rig(objective: CrossCameraObjective, start: Perturbation, faulty: Perturbation) -> CrossCameraObjective:
+    """A rig's observations with a fault written in: a camera's stamps moved (a rig whose pose does not change
+    with time shows a stamp offset only in which sightings meet), else its pixels and depths rewritten."""
+    shifts = {k: -round((d.offset_s - start.cameras.get(k, CameraDelta()).offset_s) * 1e9)
+              for k, d in faulty.cameras.items()}
+    shifts = {k: ns for k, ns in shifts.items() if ns}
+    if shifts and objective.timeless_pose:
+        return objective.restamped(shifts)
+    rig = objective.rig
+    world = _world_of(rig, start, hop1(rig, start))
+    return objective.over(observations_for(rig, faulty, world))
 
 
 def refound(stage: Stage, noise: _Noise, base: Perturbation, model: FaultModel, theta0: FloatArray,
@@ -427,7 +483,8 @@ def refound(stage: Stage, noise: _Noise, base: Perturbation, model: FaultModel, 
     floor = 2.0 * 1.2533 * float(np.std(fitted.distances)) / np.sqrt(max(fitted.distances.size, 1))
     share = before - after
     ok = (without.bic - fitted.bic >= MIN_BIC_GAIN and share > 0 and not (share < MIN_SHARE * before and share < floor)
-          and not at_bound(model, fitted.params[-1]))  # a fit on its plausible range's edge is no finding
+          and not at_bound(model, fitted.params[-1])  # a fit on its plausible range's edge is no finding
+          and not (model.tolerance is not None and model.tolerance(fitted.params[-1])))
     if ok and noise.gate_m is not None and _median_norm(noise.departure) <= noise.gate_m:
         ok = _median_norm(objective(inputs, Perturbation())) > noise.gate_m
     return ok, fitted.params[-1]
@@ -452,8 +509,10 @@ def _checked(noise: _Noise, probe: _Probe, direction: FloatArray, size: float, b
         if ok or attempt == INJECTION_RETRIES or size * 1.5 > MAX_SIZE[model.fault]:
             break
         size *= 1.5
+    below = _params(model, theta0, direction, 0.98 * size)
+    tolerated = model.tolerance is not None and model.tolerance(below)
     return _Result(model, size, direction, blind, best, _size_of(model, theta0, fitted, stage.mode),
-                   _size_of(model, theta0, theta, stage.mode), ok)
+                   _size_of(model, theta0, theta, stage.mode), ok, tolerated)
 
 
 def _worse_sign(probe: _Probe, direction: FloatArray, size: float) -> float:
@@ -476,19 +535,26 @@ def _size_of(model: FaultModel, theta0: FloatArray, theta: FloatArray, mode: Mod
 # -- the bound in words -----------------------------------------------------------------------
 def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: _Noise) -> Bound:
     """The family's bound: the worse of its models (intrinsics: two variants), with the sentence."""
+    camera = results[0].model.camera
     blind = [r for r in results if r.size is None]
     if blind:
-        return Bound(hop, fault, False, None, _why_blind(stage, fault, hop))
+        return Bound(hop, fault, False, None, _why_blind(stage, fault, hop), camera=camera)
     worst = max(results, key=lambda r: r.size or 0.0)
     assert worst.size is not None
     size = _estimate_size(fault, worst.size, stage.mode)
     axes = tuple(_axis3(v) for v in worst.unobservable)
     n_obs = len(stage.inputs)
+    over = f"{n_obs} observations"
+    if worst.model.camera is not None and stage.inputs.camera_index is not None:
+        k = next(i for i, c in enumerate(stage.inputs.rig_cameras) if c.frame == worst.model.camera)
+        mine = int((stage.inputs.camera_index == k).sum())
+        over = f"{n_obs} observations ({mine} of {worst.model.camera}, measured against the other cameras)"
     rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
     noise_text = f"{rms_mm:.2g} mm rms of residual"
     if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
         noise_text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
-    what = f"{size_text(fault, size)} is the smallest {family_name(fault, hop)}"
+    name = "latency (stamp offset)" if fault == Fault.LATENCY and worst.model.camera else family_name(fault, hop)
+    what = f"{size_text(fault, size)} is the smallest {name}"
     if fault == Fault.ROTATION_ERROR:
         what += f" (about {axis_text(_unit(worst.direction).tolist())}, the weakest axis seen"
         what += f"; {np.rad2deg(worst.best):.2g} deg about the best)" if worst.best is not None else ")"
@@ -501,10 +567,13 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
                  f"fault: {_key_text(fault, worst.refound)}")
         if not worst.confirmed:
             check += " (not a finding even there: this bound is optimistic)"
+    if worst.tolerated:
+        check += ("; the tolerance of a rig camera's fault sets it (a smaller one is no finding however well it "
+                  "fits), not the evidence")
     axis = _axis3(worst.direction) if fault == Fault.ROTATION_ERROR else None
     return Bound(hop, fault, True, {SIZE_KEYS[fault]: round(size, 6)},
                  f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
-                 f"{noise_text} over {n_obs} observations{check}.", axes, axis)
+                 f"{noise_text} over {over}{check}.", axes, axis, camera)
 
 
 def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
@@ -539,6 +608,12 @@ def _unit(v: FloatArray) -> FloatArray:
 def _why_blind(stage: Stage, fault: Fault, hop: HopName) -> str:
     """One sentence: why this family cannot be seen here."""
     inputs = stage.inputs
+    if isinstance(stage.objective, CrossCameraObjective):  # a rig camera, measured against the others
+        limit = MAX_SIZE[fault]
+        largest = float(np.rad2deg(limit)) if fault == Fault.ROTATION_ERROR else limit
+        name = "latency (stamp offset)" if fault == Fault.LATENCY else family_name(fault, hop)
+        return (f"too weak a signal here: no {name} up to {size_text(fault, largest)} changes how the camera agrees "
+                "with the others beyond framechain's thresholds")
     still = _still(inputs)
     if fault == Fault.LATENCY and (still.all() or (hop == HopName.BODY_TO_WORLD and _body_still(inputs))):
         return "the body does not move while the targets are seen: a pose taken at another time is the same pose"

@@ -68,10 +68,15 @@ class Bound:
             return None
         return self.min_detectable[SIZE_KEYS[self.fault]]
 
+    @property
+    def family(self) -> str:
+        """The fault family in words (``camera latency``, ``mount rotation``, ...)."""
+        return family_name(self.fault, self.hop)
+
     def text(self, *, camera: bool = True) -> str:
         """``4.1 ms pose latency`` (observable) or ``pose latency`` (not); ``... on camera X`` for a camera's
         (unless ``camera`` is False: a sentence naming the camera once for several families)."""
-        name = family_name(self.fault, self.hop) + (f" on camera {self.camera}" if self.camera and camera else "")
+        name = self.family + (f" on camera {self.camera}" if self.camera and camera else "")
         if self.size is None:
             return name
         return f"{size_text(self.fault, self.size)} {name}{self.axes_text()}"
@@ -123,13 +128,28 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str
              for (cause, camera), names in causes.items()]
     parts = []
     if seen:
-        parts.append(f"No {'other ' if found else ''}fault above {', '.join(seen)}")
+        joint = "; " if any(b.camera is not None for b in rest if b.observable) else ", "
+        parts.append(f"No {'other ' if found else ''}fault above {joint.join(seen)}")
     if blind:
         parts.append(f"not observable here: {'; '.join(blind)}")
     if not parts:
         return ""
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
+
+
+def _per_camera(bounds: Sequence[Bound]) -> list[str]:
+    """Each bound's text, a rig camera's families joined and the camera named once, in the order met."""
+    by_camera: dict[str | None, list[Bound]] = {}
+    for b in bounds:
+        by_camera.setdefault(b.camera, []).append(b)
+    out: list[str] = []
+    for camera, mine in by_camera.items():
+        if camera is None:
+            out += [b.text() for b in mine]
+        else:
+            out.append(f"{_and([b.text(with_camera=False) for b in mine])} on {camera}")
+    return out
 
 
 def _and(names: Sequence[str]) -> str:

@@ -23,7 +23,7 @@ for by ``obs_id``, so a subset of rows (a bootstrap resample, a grid's subsample
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import NamedTuple
 
@@ -179,6 +179,39 @@ class CrossCameraObjective:
     def take(self, index: IntArray) -> CrossCameraObjective:
         """The same objective: it picks the rows it is called with by their ``obs_id``."""
         return self
+
+    def over(self, rig: ChainInputs) -> CrossCameraObjective:
+        """The same comparisons (pairs, static objects, ranges) over other observations of the same rows (``rig``:
+        this rig's inputs with other pixels or depths, as the bounds write noise-free or faulty ones)."""
+        return replace(self, rig=rig, _kept={})
+
+    def restamped(self, shifts_ns: dict[int, int]) -> CrossCameraObjective:
+        """The same comparisons with rig camera ``k``'s stamps moved by ``shifts_ns[k]`` (a stamping fault written
+        into the log's own detections; each track keeps its order, shifted as a whole)."""
+        index = _camera_index(self.rig)
+        shift = np.zeros(len(self.rig), dtype=np.int64)
+        for k, ns in shifts_ns.items():
+            shift[index == k] = ns
+        rig = replace(self.rig, stamp_ns=self.rig.stamp_ns + shift)
+        pairs = replace(self.pairs, track_key=self.pairs.track_key + shift[self.pairs.track_rows])
+        return replace(self, rig=rig, pairs=pairs, _kept={})
+
+    def consensus(self, pert: Perturbation) -> FloatArray:
+        """(N, 3) where every observation of the rig would be if the cameras agreed under ``pert``: its static
+        object's fitted position; for a sighting compared at the same instant with ``n`` others, the mean of its
+        own point and theirs (its point minus ``n / (n + 1)`` of its residual: a pair meets half-way); its own
+        point when it is compared with nothing."""
+        _p_cam, p, static = self._points(pert)
+        out = p.copy()
+        if static is not None:
+            out[self.static.used] = p[self.static.used] - static
+        if self.pairs.size:
+            rows, mean = self._pair_means(p, pert)
+            slot = self._anchors[1]
+            n = np.bincount(slot, self._partners(p, pert)[2].astype(float), minlength=rows.size)
+            held = np.isfinite(mean).all(axis=1)
+            out[rows[held]] = p[rows[held]] - (n[held] / (n[held] + 1.0))[:, None] * mean[held]
+        return out
 
     @cached_property
     def _id_order(self) -> tuple[IntArray, IntArray]:

@@ -36,6 +36,8 @@ def curves(stages: Sequence[Stage], found: Sequence[tuple[FaultModel, FloatArray
     the first)."""
     out = []
     for stage in stages:
+        if stage.models is not None:  # a rig's cameras: bounded per camera, no curve per camera yet
+            continue
         mine = [(m, x) for m, x in found if m.hop in stage.hops]
         base = perturbation_of([m for m, _ in mine], np.concatenate([x for _, x in mine]) if mine else np.zeros(0))
         for fault, hop, variants in bounds_candidates(stage, mine):

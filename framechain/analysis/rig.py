@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs, Perturbation
+from framechain.analysis.checks import Bound
 from framechain.analysis.cross_camera import CrossCameraObjective, PairIndex, camera_ranges, pair_index
 from framechain.analysis.fault_model import FaultModel
 from framechain.analysis.faults import LATENCY_BOUND_S, models_for
@@ -71,6 +72,7 @@ class RigLevel:
     evidence_world: FloatArray
     layout: RigLayout
     notes: tuple[str, ...]
+    candidates: tuple[FaultModel, ...] = ()  # every per-camera model (what the bounds measure)
 
 
 @dataclass(frozen=True)
@@ -123,7 +125,32 @@ def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Pr
     notes = [*evidence.notes, *_left_within_tolerance(list(evidence.candidates), selected, objective, inputs, layout)]
     layout = replace(layout, lines=_pair_lines(objective, inputs))
     return RigLevel(objective, selected, objective.points(inputs, Perturbation()), layout,
-                    (*notes, *layout.notes()))
+                    (*notes, *layout.notes()), evidence.candidates)
+
+
+#: The per-camera families a bound is given for (the sized ones of :func:`rig_models`).
+CAMERA_FAMILIES = ((Fault.LATENCY, HopName.BODY_TO_WORLD), (Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY),
+                   (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA), (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA))
+
+
+def unchecked_bounds(layout: RigLayout) -> tuple[Bound, ...]:
+    """The cameras whose own faults the rig's evidence cannot bound, each family not observable with why: a
+    group's gauge (its fault shows on the other camera of its pair, bounded there) or a camera compared with
+    none (alone: without a moving pose its own sightings show nothing of its chain)."""
+    out: list[Bound] = []
+    for k, frame in enumerate(layout.frames):
+        if layout.checkable(k):
+            continue
+        group = layout.group_of(k)
+        if len(group.cameras) == 2:
+            other = layout.frames[next(c for c in group.cameras if c != k)]
+            why = (f"{frame} sets the gauge of its pair with {other}: a fault of {frame} against {other} shows as "
+                   f"the opposite fault on {other} (bounded there); neither can be checked against the world")
+        else:
+            why = (f"no other camera saw what {frame} saw at the same instant or place, and without a moving pose its "
+                   "own sightings show nothing of its chain")
+        out += [Bound(hop, fault, False, None, why, camera=frame) for fault, hop in CAMERA_FAMILIES]
+    return tuple(out)
 
 
 def _left_within_tolerance(candidates: list[FaultModel], selected: Selected, objective: CrossCameraObjective,
@@ -235,4 +262,5 @@ def _nothing_compared(inputs: ChainInputs, pose: RigPose) -> str:
             "seeing the same tags")
 
 
-__all__ = ["RigEvidence", "RigLevel", "rig_evidence", "rig_inputs", "rig_level", "rig_pose"]
+__all__ = ["CAMERA_FAMILIES", "RigEvidence", "RigLevel", "rig_evidence", "rig_inputs", "rig_level", "rig_pose",
+           "unchecked_bounds"]

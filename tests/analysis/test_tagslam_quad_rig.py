@@ -17,6 +17,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
+from framechain.analysis.checks import Bound
 from framechain.analysis.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
@@ -109,7 +110,8 @@ def _pair_distances(s: Sightings, p: np.ndarray, a: str, b: str, shift_b_ns: flo
     return np.asarray(out)
 
 
-def _chain_text(folder: Path, poses: dict[str, np.ndarray], turned_deg: float = 0.0) -> str:
+def _chain_text(folder: Path, poses: dict[str, np.ndarray], turned_deg: float = 0.0,
+                axis: tuple[float, float, float] = (1.0, 0.0, 0.0)) -> str:
     lines = ["frames: {body: rig}", "cameras:"]
     for name, frame in CAMERAS.items():
         lines.append(f"  - {{frame: {frame}, detections: /{frame}/tags, calibration: "
@@ -118,7 +120,7 @@ def _chain_text(folder: Path, poses: dict[str, np.ndarray], turned_deg: float = 
     for name, frame in CAMERAS.items():
         rotation = Rotation.from_matrix(poses[name][:3, :3])
         if name == TURNED and turned_deg:
-            rotation = rotation * Rotation.from_rotvec(np.deg2rad(turned_deg) * np.array([1.0, 0.0, 0.0]))
+            rotation = rotation * Rotation.from_rotvec(np.deg2rad(turned_deg) * np.array(axis) / np.linalg.norm(axis))
         xyz, rotvec = poses[name][:3, 3].tolist(), rotation.as_rotvec().tolist()
         lines.append(f"  - {{parent: rig, child: {frame}, xyz: {xyz}, rotvec: {rotvec}}}")
     lines += ["evidence:", "  static_target: true", "  tag_size_m: {default: 0.125, 44: 0.15}"]
@@ -126,18 +128,29 @@ def _chain_text(folder: Path, poses: dict[str, np.ndarray], turned_deg: float = 
 
 
 @cache
-def _loaded(folder: Path, turned_deg: float) -> pipeline.LoadedRun:
-    chain = ChainConfig.from_dict(yaml.safe_load(_chain_text(folder, _poses(folder), turned_deg)), where="rig.yaml")
+def _loaded(folder: Path, turned_deg: float, axis: tuple[float, float, float] = (1.0, 0.0, 0.0)) -> pipeline.LoadedRun:
+    text = _chain_text(folder, _poses(folder), turned_deg, axis)
+    chain = ChainConfig.from_dict(yaml.safe_load(text), where="rig.yaml")
     return pipeline.load_log(folder / "tag_detections.bag", chain)
 
 
 @cache
 def _attributed(folder: Path, case: str) -> Attribution:
-    loaded = _loaded(folder, 5.0 if case == "turned" else 0.0)
-    timeline = loaded.timeline
     if case == "late":  # bottom_right's detections stamped one frame late
+        return _faulty(folder, late_ns=round(FRAME_S * 1e9))
+    return _faulty(folder, turned_deg=5.0 if case == "turned" else 0.0)
+
+
+@cache
+def _faulty(folder: Path, turned_deg: float = 0.0, axis: tuple[float, float, float] = (1.0, 0.0, 0.0),
+            late_ns: int = 0) -> Attribution:
+    """The rig with bottom_right's mount turned ``turned_deg`` about ``axis`` of its own frame in the chain, and its
+    detections stamped ``late_ns`` late."""
+    loaded = _loaded(folder, turned_deg, axis)
+    timeline = loaded.timeline
+    if late_ns:
         obs = timeline.observations
-        shifted = np.where(obs.camera_frame == CAMERAS[TURNED], obs.stamp_ns + round(FRAME_S * 1e9), obs.stamp_ns)
+        shifted = np.where(obs.camera_frame == CAMERAS[TURNED], obs.stamp_ns + late_ns, obs.stamp_ns)
         timeline = timeline.replace(observations=replace(obs, stamp_ns=shifted))
     return pipeline.run(timeline, loaded.chain, bootstrap=0).attributed()
 
@@ -163,7 +176,7 @@ def test_independent_pairs_agree_as_the_readme_says(rig: Path) -> None:
 
 
 def test_each_camera_is_its_topics_and_replays_as_the_independent_points(rig: Path) -> None:
-    loaded = _loaded(rig, 0.0)
+    loaded = _loaded(rig, 0.0, (1.0, 0.0, 0.0))
     run = pipeline.run(loaded.timeline, loaded.chain, attribute=False)
     result = run.replay
     assert result.counts()["replayed"] == len(result) == 14655
@@ -238,3 +251,60 @@ def _rotation_x(degrees: float) -> Any:
     out = np.eye(4)
     out[:3, :3] = Rotation.from_rotvec(np.deg2rad(degrees) * np.array([1.0, 0.0, 0.0])).as_matrix()
     return out
+
+
+def _bound(result: Attribution, camera: str, fault: Fault) -> Bound:
+    return next(b for b in result.bounds if b.camera == camera and b.fault == fault)
+
+
+@pytest.mark.slow
+def test_bounds_per_camera_say_what_each_camera_can_show(rig: Path) -> None:
+    """Every camera has a bound for each sized family: the second camera of each pair measured against the first,
+    the first (the gauge) not observable, with why; the verdict names them per camera."""
+    result = _attributed(rig, "recorded")
+    families = {Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS}
+    for name, frame in CAMERAS.items():
+        mine = {b.fault: b for b in result.bounds if b.camera == frame}
+        assert set(mine) == families, (frame, [b.to_json() for b in result.bounds])
+        gauge = name in ("cam0", "cam2")
+        assert all(b.observable is not gauge for b in mine.values())
+        if gauge:
+            assert all("sets the gauge of its pair" in b.why for b in mine.values())
+    turned = _bound(result, CAMERAS[TURNED], Fault.ROTATION_ERROR)
+    assert turned.to_json()["camera"] == CAMERAS[TURNED]
+    # A fault within a rig camera's tolerance is no finding: no bound is under it.
+    assert turned.size is not None
+    assert turned.size >= 2.0
+    said = r"No fault above [^;]* latency, [^;]* mount rotation, [^;]* depth scale and [^;]* intrinsics scale on "
+    assert re.search(said + re.escape(CAMERAS[TURNED]), result.verdict), result.verdict
+    assert f"not observable here: latency, mount rotation, depth scale and intrinsics scale on {CAMERAS['cam0']}" \
+        in result.verdict
+    assert all("camera" in b for b in result.to_json()["bounds"])
+
+
+@pytest.mark.slow
+def test_a_mount_turned_twice_its_bound_is_found_on_that_camera(rig: Path) -> None:
+    """bottom_right's mount turned by twice its bound about the weakest axis the bound names (in its own frame, the
+    mount's link): the top finding, on that camera, the size within half the bound."""
+    bound = _bound(_attributed(rig, "recorded"), CAMERAS[TURNED], Fault.ROTATION_ERROR)
+    assert bound.size is not None
+    assert bound.axis is not None
+    result = _faulty(rig, turned_deg=round(2 * bound.size, 3), axis=bound.axis)
+    top = result.findings[0]
+    assert top.fault == Fault.ROTATION_ERROR, result.verdict
+    assert top.camera == CAMERAS[TURNED], result.verdict
+    assert abs(top.estimate.angle_deg - 2 * bound.size) < bound.size / 2  # type: ignore[union-attr]
+
+
+@pytest.mark.slow
+def test_stamps_late_by_twice_the_bound_are_found_on_that_camera(rig: Path) -> None:
+    """bottom_right's detections stamped late by twice its latency bound: a latency on that camera of minus that
+    shift, within half the bound."""
+    bound = _bound(_attributed(rig, "recorded"), CAMERAS[TURNED], Fault.LATENCY)
+    assert bound.size is not None
+    late_s = 2 * bound.size
+    result = _faulty(rig, late_ns=round(late_s * 1e9))
+    top = result.findings[0]
+    assert top.fault == Fault.LATENCY, result.verdict
+    assert top.camera == CAMERAS[TURNED], result.verdict
+    assert abs(top.estimate.offset_s + late_s) < bound.size / 2  # type: ignore[union-attr]
