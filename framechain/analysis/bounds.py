@@ -535,7 +535,7 @@ def _size_of(model: FaultModel, theta0: FloatArray, theta: FloatArray, mode: Mod
 # -- the bound in words -----------------------------------------------------------------------
 def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: _Noise) -> Bound:
     """The family's bound: the worse of its models (intrinsics: two variants), with the sentence."""
-    camera = results[0].model.camera
+    camera = results[0].model.camera or ""  # a rig camera's own models name it
     blind = [r for r in results if r.size is None]
     if blind:
         return Bound(hop, fault, False, None, _why_blind(stage, fault, hop), camera=camera)

@@ -70,7 +70,10 @@ class Bound:
 
     @property
     def family(self) -> str:
-        """The fault family in words (``camera latency``, ``mount rotation``, ...)."""
+        """The fault family in words (``camera latency``, ``mount rotation``, ...); a rig camera's stamp
+        offset against the other cameras (fitted where its pose is looked up) is its ``latency``."""
+        if self.camera and self.fault == Fault.LATENCY and self.hop == HopName.BODY_TO_WORLD:
+            return "latency"
         return family_name(self.fault, self.hop)
 
     def text(self, *, camera: bool = True) -> str:
@@ -128,7 +131,7 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str
              for (cause, camera), names in causes.items()]
     parts = []
     if seen:
-        joint = "; " if any(b.camera is not None for b in rest if b.observable) else ", "
+        joint = "; " if any(b.camera for b in rest if b.observable) else ", "
         parts.append(f"No {'other ' if found else ''}fault above {joint.join(seen)}")
     if blind:
         parts.append(f"not observable here: {'; '.join(blind)}")
@@ -136,20 +139,6 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = ()) -> str
         return ""
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
-
-
-def _per_camera(bounds: Sequence[Bound]) -> list[str]:
-    """Each bound's text, a rig camera's families joined and the camera named once, in the order met."""
-    by_camera: dict[str | None, list[Bound]] = {}
-    for b in bounds:
-        by_camera.setdefault(b.camera, []).append(b)
-    out: list[str] = []
-    for camera, mine in by_camera.items():
-        if camera is None:
-            out += [b.text() for b in mine]
-        else:
-            out.append(f"{_and([b.text(with_camera=False) for b in mine])} on {camera}")
-    return out
 
 
 def _and(names: Sequence[str]) -> str:

@@ -67,7 +67,6 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
         "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
 
 
-<<<<<<< HEAD
 def test_the_bounds_sentence_names_each_camera_once_and_leaves_out_only_that_camera_s_findings() -> None:
     latency = Fault.LATENCY, HopName.CAMERA_TO_BODY
     bounds = [Bound(HopName.CAMERA_TO_BODY, Fault.LATENCY, True, {"offset_s": 0.007}, "", camera="wrist"),
@@ -82,26 +81,26 @@ def test_the_bounds_sentence_names_each_camera_once_and_leaves_out_only_that_cam
     assert bounds_sentence(bounds, [(*latency, "wrist")]).startswith(
         "No other fault above 1.2 deg mount rotation on camera wrist; not observable here: camera latency and")
     assert bounds[0].to_json()["camera"] == "wrist"
-=======
+
+
 def test_a_rig_s_bounds_are_said_per_camera() -> None:
     """A rig camera's bounds name it once after its families; a finding on one camera leaves that camera's family out
     only; a gauge camera's families not observable are named with their cause."""
     def on(camera: str, fault: Fault, hop: HopName, size: dict[str, float] | None, why: str = "") -> Bound:
         return Bound(hop, fault, size is not None, size, why, camera=camera)
 
-    gauge = "cam0 sets the gauge of its pair with cam1: its fault shows on cam1"
+    gauge = "cam0 sets the gauge of its pair with cam1: its fault shows on camera cam1"
     bounds = [on("cam1", Fault.LATENCY, HopName.BODY_TO_WORLD, {"offset_s": 0.025}),
               on("cam1", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, {"angle_deg": 2.0}),
               on("cam2", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, {"angle_deg": 9.5}),
               on("cam0", Fault.LATENCY, HopName.BODY_TO_WORLD, None, gauge),
               on("cam0", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, None, gauge)]
     assert bounds_sentence(bounds) == (
-        "No fault above 25 ms latency and 2 deg mount rotation on cam1; 9.5 deg mount rotation on cam2; not observable "
-        "here: latency and mount rotation on cam0 (cam0 sets the gauge of its pair with cam1).")
+        "No fault above 25 ms latency and 2 deg mount rotation on camera cam1; 9.5 deg mount rotation on camera cam2; "
+        "not observable here: latency and mount rotation on camera cam0 (cam0 sets the gauge of its pair with cam1).")
     assert bounds_sentence(bounds, [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, "cam2")]).startswith(
-        "No other fault above 25 ms latency and 2 deg mount rotation on cam1; not observable here")
+        "No other fault above 25 ms latency and 2 deg mount rotation on camera cam1; not observable here")
     assert bounds[0].to_json()["camera"] == "cam1"
->>>>>>> h3-r18
     assert "camera" not in Bound(HopName.BODY_TO_WORLD, Fault.LATENCY, True, {"offset_s": 0.004}, "").to_json()
 
 
