@@ -50,6 +50,8 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     out.mkdir(parents=True, exist_ok=True)
     # Measured against the cameras' own motion, the world-error pictures would be empty.
     figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
+    if result.metric == "none":  # no evidence: the error plots would be empty axes
+        figures = [f for f in figures if f.name not in ("error_per_hop", "error_vs_speed")]
     checks = [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
     sections = image_crops(run)
     paths: dict[str, Path] = {}
@@ -342,6 +344,16 @@ def _size(value: float | None, summary: dict[str, Any]) -> str:
     return mm(value)
 
 
+def _error_sentence(result: Attribution) -> str:
+    """The error against the evidence and what the findings leave (or that there is no evidence to measure it)."""
+    s = result.error_summary()
+    if result.metric == "none":
+        return "No error measured: the log has no evidence to measure the chain against."
+    return (f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
+            f"max {_size(s['max'], s)}; {_after_label(result)}: "
+            f"median {_size(result.error_summary(result.error_after)['median'], s)}.")
+
+
 def _after_label(result: Attribution) -> str:
     """What the second error curve is: corrected data, or what the findings leave unexplained."""
     if result.metric in ("reference", "static_spread"):
@@ -439,7 +451,6 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
 
 
 def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
-    s = result.error_summary()
     lines = [
         f"# framechain report: {Path(str(result.source.get('path', ''))).name or 'episode'}",
         "",
@@ -464,9 +475,7 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "",
         "## Error",
         "",
-        f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
-        f"max {_size(s['max'], s)}; {_after_label(result)}: "
-        f"median {_size(result.error_summary(result.error_after)['median'], s)}.",
+        _error_sentence(result),
         "",
         "### Per hop",
         "",
@@ -486,7 +495,6 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
 
 def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     e = html.escape
-    s = result.error_summary()
     title = Path(str(result.source.get("path", ""))).name or "episode"
     parts = [
         f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain: {e(title)}</title>",
@@ -513,9 +521,7 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         parts.append("<p>No fault beyond noise.</p>" if _clean(result) else "<p>Nothing could be checked.</p>")
     counts = result.counts()
     parts.append(
-        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {_size(s['median'], s)}, "
-        f"p95 {_size(s['p95'], s)}, max {_size(s['max'], s)}; {_after_label(result)}: median "
-        f"{_size(result.error_summary(result.error_after)['median'], s)}. Observations: {counts['total']} total, "
+        f"<h2>Error</h2><p>{e(_error_sentence(result))} Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
     parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")

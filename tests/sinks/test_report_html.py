@@ -73,3 +73,30 @@ def test_a_table_of_long_frame_names_fits_the_page(tmp_path: Path) -> None:
     page_width, table_width, table_box = (int(g) for g in found.groups())
     assert page_width <= 1280
     assert table_width <= table_box
+
+
+def test_a_log_without_evidence_draws_no_empty_error_plots(realdata: Path, tmp_path: Path) -> None:
+    """aruco_images.bag: seven markers in one image, nothing to measure the chain against. The report says so
+    instead of "against the none: median n/a" over two empty plots, and keeps the world points and the image."""
+    from framechain.pipeline import run
+    from framechain.sinks.report import render_report
+
+    bag = realdata / "fiducials" / "aruco_images.bag"
+    chain = tmp_path / "chain.yaml"
+    chain.write_text("frames: {camera: raspicam, body: base_link, world: map}\n"
+                     "topics: {image: /raspicam_node/image/compressed}\n"
+                     "evidence: {markers: {dictionary: DICT_5X5_1000, size_m: 0.14}}\n"
+                     "mounts:\n"
+                     "  - {parent: map, child: base_link, xyz: [0, 0, 0], rpy: [0, 0, 0]}\n"
+                     "  - {parent: base_link, child: raspicam, xyz: [0.1, 0, 0.3], rpy: [-1.5707963, 0, -1.5707963]}\n")
+    made = run(bag, chain)
+    assert made.attributed().metric == "none"
+    paths = render_report(made, tmp_path / "report")
+    page, text = paths["html"].read_text(), paths["md"].read_text()
+    for written in (page, text):
+        assert "No error measured: the log has no evidence to measure the chain against." in written
+        assert "Against the none" not in written
+    assert not (tmp_path / "report" / "error_per_hop.png").exists()
+    assert not (tmp_path / "report" / "error_vs_speed.png").exists()
+    assert (tmp_path / "report" / "world_top_down.png").exists()
+    assert "What the camera saw" in page
