@@ -118,7 +118,7 @@ def attribute_replayed(
         source=base.source, config=chain, replay=result, inputs=inputs, metric=level.metric,
         error_before=assembled.error_before, error_after=assembled.error_after, hop_errors=level.hop_errors,
         evidence_points=level.evidence_world, corrected_world=corrected,
-        findings=weakened(assembled.findings, found_bounds), seed=seed,
+        findings=weakened(assembled.findings, found_bounds), others_shift=assembled.others_shift, seed=seed,
         aligned=replayed.aligned, notes=(*notes, *level.notes, *assembled.notes), stage=level.stage,
         bounds=found_bounds, curves=curves(level.stages, assembled.kept, found_bounds), labels=labels, rig=level.rig,
     )
@@ -252,6 +252,7 @@ class _Assembled:
     combined: Perturbation  # every finding's fault applied at once
     notes: tuple[str, ...]  # the faults fitted but dropped, and why
     kept: tuple[tuple[FaultModel, FloatArray], ...] = ()  # each finding's model and parameters
+    others_shift: tuple[FloatArray, ...] = ()  # per finding (in order): see Attribution.others_shift
 
 
 def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.random.Generator, draws: int, *,
@@ -288,9 +289,13 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
                                        spread_m=(total, total - float(shapley[k])), rays=rays),
             fix=fix, model=model.name, camera=model.camera,
         ))
-    findings.sort(key=lambda f: f.share, reverse=True)
-    return _Assembled(tuple(findings), error_before, distances(level.objective(inputs, combined)), combined,
-                      tuple(notes), tuple((f[0], f[1]) for f in found))
+    # What the other findings do to each world point, so that a picture can show one finding's effect alone.
+    combined_world = evaluate(inputs, combined)[2]
+    others = [combined_world - evaluate(inputs, perturbation_of([f[0]], f[1]))[2] for f in found]
+    order = sorted(range(len(findings)), key=lambda k: findings[k].share, reverse=True)
+    return _Assembled(tuple(findings[k] for k in order), error_before, distances(level.objective(inputs, combined)),
+                      combined, tuple(notes), tuple((f[0], f[1]) for f in found),
+                      others_shift=tuple(others[k] for k in order))
 
 
 def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, row: int) -> FixContext:

@@ -50,8 +50,8 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
         notes += ("no evidence: no camera turned in its images (see camera_motion) and the log has no points to "
                   "measure the chain against",)
     return replace(base, metric="camera_motion", stage="camera_rotation_rate", findings=found.findings,
-                   camera_motion=found.entries, rate_residual=(found.residual_before, found.residual_after),
-                   bounds=found.bounds, curves=(),
+                   others_shift=(), camera_motion=found.entries,
+                   rate_residual=(found.residual_before, found.residual_after), bounds=found.bounds, curves=(),
                    notes=(*notes, *(n for n in found.notes if n not in notes)))
 
 

@@ -121,6 +121,10 @@ class Attribution:
     rate_residual: tuple[FloatArray, FloatArray] | None = None
     #: a rig's cameras: which are compared with which, the gauges, what cannot be seen (None: one camera)
     rig: RigLayout | None = None
+    #: Per finding (in the order of ``findings``): how far the other findings' faults together move each world
+    #: point, (N, 3), every fault applied minus this one alone. An as-run point less it shows this finding's
+    #: own effect; empty where findings do not come from a chain fit (a camera's own motion).
+    others_shift: tuple[FloatArray, ...] = ()
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()

@@ -24,9 +24,12 @@ episode, which has none: its frame tree on /tf and /tf_static, /joint_states, ea
 /<camera>/calibration and its frames as /<camera>/video or /<camera>/image) and the replay as Foxglove
 schemas: /framechain/tf (FrameTransforms of the recomputed chain),
 /framechain/annotations (ImageAnnotations on the camera images: detection, projected as-run and
-recomputed points, the line between them), /framechain/scene (SceneUpdate: as-run vs recomputed
-world points and error lines) and /framechain/findings (a Log message per finding). Open it in
-Foxglove: the Image panel on the image topic with the annotations topic, the 3D panel on the scene.
+recomputed points, the line between them, in Foxglove's pixel convention; an as-run point off the image
+ends its line at the border), /framechain/calibration (CameraCalibration: the camera model the replay used,
+frame <camera>@replay, so the annotations can be shown on a log without images), /framechain/scene
+(SceneUpdate: as-run vs recomputed world points and error lines) and /framechain/findings (a Log
+message per finding). Open it in Foxglove: the Image panel on the image topic with the annotations
+topic, the 3D panel on the scene.
 """
 
 
@@ -46,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
     from framechain.adapters.formats.mcap.export import copies_messages, write_mcap_with
     from framechain.adapters.lerobot.media import encoded_frames
-    from framechain.sinks.foxglove_export import foxglove_messages
+    from framechain.sinks.foxglove_export import foxglove_messages, viewing_hints
     from framechain.sinks.foxglove_timeline import timeline_messages
     from framechain.timeline import FramechainError
 
@@ -90,5 +93,7 @@ def run(args: argparse.Namespace) -> int:
     for topic, n in sorted(counts.added.items()):
         print(f"added         {n:>6} on {topic}")
     print(f"observations  {replay_counts['total']} total, {replay_counts['replayed']} replayed")
+    for hint in viewing_hints(made):
+        print(f"annotations   {hint}")
     print(f"wrote         {out} (open it in Foxglove)", file=sys.stdout)
     return 0

@@ -8,7 +8,15 @@ One MCAP then opens in Foxglove with the log and the replay together:
   (pixel and tag corners), the recomputed and as-run world points projected into the image and a
   line between them coloured by the finding that explains them (:mod:`framechain.sinks.overlay`);
   stamped with the image's header stamp so Foxglove's Image panel pairs them with that image; for a
-  rig, one topic per camera, ``/framechain/annotations/<camera frame>``, each with its own detections;
+  rig, one topic per camera, ``/framechain/annotations/<camera frame>``, each with its own detections.
+  Pixels are converted from OpenCV's convention ((0, 0) the centre of the top-left pixel, as framechain
+  computes them) to Foxglove's ((0, 0) that pixel's top-left corner): half a pixel right and down.
+  An as-run point outside the image (a large fault moves it off the picture) is not drawn: its line
+  ends at the image's border, and the label there says where the point is;
+- ``/framechain/calibration`` (``foxglove.CameraCalibration``, for a rig one per camera beside its
+  annotations): the camera model the replay used, frame ``<camera>@replay``, at the first annotated
+  time and wherever the model changes, so the annotations can be shown (and the camera placed in the
+  3D panel) where the log has no image or no CameraInfo of its own;
 - ``/framechain/scene`` (``foxglove.SceneUpdate``): as-run and recomputed world points and the
   error line between them, in the world frame; for a rig also a line between two cameras' points of
   one label at one instant;
@@ -30,8 +38,9 @@ from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.findings import Finding
 from framechain.analysis.rig_layout import PairLines
 from framechain.analysis.run import Run
-from framechain.arrays import BoolArray, IntArray, rows_of
+from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import ReplayResult
+from framechain.replay.camera import distinct_models
 from framechain.sinks.overlay import (
     AS_RUN_COLOR,
     DETECTION_COLOR,
@@ -41,13 +50,17 @@ from framechain.sinks.overlay import (
 )
 from framechain.sinks.rerun_common import ERROR_COLOR, REPLAY_FRAME_SUFFIX
 from framechain.sinks.text import FindingView
-from framechain.timeline import PointRole, Timeline
+from framechain.timeline import CameraTable, PointRole, Timeline
 
 TF_TOPIC = "/framechain/tf"
 ANNOTATIONS_TOPIC = "/framechain/annotations"
+CALIBRATION_TOPIC = "/framechain/calibration"
 SCENE_TOPIC = "/framechain/scene"
 FINDINGS_TOPIC = "/framechain/findings"
 NS = 1_000_000_000
+#: Foxglove's image coordinates start at the top-left corner of the top-left pixel, OpenCV's (framechain's) at
+#: its centre: a pixel (u, v) of framechain is (u + 0.5, v + 0.5) in an ImageAnnotations message.
+FOXGLOVE_FROM_OPENCV_PX = 0.5
 
 
 @dataclass(frozen=True)
@@ -96,15 +109,34 @@ def foxglove_messages(run: Run) -> list[ProtobufMessage]:
     result = run.replay
     overlay = image_overlay(run.timeline, result, run.aligned, run.findings)
     out = _transforms(result)
+    stamp = annotation_stamps(run.timeline, result, overlay)
     if run.chain.is_rig:  # one annotations topic per camera, each with that camera's observations
         for frame in run.chain.camera_frames():
             rows = np.flatnonzero(result.observations.camera_frame == frame)
-            out += _annotations(run.timeline, result, overlay, rows, f"{ANNOTATIONS_TOPIC}/{frame.strip('/')}")
+            out += _annotations(result, overlay, stamp, rows, f"{ANNOTATIONS_TOPIC}/{frame.strip('/')}")
+            out += _calibrations(run.timeline.cameras, result, stamp, rows, f"{CALIBRATION_TOPIC}/{frame.strip('/')}")
     else:
-        out += _annotations(run.timeline, result, overlay, np.arange(len(result.observations)), ANNOTATIONS_TOPIC)
+        everyone = np.arange(len(result.observations))
+        out += _annotations(result, overlay, stamp, everyone, ANNOTATIONS_TOPIC)
+        out += _calibrations(run.timeline.cameras, result, stamp, everyone, CALIBRATION_TOPIC)
     rig = run.attribution.rig if run.attribution is not None else None
     out += _scene(result, run.aligned, overlay, rig.lines if rig is not None else None)
     out += _findings(result, run.findings)
+    return out
+
+
+def viewing_hints(run: Run) -> list[str]:
+    """Per camera, which topics to open its annotations on: its image topic where the log has one, else the
+    calibration written for it."""
+    images = run.timeline.image_frames
+    rig = run.chain.is_rig
+    out = []
+    for frame in run.chain.camera_frames() if rig else [run.chain.frames.camera]:
+        suffix = f"/{frame.strip('/')}" if rig else ""
+        mine = images.source[images.frame == frame] if rig else images.source
+        topics = sorted(set(mine.tolist()))
+        where = f"image {', '.join(topics)}" if topics else "no image in the log"
+        out.append(f"{ANNOTATIONS_TOPIC}{suffix} on camera {frame}: {where}; calibration {CALIBRATION_TOPIC}{suffix}")
     return out
 
 
@@ -144,18 +176,54 @@ def _transforms(result: ReplayResult) -> list[ProtobufMessage]:
     return out
 
 
-def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay, mine: IntArray,
+def annotation_stamps(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay) -> IntArray:
+    """Per observation, the stamp its annotations carry: its image's header stamp (so Foxglove's Image panel
+    pairs them with that image), else its own."""
+    obs = result.observations
+    images = timeline.image_frames
+    if not len(images):
+        return obs.stamp_ns
+    stamp: IntArray = np.where(overlay.image_row >= 0, images.stamp_ns[np.maximum(overlay.image_row, 0)], obs.stamp_ns)
+    return stamp
+
+
+def clip_to_image(start: FloatArray, end: FloatArray, width: IntArray,
+                  height: IntArray) -> tuple[FloatArray, BoolArray]:
+    """Segments ``start -> end`` (N, 2 each, OpenCV pixels) cut where they leave the image, and which were cut.
+
+    The image spans -0.5 .. size - 0.5 (pixel centres at integers). Only a segment that starts inside the
+    image and ends outside it is cut; the others (no image size, both ends inside or outside) are kept whole.
+    """
+    lo = np.full_like(start, -0.5)
+    hi = np.stack([width, height], axis=1).astype(float) - 0.5
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inside_start = ((start >= lo) & (start <= hi)).all(axis=1)
+        outside_end = ~((end >= lo) & (end <= hi)).all(axis=1)
+        step = end - start
+        # per axis, the fraction of the step at which the segment reaches the border it heads for
+        bound = np.where(step > 0, hi, lo)
+        reach = np.where(step != 0, (bound - start) / step, np.inf)
+    cut = inside_start & outside_end & (width > 0) & (height > 0) & np.isfinite(end).all(axis=1)
+    fraction = np.clip(np.min(reach, axis=1), 0.0, 1.0)
+    # onto the border exactly (the fraction's rounding would leave it a hair outside)
+    clipped = np.where(cut[:, None], np.clip(start + fraction[:, None] * step, lo, hi), end)
+    return clipped, cut
+
+
+def _annotations(result: ReplayResult, overlay: ImageOverlay, stamp: IntArray, mine: IntArray,
                  topic: str) -> list[ProtobufMessage]:
     """One ImageAnnotations per image (or per observation time without an image) of the observations ``mine``
-    (one camera's), on ``topic``."""
+    (one camera's), on ``topic``, in Foxglove's pixel convention (see the module docstring)."""
     from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
     from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 
     schema = file_descriptor_set(ImageAnnotations)
     obs = result.observations
-    images = timeline.image_frames
-    stamp = np.where(overlay.image_row >= 0, images.stamp_ns[np.maximum(overlay.image_row, 0)]
-                     if len(images) else obs.stamp_ns, obs.stamp_ns)
+    shift = FOXGLOVE_FROM_OPENCV_PX
+    detection, corners = overlay.detection_uv + shift, overlay.corners_px + shift
+    recomputed, as_run = overlay.recomputed_uv + shift, overlay.as_run_uv + shift
+    line_end, off_image = clip_to_image(overlay.recomputed_uv, overlay.as_run_uv, overlay.width, overlay.height)
+    line_end = line_end + shift
     out: list[ProtobufMessage] = []
     drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
     for when, in_mine in _by_stamp(stamp[mine]):
@@ -177,23 +245,71 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
             ann.thickness = size
 
         for i in rows.tolist():
-            points(PointsAnnotation.POINTS, [overlay.detection_uv[i]], DETECTION_COLOR, 8.0)
-            if np.isfinite(overlay.corners_px[i]).all():
-                points(PointsAnnotation.LINE_LOOP, overlay.corners_px[i], DETECTION_COLOR, 2.0)
-            for uv, color in ((overlay.recomputed_uv[i], RECOMPUTED_COLOR), (overlay.as_run_uv[i], AS_RUN_COLOR)):
-                if np.isfinite(uv).all():
+            points(PointsAnnotation.POINTS, [detection[i]], DETECTION_COLOR, 8.0)
+            if np.isfinite(corners[i]).all():
+                points(PointsAnnotation.LINE_LOOP, corners[i], DETECTION_COLOR, 2.0)
+            for uv, color, shown in ((recomputed[i], RECOMPUTED_COLOR, True),
+                                     (as_run[i], AS_RUN_COLOR, not off_image[i])):  # no dot off the picture
+                if shown and np.isfinite(uv).all():
                     points(PointsAnnotation.POINTS, [uv], color, 10.0)
-            if np.isfinite(overlay.recomputed_uv[i]).all() and np.isfinite(overlay.as_run_uv[i]).all():
-                points(PointsAnnotation.LINE_LIST, [overlay.recomputed_uv[i], overlay.as_run_uv[i]], overlay.color, 2.0)
+            if np.isfinite(recomputed[i]).all() and np.isfinite(as_run[i]).all():
+                points(PointsAnnotation.LINE_LIST, [recomputed[i], line_end[i]], overlay.color, 2.0)
                 text = msg.texts.add()
                 _stamp(text.timestamp, when)
-                text.position.x, text.position.y = (float(v) for v in overlay.as_run_uv[i])
-                text.text = f"{overlay.error_px[i]:.0f} px: {overlay.label()}"
+                text.position.x, text.position.y = (float(v) for v in line_end[i])
+                where = (f" (as-run point off the image at {overlay.as_run_uv[i, 0]:.0f}, "
+                         f"{overlay.as_run_uv[i, 1]:.0f})" if off_image[i] else "")
+                text.text = f"{overlay.error_px[i]:.0f} px: {overlay.label()}{where}"
                 text.font_size = 14.0
                 _color(text.text_color, overlay.color)
         log_ns = int(obs.log_time_ns[rows].max())
         out.append(ProtobufMessage(topic, "foxglove.ImageAnnotations", schema, log_ns, int(when),
                                    msg.SerializeToString()))
+    return out
+
+
+def calibration_message(cameras: CameraTable, row: int, stamp_ns: int, frame_id: str) -> bytes:
+    """Row ``row`` of the camera table as a serialised ``foxglove.CameraCalibration`` (no rectification:
+    R the identity, P = [K | 0]; no distortion written as plumb_bob with zeros)."""
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+
+    msg = CameraCalibration()
+    msg.timestamp.FromNanoseconds(int(stamp_ns))
+    msg.frame_id = frame_id
+    msg.width, msg.height = int(cameras.width[row]), int(cameras.height[row])
+    k = cameras.K[row]
+    n = int(cameras.n_distortion[row])
+    msg.distortion_model = str(cameras.distortion_model[row]) if n else "plumb_bob"
+    msg.D.extend(float(d) for d in (cameras.distortion[row, :n] if n else np.zeros(5)))
+    msg.K.extend(float(v) for v in k.ravel())
+    msg.R.extend(float(v) for v in np.eye(3).ravel())
+    msg.P.extend(float(v) for v in np.hstack([k, np.zeros((3, 1))]).ravel())
+    data: bytes = msg.SerializeToString()
+    return data
+
+
+def _calibrations(cameras: CameraTable, result: ReplayResult, stamp: IntArray, mine: IntArray,
+                  topic: str) -> list[ProtobufMessage]:
+    """The camera model each of the observations ``mine`` was replayed with, at the first annotated stamp and
+    wherever the model changes (stamp order), on ``topic``: what Foxglove needs to show the annotations when
+    the log has no image or CameraInfo of its own."""
+    from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+
+    obs = result.observations
+    rows = mine[result.camera_row[mine] >= 0]
+    rows = rows[cameras.width[result.camera_row[rows]] > 0]  # a camera-less model (3D points) has no image
+    if not rows.size:
+        return []
+    rows = rows[np.argsort(stamp[rows], kind="stable")]
+    _, model_of = distinct_models(cameras, result.camera_row[rows])
+    starts = np.flatnonzero(np.r_[True, model_of[1:] != model_of[:-1]])
+    schema = file_descriptor_set(CameraCalibration)
+    out: list[ProtobufMessage] = []
+    for i in rows[starts].tolist():
+        when = int(stamp[i])
+        frame = str(obs.camera_frame[i]) + REPLAY_FRAME_SUFFIX
+        out.append(ProtobufMessage(topic, "foxglove.CameraCalibration", schema, int(obs.log_time_ns[i]), when,
+                                   calibration_message(cameras, int(result.camera_row[i]), when, frame)))
     return out
 
 
@@ -271,10 +387,16 @@ def _findings(result: ReplayResult, findings: Sequence[Finding]) -> list[Protobu
 
 __all__ = [
     "ANNOTATIONS_TOPIC",
+    "CALIBRATION_TOPIC",
     "FINDINGS_TOPIC",
+    "FOXGLOVE_FROM_OPENCV_PX",
     "SCENE_TOPIC",
     "TF_TOPIC",
     "ProtobufMessage",
+    "annotation_stamps",
+    "calibration_message",
+    "clip_to_image",
     "file_descriptor_set",
     "foxglove_messages",
+    "viewing_hints",
 ]

@@ -25,7 +25,7 @@ import numpy as np
 
 from framechain.analysis.run import Run
 from framechain.arrays import IntArray
-from framechain.sinks.foxglove_export import ProtobufMessage, file_descriptor_set
+from framechain.sinks.foxglove_export import ProtobufMessage, calibration_message, file_descriptor_set
 from framechain.timeline import CameraTable, ImageFrameTable, JointStateTable, Timeline, TransformTable
 
 __all__ = ["EncodedCamera", "FramesOf", "camera_topic", "timeline_messages"]
@@ -139,20 +139,9 @@ def _calibrations(cameras: CameraTable, start: int) -> list[ProtobufMessage]:
     out: list[ProtobufMessage] = []
     for frame in dict.fromkeys(cameras.frame.tolist()):
         i = int(np.flatnonzero(cameras.frame == frame)[0])
-        msg = CameraCalibration()
         stamp = max(int(cameras.stamp_ns[i]), start)
-        msg.timestamp.FromNanoseconds(stamp)
-        msg.frame_id = str(frame)
-        msg.width, msg.height = int(cameras.width[i]), int(cameras.height[i])
-        k = cameras.K[i]
-        n = int(cameras.n_distortion[i])
-        msg.distortion_model = str(cameras.distortion_model[i]) if n else "plumb_bob"
-        msg.D.extend(float(d) for d in (cameras.distortion[i, :n] if n else np.zeros(5)))
-        msg.K.extend(float(v) for v in k.ravel())
-        msg.R.extend(float(v) for v in np.eye(3).ravel())
-        msg.P.extend(float(v) for v in np.hstack([k, np.zeros((3, 1))]).ravel())
         out.append(ProtobufMessage(f"{camera_topic(str(frame))}/calibration", "foxglove.CameraCalibration", schema,
-                                   stamp, stamp, msg.SerializeToString()))
+                                   stamp, stamp, calibration_message(cameras, i, stamp, str(frame))))
     return out
 
 

@@ -264,12 +264,15 @@ def worst_rows(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay, 
 
 def render_crops(
     timeline: Timeline, overlay: ImageOverlay, rows: IntArray, *, width_px: int = 360,
+    zoom_px: float | None = None,
 ) -> list[tuple[int, bytes]]:
     """PNG crops of the camera images at observation ``rows``, with the overlay drawn.
 
     Returns (observation row, PNG bytes). A crop spans the image and the projected points (grey
-    beyond the image), scaled to ``width_px``. JPEG/PNG are decoded with Pillow only to draw the
-    report; frames of video files are skipped (nothing here decodes video).
+    beyond the image), scaled to ``width_px``; with ``zoom_px``, a square of that half-size around
+    the points instead (at least), its pixels enlarged as they are, so that a gap of a pixel or two
+    shows. JPEG/PNG are decoded with Pillow only to draw the report; frames of video files are
+    skipped (nothing here decodes video).
     """
     import io
 
@@ -291,15 +294,13 @@ def render_crops(
         points = [p for p in (overlay.detection_uv[i], overlay.recomputed_uv[i], overlay.as_run_uv[i])
                   if np.isfinite(p).all()]
         pts = np.array(points) if points else np.zeros((0, 2))
-        margin = 0.05 * max(w, h)  # around points outside the image; none when all are inside
-        lo = pts.min(axis=0) - margin if pts.size else np.zeros(2)
-        hi = pts.max(axis=0) + margin if pts.size else np.array([w, h], dtype=float)
-        u0, v0 = int(np.floor(max(min(0.0, lo[0]), -w))), int(np.floor(max(min(0.0, lo[1]), -h)))
-        u1, v1 = int(np.ceil(min(max(float(w), hi[0]), 2.0 * w))), int(np.ceil(min(max(float(h), hi[1]), 2.0 * h)))
+        u0, v0, u1, v1 = _crop_window(pts, w, h, zoom_px)
         canvas = Image.new("RGB", (u1 - u0, v1 - v0), (200, 200, 200))
         canvas.paste(picture, (-u0, -v0))
         scale = width_px / canvas.width
-        canvas = canvas.resize((width_px, max(1, round(canvas.height * scale))))
+        size = (width_px, max(1, round(canvas.height * scale)))
+        # zoomed: each image pixel a block, as it is
+        canvas = canvas.resize(size) if zoom_px is None else canvas.resize(size, Image.Resampling.NEAREST)
         draw = ImageDraw.Draw(canvas)
 
         def at(p: FloatArray, *, scale: float = scale, u0: int = u0, v0: int = v0) -> tuple[float, float]:
@@ -322,3 +323,20 @@ def render_crops(
         canvas.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
         out.append((i, buf.getvalue()))
     return out
+
+
+def _crop_window(points: FloatArray, w: int, h: int, zoom_px: float | None) -> tuple[int, int, int, int]:
+    """(u0, v0, u1, v1) of a crop: the image and the points (within one image size of it), or with ``zoom_px`` a
+    square around the points (their spread and ``zoom_px`` either side)."""
+    if zoom_px is not None and points.size:
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2 + 0.5  # pixel centres at integers
+        half = max(float(zoom_px), float(np.ptp(points, axis=0).max()) / 2 + zoom_px / 2)
+        u0, v0 = (int(np.floor(c - half)) for c in centre)
+        side = int(np.ceil(2 * half))
+        return u0, v0, u0 + side, v0 + side
+    margin = 0.05 * max(w, h)  # around points outside the image; none when all are inside
+    lo = points.min(axis=0) - margin if points.size else np.zeros(2)
+    hi = points.max(axis=0) + margin if points.size else np.array([w, h], dtype=float)
+    u0, v0 = int(np.floor(max(min(0.0, lo[0]), -w))), int(np.floor(max(min(0.0, lo[1]), -h)))
+    u1, v1 = int(np.ceil(min(max(float(w), hi[0]), 2.0 * w))), int(np.ceil(min(max(float(h), hi[1]), 2.0 * h)))
+    return u0, v0, u1, v1

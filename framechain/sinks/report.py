@@ -13,7 +13,7 @@ import html
 import io
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +27,9 @@ from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
 from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots
 from framechain.sinks.evidence_files import inputs_record
-from framechain.sinks.overlay import PNG_COMPRESS_LEVEL
-from framechain.sinks.text import CSS, FindingView, mm
+from framechain.sinks.overlay import PNG_COMPRESS_LEVEL, ImageOverlay
+from framechain.sinks.text import CSS, FindingView, breakable, mm
+from framechain.timeline import PointRole
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,8 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     out.mkdir(parents=True, exist_ok=True)
     # Measured against the cameras' own motion, the world-error pictures would be empty.
     figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
+    if result.metric == "none":  # no evidence: the error plots would be empty axes
+        figures = [f for f in figures if f.name not in ("error_per_hop", "error_vs_speed")]
     checks = [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
     sections = image_crops(run)
     paths: dict[str, Path] = {}
@@ -74,12 +77,20 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
 #: Legend of the image crops (the colours of framechain.sinks.overlay).
 CROP_LEGEND = ("green: the detection (and tag corners); blue: the recomputed world point projected back into the "
                "image; orange: the as-run world point projected the same way; the line between them")
+#: Metrics whose findings are the robot's own mistakes: the as-run points carry them, one per finding.
+AS_RUN_METRICS = ("logged_hops", "target")
+#: A finding whose own gap is under this share of the image width is shown zoomed in.
+ZOOM_BELOW = 0.05
+#: Half-size (image pixels) of a zoomed crop around the points, at least.
+ZOOM_HALF_PX = 12.0
 
 
 def image_crops(run: Run) -> list[tuple[str, list[Figure]]]:
     """Per finding (or once, without findings): the camera image at the worst observations for it,
-    with the detection, both projected world points and the line between them (the whole as-run vs
-    recomputed gap, in the colour of the finding that explains most of it, as in Rerun).
+    with the detection, both projected world points and the line between them, in the colour of that
+    finding. With several findings of the robot's own (as-run evidence), each shows its own effect
+    alone: the as-run point less what the other findings do (:func:`finding_overlay`); a gap too small
+    to see in the whole image is shown zoomed in around the points.
 
     A finding's worst observations are those where its hop departs most from the logged hop
     (``hop_errors``), else where the error against the evidence is largest."""
@@ -97,23 +108,55 @@ def image_crops(run: Run) -> list[tuple[str, list[Figure]]]:
         return overlay.error_px
 
     sections: list[tuple[str, list[Figure]]] = []
-    for finding in result.findings or (None,):
-        rows = worst_rows(timeline, run.replay, overlay, score_for(finding.hop.value if finding else None))
+    for k, finding in enumerate(result.findings or (None,)):
+        shown, alone = (overlay, False) if finding is None else finding_overlay(run, overlay, k)
+        rows = worst_rows(timeline, run.replay, shown, score_for(finding.hop.value if finding else None))
+        gaps = shown.error_px[rows]
+        small = bool(rows.size) and np.isfinite(gaps).any() and float(np.nanmax(gaps)) < ZOOM_BELOW * float(
+            np.max(shown.width[rows]))
         prefix = f"camera_{finding.fault.value}" if finding else "camera"
+        what_gap = "between recomputed and as-run less the other findings" if alone else "between as-run and recomputed"
         figures = []
-        for i, png in render_crops(timeline, overlay, rows):
-            gap = overlay.error_px[i]
-            what = f"{gap:.0f} px between as-run and recomputed" if np.isfinite(gap) else "no as-run point"
-            caption = f"obs {int(obs.obs_id[i])} {obs.label[i]} at {obs.stamp_ns[i] / 1e9:.3f} s: {what}"
+        for i, png in render_crops(timeline, shown, rows, zoom_px=ZOOM_HALF_PX if small else None):
+            gap = shown.error_px[i]
+            what = f"{gap:.1f} px {what_gap}" if np.isfinite(gap) else "no as-run point"
+            zoomed = " (zoomed in around the points)" if small else ""
+            caption = f"obs {int(obs.obs_id[i])} {obs.label[i]} at {obs.stamp_ns[i] / 1e9:.3f} s: {what}{zoomed}"
             figures.append(Figure(f"{prefix}_obs_{int(obs.obs_id[i])}", caption, png))
         if figures:
-            title = (f"{finding.fault.value} on {finding.hop.value}: where {finding.hop.value} departs most"
-                     if finding else "the worst observations")
+            title = "the worst observations" if finding is None else (
+                f"{finding.fault.value} on {finding.hop.value}{' alone' if alone else ''}: where {finding.hop.value} "
+                "departs most")
             sections.append((title, figures))
     return sections
 
 
+def finding_overlay(run: Run, overlay: ImageOverlay, index: int) -> tuple[ImageOverlay, bool]:
+    """The overlay of finding ``index`` of the run's attribution: in its colour, and where several findings are the
+    robot's own and the as-run points carry them all, with the as-run points less the other findings' effect
+    (``Attribution.others_shift``), so that the picture shows this finding alone. The bool: whether it does."""
+    from framechain.sinks.overlay import FAULT_COLORS, UNEXPLAINED_COLOR, project_world_points
+
+    result, replay = run.attributed(), run.replay
+    finding = result.findings[index]
+    own = replace(overlay, finding=finding, color=FAULT_COLORS.get(finding.fault.value, UNEXPLAINED_COLOR))
+    role = {"world": PointRole.HOP_WORLD, "target": PointRole.TARGET}.get(overlay.as_run_role)
+    replayed = np.flatnonzero(replay.replayed)
+    if (len(result.findings) < 2 or result.metric not in AS_RUN_METRICS or role is None
+            or index >= len(result.others_shift) or len(result.others_shift[index]) != replayed.size):
+        return own, False
+    shift = np.full((len(replay.observations), 3), np.nan)
+    shift[replayed] = result.others_shift[index]
+    as_run = run.aligned.points(role) - shift
+    return replace(own, as_run_uv=project_world_points(run.timeline, replay, as_run)), True
+
+
 def _crops_intro(result: Attribution) -> str:
+    alone = len(result.findings) > 1 and result.metric in AS_RUN_METRICS
+    if alone:
+        return (f"Per finding, its own effect alone, at the observations where its hop departs most: {CROP_LEGEND}, "
+                "in the colour of the finding, with the as-run point less what the other findings do to it "
+                "(a gap of a few pixels is shown zoomed in).")
     top = max(result.findings, key=lambda f: f.share) if result.findings else None
     colour = f", in the colour of {top.fault.value} on {top.hop.value} (the largest share)" if top else ""
     return f"Per finding, at the observations where its hop departs most: {CROP_LEGEND}{colour}."
@@ -301,6 +344,16 @@ def _size(value: float | None, summary: dict[str, Any]) -> str:
     return mm(value)
 
 
+def _error_sentence(result: Attribution) -> str:
+    """The error against the evidence and what the findings leave (or that there is no evidence to measure it)."""
+    s = result.error_summary()
+    if result.metric == "none":
+        return "No error measured: the log has no evidence to measure the chain against."
+    return (f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
+            f"max {_size(s['max'], s)}; {_after_label(result)}: "
+            f"median {_size(result.error_summary(result.error_after)['median'], s)}.")
+
+
 def _after_label(result: Attribution) -> str:
     """What the second error curve is: corrected data, or what the findings leave unexplained."""
     if result.metric in ("reference", "static_spread"):
@@ -398,7 +451,6 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
 
 
 def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
-    s = result.error_summary()
     lines = [
         f"# framechain report: {Path(str(result.source.get('path', ''))).name or 'episode'}",
         "",
@@ -423,9 +475,7 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "",
         "## Error",
         "",
-        f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
-        f"max {_size(s['max'], s)}; {_after_label(result)}: "
-        f"median {_size(result.error_summary(result.error_after)['median'], s)}.",
+        _error_sentence(result),
         "",
         "### Per hop",
         "",
@@ -445,7 +495,6 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
 
 def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     e = html.escape
-    s = result.error_summary()
     title = Path(str(result.source.get("path", ""))).name or "episode"
     parts = [
         f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain: {e(title)}</title>",
@@ -461,30 +510,29 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         )
         for c in (FindingView.of(f).cells() for f in result.findings):
             weak = " style='color:#777'" if c.strength == "weak" else ""
+            b = breakable  # frame names wrap at their joints, so the table fits the page
             parts.append(
-                f"<tr{weak}><td><b>{e(c.fault)}</b></td><td>{e(c.hop)}</td><td>{e(c.camera or '-')}</td>"
-                f"<td>{e(c.estimate)}</td><td>{e(c.interval)}</td><td>{c.share}</td><td>{c.error}</td>"
-                f"<td>{c.confidence}</td><td>{c.strength}</td><td>{e(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
+                f"<tr{weak}><td><b>{b(c.fault)}</b></td><td>{b(c.hop)}</td><td>{b(c.camera or '-')}</td>"
+                f"<td>{b(c.estimate)}</td><td>{b(c.interval)}</td><td>{c.share}</td><td>{c.error}</td>"
+                f"<td>{c.confidence}</td><td>{c.strength}</td><td>{b(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
             )
         parts.append("</table>")
     else:
         parts.append("<p>No fault beyond noise.</p>" if _clean(result) else "<p>Nothing could be checked.</p>")
     counts = result.counts()
     parts.append(
-        f"<h2>Error</h2><p>Against the {e(s['metric'].replace('_', ' '))}: median {_size(s['median'], s)}, "
-        f"p95 {_size(s['p95'], s)}, max {_size(s['max'], s)}; {_after_label(result)}: median "
-        f"{_size(result.error_summary(result.error_after)['median'], s)}. Observations: {counts['total']} total, "
+        f"<h2>Error</h2><p>{e(_error_sentence(result))} Observations: {counts['total']} total, "
         f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
     )
     parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")
-    parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in hop_rows(result)]
+    parts += ["<tr>" + "".join(f"<td>{breakable(c)}</td>" for c in row) + "</tr>" for row in hop_rows(result)]
     parts.append("</table>")
     if result.notes:
-        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in result.notes) + "</ul>")
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{breakable(n)}</li>" for n in result.notes) + "</ul>")
     parts.append("<div class='plots'>")
     parts += [figure_html(fig) for fig in figures]
     parts.append("</div><h2>Provenance</h2><table>")
-    parts += [f"<tr><th>{e(k)}</th><td>{e(v)}</td></tr>" for k, v in _provenance(result)]
+    parts += [f"<tr><th>{e(k)}</th><td>{breakable(v)}</td></tr>" for k, v in _provenance(result)]
     parts.append(
         "</table><p class='muted'>Written by framechain. Shares are Shapley values of the median error; "
         "confidence is the BIC weight of the finding against the next-best explanation; intervals are "
@@ -499,6 +547,6 @@ def _clean(result: Attribution) -> bool:
 
 
 def _code(text: str) -> str:
-    """Escape, and show `backticked` commands as code."""
-    pieces = html.escape(text).split("`")
-    return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(pieces))
+    """Escape, and show `backticked` commands as code (both wrapping between words, long ones at their joints)."""
+    pieces = text.split("`")
+    return "".join(f"<code>{breakable(p, code=True)}</code>" if i % 2 else breakable(p) for i, p in enumerate(pieces))

@@ -7,6 +7,8 @@ The CLI table, both reports, the Rerun text log and the Foxglove findings word a
 
 from __future__ import annotations
 
+import html
+import re
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -82,7 +84,9 @@ class FindingView:
         return f" on camera {self.finding.camera}" if self.finding.camera else ""
 
 
-#: The style of the HTML reports (one log's and the fleet's).
+#: The style of the HTML reports (one log's and the fleet's). A table wider than the page scrolls inside its own
+#: box (``display:block``), so the page keeps its width; long words break where :func:`breakable` allows, and code
+#: wraps between words, never inside one unless a single word is wider than its cell.
 CSS = """
 body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;color:#222;
 line-height:1.45;padding:0 1em}
@@ -90,14 +94,41 @@ h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bo
 .verdict{font-size:1.2em;background:#fff6e5;border-left:5px solid #f0a020;padding:.7em 1em;margin:1em 0}
 .verdict.clean{background:#eaf7ea;border-color:#3a3}
 .summary{font-size:1.1em;background:#f3f6fb;border-left:5px solid #4a78c2;padding:.7em 1em}
-table{border-collapse:collapse;margin:.6em 0;font-size:.92em}
-th,td{border:1px solid #ddd;padding:.35em .6em;text-align:left;vertical-align:top}
+table{border-collapse:collapse;margin:.6em 0;font-size:.92em;display:block;max-width:100%;overflow-x:auto}
+th,td{border:1px solid #ddd;padding:.35em .5em;text-align:left;vertical-align:top;overflow-wrap:break-word}
 th{background:#f4f4f4}td.num{text-align:right}
-code{background:#f4f4f4;padding:.1em .3em;border-radius:3px;font-size:.9em;word-break:break-all}
-.plots{display:grid;grid-template-columns:1fr 1fr;gap:1em}.plots figure{margin:0}
+code{background:#f4f4f4;padding:.1em .3em;border-radius:3px;font-size:.9em;word-break:normal;overflow-wrap:break-word}
+.plots{display:grid;grid-template-columns:minmax(0,1fr) minmax(0,1fr);gap:1em}.plots figure{margin:0}
 figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}.plots img{width:100%}
-figcaption{font-size:.85em;color:#555}
-.muted{color:#777;font-size:.9em}
+figcaption{font-size:.85em;color:#555;overflow-wrap:break-word}
+.muted{color:#777;font-size:.9em}.nw{white-space:nowrap}
 """
 
-__all__ = ["CSS", "FindingCells", "FindingView", "mm"]
+#: A word at least this long gets break opportunities (frame names, paths, JSON keys).
+LONG_WORD = 16
+_BREAK_AFTER = re.compile(r"(?<=[_/.,:=(\[\]>])")
+
+
+def breakable(text: str, *, code: bool = False) -> str:
+    """``text`` escaped for HTML, with a break opportunity (``<wbr>``) after each ``_ / . , : = ( [ ] >`` inside
+    words of :data:`LONG_WORD` characters or more, so that a frame name or a path wraps at its joints and not
+    mid-word (and a table of them fits the page). ``code``: a command, whose ``--flag`` and ``a-b`` are kept
+    whole (a browser would break after a hyphen)."""
+    out = []
+    for word in re.split(r"(\s+)", text):
+        pieces: list[str] = []
+        for piece in (_BREAK_AFTER.split(word) if len(word) >= LONG_WORD else [word]):
+            if pieces and len(piece) < 3:  # no break before a last letter or a full stop
+                pieces[-1] += piece
+            elif piece:
+                pieces.append(piece)
+        out.append("<wbr>".join(_whole(html.escape(piece)) if code and "-" in piece else html.escape(piece)
+                                for piece in pieces))
+    return "".join(out)
+
+
+def _whole(escaped: str) -> str:
+    return f"<span class='nw'>{escaped}</span>"
+
+
+__all__ = ["CSS", "FindingCells", "FindingView", "breakable", "mm"]

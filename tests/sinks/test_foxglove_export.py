@@ -17,14 +17,23 @@ from mcap.reader import make_reader
 
 from framechain.cli.demo_cmd import parse_fault
 from framechain.cli.main import main
-from framechain.pipeline import load_log
+from framechain.pipeline import load_log, run
 from framechain.replay import replay
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import SceneSpec, generate
-from framechain.sinks.foxglove_export import ANNOTATIONS_TOPIC, FINDINGS_TOPIC, SCENE_TOPIC, TF_TOPIC
+from framechain.sinks.foxglove_export import (
+    ANNOTATIONS_TOPIC,
+    CALIBRATION_TOPIC,
+    FINDINGS_TOPIC,
+    SCENE_TOPIC,
+    TF_TOPIC,
+    clip_to_image,
+)
+from framechain.sinks.overlay import image_overlay
 
 ADDED = {TF_TOPIC: "foxglove.FrameTransforms", ANNOTATIONS_TOPIC: "foxglove.ImageAnnotations",
-         SCENE_TOPIC: "foxglove.SceneUpdate", FINDINGS_TOPIC: "foxglove.Log"}
+         SCENE_TOPIC: "foxglove.SceneUpdate", FINDINGS_TOPIC: "foxglove.Log",
+         CALIBRATION_TOPIC: "foxglove.CameraCalibration"}
 
 
 def _decoder(schema: Any) -> Any:
@@ -103,10 +112,12 @@ def test_every_added_message_decodes_and_annotations_land_on_the_detection(demo:
         stamp = first.timestamp.seconds * 10**9 + first.timestamp.nanos
         assert stamp in image_stamps  # paired with the image it is drawn on
         assert first.type == 1  # POINTS: the detection
-        assert (first.points[0].x, first.points[0].y) == pytest.approx(by_stamp[stamp], abs=1e-9)
+        # OpenCV's pixel (u, v) (origin at the top-left pixel's centre) is (u + 0.5, v + 0.5) in Foxglove (its corner)
+        u, v = by_stamp[stamp]
+        assert (first.points[0].x, first.points[0].y) == pytest.approx((u + 0.5, v + 0.5), abs=1e-9)
         # the recomputed point (second POINTS) projects back onto the detection as well
         recomputed = [p for p in msg.points if p.type == 1][1]
-        assert (recomputed.points[0].x, recomputed.points[0].y) == pytest.approx(by_stamp[stamp], abs=1e-6)
+        assert (recomputed.points[0].x, recomputed.points[0].y) == pytest.approx((u + 0.5, v + 0.5), abs=1e-6)
         lines = [p for p in msg.points if p.type == 4]  # LINE_LIST: recomputed -> as-run
         assert len(lines) == 1
         assert len(lines[0].points) == 2
@@ -124,6 +135,88 @@ def test_every_added_message_decodes_and_annotations_land_on_the_detection(demo:
                         for s in m.entities[0].spheres[:1]])
     order = np.argsort(obs.stamp_ns, kind="stable")
     np.testing.assert_allclose(spheres, result.p_world[order], atol=1e-9)
+
+
+def test_clip_to_image_hand_worked() -> None:
+    """A 320x240 image spans -0.5 .. 319.5 by -0.5 .. 239.5 in OpenCV pixels."""
+    start = np.array([[100.0, 50.0], [10.0, 10.0], [100.0, 50.0], [400.0, 50.0], [100.0, 50.0]])
+    end = np.array([[100.0, -150.0], [-30.0, 50.0], [200.0, 60.0], [500.0, 50.0], [np.nan, np.nan]])
+    width, height = np.full(5, 320), np.full(5, 240)
+    clipped, cut = clip_to_image(start, end, width, height)
+    assert cut.tolist() == [True, True, False, False, False]
+    # straight up: 50.5 of the 200 px step reach v = -0.5
+    np.testing.assert_allclose(clipped[0], [100.0, -0.5])
+    # left and down: u reaches -0.5 after 10.5 / 40 of the step, v = 10 + 0.2625 * 40 = 20.5
+    np.testing.assert_allclose(clipped[1], [-0.5, 20.5])
+    np.testing.assert_array_equal(clipped[2:4], end[2:4])  # inside, or starting outside: kept whole
+    no_image, cut = clip_to_image(start[:1], end[:1], np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64))
+    assert not cut.any()
+    np.testing.assert_array_equal(no_image, end[:1])
+
+
+def test_as_run_points_off_the_image_end_at_its_border(demo: tuple[Path, Path, Path]) -> None:
+    """The missing 30 deg pitch puts every as-run point above the picture: the line stops at the border (in
+    Foxglove's pixels, y = 0), pointing at the as-run point, no dot is drawn there, and the label says where it is."""
+    log, chain, annotated = demo
+    _, added, _ = _read(annotated)
+    made = run(log, chain, attribute=False)
+    result = made.replay
+    overlay = image_overlay(made.timeline, result, made.aligned)
+    outside = ~overlay.inside(overlay.as_run_uv)
+    assert outside.mean() > 0.9  # the case this test is about
+    by_stamp = {int(s): i for i, s in enumerate(result.observations.stamp_ns.tolist())}
+    for _, msg in added[ANNOTATIONS_TOPIC]:
+        (line,) = [p for p in msg.points if p.type == 4]
+        i = by_stamp[line.timestamp.seconds * 10**9 + line.timestamp.nanos]
+        start = np.array([line.points[0].x, line.points[0].y])
+        stop = np.array([line.points[1].x, line.points[1].y])
+        assert 0 <= stop[0] <= 160  # within the picture, its corners at 0 and the size
+        assert 0 <= stop[1] <= 120
+        dots = [np.array([p.points[0].x, p.points[0].y]) for p in msg.points if p.type == 1]
+        if not outside[i]:
+            continue
+        assert min(stop[1], 120 - stop[1], stop[0], 160 - stop[0]) == pytest.approx(0.0, abs=1e-9)
+        toward = overlay.as_run_uv[i] + 0.5 - start
+        along = stop - start
+        assert abs(toward[0] * along[1] - toward[1] * along[0]) < 1e-6 * np.linalg.norm(toward) ** 2  # same ray
+        assert len(dots) == 2  # the detection and the recomputed point; no as-run dot off the picture
+        assert "as-run point off the image at" in msg.texts[0].text
+        assert (msg.texts[0].position.x, msg.texts[0].position.y) == pytest.approx((stop[0], stop[1]))
+
+
+def test_calibration_of_the_replay_is_exported(demo: tuple[Path, Path, Path]) -> None:
+    """The camera model the replay used, once (one model), at the first annotated image, in the replay's frame."""
+    _, _, annotated = demo
+    _, added, _ = _read(annotated)
+    (log_ns, calibration), = added[CALIBRATION_TOPIC]
+    # SceneSpec(width=160, height=120, focal_px=150): fx = fy = 150, cx = 80, cy = 60, no distortion
+    assert (calibration.width, calibration.height) == (160, 120)
+    assert list(calibration.K) == [150.0, 0.0, 80.0, 0.0, 150.0, 60.0, 0.0, 0.0, 1.0]
+    assert list(calibration.P) == [150.0, 0.0, 80.0, 0.0, 0.0, 150.0, 60.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+    assert calibration.frame_id == "camera_optical_frame@replay"
+    first = min(m.points[0].timestamp.seconds * 10**9 + m.points[0].timestamp.nanos
+                for _, m in added[ANNOTATIONS_TOPIC])
+    assert calibration.timestamp.seconds * 10**9 + calibration.timestamp.nanos == first
+    assert log_ns <= min(t for t, _ in added[ANNOTATIONS_TOPIC])  # there before the first annotations
+
+
+def test_log_without_images_gets_a_camera(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No image in the log: the annotations still come with a CameraCalibration to be shown on."""
+    spec = SceneSpec(seed=3, duration_s=0.6, width=200, height=100, focal_px=120.0, color_images=False)
+    scene = generate(spec)
+    log = write_scene(scene, tmp_path / "episode.mcap")
+    chain = tmp_path / "chain.yaml"
+    chain.write_text(scene.chain.to_yaml())
+    out = tmp_path / "annotated.mcap"
+    assert main(["export", str(log), "--chain", str(chain), "--out", str(out), "--no-attribute", "-q"]) == 0
+    assert (f"{ANNOTATIONS_TOPIC} on camera camera_optical_frame: no image in the log; calibration "
+            f"{CALIBRATION_TOPIC}") in capsys.readouterr().out
+    copied, added, _ = _read(out)
+    assert not [t for t in copied if "image" in t]
+    assert len(added[ANNOTATIONS_TOPIC]) == len(load_log(log, chain).timeline.observations)
+    (_, calibration), = added[CALIBRATION_TOPIC]
+    assert (calibration.width, calibration.height) == (200, 100)
+    assert list(calibration.K) == [120.0, 0.0, 100.0, 0.0, 120.0, 50.0, 0.0, 0.0, 1.0]
 
 
 def test_real_bag_copied_and_annotated(realdata: Path, tmp_path: Path) -> None:
@@ -151,6 +244,15 @@ mounts:
     (_, annotations), = added[ANNOTATIONS_TOPIC]
     corners = [p for p in annotations.points if p.type == 2]  # LINE_LOOP: the seven markers
     assert len(corners) == 7
+    (_, calibration), = added[CALIBRATION_TOPIC]  # the bag's CameraInfo, as Foxglove's CameraCalibration
+    with AnyReader([bag]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/raspicam_node/camera_info"]
+        info: Any = reader.deserialize(next(iter(reader.messages(connections=conns)))[2], conns[0].msgtype)
+    assert (calibration.width, calibration.height) == (info.width, info.height)
+    np.testing.assert_array_equal(calibration.K, info.K)  # ROS 1 field names
+    np.testing.assert_array_equal(calibration.D, info.D)
+    assert calibration.distortion_model == info.distortion_model == "plumb_bob"
+    assert calibration.frame_id == "raspicam@replay"
     with out.open("rb") as f:  # the copy keeps ROS 1 encodings, readable as ROS 1
         summary = make_reader(f).get_summary()
     assert summary is not None

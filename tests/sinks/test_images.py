@@ -389,6 +389,40 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
     assert ((got > -0.5) & (got < [WIDTH - 0.5, HEIGHT - 0.5])).all()
 
 
+def test_each_finding_is_shown_alone(demo: Run, tmp_path: Path) -> None:
+    """The latency's crops show the as-run point less what the missing rotation does: where the robot's point
+    would have been with the latency alone. Independently: the same scene generated with the latency only (the
+    same observations; the robot's world points carry that one fault), projected with OpenCV."""
+    from framechain.sinks.overlay import FAULT_COLORS, image_overlay
+    from framechain.sinks.report import finding_overlay, render_report
+
+    attribution, timeline = demo.attribution, demo.loaded.timeline
+    result = attribution.replay
+    overlay = image_overlay(timeline, result, attribution.aligned, attribution.findings)
+    faults = [f.fault.value for f in attribution.findings]
+    assert len(attribution.others_shift) == len(faults) == 2
+    for fault in faults:
+        alone_faults = tuple(f for f in demo.scene.spec.faults if f.kind.value == fault)
+        scene = generate(replace(demo.scene.spec, faults=alone_faults))
+        assert np.array_equal(scene.timeline.observations.stamp_ns, timeline.observations.stamp_ns)
+        expected = _opencv_pixels(timeline, result, scene.robot_world)
+        shown, alone = finding_overlay(demo.loaded, overlay, faults.index(fault))
+        assert alone
+        assert shown.color == FAULT_COLORS[fault]
+        assert shown.label() == f"{fault} on {attribution.findings[faults.index(fault)].hop.value}"
+        ok = np.isfinite(expected).all(axis=1)
+        assert ok.mean() > 0.9
+        gap = np.linalg.norm(shown.as_run_uv[ok] - expected[ok], axis=1)
+        own = np.linalg.norm(expected[ok] - shown.recomputed_uv[ok], axis=1)
+        assert np.median(gap) < 0.1 * np.median(own)  # the finding's own effect, not the whole gap
+        if fault == "latency":  # a few pixels where the whole gap is some ninety
+            assert np.median(own) < 5
+            assert np.nanmedian(overlay.error_px) > 50
+    page = render_report(demo.loaded, tmp_path, formats=("html",))["html"].read_text()
+    assert "latency on body_to_world alone: where body_to_world departs most" in page
+    assert "zoomed in around the points" in page  # the latency's few pixels, shown where they can be seen
+
+
 def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Path) -> None:
     from PIL import Image
 
@@ -410,7 +444,7 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
     assert set(faults) == {"missing_rotation", "latency"}
     for fault in faults:  # a section of crops per finding
         assert len(sorted(tmp_path.glob(f"camera_{fault}_obs_*.png"))) == 4
-    assert "### missing_rotation on camera_to_body: where camera_to_body departs most" in paths["md"].read_text()
+    assert "### missing_rotation on camera_to_body alone: where camera_to_body departs most" in paths["md"].read_text()
     # missing_rotation's crops are at the observations where camera_to_body departs most
     timeline, result = demo.loaded.timeline, demo.attribution.replay
     overlay = image_overlay(timeline, result, demo.attribution.aligned, demo.attribution.findings)
