@@ -32,7 +32,7 @@ frame shows an earlier moment than its stamp says.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -96,6 +96,10 @@ class EgoMotionOptions:
     seed: int = 0
 
 
+#: Frame pairs: padded bearings, the stamps of both frames, the match count of each.
+_Pairs = tuple[PairBatch, IntArray, IntArray, IntArray]
+
+
 @dataclass(frozen=True)
 class FeatureTracks:
     """Feature tracks through a camera's usable frames (computed once, measured against many priors).
@@ -109,6 +113,10 @@ class FeatureTracks:
     ids: tuple[IntArray, ...]
     pixels: tuple[FloatArray, ...]
     fixed: IntArray
+    #: Per intrinsics, stamps and options: the frame pairs and their rotation-only RANSAC, which do not
+    #: depend on the translation prior (a fit measures the same tracks against many priors).
+    _first: dict[tuple[object, ...], tuple[_Pairs | None, tuple[FloatArray, BoolArray] | None]] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
 
 
 def track_features(
@@ -148,13 +156,11 @@ def measure_egomotion(
     opts = options or EgoMotionOptions()
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     focal = 0.5 * (intrinsics.fx + intrinsics.fy)
-    pairs = _gather(tracks, stamps, intrinsics, opts)
-    if pairs is None:
+    pairs, first = _first_rotations(tracks, stamps, intrinsics, opts)
+    if pairs is None or first is None:
         return EgoMotionTable.empty()
     batch, s0, s1, matched = pairs
-    rng = np.random.default_rng(opts.seed)
-    rotation, inliers = rotations_ransac(batch, opts.ransac_threshold_px / focal, hypotheses=opts.ransac_hypotheses,
-                                         rng=rng)
+    rotation, inliers = first[0].copy(), first[1].copy()
     prior = np.full((s0.size, 3), np.nan) if translation is None else np.asarray(translation(s0, s1), dtype=float)
     norm = np.linalg.norm(prior, axis=1, keepdims=True)
     known = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0)
@@ -186,13 +192,30 @@ def measure_egomotion(
     return table.take(np.lexsort((table.stamp1_ns, table.stamp0_ns)))
 
 
-def _gather(
+def _first_rotations(
     tracks: FeatureTracks, stamps: IntArray, intrinsics: Intrinsics, opts: EgoMotionOptions
-) -> tuple[PairBatch, IntArray, IntArray, IntArray] | None:
+) -> tuple[_Pairs | None, tuple[FloatArray, BoolArray] | None]:
+    """The frame pairs (:func:`_gather`) and their rotation-only RANSAC, found once per intrinsics, stamps and
+    options on ``tracks`` (the RANSAC draws from its own generator seeded by the options: the same each time)."""
+    key = (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy, intrinsics.distortion_model,
+           tuple(intrinsics.distortion), stamps.tobytes(), opts)
+    if key not in tracks._first:
+        pairs = _gather(tracks, stamps, intrinsics, opts)
+        threshold = opts.ransac_threshold_px / (0.5 * (intrinsics.fx + intrinsics.fy))
+        first = None if pairs is None else rotations_ransac(
+            pairs[0], threshold, hypotheses=opts.ransac_hypotheses, rng=np.random.default_rng(opts.seed))
+        tracks._first[key] = (pairs, first)
+    return tracks._first[key]
+
+
+def _gather(tracks: FeatureTracks, stamps: IntArray, intrinsics: Intrinsics, opts: EgoMotionOptions) -> _Pairs | None:
     """The frame pairs ``spans`` apart with enough matches: padded bearings, stamps, match counts."""
     model = PinholeModel(K=intrinsics.K, distortion_model=intrinsics.distortion_model,
                          distortion=np.asarray(intrinsics.distortion, dtype=float))
-    bearings = [_bearings(model, px) for px in tracks.pixels]
+    # One OpenCV call for every frame's pixels (each point is undistorted on its own: the same bearings).
+    counts = [len(px) for px in tracks.pixels]
+    flat = _bearings(model, np.concatenate(tracks.pixels).reshape(-1, 2) if counts else np.zeros((0, 2)))
+    bearings = np.split(flat, np.cumsum(counts)[:-1]) if counts else []
     n = len(tracks.ids)
     chosen: list[tuple[int, int, IntArray, IntArray]] = []
     for span in opts.spans:

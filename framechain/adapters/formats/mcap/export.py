@@ -25,6 +25,8 @@ from framechain.adapters.formats.mcap.reader import MCAP_MAGIC
 FRAMECHAIN_METADATA = "framechain"
 #: The MCAP header's ``library`` of framechain's exports (older exports carry it without the metadata).
 FRAMECHAIN_LIBRARY = "framechain"
+#: The bytes of an MCAP footer record (opcode, length, summary start, summary offset start, CRC).
+FOOTER_BYTES = 1 + 8 + 8 + 8 + 4
 
 
 class ExtraMessage(Protocol):
@@ -166,6 +168,47 @@ def _copy_rosbag(path: Path, writer: Any, copied: dict[str, int]) -> None:
             copied[conn.topic] = copied.get(conn.topic, 0) + 1
 
 
+def _metadata_names(f: Any) -> list[str] | None:
+    """The names in the summary's metadata index group, found through the footer's summary offsets (the
+    summary's chunk indexes, thousands on a long log, are not parsed: every log read is asked this); None
+    when the file has no summary offsets."""
+    import io
+    import struct
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Footer, MetadataIndex, SummaryOffset
+    from mcap.stream_reader import StreamReader
+
+    f.seek(-(FOOTER_BYTES + len(MCAP_MAGIC)), io.SEEK_END)
+    footer = next(StreamReader(f, skip_magic=True).records)
+    if not isinstance(footer, Footer) or footer.summary_offset_start == 0:
+        return None
+    f.seek(footer.summary_offset_start)
+    offsets = [r for r in _records_until_footer(StreamReader(f, skip_magic=True)) if isinstance(r, SummaryOffset)]
+    group = next((o for o in offsets if o.group_opcode == Opcode.METADATA_INDEX), None)
+    if group is None:
+        return []
+    f.seek(group.group_start)
+    data = f.read(group.group_length)
+    names, at = [], 0
+    while at + 9 <= len(data):
+        opcode, length = struct.unpack_from("<BQ", data, at)
+        if opcode == Opcode.METADATA_INDEX:
+            names.append(MetadataIndex.read(ReadDataStream(io.BytesIO(data[at + 9:at + 9 + length]))).name)
+        at += 9 + length
+    return names
+
+
+def _records_until_footer(reader: Any) -> Iterable[Any]:
+    from mcap.records import Footer
+
+    for record in reader.records:
+        if isinstance(record, Footer):
+            return
+        yield record
+
+
 def framechain_output(path: str | Path) -> str | None:
     """What framechain wrote ``path`` as (``framechain 0.1 export of /logs/run.bag``), or None for a file it
     did not write: the ``framechain`` metadata record of an MCAP (its header's library, for exports older
@@ -182,8 +225,11 @@ def framechain_output(path: str | Path) -> str | None:
             f.seek(0)
             reader = make_reader(f)
             library = reader.get_header().library
-            summary = reader.get_summary()
-            marked = summary is not None and any(i.name == FRAMECHAIN_METADATA for i in summary.metadata_indexes)
+            names = _metadata_names(f)
+            if names is None:  # no summary offsets to go by: the whole summary
+                summary = reader.get_summary()
+                names = [i.name for i in summary.metadata_indexes] if summary is not None else []
+            marked = FRAMECHAIN_METADATA in names
             record = next((m.metadata for m in reader.iter_metadata() if m.name == FRAMECHAIN_METADATA), None) \
                 if marked else None
     except Exception:  # a damaged file is not ours to diagnose here: the reader says what is wrong with it
