@@ -320,14 +320,14 @@ def run(
     why: NotAttributed | None = NotAttributed(Unattributed.NOT_ASKED, "attribution was not asked for")
     motion = None
     if attribute:
-        # The cameras' own motion: the evidence of an episode as recorded (joints and video, no detections).
-        motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
-                                 partial(camera_motion_source, loaded.timeline), progress=progress)
         try:
             attribution = attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap, progress=progress)
             why = None
         except AnalysisError as err:
             why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
+        if _measures_camera_motion(loaded, attribution):
+            motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
+                                     partial(camera_motion_source, loaded.timeline), progress=progress)
         if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
             # A camera that moves is measured: evidence whatever else the log lacks.
             unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)
@@ -343,6 +343,16 @@ def run(
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
         info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
     )
+
+
+def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) -> bool:
+    """Whether the cameras' own motion is measured: always for a LeRobot episode (the evidence of an episode as
+    recorded, joints and video; beside markers, their corroboration), and for a robot log only when nothing
+    else measures the chain (it costs seconds per camera, and images that do not move with the robot, such as a
+    screen, would be read as a camera on the wrong link)."""
+    if getattr(loaded.info, "format", None) == "lerobot":
+        return True
+    return attribution is None or attribution.metric == "none"
 
 
 def attribute_log(
