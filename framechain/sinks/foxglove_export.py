@@ -32,14 +32,9 @@ from framechain.analysis.rig_layout import PairLines
 from framechain.analysis.run import Run
 from framechain.arrays import BoolArray, IntArray, rows_of
 from framechain.replay import ReplayResult
-from framechain.sinks.overlay import (
-    AS_RUN_COLOR,
-    DETECTION_COLOR,
-    RECOMPUTED_COLOR,
-    ImageOverlay,
-    image_overlay,
-)
-from framechain.sinks.rerun_common import ERROR_COLOR, REPLAY_FRAME_SUFFIX
+from framechain.sinks.colors import AS_RUN_COLOR, DETECTION_COLOR, ERROR_COLOR, RECOMPUTED_COLOR
+from framechain.sinks.overlay import ImageOverlay, image_overlay
+from framechain.sinks.rerun_common import REPLAY_FRAME_SUFFIX
 from framechain.sinks.text import FindingView
 from framechain.timeline import PointRole, Timeline
 
@@ -158,6 +153,7 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
                      if len(images) else obs.stamp_ns, obs.stamp_ns)
     out: list[ProtobufMessage] = []
     drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
+    used_colors = overlay.detection_colors
     for when, in_mine in _by_stamp(stamp[mine]):
         rows = mine[in_mine]
         rows = rows[drawn[rows]]
@@ -177,7 +173,8 @@ def _annotations(timeline: Timeline, result: ReplayResult, overlay: ImageOverlay
             ann.thickness = size
 
         for i in rows.tolist():
-            points(PointsAnnotation.POINTS, [overlay.detection_uv[i]], DETECTION_COLOR, 8.0)
+            r, g, b = (int(c) for c in used_colors[i])  # the detector's own pixel, or framechain's estimate
+            points(PointsAnnotation.POINTS, [overlay.detection_uv[i]], (r, g, b), 8.0)
             if np.isfinite(overlay.corners_px[i]).all():
                 points(PointsAnnotation.LINE_LOOP, overlay.corners_px[i], DETECTION_COLOR, 2.0)
             for uv, color in ((overlay.recomputed_uv[i], RECOMPUTED_COLOR), (overlay.as_run_uv[i], AS_RUN_COLOR)):

@@ -13,7 +13,10 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
   without interpolation; these make the hop points land where the replay put them.
 - ``/camera``: the chain camera as a ``Pinhole`` (RDF) under its optical frame, with the child
   frame ``<camera>_image_plane``; ``/camera/depth`` the depth frames nearest the observations
-  (decimated); ``/camera/detections`` every observation's pixel as a 2D point.
+  (decimated); ``/camera/detections`` every observation's pixel as a 2D point (the pixel framechain used;
+  ``/camera/overlay/detector_centre`` the centre a tag's detector logged where framechain used its own).
+  Every pixel drawn over an image is shifted by +0.5 from framechain's (OpenCV's) convention into
+  Rerun's, where (0, 0) is the top-left pixel's corner; the pinhole's principal point likewise.
 - ``/camera/image``: the camera's images (``--images near``: those nearest the observations; ``all``;
   ``none``): ``Image`` for raw encodings, ``EncodedImage`` for JPEG/PNG (never decoded here);
   ``/camera/video``: a LeRobot episode's mp4 as ``AssetVideo`` and one ``VideoFrameReference`` per
@@ -55,13 +58,13 @@ import numpy as np
 
 from framechain.analysis.run import Run
 from framechain.arrays import FloatArray
+from framechain.sinks.colors import REFERENCE_COLOR
 from framechain.sinks.overlay import ImageOverlay, ImageSelection, image_overlay
 from framechain.sinks.rerun_blueprint import default_blueprint, image_view_bounds
 from framechain.sinks.rerun_checks import curve_entity, curve_title, log_checks
 from framechain.sinks.rerun_common import (
     LOG_TIME,
     OBS_INDEX,
-    REFERENCE_COLOR,
     ROLE_LEAF,
     SENSOR_TIME,
     RerunOptions,
@@ -71,12 +74,19 @@ from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_video
 from framechain.sinks.rerun_rig import log_rig
 from framechain.sinks.rerun_scene import (
     log_camera,
+    log_detections,
     log_frame_tree,
     log_images,
     log_overlay,
     log_used_transforms,
 )
-from framechain.sinks.rerun_series import log_points, log_series, log_text, summary_markdown
+from framechain.sinks.rerun_series import (
+    log_explained_error,
+    log_points,
+    log_series,
+    log_text,
+    summary_markdown,
+)
 from framechain.sinks.text import FindingView
 from framechain.timeline import FramechainError, Timeline
 
@@ -306,6 +316,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_used_transforms(rec, result, views, rows)
     for view in views:
         log_camera(rec, timeline, result, view, opts, rows)
+        log_detections(rec, overlay, result, view, rows)
     as_run = _as_run_points(rec, run, opts, rows)
     log_points(rec, result, as_run, opts, rows, views)
     log_series(rec, result, as_run, rows)
@@ -319,6 +330,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
         log_rig(rec, result, run.attribution.rig, opts, rows)
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
     if run.attribution is not None:
+        log_explained_error(rec, result, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
     return rows
 
