@@ -66,8 +66,11 @@ def hex_color(rgb: Rgb) -> str:
     return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
+#: What the legend says of the error line, after the colours.
+ERROR_LINE_LEGEND = "the line between a recomputed and an as-run point: the colour of the fault that explains it " \
+    "(red when none does)"
+
+
 def legend_text() -> str:
     """The legend in one sentence, as the report states it."""
-    parts = [f"{name}: {meaning}" for _rgb, name, meaning in LEGEND]
-    return ("; ".join(parts) + "; the line between a recomputed and an as-run point: the colour of the fault that "
-            "explains it (red when none does).")
+    return "; ".join([*(f"{name}: {meaning}" for _rgb, name, meaning in LEGEND), ERROR_LINE_LEGEND]) + "."

@@ -11,21 +11,22 @@ from framechain.config.chain import ChainFrames
 from framechain.sinks.overlay import (
     ImageOverlay,
 )
-from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, OBS_INDEX, SENSOR_TIME
+from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, OBS_INDEX, SENSOR_TIME, rerun_pixels
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
 
 
 def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float] | None:
-    """(u_min, u_max, v_min, v_max) of the camera view: the image, widened to show most projected
-    as-run points (the 90th percentile of how far they fall outside, at most one image size)."""
+    """(u_min, u_max, v_min, v_max) of the camera view in Rerun's image space, where the image spans (0, 0) ..
+    (W, H): the image, widened to show most projected as-run points (the 90th percentile of how far they fall
+    outside, at most one image size)."""
     have = overlay.width > 0
     if not have.any():
         return None
     w, h = float(overlay.width[have].max()), float(overlay.height[have].max())
-    u0, u1, v0, v1 = -0.5, w - 0.5, -0.5, h - 0.5
-    uv = overlay.as_run_uv[np.isfinite(overlay.as_run_uv).all(axis=1)]
+    u0, u1, v0, v1 = 0.0, w, 0.0, h
+    uv = rerun_pixels(overlay.as_run_uv[np.isfinite(overlay.as_run_uv).all(axis=1)])
     if uv.size:
         margin_u, margin_v = 0.04 * w, 0.04 * h
         u0 = max(min(u0, float(np.percentile(uv[:, 0], 10)) - margin_u), -w)

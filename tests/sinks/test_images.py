@@ -36,7 +36,7 @@ from framechain.sinks.colors import FAULT_COLORS
 from framechain.sinks.overlay import ImageSelection
 from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
 from framechain.sinks.rerun_common import RERUN_PIXEL_OFFSET
-from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, Timeline, TransformTable
+from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, PointRole, Timeline, TransformTable
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 
@@ -444,3 +444,37 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
         x, y = np.rint(recomputed).astype(int)
         ring = picture[y - 12: y + 13, x - 12: x + 13].reshape(-1, 3)
         assert (np.abs(ring - DETECTION_COLOR).max(axis=1) <= 40).any()
+
+
+def _by_obs(batches: Batches, entity: str) -> dict[int, float]:
+    """Scalar per observation row (``obs_index``) of a series."""
+    out: dict[int, float] = {}
+    for static, batch in batches.get(entity, []):
+        if static or "Scalars:scalars" not in batch.schema.names:
+            continue
+        for i, v in zip(batch.column("obs_index").to_pylist(), batch.column("Scalars:scalars").to_pylist(),
+                        strict=True):
+            out[int(i)] = float(v[0])
+    return out
+
+
+def test_demo_per_hop_error_is_each_hops_own_as_in_the_report(demo: Run) -> None:
+    """Each hop's series is that hop's own departure, the report's ``hop_errors`` (computed by the attribution from
+    the robot's logged input to the hop), not the error accumulated upstream that it drew before: the lost
+    30 deg mount rotation moves the body point by decimetres; body_to_world itself carries only the latency."""
+    result = demo.attribution
+    rows = {int(o): i for i, o in enumerate(demo.loaded.replay.observations.obs_id)}
+    at = np.array([rows[int(o)] for o in result.inputs.obs_id])
+    for hop in ("camera_to_body", "body_to_world"):
+        plotted = _by_obs(demo.batches, f"/series/error_mm/{hop}")
+        got = np.array([plotted.get(int(i), np.nan) for i in at])
+        np.testing.assert_allclose(got, result.hop_errors[hop] * 1e3, rtol=1e-4, atol=1e-3)
+    own = np.nanmedian(result.hop_errors["body_to_world"]) * 1e3
+    accumulated = np.nanmedian(np.linalg.norm(demo.loaded.aligned.points(PointRole.HOP_WORLD)
+                                              - demo.loaded.replay.p_world, axis=1)) * 1e3
+    assert own < 0.1 * accumulated
+    # the error the findings explain, and what remains, as series beside them
+    world = _by_obs(demo.batches, "/series/error_mm/world_error")
+    np.testing.assert_allclose([world[int(i)] for i in at], result.error_before * 1e3, rtol=1e-4)
+    corrected = _by_obs(demo.batches, "/series/error_mm/corrected")
+    assert np.nanmedian(list(corrected.values())) < 0.5 * np.nanmedian(list(world.values()))
