@@ -33,8 +33,9 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
 - ``/series/error_mm/<hop>`` (recomputed vs as-run, and ``target``/``reference``) and
   ``/series/gap_ms/<hop>`` (observation stamp minus the stamp of the transform sample used):
   ``Scalars``, one row per replayed observation.
-- ``/log/findings``, ``/log/rejected``, ``/log/stale``: ``TextLog`` entries; ``/summary``: a
-  Markdown ``TextDocument`` with the counts and the findings.
+- ``/log/findings``, ``/log/rejected``, ``/log/stale``: ``TextLog`` entries (``/log/verdict`` instead of
+  findings: why there are none, e.g. nothing could be checked); ``/summary``: a Markdown ``TextDocument``
+  with the counts, the findings and the colour legend.
 
 Timelines: ``sensor_time`` (header stamps), ``log_time`` (receive time in the log), and
 ``obs_index`` (row of the observation) on everything tied to an observation. Rerun's own
@@ -163,6 +164,9 @@ def resolve_target(target: RerunTarget, *, env: Mapping[str, str] | None = None)
     return target, None
 
 
+#: Observations spanning less than this are one moment: the series show this much either side of it.
+SHORT_LOG_NS = 1_000_000_000
+
 #: Where ``connect_grpc(None)`` sends: Rerun's default local viewer.
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
 
@@ -226,10 +230,12 @@ def stream_replay(
     curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
     views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
     boxes = [(v.frame, v.root, _image_box(run.timeline, v.frame)) for v in views if v.rig]
+    stamps = run.replay.observations.stamp_ns
+    # A log of one moment (one image): the series' time axes would span months around it.
+    moment = stamps.size > 0 and int(stamps.max() - stamps.min()) < SHORT_LOG_NS
     blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
-                                  curves=curves, curves_first=run.attribution is not None
-                                  and run.attribution.metric == "static_spread",
-                                  camera_motion=run.camera_motion is not None, cameras=boxes)
+                                  curves=curves, camera_motion=run.camera_motion is not None, cameras=boxes,
+                                  window_s=SHORT_LOG_NS / 1e9 if moment else None)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -328,7 +334,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_camera_motion(rec, run, rows)
     if run.attribution is not None and run.attribution.rig is not None:
         log_rig(rec, result, run.attribution.rig, opts, rows)
-    log_text(rec, result, [FindingView.of(f) for f in run.findings], rows)
+    log_text(rec, result, [FindingView.of(f) for f in run.findings], rows, verdict=_verdict(run))
     if run.attribution is not None:
         log_explained_error(rec, result, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
@@ -355,6 +361,14 @@ def _as_run_points(
                 rr.CoordinateFrame(run.chain.frames.world), static=True)
         rows["/points/reference/declared"] = 1
     return as_run
+
+
+def _verdict(run: Run) -> str:
+    """What the findings panel says when there are no findings: the attribution's verdict, or that none ran."""
+    if run.attribution is not None:
+        return run.attribution.verdict
+    why = f" ({run.not_attributed.detail})" if run.not_attributed else ""
+    return f"No attribution{why}: the replay alone, nothing checked against evidence."
 
 
 def _stderr(message: str) -> None:

@@ -179,13 +179,19 @@ def _send_series(rec: rr.RecordingStream, result: ReplayResult, entity: str, sel
 
 
 def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[FindingView],
-              rows: dict[str, int]) -> None:
-    """Findings (at the first observation), rejected and stale observations, and a summary."""
+             rows: dict[str, int], *, verdict: str = "") -> None:
+    """Findings (at the first observation; without findings, ``/log/verdict``: why there are none), rejected and
+    stale observations, and a summary."""
     import rerun as rr
 
     obs = result.observations
     budget_ms = result.latency_budget_ns / 1e6
     found = list(findings)
+    if not found and verdict and len(obs):
+        first = np.array([int(np.argmin(obs.stamp_ns))], dtype=np.int64)
+        rec.send_columns("/log/verdict", indexes=obs_indexes(result, first),
+                         columns=rr.TextLog.columns(text=[verdict], level=[rr.TextLogLevel.INFO]))
+        rows["/log/verdict"] = 1
     if found and len(obs):
         first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
         rec.send_columns("/log/findings", indexes=obs_indexes(result, first),
