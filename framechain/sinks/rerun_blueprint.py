@@ -101,8 +101,10 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
     errors = _error_views(curves, curves_first=curves_first, camera_motion=camera_motion, axis=axis)
     pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px", axis_x=axis)
     gaps = gaps or rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms", axis_x=axis)
-    text = rrb.Tabs(rrb.TextLogView(name="Findings and rejections", origin="/log"),
-                    rrb.TextDocumentView(name="Summary", origin="/summary"),
+    # The summary first: the log view sizes its columns to what it shows first, and cut findings to a few letters.
+    findings = rrb.TextLogView(name="Findings and rejections", origin="/log", columns=rrb.TextLogColumns(
+        timeline_columns=[], text_log_columns=["loglevel", "body"]))
+    text = rrb.Tabs(rrb.TextDocumentView(name="Summary", origin="/summary"), findings,
                     rrb.TextDocumentView(name="What this log can show", origin="/checks"))
     return rrb.Blueprint(
         rrb.Vertical(

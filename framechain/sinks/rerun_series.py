@@ -223,7 +223,7 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
         rec.send_columns("/log/stale", indexes=obs_indexes(result, stale),
                          columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.INFO] * stale.size))
         rows["/log/stale"] = int(stale.size)
-    rec.log("/summary", rr.TextDocument(summary_markdown(result, found), media_type=rr.MediaType.MARKDOWN),
+    rec.log("/summary", rr.TextDocument(summary_markdown(result, found, verdict), media_type=rr.MediaType.MARKDOWN),
             static=True)
     rows["/summary"] = 1
 
@@ -247,8 +247,9 @@ def _rejection_text(result: ReplayResult, i: int) -> str:
     return f"obs {int(obs.obs_id[i])} {obs.label[i]} rejected: {reason}{detail}".replace("  ", " ")
 
 
-def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ()) -> str:
-    """Counts (total, replayed, rejected per reason, stale) and findings as Markdown."""
+def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (), verdict: str = "") -> str:
+    """The verdict, counts (total, replayed, rejected per reason, stale), findings and the colour legend as
+    Markdown."""
     counts = result.counts()
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
@@ -256,6 +257,7 @@ def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ())
     lines = [
         "# framechain replay",
         "",
+        *([f"**{verdict}**", ""] if verdict else []),
         f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
         f"latency budget {result.latency_budget_ns / 1e6:g} ms.",
         "",
