@@ -195,26 +195,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.legend(fontsize=7)
     figures.append(figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)"))
 
-    recomputed = _recomputed_world(result)
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
-    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
-          color=hex_color(RECOMPUTED_COLOR))
-    ev = result.evidence_points
-    if np.isfinite(ev).any() and result.metric != "static_spread":
-        label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
-            result.metric, "evidence"
-        )
-        color = REFERENCE_COLOR if result.metric == "reference" else AS_RUN_COLOR
-        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7, color=hex_color(color))
-    if result.findings and result.metric in ("reference", "static_spread"):
-        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7,
-              color=hex_color(CORRECTED_COLOR))
-    ax.set_xlabel(f"x in {result.config.frames.world} (m)")
-    ax.set_ylabel(f"y in {result.config.frames.world} (m)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    figures.append(figure_png(fig, "world_top_down", "World points from above"))
+    figures.append(_world_top_down(result))
 
     if result.findings:
         top = result.findings[0]
@@ -235,6 +216,32 @@ def make_figures(result: Attribution) -> list[Figure]:
             figures.append(figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this "
                                       "episode (a displacement, not the error the findings share out)"))
     return figures
+
+
+def _world_top_down(result: Attribution) -> Figure:
+    """The world points from above: recomputed, the evidence and (against a reference or static targets) corrected."""
+    import matplotlib.pyplot as plt
+
+    recomputed = _recomputed_world(result)
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
+    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
+          color=hex_color(RECOMPUTED_COLOR))
+    ev = result.evidence_points
+    if np.isfinite(ev).any() and result.metric != "static_spread":
+        label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
+            result.metric, "evidence"
+        )
+        color = REFERENCE_COLOR if result.metric == "reference" else AS_RUN_COLOR
+        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7, color=hex_color(color))
+    if result.findings and result.metric in ("reference", "static_spread"):
+        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7,
+              color=hex_color(CORRECTED_COLOR))
+    ax.set_xlabel(f"x in {result.config.frames.world} (m)")
+    ax.set_ylabel(f"y in {result.config.frames.world} (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    return figure_png(fig, "world_top_down", "World points from above")
 
 
 #: Marker of the scatter plots: scatter(s=8)'s size (the square root of its area in points^2) and edge.

@@ -101,11 +101,7 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
     errors = _error_views(curves, curves_first=curves_first, camera_motion=camera_motion, axis=axis)
     pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px", axis_x=axis)
     gaps = gaps or rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms", axis_x=axis)
-    # The summary first: the log view sizes its columns to what it shows first, and cut findings to a few letters.
-    findings = rrb.TextLogView(name="Findings and rejections", origin="/log", columns=rrb.TextLogColumns(
-        timeline_columns=[], text_log_columns=["loglevel", "body"]))
-    text = rrb.Tabs(rrb.TextDocumentView(name="Summary", origin="/summary"), findings,
-                    rrb.TextDocumentView(name="What this log can show", origin="/checks"))
+    text = _text_views()
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(rrb.Tabs(world, history), views, column_shares=[1, 1]),
@@ -115,6 +111,19 @@ def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_pan
         rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
         collapse_panels=collapse_panels,
     )
+
+
+def _text_views() -> rrb.Tabs:
+    """The summary (verdict, counts, findings, colours), the findings and rejections, and what the log can show.
+
+    The summary first: the log view sizes its columns to what it shows first, and cut findings to a few letters.
+    """
+    import rerun.blueprint as rrb
+
+    findings = rrb.TextLogView(name="Findings and rejections", origin="/log", columns=rrb.TextLogColumns(
+        timeline_columns=[], text_log_columns=["loglevel", "body"]))
+    return rrb.Tabs(rrb.TextDocumentView(name="Summary", origin="/summary"), findings,
+                    rrb.TextDocumentView(name="What this log can show", origin="/checks"))
 
 
 def _error_views(curves: Sequence[tuple[str, str]], *, curves_first: bool, camera_motion: bool,
