@@ -162,18 +162,22 @@ def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, attributi
     for leaf, values, color, name in series:
         have = np.flatnonzero((obs_rows >= 0) & np.isfinite(values))
         have = have[np.argsort(obs_rows[have], kind="stable")]
-        _send_series(rec, result, f"/series/error_mm/{leaf}", obs_rows[have], values[have] * 1e3, name, color, rows)
+        # the world error underneath, wide and pale (as in the report): a hop that carries all of it stays visible
+        _send_series(rec, result, f"/series/error_mm/{leaf}", obs_rows[have], values[have] * 1e3, name, color, rows,
+                     under=leaf == "world_error")
 
 
 def _send_series(rec: rr.RecordingStream, result: ReplayResult, entity: str, sel: IntArray, values: FloatArray,
-                 name: str, color: tuple[int, int, int], rows: dict[str, int]) -> None:
-    """One scalar series over observation rows ``sel`` (lines and points: a single observation still shows)."""
+                 name: str, color: tuple[int, int, int], rows: dict[str, int], *, under: bool = False) -> None:
+    """One scalar series over observation rows ``sel`` (lines and points: a single observation still shows;
+    ``under``: wide and translucent, for a series others may lie on)."""
     import rerun as rr
 
     if sel.size == 0:
         return
-    rec.log(entity, rr.SeriesLines(names=[name], colors=[color]), rr.SeriesPoints(
-        names=[name], colors=[color], marker_sizes=[2.0]), static=True)
+    rgba = (*color, 90 if under else 255)
+    rec.log(entity, rr.SeriesLines(names=[name], colors=[rgba], widths=[5.0] if under else None), rr.SeriesPoints(
+        names=[name], colors=[rgba], marker_sizes=[2.0]), static=True)
     rec.send_columns(entity, indexes=obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
     rows[entity] = int(sel.size)
 
