@@ -59,7 +59,8 @@ def free_port() -> int:
 def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
                     bounds: tuple[float, float, float, float] | None, curves: Sequence[str] = (),
                     curves_first: bool = False, rig: tuple[str, ...] = (),
-                    rig_image: tuple[float, float, float, float] | None = None, camera_motion: bool = False) -> None:
+                    rig_image: tuple[float, float, float, float] | None = None, camera_motion: bool = False,
+                    window_s: float | None = None) -> None:
     """framechain's default blueprint with the side panels collapsed, for application ``framechain`` (``rig``:
     the camera frames of a rig, one view each; ``camera_motion``: the cameras' rotation rate first)."""
     from framechain.config.chain import ChainFrames
@@ -70,7 +71,8 @@ def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: b
     blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
                                   collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first,
                                   camera_motion=camera_motion,
-                                  cameras=[(f, f"/cameras/{entity_part(f)}", rig_image) for f in rig])
+                                  cameras=[(f, f"/cameras/{entity_part(f)}", rig_image) for f in rig],
+                                  window_s=window_s)
     blueprint.save("framechain", path)
 
 
@@ -95,6 +97,19 @@ def recorded_bounds(rrd: Path) -> tuple[float, float, float, float] | None:
                     value = batch.column(name).to_pylist()[-1][0]
                     (u0, u1), (v0, v1) = value["x_range"], value["y_range"]
                     return float(u0), float(u1), float(v0), float(v1)
+    return None
+
+
+def recorded_window(rrd: Path) -> float | None:
+    """The seconds the series show either side of the cursor, from the recording's own blueprint (None: all)."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(rrd)
+    for store in reader.blueprints():
+        for chunk in reader.stream(store=store):
+            batch = chunk.to_record_batch()
+            if "TimeAxis:view_range" in batch.schema.names:
+                return float(batch.column("TimeAxis:view_range").to_pylist()[-1][0]["end"]) / 1e9
     return None
 
 
@@ -326,7 +341,8 @@ def main(argv: list[str] | None = None) -> int:
         write_blueprint(blueprint, rig[0] if rig else args.camera, args.body, args.world, images=not args.no_images,
                         bounds=None if rig else recorded_bounds(rrd), curves=recorded_curves(rrd),
                         curves_first=args.curves_first, rig=rig,
-                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None, camera_motion=args.camera_motion)
+                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None, camera_motion=args.camera_motion,
+                        window_s=recorded_window(rrd))
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

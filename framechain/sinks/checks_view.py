@@ -15,6 +15,7 @@ import numpy as np
 from framechain.analysis.checks import Bound, Curve, family_name, size_text
 from framechain.analysis.findings import Attribution
 from framechain.catalogue import Fault
+from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
 from framechain.sinks.text import mm
 
 ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
@@ -113,13 +114,13 @@ def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
         half = max(4.0 * curve.display(curve.bound or 0.0), 20.0)
         keep = np.abs(x - centre) <= half
         x, rms, median = x[keep], rms[keep], median[keep]
-    ax.plot(x, rms, color="tab:blue", lw=1.2, label="rms (fitted)")
-    ax.plot(x, median, color="tab:orange", lw=1.0, ls="-.", label="median (shared out)")
+    ax.plot(x, rms, color=hex_color(ERROR_COLOR), lw=1.2, label="rms (fitted)")
+    ax.plot(x, median, color=hex_color(ERROR_COLOR), alpha=0.5, lw=1.0, ls="-.", label="median (shared out)")
     for i, edge in enumerate(curve.bound_edges() or ()):
-        ax.axvline(curve.display(edge), color="tab:gray", ls=":", lw=1, label="bound" if i else None)
+        ax.axvline(curve.display(edge), color=hex_color(BOUND_COLOR), ls=":", lw=1, label="bound" if i else None)
     ax.axvline(curve.display(curve.no_fault), color="k", lw=0.6, alpha=0.5)
     if curve.estimate is not None:
-        ax.axvline(curve.display(curve.estimate), color="tab:red", ls="--", lw=1, label="estimate")
+        ax.axvline(curve.display(curve.estimate), color=hex_color(CORRECTED_COLOR), ls="--", lw=1, label="estimate")
     ax.set_xlabel(curve.axis_label() + (" (zoom)" if zoom else ""), fontsize=8)
     ax.set_ylabel("error (mm)", fontsize=8)
     ax.tick_params(labelsize=7)

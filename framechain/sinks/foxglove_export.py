@@ -41,14 +41,9 @@ from framechain.analysis.run import Run
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import ReplayResult
 from framechain.replay.camera import distinct_models
-from framechain.sinks.overlay import (
-    AS_RUN_COLOR,
-    DETECTION_COLOR,
-    RECOMPUTED_COLOR,
-    ImageOverlay,
-    image_overlay,
-)
-from framechain.sinks.rerun_common import ERROR_COLOR, REPLAY_FRAME_SUFFIX
+from framechain.sinks.colors import AS_RUN_COLOR, DETECTION_COLOR, ERROR_COLOR, RECOMPUTED_COLOR
+from framechain.sinks.overlay import ImageOverlay, image_overlay
+from framechain.sinks.rerun_common import REPLAY_FRAME_SUFFIX
 from framechain.sinks.text import FindingView
 from framechain.timeline import CameraTable, PointRole, Timeline
 
@@ -226,6 +221,7 @@ def _annotations(result: ReplayResult, overlay: ImageOverlay, stamp: IntArray, m
     line_end = line_end + shift
     out: list[ProtobufMessage] = []
     drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
+    used_colors = overlay.detection_colors
     for when, in_mine in _by_stamp(stamp[mine]):
         rows = mine[in_mine]
         rows = rows[drawn[rows]]
@@ -245,7 +241,8 @@ def _annotations(result: ReplayResult, overlay: ImageOverlay, stamp: IntArray, m
             ann.thickness = size
 
         for i in rows.tolist():
-            points(PointsAnnotation.POINTS, [detection[i]], DETECTION_COLOR, 8.0)
+            r, g, b = (int(c) for c in used_colors[i])  # the detector's own pixel, or framechain's estimate
+            points(PointsAnnotation.POINTS, [detection[i]], (r, g, b), 8.0)
             if np.isfinite(corners[i]).all():
                 points(PointsAnnotation.LINE_LOOP, corners[i], DETECTION_COLOR, 2.0)
             for uv, color, shown in ((recomputed[i], RECOMPUTED_COLOR, True),

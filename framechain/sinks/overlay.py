@@ -27,6 +27,14 @@ from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import ReplayResult
 from framechain.replay.camera import distinct_models
 from framechain.replay.stamps import nearest
+from framechain.sinks.colors import (
+    AS_RUN_COLOR,
+    DETECTION_COLOR,
+    FAULT_COLORS,
+    RECOMPUTED_COLOR,
+    UNEXPLAINED_COLOR,
+    USED_PIXEL_COLOR,
+)
 from framechain.timeline import PointRole, Timeline, normalize_frame
 
 #: An image within this of an observation's stamp is the one shown with it.
@@ -34,18 +42,6 @@ IMAGE_WINDOW_NS = 50_000_000
 #: zlib level of the report's PNGs (crops and plots): the same pixels as the default 6, smaller for
 #: plots, in less than half the time.
 PNG_COMPRESS_LEVEL = 3
-
-#: Colour of an error line, by the fault of the finding that explains it (RGB): none is the
-#: detection's green, the recomputed blue or the as-run orange, nor the grey of a floor.
-FAULT_COLORS: dict[str, tuple[int, int, int]] = {
-    "latency": (214, 39, 40), "axis_flip": (148, 103, 189), "missing_rotation": (220, 0, 180),
-    "rotation_error": (247, 129, 191), "depth_scale": (140, 86, 75), "intrinsics": (188, 189, 34),
-    "wrong_world_frame": (23, 190, 207), "inverted_transform": (40, 40, 40),
-}
-UNEXPLAINED_COLOR = (214, 39, 40)
-DETECTION_COLOR = (44, 160, 44)
-RECOMPUTED_COLOR = (31, 119, 180)
-AS_RUN_COLOR = (255, 127, 14)
 
 
 class ImageSelection(StrEnum):
@@ -63,11 +59,16 @@ class ImageOverlay:
     Pixel arrays are NaN where there is nothing (a rejected observation has no recomputed point;
     a point behind the camera has no pixel). ``image_row`` is the row of ``timeline.image_frames``
     nearest the observation within the window, -1 if none. ``corners_px`` (N, 4, 2) holds the
-    detected tag corners where the detection was a fiducial, NaN otherwise.
+    detected tag corners where the detection was a fiducial, NaN otherwise. ``detection_uv`` is the pixel
+    framechain used; for a tag that is its own estimate of the tag centre from the corners (``estimated``),
+    and ``detector_uv`` the centre the detector logged (NaN where it logged none). Elsewhere both are the
+    detector's pixel.
     """
 
     detection_uv: FloatArray  # (N, 2)
     corners_px: FloatArray  # (N, 4, 2)
+    detector_uv: FloatArray  # (N, 2)
+    estimated: BoolArray  # (N,) detection_uv is framechain's estimate (a tag's centre from its corners)
     recomputed_uv: FloatArray  # (N, 2)
     as_run_uv: FloatArray  # (N, 2)
     as_run_role: str  # "world", "target" or "" (what the as-run pixel is the projection of)
@@ -91,6 +92,14 @@ class ImageOverlay:
         u, v = uv[:, 0], uv[:, 1]
         with np.errstate(invalid="ignore"):
             out: BoolArray = (u >= -0.5) & (v >= -0.5) & (u < self.width - 0.5) & (v < self.height - 0.5)
+        return out
+
+    @property
+    def detection_colors(self) -> npt.NDArray[np.uint8]:
+        """(N, 3) colour of the pixel used: the detection's green where it is the detector's own, light green
+        where framechain estimated it."""
+        out: npt.NDArray[np.uint8] = np.where(self.estimated[:, None], np.array(USED_PIXEL_COLOR, dtype=np.uint8),
+                                              np.array(DETECTION_COLOR, dtype=np.uint8)).astype(np.uint8)
         return out
 
     def label(self) -> str:
@@ -181,15 +190,26 @@ def select_images(timeline: Timeline, result: ReplayResult, selection: ImageSele
 
 def fiducial_corners(timeline: Timeline, obs_id: IntArray) -> FloatArray:
     """Detected corners (N, 4, 2) of the observations that are fiducials, NaN for the others."""
-    out = np.full((obs_id.size, 4, 2), np.nan)
+    return _fiducial_side(timeline, obs_id, "corners_px", 4).reshape(obs_id.size, 4, 2)
+
+
+def detector_centres(timeline: Timeline, obs_id: IntArray) -> FloatArray:
+    """The centre pixel (N, 2) each fiducial's detector logged, NaN for the others and where it logged none."""
+    return _fiducial_side(timeline, obs_id, "detector_centre_px", 1)
+
+
+def _fiducial_side(timeline: Timeline, obs_id: IntArray, key: str, points: int) -> FloatArray:
+    """A pixel column of the fiducial side table (``points`` (u, v) per row) per observation, NaN where none."""
+    out = np.full((obs_id.size, 2 * points), np.nan)
     side = (timeline.metadata.get("fiducials") or {}).get("corners") or {}
     ids = np.asarray(side.get("obs_id", []), dtype=np.int64)
-    corners = side.get("corners_px")
-    if ids.size == 0 or corners is None:
+    values = side.get(key)
+    if ids.size == 0 or values is None:
         return out
-    quads = np.asarray(corners, dtype=float).reshape(ids.size, 4, 2)
+    # JSON null (a centre not logged) reads as NaN
+    table = np.array(values, dtype=float).reshape(ids.size, 2 * points)
     row = rows_of(ids, obs_id)
-    out[row >= 0] = quads[row[row >= 0]]
+    out[row >= 0] = table[row[row >= 0]]
     return out
 
 
@@ -219,9 +239,16 @@ def image_overlay(
     finding = explaining_finding(findings)
     color = UNEXPLAINED_COLOR if finding is None else FAULT_COLORS.get(finding.fault.value, UNEXPLAINED_COLOR)
     detection_uv = np.stack([obs.u, obs.v], axis=1).astype(float)
-    detection_uv[have & (width <= 0)] = np.nan  # a camera-less model's (u, v) are x/z, y/z: not pixels
+    no_pixels = have & (width <= 0)
+    detection_uv[no_pixels] = np.nan  # a camera-less model's (u, v) are x/z, y/z: not pixels
+    corners = fiducial_corners(timeline, obs.obs_id)
+    fiducial: BoolArray = np.asarray(np.isfinite(corners).all(axis=(1, 2)))
+    detector_uv = np.where(fiducial[:, None], detector_centres(timeline, obs.obs_id), detection_uv)
+    # a bearing-only tag keeps the detector's centre: framechain estimated nothing there
+    estimated = fiducial & ~(detector_uv == detection_uv).all(axis=1)
+    detector_uv[no_pixels] = np.nan
     return ImageOverlay(
-        detection_uv=detection_uv, corners_px=fiducial_corners(timeline, obs.obs_id),
+        detection_uv=detection_uv, corners_px=corners, detector_uv=detector_uv, estimated=estimated,
         recomputed_uv=recomputed, as_run_uv=as_run_uv, as_run_role=role,
         image_row=nearest_images(timeline, result, window_ns), width=width, height=height, finding=finding,
         color=color,
@@ -279,6 +306,7 @@ def render_crops(
     from PIL import Image, ImageDraw
 
     images = timeline.image_frames
+    used_colors = overlay.detection_colors
     out: list[tuple[int, bytes]] = []
     for i in rows.tolist():
         if overlay.image_row[i] < 0 or images.encoding[overlay.image_row[i]] == "video":
@@ -316,7 +344,10 @@ def render_crops(
         if np.isfinite(overlay.recomputed_uv[i]).all() and np.isfinite(overlay.as_run_uv[i]).all():
             draw.line([at(overlay.recomputed_uv[i]), at(overlay.as_run_uv[i])], fill=overlay.color, width=3)
             dot(overlay.as_run_uv[i], AS_RUN_COLOR, 5)
-        dot(overlay.detection_uv[i], DETECTION_COLOR, 7)
+        if overlay.estimated[i] and np.isfinite(overlay.detector_uv[i]).all():
+            dot(overlay.detector_uv[i], DETECTION_COLOR, 7)
+        r, g, b = (int(c) for c in used_colors[i])
+        dot(overlay.detection_uv[i], (r, g, b), 5 if overlay.estimated[i] else 7)
         if np.isfinite(overlay.recomputed_uv[i]).all():
             dot(overlay.recomputed_uv[i], RECOMPUTED_COLOR, 4)
         buf = io.BytesIO()

@@ -25,7 +25,21 @@ from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
 from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
+from framechain.catalogue import HopName
 from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots
+from framechain.sinks.colors import (
+    AS_RUN_COLOR,
+    BOUND_COLOR,
+    CORRECTED_COLOR,
+    ERROR_COLOR,
+    ERROR_LINE_LEGEND,
+    HOP_COLORS,
+    LEGEND,
+    RECOMPUTED_COLOR,
+    REFERENCE_COLOR,
+    hex_color,
+    legend_text,
+)
 from framechain.sinks.evidence_files import inputs_record
 from framechain.sinks.overlay import PNG_COMPRESS_LEVEL, ImageOverlay
 from framechain.sinks.text import CSS, FindingView, breakable, mm
@@ -74,9 +88,10 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
 
 
 # -- what the camera saw ----------------------------------------------------------------------
-#: Legend of the image crops (the colours of framechain.sinks.overlay).
-CROP_LEGEND = ("green: the detection (and tag corners); blue: the recomputed world point projected back into the "
-               "image; orange: the as-run world point projected the same way; the line between them")
+#: Legend of the image crops (the colours of framechain.sinks.colors).
+CROP_LEGEND = ("green: the detection (and tag corners; a small light-green dot inside: the tag centre framechain "
+               "estimated from them); blue: the recomputed world point projected back into the image; orange: the "
+               "as-run world point projected the same way; the line between them")
 #: Metrics whose findings are the robot's own mistakes: the as-run points carry them, one per finding.
 AS_RUN_METRICS = ("logged_hops", "target")
 #: A finding whose own gap is under this share of the image width is shown zoomed in.
@@ -135,7 +150,8 @@ def finding_overlay(run: Run, overlay: ImageOverlay, index: int) -> tuple[ImageO
     """The overlay of finding ``index`` of the run's attribution: in its colour, and where several findings are the
     robot's own and the as-run points carry them all, with the as-run points less the other findings' effect
     (``Attribution.others_shift``), so that the picture shows this finding alone. The bool: whether it does."""
-    from framechain.sinks.overlay import FAULT_COLORS, UNEXPLAINED_COLOR, project_world_points
+    from framechain.sinks.colors import FAULT_COLORS, UNEXPLAINED_COLOR
+    from framechain.sinks.overlay import project_world_points
 
     result, replay = run.attributed(), run.replay
     finding = result.findings[index]
@@ -196,12 +212,14 @@ def make_figures(result: Attribution) -> list[Figure]:
 
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     # The world error goes underneath, wide and pale, so a hop that carries all of it stays visible.
-    _line(ax, t, result.error_before * 1e3, lw=4, color="k", alpha=0.25,
+    _line(ax, t, result.error_before * 1e3, lw=4, color=hex_color(ERROR_COLOR), alpha=0.25,
           label=f"world error ({result.metric.replace('_', ' ')})")
     for (hop, errors), style in zip(result.hop_errors.items(), ("-", "--", ":"), strict=False):
-        _line(ax, t, errors * 1e3, lw=1.2, ls=style, label=f"{hop} (logged vs recomputed)")
+        _line(ax, t, errors * 1e3, lw=1.2, ls=style, color=hex_color(HOP_COLORS[HopName(hop)]),
+              label=f"{hop} (logged vs recomputed)")
     if result.findings:
-        _line(ax, t, result.error_after * 1e3, lw=1, color="tab:green", ls="--", label=_after_label(result))
+        _line(ax, t, result.error_after * 1e3, lw=1, color=hex_color(CORRECTED_COLOR), ls="--",
+              label=_after_label(result))
     ax.set_xlabel("time since first observation (s)")
     ax.set_ylabel("error (mm)")
     ax.grid(True, alpha=0.3)
@@ -210,9 +228,10 @@ def make_figures(result: Attribution) -> list[Figure]:
 
     speed = robot_speed(result)
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
-    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, label="as recorded")
+    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, color=hex_color(ERROR_COLOR), label="as recorded")
     if result.findings:
-        _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color="tab:green", label=_after_label(result))
+        _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color=hex_color(CORRECTED_COLOR),
+              label=_after_label(result))
     ax.set_xlabel("robot speed (m/s)")
     ax.set_ylabel("error (mm)")
     ax.set_title("A latency grows with speed", fontsize=9)
@@ -220,32 +239,16 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.legend(fontsize=7)
     figures.append(figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)"))
 
-    recomputed = _recomputed_world(result)
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
-    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7)
-    ev = result.evidence_points
-    if np.isfinite(ev).any() and result.metric != "static_spread":
-        label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
-            result.metric, "evidence"
-        )
-        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7)
-    if result.findings and result.metric in ("reference", "static_spread"):
-        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7)
-    ax.set_xlabel(f"x in {result.config.frames.world} (m)")
-    ax.set_ylabel(f"y in {result.config.frames.world} (m)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    figures.append(figure_png(fig, "world_top_down", "World points from above"))
+    figures.append(_world_top_down(result))
 
     if result.findings:
         top = result.findings[0]
         x, err, label = sensitivity(result, top)
         if x.size:
             fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
-            ax.plot(x, err * 1e3, color="tab:red")
+            ax.plot(x, err * 1e3, color=hex_color(ERROR_COLOR))
             ax.axhline(10.0, color="k", ls="--", lw=1, label="1 cm gripper tolerance")
-            ax.axvline(x[-1] / 1.5, color="tab:gray", ls=":", lw=1, label="found")
+            ax.axvline(x[-1] / 1.5, color=hex_color(BOUND_COLOR), ls=":", lw=1, label="found")
             ax.set_xlabel(label)
             # How far the world points move, not the error against the evidence the findings share out
             # (that is the curves' measure): a depth scale moves points far and static spreads little.
@@ -257,6 +260,32 @@ def make_figures(result: Attribution) -> list[Figure]:
             figures.append(figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this "
                                       "episode (a displacement, not the error the findings share out)"))
     return figures
+
+
+def _world_top_down(result: Attribution) -> Figure:
+    """The world points from above: recomputed, the evidence and (against a reference or static targets) corrected."""
+    import matplotlib.pyplot as plt
+
+    recomputed = _recomputed_world(result)
+    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
+    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
+          color=hex_color(RECOMPUTED_COLOR))
+    ev = result.evidence_points
+    if np.isfinite(ev).any() and result.metric != "static_spread":
+        label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
+            result.metric, "evidence"
+        )
+        color = REFERENCE_COLOR if result.metric == "reference" else AS_RUN_COLOR
+        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7, color=hex_color(color))
+    if result.findings and result.metric in ("reference", "static_spread"):
+        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7,
+              color=hex_color(CORRECTED_COLOR))
+    ax.set_xlabel(f"x in {result.config.frames.world} (m)")
+    ax.set_ylabel(f"y in {result.config.frames.world} (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    return figure_png(fig, "world_top_down", "World points from above")
 
 
 #: Marker of the scatter plots: scatter(s=8)'s size (the square root of its area in points^2) and edge.
@@ -323,9 +352,9 @@ def motion_figures(run: Run) -> list[Figure]:
                                           for r in (declared.measured, declared.predicted, fitted.predicted))
         fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
         ax.plot(t, measured, color="k", lw=1.6, label="from the images")
-        ax.plot(t, predicted, color="tab:orange", lw=1.0,
+        ax.plot(t, predicted, color=hex_color(AS_RUN_COLOR), lw=1.0,
                 label=f"forward kinematics of {motion.declared_link} as declared")
-        ax.plot(t, corrected, color="tab:green", lw=1.0, ls="--",
+        ax.plot(t, corrected, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--",
                 label=f"{fit.link} shifted {fit.offset_s * 1e3:+.1f} ms, fitted mount")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("rotation rate (deg/s)")
@@ -483,6 +512,8 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         "| " + " | ".join("---" for _ in HOP_COLUMNS) + " |",
         *("| " + " | ".join(row) + " |" for row in hop_rows(result)),
         "",
+        f"Colours, in every plot and picture here, in Rerun and in the Foxglove export: {legend_text()}",
+        "",
     ]
     if result.notes:
         lines += ["## Notes", "", *(f"- {n.replace('|', '/')}" for n in result.notes), ""]
@@ -527,6 +558,8 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")
     parts += ["<tr>" + "".join(f"<td>{breakable(c)}</td>" for c in row) + "</tr>" for row in hop_rows(result)]
     parts.append("</table>")
+    parts.append(f"<p class='legend'>Colours, in every plot and picture here, in Rerun and in the Foxglove export: "
+                 f"{_legend_html()}</p>")
     if result.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{breakable(n)}</li>" for n in result.notes) + "</ul>")
     parts.append("<div class='plots'>")
@@ -539,6 +572,13 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
         "bootstrap 95% intervals over observations.</p></body></html>"
     )
     return "\n".join(parts)
+
+
+def _legend_html() -> str:
+    """The colour legend with a swatch of each colour."""
+    swatches = [f"<span style='color:{hex_color(rgb)}'>&#9679;</span> {html.escape(name)}: {html.escape(meaning)}"
+                for rgb, name, meaning in LEGEND]
+    return "; ".join([*swatches, html.escape(ERROR_LINE_LEGEND)]) + "."
 
 
 def _clean(result: Attribution) -> bool:

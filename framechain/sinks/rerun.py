@@ -13,7 +13,10 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
   without interpolation; these make the hop points land where the replay put them.
 - ``/camera``: the chain camera as a ``Pinhole`` (RDF) under its optical frame, with the child
   frame ``<camera>_image_plane``; ``/camera/depth`` the depth frames nearest the observations
-  (decimated); ``/camera/detections`` every observation's pixel as a 2D point.
+  (decimated); ``/camera/detections`` every observation's pixel as a 2D point (the pixel framechain used;
+  ``/camera/overlay/detector_centre`` the centre a tag's detector logged where framechain used its own).
+  Every pixel drawn over an image is shifted by +0.5 from framechain's (OpenCV's) convention into
+  Rerun's, where (0, 0) is the top-left pixel's corner; the pinhole's principal point likewise.
 - ``/camera/image``: the camera's images (``--images near``: those nearest the observations; ``all``;
   ``none``): ``Image`` for raw encodings, ``EncodedImage`` for JPEG/PNG (never decoded here);
   ``/camera/video``: a LeRobot episode's mp4 as ``AssetVideo`` and one ``VideoFrameReference`` per
@@ -30,8 +33,9 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
 - ``/series/error_mm/<hop>`` (recomputed vs as-run, and ``target``/``reference``) and
   ``/series/gap_ms/<hop>`` (observation stamp minus the stamp of the transform sample used):
   ``Scalars``, one row per replayed observation.
-- ``/log/findings``, ``/log/rejected``, ``/log/stale``: ``TextLog`` entries; ``/summary``: a
-  Markdown ``TextDocument`` with the counts and the findings.
+- ``/log/findings``, ``/log/rejected``, ``/log/stale``: ``TextLog`` entries (``/log/verdict`` instead of
+  findings: why there are none, e.g. nothing could be checked); ``/summary``: a Markdown ``TextDocument``
+  with the counts, the findings and the colour legend.
 
 Timelines: ``sensor_time`` (header stamps), ``log_time`` (receive time in the log), and
 ``obs_index`` (row of the observation) on everything tied to an observation. Rerun's own
@@ -55,13 +59,13 @@ import numpy as np
 
 from framechain.analysis.run import Run
 from framechain.arrays import FloatArray
+from framechain.sinks.colors import REFERENCE_COLOR
 from framechain.sinks.overlay import ImageOverlay, ImageSelection, image_overlay
 from framechain.sinks.rerun_blueprint import default_blueprint, image_view_bounds
 from framechain.sinks.rerun_checks import curve_entity, curve_title, log_checks
 from framechain.sinks.rerun_common import (
     LOG_TIME,
     OBS_INDEX,
-    REFERENCE_COLOR,
     ROLE_LEAF,
     SENSOR_TIME,
     RerunOptions,
@@ -71,12 +75,19 @@ from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_video
 from framechain.sinks.rerun_rig import log_rig
 from framechain.sinks.rerun_scene import (
     log_camera,
+    log_detections,
     log_frame_tree,
     log_images,
     log_overlay,
     log_used_transforms,
 )
-from framechain.sinks.rerun_series import log_points, log_series, log_text, summary_markdown
+from framechain.sinks.rerun_series import (
+    log_explained_error,
+    log_points,
+    log_series,
+    log_text,
+    summary_markdown,
+)
 from framechain.sinks.text import FindingView
 from framechain.timeline import FramechainError, Timeline
 
@@ -153,6 +164,9 @@ def resolve_target(target: RerunTarget, *, env: Mapping[str, str] | None = None)
     return target, None
 
 
+#: Observations spanning less than this are one moment: the series show this much either side of it.
+SHORT_LOG_NS = 1_000_000_000
+
 #: Where ``connect_grpc(None)`` sends: Rerun's default local viewer.
 DEFAULT_GRPC_URL = "rerun+http://127.0.0.1:9876/proxy"
 
@@ -216,10 +230,12 @@ def stream_replay(
     curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
     views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
     boxes = [(v.frame, v.root, _image_box(run.timeline, v.frame)) for v in views if v.rig]
+    stamps = run.replay.observations.stamp_ns
+    # A log of one moment (one image): the series' time axes would span months around it.
+    moment = stamps.size > 0 and int(stamps.max() - stamps.min()) < SHORT_LOG_NS
     blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
-                                  curves=curves, curves_first=run.attribution is not None
-                                  and run.attribution.metric == "static_spread",
-                                  camera_motion=run.camera_motion is not None, cameras=boxes)
+                                  curves=curves, camera_motion=run.camera_motion is not None, cameras=boxes,
+                                  window_s=SHORT_LOG_NS / 1e9 if moment else None)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
@@ -306,6 +322,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     log_used_transforms(rec, result, views, rows)
     for view in views:
         log_camera(rec, timeline, result, view, opts, rows)
+        log_detections(rec, overlay, result, view, rows)
     as_run = _as_run_points(rec, run, opts, rows)
     log_points(rec, result, as_run, opts, rows, views)
     log_series(rec, result, as_run, rows)
@@ -319,8 +336,9 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
         log_rig(rec, result, run.attribution.rig, opts, rows)
     moving = run.timeline.transforms.stamp_ns[~run.timeline.transforms.is_static]
     log_text(rec, result, [FindingView.of(f) for f in run.findings], rows,
-             start_ns=int(moving.min()) if moving.size else None)
+             start_ns=int(moving.min()) if moving.size else None, verdict=_verdict(run))
     if run.attribution is not None:
+        log_explained_error(rec, result, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
     return rows
 
@@ -345,6 +363,14 @@ def _as_run_points(
                 rr.CoordinateFrame(run.chain.frames.world), static=True)
         rows["/points/reference/declared"] = 1
     return as_run
+
+
+def _verdict(run: Run) -> str:
+    """What the findings panel says when there are no findings: the attribution's verdict, or that none ran."""
+    if run.attribution is not None:
+        return run.attribution.verdict
+    why = f" ({run.not_attributed.detail})" if run.not_attributed else ""
+    return f"No attribution{why}: the replay alone, nothing checked against evidence."
 
 
 def _stderr(message: str) -> None:

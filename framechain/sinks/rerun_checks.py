@@ -19,6 +19,7 @@ from framechain.sinks.checks_view import (
     label_rows,
     label_summary,
 )
+from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -27,9 +28,9 @@ CHECKS_ENTITY = "/checks"
 CURVES_ROOT = "/curves"
 #: The timeline of the latency curves' series: the time offset of the pose searched.
 OFFSET_TIMELINE = "pose_offset"
-CURVE_COLOR = (31, 119, 180)
-ESTIMATE_COLOR = (214, 39, 40)
-BOUND_COLOR = (127, 127, 127)
+#: The legend's colours: the error red, the estimate (the correction found) purple, the bounds grey.
+CURVE_COLOR = ERROR_COLOR
+ESTIMATE_COLOR = CORRECTED_COLOR
 
 
 def curve_entity(curve: Curve) -> str:
@@ -98,8 +99,8 @@ def checks_markdown(result: Attribution) -> str:
                 *("| " + " | ".join(c.replace("|", "/") for c in row[:3]) + " |" for row in rows), "",
                 *(f"- **{family}** ({hop}): {why}" for family, hop, _, why in rows)] if rows else [NOT_BOUNDED])]
     if result.curves:
-        lines += ["", "The error against each family's size is in the bar charts (blue: the rms error, what the fit "
-                  "minimises; red: the estimate; grey: the bound either side of no fault, or of the estimate for a "
+        lines += ["", "The error against each family's size is in the bar charts (red: the rms error, what the fit "
+                  "minimises; purple: the estimate; grey: the bound either side of no fault, or of the estimate for a "
                   "family found)."]
     if result.labels.rows:
         lines += ["", "## Per label", "", label_summary(result), "",

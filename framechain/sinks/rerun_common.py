@@ -10,8 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import IntArray
-from framechain.catalogue import HopName
+from framechain.arrays import FloatArray, IntArray
 from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
     ImageSelection,
@@ -33,17 +32,9 @@ REPLAY_FRAME_SUFFIX = "@replay"
 #: Suffix of the pinhole's child frame, as Rerun's own MCAP loader names it.
 IMAGE_PLANE_SUFFIX = "_image_plane"
 
-REFERENCE_COLOR = (44, 160, 44)
-ERROR_COLOR = (214, 39, 40)
-STALE_COLOR = (255, 187, 120)
-
-#: The point at the output of each hop, by hop: (entity leaf, as-run role).
-HOP_POINTS: tuple[tuple[HopName, str, PointRole], ...] = (
-    (HopName.PIXEL_TO_CAMERA, "camera", PointRole.HOP_CAMERA),
-    (HopName.CAMERA_TO_BODY, "body", PointRole.HOP_BODY),
-    (HopName.BODY_TO_WORLD, "world", PointRole.HOP_WORLD),
-)
-
+#: framechain's pixels are OpenCV's, (0, 0) at the centre of the top-left pixel; Rerun's 2D space has (0, 0) at
+#: that pixel's corner (the image spans (0, 0)..(W, H)). Every pixel drawn over an image is shifted by this.
+RERUN_PIXEL_OFFSET = 0.5
 
 @dataclass(frozen=True)
 class RerunOptions:
@@ -94,6 +85,21 @@ ROLE_LEAF: dict[PointRole, str] = {
     PointRole.HOP_CAMERA: "camera", PointRole.HOP_BODY: "body", PointRole.HOP_WORLD: "world",
     PointRole.TARGET: "target", PointRole.REFERENCE: "reference",
 }
+
+
+def rerun_pixels(uv: npt.ArrayLike) -> FloatArray:
+    """OpenCV pixels (..., 2) in Rerun's 2D image space (see :data:`RERUN_PIXEL_OFFSET`)."""
+    out: FloatArray = np.asarray(uv, dtype=float) + RERUN_PIXEL_OFFSET
+    return out
+
+
+def rerun_intrinsics(k: npt.ArrayLike) -> FloatArray:
+    """Camera matrices (..., 3, 3) for Rerun's pinhole: the principal point shifted as the pixels are, so the
+    ray through an image pixel's centre is the one OpenCV gives that pixel."""
+    out: FloatArray = np.array(k, dtype=float)
+    out[..., 0, 2] += RERUN_PIXEL_OFFSET
+    out[..., 1, 2] += RERUN_PIXEL_OFFSET
+    return out
 
 
 def entity_part(name: str) -> str:

@@ -25,6 +25,7 @@ from framechain.analysis.egomotion import rotation_rates
 from framechain.analysis.egomotion_run import CameraMotion
 from framechain.analysis.run import Run
 from framechain.arrays import IntArray
+from framechain.sinks.colors import AS_RUN_COLOR, CORRECTED_COLOR
 from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, SENSOR_TIME, entity_part, stamp_column
 from framechain.timeline import Timeline
 from framechain.timeline.frames import VIDEO_ENCODING
@@ -35,7 +36,8 @@ if TYPE_CHECKING:
 __all__ = ["RATE_ENTITY", "log_camera_motion", "log_camera_videos"]
 
 RATE_ENTITY = "/series/rotation_rate_deg_s"
-_COLOURS = {"measured": (40, 40, 40), "declared": (230, 120, 30), "corrected": (40, 160, 60)}
+#: The legend's: what ran (the kinematics as declared) orange, corrected purple; the images' own measure neutral.
+_COLOURS = {"measured": (40, 40, 40), "declared": AS_RUN_COLOR, "corrected": CORRECTED_COLOR}
 
 
 def camera_name(frame: str) -> str:

@@ -9,7 +9,8 @@ import numpy as np
 from framechain.analysis.rig_layout import RigLayout
 from framechain.arrays import rows_of
 from framechain.replay import ReplayResult
-from framechain.sinks.rerun_common import ERROR_COLOR, RerunOptions, entity_part, obs_indexes, send_per_stamp
+from framechain.sinks.colors import ERROR_COLOR
+from framechain.sinks.rerun_common import RerunOptions, entity_part, obs_indexes, send_per_stamp
 
 if TYPE_CHECKING:
     import rerun as rr

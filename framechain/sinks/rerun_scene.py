@@ -13,24 +13,25 @@ from framechain.arrays import FloatArray, IntArray
 from framechain.config.chain import ChainFrames
 from framechain.replay import REPLAYED, ReplayResult
 from framechain.replay.stamps import nearest
-from framechain.sinks.overlay import (
+from framechain.sinks.colors import (
     AS_RUN_COLOR,
     DETECTION_COLOR,
-    RECOMPUTED_COLOR,
-    ImageOverlay,
-    select_images,
-)
-from framechain.sinks.rerun_common import (
     ERROR_COLOR,
+    RECOMPUTED_COLOR,
+    STALE_COLOR,
+)
+from framechain.sinks.overlay import ImageOverlay, select_images
+from framechain.sinks.rerun_common import (
     LOG_TIME,
     OBS_INDEX,
     REPLAY_FRAME_SUFFIX,
     SENSOR_TIME,
-    STALE_COLOR,
     CameraView,
     RerunOptions,
     entity_part,
     obs_indexes,
+    rerun_intrinsics,
+    rerun_pixels,
     send_per_stamp,
     stamp_column,
 )
@@ -50,10 +51,12 @@ def log_frame_tree(
     cameras: tuple[str, ...] = (),
 ) -> None:
     """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk (``cameras``: a rig's
-    other camera frames, named too)."""
+    other camera frames, named too). A frame's ``@replay`` copy is named only where the log's tree lacks the frame:
+    both sit at one place when the replay used the log's transforms, and two names there are unreadable."""
     import rerun as rr
 
     tf = timeline.transforms
+    in_tree = {str(f) for f in np.unique(np.concatenate([tf.child, tf.parent]))} if len(tf) else set()
     names: set[str] = {frames.world, frames.body, frames.camera, *cameras}
     for child in np.unique(tf.child):
         sel = np.flatnonzero(tf.child == child)
@@ -84,11 +87,13 @@ def log_frame_tree(
     names.update({frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX,
                   *(c + REPLAY_FRAME_SUFFIX for c in cameras)})
     for name in sorted(names):
+        recorded = name.removesuffix(REPLAY_FRAME_SUFFIX)
         if name.endswith(REPLAY_FRAME_SUFFIX):
-            entity = f"/frames/replay/{entity_part(name.removesuffix(REPLAY_FRAME_SUFFIX))}"
+            entity = f"/frames/replay/{entity_part(recorded)}"
         else:
             entity = f"/frames/{entity_part(name)}"
-        rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=True),
+        named = not name.endswith(REPLAY_FRAME_SUFFIX) or recorded not in in_tree
+        rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=named),
                 static=True)
         rows[entity] = 1
 
@@ -126,7 +131,7 @@ def log_camera(
     rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
     rows: dict[str, int],
 ) -> None:
-    """One camera: its pinhole (static, or over time if the intrinsics change), depth frames, detections."""
+    """One camera: its pinhole (static, or over time if the intrinsics change) and depth frames."""
     import rerun as rr
 
     plane = view.plane
@@ -136,7 +141,6 @@ def log_camera(
     # and its detections are no pixels.
     on_frame = cams.frame == normalize_frame(view.frame)
     mine = np.flatnonzero(on_frame & (cams.width > 0))
-    points_only = bool(on_frame.any()) and not mine.size
     if mine.size:
         mine = mine[np.argsort(cams.stamp_ns[mine], kind="stable")]
         k = cams.K[mine]
@@ -146,7 +150,7 @@ def log_camera(
         keep = mine[changes]
         if keep.size == 1:
             rec.log(root, rr.Pinhole(
-                image_from_camera=cams.K[keep[0]], resolution=res[changes][0],
+                image_from_camera=rerun_intrinsics(cams.K[keep[0]]), resolution=res[changes][0],
                 camera_xyz=rr.ViewCoordinates.RDF, parent_frame=view.frame, child_frame=plane,
                 image_plane_distance=RIG_PLANE_DISTANCE_M if view.rig else 0.5,
             ), static=True)
@@ -156,7 +160,7 @@ def log_camera(
                 indexes=[stamp_column(SENSOR_TIME, cams.stamp_ns[keep]),
                          stamp_column(LOG_TIME, cams.log_time_ns[keep])],
                 columns=rr.Pinhole.columns(
-                    image_from_camera=cams.K[keep], resolution=res[changes],
+                    image_from_camera=rerun_intrinsics(cams.K[keep]), resolution=res[changes],
                     camera_xyz=[rr.ViewCoordinates.RDF] * keep.size,
                     parent_frame=[view.frame] * keep.size, child_frame=[plane] * keep.size,
                 ),
@@ -168,18 +172,43 @@ def log_camera(
                                                       colors=[BORDER_COLOR]), rr.CoordinateFrame(plane), static=True)
             rows[f"{root}/border"] = 1
     log_depth(rec, timeline, result, view, opts, rows)
+
+
+def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, view: CameraView,
+                   rows: dict[str, int]) -> None:
+    """A camera's detections in its image: ``detections``, the pixel framechain used per observation (green where
+    it is the detector's own, light green where framechain estimated it, red when rejected, light red when stale),
+    and ``overlay/detector_centre``, the centre the detector logged where framechain used its own estimate."""
+    import rerun as rr
+
     obs = result.observations
-    if view.rows.size and not points_only:
-        colors = np.where(result.replayed[:, None], np.array(RECOMPUTED_COLOR), np.array(ERROR_COLOR))
-        colors[result.stale] = STALE_COLOR
-        labels = {int(r): f"obs {obs.obs_id[r]} {obs.label[r]}".rstrip()
-                  + ("" if result.status[r] == REPLAYED else f" ({result.status[r]})") for r in view.rows.tolist()}
-        entity = f"{root}/detections"
-        rec.log(entity, rr.CoordinateFrame(plane), static=True)
-        send_per_stamp(rec, entity, result, view.rows, lambda sel: rr.Points2D.columns(
-            positions=np.stack([obs.u[sel], obs.v[sel]], axis=1), colors=colors[sel].astype(np.uint8),
-            labels=[labels[i] for i in sel.tolist()], radii=np.full(sel.size, 6.0)))
-        rows[entity] = int(view.rows.size)
+    drawn = view.rows[np.isfinite(overlay.detection_uv[view.rows]).all(axis=1)]  # a camera-less model: no pixels
+    if drawn.size == 0:
+        return
+    colors = overlay.detection_colors
+    colors[~result.replayed] = ERROR_COLOR
+    colors[result.stale] = STALE_COLOR
+    labels = {int(r): f"obs {obs.obs_id[r]} {obs.label[r]}".rstrip()
+              + ("" if result.status[r] == REPLAYED else f" ({result.status[r]})") for r in drawn.tolist()}
+    radii = np.where(overlay.estimated, 4.0, 6.0)
+    entity = f"{view.root}/detections"
+    rec.log(entity, rr.CoordinateFrame(view.plane), static=True)
+    send_per_stamp(rec, entity, result, drawn, lambda sel: rr.Points2D.columns(
+        positions=rerun_pixels(overlay.detection_uv[sel]), colors=colors[sel],
+        labels=[labels[i] for i in sel.tolist()], radii=radii[sel]))
+    rows[entity] = int(drawn.size)
+    logged = drawn[overlay.estimated[drawn] & np.isfinite(overlay.detector_uv[drawn]).all(axis=1)]
+    if logged.size:
+        entity = f"{view.root}/overlay/detector_centre"
+        # under the pixel framechain used (Points2D draw at 30 by default)
+        rec.log(entity, rr.CoordinateFrame(view.plane), rr.Points2D.from_fields(draw_order=20.0), static=True)
+        send_per_stamp(rec, entity, result, logged, lambda sel: rr.Points2D.columns(
+            positions=rerun_pixels(overlay.detector_uv[sel]),
+            colors=np.tile(np.array(DETECTION_COLOR, dtype=np.uint8), (sel.size, 1)),
+            radii=np.full(sel.size, 7.0), labels=[f"obs {i}: the detector's logged centre" for i in
+                                                  obs.obs_id[sel].tolist()],
+            show_labels=[False] * sel.size))
+        rows[entity] = int(logged.size)
 
 
 def log_images(
@@ -279,13 +308,13 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
     radius = np.float32(max(2.0, float(np.nanmax(overlay.width, initial=320)) / 160.0))
     corners = np.flatnonzero(np.isfinite(overlay.corners_px).all(axis=(1, 2)))
     send(f"{view.root}/overlay/corners", corners, lambda sel: rr.LineStrips2D.columns(
-        strips=[np.vstack([q, q[:1]]) for q in overlay.corners_px[sel]],
+        strips=[rerun_pixels(np.vstack([q, q[:1]])) for q in overlay.corners_px[sel]],
         colors=np.tile(np.array(DETECTION_COLOR, dtype=np.uint8), (sel.size, 1)),
         radii=np.full(sel.size, radius / 2, dtype=np.float32)))
     def points(uv: FloatArray, color: tuple[int, int, int], what: str) -> Callable[[IntArray], rr.ComponentColumnList]:
         def columns(sel: IntArray) -> rr.ComponentColumnList:
             return rr.Points2D.columns(
-                positions=uv[sel], colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
+                positions=rerun_pixels(uv[sel]), colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
                 radii=np.full(sel.size, radius * 1.5, dtype=np.float32), labels=[what] * sel.size,
                 show_labels=[False] * sel.size)
 
@@ -299,7 +328,7 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
     both = np.flatnonzero(np.isfinite(overlay.recomputed_uv).all(axis=1) & np.isfinite(overlay.as_run_uv).all(axis=1))
     error_px = overlay.error_px
     send(f"{view.root}/overlay/error", both, lambda sel: rr.LineStrips2D.columns(
-        strips=[np.stack([overlay.recomputed_uv[i], overlay.as_run_uv[i]]) for i in sel.tolist()],
+        strips=[rerun_pixels(np.stack([overlay.recomputed_uv[i], overlay.as_run_uv[i]])) for i in sel.tolist()],
         colors=np.tile(np.array(overlay.color, dtype=np.uint8), (sel.size, 1)),
         radii=np.full(sel.size, radius / 2, dtype=np.float32),
         labels=[f"{error_px[i]:.0f} px: {overlay.label()}" for i in sel.tolist()]))

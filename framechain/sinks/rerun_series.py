@@ -1,5 +1,6 @@
 """The numbers and words of a Rerun recording: every hop's point recomputed and as run, the error arrows,
-per-hop error and time-gap series, the findings, rejections and stale observations, and a summary."""
+per-hop error and time-gap series, the error the findings explain, the findings, rejections and stale
+observations, and a summary."""
 
 from __future__ import annotations
 
@@ -8,17 +9,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from framechain.analysis.findings import Attribution
 from framechain.arrays import FloatArray, IntArray, rows_of
 from framechain.catalogue import HopName
 from framechain.replay import REPLAYED, ReplayResult
-from framechain.sinks.overlay import (
+from framechain.sinks.colors import (
     AS_RUN_COLOR,
+    CORRECTED_COLOR,
+    ERROR_COLOR,
+    HOP_COLORS,
     RECOMPUTED_COLOR,
+    REFERENCE_COLOR,
+    legend_text,
 )
 from framechain.sinks.rerun_common import (
-    ERROR_COLOR,
-    HOP_POINTS,
-    REFERENCE_COLOR,
     REPLAY_FRAME_SUFFIX,
     SENSOR_TIME,
     CameraView,
@@ -100,50 +104,101 @@ def log_points(
 def log_series(
     rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], rows: dict[str, int]
 ) -> None:
-    """Per-hop error (mm) where as-run exists and per-hop time gap (ms), one row per observation."""
-    import rerun as rr
-
+    """Each hop's own error (mm) where as-run exists (:func:`hop_own_errors`), the world point against a target or
+    reference, and per-hop time gap (ms), one row per observation."""
     ok = result.replayed
-    recomputed = {"camera": result.p_cam, "body": result.p_body, "world": result.p_world}
-
-    def send(entity: str, sel: IntArray, values: FloatArray, name: str, color: tuple[int, int, int]) -> None:
-        if sel.size == 0:
-            return
-        rec.log(entity, rr.SeriesLines(names=[name], colors=[color]), rr.SeriesPoints(
-            names=[name], colors=[color], marker_sizes=[2.0]), static=True)
-        rec.send_columns(entity, indexes=obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
-        rows[entity] = int(sel.size)
-
-    palette = {HopName.PIXEL_TO_CAMERA: (148, 103, 189), HopName.CAMERA_TO_BODY: (31, 119, 180),
-               HopName.BODY_TO_WORLD: (214, 39, 40)}
-    for hop, leaf, _role in HOP_POINTS:
-        err = np.linalg.norm(as_run[leaf] - recomputed[leaf], axis=1)
+    for hop, err in hop_own_errors(result, as_run).items():
         sel = np.flatnonzero(ok & np.isfinite(err))
-        send(f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3, f"{hop.value} error (mm)", palette[hop])
+        _send_series(rec, result, f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3,
+                     f"{hop.value}: this hop's own error (mm)", HOP_COLORS[hop], rows)
     for leaf, color in (("target", AS_RUN_COLOR), ("reference", REFERENCE_COLOR)):
         err = np.linalg.norm(as_run[leaf] - result.p_world, axis=1)
         sel = np.flatnonzero(ok & np.isfinite(err))
-        send(f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)", color)
+        _send_series(rec, result, f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)", color,
+                     rows)
 
     hops = result.hops
     for hop in HopName:
         sel_rows = np.flatnonzero((hops.hop == hop.value) & (hops.status == REPLAYED))
         obs_rows = rows_of(result.observations.obs_id, hops.obs_id[sel_rows])
         order = np.argsort(obs_rows, kind="stable")
-        send(f"/series/gap_ms/{hop.value}", obs_rows[order], hops.gap_ns[sel_rows][order] / 1e6,
-             f"{hop.value} gap (ms)", palette[hop])
+        _send_series(rec, result, f"/series/gap_ms/{hop.value}", obs_rows[order], hops.gap_ns[sel_rows][order] / 1e6,
+                     f"{hop.value} gap (ms)", HOP_COLORS[hop], rows)
+
+
+def hop_own_errors(result: ReplayResult, as_run: Mapping[str, FloatArray]) -> dict[HopName, FloatArray]:
+    """Per hop, (N,) metres: the as-run point at the hop's output against the hop (the transform the replay used)
+    applied to the as-run point at its input, as the report's hop departure does: an error made upstream is not
+    counted again. Where the robot logged no input to a hop, its input is the earlier logged stage carried
+    through (the recomputed camera point where none was logged). NaN where the output was not logged."""
+    def apply(transform: FloatArray, p: FloatArray) -> FloatArray:
+        out: FloatArray = np.einsum("nij,nj->ni", transform[:, :3, :3], p) + transform[:, :3, 3]
+        return out
+
+    def logged_or(leaf: str, fallback: FloatArray) -> FloatArray:
+        out: FloatArray = np.where(np.isfinite(as_run[leaf]).all(axis=1, keepdims=True), as_run[leaf], fallback)
+        return out
+
+    out = {HopName.PIXEL_TO_CAMERA: np.linalg.norm(as_run["camera"] - result.p_cam, axis=1)}
+    body = apply(result.body_from_cam.matrix(), logged_or("camera", result.p_cam))
+    out[HopName.CAMERA_TO_BODY] = np.linalg.norm(as_run["body"] - body, axis=1)
+    body = logged_or("body", body)
+    out[HopName.BODY_TO_WORLD] = np.linalg.norm(as_run["world"] - apply(result.world_from_body.matrix(), body), axis=1)
+    return out
+
+
+def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, attribution: Attribution,
+                        rows: dict[str, int]) -> None:
+    """The error the findings explain, per observation the attribution used (``/series/error_mm/world_error``: the
+    world point against its evidence, e.g. a static target's own position), and what remains once every finding is
+    corrected (``/series/error_mm/corrected``)."""
+    if attribution.metric in ("camera_motion", "none"):  # a rotation-rate residual, or nothing measured
+        return
+    what = {"logged_hops": "the as-run world point", "target": "the as-run target", "reference": "the reference",
+            "static_spread": "the static target's own position", "cross_camera": "the other cameras' sightings"}
+    obs_rows = rows_of(result.observations.obs_id, attribution.inputs.obs_id)
+    series = [("world_error", attribution.error_before, ERROR_COLOR,
+               f"world error against {what.get(attribution.metric, 'the evidence')} (mm)")]
+    if attribution.findings:
+        series.append(("corrected", attribution.error_after, CORRECTED_COLOR, "world error, findings corrected (mm)"))
+    for leaf, values, color, name in series:
+        have = np.flatnonzero((obs_rows >= 0) & np.isfinite(values))
+        have = have[np.argsort(obs_rows[have], kind="stable")]
+        # the world error underneath, wide and pale (as in the report): a hop that carries all of it stays visible
+        _send_series(rec, result, f"/series/error_mm/{leaf}", obs_rows[have], values[have] * 1e3, name, color, rows,
+                     under=leaf == "world_error")
+
+
+def _send_series(rec: rr.RecordingStream, result: ReplayResult, entity: str, sel: IntArray, values: FloatArray,
+                 name: str, color: tuple[int, int, int], rows: dict[str, int], *, under: bool = False) -> None:
+    """One scalar series over observation rows ``sel`` (lines and points: a single observation still shows;
+    ``under``: wide and translucent, for a series others may lie on)."""
+    import rerun as rr
+
+    if sel.size == 0:
+        return
+    rgba = (*color, 90 if under else 255)
+    rec.log(entity, rr.SeriesLines(names=[name], colors=[rgba], widths=[5.0] if under else None), rr.SeriesPoints(
+        names=[name], colors=[rgba], marker_sizes=[2.0]), static=True)
+    rec.send_columns(entity, indexes=obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
+    rows[entity] = int(sel.size)
 
 
 def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[FindingView],
-              rows: dict[str, int], *, start_ns: int | None = None) -> None:
-    """Findings (at the first observation; without observations at ``start_ns``, the log's first moment),
-    rejected and stale observations, and a summary."""
+              rows: dict[str, int], *, start_ns: int | None = None, verdict: str = "") -> None:
+    """Findings (at the first observation; without observations at ``start_ns``, the log's first moment;
+    without findings, ``/log/verdict``: why there are none), rejected and stale observations, and a summary."""
     import rerun as rr
 
     obs = result.observations
     budget_ms = result.latency_budget_ns / 1e6
     found = list(findings)
     entries = rr.TextLog.columns(text=[f.text() for f in found], level=[rr.TextLogLevel.ERROR] * len(found))
+    if not found and verdict and len(obs):
+        first = np.array([int(np.argmin(obs.stamp_ns))], dtype=np.int64)
+        rec.send_columns("/log/verdict", indexes=obs_indexes(result, first),
+                         columns=rr.TextLog.columns(text=[verdict], level=[rr.TextLogLevel.INFO]))
+        rows["/log/verdict"] = 1
     if found and len(obs):
         first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
         rec.send_columns("/log/findings", indexes=obs_indexes(result, first), columns=entries)
@@ -178,7 +233,7 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
         rec.send_columns("/log/stale", indexes=obs_indexes(result, stale),
                          columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.INFO] * stale.size))
         rows["/log/stale"] = int(stale.size)
-    rec.log("/summary", rr.TextDocument(summary_markdown(result, found), media_type=rr.MediaType.MARKDOWN),
+    rec.log("/summary", rr.TextDocument(summary_markdown(result, found, verdict), media_type=rr.MediaType.MARKDOWN),
             static=True)
     rows["/summary"] = 1
 
@@ -202,8 +257,9 @@ def _rejection_text(result: ReplayResult, i: int) -> str:
     return f"obs {int(obs.obs_id[i])} {obs.label[i]} rejected: {reason}{detail}".replace("  ", " ")
 
 
-def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ()) -> str:
-    """Counts (total, replayed, rejected per reason, stale) and findings as Markdown."""
+def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (), verdict: str = "") -> str:
+    """The verdict, counts (total, replayed, rejected per reason, stale), findings and the colour legend as
+    Markdown."""
     counts = result.counts()
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
@@ -211,6 +267,7 @@ def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ())
     lines = [
         "# framechain replay",
         "",
+        *([f"**{verdict}**", ""] if verdict else []),
         f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
         f"latency budget {result.latency_budget_ns / 1e6:g} ms.",
         "",
@@ -223,4 +280,5 @@ def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = ())
     ]
     if findings:
         lines += ["", "## Findings", "", *[f"- {f.text()}" for f in findings]]
+    lines += ["", "## Colours", "", legend_text()]
     return "\n".join(lines) + "\n"

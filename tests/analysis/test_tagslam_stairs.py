@@ -183,3 +183,30 @@ def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path,
     # Odometry stamped late by the shift: the pose that fits a detection at tau is the one stamped tau + shift.
     assert estimate_to_json(top.estimate)["offset_s"] == pytest.approx(shift_ms * 1e-3, abs=0.010)
     assert top.share > 0.9
+
+
+def test_the_detectors_logged_centres_are_kept_beside_framechains(tagslam: tuple[Path, ChainConfig, Any]) -> None:
+    """The viewers draw what the detector said (the tag centre it logged) and what framechain used (its own PnP
+    centre, projected): the overlay keeps the logged centres as the bag has them, and they differ."""
+    from rosbags.highlevel import AnyReader
+
+    from framechain.replay import replay
+    from framechain.sinks.overlay import image_overlay
+
+    realdata, chain, run = tagslam
+    result = replay(run.timeline, chain.frames)
+    overlay = image_overlay(run.timeline, result, None)
+    logged: dict[tuple[int, str], tuple[float, float]] = {}
+    with AnyReader([realdata / BAG]) as reader:
+        for conn, _t, raw in reader.messages([c for c in reader.connections if c.topic == TAGS]):
+            msg = reader.deserialize(raw, conn.msgtype)
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            for tag in msg.apriltags:
+                logged[(stamp, str(tag.id))] = (tag.center.x, tag.center.y)
+    obs = result.observations
+    expected = np.array([logged[(int(s), str(label))] for s, label in zip(obs.stamp_ns, obs.label, strict=True)])
+    assert overlay.estimated.all()
+    np.testing.assert_allclose(overlay.detector_uv, expected, atol=1e-9)
+    apart = np.linalg.norm(overlay.detector_uv - overlay.detection_uv, axis=1)
+    assert 0.3 < np.median(apart) < 1.5  # 0.69 px measured; up to 5.6 px
+    assert apart.max() > 3.0

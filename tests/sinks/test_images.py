@@ -32,9 +32,11 @@ from framechain.pipeline import run
 from framechain.replay import ReplayResult
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import Scene, SceneSpec, generate
-from framechain.sinks.overlay import FAULT_COLORS, ImageSelection
+from framechain.sinks.colors import FAULT_COLORS
+from framechain.sinks.overlay import ImageSelection
 from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
-from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, Timeline, TransformTable
+from framechain.sinks.rerun_common import RERUN_PIXEL_OFFSET
+from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, PointRole, Timeline, TransformTable
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 
@@ -124,7 +126,8 @@ def test_demo_projected_points_match_opencv(demo: Run) -> None:
     obs = result.observations
     stamps, recomputed = _rows(demo.batches, "/camera/overlay/recomputed", "Points2D:positions")
     assert np.array_equal(stamps, np.sort(obs.stamp_ns[result.replayed]))
-    got = np.array([r[0] for r in recomputed])
+    # Rerun's image space puts (0, 0) at the top-left pixel's corner: OpenCV's pixels are drawn half a pixel on
+    got = np.array([r[0] for r in recomputed]) - RERUN_PIXEL_OFFSET
     order = np.argsort(obs.stamp_ns, kind="stable")
     expected = _opencv_pixels(timeline, result, result.p_world)[order]
     np.testing.assert_allclose(got, expected, atol=2e-3)  # float32 in the recording
@@ -135,7 +138,7 @@ def test_demo_projected_points_match_opencv(demo: Run) -> None:
     robot_world = demo.scene.robot_world[obs.obs_id]
     _, as_run = _rows(demo.batches, "/camera/overlay/as_run", "Points2D:positions")
     expected_as_run = _opencv_pixels(timeline, result, robot_world)[order]
-    np.testing.assert_allclose(np.array([r[0] for r in as_run]), expected_as_run, atol=2e-2)
+    np.testing.assert_allclose(np.array([r[0] for r in as_run]) - RERUN_PIXEL_OFFSET, expected_as_run, atol=2e-2)
     # a 30 deg rotation lost: the as-run point is far from the detection (tens of pixels at 150 px focal)
     assert np.linalg.norm(expected_as_run - got, axis=1).min() > 20
 
@@ -237,9 +240,10 @@ def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> Non
         assert bytes(np.asarray(buffers[k][0], dtype=np.uint8)) == little_endian.tobytes()
         fmt = formats[k][0]
         assert (fmt["width"], fmt["height"]) == (8, 6)
-    # the recomputed point lands on the detection pixel (5, 2) of the 8 x 6 image
+    # the recomputed point lands on the detection pixel (5, 2) of the 8 x 6 image: its centre, (5.5, 2.5) in Rerun's
+    # image space, where that pixel spans 5 .. 6 and 2 .. 3
     _, recomputed = _rows(batches, "/camera/overlay/recomputed", "Points2D:positions")
-    np.testing.assert_allclose(recomputed[0][0], [5.0, 2.0], atol=1e-4)
+    np.testing.assert_allclose(recomputed[0][0], [5.5, 2.5], atol=1e-4)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -310,9 +314,9 @@ def test_real_markers_drawn_where_opencv_projects_them(
     expected = cv2.projectPoints(result.p_world.reshape(-1, 1, 3), rvec, cam_from_world[:3, 3], cams.K[0],
                                  cams.distortion[0, :5])[0].reshape(-1, 2)
     order = np.argsort(obs.stamp_ns, kind="stable")
-    np.testing.assert_allclose(got, expected[order], atol=5e-3)
-    np.testing.assert_allclose(got, np.stack([obs.u, obs.v], axis=1)[order], atol=5e-3)
-    assert ((got > 0) & (got < [1279.5, 959.5])).all()
+    np.testing.assert_allclose(got, expected[order] + RERUN_PIXEL_OFFSET, atol=5e-3)
+    np.testing.assert_allclose(got, np.stack([obs.u, obs.v], axis=1)[order] + RERUN_PIXEL_OFFSET, atol=5e-3)
+    assert ((got > 0) & (got < [1280, 960])).all()
     # the corners from the detector, closed quads around each marker centre
     _, corners = _rows(batches, "/camera/overlay/corners", "LineStrips2D:strips")
     quads = np.array(corners[0])
@@ -381,7 +385,7 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
     replayed = np.flatnonzero(result.replayed)
     assert replayed.size >= 10
     _, recomputed = _rows(batches, "/camera/overlay/recomputed", "Points2D:positions")
-    got = np.array([r[0] for r in recomputed])
+    got = np.array([r[0] for r in recomputed]) - RERUN_PIXEL_OFFSET
     order = replayed[np.argsort(obs.stamp_ns[replayed], kind="stable")]
     expected = _opencv_pixels(loaded.timeline, result, result.p_world)[order]
     np.testing.assert_allclose(got, expected, atol=5e-3)
@@ -426,11 +430,8 @@ def test_each_finding_is_shown_alone(demo: Run, tmp_path: Path) -> None:
 def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Path) -> None:
     from PIL import Image
 
+    from framechain.sinks.colors import AS_RUN_COLOR, DETECTION_COLOR, RECOMPUTED_COLOR
     from framechain.sinks.overlay import (
-        AS_RUN_COLOR,
-        DETECTION_COLOR,
-        FAULT_COLORS,
-        RECOMPUTED_COLOR,
         image_overlay,
         render_crops,
         worst_rows,
@@ -477,3 +478,37 @@ def test_report_shows_the_camera_crops_with_the_overlay(demo: Run, tmp_path: Pat
         x, y = np.rint(recomputed).astype(int)
         ring = picture[y - 12: y + 13, x - 12: x + 13].reshape(-1, 3)
         assert (np.abs(ring - DETECTION_COLOR).max(axis=1) <= 40).any()
+
+
+def _by_obs(batches: Batches, entity: str) -> dict[int, float]:
+    """Scalar per observation row (``obs_index``) of a series."""
+    out: dict[int, float] = {}
+    for static, batch in batches.get(entity, []):
+        if static or "Scalars:scalars" not in batch.schema.names:
+            continue
+        for i, v in zip(batch.column("obs_index").to_pylist(), batch.column("Scalars:scalars").to_pylist(),
+                        strict=True):
+            out[int(i)] = float(v[0])
+    return out
+
+
+def test_demo_per_hop_error_is_each_hops_own_as_in_the_report(demo: Run) -> None:
+    """Each hop's series is that hop's own departure, the report's ``hop_errors`` (computed by the attribution from
+    the robot's logged input to the hop), not the error accumulated upstream that it drew before: the lost
+    30 deg mount rotation moves the body point by decimetres; body_to_world itself carries only the latency."""
+    result = demo.attribution
+    rows = {int(o): i for i, o in enumerate(demo.loaded.replay.observations.obs_id)}
+    at = np.array([rows[int(o)] for o in result.inputs.obs_id])
+    for hop in ("camera_to_body", "body_to_world"):
+        plotted = _by_obs(demo.batches, f"/series/error_mm/{hop}")
+        got = np.array([plotted.get(int(i), np.nan) for i in at])
+        np.testing.assert_allclose(got, result.hop_errors[hop] * 1e3, rtol=1e-4, atol=1e-3)
+    own = np.nanmedian(result.hop_errors["body_to_world"]) * 1e3
+    accumulated = np.nanmedian(np.linalg.norm(demo.loaded.aligned.points(PointRole.HOP_WORLD)
+                                              - demo.loaded.replay.p_world, axis=1)) * 1e3
+    assert own < 0.1 * accumulated
+    # the error the findings explain, and what remains, as series beside them
+    world = _by_obs(demo.batches, "/series/error_mm/world_error")
+    np.testing.assert_allclose([world[int(i)] for i in at], result.error_before * 1e3, rtol=1e-4)
+    corrected = _by_obs(demo.batches, "/series/error_mm/corrected")
+    assert np.nanmedian(list(corrected.values())) < 0.5 * np.nanmedian(list(world.values()))

@@ -30,6 +30,7 @@ from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.replay import ReplayResult, TransformBuffer, replay
+from framechain.sinks.colors import DETECTION_COLOR
 from framechain.sinks.rerun import (
     FindingView,
     OutputMode,
@@ -243,9 +244,10 @@ def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
     pinhole_parent = _rows(scene.chunks, "/camera", "Pinhole:parent_frame")
     assert pinhole_parent == [["camera_optical_frame"]]
     assert _rows(scene.chunks, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
-    # K is stored column-major.
+    # K is stored column-major; the principal point moves half a pixel as the pixels drawn do (Rerun puts (0, 0) at
+    # the top-left pixel's corner, OpenCV at its centre): fx 150 and cx 80 of the scene become cx 80.5.
     k = np.asarray(_rows(scene.chunks, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
-    np.testing.assert_allclose(k, scene.timeline.cameras.K[0])
+    np.testing.assert_allclose(k, [[150.0, 0.0, 80.5], [0.0, 150.0, 60.5], [0.0, 0.0, 1.0]])
 
 
 def test_world_points_equal_the_replay(scene: Scene) -> None:
@@ -315,7 +317,14 @@ def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> N
               for hop in ("pixel_to_camera", "camera_to_body", "body_to_world", "target")}
     np.testing.assert_allclose(errors["pixel_to_camera"], 0.0, atol=1e-9)
     np.testing.assert_allclose(errors["camera_to_body"], 50.0, atol=1e-6)
-    np.testing.assert_allclose(errors["body_to_world"], 50.0, atol=1e-3)
+    # Each hop's own error: the robot's world point is its body point (off by 5 cm along the body's x) taken through
+    # the pose, against the same 5 cm added along the map's x: the hop differs by (I - R_map_body) * 5 cm, not the
+    # 50 mm accumulated upstream (what the series plotted under this label before).
+    t_s = (result.observations.stamp_ns[ok] - T0) / 1e9
+    map_from_body = MAP_FROM_ODOM * Rotation.from_euler("z", 0.2 * t_s[:, None])
+    own = np.linalg.norm(BODY_OFFSET - map_from_body.apply(BODY_OFFSET), axis=1) * 1e3
+    assert (own < 30).all()
+    np.testing.assert_allclose(errors["body_to_world"], own, atol=1e-3)
     np.testing.assert_allclose(errors["target"], 30.0, atol=1e-6)
     reference = np.array([v[0] for v in _rows(scene.chunks, "/series/error_mm/reference", "Scalars:scalars")])
     np.testing.assert_allclose(reference, np.linalg.norm(result.p_world[ok] - REFERENCE_POINT, axis=1) * 1e3)
@@ -353,7 +362,15 @@ def test_camera_images_and_detections(scene: Scene) -> None:
     np.testing.assert_allclose(first.reshape(120, 160) / 1000.0, expected, atol=5e-4)
     detections = np.array([r[0] for r in _rows(scene.chunks, "/camera/detections", "Points2D:positions")])
     obs = scene.result.observations
-    np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1))
+    # OpenCV's pixel (80, 60), the centre of pixel column 80 and row 60, is (80.5, 60.5) in Rerun's image space,
+    # where pixel 80 spans 80 .. 81
+    np.testing.assert_allclose(detections[0], [80.5, 60.5])
+    np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1) + 0.5)
+    # not the recomputed blue: the detector's own pixel, in the detection's green
+    colors = [c for r in _rows(scene.chunks, "/camera/detections", "Points2D:colors") for c in r]
+    ok = scene.result.replayed & ~scene.result.stale
+    r, g, b = DETECTION_COLOR
+    assert {c for c, good in zip(colors, ok, strict=True) if good} == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
 
 
 def _rerun_exe() -> str | None:

@@ -63,7 +63,7 @@ def test_every_camera_has_its_pinhole_and_detections(made: Made) -> None:
         positions = [p for rows in _column(entities[f"{root}/detections"], "Points2D:positions") for p in rows]
         mine = obs.camera_frame == camera.frame
         assert len(positions) == int(mine.sum())
-        assert np.allclose(np.sort(np.asarray(positions)[:, 0]), np.sort(obs.u[mine]), atol=1e-3)
+        assert np.allclose(np.sort(np.asarray(positions)[:, 0]), np.sort(obs.u[mine]) + 0.5, atol=1e-3)
     assert "/camera" not in entities
 
 
