@@ -125,8 +125,8 @@ def test_every_camera_has_its_bounds(pose: str) -> None:
         mine = {b.fault: b for b in result.bounds if b.camera == scene.frame(k)}
         assert set(mine) == {Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS}
         assert all(b.observable and b.size is not None and b.size > 0 for b in mine.values())
-        assert f"on {scene.frame(k)}" in result.verdict
-    pose_latency = [b for b in result.bounds if b.camera is None]
+        assert f"on camera {scene.frame(k)}" in result.verdict
+    pose_latency = [b for b in result.bounds if not b.camera]
     assert [b.fault for b in pose_latency] == ([Fault.LATENCY] if pose == "moving" else [])
 
 

@@ -275,10 +275,11 @@ def test_bounds_per_camera_say_what_each_camera_can_show(rig: Path) -> None:
     # A fault within a rig camera's tolerance is no finding: no bound is under it.
     assert turned.size is not None
     assert turned.size >= 2.0
-    said = r"No fault above [^;]* latency, [^;]* mount rotation, [^;]* depth scale and [^;]* intrinsics scale on "
+    said = r"No fault above [^;]* latency, [^;]* mount rotation, [^;]* depth scale and [^;]* intrinsics scale " \
+        r"on camera "
     assert re.search(said + re.escape(CAMERAS[TURNED]), result.verdict), result.verdict
-    assert f"not observable here: latency, mount rotation, depth scale and intrinsics scale on {CAMERAS['cam0']}" \
-        in result.verdict
+    assert ("not observable here: latency, mount rotation, depth scale and intrinsics scale on camera "
+            f"{CAMERAS['cam0']}") in result.verdict
     assert all("camera" in b for b in result.to_json()["bounds"])
 
 

@@ -91,9 +91,11 @@ def test_the_cli_says_a_fixed_camera_could_check_nothing(tmp_path: Path, capsys:
     assert "class='verdict'" in page  # not the green "clean" box: nothing could be checked
 
 
-def test_a_rig_without_bounds_says_so_in_every_output(tmp_path: Path) -> None:
-    """A rig is measured against its other cameras, where no bound is computed yet: the verdict, both
-    reports and the Rerun document say that the smallest fault it would have shown is not known."""
+def test_a_rig_s_bounds_per_camera_and_a_run_without_bounds_say_so_in_every_output(tmp_path: Path) -> None:
+    """A rig measured against its other cameras: each camera's bounds in the verdict, both reports and the Rerun
+    document; the same run with no bound computed says that the smallest fault it would have shown is not known."""
+    import dataclasses
+
     from framechain.sim.rig import RigSpec, generate_rig
     from framechain.sinks.checks_view import NOT_BOUNDED
     from framechain.sinks.rerun_checks import checks_markdown
@@ -103,12 +105,16 @@ def test_a_rig_without_bounds_says_so_in_every_output(tmp_path: Path) -> None:
     result = run.attributed()
     doc = result.to_json()
     assert doc["error_m"]["metric"] == "cross_camera"
-    assert doc["bounds"] == []
+    cameras = {b["camera"] for b in doc["bounds"]}
+    assert cameras == {scene.frame(k) for k in range(3)}
     assert doc["verdict"].startswith("No fault beyond noise")
-    assert "Not bounded: the smallest fault this log would have shown was not computed for evidence from the other " \
-           "cameras of the rig" in doc["verdict"]
+    assert "Not bounded" not in doc["verdict"]
     paths = render_report(run, tmp_path)
     for text in (paths["md"].read_text(), paths["html"].read_text(), checks_markdown(result)):
-        assert "Not bounded" in text  # the verdict
-        assert NOT_BOUNDED in text  # in place of an empty table
-        assert "smallest fault it would find" not in text
+        for camera in cameras:
+            assert f"on camera {camera}" in text
+        assert NOT_BOUNDED not in text
+    unbounded = dataclasses.replace(result, bounds=())
+    assert "Not bounded: the smallest fault this log would have shown was not computed for evidence from the other " \
+           "cameras of the rig" in unbounded.verdict
+    assert NOT_BOUNDED in checks_markdown(unbounded)
