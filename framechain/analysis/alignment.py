@@ -28,7 +28,8 @@ import numpy.typing as npt
 
 from framechain.arrays import FloatArray, IntArray, rows_of
 from framechain.config.chain import ChainFrames
-from framechain.replay import TransformBuffer, transform_points
+from framechain.geometry.transforms import transform_points
+from framechain.replay import TransformBuffer
 from framechain.replay.stamps import nearest
 from framechain.timeline import ObservationTable, PointRole, PointTable, normalize_frame
 

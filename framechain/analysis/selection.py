@@ -19,8 +19,8 @@ from framechain.analysis.frame_swaps import swap_for_rotation
 from framechain.analysis.static import RayObjective, StaticObjective
 from framechain.arrays import FloatArray, IntArray
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.transforms import transform_points
 from framechain.progress import Progress
-from framechain.replay import transform_points
 from framechain.timeline import PointRole
 
 #: A fault must lower the BIC by this much to be reported (strong evidence on Kass-Raftery's scale).

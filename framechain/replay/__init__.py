@@ -1,7 +1,5 @@
 """The replay room: TransformBuffer (tf2 semantics, vectorised), camera models, the hop-by-hop replay."""
 
-from framechain.catalogue import NothingReplayed, RejectReason
-from framechain.geometry.transforms import transform_points
 from framechain.replay.buffer import (
     LATEST,
     Edge,
@@ -47,9 +45,7 @@ __all__ = [
     "HopSamples",
     "LookupResult",
     "LookupStatus",
-    "NothingReplayed",
     "PathHop",
-    "RejectReason",
     "ReplayOptions",
     "ReplayResult",
     "TransformBuffer",
@@ -57,5 +53,4 @@ __all__ = [
     "camera_rows_for",
     "replay",
     "sample_depth",
-    "transform_points",
 ]

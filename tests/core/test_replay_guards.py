@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from framechain.catalogue import HopName
+from framechain.catalogue import HopName, RejectReason
 from framechain.config.chain import ChainFrames
-from framechain.replay import REPLAYED, RejectReason, ReplayOptions, replay, sample_depth
+from framechain.replay import REPLAYED, ReplayOptions, replay, sample_depth
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
 
 S = 1_000_000_000
