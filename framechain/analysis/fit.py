@@ -153,8 +153,8 @@ def _grid_offsets(
 ) -> FloatArray:
     """Replace every time-offset start by the best value of a coarse-then-fine grid (others held)."""
     x = start.copy()
-    coarse_objective, coarse_inputs = _subsample(objective, inputs, GRID_SUBSAMPLE)
-    fine_objective, fine_inputs = _subsample(objective, inputs, FINE_SUBSAMPLE)
+    coarse_objective, coarse_inputs = subsample(objective, inputs, GRID_SUBSAMPLE)
+    fine_objective, fine_inputs = subsample(objective, inputs, FINE_SUBSAMPLE)
     offset = 0
     for m in models:
         if m.fault.value == "latency":
@@ -173,7 +173,7 @@ def _grid_offsets(
     return x
 
 
-def _subsample(objective: Objective, inputs: ChainInputs, size: int) -> tuple[Objective, ChainInputs]:
+def subsample(objective: Objective, inputs: ChainInputs, size: int) -> tuple[Objective, ChainInputs]:
     """At most ``size`` observations, evenly spaced (so every part of the log keeps some)."""
     n = len(inputs)
     if n <= size:

@@ -9,7 +9,7 @@ from framechain.analysis.chain_model import Perturbation, evaluate
 from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
 from framechain.analysis.faults import models_for
 from framechain.analysis.findings import Attribution, Finding
-from framechain.analysis.fit import perturbation_of
+from framechain.analysis.fit import FINE_SUBSAMPLE, even_rows, perturbation_of
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault
 
@@ -29,7 +29,9 @@ def sensitivity(result: Attribution, finding: Finding, steps: int = 31) -> tuple
     """Median world error as the finding's fault grows from nothing to 1.5x its estimate.
 
     The tilt lab for whatever was found: how fast does this fault hurt at this robot's depths
-    and speeds? Returns (magnitudes, median error in m, axis label).
+    and speeds? Returns (magnitudes, median error in m, axis label). A median read by eye: on a long
+    log, over FINE_SUBSAMPLE observations evenly spread over it (each step of a latency looks up
+    every observation's pose).
     """
     model = next((m for m in models_for(result.inputs) if m.name == finding.model), None)
     if model is None or model.n_params == 0:
@@ -37,11 +39,14 @@ def sensitivity(result: Attribution, finding: Finding, steps: int = 31) -> tuple
     x_full = _params_of(finding, model.n_params)
     magnitudes = np.linspace(0.0, 1.5, steps)
     errors = np.empty(steps)
-    baseline = evaluate(result.inputs, Perturbation())[2]
+    inputs = result.inputs
+    if len(inputs) > FINE_SUBSAMPLE:
+        inputs = inputs.take(even_rows(len(inputs), FINE_SUBSAMPLE))
+    baseline = evaluate(inputs, Perturbation())[2]
     for k, a in enumerate(magnitudes):
         scaled = finding.fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS)  # these grow from 1, not from 0
         x = 1.0 + a * (x_full - 1.0) if scaled else a * x_full
-        p = evaluate(result.inputs, perturbation_of([model], x))[2]
+        p = evaluate(inputs, perturbation_of([model], x))[2]
         errors[k] = float(np.nanmedian(np.linalg.norm(p - baseline, axis=1)))
     label = {
         Fault.LATENCY: "pose time offset (ms)",

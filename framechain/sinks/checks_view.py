@@ -16,6 +16,7 @@ from framechain.analysis.checks import Bound, Curve, family_name, size_text
 from framechain.analysis.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
+from framechain.sinks.plots import new_figure
 from framechain.sinks.text import mm
 
 ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
@@ -86,17 +87,12 @@ def curve_plots(result: Attribution) -> list[tuple[str, str, Any]]:
     the estimate and the bound marked."""
     if not result.curves:
         return []
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = []
     for curve in result.curves:
-        fig, axes = plt.subplots(1, 2 if curve.key == "offset_s" else 1, figsize=(6.4, 3.4), dpi=100, squeeze=False)
-        _plot_curve(axes[0][0], curve, zoom=False)
+        fig, axes = new_figure(6.4, 3.4, columns=2 if curve.key == "offset_s" else 1, top="suptitle")
+        _plot_curve(axes[0], curve, zoom=False)
         if curve.key == "offset_s":
-            _plot_curve(axes[0][1], curve, zoom=True)
+            _plot_curve(axes[1], curve, zoom=True)
         name = family_name(curve.fault, curve.hop)
         fig.suptitle(f"Error against the {name} ({curve.hop.value})", fontsize=9)
         caption = (f"{name.capitalize()}: the error against the {result.metric.replace('_', ' ')} as the fault is "

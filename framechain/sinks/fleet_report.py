@@ -18,7 +18,7 @@ import pyarrow as pa
 
 from framechain.analysis.estimates import format_interval
 from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets
-from framechain.sinks.report import Figure, figure_html, figure_png
+from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
 from framechain.sinks.text import CSS, mm
 
 #: Rows listed per table before the report points to the Parquet table instead.
@@ -190,18 +190,13 @@ def render_fleet_report(
 # -- figures ----------------------------------------------------------------------------------
 def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     """Logs per fault and status (bars), and every log's estimate per fault (strip plots)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     figures = []
     statuses = [s for s in STATUS_ORDER if any(log.status == s for log in logs)]
     faults: dict[str, int] = {}
     for log in logs:
         for fault in {f["fault"] for f in log.findings}:
             faults[fault] = faults.get(fault, 0) + 1
-    fig, (ax_status, ax_fault) = plt.subplots(1, 2, figsize=(9.6, 3.4), dpi=100)
+    fig, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
     ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses], color="tab:blue")
     ax_status.set_xlabel("logs")
     ax_status.set_title("Logs by outcome", fontsize=9)
@@ -224,8 +219,8 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     if groups:
         rng = np.random.default_rng(0)  # jitter only: the same report for the same table
         n = len(groups)
-        fig, axes = plt.subplots(1, n, figsize=(max(3.2 * n, 4.8), 3.4), dpi=100, squeeze=False)
-        for ax, ((title, label), values) in zip(axes[0], sorted(groups.items()), strict=True):
+        fig, axes = new_figure(max(3.2 * n, 4.8), 3.4, columns=n, top="title")
+        for ax, ((title, label), values) in zip(axes, sorted(groups.items()), strict=True):
             y = np.asarray(values)
             ax.boxplot(y, widths=0.5, showfliers=False)
             ax.scatter(1 + rng.uniform(-0.15, 0.15, y.size), y, s=10, alpha=0.6, color="tab:red", zorder=3)

@@ -35,13 +35,11 @@ from framechain.sinks.colors import (
     UNEXPLAINED_COLOR,
     USED_PIXEL_COLOR,
 )
+from framechain.sinks.plots import PNG_COMPRESS_LEVEL
 from framechain.timeline import PointRole, Timeline, normalize_frame
 
 #: An image within this of an observation's stamp is the one shown with it.
 IMAGE_WINDOW_NS = 50_000_000
-#: zlib level of the report's PNGs (crops and plots): the same pixels as the default 6, smaller for
-#: plots, in less than half the time.
-PNG_COMPRESS_LEVEL = 3
 
 
 class ImageSelection(StrEnum):

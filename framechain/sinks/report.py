@@ -8,12 +8,10 @@ provenance (file, topics, frames, units, stamps, configuration).
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -41,16 +39,10 @@ from framechain.sinks.colors import (
     legend_text,
 )
 from framechain.sinks.evidence_files import inputs_record
-from framechain.sinks.overlay import PNG_COMPRESS_LEVEL, ImageOverlay
+from framechain.sinks.overlay import ImageOverlay
+from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
 from framechain.sinks.text import CSS, FindingView, breakable, mm
 from framechain.timeline import PointRole
-
-
-@dataclass(frozen=True)
-class Figure:
-    name: str
-    caption: str
-    png: bytes
 
 
 def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html")) -> dict[str, Path]:
@@ -201,16 +193,11 @@ def _crops_html(result: Attribution, sections: Sequence[tuple[str, list[Figure]]
 
 # -- figures ----------------------------------------------------------------------------------
 def make_figures(result: Attribution) -> list[Figure]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     figures: list[Figure] = []
     inputs = result.inputs
     t = (inputs.stamp_ns - inputs.stamp_ns.min()) * 1e-9 if len(inputs) else np.zeros(0)
 
-    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+    fig, (ax,) = new_figure(6.4, 3.6)
     # The world error goes underneath, wide and pale, so a hop that carries all of it stays visible.
     _line(ax, t, result.error_before * 1e3, lw=4, color=hex_color(ERROR_COLOR), alpha=0.25,
           label=f"world error ({result.metric.replace('_', ' ')})")
@@ -227,7 +214,7 @@ def make_figures(result: Attribution) -> list[Figure]:
     figures.append(figure_png(fig, "error_per_hop", "Error per hop over time"))
 
     speed = robot_speed(result)
-    fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+    fig, (ax,) = new_figure(6.4, 3.6, top="title")
     _dots(ax, speed, result.error_before * 1e3, alpha=0.6, color=hex_color(ERROR_COLOR), label="as recorded")
     if result.findings:
         _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color=hex_color(CORRECTED_COLOR),
@@ -245,7 +232,7 @@ def make_figures(result: Attribution) -> list[Figure]:
         top = result.findings[0]
         x, err, label = sensitivity(result, top)
         if x.size:
-            fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+            fig, (ax,) = new_figure(6.4, 3.6, top="title")
             ax.plot(x, err * 1e3, color=hex_color(ERROR_COLOR))
             ax.axhline(10.0, color="k", ls="--", lw=1, label="1 cm gripper tolerance")
             ax.axvline(x[-1] / 1.5, color=hex_color(BOUND_COLOR), ls=":", lw=1, label="found")
@@ -264,10 +251,8 @@ def make_figures(result: Attribution) -> list[Figure]:
 
 def _world_top_down(result: Attribution) -> Figure:
     """The world points from above: recomputed, the evidence and (against a reference or static targets) corrected."""
-    import matplotlib.pyplot as plt
-
     recomputed = _recomputed_world(result)
-    fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
+    fig, (ax,) = new_figure(6.4, 4.4)
     _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
           color=hex_color(RECOMPUTED_COLOR))
     ev = result.evidence_points
@@ -330,11 +315,6 @@ def motion_figures(run: Run) -> list[Figure]:
     as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`)."""
     if run.camera_motion is None:
         return []
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = []
     for motion in run.camera_motion.cameras:
         fit = motion.fit
@@ -350,7 +330,7 @@ def motion_figures(run: Run) -> list[Figure]:
                                 focal_scale=fit.focal_scale / motion.measured_focal)
         measured, predicted, corrected = (np.rad2deg(np.linalg.norm(r[pairs], axis=1))
                                           for r in (declared.measured, declared.predicted, fitted.predicted))
-        fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
+        fig, (ax,) = new_figure(6.4, 3.6, top="title")
         ax.plot(t, measured, color="k", lw=1.6, label="from the images")
         ax.plot(t, predicted, color=hex_color(AS_RUN_COLOR), lw=1.0,
                 label=f"forward kinematics of {motion.declared_link} as declared")
@@ -394,28 +374,6 @@ def _recomputed_world(result: Attribution) -> FloatArray:
     from framechain.analysis.chain_model import Perturbation, evaluate
 
     return evaluate(result.inputs, Perturbation())[2]
-
-
-def figure_png(fig: Any, name: str, caption: str) -> Figure:
-    """Lay out, encode as PNG and close a matplotlib figure (the fleet report shares it)."""
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.tight_layout()
-    # tight_layout leaves a placeholder layout engine, for which savefig lays out in one more (blind)
-    # draw before the real one; the layout is done, so none is needed.
-    fig.set_layout_engine(None)
-    fig.savefig(buf, format="png", pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
-    plt.close(fig)
-    return Figure(name=name, caption=caption, png=buf.getvalue())
-
-
-def figure_html(fig: Figure) -> str:
-    """The figure embedded in HTML (base64 PNG) with its caption."""
-    e = html.escape
-    data = base64.b64encode(fig.png).decode("ascii")
-    return (f"<figure><img alt='{e(fig.caption)}' src='data:image/png;base64,{data}'>"
-            f"<figcaption>{e(fig.caption)}</figcaption></figure>")
 
 
 # -- text -------------------------------------------------------------------------------------

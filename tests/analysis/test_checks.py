@@ -129,6 +129,26 @@ def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_share
     assert len(latency_json["x"]) == len(latency_json["median_error_m"])
 
 
+def test_a_long_log_s_curves_are_measured_on_evenly_spread_observations(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Past CURVE_ROWS observations a curve is measured on that many, evenly spread (as the fit's fine
+    grid is): its dip stays at the estimate, and its value at no offset stays the median error the
+    findings share out, to the spread a median of fewer observations has."""
+    from framechain.analysis import curves
+
+    latency = InjectedFault(Fault.LATENCY, "data", {"offset_s": 0.030})
+    scene = generate(SceneSpec(seed=6, duration_s=6.0, evidence="static", faults=(latency,)))
+    monkeypatch.setattr(curves, "CURVE_ROWS", 50)
+    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    assert len(result.inputs) > 3 * 50  # the curve is measured on a third of the observations or fewer
+    curve = next(c for c in result.curves if c.fault == Fault.LATENCY)
+    x, y, rms = np.array(curve.x), np.array(curve.median_error_m), np.array(curve.rms_error_m)
+    assert curve.estimate == pytest.approx(0.030, abs=0.002)
+    assert x[np.nanargmin(rms)] == pytest.approx(curve.estimate, abs=0.002)
+    at_zero = y[np.argmin(np.abs(x))]
+    assert at_zero != float(np.nanmedian(result.error_before))  # not every observation: a subsample
+    assert at_zero == pytest.approx(float(np.nanmedian(result.error_before)), rel=0.25)
+
+
 def test_label_table_verdicts() -> None:
     rng = np.random.default_rng(3)
     labels = np.repeat(np.array(["1", "2", "3", "tag_a", "5"]), 40)
