@@ -19,11 +19,10 @@ lint: $(STAMP)
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
-# --dist loadgroup keeps each module marked xdist_group on one worker, so its cached runs are made once.
 # Notebooks run after the tests and one at a time: two Jupyter kernels starting at once (one per
 # xdist worker) can race for the same ZMQ port and the kernel dies before it answers.
 test: lint
-	$(PY) -m pytest -q -n 2 --dist loadgroup tests
+	$(PY) -m pytest -q -n 2 tests
 	$(PY) -m pytest -q -p no:xdist --nbmake notebooks
 
 bench: $(STAMP)

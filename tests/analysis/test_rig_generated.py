@@ -27,9 +27,6 @@ from framechain.sim.rig import RigScene, RigSpec, generate_rig
 #: of the tolerances below. A camera's 8 % scale needs the longer rig: at 5 s it is not yet a finding.
 BASE = RigSpec(cameras=3, duration_s=5.0, rate_hz=15.0, static_tags=12, seed=3)
 LONGER = replace(BASE, duration_s=8.0)
-
-# One xdist worker runs this module (`make test`: --dist loadgroup), so each cached run below is made once.
-pytestmark = pytest.mark.xdist_group("rig_generated")
 TURN = (1, 5.0, (0.6, 0.8, 0.0))  # camera 1's recorded mount turned 5 deg about an axis of its own frame
 LATE = (2, 1.0)  # camera 2's detections stamped one frame late
 

@@ -24,9 +24,6 @@ from framechain.config.chain import ChainConfig
 
 cv2 = pytest.importorskip("cv2")
 
-# One xdist worker runs this module (`make test`: --dist loadgroup), so the bag is read and each case run once.
-pytestmark = pytest.mark.xdist_group("tagslam_quad_rig")
-
 CAMERAS = {"cam0": "quadruple/bottom_left", "cam1": "quadruple/bottom_right", "cam2": "quadruple/top_left",
            "cam3": "quadruple/top_right"}
 FRAME_S = 0.03334  # the cameras' frame period (median step of their stamps)

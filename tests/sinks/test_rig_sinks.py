@@ -26,9 +26,6 @@ from framechain.sinks.text import FindingView
 
 SPEC = RigSpec(cameras=3, duration_s=6.0, rate_hz=10.0, static_tags=8, turned=(1, 5.0, (1.0, 0.0, 0.0)), seed=1)
 
-# One xdist worker runs this module (`make test`: --dist loadgroup), so the module's run is made once.
-pytestmark = pytest.mark.xdist_group("rig_sinks")
-
 
 @dataclass(frozen=True)
 class Made:
