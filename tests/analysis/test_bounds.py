@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from test_tagslam_stairs import BAG, _chain, restamped_bag
+from test_tagslam_stairs import _chain, recorded_attribution, restamped_bag
 
 from framechain.analysis.attribute import attribute
 from framechain.analysis.bounds import observations_for
@@ -138,9 +138,7 @@ def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(le
 @functools.cache
 def _stairs_bound(realdata: Path) -> float:
     """The pose latency bound of the stairs bag as recorded (seconds), computed once per process."""
-    chain = _chain(realdata)
-    result = attribute(load_log(realdata / BAG, chain).timeline, chain, bootstrap=0)
-    return _size(_bounds(result)[("latency", "body_to_world")])
+    return _size(_bounds(recorded_attribution(realdata))[("latency", "body_to_world")])
 
 
 @pytest.fixture

@@ -23,8 +23,10 @@ from framechain.catalogue import Fault
 from framechain.sim import rigid
 from framechain.sim.rig import RigScene, RigSpec, generate_rig
 
-#: Small rigs: three cameras, 8 s at 15 Hz (a frame is 66.7 ms).
-BASE = RigSpec(cameras=3, duration_s=8.0, rate_hz=15.0, static_tags=12, seed=3)
+#: Small rigs: three cameras, 5 s at 15 Hz (a frame is 66.7 ms); a mount or a clock is found to within a hundredth
+#: of the tolerances below. A camera's 8 % scale needs the longer rig: at 5 s it is not yet a finding.
+BASE = RigSpec(cameras=3, duration_s=5.0, rate_hz=15.0, static_tags=12, seed=3)
+LONGER = replace(BASE, duration_s=8.0)
 TURN = (1, 5.0, (0.6, 0.8, 0.0))  # camera 1's recorded mount turned 5 deg about an axis of its own frame
 LATE = (2, 1.0)  # camera 2's detections stamped one frame late
 
@@ -87,7 +89,7 @@ def test_a_late_camera_is_a_latency_on_that_camera(pose: str) -> None:
                                                     ("depth", Fault.DEPTH_SCALE, "factor")])
 def test_a_camera_s_scale_is_found_on_that_camera(what: str, fault: Fault, key: str) -> None:
     """Camera 2's recorded focal length (or its depths) 8 % off: that camera's fault, x1.08 as recorded."""
-    scene = generate_rig(replace(BASE, **{what: (2, 1.08)}))
+    scene = generate_rig(replace(LONGER, **{what: (2, 1.08)}))
     result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert top.fault == fault

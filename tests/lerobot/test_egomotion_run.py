@@ -8,6 +8,7 @@ and mount rotation, the arm that carries the camera, a shift of the video's time
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,21 @@ def attribute(root: Path, robot: Path, out: Path, capsys: pytest.CaptureFixture[
     return result
 
 
+_ATTRIBUTED: dict[tuple[Path, Path, int], tuple[dict[str, Any], Path]] = {}
+
+
+def attributed_once(root: Path, robot: Path, factory: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str],
+                    episode: int = 0) -> tuple[dict[str, Any], Path]:
+    """``attribute``'s JSON for a dataset and robot.yaml no test changes, and its --out folder: run once per
+    process, shared by the tests that read it (each gets its own copy of the JSON)."""
+    key = (root, robot, episode)
+    if key not in _ATTRIBUTED:
+        out = factory.mktemp("attributed")
+        _ATTRIBUTED[key] = attribute(root, robot, out, capsys, episode), out
+    result, out = _ATTRIBUTED[key]
+    return copy.deepcopy(result), out
+
+
 def generated(factory: pytest.TempPathFactory, name: str, spec: VideoDatasetSpec) -> tuple[VideoDatasetTruth, Path]:
     folder = factory.mktemp(name)
     truth = generate_video_dataset(folder / "dataset", spec)
@@ -64,10 +80,11 @@ def camera_entry(result: dict[str, Any]) -> dict[str, Any]:
     return entry
 
 
-def test_late_video_and_a_rotated_mount_are_findings(faulted: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+def test_late_video_and_a_rotated_mount_are_findings(faulted: tuple[VideoDatasetTruth, Path],
+                                                     tmp_path_factory: pytest.TempPathFactory,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     truth, robot = faulted
-    result = attribute(truth.root, robot, tmp_path, capsys)
+    result, out = attributed_once(truth.root, robot, tmp_path_factory, capsys)
     assert result["error_m"]["metric"] == "camera_motion"
     found = {f["fault"]: f for f in result["findings"]}
     assert set(found) == {"latency", "rotation_error"}
@@ -84,14 +101,15 @@ def test_late_video_and_a_rotated_mount_are_findings(faulted: tuple[VideoDataset
     assert sum(f["share"] for f in result["findings"]) <= 1.0
     assert min(latency["share"], mount["share"]) > 0.2
     assert all(o["observable"] for o in camera_entry(result)["observable"])
-    assert (tmp_path / "attribution.json").is_file()
+    assert (out / "attribution.json").is_file()
 
 
 def test_the_fixes_as_written_make_the_episode_clean(faulted: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                     tmp_path_factory: pytest.TempPathFactory,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     """The fixes name robot.yaml keys in robot.yaml's own form: applied, nothing is left to find."""
     truth, robot = faulted
-    result = attribute(truth.root, robot, tmp_path / "before", capsys)
+    result, _out = attributed_once(truth.root, robot, tmp_path_factory, capsys)
     config = yaml.safe_load(robot.read_text())
     camera = config["cameras"]["wrist"]
     for finding in result["findings"]:
@@ -151,11 +169,17 @@ def test_a_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.Te
     assert top["share"] > 0.9
 
 
-def test_a_still_arm_says_not_observable(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
+@pytest.fixture(scope="session")
+def still(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+    """An arm that does not move."""
+    return generated(tmp_path_factory, "run_still", VideoDatasetSpec(URDF, seed=24, duration_s=2.0, still=True))
+
+
+def test_a_still_arm_says_not_observable(still: tuple[VideoDatasetTruth, Path],
+                                         tmp_path_factory: pytest.TempPathFactory,
                                          capsys: pytest.CaptureFixture[str]) -> None:
-    truth, robot = generated(tmp_path_factory, "run_still", VideoDatasetSpec(
-        URDF, seed=24, duration_s=2.0, still=True))
-    result = attribute(truth.root, robot, tmp_path, capsys)
+    truth, robot = still
+    result, _out = attributed_once(truth.root, robot, tmp_path_factory, capsys)
     assert result["findings"] == []
     entry = camera_entry(result)
     assert [o["observable"] for o in entry["observable"]] == [False, False, False, False]
@@ -230,11 +254,12 @@ def camera_bounds(result: dict[str, Any], camera: str = "wrist_optical_frame") -
     return {b["fault"]: b for b in result["bounds"] if b.get("camera") == camera}
 
 
-def test_a_clean_episode_says_what_its_motion_bounds(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+def test_a_clean_episode_says_what_its_motion_bounds(clean: tuple[VideoDatasetTruth, Path],
+                                                    tmp_path_factory: pytest.TempPathFactory,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """attribution.json's bounds on a run measured by the camera's motion: per camera, in the verdict."""
     truth, robot = clean
-    result = attribute(truth.root, robot, tmp_path, capsys)
+    result, _out = attributed_once(truth.root, robot, tmp_path_factory, capsys)
     bounds = camera_bounds(result)
     assert set(bounds) == {"latency", "rotation_error", "intrinsics"}
     assert all(b["observable"] for b in bounds.values())
@@ -262,7 +287,7 @@ def test_a_fault_twice_its_bound_is_found(fault: str, clean: tuple[VideoDatasetT
     twice the mount bound: a finding, within its bound of the generator's truth. (One fault at a time: two
     small ones together share the misfit they remove, and a small latency beside a wrong mount may be none.)"""
     truth, robot = clean
-    bound = camera_bounds(attribute(truth.root, robot, tmp_path / "clean", capsys))[fault]["min_detectable"]
+    bound = camera_bounds(attributed_once(truth.root, robot, tmp_path_factory, capsys)[0])[fault]["min_detectable"]
     size = bound["offset_s" if fault == "latency" else "angle_deg"]
     spec = (VideoDatasetSpec(URDF, seed=22, duration_s=DURATION_S, video_delay_s=2 * size) if fault == "latency" else
             VideoDatasetSpec(URDF, seed=22, duration_s=DURATION_S, mount_error_deg=2 * size))
@@ -275,11 +300,10 @@ def test_a_fault_twice_its_bound_is_found(fault: str, clean: tuple[VideoDatasetT
         assert found[fault]["estimate"]["angle_deg"] == pytest.approx(2 * size, abs=size)
 
 
-def test_a_still_arm_bounds_nothing(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
+def test_a_still_arm_bounds_nothing(still: tuple[VideoDatasetTruth, Path], tmp_path_factory: pytest.TempPathFactory,
                                     capsys: pytest.CaptureFixture[str]) -> None:
-    truth, robot = generated(tmp_path_factory, "run_still_bounds", VideoDatasetSpec(
-        URDF, seed=24, duration_s=2.0, still=True))
-    result = attribute(truth.root, robot, tmp_path, capsys)
+    truth, robot = still
+    result, _out = attributed_once(truth.root, robot, tmp_path_factory, capsys)
     bounds = camera_bounds(result)
     assert set(bounds) == {"latency", "rotation_error", "intrinsics"}
     assert not any(b["observable"] or b["min_detectable"] for b in bounds.values())
