@@ -56,10 +56,6 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     out = Path(args.out)
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     report_formats = [f for f in formats if f in ("md", "html")]
-    if report_formats:
-        from framechain.sinks.plots import import_in_background
-
-        plotting = import_in_background()
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
@@ -71,7 +67,6 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
         if report_formats:
             from framechain.sinks.report import render_report
 
-            plotting.join()
             if progress is not None:
                 progress(f"writing the report ({', '.join(report_formats)})")
             paths.update(render_report(made, out, formats=report_formats))

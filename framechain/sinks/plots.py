@@ -12,7 +12,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,24 +38,6 @@ class Figure:
     name: str
     caption: str
     png: bytes
-
-
-def import_in_background() -> threading.Thread:
-    """Start importing matplotlib (half a second) on another thread while the log is read and attributed;
-    join it before the first figure. Its modules are matplotlib's own, which nothing on the way to a
-    report imports, so the two threads never wait on each other's imports. A failed import is left for
-    the figure itself to raise."""
-
-    def load() -> None:
-        try:
-            import matplotlib.backends.backend_agg
-            import matplotlib.figure  # noqa: F401
-        except ImportError:
-            pass
-
-    thread = threading.Thread(target=load, name="framechain-import-matplotlib", daemon=True)
-    thread.start()
-    return thread
 
 
 def new_figure(width_in: float, height_in: float, *, columns: int = 1, top: str = "none",
