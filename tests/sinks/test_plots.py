@@ -35,9 +35,8 @@ def _outside(fig: Any) -> list[str]:
             if not text.get_text():
                 continue
             box = text.get_window_extent(renderer)
-            if box.x0 < -1 or box.y0 < -1 or box.x1 > w + 1 or box.y1 > h + 1:
-                out.append(text.get_text())
-            elif any(box.overlaps(o.get_window_extent(renderer)) for o in fig.axes if o is not ax):
+            leaves = box.x0 < -1 or box.y0 < -1 or box.x1 > w + 1 or box.y1 > h + 1
+            if leaves or any(box.overlaps(o.get_window_extent(renderer)) for o in fig.axes if o is not ax):
                 out.append(text.get_text())
     return out
 
