@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -150,13 +151,15 @@ class _Noise:
         s = np.nan_to_num(signal)
         if float(np.sum(s * s)) < self.needed_ss(model):
             return False
-        with_fault, without = np.linalg.norm(self.residual + s, axis=1), np.linalg.norm(self.residual, axis=1)
-        both = np.isfinite(with_fault) & np.isfinite(without)
+        with_fault, without = np.linalg.norm(self.residual + s, axis=1), self._without
+        both = np.isfinite(with_fault) & self._without_finite
         if not both.any():
             return False
         # The share a finding keeps is a difference of medians: another draw of the noise moves it by about
         # its standard error (paired), which the predicted share must clear as well as the rule.
-        share = float(np.median(with_fault[both]) - np.median(without[both]))
+        same_rows = self._without_median is not None and bool(np.array_equal(both, self._without_finite))
+        median_without = self._without_median if same_rows else float(np.median(without[both]))
+        share = float(np.median(with_fault[both]) - median_without)
         change = with_fault[both] - without[both]
         if model.camera is not None:
             # A rig camera's fault moves its own rows only, by sizes that differ from row to row: that spread is
@@ -165,9 +168,27 @@ class _Noise:
         spread = 1.2533 * float(np.std(change)) / np.sqrt(both.sum())
         if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
             return False
-        if self.gate_m is not None and _median_norm(self.departure) <= self.gate_m:
+        if self.gate_m is not None and self._departure_median <= self.gate_m:
             return _median_norm(self.departure + s) > self.gate_m
         return True
+
+    # The residual without a fault is the same at every size a bound's search tries: measured once.
+    @cached_property
+    def _without(self) -> FloatArray:
+        out: FloatArray = np.linalg.norm(self.residual, axis=1)
+        return out
+
+    @cached_property
+    def _without_finite(self) -> BoolArray:
+        return np.isfinite(self._without)
+
+    @cached_property
+    def _without_median(self) -> float | None:
+        return float(np.median(self._without[self._without_finite])) if self._without_finite.any() else None
+
+    @cached_property
+    def _departure_median(self) -> float:
+        return _median_norm(self.departure)
 
 
 def _median_norm(residual: FloatArray) -> float:
