@@ -15,7 +15,7 @@ import io
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from framechain.analysis.lab import TiltRow
@@ -26,7 +26,8 @@ PNG_COMPRESS_LEVEL = 3
 #: Fixed margins (inches): tick labels of up to 6 characters and the axis label on the left, the last
 #: x tick label's overhang on the right, x tick labels and label below, and above a title (or none).
 LEFT_IN, RIGHT_IN, BOTTOM_IN = 0.85, 0.3, 0.6
-TOP_IN = {"none": 0.2, "title": 0.4, "suptitle": 0.5}
+Top = Literal["none", "title", "suptitle"]
+TOP_IN: dict[Top, float] = {"none": 0.2, "title": 0.4, "suptitle": 0.5}
 #: Space between the columns of a figure (inches): the right axes' tick labels and its axis label.
 BETWEEN_IN = 0.85
 #: Pixels a text may stick out before the figure is laid out again (antialiasing, rounding).
@@ -40,7 +41,7 @@ class Figure:
     png: bytes
 
 
-def new_figure(width_in: float, height_in: float, *, columns: int = 1, top: str = "none",
+def new_figure(width_in: float, height_in: float, *, columns: int = 1, top: Top = "none",
                dpi: int = 100) -> tuple[Any, list[Any]]:
     """A figure of ``columns`` axes side by side, its margins fixed (``top``: "none", "title" above each
     axes or a "suptitle"). No pyplot: nothing global to close."""
