@@ -251,7 +251,7 @@ def make_figures(result: Attribution) -> list[Figure]:
 
 def _world_top_down(result: Attribution) -> Figure:
     """The world points from above: recomputed, the evidence and (against a reference or static targets) corrected."""
-    recomputed = _recomputed_world(result)
+    recomputed = result.replay.p_world[result.replay.replayed]  # the replay's own, row for row the inputs'
     fig, (ax,) = new_figure(6.4, 4.4)
     _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
           color=hex_color(RECOMPUTED_COLOR))
@@ -368,12 +368,6 @@ def _after_label(result: Attribution) -> str:
     if result.metric in ("reference", "static_spread"):
         return "after correcting the recorded data"
     return "left unexplained by the findings"
-
-
-def _recomputed_world(result: Attribution) -> FloatArray:
-    from framechain.analysis.chain_model import Perturbation, evaluate
-
-    return evaluate(result.inputs, Perturbation())[2]
 
 
 # -- text -------------------------------------------------------------------------------------
