@@ -40,6 +40,8 @@ from framechain.adapters.formats.decoders import (
     typestore_from_msg,
 )
 from framechain.adapters.formats.fast_cdr import FEEDERS
+from framechain.adapters.formats.mcap.chunks import RECORD_HEAD as _RECORD_HEAD
+from framechain.adapters.formats.mcap.chunks import ChunkDecompressor, decompressed_ahead
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, SchemaRecord
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
@@ -105,7 +107,7 @@ class McapLog:
         #: The chunk indexes in file order, with their (first, last) log times (built on the first fetch).
         self._chunk_order: tuple[list[Any], npt.NDArray[np.uint64]] | None = None
         self._fetch_chunk: tuple[int, bytes] | None = None
-        self._zstd: Any = None
+        self._chunks = ChunkDecompressor()  # the fetches' own: the read decompresses on a thread
         #: What a linear scan salvaged and lost (None until one ran, or when nothing was damaged).
         self.salvage: SalvageReport | None = None
 
@@ -241,57 +243,20 @@ class McapLog:
         return Route(ch.topic, kind, decode, handle, batched)
 
     def _indexed(self, wanted: set[int]) -> Iterator[_RawMessage]:
-        """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once."""
-        for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
-            if ci.message_index_offsets and not (set(ci.message_index_offsets) & wanted):
-                continue
-            try:
-                data = self._chunk_data(ci)
-            except Exception as err:
-                self._note_bad_chunk(ci.chunk_start_offset, err, self._index_counts(ci))
+        """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once, on a
+        thread ahead of the decoding (:mod:`.chunks`)."""
+        chunks = [ci for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+                  if not ci.message_index_offsets or set(ci.message_index_offsets) & wanted]
+        for ci, data, err in decompressed_ahead(self.path, chunks):
+            if err is not None or data is None:
+                self._note_bad_chunk(ci.chunk_start_offset, err or ValueError(), self._index_counts(ci))
                 continue
             yield from _chunk_messages(data, wanted)
 
-    def _chunk_body(self, ci: Any) -> tuple[str, memoryview, int, int]:
-        """(compression, compressed records, uncompressed size, uncompressed CRC) of a chunk."""
-        self._f.seek(ci.chunk_start_offset + _RECORD_HEAD.size)
-        body = self._f.read(ci.chunk_length - _RECORD_HEAD.size)
-        _, _, uncompressed_size, crc, name_len = _CHUNK_HEAD.unpack_from(body, 0)
-        pos = _CHUNK_HEAD.size
-        compression = body[pos : pos + name_len].decode("utf-8", "replace")
-        pos += name_len
-        (records_len,) = struct.unpack_from("<Q", body, pos)
-        pos += 8
-        if pos + records_len > len(body):
-            raise ValueError(f"chunk records run past the chunk ({records_len} bytes at {pos} of {len(body)})")
-        return compression, memoryview(body)[pos : pos + records_len], uncompressed_size, crc
-
     def _chunk_data(self, ci: Any, *, check_crc: bool = True) -> bytes:
-        """The decompressed records of a chunk, checked for damage (an exception when damaged).
-
-        A chunk stored uncompressed has its CRC checked (CRCValidationError): nothing else would see
-        damage. A compressed one is checked by its decompressor, which rejects a damaged frame; its
-        CRC is not computed, as mcap's own readers do not by default: over a log of depth images it
-        cost a tenth of the read. (The salvage scan of a file without a usable index checks every CRC.)
-        """
-        from mcap.stream_reader import CRCValidationError
-
-        compression, raw, uncompressed_size, crc = self._chunk_body(ci)
-        if compression == "zstd":
-            if self._zstd is None:
-                import zstandard
-
-                self._zstd = zstandard.ZstdDecompressor()  # one per reader: its context is reused
-            data: bytes = self._zstd.decompress(raw, max_output_size=uncompressed_size)
-        else:
-            data = _decompress(compression, raw, uncompressed_size)
-        if check_crc and not compression and crc != 0 and _crc32(data) != crc:
-            from mcap.records import Chunk
-
-            chunk = Chunk(compression=compression, data=b"", message_end_time=0, message_start_time=0,
-                          uncompressed_crc=crc, uncompressed_size=uncompressed_size)
-            raise CRCValidationError(expected=crc, actual=_crc32(data), record=chunk)
-        return data
+        """The decompressed records of a chunk, checked for damage (an exception when damaged)."""
+        self._f.seek(ci.chunk_start_offset + _RECORD_HEAD.size)
+        return self._chunks.records(self._f.read(ci.chunk_length - _RECORD_HEAD.size), check_crc=check_crc)
 
     def _index_counts(self, ci: Any) -> Counter[int]:
         """Messages per channel in a chunk, from the message index records that follow it."""
@@ -519,34 +484,8 @@ class _RawMessage(NamedTuple):
     data: memoryview
 
 
-_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
-_CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, uncompressed CRC, compression name length
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
 _OPCODE_MESSAGE = 0x05
-
-
-def _crc32(data: bytes) -> int:
-    try:
-        from zlib_ng.zlib_ng import crc32
-    except ImportError:  # the same CRC, about 10x slower
-        from zlib import crc32
-    return int(crc32(data))
-
-
-def _decompress(compression: str, raw: memoryview, size: int) -> bytes:
-    if compression == "":
-        return bytes(raw)
-    if compression == "zstd":
-        import zstandard
-
-        return zstandard.ZstdDecompressor().decompress(raw, max_output_size=size)
-    if compression == "lz4":
-        import lz4.frame
-
-        return bytes(lz4.frame.decompress(raw))
-    from mcap.exceptions import UnsupportedCompressionError
-
-    raise UnsupportedCompressionError(compression)
 
 
 def _message_offsets(data: bytes, cids: set[int]) -> npt.NDArray[np.int64]:
