@@ -134,18 +134,28 @@ def test_a_long_log_s_curves_are_measured_on_evenly_spread_observations(monkeypa
     grid is): its dip stays at the estimate, and its value at no offset stays the median error the
     findings share out, to the spread a median of fewer observations has."""
     from framechain.analysis import curves
+    from framechain.analysis.fit import subsample
 
     latency = InjectedFault(Fault.LATENCY, "data", {"offset_s": 0.030})
     scene = generate(SceneSpec(seed=6, duration_s=6.0, evidence="static", faults=(latency,)))
     monkeypatch.setattr(curves, "CURVE_ROWS", 50)
+    measured: list[tuple[int, int]] = []  # (rows given, rows the curve is measured on)
+
+    def spy(objective: Any, inputs: Any, size: int) -> Any:
+        out = subsample(objective, inputs, size)
+        measured.append((len(inputs), len(out[1])))
+        return out
+
+    monkeypatch.setattr(curves, "subsample", spy)
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
     assert len(result.inputs) > 3 * 50  # the curve is measured on a third of the observations or fewer
+    [(given, rows)] = measured  # one stage's curves, measured on 50 of its observations
+    assert rows == 50 < given
     curve = next(c for c in result.curves if c.fault == Fault.LATENCY)
     x, y, rms = np.array(curve.x), np.array(curve.median_error_m), np.array(curve.rms_error_m)
     assert curve.estimate == pytest.approx(0.030, abs=0.002)
     assert x[np.nanargmin(rms)] == pytest.approx(curve.estimate, abs=0.002)
     at_zero = y[np.argmin(np.abs(x))]
-    assert at_zero != float(np.nanmedian(result.error_before))  # not every observation: a subsample
     assert at_zero == pytest.approx(float(np.nanmedian(result.error_before)), rel=0.25)
 
 
