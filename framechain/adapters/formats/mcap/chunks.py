@@ -3,11 +3,12 @@ of a read decompressed ahead on a thread.
 
 On a log of camera images, decompressing its chunks is about a third of reading it. zstd and lz4
 decompress in C with the GIL released, while decoding the messages is Python that holds it, so a
-thread decompresses the next chunks while the messages of this one are decoded: on two cores the
-10-minute benchmark log reads in 4.2-4.4 s instead of 5.8-6.0 s. The thread stays a few chunks ahead
-(a bounded queue, a few tens of megabytes of depth images) and reads the file through its own
-handle, a span of neighbouring chunks per read; a damaged chunk reaches the reader as its error, in
-file order, so it is noted and skipped as before.
+thread decompresses the next chunks while the messages of this one are decoded. On two cores the
+10-minute benchmark log reads in 3.9-4.6 s instead of 5.6-6.1 s; in phases of a shared machine where
+two busy threads slow each other down, about 0.5 s faster than one thread. The thread stays a few
+chunks ahead (a bounded queue, a few tens of megabytes of depth images) and reads the file through
+its own handle, a span of neighbouring chunks per read; a damaged chunk reaches the reader as its
+error, in file order, so it is noted and skipped as before.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import queue
 import struct
-import sys
 import threading
 from collections.abc import Generator, Iterator, Sequence
 from pathlib import Path
@@ -29,10 +29,6 @@ AHEAD_CHUNKS = 8
 SPAN_BYTES = 4 << 20
 #: Bytes between two wanted chunks (message indexes, a chunk not wanted) still read rather than sought past.
 GAP_BYTES = 64 << 10
-#: The interpreter's switch interval while chunks are decompressed ahead (seconds). A thread whose C call
-#: returned waits this long for the GIL held by the decoding thread; at the default 5 ms it would fall
-#: behind (a chunk decodes in about 0.5 ms).
-SWITCH_INTERVAL_S = 0.001
 
 
 class ChunkDecompressor:
@@ -90,7 +86,7 @@ def _parse(body: bytes | memoryview) -> tuple[str, memoryview, int, int]:
     return compression, memoryview(body)[pos : pos + records_len], uncompressed_size, crc
 
 
-def crc32(data: bytes) -> int:
+def crc32(data: bytes | bytearray | memoryview) -> int:
     """CRC-32 as MCAP defines it (zlib's), by zlib-ng where installed (several times faster)."""
     try:
         from zlib_ng import zlib_ng
@@ -118,16 +114,13 @@ def decompressed_ahead(path: Path, chunks: Sequence[Any]) -> Generator[ChunkItem
     stop = threading.Event()
     worker = threading.Thread(target=_decompress_all, args=(path, chunks, items, stop), daemon=True,
                               name="framechain-mcap-chunks")
-    interval = sys.getswitchinterval()
     worker.start()
-    sys.setswitchinterval(min(interval, SWITCH_INTERVAL_S))
     try:
         while (item := items.get()) is not _DONE:
             if isinstance(item, BaseException):  # the thread failed outside any one chunk
                 raise item
             yield item
     finally:
-        sys.setswitchinterval(interval)
         stop.set()
         while worker.is_alive():  # a thread blocked on a full queue sees the stop once there is room
             with contextlib.suppress(queue.Empty):

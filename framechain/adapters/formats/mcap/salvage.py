@@ -17,11 +17,11 @@ from __future__ import annotations
 import mmap
 import re
 import struct
-import zlib
 from collections import Counter
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 
+from framechain.adapters.formats.mcap.chunks import crc32
 from framechain.adapters.formats.salvage_report import SalvageReport, StreamDecompressor
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -255,7 +255,7 @@ class McapScanner:
             out = _decompress(head.compression, bytes(self.buf[pos + 9 + head.data_start:end]))
             if len(out) != head.uncompressed_size:
                 raise _MalformedError("its uncompressed size does not match its header")
-            if head.crc and zlib.crc32(out) != head.crc:
+            if head.crc and crc32(out) != head.crc:
                 raise _MalformedError("CRC mismatch")
             records, used = _inner_records(out)
             if used != len(out):
@@ -315,7 +315,7 @@ class McapScanner:
             piece = bytes(self.buf[off:min(off + _FEED, stop)])
             out += stream.feed(piece)
             off += len(piece)
-        if stream.eof and (len(out) != head.uncompressed_size or (head.crc and zlib.crc32(out) != head.crc)):
+        if stream.eof and (len(out) != head.uncompressed_size or (head.crc and crc32(out) != head.crc)):
             # The whole stream is there but does not check out: the chunk is damaged, not cut.
             self.report.lost_unknown += 1
             self.report.skip(pos, off - stream.unused, "a damaged chunk (its data does not match its CRC or size)")
