@@ -8,6 +8,10 @@ import os
 # threads (one per core in each worker) spin for the CPU without making a fit any faster. Set before numpy
 # is first imported; subprocesses the tests start (the CLI) inherit it.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# The report's figures drawn in each test's own process: renderer processes (two per report command)
+# would double the processes on the two cores; tests/sinks/test_plots.py and tests/cli/test_commands.py
+# start them where they are what is tested.
+os.environ.setdefault("FRAMECHAIN_RENDERERS", "0")
 
 from pathlib import Path
 

@@ -38,24 +38,10 @@ def register(sub: Any) -> None:
     parser.set_defaults(run=run)
 
 
-def parse_formats(text: str) -> list[str]:
-    from framechain.timeline import FramechainError
-
-    formats = [f.strip() for f in text.split(",") if f.strip()]
-    unknown = sorted(set(formats) - set(FORMATS))
-    if unknown or not formats:
-        raise FramechainError(f"--format: unknown {unknown or text!r}; choose from {', '.join(FORMATS)}")
-    return formats
-
-
-def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
+def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -> tuple[Any, Any, dict[str, Path]]:
     from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
 
-    formats = default_formats or parse_formats(args.format)
-    out = Path(args.out)
-    make_out_dir(out)  # fail on an unusable --out before the analysis, not after
-    report_formats = [f for f in formats if f in ("md", "html")]
     with progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
@@ -70,6 +56,29 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
             if progress is not None:
                 progress(f"writing the report ({', '.join(report_formats)})")
             paths.update(render_report(made, out, formats=report_formats))
+    return made, result, paths
+
+
+def parse_formats(text: str) -> list[str]:
+    from framechain.timeline import FramechainError
+
+    formats = [f.strip() for f in text.split(",") if f.strip()]
+    unknown = sorted(set(formats) - set(FORMATS))
+    if unknown or not formats:
+        raise FramechainError(f"--format: unknown {unknown or text!r}; choose from {', '.join(FORMATS)}")
+    return formats
+
+
+def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
+    from framechain.sinks.plots import renderers
+
+    formats = default_formats or parse_formats(args.format)
+    out = Path(args.out)
+    make_out_dir(out)  # fail on an unusable --out before the analysis, not after
+    report_formats = [f for f in formats if f in ("md", "html")]
+    # Started first: they load matplotlib while this process loads the analysis and reads the log.
+    with renderers(None if report_formats else 0):
+        made, result, paths = _attribute(args, out, report_formats)
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)
     if args.json:

@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain.sim.logs import SUFFIX, write_scene
     from framechain.sim.scene import SceneSpec, generate
     from framechain.sinks.evidence_files import write_attribution
+    from framechain.sinks.plots import renderers
     from framechain.sinks.report import render_report
 
     started = time.perf_counter()
@@ -116,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         color_images=True,
         faults=faults,
     )
-    with progress_reporter(args.quiet or args.json, "demo") as progress:
+    with renderers(), progress_reporter(args.quiet or args.json, "demo") as progress:
         say = progress or (lambda _m: None)
         say("generating the episode")
         scene = generate(spec)

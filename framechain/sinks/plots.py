@@ -5,17 +5,34 @@ once. ``tight_layout`` would fit each figure's margins exactly, but it draws eve
 more to measure it: 40% of a figure's cost (a second of a report's). After the one draw,
 :func:`figure_png` checks that no title, axis label or tick label fell outside the figure or onto
 another axes, and only then lays the figure out tightly and draws it again.
+
+A figure is made as a :class:`Sketch`: the matplotlib calls made on it, recorded as plain data, so it
+can be drawn in another process. Drawing a report's figures is matplotlib's Python (about 1.4 s on
+the 10-minute benchmark log) after its import (0.5 s). A command that writes a report starts
+:data:`RENDERERS` renderer processes as it starts (:func:`renderers`): each imports matplotlib at a
+low priority, in the time the read leaves a core idle, then draws the sketches it is sent (pickled
+over a pipe) while the command crops the camera images and writes its other files. Without
+renderers (a library call, most tests) a figure is drawn here when it is made; a renderer that fails
+or dies has its figures drawn here too, so a report never loses one.
 """
 
 from __future__ import annotations
 
 import base64
+import contextlib
 import html
 import io
-from collections.abc import Sequence
-from dataclasses import dataclass
+import os
+import pickle
+import queue
+import subprocess
+import sys
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 if TYPE_CHECKING:
     from framechain.analysis.lab import TiltRow
@@ -34,31 +51,91 @@ BETWEEN_IN = 0.85
 SLACK_PX = 1.0
 
 
-@dataclass(frozen=True)
 class Figure:
-    name: str
-    caption: str
-    png: bytes
+    """A figure of the report: its file name, caption and PNG (drawn here, or by the renderer process
+    and waited for when first read)."""
+
+    def __init__(self, name: str, caption: str, png: bytes | Callable[[], bytes]) -> None:
+        self.name = name
+        self.caption = caption
+        self._png = png
+
+    @property
+    def png(self) -> bytes:
+        if callable(self._png):
+            self._png = self._png()
+        return self._png
+
+
+#: One recorded call: (target, method, args, kwargs); target -1 is the figure, i its i-th axes.
+Call = tuple[int, str, tuple[Any, ...], dict[str, Any]]
+
+
+@dataclass
+class Sketch:
+    """A figure described but not drawn: its size and layout, and the matplotlib calls made on it and on
+    its axes, in order. Plain data (pickled to the renderer process); :func:`draw` makes the figure."""
+
+    width_in: float
+    height_in: float
+    columns: int
+    top: Top
+    dpi: int
+    calls: list[Call] = field(default_factory=list)
+
+
+class _Recorder:
+    """Stands for the figure (target -1) or one of its axes: every method called on it is recorded."""
+
+    def __init__(self, sketch: Sketch, target: int) -> None:
+        self.sketch = sketch
+        self._target = target
+
+    def __getattr__(self, method: str) -> Callable[..., None]:
+        if method.startswith("_"):  # copy and pickle probe for special methods: not figure calls
+            raise AttributeError(method)
+
+        def record(*args: Any, **kwargs: Any) -> None:
+            self.sketch.calls.append((self._target, method, args, kwargs))
+
+        return record
 
 
 def new_figure(width_in: float, height_in: float, *, columns: int = 1, top: Top = "none",
                dpi: int = 100) -> tuple[Any, list[Any]]:
     """A figure of ``columns`` axes side by side, its margins fixed (``top``: "none", "title" above each
-    axes or a "suptitle"). No pyplot: nothing global to close."""
+    axes or a "suptitle"), as stand-ins that record the matplotlib calls made on them (their return
+    values are not available): the figure is drawn where matplotlib is loaded, by :func:`figure_png`."""
+    sketch = Sketch(width_in, height_in, columns, top, dpi)
+    return _Recorder(sketch, -1), [_Recorder(sketch, i) for i in range(columns)]
+
+
+def draw(sketch: Sketch) -> Any:
+    """The matplotlib figure of a sketch, its recorded calls made. No pyplot: nothing global to close."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure as MplFigure
 
-    fig = MplFigure(figsize=(width_in, height_in), dpi=dpi)
+    width_in, height_in, columns = sketch.width_in, sketch.height_in, sketch.columns
+    fig = MplFigure(figsize=(width_in, height_in), dpi=sketch.dpi)
     FigureCanvasAgg(fig)  # the figure's canvas: drawn by savefig, its renderer read after
     axes = fig.subplots(1, columns, squeeze=False)[0].tolist()
     column_in = (width_in - LEFT_IN - RIGHT_IN - BETWEEN_IN * (columns - 1)) / columns
     fig.subplots_adjust(left=LEFT_IN / width_in, right=1.0 - RIGHT_IN / width_in, bottom=BOTTOM_IN / height_in,
-                        top=1.0 - TOP_IN[top] / height_in, wspace=BETWEEN_IN / column_in)
-    return fig, axes
+                        top=1.0 - TOP_IN[sketch.top] / height_in, wspace=BETWEEN_IN / column_in)
+    for target, method, args, kwargs in sketch.calls:
+        getattr(fig if target < 0 else axes[target], method)(*args, **kwargs)
+    return fig
 
 
 def figure_png(fig: Any, name: str, caption: str) -> Figure:
-    """Draw and encode a figure as PNG; laid out tightly and drawn again only when a text was cut off."""
+    """The figure ``new_figure`` gave, drawn and encoded as PNG: by the renderer process where one runs
+    (:func:`renderers`; the PNG is waited for when first read), else here."""
+    return Figure(name, caption, submit(fig.sketch))
+
+
+def render_png(sketch: Sketch) -> bytes:
+    """Draw a sketch and encode it as PNG; laid out tightly and drawn again only when a text was cut off."""
+    fig = draw(sketch)
     png = _png(fig)
     if _text_cut_off(fig):
         fig.tight_layout()
@@ -66,7 +143,7 @@ def figure_png(fig: Any, name: str, caption: str) -> Figure:
         # draw before the real one; the layout is done, so none is needed.
         fig.set_layout_engine(None)
         png = _png(fig)
-    return Figure(name=name, caption=caption, png=png)
+    return png
 
 
 def _png(fig: Any) -> bytes:
@@ -115,6 +192,157 @@ def figure_html(fig: Figure) -> str:
             f"<figcaption>{e(fig.caption)}</figcaption></figure>")
 
 
+# -- renderer processes ---------------------------------------------------------------------------
+#: Renderer processes a report command starts (two cores: the command's and one drawing beside it,
+#: the other drawing while the command waits for the last figures); FRAMECHAIN_RENDERERS sets it, 0
+#: draws in the command's own process.
+RENDERERS = 2
+RENDERERS_VARIABLE = "FRAMECHAIN_RENDERERS"
+#: How much lower a renderer's priority is than the command's (it only takes the time a core is idle).
+NICE = 10
+
+
+class RenderError(RuntimeError):
+    """A renderer could not draw a figure (it failed or died): the figure is drawn here instead."""
+
+
+class _Pool:
+    """Renderer processes fed from one queue, one thread per process writing a sketch and reading its PNG."""
+
+    def __init__(self, workers: int) -> None:
+        self._jobs: queue.Queue[tuple[Sketch, Future[bytes]] | None] = queue.Queue()
+        self._processes = [subprocess.Popen([sys.executable, "-c", _RENDERER_MAIN],
+                                            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+                           for _ in range(workers)]
+        self._threads = [threading.Thread(target=self._serve, args=(p,), daemon=True, name="framechain-renderer")
+                         for p in self._processes]
+        for thread in self._threads:
+            thread.start()
+
+    def submit(self, sketch: Sketch) -> Future[bytes]:
+        future: Future[bytes] = Future()
+        self._jobs.put((sketch, future))
+        return future
+
+    def _serve(self, process: subprocess.Popen[bytes]) -> None:
+        assert process.stdin is not None
+        assert process.stdout is not None
+        while (job := self._jobs.get()) is not None:
+            sketch, future = job
+            try:
+                pickle.dump(sketch, process.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+                process.stdin.flush()
+                drawn, value = pickle.load(process.stdout)
+            except (OSError, EOFError, pickle.PickleError) as err:
+                future.set_exception(RenderError(f"the renderer process ended ({type(err).__name__})"))
+                continue
+            if drawn:
+                future.set_result(value)
+            else:
+                future.set_exception(RenderError(value))
+
+    def close(self, *, kill: bool) -> None:
+        """Stop the renderers: at once (``kill``, the command failed), else once their queue is done."""
+        for _ in self._threads:
+            self._jobs.put(None)
+        for process in self._processes:
+            if kill:
+                process.kill()
+            with contextlib.suppress(OSError):
+                assert process.stdin is not None
+                process.stdin.close()  # end of input: a renderer exits
+        for thread in self._threads:
+            thread.join()
+        for process in self._processes:
+            process.wait()
+            assert process.stdout is not None
+            process.stdout.close()
+
+
+#: The renderers of the running command (none, or one pool).
+_running: list[_Pool] = []
+
+
+@contextlib.contextmanager
+def renderers(workers: int | None = None) -> Iterator[None]:
+    """Within this block, figures are drawn by ``workers`` renderer processes (None: RENDERERS, or
+    the FRAMECHAIN_RENDERERS variable), started now."""
+    if workers is None:
+        workers = _renderers_wanted()
+    if _running or workers < 1:
+        yield
+        return
+    pool = _Pool(workers)
+    _running.append(pool)
+    failed = True
+    try:
+        yield
+        failed = False
+    finally:
+        _running.clear()
+        pool.close(kill=failed)
+
+
+def _renderers_wanted() -> int:
+    text = os.environ.get(RENDERERS_VARIABLE, str(RENDERERS))
+    if not text.strip().isdigit():
+        from framechain.timeline import FramechainError
+
+        raise FramechainError(f"{RENDERERS_VARIABLE}={text!r}: expected a whole number of renderer processes (0: none)")
+    return int(text)
+
+
+def submit(sketch: Sketch) -> bytes | Callable[[], bytes]:
+    """The PNG of a sketch: drawn here at once without renderers, else a callable that waits for it."""
+    if not _running:
+        return render_png(sketch)
+    future = _running[0].submit(sketch)
+
+    def result() -> bytes:
+        try:
+            return future.result()
+        except RenderError:
+            return render_png(sketch)
+
+    return result
+
+
+def _serve_stdio(source: IO[bytes], sink: IO[bytes]) -> None:
+    """A renderer: sketches in from ``source``, (drawn, PNG or the error) out to ``sink``, until end of input."""
+    with contextlib.suppress(Exception):  # matplotlib and its fonts loaded before the first sketch comes
+        render_png(Sketch(6.4, 3.6, 1, "none", 20, [(0, "set_xlabel", ("loads the fonts",), {})]))
+    while True:
+        try:
+            sketch: Any = pickle.load(source)
+        except EOFError:
+            return
+        try:
+            reply: tuple[bool, Any] = (True, render_png(sketch))
+        except Exception as err:  # the command draws this one itself
+            reply = (False, f"{type(err).__name__}: {err}")
+        pickle.dump(reply, sink, protocol=pickle.HIGHEST_PROTOCOL)
+        sink.flush()
+
+
+#: A renderer process's program (``-c``: the module imported once, not run again as ``__main__``).
+_RENDERER_MAIN = "from framechain.sinks.plots import serve_renderer; serve_renderer()"
+
+
+def serve_renderer() -> None:
+    """A renderer process (:func:`renderers` starts them): low priority, sketches in on stdin, PNGs out."""
+    import signal
+
+    if hasattr(os, "nice"):
+        os.nice(NICE)
+    # Ctrl-C reaches the whole process group: the command stops its renderers itself, without their tracebacks.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # The PNGs go out on a copy of stdout; stdout itself becomes stderr, so that a stray print (a
+    # library's warning) cannot corrupt the replies.
+    replies = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    _serve_stdio(sys.stdin.buffer, replies)
+
+
 def plot_tilt(rows: Sequence[TiltRow], path: str | Path, *, tolerance_m: float = 0.01) -> None:
     """Error against pitch, one line per depth, with the gripper tolerance."""
     fig, (ax,) = new_figure(6.0, 4.0, dpi=110)
@@ -127,5 +355,6 @@ def plot_tilt(rows: Sequence[TiltRow], path: str | Path, *, tolerance_m: float =
     ax.set_yscale("symlog", linthresh=1.0)
     ax.grid(True, alpha=0.3)
     ax.legend()
-    fig.tight_layout()  # any format the path names (png, svg, pdf): laid out once, not on a hot path
-    fig.savefig(path)
+    drawn = draw(fig.sketch)
+    drawn.tight_layout()  # any format the path names (png, svg, pdf): laid out once, not on a hot path
+    drawn.savefig(path)

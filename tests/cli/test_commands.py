@@ -318,3 +318,26 @@ def test_tf_bad_at_is_one_line(latency_log: tuple[Path, Path], at: str, capsys: 
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert "--at" in err
+
+
+def test_attribute_s_report_figures_are_drawn_by_its_renderers(latency_log: tuple[Path, Path], tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """The same report PNGs, drawn in the command's process and by renderer processes (the command's own
+    drawing switched off, so that a figure drawn here would fail)."""
+    from framechain.sinks import plots
+
+    log, chain = latency_log
+    argv = ["attribute", str(log), "--chain", str(chain), "--format", "md", "--bootstrap", "0", "-q"]
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "0")
+    assert main([*argv, "--out", str(tmp_path / "here")]) == 0
+
+    def not_here(sketch: object) -> bytes:
+        raise AssertionError("drawn in the command's process")
+
+    monkeypatch.setattr(plots, "render_png", not_here)
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "2")
+    assert main([*argv, "--out", str(tmp_path / "drawn")]) == 0
+    plots_here = sorted(p.name for p in (tmp_path / "here").glob("*.png") if not p.name.startswith("camera_"))
+    assert {"error_per_hop.png", "world_top_down.png"} <= set(plots_here)
+    for name in plots_here:
+        assert (tmp_path / "drawn" / name).read_bytes() == (tmp_path / "here" / name).read_bytes(), name

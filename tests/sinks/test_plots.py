@@ -46,40 +46,50 @@ def test_a_figure_whose_labels_fit_keeps_its_margins_and_is_drawn_once(monkeypat
     ax.plot(np.arange(100.0), np.arange(100.0) * 12.5)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("error (mm)")
-    draws = []
+    draws: list[Any] = []
     original = plots._png
-    monkeypatch.setattr(plots, "_png", lambda f: draws.append(1) or original(f))
+    monkeypatch.setattr(plots, "_png", lambda f: draws.append(f) or original(f))
     figure = figure_png(fig, "fits", "a caption")
-    assert draws == [1]
-    assert fig.subplotpars.left == pytest.approx(LEFT_IN / 6.4)
-    assert _outside(fig) == []
+    assert len(draws) == 1
+    assert draws[0].subplotpars.left == pytest.approx(LEFT_IN / 6.4)
+    assert _outside(draws[0]) == []
     image = Image.open(io.BytesIO(figure.png))
     assert image.size == (640, 360)
 
 
-def test_long_tick_labels_are_laid_out_again_until_nothing_is_cut_off() -> None:
+def _drawn_by_figure_png(monkeypatch: pytest.MonkeyPatch, fig: Any) -> Any:
+    """The matplotlib figure figure_png drew and encoded last."""
+    draws: list[Any] = []
+    original = plots._png
+    monkeypatch.setattr(plots, "_png", lambda f: draws.append(f) or original(f))
+    figure_png(fig, "name", "")
+    return draws[-1]
+
+
+def test_long_tick_labels_are_laid_out_again_until_nothing_is_cut_off(monkeypatch: pytest.MonkeyPatch) -> None:
     fig, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
     names = ["wrong_camera_frame at camera_to_body", "missing_rotation at camera_to_body"]
     ax_status.barh(["ok", "fault"], [3, 4])
     ax_fault.barh(names, [2, 5])
     ax_fault.set_title("Faults across the fleet")
-    fig.canvas.draw()
-    assert _outside(fig)  # the fixed margins cut the long names off (and into the left axes)
-    figure_png(fig, "fleet", "")
-    assert _outside(fig) == []
-    assert fig.subplotpars.left != pytest.approx(LEFT_IN / 9.6)
+    as_made = plots.draw(fig.sketch)
+    as_made.canvas.draw()
+    assert _outside(as_made)  # the fixed margins cut the long names off (and into the left axes)
+    drawn = _drawn_by_figure_png(monkeypatch, fig)
+    assert _outside(drawn) == []
+    assert drawn.subplotpars.left != pytest.approx(LEFT_IN / 9.6)
 
 
-def test_a_wide_right_axes_label_reaching_into_its_neighbour_is_seen() -> None:
+def test_a_wide_right_axes_label_reaching_into_its_neighbour_is_seen(monkeypatch: pytest.MonkeyPatch) -> None:
     fig, (left, right) = new_figure(6.4, 3.4, columns=2, top="suptitle")
     left.plot([0, 1], [0, 1])
     right.plot([0, 1], [123456789.0, 987654321.0])
     right.ticklabel_format(axis="y", style="plain", useOffset=False)
     fig.suptitle("two columns")
-    fig.canvas.draw()
-    assert _outside(fig)
-    figure_png(fig, "wide", "")
-    assert _outside(fig) == []
+    as_made = plots.draw(fig.sketch)
+    as_made.canvas.draw()
+    assert _outside(as_made)
+    assert _outside(_drawn_by_figure_png(monkeypatch, fig)) == []
 
 
 def test_the_report_s_figures_fit_the_fixed_margins(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
@@ -102,3 +112,47 @@ def test_the_report_s_figures_fit_the_fixed_margins(monkeypatch: pytest.MonkeyPa
     assert len(drawn) >= 6  # error per hop, against speed, from above, sensitivity and the curves
     assert laid_out == []
     assert len(set(map(id, drawn))) == len(drawn)  # each drawn once
+
+
+def _sketches() -> list[Any]:
+    """Two figures as the report and the fleet report make them."""
+    fig, (ax,) = new_figure(6.4, 3.6, top="title")
+    rng = np.random.default_rng(1)
+    ax.plot(rng.normal(size=500), rng.normal(size=500), ls="none", marker="o", ms=2.8, label="points")
+    ax.set_title("a scatter")
+    ax.legend(fontsize=7)
+    wide, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
+    ax_status.barh(["ok", "fault"], [3, 4])
+    ax_fault.barh(["wrong_camera_frame at camera_to_body", "missing_rotation at camera_to_body"], [2, 5])
+    return [fig, wide]
+
+
+def test_renderer_processes_draw_the_same_pngs_as_this_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    here = [figure_png(fig, f"f{i}", "").png for i, fig in enumerate(_sketches())]
+    assert all(png.startswith(b"\x89PNG") for png in here)
+
+    def not_here(sketch: Any) -> bytes:
+        raise AssertionError("drawn in the test's process, not by a renderer")
+
+    monkeypatch.setattr(plots, "render_png", not_here)
+    with plots.renderers(2):
+        figures = [figure_png(fig, f"f{i}", "") for i, fig in enumerate(_sketches())]
+        assert [f.png for f in figures] == here
+
+
+def test_the_figures_of_a_renderer_that_died_are_drawn_here() -> None:
+    fig, = _sketches()[:1]
+    here = figure_png(fig, "f", "").png
+    with plots.renderers(1):
+        for process in plots._running[0]._processes:
+            process.kill()
+            process.wait()
+        assert figure_png(fig, "f", "").png == here
+
+
+def test_the_number_of_renderers_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
+    from framechain.timeline import FramechainError
+
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "two")
+    with pytest.raises(FramechainError, match="FRAMECHAIN_RENDERERS='two'"), plots.renderers():
+        pass
