@@ -324,8 +324,11 @@ def _serve_stdio(source: IO[bytes], sink: IO[bytes]) -> None:
         sink.flush()
 
 
-#: A renderer process's program (``-c``: the module imported once, not run again as ``__main__``).
-_RENDERER_MAIN = "from framechain.sinks.plots import serve_renderer; serve_renderer()"
+#: A renderer process's program (``-c``: the module imported once, not run again as ``__main__``). An
+#: interpreter that cannot import framechain (a frozen or zipped command) exits quietly: the command
+#: draws the figures itself.
+_RENDERER_MAIN = ("try:\n    from framechain.sinks.plots import serve_renderer\n"
+                  "except ImportError:\n    raise SystemExit(1)\nserve_renderer()")
 
 
 def serve_renderer() -> None:

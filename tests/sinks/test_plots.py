@@ -156,3 +156,13 @@ def test_the_number_of_renderers_is_checked(monkeypatch: pytest.MonkeyPatch) -> 
     monkeypatch.setenv(plots.RENDERERS_VARIABLE, "two")
     with pytest.raises(FramechainError, match="FRAMECHAIN_RENDERERS='two'"), plots.renderers():
         pass
+
+
+def test_a_renderer_that_cannot_start_leaves_the_figures_to_this_process(monkeypatch: pytest.MonkeyPatch,
+                                                                          capfd: pytest.CaptureFixture[str]) -> None:
+    fig = _sketches()[0]
+    here = figure_png(fig, "f", "").png
+    monkeypatch.setattr(plots, "_RENDERER_MAIN", plots._RENDERER_MAIN.replace("framechain.sinks.plots", "no_such_pkg"))
+    with plots.renderers(1):
+        assert figure_png(fig, "f", "").png == here
+    assert capfd.readouterr().err == ""  # no traceback from the renderer that could not import framechain
