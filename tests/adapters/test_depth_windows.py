@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -118,7 +119,8 @@ def test_a_larger_window_than_kept_is_cut_from_the_frame(tmp_path: Path) -> None
 
 def test_kept_windows_are_the_frames_cut_whole_wherever_they_were_kept() -> None:
     """The keeper's windows for many frames at once (repeated centres, centres at the border, frames in
-    depth units and in metres, windows never kept) equal the windows cut from the converted frames."""
+    depth units and in metres, frames at odd addresses, windows never kept) equal the windows cut from
+    the converted frames."""
     from framechain.adapters.messages.depth import DepthWindowKeeper, pixels_to_metres
     from framechain.timeline import pixel_windows
 
@@ -126,6 +128,7 @@ def test_kept_windows_are_the_frames_cut_whole_wherever_they_were_kept() -> None
     h, w, n = 12, 16, 6
     raws = [rng.integers(0, 5000, (h, w)).astype(np.uint16) if i % 2 else rng.random((h, w)).astype(np.float32)
             for i in range(n)]
+    raws[1], raws[2] = _unaligned(raws[1]), _unaligned(raws[2])  # as frames inside a decompressed chunk often are
     keeper = DepthWindowKeeper()
     for i, raw in enumerate(raws):
         keeper.add_frame(i, "cam", 1000 * i, 1000 * i, raw)
@@ -149,3 +152,38 @@ def test_kept_windows_are_the_frames_cut_whole_wherever_they_were_kept() -> None
             image = pixels_to_metres(raws[read_rows[table_row]], units[table_row])
             want = pixel_windows(image, rows[k : k + 1], cols[k : k + 1], half)[0]
             assert got[k].tobytes() == want.tobytes()
+
+
+def _unaligned(a: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """``a`` copied to an odd address (a view into a byte buffer, not aligned to its item size)."""
+    buf = np.zeros(a.nbytes + 1, dtype=np.uint8)[1:]
+    buf[:] = np.ascontiguousarray(a).view(np.uint8).reshape(-1)
+    out = buf.view(a.dtype).reshape(a.shape)
+    assert not out.flags.aligned
+    return out
+
+
+@pytest.mark.parametrize("encoding", ["16UC1", "16SC1", "32FC1"])
+@pytest.mark.parametrize("big_endian", [False, True])
+@pytest.mark.parametrize("padding", [0, 6])
+@pytest.mark.parametrize("container", [bytes, memoryview, "view"])
+def test_raw_depth_pixels_are_the_image_as_written(encoding: str, big_endian: bool, padding: int,
+                                                   container: Any) -> None:
+    """Rows padded or not, either byte order, from bytes or from a view into a message: the pixels written."""
+    from types import SimpleNamespace
+
+    from framechain.adapters.messages.depth import raw_depth_pixels
+
+    h, w = 5, 7
+    dtype = np.dtype({"16UC1": "u2", "16SC1": "i2", "32FC1": "f4"}[encoding]).newbyteorder(">" if big_endian else "<")
+    image = (np.arange(h * w).reshape(h, w) * 37 - (0 if encoding == "16UC1" else 300)).astype(dtype)
+    step = w * dtype.itemsize + padding
+    rows = np.full((h, step), 0xAB, dtype=np.uint8)  # padding bytes that are not pixels
+    rows[:, : w * dtype.itemsize] = image.view(np.uint8).reshape(h, -1)
+    written = b"\x00" + rows.tobytes()  # one byte before: the pixels start at an odd offset
+    data: Any = {bytes: written[1:], memoryview: memoryview(written)[1:],
+                 "view": np.frombuffer(written, dtype=np.uint8)[1:]}[container]
+    msg = SimpleNamespace(height=h, width=w, step=step, encoding=encoding, is_bigendian=int(big_endian), data=data)
+    got = raw_depth_pixels(msg)
+    assert got.shape == (h, w)
+    np.testing.assert_array_equal(got.astype(np.float64), image.astype(np.float64))

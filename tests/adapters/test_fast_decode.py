@@ -16,7 +16,14 @@ import pytest
 
 from framechain.adapters import open_log
 from framechain.adapters.formats import decode_loop, fast_cdr
-from framechain.adapters.formats.fast_cdr import FEEDERS, LayoutError, decode_batches, layout_of, parse_cdr_image
+from framechain.adapters.formats.fast_cdr import (
+    FEEDERS,
+    LayoutError,
+    decode_batches,
+    layout_of,
+    parse_cdr_compressed_image,
+    parse_cdr_image,
+)
 from framechain.adapters.formats.mcap import reader as mcap_log
 from framechain.adapters.formats.msgdefs import typestore
 from framechain.adapters.messages.collect import Collector
@@ -247,6 +254,24 @@ def test_image_parse_equals_rosbags(encoding: str, frame: str, little_endian: bo
     np.testing.assert_array_equal(ours.data, theirs.data)
     with pytest.raises(LayoutError):
         parse_cdr_image(raw[: len(raw) - 1 - data.size // 2] if data.size else raw[:20])
+
+
+@pytest.mark.parametrize("fmt", ["jpeg", "", "rgb8; jpeg compressed bgr8"])
+@pytest.mark.parametrize("frame", ["", "c", "camera_color_optical_frame"])
+@pytest.mark.parametrize("size", [0, 1, 7])
+@pytest.mark.parametrize("little_endian", [True, False])
+def test_compressed_image_parse_equals_rosbags(fmt: str, frame: str, size: int, little_endian: bool) -> None:
+    msgs = Msgs(ros1=False)
+    data = np.arange(size, dtype=np.uint8) + 200
+    msg = msgs.T["sensor_msgs/msg/CompressedImage"](header=msgs.header(123 * NS + 456, frame), format=fmt, data=data)
+    raw = bytes(msgs.ts.serialize_cdr(msg, "sensor_msgs/msg/CompressedImage", little_endian=little_endian))
+    ours, theirs = parse_cdr_compressed_image(raw), msgs.ts.deserialize_cdr(raw, "sensor_msgs/msg/CompressedImage")
+    assert (ours.format, ours.header.frame_id, ours.header.stamp.sec, ours.header.stamp.nanosec) == \
+        (theirs.format, theirs.header.frame_id, theirs.header.stamp.sec, theirs.header.stamp.nanosec)
+    np.testing.assert_array_equal(ours.data, theirs.data)
+    for cut in (1, size + 1, len(raw) - 12):  # into the data, its length, the format
+        with pytest.raises(LayoutError):
+            parse_cdr_compressed_image(raw[: len(raw) - cut])
 
 
 def _write_mcap(path: Path, msgs: Msgs, n: int) -> None:

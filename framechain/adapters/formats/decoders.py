@@ -13,7 +13,7 @@ import json
 from collections.abc import Callable
 from typing import Any
 
-from framechain.adapters.formats.fast_cdr import LayoutError, parse_cdr_image
+from framechain.adapters.formats.fast_cdr import LayoutError, parse_cdr_compressed_image, parse_cdr_image
 from framechain.adapters.messages.collect import wrap_json
 from framechain.adapters.messages.depth import parse_ros1_image
 from framechain.adapters.messages.kinds import normalize_msgtype
@@ -78,11 +78,13 @@ def ros_decoder(store: Any, name: str, *, ros1: bool) -> Decoder:
             return lenient
         return lambda raw: deserialize(raw, typename)
     deserialize_cdr = store.deserialize_cdr
-    if normalize_msgtype(typename) == "sensor_msgs/Image" and _standard_image(store, typename):
+    parse = _IMAGE_PARSERS.get(normalize_msgtype(typename))
+    if parse is not None and [name for name, _ in store.fielddefs[typename][1]] == parse[0]:
+        parse_image = parse[1]
 
         def image(raw: bytes | memoryview) -> Any:
             try:
-                return parse_cdr_image(raw)
+                return parse_image(raw)
             except LayoutError:
                 return deserialize_cdr(raw, typename)  # says what is wrong in rosbags' words
 
@@ -90,10 +92,12 @@ def ros_decoder(store: Any, name: str, *, ros1: bool) -> Decoder:
     return lambda raw: deserialize_cdr(raw, typename)
 
 
-def _standard_image(store: Any, typename: str) -> bool:
-    """The log's sensor_msgs/Image has the standard fields (parse_cdr_image reads those)."""
-    fields = [name for name, _ in store.fielddefs[typename][1]]
-    return fields == ["header", "height", "width", "encoding", "is_bigendian", "step", "data"]
+#: Image types parsed without rosbags (their pixels a view, not a copy): the fields the parser reads,
+#: which the log's definition must have, and the parser.
+_IMAGE_PARSERS: dict[str, tuple[list[str], Callable[[bytes | memoryview], Any]]] = {
+    "sensor_msgs/Image": (["header", "height", "width", "encoding", "is_bigendian", "step", "data"], parse_cdr_image),
+    "sensor_msgs/CompressedImage": (["header", "format", "data"], parse_cdr_compressed_image),
+}
 
 
 def protobuf_decoder(name: str, descriptor_set: bytes) -> Decoder:

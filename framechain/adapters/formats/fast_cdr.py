@@ -248,15 +248,8 @@ def parse_cdr_image(raw: bytes | memoryview) -> SimpleNamespace:
     Reading a depth frame's metadata then costs nothing per pixel, and a frame re-read for its
     pixels is not copied before it is decoded. Fields and values as rosbags gives them.
     """
-    buf = memoryview(raw)
+    buf, order, header, pos = _cdr_header(raw, "image")
     size = len(buf)
-    if size < 16:
-        raise LayoutError("image message shorter than its header")
-    order = "<" if buf[1] & 1 else ">"
-    sec, nanosec, n = struct.unpack_from(order + "iII", buf, 4)
-    pos = 16 + n
-    frame_id = bytes(buf[16 : pos - 1]).decode("utf-8", "replace") if n else ""
-    pos = (pos + 3) & -4  # offsets from the start count the 4-byte header: 4-aligned is 4-aligned
     if pos + 12 > size:
         raise LayoutError("image message ends inside its size fields")
     height, width, n = struct.unpack_from(order + "III", buf, pos)
@@ -273,9 +266,46 @@ def parse_cdr_image(raw: bytes | memoryview) -> SimpleNamespace:
     pos += 8
     if pos + n > size:
         raise LayoutError(f"image data of {n} bytes runs past the message end ({size - pos} bytes left)")
-    header = SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec), frame_id=frame_id)
     return SimpleNamespace(header=header, height=height, width=width, encoding=encoding,
                            is_bigendian=is_bigendian, step=step, data=np.frombuffer(buf[pos : pos + n], dtype=np.uint8))
+
+
+def parse_cdr_compressed_image(raw: bytes | memoryview) -> SimpleNamespace:
+    """A ROS 2 ``sensor_msgs/msg/CompressedImage`` (CDR), its bytes a view into ``raw`` as in
+    :func:`parse_cdr_image` (a JPEG is sized from its header; nothing copies the rest)."""
+    buf, order, header, pos = _cdr_header(raw, "compressed image")
+    size = len(buf)
+    if pos + 4 > size:
+        raise LayoutError("compressed image message ends inside its format")
+    (n,) = struct.unpack_from(order + "I", buf, pos)
+    pos += 4
+    end = pos + n
+    if end > size:
+        raise LayoutError("compressed image message ends inside its format")
+    fmt = bytes(buf[pos : end - 1]).decode("utf-8", "replace") if n else ""
+    pos = (end + 3) & -4
+    if pos + 4 > size:
+        raise LayoutError("compressed image message ends inside its data length")
+    (n,) = struct.unpack_from(order + "I", buf, pos)
+    pos += 4
+    if pos + n > size:
+        raise LayoutError(f"compressed image data of {n} bytes runs past the message end ({size - pos} bytes left)")
+    return SimpleNamespace(header=header, format=fmt, data=np.frombuffer(buf[pos : pos + n], dtype=np.uint8))
+
+
+def _cdr_header(raw: bytes | memoryview, what: str) -> tuple[memoryview, str, SimpleNamespace, int]:
+    """(the message, its byte order, its std_msgs/Header, where the next field's length starts)."""
+    buf = memoryview(raw)
+    if len(buf) < 16:
+        raise LayoutError(f"{what} message shorter than its header")
+    order = "<" if buf[1] & 1 else ">"
+    sec, nanosec, n = struct.unpack_from(order + "iII", buf, 4)
+    pos = 16 + n
+    if pos > len(buf):
+        raise LayoutError(f"{what} message ends inside its frame_id")
+    frame_id = bytes(buf[16 : pos - 1]).decode("utf-8", "replace") if n else ""
+    header = SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec), frame_id=frame_id)
+    return buf, order, header, (pos + 3) & -4  # offsets count the 4-byte header: 4-aligned is 4-aligned
 
 
 # -- feeding the collector from batches -------------------------------------------------------------

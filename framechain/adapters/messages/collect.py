@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.messages.depth import DepthWindowKeeper, make_depth_loader
+from framechain.adapters.messages.depth import DepthWindowKeeper, depth_metadata, make_depth_loader, raw_depth_pixels
 from framechain.adapters.messages.fiducials import (
     FiducialRows,
     ResolvedFiducials,
@@ -336,8 +336,6 @@ class Collector:
     def depth(self, topic: str, log_ns: int, msg: Any) -> None:
         """sensor_msgs/Image (16UC1, mono16, 32FC1) or CompressedImage (compressedDepth): metadata, and
         the raw pixels held briefly so the keeper cuts the windows detections need; the rest stays in the log."""
-        from framechain.adapters.messages.depth import depth_metadata, raw_depth_pixels
-
         meta = depth_metadata(msg)
         if meta is None:
             encoding = getattr(msg, "encoding", getattr(msg, "format", "?"))

@@ -9,7 +9,6 @@ Every decoder returns metres as float32; 0 and NaN mean no depth.
 from __future__ import annotations
 
 import io
-import itertools
 import struct
 from collections.abc import Callable, Sequence
 from types import SimpleNamespace
@@ -66,16 +65,22 @@ def raw_depth_pixels(msg: Any) -> npt.NDArray[Any]:
     """The (H, W) pixels of an uncompressed depth Image as stored (depth units or metres), a view where it can."""
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     encoding = str(msg.encoding)
-    data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)  # a view, never a copy
-    kind = ">" if msg.is_bigendian else "<"
+    given = msg.data
+    if isinstance(given, np.ndarray) and given.dtype == np.uint8:  # parse_cdr_image: a view into the message
+        data: npt.NDArray[np.uint8] = given
+    else:
+        data = np.frombuffer(memoryview(given).cast("B"), dtype=np.uint8)  # a view, never a copy
     if encoding in _U16:
-        code = "i2" if encoding == "16SC1" else "u2"
-        rows = data[: h * step].reshape(h, step)[:, : w * 2]
-        return np.ascontiguousarray(rows).view(kind + code).reshape(h, w)
-    if encoding in _F32:
-        rows = data[: h * step].reshape(h, step)[:, : w * 4]
-        return np.ascontiguousarray(rows).view(kind + "f4").reshape(h, w)
-    raise TimelineError(f"depth encoding {encoding!r} is not 16UC1, mono16 or 32FC1")
+        code, size = ("i2" if encoding == "16SC1" else "u2"), 2
+    elif encoding in _F32:
+        code, size = "f4", 4
+    else:
+        raise TimelineError(f"depth encoding {encoding!r} is not 16UC1, mono16 or 32FC1")
+    dtype = (">" if msg.is_bigendian else "<") + code
+    if step == w * size:  # rows without padding (the usual case): the pixels are one run of bytes
+        return data[: h * step].view(dtype).reshape(h, w)
+    rows = data[: h * step].reshape(h, step)[:, : w * size]
+    return np.ascontiguousarray(rows).view(dtype).reshape(h, w)
 
 
 def pixels_to_metres(raw: npt.NDArray[Any], units_m: float) -> npt.NDArray[np.float32]:
@@ -126,8 +131,10 @@ class DepthWindowKeeper:
     """
 
     def __init__(self) -> None:
-        self._frames: list[tuple[int, str, int, int, npt.NDArray[Any]]] = []  # row, frame, stamp, log, raw
-        self._obs_frame = np.zeros(0, dtype=str)
+        # Camera frames by a number (comparing numbers, not strings, when frames and detections pair).
+        self._frame_codes: dict[str, int] = {}
+        self._frames: list[tuple[int, int, int, int, npt.NDArray[Any]]] = []  # row, frame code, stamp, log, raw
+        self._obs_frame = np.zeros(0, dtype=np.int64)
         self._obs_stamp = np.zeros(0, dtype=np.int64)
         self._obs_log = np.zeros(0, dtype=np.int64)
         self._obs_rc = np.zeros((0, 2), dtype=np.int64)
@@ -140,8 +147,11 @@ class DepthWindowKeeper:
 
     def add_frame(self, row: int, frame: str, stamp_ns: int, log_ns: int, raw: npt.NDArray[Any]) -> bool:
         """Hold a frame's raw pixels; True when the oldest has waited long enough (call :meth:`settle`)."""
-        self._frames.append((row, normalize_frame(frame), stamp_ns, log_ns, raw))
+        self._frames.append((row, self._code(frame), stamp_ns, log_ns, raw))
         return log_ns - self._frames[0][3] > HORIZON_NS
+
+    def _code(self, frame: str) -> int:
+        return self._frame_codes.setdefault(normalize_frame(frame), len(self._frame_codes))
 
     def add_observations(self, frame: Sequence[str], stamp_ns: Sequence[int], log_ns: Sequence[int],
                          u: npt.NDArray[np.float64], v: npt.NDArray[np.float64]) -> None:
@@ -149,7 +159,7 @@ class DepthWindowKeeper:
         ok = np.isfinite(u) & np.isfinite(v)
         if not ok.any():
             return
-        frames = np.asarray([normalize_frame(f) for f in frame], dtype=str)[ok]
+        frames = np.asarray([self._code(f) for f in frame], dtype=np.int64)[ok]
         rc = np.stack([np.rint(v[ok]), np.rint(u[ok])], axis=1).astype(np.int64)
         self._obs_frame = np.concatenate([self._obs_frame, frames])
         self._obs_stamp = np.concatenate([self._obs_stamp, np.asarray(stamp_ns, dtype=np.int64)[ok]])
@@ -170,10 +180,10 @@ class DepthWindowKeeper:
         self._obs_frame, self._obs_stamp = self._obs_frame[keep], self._obs_stamp[keep]
         self._obs_log, self._obs_rc = self._obs_log[keep], self._obs_rc[keep]
 
-    def _cut(self, settling: list[tuple[int, str, int, int, npt.NDArray[Any]]]) -> None:
+    def _cut(self, settling: list[tuple[int, int, int, int, npt.NDArray[Any]]]) -> None:
         """Every (frame, detection) pair at once; then one window cut per frame that has any."""
         stamps = np.asarray([f[2] for f in settling], dtype=np.int64)
-        frames = np.asarray([f[1] for f in settling], dtype=str)
+        frames = np.asarray([f[1] for f in settling], dtype=np.int64)
         pairs = (np.abs(self._obs_stamp[None, :] - stamps[:, None]) <= KEEP_GAP_NS) & (
             self._obs_frame[None, :] == frames[:, None])
         which, obs = np.nonzero(pairs)  # grouped by frame
@@ -185,13 +195,15 @@ class DepthWindowKeeper:
         rc = self._obs_rc[obs]
         rows = np.clip(rc[:, :1] + offsets, 0, shapes[:, :1] - 1)[:, :, None]
         cols = np.clip(rc[:, 1:] + offsets, 0, shapes[:, 1:] - 1)[:, None, :]
-        windows = np.empty((which.size, offsets.size, offsets.size), dtype=np.float32)
-        in_units = np.empty(which.size, dtype=bool)
-        bounds = np.flatnonzero(np.r_[True, which[1:] != which[:-1], True]).tolist()
-        for start, end in itertools.pairwise(bounds):
-            raw = settling[int(which[start])][4]
-            windows[start:end] = raw[rows[start:end], cols[start:end]]  # exact: 16-bit integers fit float32
-            in_units[start:end] = raw.dtype.kind != "f"
+        flat = rows * shapes[:, 1:, None] + cols  # (pairs, 7, 7) indexes into each frame's pixels in a row
+        in_units = np.asarray([f[4].dtype.kind != "f" for f in settling], dtype=bool)[which]
+        bounds = np.flatnonzero(np.r_[True, which[1:] != which[:-1], True])
+        # Frames are separate buffers: one lookup in each (indexing: np.take copies a frame that is not
+        # aligned, as views into a chunk often are); 16-bit integers convert to float32 exactly.
+        parts = [settling[i][4].ravel()[flat[start:end]]
+                 for i, start, end in zip(which[bounds[:-1]].tolist(), bounds[:-1].tolist(), bounds[1:].tolist(),
+                                          strict=True)]
+        windows = np.concatenate(parts).astype(np.float32, copy=False)
         self._rows.append(np.asarray([f[0] for f in settling], dtype=np.int64)[which])
         self._centres.append(rc)
         self._windows.append(windows)

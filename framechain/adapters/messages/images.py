@@ -47,12 +47,13 @@ def image_metadata(msg: Any) -> tuple[int, int, str] | None:
     if fmt is not None and not hasattr(msg, "encoding"):
         if "compresseddepth" in str(fmt).lower():
             return None
-        data = bytes(msg.data)
-        kind = "jpeg" if data.startswith(_JPEG_MAGIC) else "png" if data.startswith(_PNG_MAGIC) else None
+        data = memoryview(msg.data).cast("B")  # not copied: a JPEG is sized from its first few hundred bytes
+        kind = "jpeg" if data[:3] == _JPEG_MAGIC else "png" if data[:8] == _PNG_MAGIC else None
         if kind is None:
             return None
         # A camera's JPEGs share their header (tables, size): Pillow sizes each header once.
-        size = _header_size(header) if kind == "jpeg" and (header := _jpeg_header(data)) else _header_size(data)
+        header = _jpeg_header(data) if kind == "jpeg" else None
+        size = _header_size(header if header is not None else bytes(data))
         return None if size is None else (*size, kind)
     encoding = raw_encoding(str(msg.encoding))
     if encoding is None:
@@ -73,7 +74,7 @@ def _header_size(data: bytes) -> tuple[int, int] | None:
     return int(width), int(height)
 
 
-def _jpeg_header(data: bytes) -> bytes | None:
+def _jpeg_header(data: memoryview) -> bytes | None:
     """A JPEG's bytes up to the end of its start-of-scan segment: all Pillow reads to size it (None when
     the markers before the scan are not plain length-prefixed segments: Pillow then reads it all)."""
     pos, end = 2, len(data)
@@ -85,7 +86,7 @@ def _jpeg_header(data: bytes) -> bytes | None:
         if segment_end <= pos + 3:
             return None
         if marker == 0xDA:  # start of scan
-            return data[:segment_end] if segment_end <= end else None
+            return bytes(data[:segment_end]) if segment_end <= end else None
         pos = segment_end
     return None
 
