@@ -9,6 +9,7 @@ from typing import Any
 
 from framechain.cli.common import (
     add_log_arguments,
+    imports_set_aside,
     make_out_dir,
     non_negative_int,
     print_findings,
@@ -42,7 +43,7 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
     from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
 
-    with progress_reporter(args.quiet or args.json, "attributing") as progress:
+    with imports_set_aside(), progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
                             warn=warner(getattr(args, "command", None) or "attribute"))

@@ -89,7 +89,7 @@ def parse_fault(text: str) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
-    from framechain.cli.common import print_findings, progress_reporter
+    from framechain.cli.common import imports_set_aside, print_findings, progress_reporter
     from framechain.sim.logs import SUFFIX, write_scene
     from framechain.sim.scene import SceneSpec, generate
     from framechain.sinks.evidence_files import write_attribution
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         color_images=True,
         faults=faults,
     )
-    with renderers(), progress_reporter(args.quiet or args.json, "demo") as progress:
+    with renderers(), imports_set_aside(), progress_reporter(args.quiet or args.json, "demo") as progress:
         say = progress or (lambda _m: None)
         say("generating the episode")
         scene = generate(spec)

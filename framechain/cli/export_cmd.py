@@ -11,6 +11,7 @@ from typing import Any
 from framechain.cli.common import (
     add_log_arguments,
     chain_text,
+    imports_set_aside,
     incomplete_chain_line,
     print_suggested_chain,
     progress_reporter,
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".mcap":
         raise FramechainError(f"--out {out}: an export is an MCAP file; name it *.mcap")
     quiet = args.quiet or args.json
-    with progress_reporter(quiet, "exporting") as progress:
+    with imports_set_aside(), progress_reporter(quiet, "exporting") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
                             seed=args.seed, progress=progress, warn=warner("export"))
         say_unattributed(made, "export")  # the recomputed chain is still worth exporting

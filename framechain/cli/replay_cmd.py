@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from framechain.cli.common import (
     add_log_arguments,
     chain_text,
+    imports_set_aside,
     incomplete_chain_line,
     print_suggested_chain,
     progress_reporter,
@@ -75,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from framechain.sinks.rerun import RerunOptions, stream_replay
 
     quiet = args.quiet or args.json
-    with progress_reporter(quiet, "replaying") as progress:
+    with imports_set_aside(), progress_reporter(quiet, "replaying") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
                             seed=args.seed, progress=progress, warn=warner("replay"))
         notes = list(made.notes)

@@ -341,3 +341,33 @@ def test_attribute_s_report_figures_are_drawn_by_its_renderers(latency_log: tupl
     assert {"error_per_hop.png", "world_top_down.png"} <= set(plots_here)
     for name in plots_here:
         assert (tmp_path / "drawn" / name).read_bytes() == (tmp_path / "here" / name).read_bytes(), name
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_attribute_sets_its_imports_aside_from_the_collector_while_it_runs(
+        latency_log: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, fails: bool) -> None:
+    """While the log is read the objects already imported are frozen (gc.freeze); after the command, failed
+    or not, the collector has them back (a test process runs many commands)."""
+    import gc
+
+    from framechain import pipeline
+    from framechain.timeline import FramechainError
+
+    log, chain = latency_log
+    run = pipeline.run
+    frozen_during: list[int] = []
+
+    def counting(*args: object, **kwargs: object) -> object:
+        frozen_during.append(gc.get_freeze_count())
+        if fails:
+            raise FramechainError("stopped here")
+        return run(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pipeline, "run", counting)
+    before = gc.get_freeze_count()
+    code = main(["attribute", str(log), "--chain", str(chain), "--format", "md", "--bootstrap", "0", "-q",
+                 "--out", str(tmp_path / "out")])
+    assert code == (1 if fails else 0)
+    [during] = frozen_during
+    assert during > before + 10_000  # the imports' objects, not a handful
+    assert gc.get_freeze_count() == before
