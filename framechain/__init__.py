@@ -1,10 +1,6 @@
 """framechain: which hop of the pixel-to-world chain broke, which fault, how big."""
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("framechain")
-except PackageNotFoundError:  # running from a source tree that is not installed
-    __version__ = "0.0.0+unknown"
+#: The one place the version is written (pyproject.toml reads it from here).
+__version__ = "0.1.0"
 
 __all__ = ["__version__"]
