@@ -7,12 +7,13 @@ Each command lives in its own module of this package with ``register(subparsers)
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import sys
 from collections.abc import Sequence
 from types import ModuleType
-from typing import Any
+from typing import Any, NoReturn
 
 from framechain import __version__
 
@@ -112,5 +113,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def entry() -> NoReturn:
+    """The ``framechain`` console script: :func:`main`, then the process's end. Its objects are set aside
+    from the collector first (``gc.freeze``): the interpreter's last full collection on the way out would
+    otherwise walk every one of them to free nothing the exit does not (0.12 s of a 10-minute log's run)."""
+    code = main()
+    gc.freeze()
+    raise SystemExit(code)
+
+
 if __name__ == "__main__":
-    raise SystemExit(main())
+    entry()

@@ -374,3 +374,19 @@ def test_attribute_sets_its_imports_aside_from_the_collector_while_it_runs(
     [during] = frozen_during
     assert during > before + 10_000  # the imports' objects, not a handful
     assert gc.get_freeze_count() == before
+
+
+def test_the_console_script_exits_with_main_s_code_its_objects_set_aside(monkeypatch: pytest.MonkeyPatch) -> None:
+    import gc
+
+    from framechain.cli import main as cli_main
+
+    monkeypatch.setattr(cli_main, "main", lambda: 3)
+    before = gc.get_freeze_count()
+    try:
+        with pytest.raises(SystemExit) as exc:
+            cli_main.entry()
+        assert exc.value.code == 3
+        assert gc.get_freeze_count() > before
+    finally:
+        gc.unfreeze()  # this test process goes on
