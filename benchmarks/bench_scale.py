@@ -23,7 +23,7 @@ with one BLAS thread, as the command sets for itself.
 
     python benchmarks/run.py scale
     FRAMECHAIN_BENCH_SCALE_MINUTES=10 python benchmarks/run.py scale     # lengths, comma-separated
-    FRAMECHAIN_BENCH_SCALE_ROUNDS=1 python benchmarks/run.py scale       # rounds (default 3), least kept
+    FRAMECHAIN_BENCH_SCALE_ROUNDS=1 python benchmarks/run.py scale       # rounds (default 5), least kept
     FRAMECHAIN_BENCH_SCALE_CACHE=/tmp/framechain-bench-scale              # where the logs are kept
 
 The logs are written by a streaming writer here (not ``write_scene``, which holds every image in

@@ -276,7 +276,7 @@ def parse_cdr_compressed_image(raw: bytes | memoryview) -> SimpleNamespace:
     buf, order, header, pos = _cdr_header(raw, "compressed image")
     size = len(buf)
     if pos + 4 > size:
-        raise LayoutError("compressed image message ends inside its format")
+        raise LayoutError("compressed image message ends inside its format's length")
     (n,) = struct.unpack_from(order + "I", buf, pos)
     pos += 4
     end = pos + n
