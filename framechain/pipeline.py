@@ -298,10 +298,13 @@ def run(
     bootstrap: int = 30,
     progress: Progress | None = None,
     warn: Callable[[str], None] | None = None,
+    when_read: Callable[[], None] | None = None,
 ) -> Run:
     """Read ``log`` once, replay it once through ``chain`` (suggested when None), align its evidence once
     and attribute its error (unless ``attribute`` is False): a :class:`Run`. ``warn`` hears, as soon as the
-    log is read and before any fit, what disagrees (a calibration of another camera's topic).
+    log is read and before any fit, what disagrees (a calibration of another camera's topic);
+    ``when_read`` is called then too (a command starts its report's renderers on the core the read
+    leaves idle).
 
     A log that cannot be attributed is still a run: ``run.not_attributed`` says why, and when no
     observation replayed ``run.nothing_replayed`` says which chain key to add. A log that cannot be
@@ -311,6 +314,8 @@ def run(
     if warn is not None:
         for warning in loaded.warnings:
             warn(warning)
+    if when_read is not None:
+        when_read()
     if progress is not None:
         progress(f"replaying {len(loaded.timeline.observations):,} observations")
     # A bearing-only static target is replayed as rays when attributed (decided here, before the replay).

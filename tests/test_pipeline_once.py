@@ -150,3 +150,29 @@ def test_batch_of_one_log_reads_once_and_replays_once(log: tuple[Path, Path], ch
     _once(counts)
     rows = pq.read_table(tmp_path / "b" / "fleet.parquet").to_pylist()
     assert [r["status"] for r in rows] == (["nothing_replayed"] if chain == "not attributable" else ["findings"])
+
+
+def test_attribute_starts_its_renderers_once_the_log_is_read(log: tuple[Path, Path], tmp_path: Path, counts: Counts,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    from framechain.sinks import plots
+
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "1")
+    started: list[dict[str, int]] = []
+    start = plots._Pool.start
+
+    def noting_when(pool: Any) -> None:
+        if not pool.started:
+            started.append(dict(counts))  # what the run had done when the renderer started
+        start(pool)
+
+    monkeypatch.setattr(plots._Pool, "start", noting_when)
+    path, chain_file = log
+    assert main(["attribute", str(path), "--chain", str(chain_file), "--out", str(tmp_path / "out"),
+                 "--bootstrap", "0", "-q"]) == 0
+    assert started == [{"read": 1}]  # after the read (its two threads), before the replay
+    assert (tmp_path / "out" / "report.html").stat().st_size > 0
+    # A log that cannot be read starts none.
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap")
+    assert main(["attribute", str(bad), "--chain", str(chain_file), "--out", str(tmp_path / "bad"), "-q"]) == 1
+    assert len(started) == 1

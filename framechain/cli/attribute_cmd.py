@@ -42,11 +42,12 @@ def register(sub: Any) -> None:
 def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -> tuple[Any, Any, dict[str, Path]]:
     from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
+    from framechain.sinks.plots import start_renderers
 
     with imports_set_aside(), progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
-                            warn=warner(getattr(args, "command", None) or "attribute"))
+                            warn=warner(getattr(args, "command", None) or "attribute"), when_read=start_renderers)
         result = made.attributed()  # none: one line saying why, exit 1
         if progress is not None:
             progress("writing the outputs")
@@ -77,8 +78,9 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     out = Path(args.out)
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     report_formats = [f for f in formats if f in ("md", "html")]
-    # Started first: they load matplotlib while this process loads the analysis and reads the log.
-    with renderers(None if report_formats else 0):
+    # Started once the log is read (start_renderers): they load matplotlib while this process replays and
+    # attributes on one core; during the read they would compete with its two threads.
+    with renderers(None if report_formats else 0, start_now=False):
         made, result, paths = _attribute(args, out, report_formats)
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)

@@ -211,15 +211,28 @@ class _Pool:
 
     def __init__(self, workers: int) -> None:
         self._jobs: queue.Queue[tuple[Sketch, Future[bytes]] | None] = queue.Queue()
+        self.workers = workers
+        self._processes: list[subprocess.Popen[bytes]] = []
+        self._threads: list[threading.Thread] = []
+
+    @property
+    def started(self) -> bool:
+        return bool(self._processes)
+
+    def start(self) -> None:
+        """Start the processes (once; a sketch submitted before starts them)."""
+        if self._processes:
+            return
         self._processes = [subprocess.Popen([sys.executable, "-c", _RENDERER_MAIN],
                                             stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-                           for _ in range(workers)]
+                           for _ in range(self.workers)]
         self._threads = [threading.Thread(target=self._serve, args=(p,), daemon=True, name="framechain-renderer")
                          for p in self._processes]
         for thread in self._threads:
             thread.start()
 
     def submit(self, sketch: Sketch) -> Future[bytes]:
+        self.start()
         future: Future[bytes] = Future()
         self._jobs.put((sketch, future))
         return future
@@ -264,15 +277,18 @@ _running: list[_Pool] = []
 
 
 @contextlib.contextmanager
-def renderers(workers: int | None = None) -> Iterator[None]:
+def renderers(workers: int | None = None, *, start_now: bool = True) -> Iterator[None]:
     """Within this block, figures are drawn by ``workers`` renderer processes (None: RENDERERS, or
-    the FRAMECHAIN_RENDERERS variable), started now."""
+    the FRAMECHAIN_RENDERERS variable), started now or, with ``start_now`` False, by
+    :func:`start_renderers` (or the first figure, whichever comes first)."""
     if workers is None:
         workers = _renderers_wanted()
     if _running or workers < 1:
         yield
         return
     pool = _Pool(workers)
+    if start_now:
+        pool.start()
     _running.append(pool)
     failed = True
     try:
@@ -281,6 +297,17 @@ def renderers(workers: int | None = None) -> Iterator[None]:
     finally:
         _running.clear()
         pool.close(kill=failed)
+
+
+def start_renderers() -> None:
+    """Start the renderers of the running :func:`renderers` block, if not yet started (else nothing).
+
+    A command that reads a log starts them once the read is done: the read keeps both cores busy
+    (its decompressing thread beside it), the analysis after it only one, and a renderer needs about
+    0.6 s of a core to load matplotlib before its first figure.
+    """
+    if _running:
+        _running[0].start()
 
 
 def _renderers_wanted() -> int:

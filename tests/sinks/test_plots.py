@@ -166,3 +166,22 @@ def test_a_renderer_that_cannot_start_leaves_the_figures_to_this_process(monkeyp
     with plots.renderers(1):
         assert figure_png(fig, "f", "").png == here
     assert capfd.readouterr().err == ""  # no traceback from the renderer that could not import framechain
+
+
+def test_renderers_started_later_start_when_asked_or_at_the_first_figure() -> None:
+    fig = _sketches()[0]
+    here = figure_png(fig, "f", "").png
+    with plots.renderers(1, start_now=False):
+        pool = plots._running[0]
+        assert not pool.started
+        plots.start_renderers()
+        assert pool.started
+        processes = list(pool._processes)
+        plots.start_renderers()  # once only
+        assert pool._processes == processes
+        assert figure_png(fig, "f", "").png == here
+    with plots.renderers(1, start_now=False):
+        assert figure_png(fig, "f", "").png == here  # a figure asked for first starts them
+        assert plots._running[0].started
+    plots.start_renderers()  # outside a block: nothing to start
+    assert not plots._running
