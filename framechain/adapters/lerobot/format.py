@@ -36,7 +36,6 @@ from typing import Any, TypedDict
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
@@ -427,6 +426,8 @@ class DatasetReader:
         for key in self.video_keys:
             wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp"]
         where = self.root / "meta" / "episodes"
+        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
+
         table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
         if table.num_rows == 0:
             raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
@@ -624,6 +625,8 @@ def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
     while pa.types.is_list(arr.type) or pa.types.is_fixed_size_list(arr.type) or pa.types.is_large_list(arr.type):
         if arr.null_count:
             raise DatasetError(path, f"column {name!r} has null rows")
+        import pyarrow.compute as pc
+
         lengths = pc.list_value_length(arr).to_numpy(zero_copy_only=False)
         width = int(lengths[0]) if lengths.size else 0
         if lengths.size and not (lengths == width).all():
