@@ -43,6 +43,7 @@ from framechain.adapters.formats.fast_cdr import FEEDERS
 from framechain.adapters.formats.mcap.chunks import RECORD_HEAD as _RECORD_HEAD
 from framechain.adapters.formats.mcap.chunks import ChunkDecompressor, decompressed_ahead
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, SchemaRecord
+from framechain.adapters.formats.mcap.summary import read_summary
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
@@ -90,9 +91,8 @@ class McapLog:
         try:
             from mcap.reader import SeekingReader
 
-            reader = SeekingReader(self._f)
-            self.profile = reader.get_header().profile
-            self.summary = summary if summary is not None else reader.get_summary()
+            self.profile = SeekingReader(self._f).get_header().profile
+            self.summary = summary if summary is not None else read_summary(self._f)
         except (McapError, struct.error, ValueError, OSError):
             self.truncated = True
             self.summary = None
