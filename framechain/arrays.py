@@ -1,7 +1,9 @@
-"""The NumPy array types every room annotates with (one definition, imported everywhere), and the one
-lookup of rows by key (an observation by its ``obs_id``)."""
+"""The NumPy array types every room annotates with (one definition, imported everywhere), the one
+lookup of rows by key (an observation by its ``obs_id``), and the distinct names of a column."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -25,3 +27,19 @@ def rows_of(keys: IntArray, wanted: npt.ArrayLike) -> IntArray:
     hit = ordered[pos] == want
     out[hit] = order[pos[hit]]
     return out
+
+
+def distinct_names(values: npt.NDArray[Any]) -> list[str]:
+    """``np.unique(values).tolist()`` of a column of few distinct names (frames, topics, roles): hashed, not
+    sorted (np.unique sorts every row: 13 ms for a log's 90,000 transforms' names, a set 4 ms)."""
+    return sorted(set(values.tolist()))
+
+
+def names_and_codes(values: StrArray) -> tuple[StrArray, IntArray]:
+    """``np.unique(values, return_inverse=True)`` of a column of few distinct names, by hashing: the sorted
+    names, and each row's index among them."""
+    listed = values.tolist()
+    names = sorted(set(listed))
+    index = {name: k for k, name in enumerate(names)}
+    codes = np.fromiter(map(index.__getitem__, listed), dtype=np.int64, count=len(listed))
+    return np.array(names, dtype=values.dtype).reshape(-1), codes

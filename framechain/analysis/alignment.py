@@ -26,7 +26,7 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray, IntArray, rows_of
+from framechain.arrays import FloatArray, IntArray, distinct_names, rows_of
 from framechain.config.chain import ChainFrames
 from framechain.geometry.transforms import transform_points
 from framechain.replay import TransformBuffer
@@ -231,7 +231,7 @@ def _in_frame(points: PointTable, target: str, buffer: TransformBuffer) -> Float
     """
     xyz = np.asarray(points.xyz, dtype=float).copy()
     frame = normalize_frame(target)
-    for other in np.unique(points.frame).tolist():
+    for other in distinct_names(points.frame):
         if not other or other == frame:
             continue
         sel = points.frame == other

@@ -27,7 +27,7 @@ from typing import overload
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray, IntArray
+from framechain.arrays import FloatArray, IntArray, distinct_names, names_and_codes
 from framechain.geometry.rotations import compose, invert, quat_conjugate, quat_multiply, quat_to_rotvec
 from framechain.replay.composition import Step, compose_chunk
 from framechain.replay.errors import FrameGraphError
@@ -65,13 +65,13 @@ class TransformBuffer:
     def _build(self, table: TransformTable) -> None:
         if len(table) == 0:
             return
-        children, child_idx = np.unique(table.child, return_inverse=True)
+        children, child_idx = names_and_codes(table.child)
         order = np.lexsort((table.log_time_ns, table.stamp_ns, child_idx))
         bounds = np.searchsorted(child_idx[order], np.arange(children.size + 1))
         for k, child in enumerate(children.tolist()):
             rows = order[bounds[k] : bounds[k + 1]]
-            parents = np.unique(table.parent[rows])
-            if parents.size > 1:
+            parents = distinct_names(table.parent[rows])
+            if len(parents) > 1:
                 sources = sorted(set(table.source[rows].tolist()) - {""})
                 raise FrameGraphError(
                     f"frame {child!r} has two parents, {parents[0]!r} and {parents[1]!r}"
@@ -103,7 +103,7 @@ class TransformBuffer:
             quats = table.quat_xyzw[rows]
             q_soa = np.ascontiguousarray(quats.T)
             delta = quat_to_rotvec(quat_multiply(quat_conjugate(q_soa[:, :-1]), q_soa[:, 1:]))
-            edge_sources: list[str] = np.unique(table.source[rows]).tolist()
+            edge_sources = distinct_names(table.source[rows])
             self._edges[child] = Edge(
                 parent=parent, child=child, is_static=is_static, stamps_ns=table.stamp_ns[rows].copy(),
                 translation=table.translation[rows].copy(), quat_xyzw=quats.copy(),

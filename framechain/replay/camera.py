@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray, IntArray
+from framechain.arrays import FloatArray, IntArray, names_and_codes
 from framechain.replay.errors import CameraModelError
 from framechain.timeline import CameraTable
 
@@ -182,13 +182,16 @@ def distinct_models(table: CameraTable, rows: IntArray) -> tuple[list[CameraMode
         return [], np.zeros(0, dtype=np.int64)
     n_coeffs = table.n_distortion[used]
     coeffs = np.where(np.arange(table.distortion.shape[1]) < n_coeffs[:, None], table.distortion[used], 0.0)
-    codes = [np.unique(column[used].astype(str), return_inverse=True)[1].reshape(-1)
-             for column in (table.frame, table.distortion_model)]
+    codes = [names_and_codes(column[used].astype(str))[1] for column in (table.frame, table.distortion_model)]
     key = np.column_stack([table.K[used].reshape(used.size, 9), coeffs, n_coeffs, table.width[used],
                            table.height[used], *codes])
-    _, first, model_of_used = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    models = [CameraModel.from_table(table, int(used[i])) for i in first.tolist()]
-    which: IntArray = model_of_used.reshape(-1)[row_of.reshape(-1)].astype(np.int64)
+    # Runs of equal rows first (a camera's messages in a row are one model): np.unique over rows sorts
+    # them all, 40 ms for the 18,000 CameraInfo messages of a 10-minute log, where the runs are few.
+    new_run = np.r_[True, (key[1:] != key[:-1]).any(axis=1)]
+    starts, run_of = np.flatnonzero(new_run), np.cumsum(new_run) - 1
+    _, first, model_of_run = np.unique(key[starts], axis=0, return_index=True, return_inverse=True)
+    models = [CameraModel.from_table(table, int(used[starts[i]])) for i in first.tolist()]
+    which: IntArray = model_of_run.reshape(-1)[run_of[row_of.reshape(-1)]].astype(np.int64)
     return models, which
 
 

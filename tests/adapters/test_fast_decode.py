@@ -414,3 +414,43 @@ def test_fetch_finds_each_of_equal_log_times_across_chunks(index: str, tmp_path:
             log.fetch("/wanted", NS + 1, 0)
     finally:
         log.close()
+
+
+@pytest.mark.parametrize("encoding", ENCODINGS)
+def test_layouts_met_before_are_not_walked_again_and_batch_the_same(encoding: str,
+                                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    """A read flushes a topic hundreds of times: the layouts it met are looked up, not walked again, and
+    every flush's batches (rows, layout, bytes) are those a fresh walk gives."""
+    msgs = Msgs(ros1=encoding == "ros1")
+    edge_sets = [[("odom", "base_link")], [("map", "odom"), ("odom", "base_link")], [],
+                 [("a", "bc")], [("ab", "c")]]  # two of one length with different strings
+    raws = [serialise(msgs, msgs.tf(i, edge_sets[i % len(edge_sets)]), TF, encoding) for i in range(60)]
+    raws.insert(17, raws[3][:-5])  # a damaged one: no layout, left over every time
+    walked: list[int] = []
+    walk = fast_cdr.layout_of
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        walked.append(1)
+        return walk(*args, **kwargs)
+
+    monkeypatch.setattr(fast_cdr, "layout_of", counting)
+    known: fast_cdr.KnownLayouts = {}
+    for k, flush in enumerate((raws[:20], raws[20:40], raws[40:])):
+        before = len(walked)
+        fresh, fresh_rest = decode_batches(msgs.ts, TF, flush, ros1=msgs.ros1)
+        walks_fresh = len(walked) - before
+        before = len(walked)
+        cached, cached_rest = decode_batches(msgs.ts, TF, flush, ros1=msgs.ros1, known=known)
+        walks_cached = len(walked) - before
+        assert [_batch(b) for b in cached] == [_batch(b) for b in fresh]
+        assert cached_rest.tolist() == fresh_rest.tolist()
+        if k:  # every layout was met in the first flush (which also held the damaged message)
+            assert walks_fresh > 0
+            assert walks_cached == 0
+    assert sum(len(v) for v in known.values()) == len(edge_sets)
+
+
+def _batch(b: Any) -> tuple[Any, ...]:
+    layout = b.layout
+    return (b.rows.tolist(), layout.length, layout.leaves, layout.strings, layout.counts, layout.structure.tolist(),
+            b.data.tobytes())

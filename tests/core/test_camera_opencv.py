@@ -134,3 +134,45 @@ def test_points_not_in_front_of_the_camera_have_no_pixel(model: str) -> None:
     assert np.isnan(u[:3]).all()
     assert np.isnan(v[:3]).all()
     assert np.isfinite([u[3], v[3]]).all()
+
+
+def test_distinct_models_groups_rows_by_their_whole_model() -> None:
+    """Rows share a model exactly when frame, size, K, distortion model and its coefficients are equal:
+    checked pair by pair against plain Python tuples, on two cameras interleaved and in runs."""
+    from framechain.replay.camera import distinct_models
+    from framechain.timeline import CameraTable
+
+    rng = np.random.default_rng(4)
+    n = 400
+    kinds = [("cam_a", 640, 480, 500.0, "plumb_bob", 5), ("cam_b", 320, 240, 250.0, "equidistant", 4),
+             ("cam_a", 640, 480, 501.0, "plumb_bob", 5), ("cam_a", 640, 480, 500.0, "rational_polynomial", 8)]
+    # runs of one model, then two cameras alternating message by message
+    pick = np.r_[np.repeat([0, 2, 0, 3], 50), np.tile([0, 1], 100)]
+    K = np.zeros((n, 3, 3))
+    distortion = np.zeros((n, 14))
+    for i, k in enumerate(pick):
+        f = kinds[k][3]
+        K[i] = [[f, 0, kinds[k][1] / 2], [0, f, kinds[k][2] / 2], [0, 0, 1]]
+        distortion[i, : kinds[k][5]] = np.linspace(-0.1, 0.1, kinds[k][5]) * (k + 1)
+    distortion[pick == 1, 6] = rng.normal(size=(pick == 1).sum())  # beyond its 4 coefficients: ignored
+    table = CameraTable(
+        frame=np.array([kinds[k][0] for k in pick]), stamp_ns=np.arange(n, dtype=np.int64),
+        log_time_ns=np.arange(n, dtype=np.int64), width=np.array([kinds[k][1] for k in pick], dtype=np.int64),
+        height=np.array([kinds[k][2] for k in pick], dtype=np.int64), K=K,
+        distortion_model=np.array([kinds[k][4] for k in pick]), distortion=distortion,
+        n_distortion=np.array([kinds[k][5] for k in pick], dtype=np.int64), source=np.full(n, "/info"),
+    )
+    rows = rng.integers(0, n, 600)
+    models, which = distinct_models(table, rows)
+
+    def key(row: int) -> tuple[object, ...]:
+        m = int(table.n_distortion[row])
+        return (str(table.frame[row]), int(table.width[row]), int(table.height[row]), tuple(table.K[row].ravel()),
+                str(table.distortion_model[row]), tuple(table.distortion[row, :m]))
+
+    keys = [key(int(r)) for r in rows]
+    assert len(models) == len(set(keys)) == 4
+    for i in range(len(rows)):
+        model = models[which[i]]
+        assert (model.frame, model.width, model.height, tuple(model.K.ravel()), model.distortion_model,
+                tuple(model.distortion)) == keys[i]

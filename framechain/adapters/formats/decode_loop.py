@@ -20,7 +20,7 @@ import numpy as np
 
 from framechain.adapters.errors import SchemaError
 from framechain.adapters.formats.decoders import Decoder
-from framechain.adapters.formats.fast_cdr import Feeder, LayoutError, decode_batches
+from framechain.adapters.formats.fast_cdr import Feeder, KnownLayouts, LayoutError, decode_batches
 from framechain.adapters.messages.collect import OBSERVATION_KINDS, Collector
 from framechain.adapters.messages.kinds import Kind
 
@@ -40,6 +40,7 @@ class Batched:
     typename: str  # rosbags' spelling, pkg/msg/Type
     ros1: bool
     feeder: Feeder
+    layouts: KnownLayouts = field(default_factory=dict, compare=False)  # met so far (filled as the read goes)
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,7 +167,7 @@ class DecodeLoop:
         fast = route.batched
         assert fast is not None
         log_times = np.asarray(batch.log_times, dtype=np.int64)
-        batches, rest = decode_batches(fast.store, fast.typename, batch.payloads, ros1=fast.ros1)
+        batches, rest = decode_batches(fast.store, fast.typename, batch.payloads, ros1=fast.ros1, known=fast.layouts)
         slow = [rest]
         for b in batches:
             try:

@@ -94,9 +94,14 @@ class Batch:
         if size == 0:
             return [""] * len(self)
         block = np.ascontiguousarray(self.data[:, offset : offset + size]).view(f"V{size}")[:, 0]
-        _, first, inverse = np.unique(block, return_index=True, return_inverse=True)
-        texts = [self.data[row, offset : offset + size].tobytes().decode("utf-8", "replace") for row in first.tolist()]
-        return [texts[i] for i in inverse.reshape(-1).tolist()]
+        texts: dict[bytes, str] = {}
+        out = []
+        for raw in block.tolist():  # (a batch holds few distinct strings: each decoded once)
+            text = texts.get(raw)
+            if text is None:
+                text = texts[raw] = raw.decode("utf-8", "replace")
+            out.append(text)
+        return out
 
     def string(self, path: FieldPath) -> str:
         """The string at ``path``, equal in every message (LayoutError when it is not)."""
@@ -208,18 +213,27 @@ def layout_of(store: Any, typename: str, raw: bytes, *, ros1: bool) -> Layout:
     return Layout(len(raw), walker.leaves, walker.strings, walker.counts, np.flatnonzero(~free))
 
 
+#: The layouts a route has met, by message length: each with the structure bytes of the message it was
+#: walked from (a message whose structure bytes are those has that layout: walking it again would find it).
+KnownLayouts = dict[int, list[tuple[Layout, npt.NDArray[np.uint8]]]]
+
+
 def decode_batches(
-    store: Any, typename: str, payloads: Sequence[bytes | memoryview], *, ros1: bool
+    store: Any, typename: str, payloads: Sequence[bytes | memoryview], *, ros1: bool,
+    known: KnownLayouts | None = None,
 ) -> tuple[list[Batch], npt.NDArray[np.intp]]:
     """Split ``payloads`` into batches of one layout each, and the rows no template fits.
 
     Rows that fail to walk (too short, not this type) are among the leftovers too, so the
     caller's slow path meets them and reports them as it would any undecodable message.
+    ``known``: the layouts met in earlier calls for this type, looked up before walking a message
+    (and added to): a read flushes a topic's messages hundreds of times, and a walk is Python.
     """
-    lengths = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=len(payloads))
+    sizes = [len(p) for p in payloads]
+    lengths = np.array(sizes, dtype=np.int64)
     batches: list[Batch] = []
     leftover: list[npt.NDArray[np.intp]] = []
-    for length in np.unique(lengths).tolist():
+    for length in sorted(set(sizes)):  # (np.unique costs more than the few lengths of a flush)
         rows = np.flatnonzero(lengths == length)
         data = np.frombuffer(b"".join(bytes(payloads[i]) for i in rows.tolist()), dtype=np.uint8)
         data = data.reshape(rows.size, length) if length else np.zeros((rows.size, 0), dtype=np.uint8)
@@ -229,10 +243,14 @@ def decode_batches(
             if open_rows.size == 0:
                 break
             first = int(open_rows[0])
-            try:
-                layout = layout_of(store, typename, data[first].tobytes(), ros1=ros1)
-            except (LayoutError, KeyError, UnicodeDecodeError):
-                break
+            layout = _known_layout(known, data[first]) if known is not None else None
+            if layout is None:
+                try:
+                    layout = layout_of(store, typename, data[first].tobytes(), ros1=ros1)
+                except (LayoutError, KeyError, UnicodeDecodeError):
+                    break
+                if known is not None and len(known.setdefault(length, [])) < MAX_TEMPLATES_PER_LENGTH:
+                    known[length].append((layout, data[first, layout.structure].copy()))
             same = (data[open_rows][:, layout.structure] == data[first, layout.structure]).all(axis=1)
             members = open_rows[same]
             batches.append(Batch(rows[members], layout, data[members]))
@@ -240,6 +258,14 @@ def decode_batches(
         leftover.append(rows[pending])
     rest = np.sort(np.concatenate(leftover)) if leftover else np.zeros(0, dtype=np.intp)
     return batches, rest.astype(np.intp)
+
+
+def _known_layout(known: KnownLayouts, message: npt.NDArray[np.uint8]) -> Layout | None:
+    """The known layout of a message of that length whose structure bytes are the message's, if any."""
+    for layout, structure in known.get(message.shape[0], ()):
+        if np.array_equal(message[layout.structure], structure):
+            return layout
+    return None
 
 
 def parse_cdr_image(raw: bytes | memoryview) -> SimpleNamespace:

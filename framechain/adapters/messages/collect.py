@@ -47,6 +47,7 @@ from framechain.adapters.robot.mounts import (
     merge_file_cameras,
     merge_static_edges,
 )
+from framechain.arrays import distinct_names
 from framechain.config.chain import ChainConfig
 from framechain.timeline import CameraTable, DepthFrameTable, ImageFrameTable, Timeline, TransformTable
 
@@ -597,7 +598,7 @@ def stamp_notes(timeline: Timeline) -> list[str]:
         if not len(table):
             continue
         sel = np.ones(len(table), dtype=bool) if mask is None else mask
-        for t in np.unique(table.source[sel]).tolist():
+        for t in distinct_names(table.source[sel]):
             rows = sel & (table.source == t)
             per_topic[t].append(np.stack([table.stamp_ns[rows], table.log_time_ns[rows]]))
     for topic, parts in sorted(per_topic.items()):
