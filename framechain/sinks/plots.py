@@ -211,7 +211,7 @@ class _Pool:
 
     def __init__(self, workers: int) -> None:
         self._jobs: queue.Queue[tuple[Sketch, Future[bytes]] | None] = queue.Queue()
-        self.workers = workers
+        self._workers = workers
         self._processes: list[subprocess.Popen[bytes]] = []
         self._threads: list[threading.Thread] = []
 
@@ -225,7 +225,7 @@ class _Pool:
             return
         self._processes = [subprocess.Popen([sys.executable, "-c", _RENDERER_MAIN],
                                             stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-                           for _ in range(self.workers)]
+                           for _ in range(self._workers)]
         self._threads = [threading.Thread(target=self._serve, args=(p,), daemon=True, name="framechain-renderer")
                          for p in self._processes]
         for thread in self._threads:
