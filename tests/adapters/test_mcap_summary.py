@@ -13,11 +13,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from framechain.adapters.formats.mcap.reader import McapLog
-from framechain.adapters.formats.mcap.summary import CHUNK_INDEX, read_summary
+from framechain.adapters.formats.mcap.summary import read_summary
 
 
 def _write(path: Path, compression: CompressionType, *, summary_extras: bool = True, index: bool = True) -> Path:
@@ -78,7 +79,7 @@ def test_the_real_logs_summaries_equal_mcaps(realdata: Path) -> None:
 
 def _chunk_index_at(data: bytes, summary_start: int) -> int:
     pos = summary_start
-    while data[pos] != CHUNK_INDEX:
+    while data[pos] != Opcode.CHUNK_INDEX:
         (length,) = struct.unpack_from("<Q", data, pos + 1)
         pos += 9 + length
     return pos

@@ -13,9 +13,8 @@ import io
 import struct
 from typing import IO, Any
 
-#: The opcode of a ChunkIndex record (MCAP specification).
-CHUNK_INDEX = 0x08
-_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+from framechain.adapters.formats.mcap.chunks import RECORD_HEAD
+
 _CHUNK_INDEX_HEAD = struct.Struct("<QQQQI")  # message start and end time, chunk offset and length, offsets' bytes
 _CHANNEL_OFFSET = struct.Struct("<HQ")  # channel id, offset of its MessageIndex record
 _INDEX_LENGTH_NAME = struct.Struct("<QI")  # message index bytes, compression name length
@@ -51,18 +50,19 @@ def read_summary(f: IO[bytes]) -> Any:
 
 def _cut(section: memoryview) -> tuple[list[Any], list[memoryview]]:
     """The section's chunk indexes (parsed) and its other records (as they are)."""
+    from mcap.opcode import Opcode
     from mcap.records import ChunkIndex
 
     chunk_indexes: list[Any] = []
     others: list[memoryview] = []
     pos, size = 0, len(section)
     while pos < size:
-        opcode, length = _RECORD_HEAD.unpack_from(section, pos)
-        body, pos = pos + _RECORD_HEAD.size, pos + _RECORD_HEAD.size + length
+        opcode, length = RECORD_HEAD.unpack_from(section, pos)
+        body, pos = pos + RECORD_HEAD.size, pos + RECORD_HEAD.size + length
         if pos > size:
             raise ValueError(f"summary record (opcode {opcode:#x}) of {length} bytes runs past the summary section")
-        if opcode != CHUNK_INDEX:
-            others.append(section[body - _RECORD_HEAD.size : pos])
+        if opcode != Opcode.CHUNK_INDEX:
+            others.append(section[body - RECORD_HEAD.size : pos])
             continue
         start_time, end_time, offset, chunk_length, n = _CHUNK_INDEX_HEAD.unpack_from(section, body)
         at = body + _CHUNK_INDEX_HEAD.size
