@@ -371,6 +371,11 @@ def serve_renderer() -> None:
     replies = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
     _serve_stdio(sys.stdin.buffer, replies)
+    # Every reply is flushed as it is made: nothing is left to save. The interpreter's teardown (matplotlib's
+    # modules and font caches, about 0.25 s) would only make the command, which waits for its renderers to
+    # end, wait longer.
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def plot_tilt(rows: Sequence[TiltRow], path: str | Path, *, tolerance_m: float = 0.01) -> None:

@@ -4,6 +4,9 @@ report's own figures fit the fixed margins (the draw that tight_layout costs is 
 from __future__ import annotations
 
 import io
+import pickle
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -138,6 +141,25 @@ def test_renderer_processes_draw_the_same_pngs_as_this_process(monkeypatch: pyte
     with plots.renderers(2):
         figures = [figure_png(fig, f"f{i}", "") for i, fig in enumerate(_sketches())]
         assert [f.png for f in figures] == here
+
+
+def test_a_renderer_ends_at_the_end_of_its_input_without_the_interpreter_s_teardown() -> None:
+    # An exit handler registered before the renderer serves stands for the teardown the command would wait for.
+    program = ("import atexit, sys\n"
+               "atexit.register(lambda: sys.stderr.write('torn down'))\n"
+               "from framechain.sinks.plots import serve_renderer\n"
+               "serve_renderer()\n"
+               "sys.stderr.write('returned')\n")
+    sketch = _sketches()[0].sketch
+    request = pickle.dumps(sketch, protocol=pickle.HIGHEST_PROTOCOL)
+    done = subprocess.run([sys.executable, "-c", program], input=request, capture_output=True, timeout=120,
+                          check=False)
+    assert done.returncode == 0
+    assert b"torn down" not in done.stderr
+    assert b"returned" not in done.stderr
+    drawn, png = pickle.loads(done.stdout)
+    assert drawn
+    assert png == plots.render_png(sketch)
 
 
 def test_the_figures_of_a_renderer_that_died_are_drawn_here() -> None:
