@@ -176,3 +176,30 @@ def test_attribute_starts_its_renderers_once_the_log_is_read(log: tuple[Path, Pa
     bad.write_bytes(b"not an mcap")
     assert main(["attribute", str(bad), "--chain", str(chain_file), "--out", str(tmp_path / "bad"), "-q"]) == 1
     assert len(started) == 1
+
+
+def test_attribute_hands_its_figures_to_the_renderers_before_writing_its_files(
+        log: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from framechain.sinks import evidence_files, plots
+
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "1")
+    events: list[str] = []
+    submit, write = plots._Pool.submit, evidence_files.write_attribution
+
+    def submitting(pool: Any, sketch: Any) -> Any:
+        events.append("figure")
+        return submit(pool, sketch)
+
+    def writing(*args: Any, **kwargs: Any) -> Any:
+        events.append("write")
+        return write(*args, **kwargs)
+
+    monkeypatch.setattr(plots._Pool, "submit", submitting)
+    monkeypatch.setattr(evidence_files, "write_attribution", writing)
+    path, chain_file = log
+    assert main(["attribute", str(path), "--chain", str(chain_file), "--out", str(tmp_path / "out"),
+                 "--bootstrap", "0", "-q"]) == 0
+    # Every figure is being drawn while the attribution's files are written, none is asked for after.
+    assert events.count("figure") >= 4
+    assert events.index("write") == events.count("figure")
+    assert (tmp_path / "out" / "error_per_hop.png").read_bytes().startswith(b"\x89PNG")

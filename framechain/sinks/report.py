@@ -11,7 +11,7 @@ from __future__ import annotations
 import html
 import json
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -45,8 +45,29 @@ from framechain.sinks.text import CSS, FindingView, breakable, mm
 from framechain.timeline import PointRole
 
 
-def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html")) -> dict[str, Path]:
-    """Write report.md (with its PNGs) and/or report.html of the run's attribution into ``out_dir``.
+@dataclass(frozen=True)
+class ReportFigures:
+    """The report's plots: its pictures and those of its checks (each drawn, or being drawn by a renderer)."""
+
+    pictures: list[Figure]
+    checks: list[Figure]
+
+
+def report_figures(run: Run) -> ReportFigures:
+    """The plots of the run's report, made now: with renderers running they are drawn while the command goes
+    on (a command asks for them before writing its other files)."""
+    result = run.attributed()
+    # Measured against the cameras' own motion, the world-error pictures would be empty.
+    figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
+    if result.metric == "none":  # no evidence: the error plots would be empty axes
+        figures = [f for f in figures if f.name not in ("error_per_hop", "error_vs_speed")]
+    return ReportFigures(figures, [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)])
+
+
+def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
+                  figures: ReportFigures | None = None) -> dict[str, Path]:
+    """Write report.md (with its PNGs) and/or report.html of the run's attribution into ``out_dir``
+    (``figures``: its plots, made already by :func:`report_figures`).
 
     Both show what the camera saw at the worst observations, with the chain drawn on the image
     (:func:`image_crops`), where the log has camera images.
@@ -54,25 +75,22 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     result = run.attributed()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    # Measured against the cameras' own motion, the world-error pictures would be empty.
-    figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
-    if result.metric == "none":  # no evidence: the error plots would be empty axes
-        figures = [f for f in figures if f.name not in ("error_per_hop", "error_vs_speed")]
-    checks = [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
+    made = figures or report_figures(run)
+    pictures, checks = made.pictures, made.checks
     sections = image_crops(run)
     paths: dict[str, Path] = {}
     if "md" in formats:
-        for fig in [*figures, *checks]:
+        for fig in [*pictures, *checks]:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["md"] = out / "report.md"
         for _, crops in sections:
             for crop in crops:
                 (out / f"{crop.name}.png").write_bytes(crop.png)
-        text = markdown(result, figures).replace("## Provenance", checks_markdown(result, checks) + "## Provenance", 1)
+        text = markdown(result, pictures).replace("## Provenance", checks_markdown(result, checks) + "## Provenance", 1)
         paths["md"].write_text(text + _crops_markdown(result, sections))
     if "html" in formats:
         paths["html"] = out / "report.html"
-        page = html_page(result, figures)
+        page = html_page(result, pictures)
         provenance = "<h2>Provenance</h2>"
         inserted = checks_html(result, checks, figure_html) + _crops_html(result, sections) + provenance
         paths["html"].write_text(page.replace(provenance, inserted, 1))
