@@ -7,11 +7,12 @@ more to measure it: 40% of a figure's cost (a second of a report's). After the o
 another axes, and only then lays the figure out tightly and draws it again.
 
 A figure is made as a :class:`Sketch`: the matplotlib calls made on it, recorded as plain data, so it
-can be drawn in another process. Drawing a report's figures is matplotlib's Python (about 1.4 s on
-the 10-minute benchmark log) after its import (0.5 s). A command that writes a report starts
-:data:`RENDERERS` renderer processes as it starts (:func:`renderers`): each imports matplotlib at a
-low priority, in the time the read leaves a core idle, then draws the sketches it is sent (pickled
-over a pipe) while the command crops the camera images and writes its other files. Without
+can be drawn in another process. Drawing a report's figures is matplotlib's Python (about 1.0 s on
+the 10-minute benchmark log) after its import (0.5 s). A command that writes a report runs
+:data:`RENDERERS` renderer processes (:func:`renderers`), started once its log is read
+(:func:`start_renderers`): each imports matplotlib at a low priority while the command replays and
+attributes on one core, then draws the sketches it is sent (pickled over a pipe) while the command
+writes its files, and exits at the end of its input without the interpreter's teardown. Without
 renderers (a library call, most tests) a figure is drawn here when it is made; a renderer that fails
 or dies has its figures drawn here too, so a report never loses one.
 """
