@@ -375,6 +375,7 @@ def serve_renderer() -> None:
     # Every reply is flushed as it is made: nothing is left to save. The interpreter's teardown (matplotlib's
     # modules and font caches, about 0.25 s) would only make the command, which waits for its renderers to
     # end, wait longer.
+    sys.stdout.flush()  # (a stray print, on stderr)
     sys.stderr.flush()
     os._exit(0)
 
