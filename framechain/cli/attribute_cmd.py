@@ -43,7 +43,6 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
     from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
     from framechain.sinks.plots import start_renderers
-    from framechain.sinks.report import render_report, report_figures
 
     with imports_set_aside(), progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
@@ -52,8 +51,11 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
         result = made.attributed()  # none: one line saying why, exit 1
         if progress is not None:
             progress("writing the outputs")
-        # The report's plots first: the renderers draw them while this process writes the other files.
-        figures = report_figures(made) if report_formats else None
+        if report_formats:
+            from framechain.sinks.report import render_report, report_figures
+
+            # The report's plots first: the renderers draw them while this process writes the other files.
+            figures = report_figures(made)
         paths = write_attribution(made, out)
         if report_formats:
             if progress is not None:

@@ -75,7 +75,7 @@ def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("m
     result = run.attributed()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    made = figures or report_figures(run)
+    made = figures if figures is not None else report_figures(run)
     pictures, checks = made.pictures, made.checks
     sections = image_crops(run)
     paths: dict[str, Path] = {}
