@@ -180,11 +180,11 @@ def test_attribute_starts_its_renderers_once_the_log_is_read(log: tuple[Path, Pa
 
 def test_attribute_hands_its_figures_to_the_renderers_before_writing_its_files(
         log: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from framechain.sinks import evidence_files, plots
+    from framechain.sinks import plots, report
 
     monkeypatch.setenv(plots.RENDERERS_VARIABLE, "1")
     events: list[str] = []
-    submit, write = plots._Pool.submit, evidence_files.write_attribution
+    submit, write = plots._Pool.submit, report.write_attribution
 
     def submitting(pool: Any, sketch: Any) -> Any:
         events.append("figure")
@@ -195,7 +195,7 @@ def test_attribute_hands_its_figures_to_the_renderers_before_writing_its_files(
         return write(*args, **kwargs)
 
     monkeypatch.setattr(plots._Pool, "submit", submitting)
-    monkeypatch.setattr(evidence_files, "write_attribution", writing)
+    monkeypatch.setattr(report, "write_attribution", writing)
     path, chain_file = log
     assert main(["attribute", str(path), "--chain", str(chain_file), "--out", str(tmp_path / "out"),
                  "--bootstrap", "0", "-q"]) == 0

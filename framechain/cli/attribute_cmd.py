@@ -52,15 +52,11 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
         if progress is not None:
             progress("writing the outputs")
         if report_formats:
-            from framechain.sinks.report import render_report, report_figures
+            from framechain.sinks.report import write_outputs
 
-            # The report's plots first: the renderers draw them while this process writes the other files.
-            figures = report_figures(made)
-        paths = write_attribution(made, out)
-        if report_formats:
-            if progress is not None:
-                progress(f"writing the report ({', '.join(report_formats)})")
-            paths.update(render_report(made, out, formats=report_formats, figures=figures))
+            paths = write_outputs(made, out, formats=report_formats, say=progress or (lambda _m: None))
+        else:
+            paths = write_attribution(made, out)
     return made, result, paths
 
 

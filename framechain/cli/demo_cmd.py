@@ -92,9 +92,8 @@ def run(args: argparse.Namespace) -> int:
     from framechain.cli.common import imports_set_aside, print_findings, progress_reporter
     from framechain.sim.logs import SUFFIX, write_scene
     from framechain.sim.scene import SceneSpec, generate
-    from framechain.sinks.evidence_files import write_attribution
     from framechain.sinks.plots import renderers
-    from framechain.sinks.report import render_report, report_figures
+    from framechain.sinks.report import write_outputs
 
     started = time.perf_counter()
     faults = tuple(parse_fault(f) for f in (args.fault or DEFAULT_FAULTS))
@@ -131,10 +130,7 @@ def run(args: argparse.Namespace) -> int:
         made = pipeline.run(log_path, chain_path, seed=args.seed, progress=progress)
         result = made.attributed()
         paths: dict[str, Path] = {"log": log_path, "chain": chain_path}
-        figures = report_figures(made)  # drawn by the renderers while the other files are written
-        paths.update(write_attribution(made, out))
-        say("writing the report")
-        paths.update(render_report(made, out, formats=("md", "html"), figures=figures))
+        paths.update(write_outputs(made, out, formats=("md", "html"), say=say))
         if not args.no_rrd:
             from framechain.sinks.rerun import RerunTarget, stream_replay
 

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import html
 import json
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -38,45 +38,51 @@ from framechain.sinks.colors import (
     hex_color,
     legend_text,
 )
-from framechain.sinks.evidence_files import inputs_record
+from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
 from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
 from framechain.sinks.text import CSS, FindingView, breakable, mm
 from framechain.timeline import PointRole
 
 
-@dataclass(frozen=True)
-class ReportFigures:
-    """The report's plots: its pictures and those of its checks (each drawn, or being drawn by a renderer)."""
+def write_outputs(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
+                  say: Callable[[str], None] = lambda _m: None) -> dict[str, Path]:
+    """The attribution's files (:func:`write_attribution`), then the report in ``formats`` (:func:`render_report`).
 
-    pictures: list[Figure]
-    checks: list[Figure]
-
-
-def report_figures(run: Run) -> ReportFigures:
-    """The plots of the run's report, made now: with renderers running they are drawn while the command goes
-    on (a command asks for them before writing its other files)."""
-    result = run.attributed()
-    # Measured against the cameras' own motion, the world-error pictures would be empty.
-    figures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
-    if result.metric == "none":  # no evidence: the error plots would be empty axes
-        figures = [f for f in figures if f.name not in ("error_per_hop", "error_vs_speed")]
-    return ReportFigures(figures, [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)])
+    The report's plots are made first: where renderers run (:func:`framechain.sinks.plots.renderers`), they
+    draw them while this process writes the other files and crops the camera images.
+    """
+    plots = _plots(run)
+    paths = write_attribution(run, out_dir)
+    say(f"writing the report ({', '.join(formats)})")
+    paths.update(_write_report(run, Path(out_dir), formats, plots))
+    return paths
 
 
-def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"),
-                  figures: ReportFigures | None = None) -> dict[str, Path]:
-    """Write report.md (with its PNGs) and/or report.html of the run's attribution into ``out_dir``
-    (``figures``: its plots, made already by :func:`report_figures`).
+def render_report(run: Run, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html")) -> dict[str, Path]:
+    """Write report.md (with its PNGs) and/or report.html of the run's attribution into ``out_dir``.
 
     Both show what the camera saw at the worst observations, with the chain drawn on the image
     (:func:`image_crops`), where the log has camera images.
     """
+    return _write_report(run, Path(out_dir), formats, _plots(run))
+
+
+def _plots(run: Run) -> tuple[list[Figure], list[Figure]]:
+    """The report's pictures and the plots of its checks (made now: drawn here, or sent to the renderers)."""
     result = run.attributed()
-    out = Path(out_dir)
+    # Measured against the cameras' own motion, the world-error pictures would be empty.
+    pictures = motion_figures(run) + (make_figures(result) if result.metric != "camera_motion" else [])
+    if result.metric == "none":  # no evidence: the error plots would be empty axes
+        pictures = [f for f in pictures if f.name not in ("error_per_hop", "error_vs_speed")]
+    return pictures, [figure_png(fig, name, caption) for name, caption, fig in curve_plots(result)]
+
+
+def _write_report(run: Run, out: Path, formats: Sequence[str], plots: tuple[list[Figure], list[Figure]]
+                  ) -> dict[str, Path]:
+    result = run.attributed()
     out.mkdir(parents=True, exist_ok=True)
-    made = figures if figures is not None else report_figures(run)
-    pictures, checks = made.pictures, made.checks
+    pictures, checks = plots
     sections = image_crops(run)
     paths: dict[str, Path] = {}
     if "md" in formats:
