@@ -90,6 +90,8 @@ class EgoMotionFitOptions:
     #: Links whose misfit is within this factor of the best fit explain the motion as well.
     same_fit_ratio: float = 1.25
     min_pairs: int = 20
+    #: Fit a constant rate bias of the reference too (a gyro's; forward kinematics has none).
+    rate_bias: bool = False
     seed: int = 0
 
 
@@ -103,6 +105,10 @@ class LinkFit:
     residual_deg: float  # robust RMS misfit per frame pair
     link_rotation_deg: float  # RMS rotation of the link per frame pair (0: the link does not turn)
     pairs: int
+    #: The best offset of the coarse search lies at an end of its window: the true one may lie beyond it.
+    at_window_edge: bool = False
+    #: The reference's rate bias fitted (rad/s, in the link's frame; zeros unless ``rate_bias``).
+    bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -139,6 +145,10 @@ class EgoMotionFit:
     offset_observable: bool
     mount_observable: bool
     notes: tuple[str, ...]
+    #: Why the offset is undetermined ("" when it is not): at the edge of its search window, a flat misfit.
+    offset_undetermined: str = ""
+    #: The reference's rate bias fitted (rad/s, link frame; zeros unless the options ask for it).
+    bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def wrong_link(self) -> bool:
@@ -154,6 +164,11 @@ class _Pairs:
     t1: FloatArray
     rotvec: FloatArray  # (N, 3) measured, optical frame
     weight: FloatArray
+
+    @property
+    def dt(self) -> FloatArray:
+        out: FloatArray = self.t1 - self.t0
+        return out
 
 
 def _pairs(measured: EgoMotionTable, origin_ns: int, span_s: tuple[float, float], max_offset_s: float) -> _Pairs:
@@ -197,14 +212,20 @@ class _Scatter:
 
     ``link_rv`` (G, N, 3) are the link's rotation vectors at G offsets, ``cam_rv`` (N, 3) the measured
     ones; :meth:`fit` then weighs the pairs with one matrix product (BLAS), for one weight vector or
-    a whole bootstrap at once.
+    a whole bootstrap at once. With ``dt`` (N,) the pairs' durations, a constant rate bias ``beta`` of the
+    link's rotation is fitted too: ``a`` becomes ``a - beta dt``, alternating with the mount.
     """
 
-    def __init__(self, link_rv: FloatArray, cam_rv: FloatArray) -> None:
+    def __init__(self, link_rv: FloatArray, cam_rv: FloatArray, dt: FloatArray | None = None) -> None:
         g, n = link_rv.shape[:2]
         self.offsets = g
         self.outer = np.einsum("gni,nj->ngij", link_rv, cam_rv).reshape(n, g * 9)
         self.norms = ((link_rv**2).sum(-1) + (cam_rv**2).sum(-1)[None]).T  # (N, G)
+        self.dt = dt
+        if dt is not None:
+            self.link_dt = (link_rv * dt[None, :, None]).transpose(1, 0, 2).reshape(n, g * 3)
+            self.cam_dt = cam_rv * dt[:, None]
+            self.dt2 = dt**2
 
     def fit(self, weights: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Per offset (and per weight row): the mount ``X``, the misfit ``sum w |b - X^T a|^2`` and ``C = sum w a b^T``.
@@ -215,9 +236,37 @@ class _Scatter:
         cross = (w @ self.outer).reshape(w.shape[0], self.offsets, 3, 3)
         mounts = kabsch(cross)
         cost = w @ self.norms - 2.0 * (mounts * cross).sum(axis=(-1, -2))
+        if self.dt is not None:
+            mounts, cost, cross = self._with_bias(w, cross, mounts)
         if weights.ndim == 1:
             return mounts[0], cost[0], cross[0]
         return mounts, cost, cross
+
+    def bias(self, weights: FloatArray, mount: FloatArray, offset: int) -> FloatArray:
+        """The rate bias (rad/s, link frame) fitted with ``mount`` at offset index ``offset`` (one weight row)."""
+        if self.dt is None:
+            return np.zeros(3)
+        s_adt = (weights @ self.link_dt).reshape(self.offsets, 3)[offset]
+        s_bdt = weights @ self.cam_dt
+        out: FloatArray = (s_adt - mount @ s_bdt) / max(float(weights @ self.dt2), 1e-18)
+        return out
+
+    def _with_bias(self, w: FloatArray, cross: FloatArray, mounts: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Mount and bias in turn (three rounds): ``beta = sum w dt (a - X b) / sum w dt^2``, then Kabsch on
+        ``C - beta (sum w dt b)^T``."""
+        assert self.dt is not None
+        s_adt = (w @ self.link_dt).reshape(w.shape[0], self.offsets, 3)  # (B, G, 3)
+        s_bdt = w @ self.cam_dt  # (B, 3)
+        s_dt2 = np.maximum(w @ self.dt2, 1e-18)[:, None, None]  # (B, 1, 1)
+        biased = cross
+        for _ in range(3):
+            beta = (s_adt - np.einsum("bgij,bj->bgi", mounts, s_bdt)) / s_dt2
+            biased = cross - beta[..., :, None] * s_bdt[:, None, None, :]
+            mounts = kabsch(biased)
+        cost = (w @ self.norms - 2.0 * (beta * s_adt).sum(-1) + (beta**2).sum(-1) * s_dt2[..., 0]
+                - 2.0 * (mounts * biased).sum(axis=(-1, -2)))
+        return mounts, cost, biased
 
 
 def _parabola_min(x: FloatArray, y: FloatArray) -> FloatArray:
@@ -247,29 +296,58 @@ class _Solved:
     residual: FloatArray  # per pair at the solution (rad)
     fine: FloatArray  # fine offset grid around the solution
     fine_scatter: _Scatter  # the pairs' products on it
+    at_window_edge: bool  # the coarse search's best offset is at an end of its window
+    bias: FloatArray  # (3,) the reference's rate bias (rad/s, link frame; zeros unless fitted)
 
 
 def _solve(orientations: _Orientations, pairs: _Pairs, opts: EgoMotionFitOptions) -> _Solved:
-    """Coarse grid, robust reweighting, then a fine grid and a parabola: the offset and mount."""
+    """Coarse grid, robust reweighting, a fine grid and a parabola, then the continuous minimum: offset and mount.
+
+    The offset is a continuous unknown: forward kinematics is interpolated (slerp) at each frame's
+    stamp plus the trial offset, and the last step minimises the misfit over the offset itself
+    (bounded scalar search around the parabola's vertex), not over a grid of frame periods.
+    """
+    dt = pairs.dt if opts.rate_bias else None
     coarse = np.arange(-opts.max_offset_s, opts.max_offset_s + 0.5 * opts.step_s, opts.step_s)
     coarse_rv = _link_rotvecs(orientations, pairs, coarse)
-    coarse_scatter = _Scatter(coarse_rv, pairs.rotvec)
+    coarse_scatter = _Scatter(coarse_rv, pairs.rotvec, dt)
     weights = pairs.weight
     for _ in range(3):
         mounts, cost, _cross = coarse_scatter.fit(weights)
         best = int(np.argmin(cost))
-        residual = np.linalg.norm(pairs.rotvec - coarse_rv[best] @ mounts[best], axis=1)
+        bias = coarse_scatter.bias(weights, mounts[best], best)
+        residual = np.linalg.norm(pairs.rotvec - (coarse_rv[best] - bias * pairs.dt[:, None]) @ mounts[best], axis=1)
         weights = pairs.weight * _robust_weights(residual)
+    coarse_cost = coarse_scatter.fit(weights)[1]
+    best = int(np.argmin(coarse_cost))
+    edge = best <= 1 or best >= coarse.size - 2
     half = max(3.0 * opts.step_s, 0.025)
-    centre = float(coarse[int(np.argmin(coarse_scatter.fit(weights)[1]))])
-    fine = centre + np.arange(-half, half + 0.5 * opts.fine_step_s, opts.fine_step_s)
-    fine_scatter = _Scatter(_link_rotvecs(orientations, pairs, fine), pairs.rotvec)
-    offset = float(_parabola_min(fine, fine_scatter.fit(weights)[1]))
+    fine = float(coarse[best]) + np.arange(-half, half + 0.5 * opts.fine_step_s, opts.fine_step_s)
+    fine_scatter = _Scatter(_link_rotvecs(orientations, pairs, fine), pairs.rotvec, dt)
+    vertex = float(_parabola_min(fine, fine_scatter.fit(weights)[1]))
+    offset = _continuous_minimum(orientations, pairs, weights, dt, vertex, opts.fine_step_s)
     at = _link_rotvecs(orientations, pairs, np.array([offset]))
-    mount = _Scatter(at, pairs.rotvec).fit(weights)[0][0]
-    residual = np.linalg.norm(pairs.rotvec - at[0] @ mount, axis=1)
+    scatter = _Scatter(at, pairs.rotvec, dt)
+    mount = scatter.fit(weights)[0][0]
+    bias = scatter.bias(weights, mount, 0)
+    residual = np.linalg.norm(pairs.rotvec - (at[0] - bias * pairs.dt[:, None]) @ mount, axis=1)
     return _Solved(offset_s=offset, mount=mount, weights=weights, residual=residual, fine=fine,
-                   fine_scatter=fine_scatter)
+                   fine_scatter=fine_scatter, at_window_edge=edge, bias=bias)
+
+
+def _continuous_minimum(orientations: _Orientations, pairs: _Pairs, weights: FloatArray, dt: FloatArray | None,
+                        start: float, step: float) -> float:
+    """The offset minimising the weighted misfit within two fine steps of ``start`` (bounded Brent search)."""
+    from scipy.optimize import minimize_scalar
+
+    def cost(offset: float) -> float:
+        scatter = _Scatter(_link_rotvecs(orientations, pairs, np.array([offset])), pairs.rotvec, dt)
+        return float(scatter.fit(weights)[1][0])
+
+    found = minimize_scalar(cost, bounds=(start - 2 * step, start + 2 * step), method="bounded",
+                            options={"xatol": 1e-5})
+    best = float(found.x)
+    return best if cost(best) <= cost(start) else start
 
 
 def fit_link(
@@ -292,7 +370,9 @@ def _link_fit(name: str, pairs: _Pairs, solved: _Solved, orientations: _Orientat
     link_rv = _link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0]
     return LinkFit(link=name, offset_s=solved.offset_s, q_link_cam=Rotation.from_matrix(solved.mount).as_quat(),
                    residual_deg=float(np.rad2deg(rms)),
-                   link_rotation_deg=float(np.rad2deg(np.sqrt((link_rv**2).sum(1).mean()))), pairs=pairs.t0.size)
+                   link_rotation_deg=float(np.rad2deg(np.sqrt((link_rv**2).sum(1).mean()))), pairs=pairs.t0.size,
+                   at_window_edge=solved.at_window_edge,
+                   bias_rad_s=(float(solved.bias[0]), float(solved.bias[1]), float(solved.bias[2])))
 
 
 def translation_prior(
@@ -552,17 +632,15 @@ def _final(
     solved = _solve(orientations, pairs, opts)
     boot = _bootstrap(pairs, solved, opts)
     mount = Rotation.from_matrix(solved.mount)
-    link_rv = _link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0]
+    link_rv = _link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
     spread = _axis_spread(link_rv, solved.weights)
     mount_observable = spread >= opts.min_axis_spread
     if not mount_observable:
         notes.append(f"link {link.link} turned about one axis only (spread {spread:.3f}): the camera's mount "
                      "rotation about that axis is not observable")
-    edge = boot.at_edge
-    offset_observable = edge <= 0.05
-    if not offset_observable:
-        notes.append(f"time offset of camera {camera} is poorly determined: {edge:.0%} of the bootstrap minima "
-                     "lie at the edge of the search window")
+    undetermined = _offset_undetermined(solved, boot, opts)
+    if undetermined:
+        notes.append(f"time offset of camera {camera} is undetermined: {undetermined}")
     focal, focal_boot = _focal_scale(pairs, solved, link_rv, boot)
     error = None
     if link.link == declared_link:
@@ -581,9 +659,26 @@ def _final(
         alternatives=tuple(name for name in similar if name != link.link), links=links,
         offset_s=solved.offset_s, offset_interval_s=_interval(boot.offsets),
         q_link_cam=mount.as_quat(), mount_error=error, focal_scale=focal, focal_scale_interval=_interval(focal_boot),
-        camera_rotation_deg=turning, offset_observable=offset_observable, mount_observable=mount_observable,
-        notes=tuple(notes),
+        camera_rotation_deg=turning, offset_observable=not undetermined, mount_observable=mount_observable,
+        notes=tuple(notes), offset_undetermined=undetermined,
+        bias_rad_s=(float(solved.bias[0]), float(solved.bias[1]), float(solved.bias[2])),
     )
+
+
+#: Share of bootstrap minima at the fine grid's edge above which the offset is undetermined.
+_EDGE_SHARE = 0.05
+
+
+def _offset_undetermined(solved: _Solved, boot: _Boot, opts: EgoMotionFitOptions) -> str:
+    """Why the time offset cannot be trusted ("" when it can): its best value at an end of the search window
+    (the true one may lie beyond), or resamples whose best lies at the edge of the grid around it (a flat
+    or many-valleyed misfit)."""
+    if solved.at_window_edge:
+        return (f"its best value ({solved.offset_s * 1e3:+.0f} ms) lies at the edge of the +-{opts.max_offset_s:.2f} s "
+                "search window, and the true offset may lie beyond it")
+    if boot.at_edge > _EDGE_SHARE:
+        return f"{boot.at_edge:.0%} of the bootstrap minima lie at the edge of the search around it (a flat misfit)"
+    return ""
 
 
 def _chosen_fit(fit: LinkFit, solved: _Solved, pairs: _Pairs, orientations: _Orientations) -> LinkFit:

@@ -4,14 +4,16 @@ Each camera's fit (:mod:`framechain.analysis.egomotion_run`) proposes correction
 declares: the video/state time offset (``latency`` on camera_to_body), the mount's rotation on its
 link (``rotation_error``, ``missing_rotation`` or ``axis_flip``), the link the camera moves with
 (``wrong_camera_frame``: another link, another arm) and, when it is clear, the focal length
-(``intrinsics``; otherwise a note). A correction is proposed when its interval excludes "nothing
-wrong" by more than the smallest size worth a fix (:data:`MIN_OFFSET_S`, :data:`MIN_ANGLE_DEG`).
+(``intrinsics``; otherwise a note). A correction is a finding when its estimate is determined, its
+interval excludes "nothing wrong" and its size passes its bound (:mod:`framechain.analysis.
+egomotion_bounds`), and only when the fitted model explains the camera's motion at all: a model that
+leaves most of the motion unexplained offers no fix, whatever its estimates say.
 
 The error they share is the camera's rotation-rate misfit: per frame pair, the measured rotation
 against the rotation forward kinematics predicts as declared (declared link and mount, no offset),
 in deg/s; its robust RMS over the pairs is the camera's error. Shares are Shapley values of the
 misfit each correction removes (every subset of the corrections applied, as attribution does for
-points); a correction that removes less than :data:`MIN_SHARE` of it is a note, not a finding.
+points): they say how much of the misfit each finding explains, not whether it is one.
 
 Every fix names the key to change in the file that declares the camera (robot.yaml, or the
 camera's calibration file), in that file's own form.
@@ -30,6 +32,16 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
+from framechain.analysis.egomotion_bounds import (
+    FOCAL_CLEAR,
+    MIN_ANGLE_DEG,
+    NO_DEPTH,
+    Judgement,
+    judge,
+    latency_bound_s,
+    motion_bounds,
+    observability,
+)
 from framechain.analysis.egomotion_run import CameraMotion, CameraMotionEvidence
 from framechain.analysis.estimates import (
     Estimate,
@@ -38,24 +50,16 @@ from framechain.analysis.estimates import (
     PermutationEstimate,
     RotationEstimate,
     ScaleEstimate,
-    format_estimate,
 )
 from framechain.analysis.findings import Finding
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 
-__all__ = ["MIN_ANGLE_DEG", "MIN_OFFSET_S", "MIN_SHARE", "MotionFindings", "MountDeclaration", "motion_bounds",
-           "motion_findings"]
+__all__ = ["MotionFindings", "MountDeclaration", "motion_findings"]
 
-#: A time offset smaller than this (s) is not worth a fix.
-MIN_OFFSET_S = 0.005
-#: A mount rotation whose interval does not clear this (deg) is not worth a fix.
-MIN_ANGLE_DEG = 1.0
-#: A correction removing less than this share of the rotation-rate misfit is a note, not a finding.
-MIN_SHARE = 0.05
-#: A focal length off by more than this (ratio), with an interval narrower than it, is a finding.
-FOCAL_CLEAR = 0.10
+#: Every correction a camera's fit can propose.
+_EVERY = frozenset({"latency", "link", "mount", "focal"})
 #: Declared intrinsics the motion implies are off by less than this (ratio) get no note: the rotation
 #: measured from images of a scene at finite depth comes out up to about 1% off on clean generated episodes.
 FOCAL_NOTE = 0.03
@@ -149,54 +153,65 @@ class _Misfit:
         r = self.residual(kinds)
         return float(np.sqrt((self.weights * r**2).sum() / self.weights.sum()))
 
+    def motion_rms(self) -> float:
+        """The camera's rotation rate (deg/s, RMS over the pairs): the larger of measured and fitted."""
+        m, fit = self.motion, self.fit
+        rates = rotation_rates(m.table, m.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
+                               focal_scale=fit.focal_scale / m.measured_focal)
+        size = np.maximum(np.linalg.norm(rates.measured, axis=1), np.linalg.norm(rates.predicted, axis=1))[self.rows]
+        return float(np.rad2deg(np.sqrt(np.nanmean(size**2)))) if size.size else 0.0
+
 
 def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any]) -> MotionFindings:
-    """Findings of every camera whose motion was measured, with shares of their summed misfit."""
+    """Findings of every camera whose motion was measured and is explained, with shares of their summed misfit."""
     found: list[tuple[_Proposal, float, str]] = []
     before: list[FloatArray] = []
     after: list[FloatArray] = []
     notes: list[str] = []
     entries: list[dict[str, Any]] = []
+    bounds: list[Bound] = []
     totals = 0.0
     for motion in evidence.cameras:
         declaration = MountDeclaration.from_metadata(metadata, motion.camera)
-        if not motion.observable or motion.fit is None:
-            notes.extend(motion.notes if not motion.fit else motion.fit.notes)
-            entries.append(_entry(motion, declaration, None, ()))
+        misfit = _misfit(motion, motion.fit) if motion.observable and motion.fit is not None else None
+        if misfit is None or misfit.rows.size == 0:
+            why = [] if misfit is None else [f"camera {motion.camera}: no measured frame pair inside the span of its "
+                                             "links' poses"]
+            notes.extend((*why, *(motion.notes if not motion.fit else motion.fit.notes)))
+            entries.append(_entry(motion, declaration, None, (), None))
+            bounds.extend(motion_bounds(motion))
             continue
-        fit = motion.fit
-        misfit = _misfit(motion, fit)
-        if misfit.rows.size == 0:
-            notes.append(f"camera {motion.camera}: no measured frame pair inside the span of its links' poses")
-            entries.append(_entry(motion, declaration, None, ()))
-            continue
-        proposals = _proposals(motion, fit, declaration)
+        fit = misfit.fit
+        judgement = judge(motion, fit, misfit.rms(frozenset()), misfit.rms(_EVERY), misfit.motion_rms())
+        proposals = _proposals(motion, fit, declaration, judgement)
         values = _shapley(misfit, [p.kind for p in proposals])
-        total = misfit.rms(frozenset())
-        totals += total
+        totals += misfit.rms(frozenset())
         before.append(misfit.residual(frozenset()))
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
-        for proposal, value in zip(proposals, values, strict=True):
-            found.append((proposal, value, motion.camera))
-        notes.extend(n for n in (*motion.notes, *fit.notes, *_focal_notes(motion, fit, proposals)) if n not in notes)
-        entries.append(_entry(motion, declaration, misfit, proposals))
-    findings = []
-    for proposal, value, camera in found:
-        share = value / totals if totals > 0 else 0.0
-        if share < MIN_SHARE:
-            notes.append(f"{proposal.fault.value} on camera {camera} ({format_estimate(proposal.estimate)}) is no "
-                         f"finding: it removes {value:.3f} deg/s ({share:.1%}) of the rotation-rate misfit")
-            continue
-        findings.append(Finding(fault=proposal.fault, hop=proposal.hop, estimate=proposal.estimate,
-                                interval=proposal.interval, share=share, error_m=value,
-                                confidence=proposal.confidence, evidence=proposal.evidence, fix=proposal.fix,
-                                model=f"camera_motion_{proposal.kind}", camera=camera, error_unit="deg/s"))
-    findings.sort(key=lambda f: f.share, reverse=True)
+        found.extend((proposal, value, motion.camera) for proposal, value in zip(proposals, values, strict=True))
+        said = (*motion.notes, *fit.notes, *_judged_notes(judgement), *_focal_notes(motion, fit, proposals, judgement))
+        notes.extend(n for n in said if n not in notes)
+        entries.append(_entry(motion, declaration, misfit, proposals, judgement))
+        bounds.extend(motion_bounds(motion, judgement))
+    findings = sorted((_finding(proposal, value, camera, totals) for proposal, value, camera in found),
+                      key=lambda f: f.share, reverse=True)
     empty = np.zeros(0)
     return MotionFindings(findings=tuple(findings), residual_before=np.concatenate(before) if before else empty,
                           residual_after=np.concatenate(after) if after else empty, notes=tuple(notes),
-                          entries=tuple(entries),
-                          bounds=(*(b for motion in evidence.cameras for b in motion_bounds(motion)), _NO_DEPTH))
+                          entries=tuple(entries), bounds=(*bounds, NO_DEPTH))
+
+
+def _finding(proposal: _Proposal, value: float, camera: str, total: float) -> Finding:
+    return Finding(fault=proposal.fault, hop=proposal.hop, estimate=proposal.estimate, interval=proposal.interval,
+                   share=value / total if total > 0 else 0.0, error_m=value, confidence=proposal.confidence,
+                   evidence=proposal.evidence, fix=proposal.fix, model=f"camera_motion_{proposal.kind}", camera=camera,
+                   error_unit="deg/s")
+
+
+def _judged_notes(judgement: Judgement) -> list[str]:
+    """A motion the model does not explain, and each undetermined estimate, as notes."""
+    out = [f"{judgement.why_unexplained}: no fix is offered from it"] if not judgement.explained else []
+    return out + list(judgement.undetermined.values())
 
 
 def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
@@ -234,27 +249,37 @@ def _shapley(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:
 
 
 # -- the corrections proposed ----------------------------------------------------------------------
-def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> list[_Proposal]:
+def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None,
+               judgement: Judgement) -> list[_Proposal]:
+    """The corrections that are findings: determined, clear of "nothing wrong", past their bound; none at all
+    when the fitted model does not explain the motion."""
+    if not judgement.explained:
+        return []
+    undetermined = judgement.undetermined
     out: list[_Proposal] = []
     low, high = fit.offset_interval_s
-    if fit.offset_observable and abs(fit.offset_s) >= MIN_OFFSET_S and (low > 0 or high < 0):
+    if (Fault.LATENCY.value not in undetermined and fit.offset_observable and (low > 0 or high < 0)
+            and abs(fit.offset_s) >= latency_bound_s(fit)):
         out.append(_latency(motion, fit, declaration))
     if fit.wrong_link:
         out.append(_link(motion, fit, declaration))
-    elif fit.mount_error is not None and fit.mount_observable and fit.mount_error.interval_deg[0] >= MIN_ANGLE_DEG:
+    elif (fit.mount_error is not None and fit.mount_observable and Fault.ROTATION_ERROR.value not in undetermined
+          and fit.mount_error.interval_deg[0] >= MIN_ANGLE_DEG):
         out.append(_mount(motion, fit, declaration))
     scale_low, scale_high = fit.focal_scale_interval
-    if (abs(fit.focal_scale - 1.0) > FOCAL_CLEAR and scale_high - scale_low < FOCAL_CLEAR
-            and not scale_low <= 1.0 <= scale_high):
+    if (Fault.INTRINSICS.value not in undetermined and abs(fit.focal_scale - 1.0) > FOCAL_CLEAR
+            and scale_high - scale_low < FOCAL_CLEAR and not scale_low <= 1.0 <= scale_high):
         out.append(_focal(motion, fit, declaration))
     return out
 
 
-def _focal_notes(motion: CameraMotion, fit: EgoMotionFit, proposals: Sequence[_Proposal]) -> list[str]:
+def _focal_notes(motion: CameraMotion, fit: EgoMotionFit, proposals: Sequence[_Proposal],
+                 judgement: Judgement) -> list[str]:
     """The focal length the camera's motion implies, as a note when it is no finding (assumed intrinsics, or a
-    departure not clear enough to fix)."""
+    departure not clear enough to fix); nothing when it is undetermined (said already)."""
     low, high = fit.focal_scale_interval
-    if any(p.kind == "focal" for p in proposals) or not np.isfinite(fit.focal_scale):
+    if (any(p.kind == "focal" for p in proposals) or not np.isfinite(fit.focal_scale)
+            or Fault.INTRINSICS.value in judgement.undetermined or not judgement.explained):
         return []
     implied = f"{fit.focal_scale:.3f} ({low:.3f} .. {high:.3f}) times the declared focal length"
     if not motion.intrinsics_known:
@@ -370,13 +395,14 @@ def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration:
 
 # -- the JSON entry ---------------------------------------------------------------------------------
 def _entry(motion: CameraMotion, declaration: MountDeclaration | None, misfit: _Misfit | None,
-           proposals: Sequence[_Proposal]) -> dict[str, Any]:
+           proposals: Sequence[_Proposal], judgement: Judgement | None) -> dict[str, Any]:
     """One camera's ``camera_motion`` entry: the measurement, and what it can and cannot observe."""
     fit = motion.fit
     entry: dict[str, Any] = {
         "camera": motion.camera, "name": declaration.name if declaration else None,
         "declared_link": motion.declared_link, "frames": motion.frames, "pairs": len(motion.table),
-        "seconds": round(motion.seconds, 3), "observable": _observability(motion),
+        "seconds": round(motion.seconds, 3), "pairing": motion.pairing or None,
+        "observable": observability(motion, judgement),
     }
     if fit is None or not fit.link:
         return {**entry, "notes": list(motion.notes if fit is None else (*motion.notes, *fit.notes))}
@@ -395,65 +421,14 @@ def _entry(motion: CameraMotion, declaration: MountDeclaration | None, misfit: _
     })
     if misfit is not None:
         entry["misfit_deg_s"] = {"declared": _num(misfit.rms(frozenset())),
-                                 "corrected": _num(misfit.rms(frozenset(p.kind for p in proposals)))}
+                                 "corrected": _num(misfit.rms(frozenset(p.kind for p in proposals))),
+                                 "fitted": _num(misfit.rms(_EVERY))}
+    if judgement is not None:
+        entry["explained"] = judgement.explained
+        entry["unexplained_why"] = judgement.why_unexplained or None
+        entry["motion_deg_s"] = _num(judgement.motion_deg_s)
+        entry["undetermined"] = dict(judgement.undetermined)
     return entry
-
-
-def motion_bounds(motion: CameraMotion) -> tuple[Bound, ...]:
-    """What the camera's motion can show of each sized family, as attribution bounds (camera named): the
-    smallest offset, mount rotation and focal length departure the rate fit would make a finding of
-    (:func:`_proposals`' thresholds widened by the fit's own interval), or why it cannot see them."""
-    fit = motion.fit
-    hop, camera = HopName.CAMERA_TO_BODY, motion.camera
-    if fit is None or not fit.link:
-        why = motion.why_not
-        return (Bound(hop, Fault.LATENCY, False, None, why, camera=camera),
-                Bound(hop, Fault.ROTATION_ERROR, False, None, why, camera=camera),
-                Bound(HopName.PIXEL_TO_CAMERA, Fault.INTRINSICS, False, None, why, camera=camera))
-    low, high = fit.offset_interval_s
-    # A latency finding needs an interval clear of 0 and an offset of MIN_OFFSET_S.
-    latency = (Bound(hop, Fault.LATENCY, True, {"offset_s": _num(max(MIN_OFFSET_S, 0.5 * (high - low))) or 0.0},
-                     "", camera=camera) if fit.offset_observable else
-               Bound(hop, Fault.LATENCY, False, None, next((n for n in fit.notes if "offset" in n), ""), camera=camera))
-    if fit.mount_error is None:
-        mount = Bound(hop, Fault.ROTATION_ERROR, False, None, f"camera {camera} moves with {fit.link}, not the "
-                      f"declared {motion.declared_link}: its mount there is not measured", camera=camera)
-    elif not fit.mount_observable:
-        mount = Bound(hop, Fault.ROTATION_ERROR, False, None, next((n for n in fit.notes if "one axis" in n), ""),
-                      camera=camera)
-    else:  # a mount finding needs the interval's lower end at MIN_ANGLE_DEG
-        spread = fit.mount_error.interval_deg
-        mount = Bound(hop, Fault.ROTATION_ERROR, True,
-                      {"angle_deg": _num(MIN_ANGLE_DEG + 0.5 * (spread[1] - spread[0])) or 0.0}, "", camera=camera)
-    return latency, mount, _focal_bound(motion, fit)
-
-
-#: A rotation rate has no depth in it: the cameras' own motion cannot scale their depth.
-_NO_DEPTH = Bound(HopName.PIXEL_TO_CAMERA, Fault.DEPTH_SCALE, False, None,
-                  "a camera's rotation carries no depth: no depth scale is measured from the cameras' own motion")
-
-
-def _focal_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
-    """An intrinsics finding needs a departure over FOCAL_CLEAR measured within an interval narrower than it."""
-    low, high = fit.focal_scale_interval
-    hop, camera = HopName.PIXEL_TO_CAMERA, motion.camera
-    if not np.isfinite(fit.focal_scale) or not high - low < FOCAL_CLEAR:
-        return Bound(hop, Fault.INTRINSICS, False, None, f"camera {camera}: the focal length its motion implies is "
-                     f"uncertain by more than {FOCAL_CLEAR:.0%}", camera=camera)
-    return Bound(hop, Fault.INTRINSICS, True, {"scale": FOCAL_CLEAR}, "", camera=camera)
-
-
-def _observability(motion: CameraMotion) -> list[dict[str, Any]]:
-    """The camera's bounds, and whether the link it moves with is told apart from the others."""
-    fit = motion.fit
-    out = [b.to_json() for b in motion_bounds(motion)]
-    ambiguous = fit is not None and bool(fit.alternatives)
-    why = motion.why_not if fit is None or not fit.link else (
-        f"{', '.join(fit.alternatives)} move(s) as {fit.link} does" if ambiguous else "")
-    out.append({"hop": HopName.CAMERA_TO_BODY.value, "fault": Fault.WRONG_CAMERA_FRAME.value, "camera": motion.camera,
-                "observable": bool(fit is not None and fit.link) and not ambiguous, "min_detectable": None,
-                "why": why})
-    return out
 
 
 def _num(value: float) -> float | None:

@@ -24,8 +24,9 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, LinkMotion, fit_camera_motion
-from framechain.arrays import FloatArray
+from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, LinkMotion, fit_camera_motion, fit_link
+from framechain.arrays import FloatArray, IntArray
+from framechain.config.calibration import Intrinsics
 from framechain.config.chain import ChainConfig
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
@@ -42,14 +43,24 @@ class CameraImages(Protocol):
 
     frames: int  # frames used
     decoded: int  # frames decoded
+    intrinsics: Intrinsics  # as measured with (declared, or assumed from the image size)
     intrinsics_known: bool
     notes: tuple[str, ...]
     last: EgoMotionTable  # the latest measurement
+    pairing: str  # how a video's frames pair with the rows ("" for images stamped on their own)
+    forced: bool  # the pairing was forced in the configuration
+    alternatives: dict[str, IntArray]  # the frames' stamps under the other pairings
 
     def measure(self, prior: TranslationPrior | None) -> EgoMotionTable: ...
 
     def rescale_focal(self, factor: float) -> None:
         """Measure from now on with the focal length scaled by ``factor``."""
+
+    def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
+        """A measurement with its frames stamped under another pairing."""
+
+    def use_pairing(self, pairing: str) -> None:
+        """Measure from now on with the frames stamped under ``pairing``."""
 
 
 #: Decodes and tracks the images of a camera (its frame), only when its motion is worth measuring.
@@ -74,6 +85,11 @@ class CameraMotion:
     notes: tuple[str, ...] = ()
     #: The focal length ``table`` was measured with, over the declared one (1: as declared).
     measured_focal: float = 1.0
+    #: The declared (or assumed) focal length and image width (px): what a lens can be is judged on them.
+    focal_px: float = float("nan")
+    width_px: int = 0
+    #: How the camera's video frames pair with the rows, and what the motion says of it ("" when not a video).
+    pairing: str = ""
 
     @property
     def observable(self) -> bool:
@@ -139,11 +155,58 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
         why = f"camera {camera}: the poses of {link} cannot be looked up in {chain.frames.world} at its samples"
         return replace(empty, notes=(why,), seconds=time.perf_counter() - start)
     source = images(camera)
+    declared = source.intrinsics
+    pairing = confirm_pairing(source, links, camera, options)
     fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options)
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
                         declared_xyz_link_cam=xyz_link_cam, fit=fit, table=source.last, links=links,
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
-                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *notes), measured_focal=focal)
+                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *notes),
+                        measured_focal=focal, focal_px=0.5 * (declared.fx + declared.fy), width_px=declared.width,
+                        pairing=source.pairing)
+
+
+#: Another pairing whose misfit is this many times smaller contradicts the one the files gave.
+PAIRING_CONTRADICTED = 1.5
+
+
+def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: str,
+                    options: EgoMotionFitOptions) -> list[str]:
+    """What the camera's motion says of how its video frames were paired with the rows, as notes.
+
+    The rotation-only measurement is fitted (offset and mount, every candidate link) with the frames
+    stamped as paired, and as every other pairing would stamp them: under a wrong pairing the misfit
+    is much larger. When another pairing fits :data:`PAIRING_CONTRADICTED` times better, a pairing the
+    files suggested is replaced by it, and a pairing forced in the configuration stays, with a note.
+    """
+    if not source.pairing or not source.alternatives:
+        return []
+    table = source.measure(None)
+    own = _best_misfit(table, links, options)
+    if own is None:
+        return []
+    others = {name: _best_misfit(source.restamp(table, name), links, options) for name in source.alternatives}
+    scored = sorted((v, k) for k, v in others.items() if v is not None)
+    said = "; ".join(f"{v:.3f} by {k}" for v, k in scored)
+    if not scored or scored[0][0] * PAIRING_CONTRADICTED >= own:
+        return [f"camera {camera}: its motion confirms its frames' pairing by {source.pairing} (misfit {own:.3f} deg "
+                f"per frame pair against forward kinematics; {said})"]
+    best, name = scored[0]
+    if source.forced:
+        return [f"camera {camera}: its frames are paired with the rows by {source.pairing}, as the configuration "
+                f"forces, but its motion contradicts it: the misfit against forward kinematics is {own:.3f} deg per "
+                f"frame pair, and {best:.3f} by {name}"]
+    was = source.pairing
+    source.use_pairing(name)
+    return [f"camera {camera}: the files suggested pairing its frames with the rows by {was}, but its motion fits "
+            f"forward kinematics much better by {name} ({best:.3f} against {own:.3f} deg misfit per frame pair): "
+            f"paired by {name}"]
+
+
+def _best_misfit(table: EgoMotionTable, links: Sequence[LinkMotion], options: EgoMotionFitOptions) -> float | None:
+    """The smallest rotation-only misfit (deg per frame pair) of any candidate link, offset and mount fitted."""
+    fits = [f for f in (fit_link(table, link, options) for link in links) if f is not None]
+    return min((f.residual_deg for f in fits), default=None)
 
 
 #: Rounds of measuring again with the focal length the motion implies, when it is clearly not the declared one.

@@ -213,23 +213,33 @@ class Attribution:
         return f" {bounds}" if bounds else ""
 
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
-        """The verdict of a run measured by the cameras' own motion against forward kinematics."""
+        """The verdict of a run measured by the cameras' own motion against forward kinematics: the findings, or
+        "Inconclusive" when a camera's motion is not explained or the estimates that would decide are
+        undetermined, or no fault beyond noise; then the bounds."""
         rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
         bounds = self._bounds_sentence() if self.bounds else ""
         observable = [o for entry in self.camera_motion for o in entry.get("observable", ()) if o["observable"]]
-        if not self.findings and not observable:
+        unexplained = [str(e["unexplained_why"]) for e in self.camera_motion if e.get("explained") is False]
+        undetermined = [f"camera {e['camera']}: {why}" for e in self.camera_motion if e.get("explained") is not False
+                        for why in (e.get("undetermined") or {}).values()]
+        if not self.findings and not observable and not unexplained and not undetermined:
             if bounds:
                 return ("Nothing could be checked: no camera's own motion can be measured against forward "
                         f"kinematics; {bounds[0].lower()}{bounds[1:]}")
             why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
             return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
         if not self.findings:
+            if unexplained or undetermined:
+                said = "; ".join([*unexplained, *undetermined])
+                return f"Inconclusive: {said}; no fix is offered." + self._then_bounds()
             return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}." + self._then_bounds()
         top = self.findings[0]
         more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
         on = f" on camera {top.camera}" if top.camera else ""
+        also = "".join(f" {why[0].upper()}{why[1:]}: no fix is offered for it." for why in unexplained)
         return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
-                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}." + self._then_bounds())
+                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{also}"
+                + self._then_bounds())
 
     def _rig_unobservable(self) -> str:
         """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""

@@ -108,7 +108,7 @@ def _dataset_summary(path: str, episode: int | None = None) -> LoadedLog:
     from framechain.adapters import LoadedLog, scan_dataset
     from framechain.timeline import Timeline
 
-    info = scan_dataset(path, episode)
+    info = scan_dataset(path, episode, clocks=True)
     note = "pass --episode N --robot robot.yaml to see the frame tree that forward kinematics gives"
     return LoadedLog(timeline=Timeline(), info=info.with_notes([note]), decoded_topics={})
 

@@ -28,6 +28,8 @@ One YAML mapping per camera (a file of its own, or inline under ``cameras:`` in 
     timing:                            # optional: when the camera's frames were taken
       timestamp_column: observation.images.wrist.timestamp  # per-frame camera time (s), or
       offset_s: 0.0                    # camera time = frame timestamp + offset_s
+      pairing: order                   # optional: how a video's frames pair with the rows (presentation,
+                                       # order or fitted); found from the files when not given
     depth:                             # optional: a per-frame depth feature of this camera
       feature: observation.depth.wrist # array feature (H, W), float metres or integer units
       scale_m: 0.001                   # metres per unit (default 1.0)
@@ -115,6 +117,12 @@ class CameraTiming:
 
     timestamp_column: str | None = None
     offset_s: float = 0.0
+    #: How the video's frames pair with the rows, when the user forces it (None: found from the files).
+    pairing: str | None = None
+
+
+#: The ways a video's frames can pair with a dataset's rows (framechain.adapters.lerobot.clock).
+PAIRINGS = ("presentation", "order", "fitted")
 
 
 @dataclass(frozen=True)
@@ -202,12 +210,15 @@ def load_calibration(
     if "mount" not in top:
         top.fail("no mount: give mount: {parent, xyz, rpy | quat_xyzw | rotvec, optical}")
     mount = _mount(top.section("mount", _MOUNT_KEYS))
-    timing = top.section("timing", {"timestamp_column", "offset_s"})
+    timing = top.section("timing", {"timestamp_column", "offset_s", "pairing"})
     offset_s = timing.number("offset_s", 0.0, unit="s", check=plausible.camera_offset)
+    pairing = timing.name("pairing", what="a pairing")
+    if pairing is not None and pairing not in PAIRINGS:
+        timing.expected("pairing", f"one of {', '.join(PAIRINGS)}", pairing)
     return CameraCalibration(
         name=cam_name, intrinsics=intrinsics, mount=mount, frame=top.frame("frame") or "",
         video_key=top.name("video_key", what="a feature name"),
-        timing=CameraTiming(timing.name("timestamp_column", what="a column name"), offset_s or 0.0),
+        timing=CameraTiming(timing.name("timestamp_column", what="a column name"), offset_s or 0.0, pairing),
         # Inline intrinsics noted into this file's notes already; a file's own come with its intrinsics.
         depth=_depth(top), source=source, notes=tuple(dict.fromkeys((*intrinsics.notes, *top.notes))),
     )

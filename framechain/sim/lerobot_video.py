@@ -15,7 +15,21 @@ Faults, all known to the returned :class:`VideoDatasetTruth`:
   ``R_declared = R_true exp(angle * axis)``;
 - ``declared_arm``: the camera is declared on another arm than the one carrying it;
 - ``focal_scale``: the declared intrinsics' focal length is this times the true one;
-- ``repeat_share``: this share of frames repeat the previous frame exactly (a late camera).
+- ``repeat_share``: this share of frames repeat the previous frame exactly (a late camera), on the
+  same rows in every camera (as a real recorder resends when its loop is late);
+- ``camera_delays_s`` / ``episode_delays_s``: a delay of one camera, or of one episode, on top.
+
+And the ways real recordings depart from LeRobot's own writer, each switched on its own:
+
+- ``clock="realtime"``: the rows' ``timestamp`` are the real capture times, at a variable rate about
+  ``realtime_hz`` (18.6 Hz in a real SO-101 recording), while each video holds exactly one frame per
+  row encoded at the nominal ``fps`` (so ``timestamp`` departs from ``frame_index / fps``, by seconds
+  at the end of a long episode); the default ``"presentation"`` writes ``timestamp = frame_index / fps``;
+- ``camera_per_arm``: a wrist camera on each arm of a bimanual robot (``observation.images.left_wrist``
+  and ``right_wrist``), and ``swap_cameras``: each declared on the other arm;
+- ``black_first_episode``: that camera's first episode is all black (a camera that delivered nothing);
+- ``table="cloth"``: a low-texture table (a cloth's faint weave) under the camera;
+- ``codec="mpeg4"`` at 224x224 and a wide lens (``focal_px`` about 100 to 125) are spec values.
 
 State is LeRobot's SO-101 convention: joints in degrees (``shoulder_pan.pos``, ...), the gripper
 0-100; actions are the next frame's state.
@@ -36,8 +50,8 @@ from framechain.arrays import FloatArray
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
 from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
 
-__all__ = ["ARM_JOINTS", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset", "gripper_pads",
-           "write_robot_yaml"]
+__all__ = ["ARM_JOINTS", "CameraTruth", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset",
+           "gripper_pads", "realtime_stamps", "write_robot_yaml"]
 
 ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 #: A pose with the gripper reaching forward and down over the table.
@@ -50,7 +64,7 @@ _OPTICAL_IN_GRIPPER = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -
 
 @dataclass(frozen=True)
 class VideoDatasetSpec:
-    """What to generate: arms, camera, episodes, format, and the faults to inject."""
+    """What to generate: arms, cameras, episodes, format, the clock, and the faults to inject."""
 
     urdf: Path
     seed: int = 0
@@ -63,11 +77,17 @@ class VideoDatasetSpec:
     #: The arm carrying the camera and the arm it is declared on ("" single arm; "left_"/"right_").
     camera_arm: str = ""
     declared_arm: str | None = None
+    #: A wrist camera on every arm (bimanual), each declared on the other arm when ``swap_cameras``.
+    camera_per_arm: bool = False
+    swap_cameras: bool = False
     width: int = 224
     height: int = 224
     focal_px: float = 180.0
     mount_xyz: tuple[float, float, float] = (0.05, 0.0, -0.03)
     video_delay_s: float = 0.0
+    #: Per camera (in the order of ``VideoDatasetTruth.cameras``) and per episode: delays added to ``video_delay_s``.
+    camera_delays_s: tuple[float, ...] = ()
+    episode_delays_s: tuple[float, ...] = ()
     mount_error_deg: float = 0.0
     mount_error_axis: tuple[float, float, float] = (0.6, 0.8, 0.0)
     focal_scale: float = 1.0
@@ -75,6 +95,13 @@ class VideoDatasetSpec:
     pads: bool = True
     #: The arms hold still (a camera that shows nothing of its motion).
     still: bool = False
+    #: "presentation": ``timestamp = frame_index / fps``; "realtime": real capture times at about ``realtime_hz``.
+    clock: str = "presentation"
+    realtime_hz: float = 18.6
+    #: The camera (its name: "wrist", "left_wrist", ...) whose first episode is all black ("": none).
+    black_first_episode: str = ""
+    #: "rich": a textured table; "cloth": a low-texture one.
+    table: str = "rich"
     #: A marker lying on the table under the camera's mean view (0: none): its side (m), id, dictionary.
     marker_size_m: float = 0.0
     marker_id: int = 7
@@ -84,10 +111,36 @@ class VideoDatasetSpec:
     #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
     codec_options: tuple[tuple[str, str], ...] = ()
 
+    def delay_s(self, camera: int, episode: int) -> float:
+        """How late camera ``camera``'s frames of episode ``episode`` are (s)."""
+        extra = self.camera_delays_s[camera] if camera < len(self.camera_delays_s) else 0.0
+        shift = self.episode_delays_s[episode] if episode < len(self.episode_delays_s) else 0.0
+        return self.video_delay_s + extra + shift
+
+
+@dataclass(frozen=True)
+class CameraTruth:
+    """One wrist camera: where it truly is, where robot.yaml declares it, what its frames hold."""
+
+    name: str
+    video_key: str
+    arm: str  # the arm carrying it ("", "left_", "right_")
+    declared_arm: str
+    camera_link: str
+    declared_link: str
+    q_link_cam: FloatArray  # true R_link_cam (xyzw)
+    declared_q_link_cam: FloatArray
+    #: Per episode: how late its frames are (s); framechain's offset is minus this.
+    delays_s: tuple[float, ...]
+    black_episodes: tuple[int, ...] = ()
+
 
 @dataclass(frozen=True)
 class VideoDatasetTruth:
-    """The dataset written and everything true about it (frames in the camera's optical frame)."""
+    """The dataset written and everything true about it (frames in the camera's optical frame).
+
+    The single-camera fields describe the first camera; ``cameras`` holds every one.
+    """
 
     root: Path
     spec: VideoDatasetSpec
@@ -102,15 +155,36 @@ class VideoDatasetTruth:
     #: True fx, fy, cx, cy and the declared focal length.
     intrinsics: tuple[float, float, float, float]
     declared_focal_px: float
-    #: Per episode: the frames (in order) that repeat the previous one.
+    #: Per episode: the frames (in order) that repeat the previous one (the same rows in every camera).
     repeated: tuple[tuple[int, ...], ...] = field(default_factory=tuple)
     #: The marker's centre in the world (NaN: none).
     marker_xyz: tuple[float, float, float] = (float("nan"), float("nan"), float("nan"))
+    cameras: tuple[CameraTruth, ...] = ()
+    #: Per episode: the rows' timestamps as written (s from the episode's start).
+    timestamps_s: tuple[FloatArray, ...] = ()
 
     @property
     def expected_offset_s(self) -> float:
         """framechain's latency offset for the injected delay: frames late by d give ``-d``."""
         return -self.spec.video_delay_s
+
+    def camera(self, name: str) -> CameraTruth:
+        return next(c for c in self.cameras if c.name == name)
+
+
+def realtime_stamps(rng: np.random.Generator, duration_s: float, rate_hz: float) -> FloatArray:
+    """Capture times (s, from 0) of a recorder whose loop runs at a variable ``rate_hz`` on average.
+
+    Intervals jitter by about 15% around the mean, and one in thirty takes twice as long (a late loop),
+    as the rows of a real SO-101 recording do (about 18.6 Hz where 20 fps was asked).
+    """
+    mean = 1.0 / rate_hz
+    count = max(2, round(duration_s * rate_hz))
+    intervals = mean * np.clip(1.0 + 0.15 * rng.standard_normal(count - 1), 0.6, 1.6)
+    intervals[rng.random(count - 1) < 1.0 / 30.0] *= 2.0
+    intervals *= (count - 1) * mean / intervals.sum()  # keep the average rate
+    out: FloatArray = np.concatenate([[0.0], np.cumsum(intervals)])
+    return out
 
 
 def _trajectory(rng: np.random.Generator, *, still: bool = False) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -159,68 +233,112 @@ def gripper_pads(width: int, height: int) -> tuple[PadRegion, ...]:
     return PadRegion(left, 1), PadRegion(right, 2)
 
 
+def _camera_layout(spec: VideoDatasetSpec, arms: tuple[str, ...]) -> list[tuple[str, str, str]]:
+    """(name, carrying arm, declared arm) of each camera."""
+    if spec.camera_per_arm:
+        if len(arms) != 2:
+            raise ValueError("camera_per_arm needs a bimanual robot")
+        other = {arms[0]: arms[1], arms[1]: arms[0]}
+        return [(f"{arm}wrist", arm, other[arm] if spec.swap_cameras else arm) for arm in arms]
+    declared = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
+    return [("wrist", spec.camera_arm, declared)]
+
+
+def _episode_stamps(rng: np.random.Generator, spec: VideoDatasetSpec) -> FloatArray:
+    if spec.clock == "realtime":
+        return realtime_stamps(rng, spec.duration_s, spec.realtime_hz)
+    if spec.clock != "presentation":
+        raise ValueError(f"clock {spec.clock!r}: presentation or realtime")
+    out: FloatArray = np.arange(round(spec.duration_s * spec.fps)) / spec.fps
+    return out
+
+
 def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDatasetTruth:
     """Render, encode and write the dataset under ``root`` (created); return its truth."""
     rng = np.random.default_rng(spec.seed)
     arms = ("left_", "right_") if spec.bimanual else ("",)
-    if spec.camera_arm not in arms or (spec.declared_arm is not None and spec.declared_arm not in arms):
+    if not spec.camera_per_arm and (spec.camera_arm not in arms or spec.declared_arm not in (None, *arms)):
         raise ValueError(f"camera arm {spec.camera_arm!r} / declared {spec.declared_arm!r}: arms are {arms}")
-    chain = UrdfChain(spec.urdf, prefix=spec.camera_arm)
-    scene = TexturedScene(rng)
+    layout = _camera_layout(spec, arms)
+    chains = {arm: UrdfChain(spec.urdf, prefix=arm) for arm in {a for _n, a, _d in layout}}
+    scene = TexturedScene(rng, table_style=spec.table)
     cx, cy = (spec.width - 1) / 2.0, (spec.height - 1) / 2.0
     rays = pixel_rays(spec.focal_px, spec.focal_px, cx, cy, spec.width, spec.height)
     mount, declared_mount = _mounts(spec)
     bases = _base_poses(arms)
     pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
     names = tuple(f"{arm}{joint}.pos" for arm in arms for joint in (*ARM_JOINTS, "gripper"))
-    key = "observation.images.wrist"
-    n = round(spec.duration_s * spec.fps)
-    t = np.arange(n) / spec.fps
-    episodes, videos, repeated = [], [], []
+    keys = [f"observation.images.{name}" for name, _a, _d in layout]
+    episodes, repeated, stamps = [], [], []
+    videos: dict[str, list[np.ndarray]] = {key: [] for key in keys}
     marker = (float("nan"), float("nan"), float("nan"))
     for e in range(spec.episodes):
+        t = _episode_stamps(rng, spec)
+        n = t.size
         motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
-        captured = _joints(motions[spec.camera_arm], t - spec.video_delay_s)
-        world_from_cam = bases[spec.camera_arm] @ chain.root_from_link(
-            dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{spec.camera_arm}gripper_link") @ mount
-        if e == 0 and spec.marker_size_m > 0:
-            marker = _place_marker(scene, world_from_cam, spec)
-        frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
-        for k in repeats:  # in order, so runs of repeats all show the frame before the run
-            frames[k] = frames[k - 1]
         repeated.append(tuple(int(k) for k in repeats))
-        videos.append(frames)
-        action = np.concatenate([state[1:], state[-1:]])
-        columns = {"observation.state": state, "action": action}
-        if spec.storage == "image":
-            columns[key] = np.array([_png(f) for f in frames], dtype=object)
-        episodes.append(EpisodeData(frames=columns))
+        columns: dict[str, np.ndarray] = {"observation.state": state, "action": np.concatenate([state[1:], state[-1:]])}
+        for c, ((name, arm, _declared), key) in enumerate(zip(layout, keys, strict=True)):
+            captured = _joints(motions[arm], t - spec.delay_s(c, e))
+            world_from_cam = bases[arm] @ chains[arm].root_from_link(
+                dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{arm}gripper_link") @ mount
+            if e == 0 and c == 0 and spec.marker_size_m > 0:
+                marker = _place_marker(scene, world_from_cam, spec)
+            frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
+            for k in repeats:  # in order, so runs of repeats all show the frame before the run
+                frames[k] = frames[k - 1]
+            if e == 0 and name == spec.black_first_episode:
+                frames = _black_frames(rng, frames.shape)
+            videos[key].append(frames)
+            if spec.storage == "image":
+                columns[key] = np.array([_png(f) for f in frames], dtype=object)
+        episodes.append(EpisodeData(frames=columns, timestamp_s=None if spec.clock == "presentation" else t))
+        stamps.append(t)
     out = Path(root)
-    features = {
-        "observation.state": FeatureSpec("float32", (len(names),), list(names)),
-        "action": FeatureSpec("float32", (len(names),), list(names)),
-        key: FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
-                         {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
-                          "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
-        if spec.storage == "video"
-        else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]),
-    }
-    write_lerobot_dataset(out, episodes, features=features, fps=spec.fps, version=spec.version,
+    write_lerobot_dataset(out, episodes, features=_features(spec, names, keys), fps=spec.fps, version=spec.version,
                           robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")
     if spec.storage == "video":
-        _write_videos(out, key, videos, spec)
-    declared_arm = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
+        for key in keys:
+            _write_videos(out, key, videos[key], spec)
+    q_true = Rotation.from_matrix(mount[:3, :3]).as_quat()
+    q_declared = Rotation.from_matrix(declared_mount[:3, :3]).as_quat()
+    cameras = tuple(CameraTruth(
+        name=name, video_key=key, arm=arm, declared_arm=declared, camera_link=f"{arm}gripper_link",
+        declared_link=f"{declared}gripper_link", q_link_cam=q_true, declared_q_link_cam=q_declared,
+        delays_s=tuple(spec.delay_s(c, e) for e in range(spec.episodes)),
+        black_episodes=(0,) if name == spec.black_first_episode else ())
+        for c, ((name, arm, declared), key) in enumerate(zip(layout, keys, strict=True)))
+    first = cameras[0]
     return VideoDatasetTruth(
-        root=out, spec=spec, video_key=key, arms=arms, state_names=names,
-        camera_link=f"{spec.camera_arm}gripper_link", declared_link=f"{declared_arm}gripper_link",
-        q_link_cam=Rotation.from_matrix(mount[:3, :3]).as_quat(),
-        declared_q_link_cam=Rotation.from_matrix(declared_mount[:3, :3]).as_quat(),
-        xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float), intrinsics=(spec.focal_px, spec.focal_px, cx, cy),
-        declared_focal_px=spec.focal_px * spec.focal_scale, repeated=tuple(repeated), marker_xyz=marker,
+        root=out, spec=spec, video_key=first.video_key, arms=arms, state_names=names,
+        camera_link=first.camera_link, declared_link=first.declared_link, q_link_cam=q_true,
+        declared_q_link_cam=q_declared, xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float),
+        intrinsics=(spec.focal_px, spec.focal_px, cx, cy), declared_focal_px=spec.focal_px * spec.focal_scale,
+        repeated=tuple(repeated), marker_xyz=marker, cameras=cameras, timestamps_s=tuple(stamps),
     )
+
+
+def _features(spec: VideoDatasetSpec, names: tuple[str, ...], keys: Sequence[str]) -> dict[str, FeatureSpec]:
+    out = {
+        "observation.state": FeatureSpec("float32", (len(names),), list(names)),
+        "action": FeatureSpec("float32", (len(names),), list(names)),
+    }
+    for key in keys:
+        out[key] = (FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
+                                {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
+                                 "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
+                    if spec.storage == "video"
+                    else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]))
+    return out
+
+
+def _black_frames(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarray:
+    """A camera that delivered nothing: sensor noise a few grey levels above black."""
+    out: np.ndarray = rng.integers(0, 6, size=shape, dtype=np.uint8)
+    return out
 
 
 def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
@@ -240,7 +358,9 @@ def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
 
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
 #: Fast encoder presets: generation time, not file size, matters here.
-_FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"}}
+_FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"},
+         # MPEG-4 Part 2 at the quality of a real recording (a frame sent twice decodes within about a grey level).
+         "mpeg4": {"b": "2500000"}}
 
 
 def _png(rgb: FloatArray) -> bytes:
@@ -284,13 +404,15 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
         out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
         return out
 
-    camera = {
-        "intrinsics": {"fx": truth.declared_focal_px, "fy": truth.declared_focal_px, "cx": cx, "cy": cy,
-                       "width": spec.width, "height": spec.height},
-        "mount": {"parent": truth.declared_link, "xyz": [float(v) for v in truth.xyz_link_cam],
-                  "quat_xyzw": [float(v) for v in truth.declared_q_link_cam], "optical": True},
-        "video_key": truth.video_key,
-    }
+    def camera(cam: CameraTruth) -> dict[str, object]:
+        return {
+            "intrinsics": {"fx": truth.declared_focal_px, "fy": truth.declared_focal_px, "cx": cx, "cy": cy,
+                           "width": spec.width, "height": spec.height},
+            "mount": {"parent": cam.declared_link, "xyz": [float(v) for v in truth.xyz_link_cam],
+                      "quat_xyzw": [float(v) for v in cam.declared_q_link_cam], "optical": True},
+            "video_key": cam.video_key,
+        }
+
     config: dict[str, object] = {"state_feature": "observation.state"}
     if truth.arms == ("",):
         config.update(urdf=str(spec.urdf), default_unit="deg", joints=joints(""))
@@ -301,7 +423,7 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
                                                                 "rpy": [0.0, 0.0, 0.0]},
                                             "joints": joints(arm)}
                           for arm in truth.arms}
-    config["cameras"] = {"wrist": camera}
+    config["cameras"] = {cam.name: camera(cam) for cam in truth.cameras}
     config.update(extra or {})
     out = Path(path)
     out.write_text(yaml.safe_dump(config, sort_keys=False))

@@ -52,6 +52,26 @@ def _texture(rng: np.random.Generator, height: int, width: int, shapes: int, rad
     return np.asarray(cv2.GaussianBlur(img, (0, 0), 1.0), dtype=np.uint8)
 
 
+def _cloth(rng: np.random.Generator, side: int, px_per_m: float) -> Image:
+    """A cloth over the table: one colour, a faint weave (4 mm threads), soft folds and a few small stains.
+
+    Little for a tracker to hold on to: the weave is a few grey levels deep and repeats (its corners
+    alias), the folds are smooth, and only the stains are corners worth the name.
+    """
+    y, x = np.mgrid[0:side, 0:side].astype(np.float32)
+    period = max(2.0, 0.004 * px_per_m)
+    weave = 4.0 * np.sin(2 * np.pi * x / period) * np.sin(2 * np.pi * y / period)
+    coarse = rng.random((6, 6)).astype(np.float32)
+    folds = 30.0 * (cv2.resize(coarse, (side, side), interpolation=cv2.INTER_CUBIC) - 0.5)
+    base = np.array([96.0, 112.0, 140.0], dtype=np.float32)
+    img = np.clip(base[None, None, :] + (weave + folds)[..., None], 0, 255).astype(np.uint8)
+    for _ in range(int(side * side / 2500)):
+        colour = tuple(int(c) for c in base + rng.uniform(-45, 45, 3))
+        cv2.circle(img, (int(rng.integers(0, side)), int(rng.integers(0, side))),
+                   int(rng.integers(2, max(3, int(0.02 * px_per_m)))), colour, -1)
+    return np.asarray(cv2.GaussianBlur(img, (0, 0), 0.8), dtype=np.uint8)
+
+
 @dataclass(frozen=True)
 class PadRegion:
     """A part of the robot fixed in the image: a filled polygon of pixels and its texture seed."""
@@ -65,14 +85,19 @@ class TexturedScene:
 
     def __init__(
         self, rng: np.random.Generator, *, half_size_m: float = 1.0, table_px_per_m: float = 500.0,
-        panorama_height: int = 720, noise_sigma: float = 1.5,
+        panorama_height: int = 720, noise_sigma: float = 1.5, table_style: str = "rich",
     ) -> None:
         self.half_size_m = half_size_m
         self.table_px_per_m = table_px_per_m
         side = round(2 * half_size_m * table_px_per_m)
         # Shapes of 1-4 cm on the table, of 1-5 degrees in the panorama.
         lo, hi = max(2, int(0.01 * table_px_per_m)), max(4, int(0.04 * table_px_per_m))
-        self.table = _texture(rng, side, side, shapes=int(3 * (side / lo) ** 2 / 16), radius=(lo, hi))
+        if table_style == "rich":
+            self.table = _texture(rng, side, side, shapes=int(3 * (side / lo) ** 2 / 16), radius=(lo, hi))
+        elif table_style == "cloth":
+            self.table = _cloth(rng, side, table_px_per_m)
+        else:
+            raise ValueError(f"table_style {table_style!r}: rich or cloth")
         deg = panorama_height / 180.0
         self.panorama = _texture(rng, panorama_height, 2 * panorama_height, shapes=panorama_height * 3,
                                  radius=(max(2, int(deg)), max(4, int(5 * deg))))

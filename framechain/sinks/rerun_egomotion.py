@@ -71,7 +71,7 @@ def _log_video(rec: rr.RecordingStream, timeline: Timeline, frame: str, entity: 
     import rerun as rr
 
     images = timeline.image_frames
-    mine = np.flatnonzero((images.frame == frame) & (images.encoding == VIDEO_ENCODING))
+    mine = np.flatnonzero((images.frame == frame) & (images.encoding == VIDEO_ENCODING) & (images.video_time_ns >= 0))
     if mine.size == 0:
         return
     path = str(images.video_path[mine[0]])

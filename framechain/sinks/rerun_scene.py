@@ -245,7 +245,7 @@ def log_images(
         )
     if raw.size or compressed.size:
         rows[image_entity] = int(raw.size + compressed.size)
-    video = chosen[enc == VIDEO_ENCODING]
+    video = chosen[(enc == VIDEO_ENCODING) & (images.video_time_ns[chosen] >= 0)]  # -1: a row without a frame
     for k, path in enumerate(np.unique(images.video_path[video]).tolist()):
         entity = f"{view.root}/video" if k == 0 else f"{view.root}/video/{k}"
         frames = video[images.video_path[video] == path]

@@ -126,6 +126,8 @@ class EpisodeInfo:
     video_files: Mapping[str, Path] = field(default_factory=dict)
     #: v3: where the episode starts inside the shared mp4, per video key (s); v2: 0.
     video_from_s: Mapping[str, float] = field(default_factory=dict)
+    #: v3: where it ends (s, exclusive), per video key; v2: absent (the file's end).
+    video_to_s: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -424,7 +426,8 @@ class DatasetReader:
         wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
                   "dataset_from_index", "dataset_to_index"]
         for key in self.video_keys:
-            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp"]
+            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp",
+                       f"videos/{key}/to_timestamp"]
         where = self.root / "meta" / "episodes"
         import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
 
@@ -439,6 +442,7 @@ class DatasetReader:
         data_file = self._fill("data_path", self.data_path, fields)
         videos: dict[str, Path] = {}
         video_from: dict[str, float] = {}
+        video_to: dict[str, float] = {}
         for key in self.video_keys:
             c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
             if c is None or f is None or self.video_path is None:
@@ -448,12 +452,14 @@ class DatasetReader:
             if vf is not None and vf.is_file():
                 videos[key] = vf
                 video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
+                if row.get(f"videos/{key}/to_timestamp") is not None:
+                    video_to[key] = float(row[f"videos/{key}/to_timestamp"])
         tasks = row.get("tasks") or []
         return EpisodeInfo(
             index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks), data_file=data_file,
             from_index=None if row.get("dataset_from_index") is None else int(row["dataset_from_index"]),
             to_index=None if row.get("dataset_to_index") is None else int(row["dataset_to_index"]),
-            video_files=videos, video_from_s=video_from,
+            video_files=videos, video_from_s=video_from, video_to_s=video_to,
         )
 
     def _fill(self, key: str, template: str, fields: Mapping[str, Any]) -> Path:

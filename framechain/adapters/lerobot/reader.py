@@ -39,6 +39,12 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
+from framechain.adapters.lerobot.clock import (
+    VIDEO_REFERENCE_NUDGE_NS,
+    VideoClock,
+    episode_frame_times_s,
+    video_clock,
+)
 from framechain.adapters.lerobot.format import (
     DatasetError,
     DatasetReader,
@@ -118,13 +124,15 @@ def open_dataset(
         _depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
     ])
     joint_states = _joint_states(cfg, q, state_ns, source_name)
+    clocks = {cam.name: _clock(cam.video_key, frames, reader.fps, cam.timing.pairing) for cam in cfg.cameras.values()
+              if cam.video_key is not None and cam.video_key in frames.episode.video_files}
     videos = ImageFrameTable.concat([
-        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values()
-          if cam.video_key is not None and cam.video_key in frames.episode.video_files),
+        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns, clocks[cam.name]) for cam in cfg.cameras.values()
+          if cam.name in clocks),
         *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
           if cam.video_key is not None and cam.video_key in frames.columns),
     ])
-    metadata = _metadata(Path(path), episode, cfg, model, reader, frames)
+    metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
     spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
     if spec is not None:
         observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
@@ -180,7 +188,7 @@ def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[Detectio
 
 
 def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, reader: DatasetReader,
-              frames: EpisodeFrames) -> dict[str, Any]:
+              frames: EpisodeFrames, clocks: Mapping[str, VideoClock]) -> dict[str, Any]:
     """What the episode came from: dataset, robot configuration, joints held or at zero, cameras, chain."""
     held = {name: float(v) for name, v in cfg.hold.items()}
     driven = {m.joint for m in cfg.joints}
@@ -216,13 +224,14 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
                                                        "timestamp_column": cam.timing.timestamp_column},
                 "video_file": _video_file(frames, cam.video_key),
                 "video_from_s": frames.episode.video_from_s.get(cam.video_key or "", 0.0),
+                "clock": clocks[name].to_json() if name in clocks else None,
             }
             for name, cam in cfg.cameras.items()
         },
         "chain_frames": None if chain is None else {"camera": chain.frames.camera, "body": chain.frames.body,
                                                     "world": chain.frames.world},
         "chain": None if chain is None else chain.to_dict(),
-        "notes": [*reader.notes, *cfg.notes],
+        "notes": [*reader.notes, *cfg.notes, *(c.summary() for c in clocks.values())],
     }
 
 
@@ -441,24 +450,26 @@ def _depth_frames(
     )
 
 
-#: Video references are nudged this much later than the frame's time: float32 timestamps fall a few ns
-#: before the frame's presentation time, and a viewer shows the frame at or before the reference
-#: (LeRobot itself accepts frames within 100 us).
-VIDEO_REFERENCE_NUDGE_NS = 50_000
+def _clock(key: str, frames: EpisodeFrames, fps: float, forced: str | None = None) -> VideoClock:
+    """How video ``key``'s frames pair with the episode's rows (:mod:`framechain.adapters.lerobot.clock`)."""
+    from_s = float(frames.episode.video_from_s.get(key, 0.0))
+    to_s = frames.episode.video_to_s.get(key)
+    if to_s is None and frames.episode.video_from_s:  # v3.0 without to_timestamp: the rows' nominal span
+        to_s = from_s + len(frames) / fps
+    times = episode_frame_times_s(frames.episode.video_files[key], from_s, to_s)
+    return video_clock(key, times, frames.timestamp_s, frames.frame_index, fps=fps, from_s=from_s, to_s=to_s,
+                       forced=forced)
 
 
 def _video_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, clock: VideoClock
 ) -> ImageFrameTable:
-    """One row per frame of the camera's video: the mp4 and the frame's time in it (not decoded).
-
-    The time in the file is ``from_timestamp + timestamp`` (v3.0 concatenates episodes in one file;
-    v2.1 has one file per episode and from_timestamp 0).
-    """
+    """One row per row of the episode: the mp4 and the time in it of the frame the clock pairs with the row (not
+    decoded; -1: the row has no frame). v3.0 concatenates episodes in one file (from_timestamp is where the
+    episode starts in it), v2.1 has one file per episode."""
     assert cam.video_key is not None
     path = frames.episode.video_files[cam.video_key]
-    start_s = float(frames.episode.video_from_s.get(cam.video_key, 0.0))
-    in_file = np.round((start_s + frames.timestamp_s.astype(np.float64)) * 1e9).astype(np.int64)
+    in_file = clock.file_times_ns(frames.timestamp_s)
     n = len(frames)
     size = cam.camera_table()
     width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
@@ -466,7 +477,7 @@ def _video_frames(
         frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns,
         width=np.full(n, width), height=np.full(n, height),
         encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
-        video_time_ns=in_file + VIDEO_REFERENCE_NUDGE_NS,
+        video_time_ns=np.where(in_file >= 0, in_file + VIDEO_REFERENCE_NUDGE_NS, -1),
     )
 
 
@@ -509,10 +520,13 @@ def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     return None if path is None else str(path)
 
 
-def scan_dataset(path: str | Path, episode: int | None = None) -> LogInfo:
+def scan_dataset(path: str | Path, episode: int | None = None, *, clocks: bool = False) -> LogInfo:
     """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes.
 
-    With ``episode``, the counts and the span are that episode's, not the whole dataset's.
+    With ``episode``, the counts and the span are that episode's, not the whole dataset's. With
+    ``clocks``, a note per video says how its frames pair with the rows and why (of ``episode``, else of
+    the first episode): frames against rows, the declared fps against the stamps' rate, the largest
+    departure of the stamps from ``frame_index / fps``.
     """
     reader = DatasetReader(path)
     lengths = reader.lengths()
@@ -528,11 +542,28 @@ def scan_dataset(path: str | Path, episode: int | None = None) -> LogInfo:
         for key, feat in reader.features.items()
     )
     layout = "one episode per file" if reader.layout is Layout.V2 else "episodes share files"
+    said = _clock_notes(reader, episode) if clocks else []
     return LogInfo(
         format="lerobot", path=Path(path), start_ns=0, end_ns=round(max(longest - 1, 0) / reader.fps * 1e9),
-        topics=topics, notes=tuple(reader.notes), message_count=frames,
+        topics=topics, notes=(*reader.notes, *said), message_count=frames,
         container=f"lerobot {reader.version} ({len(reader.episodes())} episodes, {layout}, {reader.fps:g} fps)",
     )
+
+
+def _clock_notes(reader: DatasetReader, episode: int | None) -> list[str]:
+    """One line per video of the episode (the first one when None): how its frames pair with the rows."""
+    episodes = reader.episodes()
+    if not episodes or not reader.video_keys:
+        return []
+    index = episodes[0] if episode is None else episode
+    frames = reader.read(index)
+    out = []
+    for key in reader.video_keys:
+        if key not in frames.episode.video_files:
+            continue
+        line = _clock(key, frames, reader.fps).summary()
+        out.append(line if episode is not None else f"{line} (episode {index})")
+    return out
 
 
 class LeRobotAdapter:

@@ -9,7 +9,8 @@ episodes of a key in one file, so the time is ``from_timestamp + timestamp`` (th
 :func:`read_frames` seeks to the key frame before the first wanted time, decodes forward, and
 converts only the frames some row wants, each once; it seeks again over gaps longer than
 ``reseek_s``. A row takes the frame whose presentation time is nearest its time, within
-``tolerance_s`` (default: half the stream's frame period); a row with none is missing. A row
+``tolerance_s`` (default: half the stream's frame period); a row with none (or a negative time: no frame
+paired with it) is missing. A row
 whose frame repeats the previous row's is duplicated (real recordings resend a frame when the
 camera is late: it shows an earlier moment than its stamp), and a frame with hardly a pixel
 above ``black_level`` is black (a camera that delivered nothing). "Repeats" means pixel for
@@ -189,7 +190,9 @@ def read_frames(
         stream.thread_type = "AUTO"
         rate = float(stream.average_rate or stream.guessed_rate or 30)
         tolerance = round((0.5 / rate if tolerance_s is None else tolerance_s) * 1e9)
+        # A negative time is a row without a frame (a clock that pairs it with none): missing, never decoded.
         order = np.argsort(wanted, kind="stable")
+        order = order[wanted[order] >= 0]
         matcher = _Matcher(wanted[order], tolerance, pixel_format)
         try:
             for start, stop in _segments(wanted[order], int(reseek_s * 1e9)):

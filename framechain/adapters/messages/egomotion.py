@@ -93,6 +93,12 @@ class EgoMotionOptions:
     still_share: float = 0.2
     still_grey_levels: float = 3.0
     fixed_mask_radius_px: int = 8
+    #: A frame whose tracks moved less than this (median, px) from the previous frame repeats it: an encoder
+    #: may code a frame sent twice with a residual of a grey level or more (MPEG-4 Part 2), as much as a slow
+    #: camera changes a low-texture scene; tracks tell the two apart (generated 224x224 MPEG-4 over cloth:
+    #: repeats moved 0.21 px at most, every other frame 1.2 px at least). A genuinely still moment is left out
+    #: as well, which costs nothing: it shows no rotation.
+    repeat_motion_px: float = 0.3
     seed: int = 0
 
 
@@ -106,13 +112,15 @@ class FeatureTracks:
 
     ``rows[k]`` is the frame (row) index of the k-th usable frame; ``ids[k]`` and ``pixels[k]`` the
     tracks alive in it and their pixels (OpenCV convention); ``fixed`` the ids of tracks found fixed
-    in the image (robot parts in view), left out of every pair.
+    in the image (robot parts in view), left out of every pair. ``repeats`` are the frames (rows)
+    left out because no track moved from the frame before (a frame sent twice, re-encoded).
     """
 
     rows: IntArray
     ids: tuple[IntArray, ...]
     pixels: tuple[FloatArray, ...]
     fixed: IntArray
+    repeats: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     #: Per intrinsics, stamps and options: the frame pairs and their rotation-only RANSAC, which do not
     #: depend on the translation prior (a fit measures the same tracks against many priors).
     _first: dict[tuple[object, ...], tuple[_Pairs | None, tuple[FloatArray, BoolArray] | None]] = field(
@@ -270,9 +278,11 @@ def _track(images: list[GreyImage], rows: IntArray, opts: EgoMotionOptions) -> F
     state.fixed_mask[_fixed_region(images, opts)] = 0
     all_ids: list[IntArray] = []
     all_pixels: list[FloatArray] = []
+    repeats = np.zeros(len(images), dtype=bool)
     for k, img in enumerate(images):
         if k > 0:
-            state.follow(images[k - 1], img)
+            step, count = state.follow(images[k - 1], img)
+            repeats[k] = count >= opts.min_inliers and step < opts.repeat_motion_px
         state.replenish(img)
         all_ids.append(state.ids.copy())
         all_pixels.append(state.pts.astype(np.float64))
@@ -280,7 +290,10 @@ def _track(images: list[GreyImage], rows: IntArray, opts: EgoMotionOptions) -> F
     inside = state.fixed_mask[np.clip(born[:, 1], 0, state.fixed_mask.shape[0] - 1),
                               np.clip(born[:, 0], 0, state.fixed_mask.shape[1] - 1)] == 0
     fixed = np.union1d(np.fromiter(state.fixed, dtype=np.int64, count=len(state.fixed)), np.flatnonzero(inside))
-    return FeatureTracks(rows=rows, ids=tuple(all_ids), pixels=tuple(all_pixels), fixed=fixed.astype(np.int64))
+    keep = np.flatnonzero(~repeats)
+    return FeatureTracks(rows=rows[keep], ids=tuple(all_ids[k] for k in keep),
+                         pixels=tuple(all_pixels[k] for k in keep), fixed=fixed.astype(np.int64),
+                         repeats=rows[repeats])
 
 
 def _fixed_region(images: list[GreyImage], opts: EgoMotionOptions) -> BoolArray:
@@ -324,10 +337,13 @@ class _Tracker:
         self.scene = 0.0  # cumulative median image motion of the tracks
         self.fixed: set[int] = set()
 
-    def follow(self, previous: GreyImage, img: GreyImage) -> None:
-        """Track into ``img`` with a forward-backward check; drop lost tracks and flag fixed ones."""
+    def follow(self, previous: GreyImage, img: GreyImage) -> tuple[float, int]:
+        """Track into ``img`` with a forward-backward check; drop lost tracks and flag fixed ones.
+
+        Returns the median motion (px) of the tracks kept and how many they are.
+        """
         if not len(self.pts):
-            return
+            return float("inf"), 0
         cv2 = require_cv2()
         h, w = img.shape
         new, status, _ = cv2.calcOpticalFlowPyrLK(previous, img, self.pts.reshape(-1, 1, 2), None, **self.lk)
@@ -346,8 +362,10 @@ class _Tracker:
             cv2.circle(self.fixed_mask, (int(x), int(y)), self.opts.fixed_mask_radius_px, 0, -1)
         self.fixed.update(self.ids[still].tolist())
         ok &= ~still
+        step = float(np.median(np.linalg.norm(new[ok] - self.pts[ok], axis=1))) if ok.any() else float("inf")
         self.ids, self.pts = self.ids[ok], new[ok]
         self.birth_pts, self.birth_scene = self.birth_pts[ok], self.birth_scene[ok]
+        return step, int(ok.sum())
 
     def replenish(self, img: GreyImage) -> None:
         """New features where tracks are few, away from the tracks alive and the fixed parts."""

@@ -15,12 +15,14 @@ camera's frames decoded and tracked once, measured against any translation prior
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from framechain.adapters.lerobot.clock import alternative_stamps
 from framechain.adapters.lerobot.video import read_frames
 from framechain.adapters.messages.egomotion import (
     EgoMotionOptions,
@@ -48,9 +50,11 @@ __all__ = [
 
 #: A frame with hardly a pixel above this grey level is black (a camera that delivered nothing).
 BLACK_LEVEL = 32
-#: Mean absolute difference (grey levels) under which a frame repeats the previous one: H.264, HEVC
-#: and AV1 return a frame sent twice pixel for pixel, MPEG-4 Part 2 within a level.
-REPEAT_LEVEL = 1.0
+#: Mean absolute difference (grey levels) under which a frame repeats the previous one pixel for pixel: H.264,
+#: HEVC and AV1 return a frame sent twice exactly. Re-encoded repeats (MPEG-4 Part 2: a grey level or more off)
+#: are found by their tracks instead (``EgoMotionOptions.repeat_motion_px``): a slow camera over a
+#: low-texture scene changes its image by less than that.
+REPEAT_LEVEL = 0.25
 #: Assumed horizontal field of view when a camera has no intrinsics (the focal length is then implied).
 ASSUMED_FOV_DEG = 70.0
 
@@ -72,6 +76,10 @@ class CameraFrames:
     window: IntArray
     decoded: int
     notes: tuple[str, ...]
+    #: Frames repeating the previous one pixel for pixel (within :data:`REPEAT_LEVEL`).
+    duplicate: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: Each row's position among the camera's rows (the frame number a note gives).
+    positions: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __len__(self) -> int:
         return int(self.rows.size)
@@ -80,11 +88,14 @@ class CameraFrames:
 class ImageMotion:
     """One camera's frames decoded and tracked once; :meth:`measure` measures its motion against a prior.
 
-    ``last`` is the most recent measurement (the one a fit ends on).
+    ``last`` is the most recent measurement (the one a fit ends on). ``pairing`` names how a video's
+    frames were paired with the rows ("" for images with stamps of their own), ``alternatives`` the
+    frames' capture stamps under the other pairings (-1: no row), for the motion to confirm the pairing.
     """
 
     def __init__(self, frames: CameraFrames, tracks: FeatureTracks, intrinsics: Intrinsics, *, intrinsics_known: bool,
-                 options: EgoMotionOptions | None = None) -> None:
+                 options: EgoMotionOptions | None = None, pairing: str = "", forced: bool = False,
+                 alternatives: Mapping[str, IntArray] | None = None) -> None:
         self.camera = frames.frame
         self.frames = len(frames)
         self.decoded = frames.decoded
@@ -93,7 +104,10 @@ class ImageMotion:
         self.intrinsics = intrinsics
         self.intrinsics_known = intrinsics_known
         self.options = options
-        notes = list(frames.notes)
+        self.pairing = pairing
+        self.forced = forced
+        self.alternatives = dict(alternatives or {})
+        notes = [*frames.notes, *_repeat_notes(frames, tracks)]
         if not intrinsics_known:
             notes.append(f"camera {frames.frame} has no intrinsics: measured with an assumed {ASSUMED_FOV_DEG:.0f} "
                          f"deg field of view (fx = {intrinsics.fx:.1f} px); the focal length its motion implies is "
@@ -111,6 +125,47 @@ class ImageMotion:
                                       translation=prior, options=self.options)
         return self.last
 
+    def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
+        """``table`` (measured with this camera's stamps) with its frames' stamps under another ``pairing``."""
+        new = self.alternatives[pairing]
+        order = np.argsort(self.stamps_ns, kind="stable")
+        known = self.stamps_ns[order]
+
+        def moved(stamps: IntArray) -> IntArray:
+            at = np.clip(np.searchsorted(known, stamps), 0, known.size - 1)
+            out: IntArray = np.where(known[at] == stamps, new[order][at], -1)
+            return out
+
+        s0, s1 = moved(table.stamp0_ns), moved(table.stamp1_ns)
+        keep = (s0 >= 0) & (s1 > s0)
+        return replace(table.take(np.flatnonzero(keep)), stamp0_ns=s0[keep], stamp1_ns=s1[keep])
+
+    def use_pairing(self, pairing: str) -> None:
+        """Measure from now on with the frames stamped under ``pairing`` (frames without a row left out)."""
+        new = self.alternatives.pop(pairing)
+        self.alternatives[self.pairing] = self.stamps_ns
+        self.pairing, self.stamps_ns = pairing, new
+        self.tracks = _without_rows(self.tracks, new)
+
+
+def _without_rows(tracks: FeatureTracks, stamps: IntArray) -> FeatureTracks:
+    """The tracks of frames whose stamp is known (>= 0), in their stamps' order (a pairing may reorder none)."""
+    keep = np.flatnonzero(stamps[tracks.rows] >= 0)
+    return FeatureTracks(rows=tracks.rows[keep], ids=tuple(tracks.ids[k] for k in keep),
+                         pixels=tuple(tracks.pixels[k] for k in keep), fixed=tracks.fixed, repeats=tracks.repeats)
+
+
+def _repeat_notes(frames: CameraFrames, tracks: FeatureTracks) -> list[str]:
+    """How many frames repeat the previous one: pixel for pixel, or with no feature moving between them."""
+    repeated = frames.duplicate.copy() if frames.duplicate.size else np.zeros(len(frames), dtype=bool)
+    repeated[tracks.repeats] = True
+    if not repeated.any():
+        return []
+    numbers = frames.positions[repeated] if frames.positions.size else np.flatnonzero(repeated)
+    first = ", ".join(str(int(i)) for i in numbers[:8]) + (", ..." if numbers.size > 8 else "")
+    return [f"camera {frames.frame}: {int(repeated.sum())} of {len(frames)} frames duplicated (a repeat of the "
+            f"previous frame: the same pixels, or no feature moved): frame {first}"]
+
 
 def image_cameras(timeline: Timeline) -> list[str]:
     """The camera frames of ``timeline`` with images whose pixels can be had, in order of appearance."""
@@ -123,7 +178,27 @@ def camera_motion_source(timeline: Timeline, camera: str, *, max_frames: int = 6
     """Camera ``camera``'s frames decoded (at most ``max_frames``) and tracked, ready to be measured."""
     frames = camera_frames(timeline.image_frames, camera, max_frames=max_frames, window=window)
     intrinsics, known = _intrinsics(timeline, camera, frames.images.shape)
-    return ImageMotion(frames, camera_tracks(frames, options), intrinsics, intrinsics_known=known, options=options)
+    clock, alternatives = _video_clock(timeline, frames)
+    return ImageMotion(frames, camera_tracks(frames, options), intrinsics, intrinsics_known=known, options=options,
+                       pairing=str(clock.get("pairing", "")), forced=bool(clock.get("forced", False)),
+                       alternatives=alternatives)
+
+
+def _video_clock(timeline: Timeline, frames: CameraFrames) -> tuple[Mapping[str, Any], dict[str, IntArray]]:
+    """The clock pairing the camera's video frames with the rows (a LeRobot episode's), and the frames' stamps
+    under the other pairings; nothing for images stamped on their own."""
+    cameras = timeline.metadata.get("cameras")
+    entry = next((c for c in cameras.values() if isinstance(c, Mapping) and c.get("frame") == frames.frame),
+                 None) if isinstance(cameras, Mapping) else None
+    clock = entry.get("clock") if entry is not None else None
+    images = timeline.image_frames
+    if not isinstance(clock, Mapping) or not len(frames):
+        return {}, {}
+    rows = camera_image_rows(images, frames.frame)
+    offset = float((entry or {}).get("timing", {}).get("offset_s") or 0.0)
+    alternatives = alternative_stamps(clock, str(images.video_path[frames.rows[0]]),
+                                      images.video_time_ns[frames.rows], np.sort(images.log_time_ns[rows]), offset)
+    return clock, alternatives
 
 
 def _intrinsics(timeline: Timeline, camera: str, shape: tuple[int, ...]) -> tuple[Intrinsics, bool]:
@@ -176,15 +251,14 @@ def camera_frames(images: ImageFrameTable, frame: str, *, max_frames: int = 600,
                      f"({windows.max() + 1} runs of {window} consecutive frames spread over the recording)")
     grey, missing, decoded = decode_grey(images, rows)
     duplicate, black = _repeats_and_black(grey, missing)
-    for what, flags in (("missing (no frame within half a frame period of the row's time)", missing),
-                        ("duplicated (a repeat of the previous frame)", duplicate), ("black", black)):
+    for what, flags in (("missing (no frame paired with the row)", missing), ("black", black)):
         if flags.any():
             first = ", ".join(str(int(i)) for i in picked[np.flatnonzero(flags)][:8])
             more = ", ..." if flags.sum() > 8 else ""
             notes.append(f"camera {frame}: {int(flags.sum())} of {rows.size} frames {what}: frame {first}{more}")
     return CameraFrames(frame=normalize_frame(frame), rows=rows, stamps_ns=images.stamp_ns[rows].astype(np.int64),
                         images=grey, usable=~missing & ~duplicate & ~black, window=windows, decoded=decoded,
-                        notes=tuple(notes))
+                        notes=tuple(notes), duplicate=duplicate, positions=picked.astype(np.int64))
 
 
 def camera_tracks(frames: CameraFrames, options: EgoMotionOptions | None = None) -> FeatureTracks:
@@ -203,17 +277,22 @@ def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTrac
     ids: list[IntArray] = []
     pixels: list[FloatArray] = []
     fixed: list[IntArray] = []
+    repeats: list[IntArray] = []
     base = 0
     for part, start in zip(parts, starts, strict=True):
         rows.append(part.rows + start)
+        repeats.append(part.repeats + start)
         ids.extend(i + base for i in part.ids)
         pixels.extend(part.pixels)
         fixed.append(part.fixed + base)
         top = max((int(i.max()) for i in part.ids if i.size), default=-1)
         base += max(top, int(part.fixed.max()) if part.fixed.size else -1) + 1
-    return FeatureTracks(rows=np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, dtype=np.int64),
-                         ids=tuple(ids), pixels=tuple(pixels),
-                         fixed=np.concatenate(fixed).astype(np.int64) if fixed else np.zeros(0, dtype=np.int64))
+
+    def joined(arrays: list[IntArray]) -> IntArray:
+        return np.concatenate(arrays).astype(np.int64) if arrays else np.zeros(0, dtype=np.int64)
+
+    return FeatureTracks(rows=joined(rows), ids=tuple(ids), pixels=tuple(pixels), fixed=joined(fixed),
+                         repeats=joined(repeats))
 
 
 def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:
