@@ -34,12 +34,12 @@ from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
 from framechain.analysis.egomotion_bounds import (
     FOCAL_CLEAR,
-    MIN_ANGLE_DEG,
     NO_DEPTH,
     Judgement,
     judge,
     latency_bound_s,
     motion_bounds,
+    mount_bound_deg,
     observability,
 )
 from framechain.analysis.egomotion_run import CameraMotion, CameraMotionEvidence
@@ -264,7 +264,7 @@ def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclar
     if fit.wrong_link:
         out.append(_link(motion, fit, declaration))
     elif (fit.mount_error is not None and fit.mount_observable and Fault.ROTATION_ERROR.value not in undetermined
-          and fit.mount_error.interval_deg[0] >= MIN_ANGLE_DEG):
+          and fit.mount_error.angle_deg >= mount_bound_deg(fit)):
         out.append(_mount(motion, fit, declaration))
     scale_low, scale_high = fit.focal_scale_interval
     if (Fault.INTRINSICS.value not in undetermined and abs(fit.focal_scale - 1.0) > FOCAL_CLEAR

@@ -266,7 +266,7 @@ def test_a_clean_episode_says_what_its_motion_bounds(clean: tuple[VideoDatasetTr
     latency, mount = bounds["latency"]["min_detectable"]["offset_s"], bounds["rotation_error"]["min_detectable"][
         "angle_deg"]
     assert 0.005 <= latency < 0.015
-    assert 1.0 <= mount < 3.0
+    assert 2.5 <= mount < 4.5
     assert bounds["intrinsics"]["min_detectable"] == {"scale": 0.1}
     (depth,) = [b for b in result["bounds"] if b["fault"] == "depth_scale"]
     assert not depth["observable"]
