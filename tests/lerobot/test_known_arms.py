@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -125,7 +126,8 @@ def test_info_prints_a_complete_robot_yaml_for_numbered_joints_in_ticks(
     assert skeleton["cameras"]["arm2_wrist"]["mount"]["parent"] == "arm2_gripper_link"
     assert skeleton["cameras"]["top"]["mount"]["parent"] == "world"
     assert skeleton["cameras"]["top"]["intrinsics"]["fx"] == pytest.approx(320 / np.tan(np.radians(35)), abs=0.1)
-    assert "FILL IN" not in text and "whole numbers" in text
+    assert "FILL IN" not in text
+    assert "whole numbers" in text
     # As printed, it loads and gives the arms' frame tree: the generator's URDF maths on the official file,
     # ticks as (value - 2048) * 2 pi / 4096, the second arm's base 0.2 m to the right.
     del skeleton["cameras"]
@@ -182,7 +184,8 @@ def test_attribute_without_robot_or_episode_runs_on_the_bundled_urdf(
     err = capsys.readouterr().err.strip().splitlines()
     said = [line for line in err if "no --robot given" in line]
     assert len(said) == 1
-    assert "episode 0" in said[0] and "bundled SO-101 URDF" in said[0] and str(out / "robot.yaml") in said[0]
+    for piece in ("episode 0 (no --episode given)", "bundled SO-101 URDF", f"wrote {out / 'robot.yaml'}"):
+        assert piece in said[0]
     assert RobotConfig.load(out / "robot.yaml").cameras["wrist"].mount.parent == "gripper_link"
     motion = json.loads((out / "attribution.json").read_text())["camera_motion"][0]
     assert motion["link"] == "gripper_link"
@@ -218,3 +221,33 @@ def test_a_dataset_of_an_unknown_arm_asks_for_all_it_lacks_at_once(tmp_path: Pat
         for piece in expected:
             assert piece in err
         assert ("--robot" in err) == ("--robot" not in extra)
+
+
+def _info_yaml(root: Path, capsys: pytest.CaptureFixture[str]) -> Any:
+    assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
+    return yaml.safe_load(capsys.readouterr().out)
+
+
+def test_cameras_ride_the_arm_their_name_mentions(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    names = [f"{side}_{m}.pos" for side in ("l", "r") for m in LEROBOT_MOTORS]
+    image = FeatureSpec("video", (96, 128, 3), ["height", "width", "channels"], VIDEO)
+    features = {"observation.state": FeatureSpec("float32", (12,), names), "observation.images.cam_right_wrist": image,
+                "observation.images.left_wrist": image, "observation.images.front": image}
+    state = np.random.default_rng(2).uniform(-80, 80, (5, 12)).astype(np.float32)
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": state})], features=features,
+                                 fps=30, robot_type="bi_so100_follower")
+    skeleton = _info_yaml(root, capsys)
+    assert {name: arm["prefix"] for name, arm in skeleton["arms"].items()} == {"l": "l_", "r": "r_"}
+    parents = {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()}
+    assert parents == {"cam_right_wrist": "r_gripper", "left_wrist": "l_gripper", "front": "world"}
+
+
+def test_an_unknown_arm_gets_one_arm_per_shared_prefix(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    names = [f"arm{a}_j{k}" for a in (1, 2) for k in range(1, 4)]
+    features = {"observation.state": FeatureSpec("float32", (6,), names)}
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": np.zeros((4, 6), np.float32)})],
+                                 features=features, fps=30, robot_type="my_arm")
+    skeleton = _info_yaml(root, capsys)
+    arms = skeleton["arms"]
+    assert {name: (arm["prefix"], arm["urdf"], arm["joints"]) for name, arm in arms.items()} == {
+        f"arm{a}": (f"arm{a}_", "URDF", {f"arm{a}_j{k}": f"j{k}" for k in range(1, 4)}) for a in (1, 2)}

@@ -260,10 +260,10 @@ def _generic_arms(names: Sequence[str], values: np.ndarray) -> list[_Arm]:
     out = []
     for head in shared:
         idx = [i for i, (h, _r) in enumerate(split) if head in (h, "")]
-        states = [names[i] for i in idx]
-        units, why = guess_arm_units(states, values[:, idx])
-        joints = tuple(_Joint(names[i], split[i][1] if head else stems[i], u) for i, u in zip(idx, units, strict=True))
-        out.append(_Arm(head or "arm", f"{head}_" if head else "", joints, why))
+        # Another robot's joints may differ in kind (a base in metres, a hand in radians): a unit per joint.
+        joints = tuple(_Joint(names[i], split[i][1] if head else stems[i], guess_unit(names[i], values[:, i]))
+                       for i in idx)
+        out.append(_Arm(head or "arm", f"{head}_" if head else "", joints, "per joint, from its values"))
     return out
 
 
