@@ -78,6 +78,8 @@ class _Arm:
     prefix: str  # frames' prefix (arms) or "" (one URDF)
     joints: tuple[_Joint, ...]
     unit_note: str
+    #: URDF joints no state drives, held at zero
+    hold: tuple[str, ...] = ()
 
     @property
     def default_unit(self) -> str:
@@ -242,7 +244,10 @@ def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray) -> list
             why_not = ("the bundled URDF has no such joint" if joint is None else
                        f"its URDF joint {joint!r} has no limits for {unit}" if no_limits else "")
             joints.append(_Joint(state, None if why_not else joint, unit, why_not))
-        out.append(_Arm(group.name, group.prefix if len(groups) > 1 else "", tuple(joints), why))
+        driven = {j.joint for j in joints}
+        hold = tuple(j for j in arm.joints.values() if j not in driven)
+        prefix = (group.prefix or f"{group.name}_") if len(groups) > 1 else ""
+        out.append(_Arm(group.name, prefix, tuple(joints), why, hold))
     return out
 
 
@@ -303,6 +308,9 @@ def _joint_lines(arm: _Arm, indent: str) -> list[str]:
             continue
         joint = _yaml_name(j.joint)
         lines.append(f"{indent}  {j.state}: " + (joint if j.unit == default else f"{{joint: {joint}, unit: {j.unit}}}"))
+    if arm.hold:
+        lines.append(f"{indent}hold:  # GUESSED: joints no state drives, held at 0")
+        lines += [f"{indent}  {_yaml_name(j)}: 0.0" for j in arm.hold]
     return lines
 
 
