@@ -360,8 +360,7 @@ def run(
         replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
         info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
-        generated_robot=loaded.generated_robot,
-    )
+        generated_robot=loaded.generated_robot)
 
 
 def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) -> bool:
