@@ -51,6 +51,8 @@ class LoadedRun:
     suggestion: Any = None
     #: What disagrees before any fit (a calibration of another camera's topic); first in ``notes`` too.
     warnings: list[str] = field(default_factory=list)
+    #: The robot.yaml made for a known arm when a LeRobot dataset came without one (adapters' GeneratedRobot).
+    generated_robot: Any = None
 
     def chain_topic_notes(self) -> list[str]:
         """The reader's notes on the topics the chain names (an undecodable topic, say)."""
@@ -256,11 +258,16 @@ def _load_lerobot(
     elif "config" in section and isinstance(chain_arg, str | Path):
         # robot.yaml named in CHAIN.yaml resolves against the CHAIN.yaml's folder.
         section["config"] = str((Path(chain_arg).resolve().parent / str(section["config"])).resolve())
-    if "episode" not in section:
-        raise FramechainError(f"{target}: a LeRobot dataset needs --episode N")
-    if "config" not in section and "urdf" not in section:
-        raise FramechainError(f"{target}: a LeRobot dataset needs --robot robot.yaml (URDF, joints, cameras)")
-    loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=section))
+    generated = None
+    if "episode" not in section or not _ROBOT_KEYS & set(section):
+        # What is missing, asked for at once; a known arm's robot.yaml needs neither.
+        generated = adapters.generated_robot(target, section.get("episode")) if not _ROBOT_KEYS & set(section) else None
+        if generated is None:
+            raise FramechainError(adapters.dataset_needs(target, episode=section.get("episode"),
+                                                         robot_given=bool(_ROBOT_KEYS & set(section))))
+        section.update(generated.mapping(), episode=generated.episode)
+    given = {"episode": section["episode"], "config": generated.config()} if generated is not None else section
+    loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=given))
     suggested = config is None
     if config is not None:
         _check_frames(target, loaded.timeline, config, loaded.info)
@@ -269,8 +276,14 @@ def _load_lerobot(
         if not isinstance(stored, dict):
             raise FramechainError(f"{target}: give --chain CHAIN.yaml to name the camera, body and world frames")
         config = ChainConfig.from_dict(stored, where=f"{target} (suggested by robot.yaml)")
+    notes = [f"no --robot given: {generated.line}"] if generated is not None else []
     return LoadedRun(path=target, timeline=loaded.timeline, chain=replace(config, robot=section),
-                     chain_suggested=suggested, info=loaded.info, notes=list(loaded.info.notes))
+                     chain_suggested=suggested, info=loaded.info, notes=[*notes, *loaded.info.notes],
+                     generated_robot=generated)
+
+
+#: Keys of a chain's robot section that give the robot: robot.yaml's path, or its keys inline.
+_ROBOT_KEYS = {"config", "urdf", "arms"}
 
 
 def _check_not_urdf(robot: Path) -> None:
@@ -347,7 +360,7 @@ def run(
         replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
         info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
-    )
+        generated_robot=loaded.generated_robot)
 
 
 def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) -> bool:

@@ -17,6 +17,7 @@ from framechain.adapters.errors import (
 from framechain.adapters.formats.mcap.export import framechain_output
 from framechain.adapters.formats.writer import CONTAINERS, canonical_order, write_log
 from framechain.adapters.lerobot.reader import LeRobotAdapter, open_dataset, scan_dataset
+from framechain.adapters.lerobot.skeleton import GeneratedRobot, dataset_needs, generated_robot
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.adapters.suggest.chain import SuggestedChain, as_suggested, evidence_roles, suggest, suggest_chain
 from framechain.adapters.suggest.consistency import calibration_disagreements, frame_id_disagreements
@@ -35,6 +36,7 @@ __all__ = [
     "CorruptLogError",
     "EdgeInfo",
     "EmptyLogError",
+    "GeneratedRobot",
     "LeRobotAdapter",
     "LoadedLog",
     "LogAdapter",
@@ -50,12 +52,14 @@ __all__ = [
     "canonical_order",
     "chain_files_beside",
     "chain_needs",
+    "dataset_needs",
     "detect",
     "did_you_mean",
     "evidence_roles",
     "frame_id_disagreements",
     "frame_tree",
     "framechain_output",
+    "generated_robot",
     "missing_topics",
     "open_dataset",
     "open_log",

@@ -53,6 +53,9 @@ class Run:
     warnings: tuple[str, ...] = ()
     #: each camera's own motion against the frame tree (None: no camera has images, or not attributed)
     camera_motion: CameraMotionEvidence | None = None
+    #: the robot.yaml made for a known arm when a dataset came without one (text, the line saying what it
+    #: assumed, the episode); None when robot.yaml was given
+    generated_robot: Any = None
 
     @property
     def findings(self) -> tuple[Finding, ...]:

@@ -15,6 +15,7 @@ from framechain.cli.common import (
     print_findings,
     print_suggested_chain,
     progress_reporter,
+    say_generated_robot,
     warner,
 )
 
@@ -48,6 +49,7 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
                             warn=warner(getattr(args, "command", None) or "attribute"), when_read=start_renderers)
+        say_generated_robot(made, getattr(args, "command", None) or "attribute", out / "robot.yaml")
         result = made.attributed()  # none: one line saying why, exit 1
         if progress is not None:
             progress("writing the outputs")

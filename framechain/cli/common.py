@@ -159,6 +159,20 @@ def print_suggested_chain(chain: Any, quiet: bool) -> None:
     print(chain.to_yaml().rstrip(), file=sys.stderr)
 
 
+def say_generated_robot(run: Run, command: str, path: Path | None) -> None:
+    """A dataset run without --robot on a known arm: write the robot.yaml it used to ``path`` (None: nowhere) and
+    say, in one line on stderr (even with --quiet: it is what the results rest on), what it assumed."""
+    generated = run.generated_robot
+    if generated is None:
+        return
+    if path is not None:
+        path.write_text(generated.text, encoding="utf-8")
+        where = f"; wrote {path}: edit it and pass --robot {path}"
+    else:
+        where = f"; `framechain info {run.path} --episode {generated.episode} --chain > robot.yaml` writes it to edit"
+    print(f"framechain {command}: no --robot given: {generated.line}{where}", file=sys.stderr)
+
+
 def chain_text(run: Run) -> str:
     """The chain a run used, one line: its frames (a suggestion's placeholders marked FILL IN)."""
     frames = run.chain.frames

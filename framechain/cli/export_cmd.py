@@ -15,6 +15,7 @@ from framechain.cli.common import (
     incomplete_chain_line,
     print_suggested_chain,
     progress_reporter,
+    say_generated_robot,
     say_unattributed,
     warner,
 )
@@ -61,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     with imports_set_aside(), progress_reporter(quiet, "exporting") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, attribute=args.attribute,
                             seed=args.seed, progress=progress, warn=warner("export"))
+        say_generated_robot(made, "export", out.with_suffix(".robot.yaml"))
         say_unattributed(made, "export")  # the recomputed chain is still worth exporting
         extra = foxglove_messages(made)
         if not copies_messages(made.path):  # a dataset: its frame tree, joints and cameras are the log

@@ -88,12 +88,13 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({**_as_json(loaded, edges, None), "robot_yaml": skeleton}, indent=2))
         else:
             _render(loaded, edges, None, chain_given=False)
-            print("Suggested robot.yaml (framechain info DATASET --episode N --chain > robot.yaml):")
+            print(f"Suggested robot.yaml (framechain info {args.log} --episode {args.episode} --chain > robot.yaml):")
             print(skeleton, end="")
         return 0
     if print_chain:
         if suggestion is None:
-            raise FramechainError(f"{args.log}: a LeRobot dataset's chain comes from --episode N --robot robot.yaml")
+            raise FramechainError(f"{args.log}: a LeRobot dataset's robot.yaml comes from --episode N "
+                                  f"(`framechain info {args.log} --episode N --chain > robot.yaml`)")
         print(suggestion.to_yaml(source=str(loaded.info.path)), end="")
         return 0
     if args.json:
@@ -109,7 +110,8 @@ def _dataset_summary(path: str, episode: int | None = None) -> LoadedLog:
     from framechain.timeline import Timeline
 
     info = scan_dataset(path, episode, clocks=True)
-    note = "pass --episode N --robot robot.yaml to see the frame tree that forward kinematics gives"
+    note = (f"`framechain info {path} --episode N` prints a robot.yaml to start from (complete for an arm "
+            "framechain bundles a URDF for); with --robot robot.yaml it shows the frame tree forward kinematics gives")
     return LoadedLog(timeline=Timeline(), info=info.with_notes([note]), decoded_topics={})
 
 

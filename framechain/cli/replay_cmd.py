@@ -15,6 +15,7 @@ from framechain.cli.common import (
     incomplete_chain_line,
     print_suggested_chain,
     progress_reporter,
+    say_generated_robot,
     say_unattributed,
     warner,
 )
@@ -95,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
                                  images=ImageSelection(args.images)),
             notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
         )
+    say_generated_robot(made, "replay", None if outcome.path is None else Path(outcome.path).with_suffix(".robot.yaml"))
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, quiet)
     if args.json:

@@ -36,8 +36,8 @@ position is ``sign * convert(value) + offset`` (offset in radians or metres), so
 puts the dataset's zero elsewhere than the URDF's is explicit too.
 
 Several arms (a bimanual SO-101, ALOHA) replace ``urdf``, ``joints``, ``world_from_base``,
-``default_unit`` and ``hold`` with ``arms``, one entry per arm; every link and joint of an arm is
-named with its ``prefix`` (default ``<arm>_``) in the frame tree, so cameras mount on
+``default_unit``, ``hold`` and ``calibration`` with ``arms``, one entry per arm; every link and joint
+of an arm is named with its ``prefix`` (default ``<arm>_``) in the frame tree, so cameras mount on
 ``left_gripper_link``::
 
     arms:
@@ -47,12 +47,18 @@ named with its ``prefix`` (default ``<arm>_``) in the frame tree, so cameras mou
         world_from_base: {xyz: [0.0, 0.2, 0.0], rpy: [0.0, 0.0, 0.0]}
         default_unit: ticks
         joints: {left_shoulder_pan.pos: shoulder_pan, ...}   # the URDF's own joint names
-        calibration: left_follower.json # optional: LeRobot's calibration of the arm (ticks)
+        calibration: left_follower.json # optional: LeRobot's calibration of the arm
 
-A LeRobot calibration JSON (``{motor: {id, drive_mode, homing_offset, range_min, range_max}}``,
-the motors named as the URDF's joints) sets each ``ticks`` joint's ``zero_ticks`` to ``2048 +
-homing_offset`` (the state recorded as the encoder's raw counts, the servo's homing offset not
-applied) and flips its sign where ``drive_mode`` is 1; a joint's own ``zero_ticks`` wins.
+``calibration`` (top level for one URDF, or per arm) is LeRobot's calibration JSON
+(``{motor: {id, drive_mode, homing_offset, range_min, range_max}}``, a motor named as the URDF
+joint or as the state name without its arm prefix and ``.pos``). Its joints are read as LeRobot
+reads its Feetech servos: the servo applies ``homing_offset`` itself, so the recorded
+Present_Position ticks are already homed, and ``range_min``/``range_max`` are homed ticks too.
+``ticks`` then has its zero at the middle of the range and 4095 ticks per turn (LeRobot's DEGREES
+mode: ``(ticks - (range_min + range_max) / 2) * 360 / 4095``); ``range_m100_100`` and
+``range_0_100`` are LeRobot's normalisation of that range, read back to ticks (inverted where
+``drive_mode`` is 1, as LeRobot inverts them) and turned into an angle the same way. A joint's own
+``zero_ticks`` or ``ticks_per_turn`` wins.
 
 This module reads and checks the file only; binding it to the URDF's model (joints that exist
 and move, the conversion of joint values) is the robot adapter's job
@@ -85,6 +91,7 @@ __all__ = [
     "DetectionSource",
     "JointMapping",
     "JointUnit",
+    "MotorCalibration",
     "RobotConfig",
     "RobotConfigError",
 ]
@@ -105,6 +112,8 @@ class JointUnit(StrEnum):
 #: Feetech STS servos: counts per turn and the count at the middle of the range.
 TICKS_PER_TURN = 4096.0
 ZERO_TICKS = 2048.0
+#: What LeRobot's DEGREES mode divides 360 degrees by: the servo's resolution minus one (STS3215: 4096 - 1).
+CALIBRATED_TICKS_PER_TURN = 4095.0
 
 
 @dataclass(frozen=True)
@@ -119,6 +128,22 @@ class JointMapping:
     #: unit ticks: the count at the joint's zero and the counts per turn
     zero_ticks: float = ZERO_TICKS
     ticks_per_turn: float = TICKS_PER_TURN
+    #: A LeRobot calibration's (range_min, range_max) in homed ticks: range units are then LeRobot's
+    #: normalisation of this range, read back to ticks (None: range units map to the joint's limits).
+    ticks_range: tuple[float, float] | None = None
+    #: LeRobot's drive_mode 1: its range units count the other way (1 - fraction).
+    inverted: bool = False
+
+
+@dataclass(frozen=True)
+class MotorCalibration:
+    """One motor of a LeRobot calibration JSON; ``range_min``/``range_max`` in homed ticks (the servo applies
+    ``homing_offset`` itself, so it is kept for the record only)."""
+
+    range_min: float
+    range_max: float
+    drive_mode: int = 0
+    homing_offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -142,7 +167,7 @@ class DetectionSource:
 
 
 _KEYS = {"urdf", "state_feature", "world_frame", "world_from_base", "default_unit", "joints", "hold", "cameras",
-         "detections", "chain", "arms"}
+         "detections", "chain", "arms", "calibration"}
 _ARM_KEYS = {"urdf", "prefix", "world_from_base", "default_unit", "joints", "hold", "calibration"}
 _JOINT_KEYS = {"joint", "unit", "sign", "offset", "zero_ticks", "ticks_per_turn"}
 
@@ -191,7 +216,8 @@ class RobotConfig:
         else:
             urdf = _resolve(top.name("urdf", required=True, hint="the path of the robot's URDF", what="a file name"),
                             base)
-            joints, hold, arms = _joints(top), _hold(top), ()
+            calibration = _calibration(top, base) if "calibration" in top else None
+            joints, hold, arms = _joints(top, calibration=calibration), _hold(top), ()
             pose = top.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
                 rotation_required=False, translation=plausible.position)
         cameras = _cameras(top, base)
@@ -265,13 +291,13 @@ def _unit(section: Section, key: str) -> JointUnit:
         section.fail_at(section.path(key), f"is an unknown unit {show(value)}; units are {units}")
 
 
-def _joints(top: Section, prefix: str = "", calibration: Mapping[str, Any] | None = None
+def _joints(top: Section, prefix: str = "", calibration: Mapping[str, MotorCalibration] | None = None
             ) -> tuple[JointMapping, ...]:
     joints = top.section("joints", what="a mapping of dataset state names to URDF joints")
     if not joints.raw:
         top.fail_at("joints", "must map dataset state names to URDF joints")
     default_unit = _unit(top, "default_unit") if "default_unit" in top else None
-    out = tuple(_joint_mapping(joints, state, spec, default_unit, prefix, calibration or {})
+    out = tuple(_joint_mapping(joints, state, spec, default_unit, prefix, calibration)
                 for state, spec in joints.entries())
     seen: dict[str, str] = {}
     for m in out:
@@ -281,8 +307,8 @@ def _joints(top: Section, prefix: str = "", calibration: Mapping[str, Any] | Non
     return out
 
 
-def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUnit | None, prefix: str = "",
-                   calibration: Mapping[str, Any] | None = None) -> JointMapping:
+def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUnit | None, prefix: str,
+                   calibration: Mapping[str, MotorCalibration] | None) -> JointMapping:
     entry = joints.child({"joint": spec} if isinstance(spec, str) else spec, joints.path(state),
                          _JOINT_KEYS, what="a joint name or {joint, unit, sign, offset}")
     joint = entry.name("joint", required=True, what="a joint name") or ""
@@ -296,14 +322,24 @@ def _joint_mapping(joints: Section, state: str, spec: Any, default_unit: JointUn
     if isinstance(sign, bool) or sign not in (1, -1):
         entry.fail_at(entry.path("sign"), f"must be 1 or -1, got {show(sign)}")
     offset = entry.number("offset", 0.0, unit="rad or m", check=plausible.joint_value) or 0.0
-    motor = (calibration or {}).get(joint)
-    zero = ZERO_TICKS + float(motor["homing_offset"]) if motor is not None else ZERO_TICKS
-    if motor is not None and motor.get("drive_mode"):
-        sign = -sign
+    motor = _motor(calibration or {}, joint, state, prefix)
     given = entry.number("zero_ticks", unit="ticks")
-    per_turn = entry.number("ticks_per_turn", TICKS_PER_TURN, positive=True, unit="ticks") or TICKS_PER_TURN
-    return JointMapping(state, prefix + joint, unit, float(sign), offset, zero if given is None else given,
-                        float(per_turn))
+    per_turn = entry.number("ticks_per_turn", unit="ticks", positive=True)
+    if motor is None:
+        return JointMapping(state, prefix + joint, unit, float(sign), offset,
+                            ZERO_TICKS if given is None else given, per_turn or TICKS_PER_TURN)
+    return JointMapping(state, prefix + joint, unit, float(sign), offset,
+                        0.5 * (motor.range_min + motor.range_max) if given is None else given,
+                        per_turn or CALIBRATED_TICKS_PER_TURN, (motor.range_min, motor.range_max),
+                        motor.drive_mode == 1)
+
+
+def _motor(calibration: Mapping[str, MotorCalibration], joint: str, state: str, prefix: str
+           ) -> MotorCalibration | None:
+    """The calibration of the motor driving ``joint``: named as the URDF joint, or as the state name without its
+    arm prefix and ``.pos`` (LeRobot's motor names)."""
+    motor = state.removesuffix(".pos")
+    return calibration.get(joint) or calibration.get(motor.removeprefix(prefix) if prefix else motor)
 
 
 def _hold(top: Section, prefix: str = "") -> dict[str, float]:
@@ -314,7 +350,7 @@ def _hold(top: Section, prefix: str = "") -> dict[str, float]:
 
 def _arms(top: Section, base: Path) -> tuple[tuple[ArmConfig, ...], tuple[JointMapping, ...], dict[str, float]]:
     """``arms``: each arm's URDF, prefix, base pose, joints (prefixed) and held joints (prefixed)."""
-    for key in ("urdf", "joints", "world_from_base", "default_unit", "hold"):
+    for key in ("urdf", "joints", "world_from_base", "default_unit", "hold", "calibration"):
         if key in top:
             top.fail_at(key, f"goes under each arm when arms are given (arms.<name>.{key})")
     section = top.section("arms", what="a mapping of arm names to {urdf, prefix, world_from_base, joints}")
@@ -344,23 +380,34 @@ def _arms(top: Section, base: Path) -> tuple[tuple[ArmConfig, ...], tuple[JointM
     return tuple(arms), tuple(joints), hold
 
 
-def _calibration(arm: Section, base: Path) -> dict[str, Any]:
-    """A LeRobot calibration JSON: ``{motor: {homing_offset, drive_mode, ...}}`` (one line per problem)."""
+def _calibration(section: Section, base: Path) -> dict[str, MotorCalibration]:
+    """A LeRobot calibration JSON: ``{motor: {id, drive_mode, homing_offset, range_min, range_max}}`` (one line
+    per problem)."""
     import json
 
-    path = _resolve(arm.name("calibration", what="a file name"), base)
-    where = arm.path("calibration")
+    path = _resolve(section.name("calibration", what="a file name"), base)
+    where = section.path("calibration")
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as err:
-        arm.fail_at(where, f"cannot read the calibration JSON {path} ({err})")
+        section.fail_at(where, f"cannot read the calibration JSON {path} ({err})")
     if not isinstance(raw, dict) or not all(isinstance(v, dict) for v in raw.values()):
-        arm.fail_at(where, f"{path}: expected {{motor: {{homing_offset, drive_mode, range_min, range_max}}}}")
+        section.fail_at(where, f"{path}: expected {{motor: {{homing_offset, drive_mode, range_min, range_max}}}}")
+    out: dict[str, MotorCalibration] = {}
     for motor, entry in raw.items():
-        offset = entry.get("homing_offset", 0)
-        if isinstance(offset, bool) or not isinstance(offset, int | float) or not abs(offset) < 1e5:
-            arm.fail_at(where, f"{path}: {motor}.homing_offset must be a number of ticks, got {show(offset)}")
-    return {str(k): v for k, v in raw.items()}
+        values = {key: entry.get(key, default) for key, default in
+                  (("homing_offset", 0), ("drive_mode", 0), ("range_min", None), ("range_max", None))}
+        for key, value in values.items():
+            if isinstance(value, bool) or not isinstance(value, int | float) or not abs(value) < 1e5:
+                section.fail_at(where, f"{path}: {motor}.{key} must be a number of ticks, got {show(value)}")
+        if values["range_max"] <= values["range_min"]:
+            section.fail_at(where, f"{path}: {motor}: range_max {show(values['range_max'])} must be above range_min "
+                            f"{show(values['range_min'])}")
+        if values["drive_mode"] not in (0, 1):
+            section.fail_at(where, f"{path}: {motor}.drive_mode must be 0 or 1, got {show(values['drive_mode'])}")
+        out[str(motor)] = MotorCalibration(float(values["range_min"]), float(values["range_max"]),
+                                           int(values["drive_mode"]), float(values["homing_offset"]))
+    return out
 
 
 def _cameras(top: Section, base: Path) -> dict[str, CameraCalibration]:

@@ -159,17 +159,22 @@ def _tree_fingerprint(directory: Path) -> tuple[int, int]:
 
 
 def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -> Iterator[LogUnit]:
+    """One unit per episode; without robot.yaml, only for an arm framechain bundles a URDF for (each episode's
+    robot.yaml is then generated), else one unit whose problem says what to give."""
+    from framechain.adapters import dataset_needs
     from framechain.adapters.lerobot.format import DatasetReader
+    from framechain.adapters.robot.known_arms import known_arm
 
     size, mtime = _tree_fingerprint(directory)
-    if not robot_given:
-        yield LogUnit(path=directory, size_bytes=size, mtime_ns=mtime,
-                      problem="a LeRobot dataset needs --robot robot.yaml (URDF, joints, cameras)")
-        return
     try:
-        found = DatasetReader(directory).episodes()
+        reader = DatasetReader(directory)
+        found = reader.episodes()
+        problem = None if robot_given or known_arm(reader.robot_type) else dataset_needs(
+            directory, episode=found[0] if found else 0, robot_given=False)
     except FramechainError as err:
-        yield LogUnit(path=directory, size_bytes=size, mtime_ns=mtime, problem=str(err))
+        problem = str(err)
+    if problem is not None:
+        yield LogUnit(path=directory, size_bytes=size, mtime_ns=mtime, problem=problem)
         return
     for episode in found:
         if episodes is None or episode in episodes:

@@ -213,8 +213,9 @@ def write_arm_dataset(
         episodes.append(EpisodeData(frames, task=f"reach {e % 2}", timestamp_s=t if jitter_s else None))
         stamps.append(t)
         camera_times.append(t_cam)
+    # A seven-joint arm of its own (with a wrist yaw): no robot type framechain bundles a URDF for.
     write_lerobot_dataset(root, episodes, features=features, fps=FPS, version=version,
-                          episodes_per_file=episodes_per_file)
+                          episodes_per_file=episodes_per_file, robot_type="seven_joint_test_arm")
     return ArmDataset(root, tuple(lengths), camera_delay_s, tuple(stamps), tuple(camera_times))
 
 

@@ -65,23 +65,26 @@ def truth_poses(state_deg: np.ndarray, names: list[str], arm: str, link: str) ->
 def test_two_arms_in_ticks_with_a_calibration_json(bimanual: tuple[VideoDatasetTruth, Path], tmp_path: Path) -> None:
     truth, robot = bimanual
     state_deg, names = stored_state(truth.root)
-    # The same motion recorded as raw Feetech ticks of the encoders: LeRobot's calibration gives each
-    # joint's homing offset; the right arm's elbow turns the other way (drive_mode 1).
+    # The same motion recorded as LeRobot records raw Feetech ticks: the servo applies the homing offset
+    # itself, so the ticks are homed and LeRobot's degrees are (ticks - mid-range) * 360 / 4095. The right
+    # arm's elbow has drive_mode 1, which LeRobot's degrees ignore.
     rng = np.random.default_rng(0)
     homing = {f"{arm}{j}": int(rng.integers(-1500, 1500)) for arm in ("left_", "right_") for j in ARM_JOINTS}
+    ranges = {j: (700 + 40 * k, 3400 - 25 * k) for k, j in enumerate(ARM_JOINTS)}
     ticks = state_deg.copy()
     for i, name in enumerate(names):
         joint = name.removesuffix(".pos")
         if joint in homing:
-            sign = -1.0 if joint == "right_elbow_flex" else 1.0
-            ticks[:, i] = np.round(2048 + homing[joint] + sign * state_deg[:, i] * 4096 / 360)
+            lo, hi = ranges[joint.split("_", 1)[1]]
+            ticks[:, i] = np.round((lo + hi) / 2 + state_deg[:, i] * 4095 / 360)
     dataset = write_lerobot_dataset(tmp_path / "ticks", [EpisodeData({"observation.state": ticks})],
                                     features={"observation.state": FeatureSpec("float32", (len(names),), names)},
                                     fps=30, version="v3.0", robot_type="bi_so101_follower")
     config = yaml.safe_load(robot.read_text())
     for arm, spec in config["arms"].items():
         calibration = {j: {"id": k + 1, "drive_mode": int(f"{arm}_{j}" == "right_elbow_flex"),
-                           "homing_offset": homing[f"{arm}_{j}"], "range_min": 700, "range_max": 3400}
+                           "homing_offset": homing[f"{arm}_{j}"], "range_min": ranges[j][0],
+                           "range_max": ranges[j][1]}
                        for k, j in enumerate(ARM_JOINTS)}
         (tmp_path / f"{arm}.json").write_text(json.dumps(calibration))
         spec["calibration"] = str(tmp_path / f"{arm}.json")
@@ -95,7 +98,7 @@ def test_two_arms_in_ticks_with_a_calibration_json(bimanual: tuple[VideoDatasetT
     for arm in ("left_", "right_"):
         found = buffer.lookup("world", f"{arm}gripper_link", stamps).matrix()
         expected = truth_poses(state_deg, names, arm, "gripper_link")
-        # Ticks are whole counts: 2 pi / 4096 rad each, a few tenths of a millimetre at the gripper.
+        # Ticks are whole counts: 2 pi / 4095 rad each, a few tenths of a millimetre at the gripper.
         assert np.abs(found[:, :3, 3] - expected[:, :3, 3]).max() < 1.5e-3
 
 

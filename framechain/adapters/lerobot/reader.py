@@ -570,7 +570,8 @@ class LeRobotAdapter:
     """The :class:`framechain.adapters.LogAdapter` of LeRobot dataset directories.
 
     ``open(path, chain)`` takes the episode and the robot configuration from ``chain.robot``:
-    ``{"episode": N, "config": "robot.yaml"}``, or the robot.yaml keys inline plus ``episode``.
+    ``{"episode": N, "config": "robot.yaml"}`` (or a :class:`RobotConfig`), or the robot.yaml keys inline
+    plus ``episode``.
     Register it with ``framechain.adapters.register_adapter(LeRobotAdapter())``.
     """
 
@@ -590,9 +591,11 @@ class LeRobotAdapter:
                                "config: robot.yaml} (framechain ... --episode N --robot robot.yaml)")
         config = section.pop("config", None)
         robot: RobotConfig | Path
-        if config is not None:
+        if isinstance(config, RobotConfig):  # made in memory (a known arm's generated robot.yaml)
+            robot = config
+        elif config is not None:
             robot = Path(str(config))
-        elif "urdf" in section:
+        elif "urdf" in section or "arms" in section:
             robot = RobotConfig.from_mapping(section, base_dir=Path.cwd(), source="chain robot section")
         else:
             raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "

@@ -71,15 +71,24 @@ def convert_joint(mapping: JointMapping, values: npt.ArrayLike, lower: float | N
     elif mapping.unit is JointUnit.MM:
         si = x * 1e-3
     elif mapping.unit is JointUnit.TICKS:
-        si = (x - mapping.zero_ticks) * (2.0 * np.pi / mapping.ticks_per_turn)
+        si = _ticks_angle(mapping, x)
     else:
-        if lower is None or upper is None:
+        frac = x / 100.0 if mapping.unit is JointUnit.RANGE_0_100 else (x + 100.0) / 200.0
+        if mapping.ticks_range is not None:  # LeRobot's normalisation of a calibrated range, read back to ticks
+            lo, hi = mapping.ticks_range
+            si = _ticks_angle(mapping, lo + (1.0 - frac if mapping.inverted else frac) * (hi - lo))
+        elif lower is None or upper is None:
             raise RobotConfigError(
                 mapping.state, f"unit {mapping.unit.value} needs joint limits, and joint {mapping.joint!r} has none"
             )
-        frac = x / 100.0 if mapping.unit is JointUnit.RANGE_0_100 else (x + 100.0) / 200.0
-        si = lower + frac * (upper - lower)
+        else:
+            si = lower + frac * (upper - lower)
     out: FloatArray = mapping.sign * si + mapping.offset
+    return out
+
+
+def _ticks_angle(mapping: JointMapping, ticks: FloatArray) -> FloatArray:
+    out: FloatArray = (ticks - mapping.zero_ticks) * (2.0 * np.pi / mapping.ticks_per_turn)
     return out
 
 
@@ -106,9 +115,11 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
                                    f"{list(model.actuated)}")
         if not joint.moves or joint.mimic is not None:
             raise RobotConfigError(fail, f"joints.{m.state}: joint {m.joint!r} is fixed or a mimic joint")
-        if m.unit is JointUnit.TICKS and joint.type is JointType.PRISMATIC:
-            raise RobotConfigError(fail, f"joints.{m.state}: unit ticks turns a revolute joint; {m.joint!r} slides")
-        if m.unit in (JointUnit.RANGE_0_100, JointUnit.RANGE_M100_100) and (joint.lower is None or joint.upper is None):
+        if (m.unit is JointUnit.TICKS or m.ticks_range is not None) and joint.type is JointType.PRISMATIC:
+            how = "unit ticks" if m.unit is JointUnit.TICKS else f"unit {m.unit.value} with a calibration JSON"
+            raise RobotConfigError(fail, f"joints.{m.state}: {how} turns a revolute joint; {m.joint!r} slides")
+        if (m.unit in (JointUnit.RANGE_0_100, JointUnit.RANGE_M100_100) and m.ticks_range is None
+                and (joint.lower is None or joint.upper is None)):
             raise RobotConfigError(fail, f"joints.{m.state}: unit {m.unit.value} needs limits on joint {m.joint!r}, "
                                    "which has none")
     for name in config.hold:

@@ -1,0 +1,106 @@
+"""Arms framechain knows without a robot.yaml: a bundled URDF per LeRobot robot type, and dataset state
+names matched to its joints under any per-arm prefix.
+
+The URDFs under ``urdfs/`` are the published models with their visual and collision geometry removed
+(the meshes are not bundled), each with its licence beside it: SO-100 and SO-101 from
+TheRobotStudio/SO-ARM100 (Apache-2.0), Koch v1.0 from AlexanderKoch-Koch/low_cost_robot (MIT).
+
+State names are matched to an arm's motors (LeRobot's names, ``shoulder_pan`` ... ``gripper``) by
+suffix, so ``shoulder_pan.pos``, ``left_shoulder_pan.pos``, ``arm1_shoulder_pan.pos`` and
+``follower_shoulder_pan.pos`` all drive ``shoulder_pan``, and what comes before the motor is the
+arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the motors in order, per arm.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["KNOWN_ARMS", "ArmJoints", "KnownArm", "known_arm", "match_state_names"]
+
+_URDFS = Path(__file__).resolve().parent / "urdfs"
+#: LeRobot's motor names of its SO-100/SO-101 and Koch arms, from the base out (their ids 1..6).
+LEROBOT_MOTORS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
+#: A numbered joint at the end of a state name: ``j1``, ``joint_3``, ``motor2``.
+_NUMBERED = re.compile(r"^(?P<prefix>.*?)(?:joint|motor|j)_?(?P<index>\d+)$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class KnownArm:
+    """One arm model: its bundled URDF, its motors in order, the URDF joint each drives, and its wrist link."""
+
+    name: str
+    title: str
+    urdf: Path
+    source: str
+    #: The link a wrist camera rides (the fixed jaw's link).
+    camera_link: str
+    motors: tuple[str, ...] = LEROBOT_MOTORS
+    #: motor -> URDF joint; a motor absent here has no joint in the URDF.
+    joints: Mapping[str, str] = field(default_factory=lambda: {m: m for m in LEROBOT_MOTORS})
+
+
+KNOWN_ARMS = {
+    "so101": KnownArm("so101", "SO-101", _URDFS / "so101" / "so101_new_calib.urdf",
+                      "TheRobotStudio/SO-ARM100, Apache-2.0", "gripper_link"),
+    "so100": KnownArm("so100", "SO-100", _URDFS / "so100" / "so100.urdf", "TheRobotStudio/SO-ARM100, Apache-2.0",
+                      "gripper"),
+    # Koch v1.0 has no wrist flex: its fourth joint turns about the forearm.
+    "koch": KnownArm("koch", "Koch", _URDFS / "koch" / "low-cost-arm.urdf", "AlexanderKoch-Koch/low_cost_robot, MIT",
+                     "gripper-static-motor_v2_1",
+                     joints={"shoulder_pan": "Revolute 2", "shoulder_lift": "Revolute 3", "elbow_flex": "Revolute 5",
+                             "wrist_roll": "Revolute 6", "gripper": "Revolute 7"}),
+}
+
+
+def known_arm(robot_type: str | None) -> KnownArm | None:
+    """The arm a LeRobot ``robot_type`` names (``so101_follower``, ``bi_so100_follower``, ``koch``), or None."""
+    key = re.sub(r"[^a-z0-9]", "", (robot_type or "").lower())
+    return next((arm for name, arm in KNOWN_ARMS.items() if name in key), None)
+
+
+@dataclass(frozen=True)
+class ArmJoints:
+    """The state names of one arm: its prefix, each name with the motor it drives, in the dataset's order."""
+
+    prefix: str
+    motors: tuple[tuple[str, str], ...]  # (state name, motor)
+
+    @property
+    def name(self) -> str:
+        """The arm's name in robot.yaml: its prefix without the separator (``arm`` for none)."""
+        return self.prefix.strip("_.- ") or "arm"
+
+
+def match_state_names(names: Sequence[str], motors: Sequence[str]) -> tuple[list[ArmJoints], list[str]]:
+    """The arms ``names`` hold (grouped by prefix, in order of appearance) and the names matched to no motor.
+
+    A name matches the longest motor it ends with (``.pos`` aside; velocities and efforts match none);
+    numbered names (``arm1_j1``) take the motors in order per prefix, from 0 or 1 as the names start."""
+    by_prefix: dict[str, list[tuple[str, str]]] = {}
+    numbered: dict[str, list[tuple[str, int]]] = {}
+    unmatched: list[str] = []
+    for name in names:
+        stem = name.removesuffix(".pos")
+        motor = max((m for m in motors if stem.endswith(m)), key=len, default=None)
+        found = _NUMBERED.match(stem)
+        if "." in stem:
+            unmatched.append(name)
+        elif motor is not None:
+            by_prefix.setdefault(stem[: len(stem) - len(motor)], []).append((name, motor))
+        elif found is not None:
+            numbered.setdefault(found["prefix"], []).append((name, int(found["index"])))
+        else:
+            unmatched.append(name)
+    for prefix, items in numbered.items():
+        first = min(i for _n, i in items)
+        for name, index in items:
+            k = index - first
+            if 0 <= k < len(motors):
+                by_prefix.setdefault(prefix, []).append((name, motors[k]))
+            else:
+                unmatched.append(name)
+    arms = [ArmJoints(prefix, tuple(items)) for prefix, items in by_prefix.items()]
+    return arms, unmatched
