@@ -51,7 +51,8 @@ def test_real_time_stamps_with_a_frame_per_row_pair_by_order(thirty: Path) -> No
     assert clock.pairing is Pairing.ORDER
     assert clock.max_departure_s == pytest.approx(29 / 18 - 29 / 20)
     assert clock.stamp_rate_hz == pytest.approx(18.0)
-    assert "30 frames for 30 rows" in clock.summary() and "by order" in clock.summary()
+    assert "30 frames for 30 rows" in clock.summary()
+    assert "by order" in clock.summary()
     times = clock.file_times_ns(stamps)
     got = read_frames(thirty, times + 50_000)
     levels = got.row_images()[:, 8, 8].astype(int)  # grey
@@ -75,7 +76,8 @@ def test_fewer_frames_than_rows_off_the_nominal_rate_fit_a_clock(thirty: Path) -
 def test_a_forced_pairing_wins_and_says_so(thirty: Path) -> None:
     rows = np.arange(30)
     clock = video_clock("cam", episode_frame_times_s(thirty), rows / 18.0, rows, fps=20, forced="presentation")
-    assert clock.pairing is Pairing.PRESENTATION and clock.forced
+    assert clock.pairing is Pairing.PRESENTATION
+    assert clock.forced
     assert clock.why.startswith("forced in robot.yaml")
 
 
@@ -93,12 +95,13 @@ def test_capture_stamps_under_each_pairing(thirty: Path) -> None:
     assert fitted[[0, -1]] == pytest.approx(np.round(stamps[[0, 29]] * 1e9), abs=1000)
 
 
-def test_a_pairing_that_is_not_one_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_pairing_that_is_not_one_is_one_line(tmp_path: Path) -> None:
     from framechain.config.calibration import CalibrationError, load_calibration
 
     path = tmp_path / "cam.yaml"
     path.write_text("name: wrist\nintrinsics: {fx: 100, fy: 100, cx: 50, cy: 50, width: 100, height: 100}\n"
-                    "mount: {parent: base, xyz: [0, 0, 0], rpy: [0, 0, 0], optical: true}\ntiming: {pairing: by_time}\n")
+                    "mount: {parent: base, xyz: [0, 0, 0], rpy: [0, 0, 0], optical: true}\n"
+                    "timing: {pairing: by_time}\n")
     with pytest.raises(CalibrationError, match=r"timing.pairing: expected one of presentation, order, fitted"):
         load_calibration(path)
 
