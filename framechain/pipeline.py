@@ -20,8 +20,8 @@ from typing import Any
 from framechain import adapters
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.attribute import attribute_replayed
-from framechain.analysis.egomotion_attribution import with_camera_motion
-from framechain.analysis.egomotion_run import measure_cameras
+from framechain.analysis.egomotion.attribution import with_camera_motion
+from framechain.analysis.egomotion.run import measure_cameras
 from framechain.analysis.findings import AnalysisError, Attribution, Unattributed
 from framechain.analysis.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run

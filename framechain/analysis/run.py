@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.egomotion_run import CameraMotionEvidence
+from framechain.analysis.egomotion.run import CameraMotionEvidence
 from framechain.analysis.findings import AnalysisError, Attribution, Finding, Unattributed
 from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from framechain.analysis.egomotion import rotation_rates
-from framechain.analysis.egomotion_run import CameraMotion
+from framechain.analysis.egomotion.run import CameraMotion
 from framechain.analysis.run import Run
 from framechain.arrays import IntArray
 from framechain.sinks.colors import AS_RUN_COLOR, CORRECTED_COLOR

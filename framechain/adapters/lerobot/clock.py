@@ -12,7 +12,7 @@ rows' span is mapped linearly onto the frames' span, video time ``= a t + b`` (a
 :func:`video_clock` decides from the files alone: the frames are counted in the episode's span of
 the video (packets demuxed, nothing decoded) and compared with the rows and their stamps; robot.yaml
 can force a pairing (``cameras.NAME.timing.pairing``). The cameras' own motion then confirms it
-(:mod:`framechain.analysis.egomotion_run`): under the wrong pairing the misfit against forward
+(:mod:`framechain.analysis.egomotion.run`): under the wrong pairing the misfit against forward
 kinematics is much larger. :meth:`VideoClock.capture_stamps_ns` gives a frame's capture time under
 any pairing, for that comparison.
 """

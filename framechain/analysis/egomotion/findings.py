@@ -1,12 +1,12 @@
 """What each camera's own motion says, as findings: time offset, mount rotation, carrying link, focal length.
 
-Each camera's fit (:mod:`framechain.analysis.egomotion_run`) proposes corrections of what the run
+Each camera's fit (:mod:`framechain.analysis.egomotion.run`) proposes corrections of what the run
 declares: the video/state time offset (``latency`` on camera_to_body), the mount's rotation on its
 link (``rotation_error``, ``missing_rotation`` or ``axis_flip``), the link the camera moves with
 (``wrong_camera_frame``: another link, another arm) and, when it is clear, the focal length
 (``intrinsics``; otherwise a note). A correction is a finding when its estimate is determined, its
-interval excludes "nothing wrong" and its size passes its bound (:mod:`framechain.analysis.
-egomotion_bounds`), and only when the fitted model explains the camera's motion at all: a model that
+interval excludes "nothing wrong" and its size passes its bound (:mod:`framechain.analysis.egomotion.
+bounds`), and only when the fitted model explains the camera's motion at all: a model that
 leaves most of the motion unexplained offers no fix, whatever its estimates say.
 
 The error they share is the camera's rotation-rate misfit: per frame pair, the measured rotation
@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
-from framechain.analysis.egomotion_bounds import (
+from framechain.analysis.egomotion.bounds import (
     FOCAL_CLEAR,
     NO_DEPTH,
     Judgement,
@@ -42,7 +42,7 @@ from framechain.analysis.egomotion_bounds import (
     mount_bound_deg,
     observability,
 )
-from framechain.analysis.egomotion_run import CameraMotion, CameraMotionEvidence
+from framechain.analysis.egomotion.run import CameraMotion, CameraMotionEvidence
 from framechain.analysis.estimates import (
     Estimate,
     FrameEstimate,
@@ -253,7 +253,7 @@ def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclar
                judgement: Judgement) -> list[_Proposal]:
     """The corrections that are findings: determined, clear of "nothing wrong", past their bound; none at all
     when the fitted model does not explain the motion."""
-    if not judgement.explained:
+    if not judgement.explained or fit.unobservable:
         return []
     undetermined = judgement.undetermined
     out: list[_Proposal] = []

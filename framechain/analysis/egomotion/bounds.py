@@ -33,7 +33,7 @@ import numpy as np
 
 from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit
-from framechain.analysis.egomotion_run import CameraMotion
+from framechain.analysis.egomotion.run import CameraMotion
 from framechain.catalogue import Fault, HopName
 
 __all__ = [
@@ -162,6 +162,8 @@ def _latency_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
     """A latency finding needs an interval clear of 0 and an offset of at least the bound (MIN_OFFSET_S, or
     :data:`BOUND_HALF_WIDTHS` half-widths of the interval when that is larger)."""
     hop, camera = HopName.CAMERA_TO_BODY, motion.camera
+    if fit.unobservable:
+        return Bound(hop, Fault.LATENCY, False, None, f"camera {camera}: {fit.unobservable}", camera=camera)
     if not fit.offset_observable:
         return Bound(hop, Fault.LATENCY, False, None, f"undetermined: {fit.offset_undetermined}", camera=camera)
     low, high = fit.offset_interval_s
@@ -193,15 +195,17 @@ def _mount_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
         return Bound(hop, Fault.ROTATION_ERROR, False, None, f"camera {camera} moves with {fit.link}, not the declared "
                      f"{motion.declared_link}: its mount there is not measured", camera=camera)
     if not fit.mount_observable:
-        return Bound(hop, Fault.ROTATION_ERROR, False, None, next((n for n in fit.notes if "one axis" in n), ""),
-                     camera=camera)
-    return Bound(hop, Fault.ROTATION_ERROR, True, {"angle_deg": _num(mount_bound_deg(fit)) or 0.0}, "", camera=camera)
+        return Bound(hop, Fault.ROTATION_ERROR, False, None, f"camera {camera}: {fit.unobservable}", camera=camera)
+    return Bound(hop, Fault.ROTATION_ERROR, True, {"angle_deg": _num(mount_bound_deg(fit)) or 0.0}, "",
+                 unobservable_axes=fit.mount_unobservable_axes, camera=camera)
 
 
 def _focal_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
     """An intrinsics finding needs a departure over FOCAL_CLEAR measured within an interval narrower than it."""
     low, high = fit.focal_scale_interval
     hop, camera = HopName.PIXEL_TO_CAMERA, motion.camera
+    if fit.unobservable:
+        return Bound(hop, Fault.INTRINSICS, False, None, f"camera {camera}: {fit.unobservable}", camera=camera)
     if not np.isfinite(fit.focal_scale) or not high - low < FOCAL_CLEAR:
         return Bound(hop, Fault.INTRINSICS, False, None, f"camera {camera}: the focal length its motion implies is "
                      f"uncertain by more than {FOCAL_CLEAR:.0%}", camera=camera)

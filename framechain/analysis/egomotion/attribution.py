@@ -6,7 +6,7 @@ is attributed from them; what each measured camera's motion says then travels wi
 (an episode as recorded: joint states and videos, no detections) is attributed from the cameras'
 motion alone when some camera moves (a camera fixed in the world cannot stand in for them): metric
 ``camera_motion``, findings with shares of the rotation-rate misfit
-(:mod:`framechain.analysis.egomotion_findings`).
+(:mod:`framechain.analysis.egomotion.findings`).
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from dataclasses import replace
 import numpy as np
 
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.egomotion_findings import motion_findings
-from framechain.analysis.egomotion_run import CameraMotionEvidence
+from framechain.analysis.egomotion.findings import motion_findings
+from framechain.analysis.egomotion.run import CameraMotionEvidence
 from framechain.analysis.estimates import format_estimate
 from framechain.analysis.findings import Attribution
 from framechain.analysis.replayed import Replayed
