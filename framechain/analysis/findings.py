@@ -3,6 +3,7 @@ contract, and the error raised (with its typed reason) when a log cannot be attr
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, Literal
@@ -213,33 +214,7 @@ class Attribution:
         return f" {bounds}" if bounds else ""
 
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
-        """The verdict of a run measured by the cameras' own motion against forward kinematics: the findings, or
-        "Inconclusive" when a camera's motion is not explained or the estimates that would decide are
-        undetermined, or no fault beyond noise; then the bounds."""
-        rate = "" if summary["median"] is None else f" (median {summary['median']:.2f} deg/s)"
-        bounds = self._bounds_sentence() if self.bounds else ""
-        observable = [o for entry in self.camera_motion for o in entry.get("observable", ()) if o["observable"]]
-        unexplained = [str(e["unexplained_why"]) for e in self.camera_motion if e.get("explained") is False]
-        undetermined = [f"camera {e['camera']}: {why}" for e in self.camera_motion if e.get("explained") is not False
-                        for why in (e.get("undetermined") or {}).values()]
-        if not self.findings and not observable and not unexplained and not undetermined:
-            if bounds:
-                return ("Nothing could be checked: no camera's own motion can be measured against forward "
-                        f"kinematics; {bounds[0].lower()}{bounds[1:]}")
-            why = next((o["why"] for e in self.camera_motion for o in e.get("observable", ()) if o["why"]), "")
-            return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
-        if not self.findings:
-            if unexplained or undetermined:
-                said = "; ".join([*unexplained, *undetermined])
-                return f"Inconclusive: {said}; no fix is offered." + self._then_bounds()
-            return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}." + self._then_bounds()
-        top = self.findings[0]
-        more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
-        on = f" on camera {top.camera}" if top.camera else ""
-        also = "".join(f" {why[0].upper()}{why[1:]}: no fix is offered for it." for why in unexplained)
-        return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
-                f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{also}"
-                + self._then_bounds())
+        return motion_verdict(self.findings, self.bounds, self.camera_motion, summary["median"])
 
     def _rig_unobservable(self) -> str:
         """What a rig's evidence cannot check, for the verdict ("" for one camera, or when it sees everything)."""
@@ -271,4 +246,34 @@ class Attribution:
         }
 
 
-__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed"]
+def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_motion: Sequence[Mapping[str, Any]],
+                   median_deg_s: float | None) -> str:
+    """The verdict of a run measured by the cameras' own motion against forward kinematics: the findings, or
+    "Inconclusive" when a camera's motion is not explained or the estimates that would decide are
+    undetermined, or no fault beyond noise, or nothing could be checked; then the bounds."""
+    rate = "" if median_deg_s is None else f" (median {median_deg_s:.2f} deg/s)"
+    sentence = bounds_sentence(bounds, [(f.fault, f.hop, f.camera or "") for f in findings]) if bounds else ""
+    then = f" {sentence}" if sentence else ""
+    observable = [o for entry in camera_motion for o in entry.get("observable", ()) if o["observable"]]
+    unexplained = [str(e["unexplained_why"]) for e in camera_motion if e.get("explained") is False]
+    undetermined = [f"camera {e['camera']}: {why}" for e in camera_motion if e.get("explained") is not False
+                    for why in (e.get("undetermined") or {}).values()]
+    if not findings and not observable and not unexplained and not undetermined:
+        if sentence:
+            return ("Nothing could be checked: no camera's own motion can be measured against forward kinematics; "
+                    f"{sentence[0].lower()}{sentence[1:]}")
+        why = next((o["why"] for e in camera_motion for o in e.get("observable", ()) if o["why"]), "")
+        return f"Not observable: no camera's own motion can be measured against forward kinematics ({why})."
+    if not findings:
+        if unexplained or undetermined:
+            return f"Inconclusive: {'; '.join([*unexplained, *undetermined])}; no fix is offered.{then}"
+        return f"No fault beyond noise: the cameras turn as forward kinematics says{rate}.{then}"
+    top = findings[0]
+    more = f", plus {len(findings) - 1} more" if len(findings) > 1 else ""
+    on = f" on camera {top.camera}" if top.camera else ""
+    also = "".join(f" {why[0].upper()}{why[1:]}: no fix is offered for it." for why in unexplained)
+    return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
+            f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{also}{then}")
+
+
+__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed", "motion_verdict"]

@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from framechain.analysis.egomotion.joint import Joint, joint_fit
 from framechain.analysis.egomotion.model import (
     EgoMotionFit,
     EgoMotionFitOptions,
@@ -195,8 +196,11 @@ def fit_camera_motion(
     by_name = {link.link: link for link in links}
     first = (table, ranked)
     candidates: list[str] = []
+    joint: Joint | None = None
     if declared_link in _similar(ranked, ranked[0], opts):
-        table, fit, ranked = _refined(measure, by_name[declared_link], [declared], first, links, refinements, opts)
+        own = next(f for f in ranked if f.link == declared_link)
+        table, fit, ranked, joint = _refined(measure, by_name[declared_link], [declared, _Start(
+            own.q_link_cam, own.offset_s, declared.xyz)], first, links, refinements, opts)
         if ranked[0].link != declared_link and ranked[0].residual_deg * opts.same_fit_ratio < fit.residual_deg:
             notes.append(f"camera {camera}: measured with {declared_link}'s translation, its motion fits "
                          f"{ranked[0].link} better; refined on the links that fit best")
@@ -205,15 +209,15 @@ def fit_camera_motion(
         candidates = list(_similar(ranked, ranked[0], opts))[:_MAX_CANDIDATES]
     if candidates:
         # Each candidate from the declared mount (the same link on another arm) and from its rotation-only
-        # fit (another link); the one its own refined measurement fits best wins.
+        # fit (another link); the one its own measurement fits best wins.
         tried = [_refined(measure, by_name[name], [declared, _Start(f.q_link_cam, f.offset_s, np.zeros(3))],
                           first, links, refinements, opts)
                  for name in candidates for f in first[1] if f.link == name]
-        table, fit, ranked = min(tried, key=lambda item: item[1].residual_deg)
+        table, fit, ranked, joint = min(tried, key=lambda item: item[1].residual_deg)
     link = by_name[fit.link]
     similar = _similar(ranked, next((f for f in ranked if f.link == fit.link), fit), opts)
     return _final(table, link, fit, ranked, similar, declared_link, np.asarray(declared_q_link_cam, dtype=float),
-                  camera, turning, notes, opts)
+                  camera, turning, notes, opts, joint)
 
 
 #: At most this many candidate links are refined when the declared one does not fit.
@@ -232,22 +236,23 @@ class _Start:
 def _refined(
     measure: Measure, link: LinkMotion, starts: Sequence[_Start], first: tuple[EgoMotionTable, list[LinkFit]],
     links: Sequence[LinkMotion], refinements: int, opts: EgoMotionFitOptions,
-) -> tuple[EgoMotionTable, LinkFit, list[LinkFit]]:
-    """The link's fit on a measurement made with its own translation prior, and every candidate ranked on it.
+) -> tuple[EgoMotionTable, LinkFit, list[LinkFit], Joint | None]:
+    """The link's fit on measurements made with its own translation prior (:mod:`.joint`: the offset used for the
+    prior and for the comparison at once), from each start's mount; every candidate ranked on the best one.
 
-    With several starts, two refinements from each pick the one to finish from. Without link positions
-    (or refinements) the rotation-only fit stands.
+    Without link positions (or refinements) the rotation-only fit stands.
     """
     own = next(f for f in first[1] if f.link == link.link)
     if link.xyz is None or refinements <= 0:
-        return first[0], own, first[1]
-    trials = [(*_refine_with_translation(measure, link, (s.q_link_cam, s.offset_s), s.xyz,
-                                         min(2, refinements), opts), s) for s in starts]
-    table, fit, start = min(trials, key=lambda item: item[1].residual_deg)
-    if refinements > 2:
-        table, fit = _refine_with_translation(measure, link, (fit.q_link_cam, fit.offset_s), start.xyz,
-                                              refinements - 2, opts)
-    return table, fit, _rank(table, links, opts)
+        return first[0], own, first[1], None
+    tried = [j for j in (joint_fit(measure, link, translation_prior, s.q_link_cam, s.xyz,
+                                   [s.offset_s, own.offset_s], opts) for s in starts) if j is not None]
+    if not tried:
+        return first[0], own, first[1], None
+    best = min(tried, key=lambda j: j.residual_deg)
+    orientations = Orientations(link, int(link.stamps_ns[0]))
+    fit = replace(link_fit(link.link, best.pairs, best.solved, orientations), residual_deg=best.residual_deg)
+    return best.table, fit, _rank(best.table, links, opts), best
 
 
 def _rank(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:
@@ -260,54 +265,6 @@ def _similar(ranked: list[LinkFit], reference: LinkFit, opts: EgoMotionFitOption
     """The links that explain the motion about as well as ``reference`` (within ``same_fit_ratio``)."""
     best = min(reference.residual_deg, ranked[0].residual_deg)
     return tuple(f.link for f in ranked if f.residual_deg <= best * opts.same_fit_ratio)
-
-
-#: Offset (s) to radians in the refinement's state vector: 10 ms weighs as 1 degree.
-_OFFSET_WEIGHT = np.deg2rad(1.0) / 0.010
-
-
-def _refine_with_translation(
-    measure: Measure, link: LinkMotion, start: tuple[FloatArray, float], xyz: FloatArray, refinements: int,
-    opts: EgoMotionFitOptions,
-) -> tuple[EgoMotionTable, LinkFit]:
-    """Measure with the translation FK predicts under the current mount and offset, refit, repeat.
-
-    The mount and offset a measurement returns depend on the prior it was given (a prior a few
-    degrees off leaves a share of its error in the rotations): a contraction towards the right
-    values, accelerated with Anderson mixing of the last three iterates (state: the mount's
-    rotation vector relative to the start, and the offset with 10 ms weighing as one degree).
-    """
-    base = Rotation.from_quat(start[0])
-    state = np.r_[0.0, 0.0, 0.0, start[1] * _OFFSET_WEIGHT]
-    inputs: list[FloatArray] = []
-    outputs: list[FloatArray] = []
-    table, fit = EgoMotionTable.empty(), None
-    for _ in range(refinements):
-        mount = (base * Rotation.from_rotvec(state[:3])).as_quat()
-        table = measure(translation_prior(link, mount, xyz, float(state[3] / _OFFSET_WEIGHT)))
-        fit = fit_link(table, link, opts)
-        if fit is None:
-            break
-        result = np.r_[(base.inv() * Rotation.from_quat(fit.q_link_cam)).as_rotvec(), fit.offset_s * _OFFSET_WEIGHT]
-        if outputs and float(np.abs(result - outputs[-1]).max()) < np.deg2rad(0.02):
-            break
-        inputs.append(state)
-        outputs.append(result)
-        state = _anderson(inputs[-3:], outputs[-3:])
-    if fit is None:
-        raise ValueError(f"link {link.link!r}: too few measured frame pairs with a translation prior")
-    return table, fit
-
-
-def _anderson(inputs: list[FloatArray], outputs: list[FloatArray]) -> FloatArray:
-    """The next iterate of a fixed-point map from its last few inputs and outputs (Anderson type II)."""
-    if len(inputs) == 1:
-        return outputs[0]
-    residuals = np.array([g - x for x, g in zip(inputs, outputs, strict=True)]).T
-    images = np.array(outputs).T
-    gamma = np.linalg.lstsq(np.diff(residuals, axis=1), residuals[:, -1], rcond=None)[0]
-    out: FloatArray = images[:, -1] - np.diff(images, axis=1) @ gamma
-    return out
 
 
 def _rms_deg(rotvec: FloatArray) -> float:
@@ -327,14 +284,18 @@ def _unobservable(camera: str, declared_link: str, turning: float, notes: list[s
 def _final(
     table: EgoMotionTable, link: LinkMotion, fit: LinkFit, ranked: list[LinkFit], similar: tuple[str, ...],
     declared_link: str, declared_q: FloatArray, camera: str, turning: float, notes: list[str],
-    opts: EgoMotionFitOptions,
+    opts: EgoMotionFitOptions, joint: Joint | None = None,
 ) -> EgoMotionFit:
-    """Intervals by bootstrap on the final measurement, observability, the mount against the declared one."""
+    """Intervals by bootstrap on the final measurement (or on the joint fit's grid of measurements), observability,
+    the mount against the declared one."""
     origin = int(link.stamps_ns[0])
     span = (0.0, (int(link.stamps_ns[-1]) - origin) * 1e-9)
-    pairs = frame_pairs(table, origin, span, opts.max_offset_s)
     orientations = Orientations(link, origin)
-    solved = solve(orientations, pairs, opts)
+    if joint is not None and joint.solved.fine.size:
+        pairs, solved = joint.pairs, joint.solved
+    else:
+        pairs = frame_pairs(table, origin, span, opts.max_offset_s)
+        solved = solve(orientations, pairs, opts)
     boot = bootstrap(pairs, solved, opts)
     mount = Rotation.from_matrix(solved.mount)
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
@@ -374,7 +335,7 @@ def _final(
         camera_rotation_deg=turning, offset_observable=not (undetermined or seen.unobservable),
         mount_observable=mount_observable, notes=tuple(notes), offset_undetermined=undetermined,
         unobservable=seen.unobservable, mount_unobservable_axes=seen.axes,
-        bias_rad_s=(float(solved.bias[0]), float(solved.bias[1]), float(solved.bias[2])),
+        bias_rad_s=(float(solved.bias[0]), float(solved.bias[1]), float(solved.bias[2])), table=table,
     )
 
 

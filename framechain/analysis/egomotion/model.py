@@ -6,7 +6,7 @@ See :mod:`framechain.analysis.egomotion` for what the fit does.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.timeline import EgoMotionTable, TranslationPrior
@@ -111,6 +111,8 @@ class EgoMotionFit:
     mount_unobservable_axes: tuple[tuple[float, float, float], ...] = ()
     #: The reference's rate bias fitted (rad/s, link frame; zeros unless the options ask for it).
     bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: The measurement the fit rests on (made with the chosen link's translation prior at the fitted offset).
+    table: EgoMotionTable = field(default_factory=EgoMotionTable.empty)
 
     @property
     def wrong_link(self) -> bool:

@@ -159,7 +159,8 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
     pairing = confirm_pairing(source, links, camera, options)
     fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options)
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
-                        declared_xyz_link_cam=xyz_link_cam, fit=fit, table=source.last, links=links,
+                        declared_xyz_link_cam=xyz_link_cam, fit=fit,
+                        table=fit.table if len(fit.table) else source.last, links=links,
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
                         intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *notes),
                         measured_focal=focal, focal_px=0.5 * (declared.fx + declared.fy), width_px=declared.width,

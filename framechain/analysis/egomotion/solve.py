@@ -74,16 +74,22 @@ class Scatter:
     """The products ``a b^T`` and ``|a|^2 + |b|^2`` of every pair at every trial offset, built once.
 
     ``link_rv`` (G, N, 3) are the link's rotation vectors at G offsets, ``cam_rv`` (N, 3) the measured
-    ones; :meth:`fit` then weighs the pairs with one matrix product (BLAS), for one weight vector or
-    a whole bootstrap at once. With ``dt`` (N,) the pairs' durations, a constant rate bias ``beta`` of the
-    link's rotation is fitted too: ``a`` becomes ``a - beta dt``, alternating with the mount.
+    ones, or (G, N, 3) when each offset has a measurement of its own (measured with the translation
+    prior of that offset); :meth:`fit` then weighs the pairs with one matrix product (BLAS), for one
+    weight vector or a whole bootstrap at once. With ``dt`` (N,) the pairs' durations, a constant rate
+    bias ``beta`` of the link's rotation is fitted too: ``a`` becomes ``a - beta dt``, alternating with
+    the mount (one measurement only).
     """
 
     def __init__(self, link_rv: FloatArray, cam_rv: FloatArray, dt: FloatArray | None = None) -> None:
         g, n = link_rv.shape[:2]
         self.offsets = g
-        self.outer = np.einsum("gni,nj->ngij", link_rv, cam_rv).reshape(n, g * 9)
-        self.norms = ((link_rv**2).sum(-1) + (cam_rv**2).sum(-1)[None]).T  # (N, G)
+        per_offset = cam_rv.ndim == 3
+        if per_offset and dt is not None:
+            raise ValueError("a rate bias is fitted against one measurement, not one per offset")
+        self.outer = np.einsum("gni,gnj->ngij" if per_offset else "gni,nj->ngij", link_rv, cam_rv).reshape(n, g * 9)
+        cam_norms = (cam_rv**2).sum(-1) if per_offset else (cam_rv**2).sum(-1)[None]
+        self.norms = ((link_rv**2).sum(-1) + cam_norms).T  # (N, G)
         self.dt = dt
         if dt is not None:
             self.link_dt = (link_rv * dt[None, :, None]).transpose(1, 0, 2).reshape(n, g * 3)
