@@ -245,11 +245,10 @@ def _refined(
     own = next(f for f in first[1] if f.link == link.link)
     if link.xyz is None or refinements <= 0:
         return first[0], own, first[1], None
-    tried = [j for j in (joint_fit(measure, link, translation_prior, s.q_link_cam, s.xyz,
-                                   [s.offset_s, own.offset_s], opts) for s in starts) if j is not None]
-    if not tried:
+    best = joint_fit(measure, link, translation_prior, [s.q_link_cam for s in starts], starts[0].xyz,
+                     [starts[0].offset_s, own.offset_s], opts)
+    if best is None:
         return first[0], own, first[1], None
-    best = min(tried, key=lambda j: j.residual_deg)
     orientations = Orientations(link, int(link.stamps_ns[0]))
     fit = replace(link_fit(link.link, best.pairs, best.solved, orientations), residual_deg=best.residual_deg)
     return best.table, fit, _rank(best.table, links, opts), best

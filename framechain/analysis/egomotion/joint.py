@@ -41,7 +41,7 @@ __all__ = ["Joint", "joint_fit"]
 #: Steps (s) of the bracketing search, of the grid the intervals are measured on, and its half-width in steps.
 BRACKET_STEP_S = 0.02
 GRID_STEP_S = 0.0025
-GRID_HALF = 4
+GRID_HALF = 3
 
 #: Makes the translation prior of a link, mount rotation (xyzw), camera position on the link (m) and offset (s).
 PriorOf = Callable[[LinkMotion, FloatArray, FloatArray, float], TranslationPrior]
@@ -84,11 +84,14 @@ class _Trials:
                                                 self.opts.max_offset_s)[0]
         return self.costs[key]
 
-    def remount(self, offset: float) -> None:
-        """Measure from now on with the mount fitted at ``offset`` (the prior's direction depends on it)."""
-        mount = _fixed_offset_fit(self.table(offset), self.orientations, self.origin, self.span, offset,
-                                  self.opts.max_offset_s)[1]
-        self.q_link_cam = Rotation.from_matrix(mount).as_quat()
+    def fitted_mount(self, offset: float) -> Rotation:
+        """The mount fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
+        return Rotation.from_matrix(_fixed_offset_fit(self.table(offset), self.orientations, self.origin, self.span,
+                                                      offset, self.opts.max_offset_s)[1])
+
+    def use_mount(self, mount: Rotation) -> None:
+        """Measure from now on with the translation prior of ``mount``."""
+        self.q_link_cam = mount.as_quat()
         self.tables.clear()
         self.costs.clear()
 
@@ -114,7 +117,8 @@ def _fixed_offset_fit(table: EgoMotionTable, orientations: Orientations, origin:
 
 
 def _search(trials: _Trials, starts: list[float], limit: float) -> float:
-    """The offset of least cost: the best start, a bracket walked in steps of BRACKET_STEP_S, then a parabola."""
+    """Near the offset of least cost: the best start, then a bracket walked in steps of BRACKET_STEP_S and one
+    parabola through it (the grid of :func:`_grid` finishes it)."""
     best = min(starts, key=trials.cost)
     step = BRACKET_STEP_S
     left, right = max(best - step, -limit), min(best + step, limit)
@@ -122,28 +126,74 @@ def _search(trials: _Trials, starts: list[float], limit: float) -> float:
         best, left = left, max(left - step, -limit)
     while trials.cost(right) < trials.cost(best) and right < limit:
         best, right = right, min(right + step, limit)
-    for _ in range(4):  # successive parabolas through the bracket, halving it
-        step /= 2
-        grid = np.array([best - step, best, best + step])
-        costs = np.array([trials.cost(float(x)) for x in np.clip(grid, -limit, limit)])
-        best = float(np.clip(parabola_min(grid, costs[None])[0], -limit, limit))
-    return best
+    grid = np.array([left, best, right])
+    costs = np.array([trials.cost(float(x)) for x in grid])
+    return float(np.clip(parabola_min(grid, costs[None])[0], -limit, limit))
 
 
-def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, q_link_cam: FloatArray, xyz: FloatArray,
+def _grid(trials: _Trials, centre: float, limit: float) -> tuple[FloatArray, float]:
+    """Trial offsets GRID_STEP_S apart around ``centre`` with the least cost inside them (moved out to three times
+    when it lies at an end), and the parabola's vertex there."""
+    grid: FloatArray = centre + GRID_STEP_S * np.arange(-GRID_HALF, GRID_HALF + 1, dtype=np.float64)
+    for _ in range(3):
+        grid = np.clip(grid, -limit, limit)
+        costs = np.array([trials.cost(float(x)) for x in grid])
+        k = int(np.argmin(costs))
+        if 0 < k < grid.size - 1 or abs(grid[k]) >= limit:
+            break
+        grid = grid + (k - GRID_HALF) * GRID_STEP_S
+    costs = np.array([trials.cost(float(x)) for x in grid])
+    return grid, float(parabola_min(grid, costs[None])[0])
+
+
+#: The mount is measured again (and the offset searched near where it was) at most this many times, until it
+#: moves by less than REMOUNT_DEG: the prior's direction in the camera depends on the mount, and a measurement
+#: with the prior of one mount returns a mount only part of the way to the one its images show (about two
+#: thirds of the way on generated episodes), so the iterates are mixed (Anderson) to reach the fixed point.
+REMOUNTS = 4
+REMOUNT_DEG = 0.2
+
+
+def _remount(trials: _Trials, best: float) -> None:
+    """The mount's fixed point at offset ``best``: each measurement's fitted mount fed back into its prior."""
+    base = Rotation.from_quat(trials.q_link_cam)
+    inputs: list[FloatArray] = []
+    outputs: list[FloatArray] = []
+    state = np.zeros(3)
+    for _ in range(REMOUNTS):
+        result = (base.inv() * trials.fitted_mount(best)).as_rotvec()
+        if np.rad2deg(np.linalg.norm(result - state)) < REMOUNT_DEG:
+            break
+        inputs.append(state)
+        outputs.append(result)
+        state = anderson(inputs[-3:], outputs[-3:])
+        trials.use_mount(base * Rotation.from_rotvec(state))
+
+
+def anderson(inputs: list[FloatArray], outputs: list[FloatArray]) -> FloatArray:
+    """The next iterate of a fixed-point map from its last few inputs and outputs (Anderson type II)."""
+    if len(inputs) == 1:
+        return outputs[0]
+    residuals = np.array([g - x for x, g in zip(inputs, outputs, strict=True)]).T
+    images = np.array(outputs).T
+    gamma = np.linalg.lstsq(np.diff(residuals, axis=1), residuals[:, -1], rcond=None)[0]
+    out: FloatArray = images[:, -1] - np.diff(images, axis=1) @ gamma
+    return out
+
+
+def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: list[FloatArray], xyz: FloatArray,
               starts: list[float], opts: EgoMotionFitOptions) -> Joint | None:
-    """The offset and mount of ``link`` measured jointly (module text), from the best of ``starts`` (s).
-
-    None when the measurements leave too few pairs inside the link's span.
+    """The offset and mount of ``link`` measured jointly (module text): the better of ``mounts`` (xyzw) at the
+    first of ``starts`` (s), searched from the best start. None when too few pairs stay inside the link's span.
     """
-    trials = _Trials(measure, link, prior_of, q_link_cam, xyz, opts)
+    candidates = [_Trials(measure, link, prior_of, q, xyz, opts) for q in mounts]
+    trials = min(candidates, key=lambda t: t.cost(starts[0]))
     limit = opts.max_offset_s
     best = _search(trials, starts, limit)
     if not np.isfinite(trials.cost(best)):
         return None
-    trials.remount(best)  # the prior's direction with the mount just measured, then a local search again
-    best = _search(trials, [best], limit)
-    grid: FloatArray = best + GRID_STEP_S * np.arange(-GRID_HALF, GRID_HALF + 1, dtype=np.float64)
+    _remount(trials, best)
+    grid, best = _grid(trials, best, limit)
     tables = [trials.table(float(x)) for x in grid]
     cost, mount, weights, pairs = _fixed_offset_fit(trials.table(best), trials.orientations, trials.origin,
                                                     trials.span, best, opts.max_offset_s)
