@@ -89,3 +89,21 @@ def test_an_episodes_time_axis_starts_at_zero_with_the_wall_clock_beside(tmp_pat
     np.testing.assert_allclose(_times(rrd, moving, "wall_time") / 1e9, wall, rtol=0, atol=1e-6)
     assert views_without_data(rrd) == []
     assert "wrist_optical_frame" in labels_in_3d(rrd)
+
+
+@pytest.mark.parametrize(("first", "expected_ns"), [
+    (np.int64(1_760_000_000_123_456_789), 1_760_000_000_123_456_789),  # ns, kept exact
+    (np.int64(1_760_000_000_123), 1_760_000_000_123_000_000),  # ms
+    (np.int64(1_760_000_000_123_456), 1_760_000_000_123_456_000),  # us
+    (np.float64(1_760_000_000.5), 1_760_000_000_500_000_000),  # s
+    (np.float64(12.5), None),  # seconds from the start: no date
+    (np.float64(np.nan), None),
+])
+def test_a_unix_time_column_in_any_unit_is_the_wall_clock(first: np.generic, expected_ns: int | None) -> None:
+    from framechain.adapters.lerobot.format import EpisodeFrames, EpisodeInfo
+    from framechain.adapters.lerobot.wall_clock import wall_clock_start_ns
+
+    frames = EpisodeFrames(EpisodeInfo(0, 2, (), Path("x.parquet")), np.array([0.0, 0.1]), np.arange(2),
+                           np.arange(2), {"unix_time_ns": np.array([first, first], dtype=np.asarray(first).dtype)})
+    found = wall_clock_start_ns(frames, ["unix_time_ns"])
+    assert found == (None if expected_ns is None else ("unix_time_ns", expected_ns))
