@@ -262,7 +262,7 @@ def stream_replay(
         clock = Clock.of(run.timeline)
         rows = _log_run(rec, run, overlay, opts, clock)
         # The layout follows what was logged: a view is there only when it has data.
-        rec.send_blueprint(_blueprint(run, rows, overlay, clock), make_active=True, make_default=True)
+        rec.send_blueprint(_blueprint(run, rows, overlay, clock), make_active=False, make_default=True)
         rec.flush(timeout_sec=60.0)
         rec.disconnect()
     except (RuntimeError, OSError) as err:
@@ -351,7 +351,8 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     rows: dict[str, int] = {}
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     views = camera_views(result, run.chain.camera_frames() if run.chain.is_rig else ())
-    log_frame_tree(rec, timeline, clock, result.frames, opts, rows, tuple(v.frame for v in views))
+    log_frame_tree(rec, timeline, clock, result.frames, opts, rows, tuple(v.frame for v in views),
+                   replayed=bool(result.replayed.any()))
     log_used_transforms(rec, result, clock, views, rows)
     for view in views:
         log_camera(rec, timeline, result, clock, view, opts, rows)

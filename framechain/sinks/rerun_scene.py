@@ -41,17 +41,20 @@ if TYPE_CHECKING:
 #: A rig's cameras sit centimetres apart: their frustums are drawn short.
 RIG_PLANE_DISTANCE_M = 0.1
 BORDER_COLOR = (160, 160, 160)
+#: The chain's frames' names in 3D: dark, as the viewer writes text.
+LABEL_COLOR = (40, 40, 40)
 
 
 def log_frame_tree(
     rec: rr.RecordingStream, timeline: Timeline, clock: Clock, frames: ChainFrames, opts: RerunOptions,
-    rows: dict[str, int], cameras: tuple[str, ...] = (),
+    rows: dict[str, int], cameras: tuple[str, ...] = (), *, replayed: bool = True,
 ) -> None:
     """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk; ``/frames/<frame>`` the
     axes of every frame, named only where the frame is one of the chain's (world, body, camera; ``cameras``: a rig's
     other cameras): an arm's dozen links would bury each other's names. Chain frames that sit at one place (a
     world that is the arm's base) share one label. A frame's ``@replay`` copy is named only where the log's tree
-    lacks the frame: both sit at one place when the replay used the log's transforms."""
+    lacks the frame: both sit at one place when the replay used the log's transforms; without a replayed
+    observation (``replayed`` False) there are no copies, whose frames nothing would place."""
     import rerun as rr
 
     tf = timeline.transforms
@@ -84,27 +87,30 @@ def log_frame_tree(
         )
         rows[entity] = int(use.size)
     chain = (frames.world, frames.body, frames.camera, *cameras)
-    names.update(c + REPLAY_FRAME_SUFFIX for c in chain[1:])
-    labels = frame_labels(timeline, chain)
+    if replayed:
+        names.update(c + REPLAY_FRAME_SUFFIX for c in chain[1:])
+    labels = frame_labels(timeline, chain, anchors=(frames.camera, *cameras))
     for name in sorted(names):
         recorded = name.removesuffix(REPLAY_FRAME_SUFFIX)
         replay_copy = name.endswith(REPLAY_FRAME_SUFFIX)
         entity = f"/frames/replay/{entity_part(recorded)}" if replay_copy else f"/frames/{entity_part(name)}"
+        rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=False),
+                static=True)
         # a chain frame the log's tree lacks is named on its replay copy, where the replay put it
         on_copy = recorded not in in_tree and recorded + REPLAY_FRAME_SUFFIX in names
         label = labels.get(recorded) if replay_copy == on_copy else None
-        rec.log(entity, rr.CoordinateFrame(name),
-                rr.TransformAxes3D(opts.axis_length_m, show_frame=label == recorded), static=True)
-        if label is not None and label != recorded:  # frames at one place: one label naming them all
-            rec.log(entity, rr.Points3D([[0.0, 0.0, 0.0]], radii=[opts.axis_length_m / 20], colors=[BORDER_COLOR],
+        if label is not None:
+            # A rig's cameras sit centimetres apart: each is named past its frustum, along its view, where they part.
+            ahead = 2.5 * RIG_PLANE_DISTANCE_M if len(cameras) > 1 and recorded in cameras else 0.0
+            rec.log(entity, rr.Points3D([[0.0, 0.0, ahead]], radii=[opts.axis_length_m / 25], colors=[LABEL_COLOR],
                                         labels=[label], show_labels=True), static=True)
         rows[entity] = 1
 
 
-def frame_labels(timeline: Timeline, chain: tuple[str, ...]) -> dict[str, str]:
-    """The label of each chain frame that gets one: its name, or for chain frames that a static edge without
-    translation (under 1 mm) joins, the first of them in ``chain`` gets ``"world = base_link"`` and the others
-    none."""
+def frame_labels(timeline: Timeline, chain: tuple[str, ...], anchors: tuple[str, ...] = ()) -> dict[str, str]:
+    """The label of each chain frame that gets one: its name; chain frames that static edges without translation
+    (under 1 mm) join share one label, ``"world = base_link"``, on the first of them in ``chain`` (the first of
+    ``anchors``, cameras, among them when there is one) and the others get none."""
     tf = timeline.transforms
     static = np.flatnonzero(tf.is_static & (np.linalg.norm(tf.translation, axis=1) < 1e-3)).tolist() if len(tf) else []
     group = {frame: frame for frame in chain}
@@ -121,7 +127,8 @@ def frame_labels(timeline: Timeline, chain: tuple[str, ...]) -> dict[str, str]:
     members: dict[str, list[str]] = {}
     for frame in dict.fromkeys(chain):
         members.setdefault(root(frame), []).append(frame)
-    return {together[0]: " = ".join(together) for together in members.values()}
+    return {next((f for f in together if f in anchors), together[0]): " = ".join(together)
+            for together in members.values()}
 
 
 def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, views: list[CameraView],

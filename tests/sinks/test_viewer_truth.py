@@ -94,7 +94,8 @@ def test_replay_frames_are_named_only_where_the_log_lacks_the_frame(
         fiducial_scene: dict[str, list[tuple[bool, Any]]]) -> None:
     # base_link and camera_optical_frame are in the log's tree: their @replay copies sit on them, unnamed
     for frame in ("base_link", "camera_optical_frame"):
-        assert _rows(fiducial_scene, f"/frames/{frame}", "TransformAxes3D:show_frame") == [[True]]
+        assert _rows(fiducial_scene, f"/frames/{frame}", "Points3D:labels") == [[frame]]
+        assert _rows(fiducial_scene, f"/frames/replay/{frame}", "Points3D:labels") == []
         assert _rows(fiducial_scene, f"/frames/replay/{frame}", "TransformAxes3D:show_frame") == [[False]]
 
 
