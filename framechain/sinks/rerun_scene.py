@@ -89,7 +89,16 @@ def log_frame_tree(
     chain = (frames.world, frames.body, frames.camera, *cameras)
     if replayed:
         names.update(c + REPLAY_FRAME_SUFFIX for c in chain[1:])
-    labels = frame_labels(timeline, chain, anchors=(frames.camera, *cameras))
+    _log_frame_axes(rec, names, in_tree, frame_labels(timeline, chain, anchors=(frames.camera, *cameras)),
+                    cameras if len(cameras) > 1 else (), opts, rows)
+
+
+def _log_frame_axes(rec: rr.RecordingStream, names: set[str], in_tree: set[str], labels: dict[str, str],
+                    rig: tuple[str, ...], opts: RerunOptions, rows: dict[str, int]) -> None:
+    """``/frames/<frame>``: every frame's axes, and the chain frames' ``labels`` (a ``rig``'s cameras sit
+    centimetres apart: each is named past its frustum, along its view, where they part)."""
+    import rerun as rr
+
     for name in sorted(names):
         recorded = name.removesuffix(REPLAY_FRAME_SUFFIX)
         replay_copy = name.endswith(REPLAY_FRAME_SUFFIX)
@@ -100,8 +109,7 @@ def log_frame_tree(
         on_copy = recorded not in in_tree and recorded + REPLAY_FRAME_SUFFIX in names
         label = labels.get(recorded) if replay_copy == on_copy else None
         if label is not None:
-            # A rig's cameras sit centimetres apart: each is named past its frustum, along its view, where they part.
-            ahead = 2.5 * RIG_PLANE_DISTANCE_M if len(cameras) > 1 and recorded in cameras else 0.0
+            ahead = 2.5 * RIG_PLANE_DISTANCE_M if recorded in rig else 0.0
             rec.log(entity, rr.Points3D([[0.0, 0.0, ahead]], radii=[opts.axis_length_m / 25], colors=[LABEL_COLOR],
                                         labels=[label], show_labels=True), static=True)
         rows[entity] = 1

@@ -24,6 +24,8 @@ The Timeline holds:
 - depth_frames: per-frame depth features of the cameras that have one.
 
 Times are nanoseconds from the episode start (LeRobot timestamps restart at 0 per episode).
+``metadata["episode_start_ns"]`` is the first row's stamp, and ``metadata["wall_clock_start_ns"]`` that
+row's wall-clock time where the dataset stores one (:mod:`framechain.adapters.lerobot.wall_clock`).
 """
 
 from __future__ import annotations
