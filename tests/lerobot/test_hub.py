@@ -112,6 +112,10 @@ def test_an_id_or_an_episode_not_in_the_cache_is_one_line_offline(hub_cache: Hub
     line = one_error_line(framechain("info", "lerobot/tiny_v21", "--episode", "1", **offline(hub_cache)))
     assert "not in the Hugging Face cache" in line
     assert "data/chunk-000/episode_000001.parquet" in line
+    # batch without --episodes asks for every episode: the same line, before any episode is attributed
+    line = one_error_line(framechain("batch", "lerobot/tiny_v21", "--out", str(hub_cache.home / "fleet"),
+                                     **offline(hub_cache)))
+    assert "data/chunk-000/episode_000001.parquet" in line
 
 
 def test_a_local_folder_wins_over_the_hub_id_of_its_name(hub_cache: HubCache, tmp_path: Path) -> None:
