@@ -5,8 +5,8 @@ gRPC; headless Chromium renders it with SwiftShader (WebGL on the CPU; no GPU, n
 script drives Chromium over the DevTools protocol: it takes a screenshot every 5 s until the viewer
 shows data, waits ``--settle`` seconds more (JPEGs are decoded asynchronously: earlier shots show a
 spinner where the image goes) and keeps the last one. The blueprint ``VIEW.rbl`` is framechain's
-default with the side panels collapsed. The viewer opens at the end of the timeline: the shot
-shows the last observation.
+default for what the recording holds (its views with data, its cameras, its timelines) with the side
+panels collapsed. The viewer opens at the end of the timeline: the shot shows the last observation.
 
 Tried first: ``chromium --screenshot --virtual-time-budget=N`` works on an idle machine, but under
 load the budget ran out while the viewer was still loading (a dark page, or no recording yet). A
@@ -14,12 +14,9 @@ native viewer under Xvfb with llvmpipe gave all-black captures on this machine. 
 2-core machine: about 1 minute per screenshot.
 
     .venv/bin/python scripts/screenshots.py --demo docs/images/demo_viewer.png
-    .venv/bin/python scripts/screenshots.py --rrd aruco.rrd --camera raspicam --out docs/images/aruco_viewer.png
-    .venv/bin/python scripts/screenshots.py --rrd quad.rrd --no-images --body rig --world rig \
-        --rig quadruple/bottom_left,quadruple/bottom_right,quadruple/top_left,quadruple/top_right \
-        --image-size 1280x1024 --out quad.png
-    .venv/bin/python scripts/screenshots.py --rrd episode.rrd --camera wrist_optical_frame --body base_link \
-        --world world --camera-motion --out episode.png
+    .venv/bin/python scripts/screenshots.py --rrd aruco.rrd --out docs/images/aruco_viewer.png
+    .venv/bin/python scripts/screenshots.py --rrd quad.rrd --body rig --world rig --out quad.png
+    .venv/bin/python scripts/screenshots.py --rrd episode.rrd --world world --out episode.png
 
 Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``).
 """
@@ -40,7 +37,6 @@ import tempfile
 import time
 import urllib.parse
 import urllib.request
-from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -56,24 +52,45 @@ def free_port() -> int:
         return port
 
 
-def write_blueprint(path: Path, camera: str, body: str, world: str, *, images: bool,
-                    bounds: tuple[float, float, float, float] | None, curves: Sequence[str] = (),
-                    curves_first: bool = False, rig: tuple[str, ...] = (),
-                    rig_image: tuple[float, float, float, float] | None = None, camera_motion: bool = False,
-                    window_s: float | None = None) -> None:
-    """framechain's default blueprint with the side panels collapsed, for application ``framechain`` (``rig``:
-    the camera frames of a rig, one view each; ``camera_motion``: the cameras' rotation rate first)."""
+def write_blueprint(path: Path, rrd: Path, *, body: str, world: str, curves_first: bool = False) -> None:
+    """framechain's default blueprint of the recording (the views that have data in it) with the side panels
+    collapsed, for application ``framechain``."""
     from framechain.config.chain import ChainFrames
     from framechain.sinks.rerun import default_blueprint
-    from framechain.sinks.rerun_common import entity_part
 
-    titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in curves]
-    blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), images=images,
-                                  collapse_panels=True, image_bounds=bounds, curves=titles, curves_first=curves_first,
-                                  camera_motion=camera_motion,
-                                  cameras=[(f, f"/cameras/{entity_part(f)}", rig_image) for f in rig],
-                                  window_s=window_s)
+    logged, cameras, timelines = recorded_layout(rrd)
+    camera = next((frame for frame, root, _ in cameras if root == "/camera"), cameras[0][0] if cameras else "camera")
+    titles = [(entity, f"Error vs {entity.rsplit('/', 1)[-1]}") for entity in recorded_curves(rrd)]
+    blueprint = default_blueprint(ChainFrames(camera=camera, body=body, world=world), logged, cameras=cameras,
+                                  collapse_panels=True, curves=titles, curves_first=curves_first,
+                                  window_s=recorded_window(rrd), timelines=timelines)
     blueprint.save("framechain", path)
+
+
+Bounds = tuple[float, float, float, float]
+
+
+def recorded_layout(rrd: Path) -> tuple[dict[str, int], list[tuple[str, str, Bounds | None]], list[str]]:
+    """What the recording holds: rows per entity, its cameras (optical frame, entity, the view's bounds: the
+    recording's own for the chain camera, the whole image for the others) and its timelines (the stamps' first)."""
+    from rerun.chunk import RrdReader
+
+    logged: dict[str, int] = {}
+    cameras: dict[str, tuple[str, str, Bounds | None]] = {}
+    names: set[str] = set()
+    for chunk in RrdReader(rrd).stream():
+        entity = str(chunk.entity_path)
+        batch = chunk.to_record_batch()
+        logged[entity] = logged.get(entity, 0) + chunk.num_rows
+        names.update(f.name for f in batch.schema if (f.metadata or {}).get(b"rerun:kind") == b"index")
+        if "Pinhole:parent_frame" in batch.schema.names:
+            frame = batch.column("Pinhole:parent_frame").to_pylist()[-1][0]
+            width, height = batch.column("Pinhole:resolution").to_pylist()[-1][0]
+            box = recorded_bounds(rrd) if entity == "/camera" else (0.0, float(width), 0.0, float(height))
+            cameras[entity] = (frame, entity, box)
+    stamps = "episode_time" if "episode_time" in names else "sensor_time"
+    timelines = [stamps, *(t for t in ("log_time", "obs_index", "wall_time") if t in names)]
+    return logged, [cameras[e] for e in sorted(cameras, key=lambda e: (e != "/camera", e))], timelines
 
 
 def recorded_curves(rrd: Path) -> list[str]:
@@ -304,18 +321,10 @@ def main(argv: list[str] | None = None) -> int:
     what.add_argument("--demo", metavar="OUT.png", help="run `framechain demo` and screenshot its recording")
     what.add_argument("--rrd", type=Path, help="a framechain recording to screenshot (with --out)")
     parser.add_argument("--out", type=Path, help="the PNG (with --rrd)")
-    parser.add_argument("--camera", default="camera_optical_frame", help="the chain's camera frame")
-    parser.add_argument("--rig", default="", metavar="FRAME,FRAME,...",
-                        help="a rig's camera frames, in the chain's order (one view each)")
-    parser.add_argument("--image-size", default="", metavar="WxH", help="a rig's image size (frames its views)")
     parser.add_argument("--body", default="base_link")
     parser.add_argument("--world", default="map")
-    parser.add_argument("--no-images", action="store_true", help="the recording has no camera images")
     parser.add_argument("--curves-first", action="store_true",
                         help="show the error-against-size curves before the per-hop error (static targets)")
-    parser.add_argument("--camera-motion", action="store_true",
-                        help="a run measured by the cameras' own motion (a LeRobot episode as recorded): the "
-                             "rotation rate from the images against forward kinematics first")
     parser.add_argument("--size", default="1600x900")
     parser.add_argument("--settle", type=float, default=20.0, metavar="S",
                         help="seconds to wait once the data shows, for images to decode (default 20)")
@@ -336,13 +345,7 @@ def main(argv: list[str] | None = None) -> int:
                 parser.error("--rrd needs --out")
             rrd, out = args.rrd, args.out
         blueprint = work / "view.rbl"
-        rig = tuple(f for f in args.rig.split(",") if f)
-        w, _, h = args.image_size.lower().partition("x")
-        write_blueprint(blueprint, rig[0] if rig else args.camera, args.body, args.world, images=not args.no_images,
-                        bounds=None if rig else recorded_bounds(rrd), curves=recorded_curves(rrd),
-                        curves_first=args.curves_first, rig=rig,
-                        rig_image=(0.0, float(w), 0.0, float(h)) if h else None, camera_motion=args.camera_motion,
-                        window_s=recorded_window(rrd))
+        write_blueprint(blueprint, rrd, body=args.body, world=args.world, curves_first=args.curves_first)
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

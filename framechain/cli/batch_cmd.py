@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import PlainProgress, make_out_dir, non_negative_int
+from framechain.cli.common import PlainProgress, add_revision_argument, make_out_dir, non_negative_int
 
 EPILOG = """exit codes:
   0    the batch ran: every log has its row in DIR/fleet.parquet (a log that failed is a row with its error)
@@ -30,8 +30,8 @@ def register(sub: Any) -> None:
         epilog=EPILOG,
         formatter_class=_WrapProseKeepTables,
     )
-    parser.add_argument("inputs", nargs="+", metavar="INPUT", help="log file, bag directory, LeRobot dataset, or a "
-                        "directory of any of these")
+    parser.add_argument("inputs", nargs="+", metavar="INPUT", help="log file, bag directory, LeRobot dataset (a folder "
+                        "or a Hugging Face Hub id), or a directory of any of these")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory (results are resumed from it)")
     parser.add_argument("--chain", metavar="CHAIN.yaml",
                         help="chain configuration for the logs that have none beside them (<log name>.chain.yaml, "
@@ -39,6 +39,7 @@ def register(sub: Any) -> None:
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     parser.add_argument("--episodes", type=episode_set, metavar="SPEC",
                         help="LeRobot datasets: only these episodes, e.g. 0-9,20 (default: all)")
+    add_revision_argument(parser)
     parser.add_argument("--jobs", "-j", type=positive_int, metavar="N",
                         help="worker processes (local; 1: in this process; default: the CPU count), or tasks "
                         "in flight (ray; default: twice the cluster's CPUs)")

@@ -24,7 +24,7 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
         "log",
         metavar="LOG",
         help="MCAP file, ROS 1 .bag, ROS 2 bag directory (or bare .db3/.mcap), LeRobot dataset "
-        "directory, or a saved timeline directory",
+        "directory or Hugging Face Hub id (lerobot/NAME), or a saved timeline directory",
     )
     parser.add_argument(
         "--chain",
@@ -32,10 +32,43 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
         help="chain configuration (frames, topics, evidence, calibration, mounts); default: the one "
         "`framechain info LOG --chain` suggests, printed (`framechain info LOG` lists what the log lacks)",
     )
-    parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
-    parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
+    add_dataset_arguments(parser)
     parser.add_argument("-q", "--quiet", action="store_true",
                         help="no progress output and no suggested chain (results are still printed)")
+
+
+def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
+    """--episode, --robot and --revision: what a command reading one LeRobot episode takes."""
+    parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+    parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
+    add_revision_argument(parser)
+
+
+def add_revision_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--revision", metavar="REV", help="a dataset named by its Hugging Face Hub id: the branch, "
+                        "tag or commit (default: main)")
+
+
+def resolve_datasets(args: argparse.Namespace) -> None:
+    """A Hugging Face Hub id given as LOG (or as a batch INPUT) becomes its folder in the user's Hugging Face cache,
+    fetched as far as the command needs (meta/, the asked episodes' data and videos); a path that exists stays
+    as it is. The one place every command's dataset is resolved."""
+    log, inputs = getattr(args, "log", None), getattr(args, "inputs", None)
+    revision = getattr(args, "revision", None)
+    if isinstance(log, str):
+        episode = getattr(args, "episode", None)
+        args.log = _resolved(log, revision, () if episode is None else (episode,))
+    elif isinstance(inputs, list):
+        episodes = getattr(args, "episodes", None)
+        args.inputs = [_resolved(item, revision, None if episodes is None else sorted(episodes)) for item in inputs]
+
+
+def _resolved(spec: str, revision: str | None, episodes: Sequence[int] | None) -> str:
+    if Path(spec).exists() and revision is None:  # the usual case, without loading the adapters
+        return spec
+    from framechain.adapters.lerobot.hub import resolve_dataset
+
+    return str(resolve_dataset(spec, revision=revision, episodes=episodes))
 
 
 @contextmanager

@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from framechain.cli.common import add_dataset_arguments
+
 if TYPE_CHECKING:
     from framechain.adapters import EdgeInfo, LoadedLog, SuggestedChain
 
@@ -24,9 +26,8 @@ def register(sub: Any) -> None:
         "that chain (its calibration files, mounts, urdf and pose topics) and checked against it.",
     )
     p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory, a bare .db3, or a LeRobot "
-                   "dataset directory (with --episode and --robot for its frame tree)")
-    p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
-    p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
+                   "dataset directory or Hugging Face Hub id (with --episode and --robot for its frame tree)")
+    add_dataset_arguments(p)
     p.add_argument("--json", action="store_true", help="print one JSON object instead of the tree")
     p.add_argument("--chain", nargs="?", const=True, default=None, metavar="CHAIN.yaml",
                    help="alone: print only the suggested chain configuration as YAML (framechain info LOG --chain "

@@ -93,9 +93,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # the user set wins.
     for variable in BLAS_THREAD_VARIABLES:
         os.environ.setdefault(variable, "1")
+    from framechain.cli.common import resolve_datasets
     from framechain.timeline import FramechainError  # after parsing, so that --help loads no tables
 
     try:
+        resolve_datasets(args)
         return int(args.run(args))
     except FramechainError as err:
         print(f"framechain {args.command}: error: {err}", file=sys.stderr)

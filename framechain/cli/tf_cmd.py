@@ -9,6 +9,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from framechain.cli.common import add_dataset_arguments
+
 if TYPE_CHECKING:
     import numpy as np
     import numpy.typing as npt
@@ -28,7 +30,8 @@ def register(sub: Any) -> None:
         "the time, static edges timeless, extrapolation an error that names the edge and its recorded span.",
     )
     p.add_argument("log", help="an .mcap file, a ROS 1 .bag, a ROS 2 bag directory, a bare .db3, or a LeRobot "
-                   "dataset directory (with --episode and --robot: the frame tree from forward kinematics)")
+                   "dataset directory or Hugging Face Hub id (with --episode and --robot: the frame tree from "
+                   "forward kinematics)")
     p.add_argument("target", help="target frame (the transform maps points into it)")
     p.add_argument("source", help="source frame")
     when = p.add_mutually_exclusive_group()
@@ -42,8 +45,7 @@ def register(sub: Any) -> None:
     fmt.add_argument("--csv", action="store_true", help="print CSV")
     p.add_argument("--chain", metavar="CHAIN.yaml",
                    help="a chain file whose mounts, urdf and pose topics (topics.odometry) add edges to the log's")
-    p.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
-    p.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
+    add_dataset_arguments(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar while reading")
     p.set_defaults(run=run)
 

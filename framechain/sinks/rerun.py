@@ -39,7 +39,16 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
 
 Timelines: ``sensor_time`` (header stamps), ``log_time`` (receive time in the log), and
 ``obs_index`` (row of the observation) on everything tied to an observation. Rerun's own
-wall-clock ``log_time`` is switched off so the name means the log's receive time.
+wall-clock ``log_time`` is switched off so the name means the log's receive time. An episode
+(LeRobot: stamps in seconds from its start) has ``episode_time`` in place of ``sensor_time``, and
+``log_time``, as durations from its first row, plus ``wall_time`` where the dataset stores the
+wall-clock (:class:`~framechain.sinks.rerun_common.Clock`).
+
+The default blueprint is sent once everything is logged, made of the views that have data
+(:func:`~framechain.sinks.rerun_blueprint.default_blueprint`): an episode without detections shows
+its cameras, its frame tree in 3D, one rotation-rate plot per camera and the text, nothing empty.
+In 3D only the chain's frames are named (chain frames at one place share a label); every other
+label (points, arrows, lines) shows on hover.
 
 Everything per observation goes through ``send_columns`` (one call per entity, never one call per
 observation per hop).
@@ -64,14 +73,17 @@ from framechain.sinks.overlay import ImageOverlay, ImageSelection, image_overlay
 from framechain.sinks.rerun_blueprint import default_blueprint, image_view_bounds
 from framechain.sinks.rerun_checks import curve_entity, curve_title, log_checks
 from framechain.sinks.rerun_common import (
+    EPISODE_TIME,
     LOG_TIME,
     OBS_INDEX,
     ROLE_LEAF,
     SENSOR_TIME,
+    WALL_TIME,
+    Clock,
     RerunOptions,
     camera_views,
 )
-from framechain.sinks.rerun_egomotion import log_camera_motion, log_camera_videos
+from framechain.sinks.rerun_egomotion import camera_root, log_camera_motion, log_camera_videos
 from framechain.sinks.rerun_rig import log_rig
 from framechain.sinks.rerun_scene import (
     log_camera,
@@ -93,6 +105,7 @@ from framechain.timeline import FramechainError, Timeline
 
 if TYPE_CHECKING:
     import rerun as rr
+    import rerun.blueprint as rrb
 
 
 class RerunSinkError(FramechainError):
@@ -226,28 +239,18 @@ def stream_replay(
         say(note)
     rec = rr.RecordingStream(opts.application_id, recording_id=opts.recording_id)
     overlay = image_overlay(run.timeline, run.replay, run.aligned, run.findings)
-    shows_images = opts.images is not ImageSelection.NONE and len(run.timeline.image_frames) > 0
-    curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
-    views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
-    boxes = [(v.frame, v.root, _image_box(run.timeline, v.frame)) for v in views if v.rig]
-    stamps = run.replay.observations.stamp_ns
-    # A log of one moment (one image): the series' time axes would span months around it.
-    moment = stamps.size > 0 and int(stamps.max() - stamps.min()) < SHORT_LOG_NS
-    blueprint = default_blueprint(run.replay.frames, images=shows_images, image_bounds=image_view_bounds(overlay),
-                                  curves=curves, camera_motion=run.camera_motion is not None, cameras=boxes,
-                                  window_s=SHORT_LOG_NS / 1e9 if moment else None)
     fell_back = chosen.mode is not target.mode
     try:
         if chosen.mode is OutputMode.SAVE:
             assert chosen.path is not None
             chosen.path.parent.mkdir(parents=True, exist_ok=True)
-            rec.save(chosen.path, default_blueprint=blueprint)
+            rec.save(chosen.path)
         elif chosen.mode is OutputMode.CONNECT:
             _check_listening(chosen.url)
-            rec.connect_grpc(chosen.url, default_blueprint=blueprint)
+            rec.connect_grpc(chosen.url)
         else:
             try:
-                rec.spawn(default_blueprint=blueprint)
+                rec.spawn()
             except RuntimeError as err:  # no `rerun` executable on PATH
                 path = chosen.path or Path("framechain.rrd")
                 msg = f"cannot start the Rerun viewer ({err}); saving to {path} instead"
@@ -255,8 +258,11 @@ def stream_replay(
                 say(msg)
                 chosen = RerunTarget.save(path)
                 fell_back = True
-                rec.save(path, default_blueprint=blueprint)
-        rows = _log_run(rec, run, overlay, opts)
+                rec.save(path)
+        clock = Clock.of(run.timeline)
+        rows = _log_run(rec, run, overlay, opts, clock)
+        # The layout follows what was logged: a view is there only when it has data.
+        rec.send_blueprint(_blueprint(run, rows, overlay, clock), make_active=False, make_default=True)
         rec.flush(timeout_sec=60.0)
         rec.disconnect()
     except (RuntimeError, OSError) as err:
@@ -294,17 +300,44 @@ def _release_dropped_recordings() -> None:
         sweep()
 
 
-def log_replay(rec: rr.RecordingStream, run: Run, *, options: RerunOptions | None = None) -> dict[str, int]:
-    """Log everything of one run to an open recording; returns rows logged per entity path.
+def log_replay(rec: rr.RecordingStream, run: Run, *, options: RerunOptions | None = None,
+               clock: Clock | None = None) -> dict[str, int]:
+    """Log everything of one run to an open recording; returns rows logged per entity path (what
+    :func:`recording_blueprint` lays out). ``clock``: how stamps become timelines (default: the run's own, an
+    episode's durations from its first row).
 
     The caller owns ``rec`` (its sink, flush and disconnect), so this also serves notebooks
-    (``rec.notebook_show()``) and in-memory recordings.
+    (``rec.notebook_show()``), in-memory recordings, and recordings of many runs (one per episode).
     """
     return _log_run(rec, run, image_overlay(run.timeline, run.replay, run.aligned, run.findings),
-                    options or RerunOptions())
+                    options or RerunOptions(), clock or Clock.of(run.timeline))
 
 
-def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: RerunOptions) -> dict[str, int]:
+def recording_blueprint(run: Run, logged: Mapping[str, int], *, collapse_panels: bool = False) -> rrb.Blueprint:
+    """The default layout of a run's recording: the views that have data in it (``logged``: rows per entity path,
+    as :func:`log_replay` returns them) for this kind of run (a robot log, a rig, an episode)."""
+    return _blueprint(run, logged, image_overlay(run.timeline, run.replay, run.aligned, run.findings),
+                      Clock.of(run.timeline), collapse_panels=collapse_panels)
+
+
+def _blueprint(run: Run, logged: Mapping[str, int], overlay: ImageOverlay, clock: Clock, *,
+               collapse_panels: bool = False) -> rrb.Blueprint:
+    views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
+    cameras = [(v.frame, v.root, _image_box(run.timeline, v.frame) if v.rig else image_view_bounds(overlay))
+               for v in views]
+    shown = {v.frame for v in views}
+    cameras += [(frame, camera_root(frame), None) for frame in dict.fromkeys(run.timeline.cameras.frame.tolist())
+                if frame not in shown]
+    curves = [(curve_entity(c), curve_title(c)) for c in run.attribution.curves] if run.attribution else []
+    stamps = run.replay.observations.stamp_ns
+    # A log of one moment (one image): the series' time axes would span months around it.
+    moment = stamps.size > 0 and int(stamps.max() - stamps.min()) < SHORT_LOG_NS
+    return default_blueprint(run.replay.frames, logged, cameras=cameras, collapse_panels=collapse_panels,
+                             curves=curves, window_s=SHORT_LOG_NS / 1e9 if moment else None, timelines=clock.timelines)
+
+
+def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: RerunOptions,
+             clock: Clock) -> dict[str, int]:
     import rerun as rr
 
     result, timeline = run.replay, run.timeline
@@ -318,27 +351,28 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     rows: dict[str, int] = {}
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     views = camera_views(result, run.chain.camera_frames() if run.chain.is_rig else ())
-    log_frame_tree(rec, timeline, result.frames, opts, rows, tuple(v.frame for v in views))
-    log_used_transforms(rec, result, views, rows)
+    log_frame_tree(rec, timeline, clock, result.frames, opts, rows, tuple(v.frame for v in views),
+                   replayed=bool(result.replayed.any()))
+    log_used_transforms(rec, result, clock, views, rows)
     for view in views:
-        log_camera(rec, timeline, result, view, opts, rows)
-        log_detections(rec, overlay, result, view, rows)
+        log_camera(rec, timeline, result, clock, view, opts, rows)
+        log_detections(rec, overlay, result, clock, view, rows)
     as_run = _as_run_points(rec, run, opts, rows)
-    log_points(rec, result, as_run, opts, rows, views)
-    log_series(rec, result, as_run, rows)
+    log_points(rec, result, clock, as_run, opts, rows, views)
+    log_series(rec, result, clock, as_run, rows)
     for view in views:
-        log_images(rec, timeline, result, view, opts, rows)
-        log_overlay(rec, overlay, result, view, rows)
+        log_images(rec, timeline, result, clock, view, opts, rows)
+        log_overlay(rec, overlay, result, clock, view, rows)
     if opts.images is not ImageSelection.NONE:
-        log_camera_videos(rec, run, rows)
-    log_camera_motion(rec, run, rows)
+        log_camera_videos(rec, run, clock, rows)
+    log_camera_motion(rec, run, clock, rows)
     if run.attribution is not None and run.attribution.rig is not None:
-        log_rig(rec, result, run.attribution.rig, opts, rows)
+        log_rig(rec, result, clock, run.attribution.rig, opts, rows)
     moving = run.timeline.transforms.stamp_ns[~run.timeline.transforms.is_static]
-    log_text(rec, result, [FindingView.of(f) for f in run.findings], rows,
+    log_text(rec, result, clock, [FindingView.of(f) for f in run.findings], rows,
              start_ns=int(moving.min()) if moving.size else None, verdict=_verdict(run))
     if run.attribution is not None:
-        log_explained_error(rec, result, run.attribution, rows)
+        log_explained_error(rec, result, clock, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
     return rows
 
@@ -359,7 +393,7 @@ def _as_run_points(
         as_run["reference"] = np.where(run.replay.replayed[:, None], reference, np.nan)
         rec.log("/points/reference/declared",
                 rr.Points3D([declared], colors=[REFERENCE_COLOR], radii=[opts.point_radius_m * 1.5],
-                            labels=["declared reference"]),
+                            labels=["declared reference"], show_labels=False),
                 rr.CoordinateFrame(run.chain.frames.world), static=True)
         rows["/points/reference/declared"] = 1
     return as_run
@@ -378,9 +412,12 @@ def _stderr(message: str) -> None:
 
 
 __all__ = [
+    "EPISODE_TIME",
     "LOG_TIME",
     "OBS_INDEX",
     "SENSOR_TIME",
+    "WALL_TIME",
+    "Clock",
     "FindingView",
     "OutputMode",
     "RerunOptions",
@@ -390,6 +427,7 @@ __all__ = [
     "default_blueprint",
     "display_available",
     "log_replay",
+    "recording_blueprint",
     "resolve_target",
     "stream_replay",
     "summary_markdown",

@@ -1,8 +1,9 @@
-"""The default layout of a Rerun recording: the world in 3D beside the camera's view, series and text below."""
+"""The default layout of a Rerun recording, made of the views that have data: the world in 3D beside the cameras'
+views, series and text below."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -36,111 +37,170 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
     return u0, u1, v0, v1
 
 
-def default_blueprint(frames: ChainFrames, *, images: bool = False, collapse_panels: bool = False,
-                      image_bounds: tuple[float, float, float, float] | None = None,
-                      curves: Sequence[tuple[str, str]] = (), curves_first: bool = False,
-                      camera_motion: bool = False,
-                      cameras: Sequence[tuple[str, str, tuple[float, float, float, float] | None]] = (),
-                      window_s: float | None = None) -> rrb.Blueprint:
-    """The 3D view in the world frame (and all observations' world points) beside the camera's 2D view
-    (its images with the chain drawn on them when ``images``, else the depth frames); below them the
-    per-hop error, the error in the image and the time gaps as series, and the findings.
-    ``collapse_panels`` hides the viewer's side panels (screenshots); ``image_bounds`` (u_min, u_max,
-    v_min, v_max) frames the camera view (see :func:`image_view_bounds`). ``curves`` (entity, title): the
-    error against each fault family's size, as bar charts beside the per-hop error (``curves_first``: shown
-    first, where no hop error is logged); what the log can show and the labels are a tab beside the findings.
-    ``camera_motion`` puts the cameras' rotation rate, from their images against forward kinematics, first
-    beside the per-hop error. ``cameras`` (frame, entity root, image bounds) of a rig: one view per camera
-    beside the 3D view instead of the one camera's, and the distances between cameras' sightings in place of
-    the time gaps. ``window_s``: the series show that many seconds either side of the time cursor (a log of one
-    moment, where the viewer would otherwise pick months); None: the whole log."""
+Bounds = tuple[float, float, float, float]
+#: Where the cameras' rotation rates are logged, one entity root per camera (see :mod:`rerun_egomotion`).
+RATE_ROOT = "/series/rotation_rate_deg_s"
+
+
+def has_data(logged: Mapping[str, int], *roots: str) -> bool:
+    """Whether a row was logged at one of ``roots`` or below it (``logged``: rows per entity path)."""
+    return any(rows > 0 and any(entity == r or entity.startswith(r + "/") for r in roots)
+               for entity, rows in logged.items())
+
+
+def default_blueprint(frames: ChainFrames, logged: Mapping[str, int], *,
+                      cameras: Sequence[tuple[str, str, Bounds | None]], collapse_panels: bool = False,
+                      curves: Sequence[tuple[str, str]] = (), curves_first: bool = False, window_s: float | None = None,
+                      timelines: Sequence[str] = (SENSOR_TIME, LOG_TIME, OBS_INDEX)) -> rrb.Blueprint:
+    """The views that have data in this recording (``logged``: rows per entity path, as the sinks return them),
+    whatever the kind of run: the world in 3D (and all observations' world points) beside the cameras' views
+    (``cameras``: frame, entity root, image bounds; a camera with its images, depth or detections); below them
+    the cameras' rotation rates (one plot each: measured, as declared, as fitted), the error series with the
+    error-against-size bar charts (``curves``: entity, title; ``curves_first``: that tab first), the error in
+    the image, the time gaps or a rig's distances between cameras' sightings, and the text. ``window_s``: the
+    series show that many seconds either side of the time cursor (a log of one moment); ``timelines``: the
+    recording's, the time panel's first. ``collapse_panels`` hides the viewer's side panels (screenshots)."""
     import rerun.blueprint as rrb
 
     axis = None if window_s is None else rrb.TimeAxis(view_range=rrb.TimeRange(
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-window_s),
         end=rrb.TimeRangeBoundary.cursor_relative(seconds=window_s)))
-    # With colour images, the depth cloud would bury the points: it stays in the depth tab.
-    roots = [root for _frame, root, _bounds in cameras] or ["/camera"]
-    world = rrb.Spatial3DView(
-        name=f"World ({frames.world})", origin="/",
-        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", *(f"- {r}/overlay/**" for r in roots),
-                  *([f"- {r}/depth" for r in roots] if images else [])],
-        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
-    )
-    history = rrb.Spatial3DView(
-        name="All observations (world points)", origin="/",
-        contents=["+ /points/recomputed/world", "+ /points/as_run/world", "+ /points/as_run/target", "+ /points/rig/**",
-                  "+ /points/reference/**", "+ /points/error/world", "+ /frames/**", "+ /tf/**"],
-        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
-        time_ranges=[rrb.VisibleTimeRange(name, start=rrb.TimeRangeBoundary.infinite(),
-                                          end=rrb.TimeRangeBoundary.infinite())
-                     for name in (SENSOR_TIME, LOG_TIME, OBS_INDEX)],
-    )
-    plane = rrb.SpatialInformation(target_frame=frames.camera + IMAGE_PLANE_SUFFIX)
-    bounds = None if image_bounds is None else rrb.VisualBounds2D(x_range=image_bounds[:2], y_range=image_bounds[2:])
-    camera = rrb.Spatial2DView(
-        name=f"Camera ({frames.camera})", origin="/camera",
-        contents=["+ /camera/**", "- /camera/depth"] if images else ["+ /camera/**"],
-        spatial_information=plane, visual_bounds=bounds,
-    )
-    views: rrb.Tabs | rrb.Spatial2DView | rrb.Grid = camera
-    if images:
-        depth = rrb.Spatial2DView(name=f"Depth ({frames.camera})", origin="/camera",
-                                  contents=["+ /camera/depth", "+ /camera/detections"], spatial_information=plane)
-        views = rrb.Tabs(camera, depth)
-    if cameras:
-        views = rrb.Grid(*(rrb.Spatial2DView(
-            name=f"Camera ({frame})", origin=root, contents=[f"+ {root}/**", f"- {root}/depth"],
-            spatial_information=rrb.SpatialInformation(target_frame=frame + IMAGE_PLANE_SUFFIX),
-            visual_bounds=None if box is None else rrb.VisualBounds2D(x_range=box[:2], y_range=box[2:]))
-            for frame, root, box in cameras))
-        gaps: rrb.TimeSeriesView | None = rrb.TimeSeriesView(name="Distance to another camera's sighting (mm)",
-                                                             origin="/series/rig", axis_x=axis)
-    else:
-        gaps = None
-    errors = _error_views(curves, curves_first=curves_first, camera_motion=camera_motion, axis=axis)
-    pixels = rrb.TimeSeriesView(name="As-run vs recomputed in the image (px)", origin="/series/error_px", axis_x=axis)
-    gaps = gaps or rrb.TimeSeriesView(name="Per-hop time gap (ms)", origin="/series/gap_ms", axis_x=axis)
-    text = _text_views()
+    top = [group for group in (_world_views(frames, logged, cameras, timelines), _camera_views(logged, cameras))
+           if group is not None]
+    bottom = [group for group in (_rate_views(logged, axis), _error_views(logged, curves, curves_first, axis),
+                                  _image_and_time_views(logged, axis), _text_views(logged)) if group is not None]
+    rows = [rrb.Horizontal(*top, column_shares=[1] * len(top)) if len(top) > 1 else top[0]]
+    if bottom:
+        rows.append(rrb.Horizontal(*bottom, column_shares=[1] * len(bottom)) if len(bottom) > 1 else bottom[0])
     return rrb.Blueprint(
-        rrb.Vertical(
-            rrb.Horizontal(rrb.Tabs(world, history), views, column_shares=[1, 1]),
-            rrb.Horizontal(errors, rrb.Tabs(pixels, gaps) if images else gaps, text, column_shares=[2, 2, 2]),
-            row_shares=[3, 2],
-        ),
-        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=SENSOR_TIME),
+        rrb.Vertical(*rows, row_shares=[3, 2][: len(rows)]),
+        rrb.TimePanel(state="collapsed" if collapse_panels else "expanded", timeline=timelines[0]),
         collapse_panels=collapse_panels,
     )
 
 
-def _text_views() -> rrb.Tabs:
+def _one_or_tabs(views: Sequence[rrb.View | rrb.Container], active_tab: int = 0) -> rrb.View | rrb.Container | None:
+    import rerun.blueprint as rrb
+
+    if not views:
+        return None
+    return views[0] if len(views) == 1 else rrb.Tabs(*views, active_tab=active_tab)
+
+
+def _world_views(frames: ChainFrames, logged: Mapping[str, int], cameras: Sequence[tuple[str, str, Bounds | None]],
+                 timelines: Sequence[str]) -> rrb.View | rrb.Container | None:
+    """The world in 3D at the cursor, and every observation's world point at once (where there are any)."""
+    import rerun.blueprint as rrb
+
+    roots = [root for _frame, root, _bounds in cameras]
+    # With colour images, the depth cloud would bury the points: it stays in the depth view.
+    buried = [f"- {r}/depth" for r in roots if has_data(logged, f"{r}/image", f"{r}/video")]
+    world = rrb.Spatial3DView(
+        name=f"World ({frames.world})", origin="/",
+        contents=["+ /**", "- /series/**", "- /log/**", "- /summary", "- /checks", "- /curves/**",
+                  *(f"- {r}/overlay/**" for r in roots), *buried],
+        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
+    )
+    points = ["/points/recomputed/world", "/points/as_run/world", "/points/as_run/target", "/points/rig",
+              "/points/reference"]
+    if not has_data(logged, *points):
+        return world if has_data(logged, "/tf", "/frames", "/points") else None
+    history = rrb.Spatial3DView(
+        name="All observations (world points)", origin="/",
+        contents=[*(f"+ {p}/**" for p in points), *(f"+ {p}" for p in points), "+ /points/error/world",
+                  "+ /frames/**", "+ /tf/**"],
+        spatial_information=rrb.SpatialInformation(target_frame=frames.world),
+        time_ranges=[rrb.VisibleTimeRange(name, start=rrb.TimeRangeBoundary.infinite(),
+                                          end=rrb.TimeRangeBoundary.infinite()) for name in timelines],
+    )
+    return rrb.Tabs(world, history)
+
+
+def _camera_views(logged: Mapping[str, int], cameras: Sequence[tuple[str, str, Bounds | None]]
+                  ) -> rrb.View | rrb.Container | None:
+    """Each camera that shows something (its images or video, its detections, its depth): its image plane with
+    the chain drawn on it, and its depth frames beside (a tab) when it has images too."""
+    import rerun.blueprint as rrb
+
+    panels: list[rrb.View | rrb.Container] = []
+    for frame, root, box in cameras:
+        images = has_data(logged, f"{root}/image", f"{root}/video")
+        depth = has_data(logged, f"{root}/depth")
+        if not (images or depth or has_data(logged, f"{root}/detections", f"{root}/overlay")):
+            continue
+        plane = rrb.SpatialInformation(target_frame=frame + IMAGE_PLANE_SUFFIX)
+        bounds = None if box is None else rrb.VisualBounds2D(x_range=box[:2], y_range=box[2:])
+        view = rrb.Spatial2DView(name=f"Camera ({frame})", origin=root,
+                                 contents=[f"+ {root}/**", f"- {root}/depth"] if images else [f"+ {root}/**"],
+                                 spatial_information=plane, visual_bounds=bounds)
+        if images and depth:
+            panels.append(rrb.Tabs(view, rrb.Spatial2DView(
+                name=f"Depth ({frame})", origin=root, contents=[f"+ {root}/depth", f"+ {root}/detections"],
+                spatial_information=plane)))
+        else:
+            panels.append(view)
+    if len(panels) > 1:
+        return rrb.Grid(*panels)
+    return panels[0] if panels else None
+
+
+def _rate_views(logged: Mapping[str, int], axis: rrb.TimeAxis | None) -> rrb.View | rrb.Container | None:
+    """One plot per camera measured by its own motion: its rotation rate from its images, and as forward kinematics
+    predicts it through the declared and through the fitted link, mount and time."""
+    import rerun.blueprint as rrb
+
+    bases = sorted({e[: -len("/measured")] for e, n in logged.items()
+                    if n > 0 and e.startswith(RATE_ROOT + "/") and e.endswith("/measured") and e.count("/") == 4})
+    plots = [rrb.TimeSeriesView(name=f"Rotation rate of {base.rsplit('/', 1)[-1]} (deg/s): measured, as declared, "
+                                "as fitted", origin=base,
+                                contents=["+ $origin/measured", "+ $origin/declared", "+ $origin/corrected"],
+                                axis_x=axis) for base in bases]
+    if len(plots) > 1:
+        return rrb.Vertical(*plots)
+    return plots[0] if plots else None
+
+
+def _error_views(logged: Mapping[str, int], curves: Sequence[tuple[str, str]], curves_first: bool,
+                 axis: rrb.TimeAxis | None) -> rrb.View | rrb.Container | None:
+    """The error series (each hop's own, the world error the findings explain and what remains) and the
+    error-against-size bar charts, as tabs."""
+    import rerun.blueprint as rrb
+
+    errors: list[rrb.View | rrb.Container] = []
+    if has_data(logged, "/series/error_mm"):
+        errors.append(rrb.TimeSeriesView(name="Error (mm): each hop's own, the world's", origin="/series/error_mm",
+                                         axis_x=axis))
+    # No legend: it names entity paths over the bars; the title says what each colour is.
+    charts = [rrb.BarChartView(name=title, origin=entity, plot_legend=rrb.PlotLegend(visible=False))
+              for entity, title in curves if has_data(logged, entity)]
+    return _one_or_tabs([*errors, *charts], active_tab=len(errors) if curves_first and charts else 0)
+
+
+def _image_and_time_views(logged: Mapping[str, int], axis: rrb.TimeAxis | None) -> rrb.View | rrb.Container | None:
+    """The as-run point's distance from the recomputed one in the image, the per-hop time gaps, a rig's distances
+    between cameras' sightings."""
+    import rerun.blueprint as rrb
+
+    views = [rrb.TimeSeriesView(name=name, origin=origin, axis_x=axis) for origin, name in (
+        ("/series/error_px", "As-run vs recomputed in the image (px)"),
+        ("/series/rig", "Distance to another camera's sighting (mm)"),
+        ("/series/gap_ms", "Per-hop time gap (ms)")) if has_data(logged, origin)]
+    return _one_or_tabs(views)
+
+
+def _text_views(logged: Mapping[str, int]) -> rrb.View | rrb.Container | None:
     """The summary (verdict, counts, findings, colours), the findings and rejections, and what the log can show.
 
     The summary first: the log view sizes its columns to what it shows first, and cut findings to a few letters.
     """
     import rerun.blueprint as rrb
 
-    findings = rrb.TextLogView(name="Findings and rejections", origin="/log", columns=rrb.TextLogColumns(
-        timeline_columns=[], text_log_columns=["loglevel", "body"]))
-    return rrb.Tabs(rrb.TextDocumentView(name="Summary", origin="/summary"), findings,
-                    rrb.TextDocumentView(name="What this log can show", origin="/checks"))
-
-
-def _error_views(curves: Sequence[tuple[str, str]], *, curves_first: bool, camera_motion: bool,
-                 axis: rrb.TimeAxis | None = None) -> rrb.TimeSeriesView | rrb.Tabs:
-    """The error series (each hop's own, the world error the findings explain and what remains), with the
-    error-against-size bar charts and the cameras' rotation rate as tabs."""
-    import rerun.blueprint as rrb
-
-    errors: rrb.TimeSeriesView | rrb.Tabs = rrb.TimeSeriesView(name="Error (mm): each hop's own, the world's",
-                                                               origin="/series/error_mm", axis_x=axis)
-    if curves:
-        # No legend: it names entity paths over the bars; the title says what each colour is.
-        charts = [rrb.BarChartView(name=title, origin=entity, plot_legend=rrb.PlotLegend(visible=False))
-                  for entity, title in curves]
-        errors = rrb.Tabs(errors, *charts, active_tab=1 if curves_first else 0)
-    if camera_motion:
-        rates = rrb.TimeSeriesView(name="Camera rotation rate: images vs forward kinematics (deg/s)",
-                                   origin="/series/rotation_rate_deg_s", axis_x=axis)
-        errors = rrb.Tabs(rates, errors)
-    return errors
+    views: list[rrb.View | rrb.Container] = []
+    if has_data(logged, "/summary"):
+        views.append(rrb.TextDocumentView(name="Summary", origin="/summary"))
+    if has_data(logged, "/log"):
+        views.append(rrb.TextLogView(name="Findings and rejections", origin="/log", columns=rrb.TextLogColumns(
+            timeline_columns=[], text_log_columns=["loglevel", "body"])))
+    if has_data(logged, "/checks"):
+        views.append(rrb.TextDocumentView(name="What this log can show", origin="/checks"))
+    return _one_or_tabs(views)

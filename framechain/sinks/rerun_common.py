@@ -15,7 +15,7 @@ from framechain.replay import ReplayResult
 from framechain.sinks.overlay import (
     ImageSelection,
 )
-from framechain.timeline import PointRole
+from framechain.timeline import PointRole, Timeline
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -26,6 +26,10 @@ SENSOR_TIME = "sensor_time"
 LOG_TIME = "log_time"
 #: Timeline of the observation's row in the ObservationTable.
 OBS_INDEX = "obs_index"
+#: An episode's timeline: the time since its first row (a duration), in place of ``sensor_time``.
+EPISODE_TIME = "episode_time"
+#: An episode's wall-clock time, where the dataset stores one.
+WALL_TIME = "wall_time"
 
 #: Suffix of the frames that carry the transforms the replay used (``base_link@replay``).
 REPLAY_FRAME_SUFFIX = "@replay"
@@ -115,23 +119,68 @@ def stamp_column(name: str, ns: npt.ArrayLike) -> rr.TimeColumn:
     return rr.TimeColumn(name, timestamp=np.asarray(ns, dtype=np.int64).astype("datetime64[ns]"))
 
 
-def obs_indexes(result: ReplayResult, rows: IntArray) -> list[rr.TimeColumn]:
-    import rerun as rr
+@dataclass(frozen=True)
+class Clock:
+    """How a run's stamps (integer nanoseconds) become the recording's timelines.
 
-    obs = result.observations
-    return [
-        stamp_column(SENSOR_TIME, obs.stamp_ns[rows]),
-        stamp_column(LOG_TIME, obs.log_time_ns[rows]),
-        rr.TimeColumn(OBS_INDEX, sequence=rows.astype(np.int64)),
-    ]
+    A robot log: its header stamps on ``sensor_time`` and its receive times on ``log_time``, as dates. An episode
+    (a timeline whose metadata holds ``episode_start_ns``: LeRobot stamps are seconds from the episode's start,
+    not dates): both as durations from its first row, the stamps on ``episode_time``, and where the dataset
+    stores the wall-clock time of that row (``wall_clock_start_ns``), the stamps on ``wall_time`` too.
+    """
+
+    stamps: str = SENSOR_TIME
+    #: Durations from this stamp (an episode's first row); None: the stamps are dates.
+    origin_ns: int | None = None
+    #: The wall-clock time (ns since the epoch) at ``origin_ns``, where known.
+    wall_origin_ns: int | None = None
+
+    @classmethod
+    def of(cls, timeline: Timeline) -> Clock:
+        start, wall = timeline.metadata.get("episode_start_ns"), timeline.metadata.get("wall_clock_start_ns")
+        if not isinstance(start, int):
+            return cls()
+        return cls(EPISODE_TIME, start, wall if isinstance(wall, int) else None)
+
+    @property
+    def timelines(self) -> tuple[str, ...]:
+        """Every timeline the clock writes, the stamps' first."""
+        wall = (WALL_TIME,) if self.wall_origin_ns is not None else ()
+        return (self.stamps, LOG_TIME, OBS_INDEX, *wall)
+
+    def column(self, name: str, ns: npt.ArrayLike) -> rr.TimeColumn:
+        import rerun as rr
+
+        if self.origin_ns is None:
+            return stamp_column(name, ns)
+        return rr.TimeColumn(name, duration=(np.asarray(ns, dtype=np.int64) - self.origin_ns).astype("timedelta64[ns]"))
+
+    def columns(self, stamp_ns: npt.ArrayLike, log_time_ns: npt.ArrayLike | None = None) -> list[rr.TimeColumn]:
+        """The time columns of rows at ``stamp_ns`` (received at ``log_time_ns``)."""
+        out = [self.column(self.stamps, stamp_ns)]
+        if log_time_ns is not None:
+            out.append(self.column(LOG_TIME, log_time_ns))
+        if self.wall_origin_ns is not None and self.origin_ns is not None:
+            out.append(stamp_column(WALL_TIME, np.asarray(stamp_ns, dtype=np.int64) - self.origin_ns
+                                    + self.wall_origin_ns))
+        return out
+
+    def obs_indexes(self, result: ReplayResult, rows: IntArray) -> list[rr.TimeColumn]:
+        """The time columns of observations ``rows``: their stamps, receive times and row numbers."""
+        import rerun as rr
+
+        obs = result.observations
+        return [*self.columns(obs.stamp_ns[rows], obs.log_time_ns[rows]),
+                rr.TimeColumn(OBS_INDEX, sequence=rows.astype(np.int64))]
 
 
-def send_per_stamp(rec: rr.RecordingStream, entity: str, result: ReplayResult, sel: IntArray,
-                    columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
+def send_per_stamp(rec: rr.RecordingStream, entity: str, result: ReplayResult, clock: Clock, sel: IntArray,
+                   columns: Callable[[IntArray], rr.ComponentColumnList]) -> None:
     """One row per observation stamp holding every observation of that stamp (several tags in one
     image): a later row at the same time would hide the earlier ones in the viewer."""
     obs = result.observations
     sel = sel[np.argsort(obs.stamp_ns[sel], kind="stable")]
     starts = np.flatnonzero(np.concatenate([[True], np.diff(obs.stamp_ns[sel]) != 0]))
     lengths = np.diff(np.append(starts, sel.size))
-    rec.send_columns(entity, indexes=obs_indexes(result, sel[starts]), columns=columns(sel).partition(lengths=lengths))
+    rec.send_columns(entity, indexes=clock.obs_indexes(result, sel[starts]),
+                     columns=columns(sel).partition(lengths=lengths))

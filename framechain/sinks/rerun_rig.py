@@ -10,7 +10,7 @@ from framechain.analysis.rig_layout import RigLayout
 from framechain.arrays import rows_of
 from framechain.replay import ReplayResult
 from framechain.sinks.colors import ERROR_COLOR
-from framechain.sinks.rerun_common import RerunOptions, entity_part, obs_indexes, send_per_stamp
+from framechain.sinks.rerun_common import Clock, RerunOptions, entity_part, send_per_stamp
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -21,7 +21,7 @@ DISAGREEMENT_ENTITY = "/points/rig/disagreement"
 SERIES_ROOT = "/series/rig"
 
 
-def log_rig(rec: rr.RecordingStream, result: ReplayResult, layout: RigLayout, opts: RerunOptions,
+def log_rig(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, layout: RigLayout, opts: RerunOptions,
             rows: dict[str, int]) -> None:
     """One line per same-instant comparison, from the observation's recomputed point to the other camera's point
     at that instant (in the world frame, the rig's frame without a pose), labelled with both cameras and the
@@ -48,11 +48,12 @@ def log_rig(rec: rr.RecordingStream, result: ReplayResult, layout: RigLayout, op
         text[r] = f"{obs.camera_frame[r]} vs {lines.partner_frame[i]}: {gap_mm:.0f} mm (label {obs.label[r]})"
     sel = np.asarray(sorted(text), dtype=np.int64)
     rec.log(DISAGREEMENT_ENTITY, rr.CoordinateFrame(result.frames.world), static=True)
-    send_per_stamp(rec, DISAGREEMENT_ENTITY, result, sel, lambda s: rr.LineStrips3D.columns(
+    send_per_stamp(rec, DISAGREEMENT_ENTITY, result, clock, sel, lambda s: rr.LineStrips3D.columns(
         strips=[np.stack([start[i], end[i]]) for i in s.tolist()],
         colors=np.tile(np.array(ERROR_COLOR, dtype=np.uint8), (s.size, 1)),
         radii=np.full(s.size, opts.point_radius_m / 3, dtype=np.float32),
-        labels=[text[i] for i in s.tolist()]))
+        # on hover: the 3D view's labels name the chain's frames alone
+        labels=[text[i] for i in s.tolist()], show_labels=[False] * s.size))
     rows[DISAGREEMENT_ENTITY] = int(sel.size)
     gap_mm = np.linalg.norm(end - start, axis=1) * 1e3
     for frame in layout.frames:
@@ -61,7 +62,8 @@ def log_rig(rec: rr.RecordingStream, result: ReplayResult, layout: RigLayout, op
             continue
         entity = f"{SERIES_ROOT}/{entity_part(frame)}"
         rec.log(entity, rr.SeriesPoints(names=[f"{frame} vs another camera (mm)"], marker_sizes=[2.0]), static=True)
-        rec.send_columns(entity, indexes=obs_indexes(result, mine), columns=rr.Scalars.columns(scalars=gap_mm[mine]))
+        rec.send_columns(entity, indexes=clock.obs_indexes(result, mine),
+                         columns=rr.Scalars.columns(scalars=gap_mm[mine]))
         rows[entity] = int(mine.size)
 
 

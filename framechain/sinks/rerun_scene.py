@@ -22,18 +22,15 @@ from framechain.sinks.colors import (
 )
 from framechain.sinks.overlay import ImageOverlay, select_images
 from framechain.sinks.rerun_common import (
-    LOG_TIME,
     OBS_INDEX,
     REPLAY_FRAME_SUFFIX,
-    SENSOR_TIME,
     CameraView,
+    Clock,
     RerunOptions,
     entity_part,
-    obs_indexes,
     rerun_intrinsics,
     rerun_pixels,
     send_per_stamp,
-    stamp_column,
 )
 from framechain.timeline import ImageFrameTable, Timeline, normalize_frame
 from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
@@ -44,15 +41,20 @@ if TYPE_CHECKING:
 #: A rig's cameras sit centimetres apart: their frustums are drawn short.
 RIG_PLANE_DISTANCE_M = 0.1
 BORDER_COLOR = (160, 160, 160)
+#: The chain's frames' names in 3D: dark, as the viewer writes text.
+LABEL_COLOR = (40, 40, 40)
 
 
 def log_frame_tree(
-    rec: rr.RecordingStream, timeline: Timeline, frames: ChainFrames, opts: RerunOptions, rows: dict[str, int],
-    cameras: tuple[str, ...] = (),
+    rec: rr.RecordingStream, timeline: Timeline, clock: Clock, frames: ChainFrames, opts: RerunOptions,
+    rows: dict[str, int], cameras: tuple[str, ...] = (), *, replayed: bool = True,
 ) -> None:
-    """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk (``cameras``: a rig's
-    other camera frames, named too). A frame's ``@replay`` copy is named only where the log's tree lacks the frame:
-    both sit at one place when the replay used the log's transforms, and two names there are unreadable."""
+    """``/tf/<child>`` per child frame: static edges once as static, dynamic edges in bulk; ``/frames/<frame>`` the
+    axes of every frame, named only where the frame is one of the chain's (world, body, camera; ``cameras``: a rig's
+    other cameras): an arm's dozen links would bury each other's names. Chain frames that sit at one place (a
+    world that is the arm's base) share one label. A frame's ``@replay`` copy is named only where the log's tree
+    lacks the frame: both sit at one place when the replay used the log's transforms; without a replayed
+    observation (``replayed`` False) there are no copies, whose frames nothing would place."""
     import rerun as rr
 
     tf = timeline.transforms
@@ -77,28 +79,67 @@ def log_frame_tree(
         use = sel[np.argsort(tf.stamp_ns[sel], kind="stable")]
         rec.send_columns(
             entity,
-            indexes=[stamp_column(SENSOR_TIME, tf.stamp_ns[use]), stamp_column(LOG_TIME, tf.log_time_ns[use])],
+            indexes=clock.columns(tf.stamp_ns[use], tf.log_time_ns[use]),
             columns=rr.Transform3D.columns(
                 translation=tf.translation[use], quaternion=tf.quat_xyzw[use],
                 parent_frame=tf.parent[use].tolist(), child_frame=tf.child[use].tolist(),
             ),
         )
         rows[entity] = int(use.size)
-    names.update({frames.body + REPLAY_FRAME_SUFFIX, frames.camera + REPLAY_FRAME_SUFFIX,
-                  *(c + REPLAY_FRAME_SUFFIX for c in cameras)})
+    chain = (frames.world, frames.body, frames.camera, *cameras)
+    if replayed:
+        names.update(c + REPLAY_FRAME_SUFFIX for c in chain[1:])
+    _log_frame_axes(rec, names, in_tree, frame_labels(timeline, chain, anchors=(frames.camera, *cameras)),
+                    cameras if len(cameras) > 1 else (), opts, rows)
+
+
+def _log_frame_axes(rec: rr.RecordingStream, names: set[str], in_tree: set[str], labels: dict[str, str],
+                    rig: tuple[str, ...], opts: RerunOptions, rows: dict[str, int]) -> None:
+    """``/frames/<frame>``: every frame's axes, and the chain frames' ``labels`` (a ``rig``'s cameras sit
+    centimetres apart: each is named past its frustum, along its view, where they part)."""
+    import rerun as rr
+
     for name in sorted(names):
         recorded = name.removesuffix(REPLAY_FRAME_SUFFIX)
-        if name.endswith(REPLAY_FRAME_SUFFIX):
-            entity = f"/frames/replay/{entity_part(recorded)}"
-        else:
-            entity = f"/frames/{entity_part(name)}"
-        named = not name.endswith(REPLAY_FRAME_SUFFIX) or recorded not in in_tree
-        rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=named),
+        replay_copy = name.endswith(REPLAY_FRAME_SUFFIX)
+        entity = f"/frames/replay/{entity_part(recorded)}" if replay_copy else f"/frames/{entity_part(name)}"
+        rec.log(entity, rr.CoordinateFrame(name), rr.TransformAxes3D(opts.axis_length_m, show_frame=False),
                 static=True)
+        # a chain frame the log's tree lacks is named on its replay copy, where the replay put it
+        on_copy = recorded not in in_tree and recorded + REPLAY_FRAME_SUFFIX in names
+        label = labels.get(recorded) if replay_copy == on_copy else None
+        if label is not None:
+            ahead = 2.5 * RIG_PLANE_DISTANCE_M if recorded in rig else 0.0
+            rec.log(entity, rr.Points3D([[0.0, 0.0, ahead]], radii=[opts.axis_length_m / 25], colors=[LABEL_COLOR],
+                                        labels=[label], show_labels=True), static=True)
         rows[entity] = 1
 
 
-def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, views: list[CameraView],
+def frame_labels(timeline: Timeline, chain: tuple[str, ...], anchors: tuple[str, ...] = ()) -> dict[str, str]:
+    """The label of each chain frame that gets one: its name; chain frames that static edges without translation
+    (under 1 mm) join share one label, ``"world = base_link"``, on the first of them in ``chain`` (the first of
+    ``anchors``, cameras, among them when there is one) and the others get none."""
+    tf = timeline.transforms
+    static = np.flatnonzero(tf.is_static & (np.linalg.norm(tf.translation, axis=1) < 1e-3)).tolist() if len(tf) else []
+    group = {frame: frame for frame in chain}
+
+    def root(frame: str) -> str:
+        while group.get(frame, frame) != frame:
+            frame = group[frame]
+        return frame
+
+    for i in static:
+        a, b = root(str(tf.parent[i])), root(str(tf.child[i]))
+        if a != b:
+            group[b] = a
+    members: dict[str, list[str]] = {}
+    for frame in dict.fromkeys(chain):
+        members.setdefault(root(frame), []).append(frame)
+    return {next((f for f in together if f in anchors), together[0]): " = ".join(together)
+            for together in members.values()}
+
+
+def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, views: list[CameraView],
                         rows: dict[str, int]) -> None:
     """The transforms the replay used, per replayed observation, at the observation's time (body -> camera per
     camera of a rig)."""
@@ -118,7 +159,7 @@ def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, views: li
         if sel.size == 0:
             continue
         rec.send_columns(
-            entity, indexes=obs_indexes(result, sel),
+            entity, indexes=clock.obs_indexes(result, sel),
             columns=rr.Transform3D.columns(
                 translation=lookup.translation[sel], quaternion=lookup.quat_xyzw[sel],
                 parent_frame=[parent] * sel.size, child_frame=[child] * sel.size,
@@ -128,8 +169,8 @@ def log_used_transforms(rec: rr.RecordingStream, result: ReplayResult, views: li
 
 
 def log_camera(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
-    rows: dict[str, int],
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, clock: Clock, view: CameraView,
+    opts: RerunOptions, rows: dict[str, int],
 ) -> None:
     """One camera: its pinhole (static, or over time if the intrinsics change) and depth frames."""
     import rerun as rr
@@ -157,8 +198,7 @@ def log_camera(
         else:
             rec.send_columns(
                 root,
-                indexes=[stamp_column(SENSOR_TIME, cams.stamp_ns[keep]),
-                         stamp_column(LOG_TIME, cams.log_time_ns[keep])],
+                indexes=clock.columns(cams.stamp_ns[keep], cams.log_time_ns[keep]),
                 columns=rr.Pinhole.columns(
                     image_from_camera=rerun_intrinsics(cams.K[keep]), resolution=res[changes],
                     camera_xyz=[rr.ViewCoordinates.RDF] * keep.size,
@@ -171,11 +211,11 @@ def log_camera(
             rec.log(f"{root}/border", rr.LineStrips2D([[(0, 0), (width, 0), (width, height), (0, height), (0, 0)]],
                                                       colors=[BORDER_COLOR]), rr.CoordinateFrame(plane), static=True)
             rows[f"{root}/border"] = 1
-    log_depth(rec, timeline, result, view, opts, rows)
+    log_depth(rec, timeline, result, clock, view, opts, rows)
 
 
-def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, view: CameraView,
-                   rows: dict[str, int]) -> None:
+def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, clock: Clock,
+                   view: CameraView, rows: dict[str, int]) -> None:
     """A camera's detections in its image: ``detections``, the pixel framechain used per observation (green where
     it is the detector's own, light green where framechain estimated it, red when rejected, light red when stale),
     and ``overlay/detector_centre``, the centre the detector logged where framechain used its own estimate."""
@@ -193,7 +233,7 @@ def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: Repla
     radii = np.where(overlay.estimated, 4.0, 6.0)
     entity = f"{view.root}/detections"
     rec.log(entity, rr.CoordinateFrame(view.plane), static=True)
-    send_per_stamp(rec, entity, result, drawn, lambda sel: rr.Points2D.columns(
+    send_per_stamp(rec, entity, result, clock, drawn, lambda sel: rr.Points2D.columns(
         positions=rerun_pixels(overlay.detection_uv[sel]), colors=colors[sel],
         labels=[labels[i] for i in sel.tolist()], radii=radii[sel]))
     rows[entity] = int(drawn.size)
@@ -202,7 +242,7 @@ def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: Repla
         entity = f"{view.root}/overlay/detector_centre"
         # under the pixel framechain used (Points2D draw at 30 by default)
         rec.log(entity, rr.CoordinateFrame(view.plane), rr.Points2D.from_fields(draw_order=20.0), static=True)
-        send_per_stamp(rec, entity, result, logged, lambda sel: rr.Points2D.columns(
+        send_per_stamp(rec, entity, result, clock, logged, lambda sel: rr.Points2D.columns(
             positions=rerun_pixels(overlay.detector_uv[sel]),
             colors=np.tile(np.array(DETECTION_COLOR, dtype=np.uint8), (sel.size, 1)),
             radii=np.full(sel.size, 7.0), labels=[f"obs {i}: the detector's logged centre" for i in
@@ -212,8 +252,8 @@ def log_detections(rec: rr.RecordingStream, overlay: ImageOverlay, result: Repla
 
 
 def log_images(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
-    rows: dict[str, int],
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, clock: Clock, view: CameraView,
+    opts: RerunOptions, rows: dict[str, int],
 ) -> None:
     """A camera's images under its image plane: raw as ``Image``, JPEG/PNG as ``EncodedImage`` (bytes
     as logged), frames of a video file as ``VideoFrameReference`` into one ``AssetVideo`` per file."""
@@ -232,14 +272,14 @@ def log_images(
         rec.log(image_entity, rr.CoordinateFrame(plane), static=True)
     if raw.size:
         rec.send_columns(
-            image_entity, indexes=_image_indexes(images, result, raw),
+            image_entity, indexes=_image_indexes(images, result, clock, raw),
             columns=rr.Image.columns(buffer=[images.load(int(i)) for i in raw],
                                      format=[_image_format(str(images.encoding[i]), int(images.width[i]),
                                                            int(images.height[i])) for i in raw]),
         )
     if compressed.size:
         rec.send_columns(
-            image_entity, indexes=_image_indexes(images, result, compressed),
+            image_entity, indexes=_image_indexes(images, result, clock, compressed),
             columns=rr.EncodedImage.columns(blob=[images.load(int(i)) for i in compressed],
                                             media_type=[f"image/{images.encoding[i]}" for i in compressed]),
         )
@@ -250,7 +290,7 @@ def log_images(
         entity = f"{view.root}/video" if k == 0 else f"{view.root}/video/{k}"
         frames = video[images.video_path[video] == path]
         rec.log(entity, rr.AssetVideo(path=path), rr.CoordinateFrame(plane), static=True)
-        rec.send_columns(entity, indexes=_image_indexes(images, result, frames),
+        rec.send_columns(entity, indexes=_image_indexes(images, result, clock, frames),
                          columns=rr.VideoFrameReference.columns_nanos(images.video_time_ns[frames]))
         rows[entity] = int(frames.size)
 
@@ -267,7 +307,7 @@ def _image_format(encoding: str, width: int, height: int) -> rr.components.Image
                                      channel_datatype=datatypes[dtype])
 
 
-def _image_indexes(images: ImageFrameTable, result: ReplayResult, rows: IntArray) -> list[rr.TimeColumn]:
+def _image_indexes(images: ImageFrameTable, result: ReplayResult, clock: Clock, rows: IntArray) -> list[rr.TimeColumn]:
     """Sensor and log time of each image, and the row of the observation nearest it (so images
     follow the ``obs_index`` timeline too)."""
     import rerun as rr
@@ -278,12 +318,12 @@ def _image_indexes(images: ImageFrameTable, result: ReplayResult, rows: IntArray
         near = order[nearest(obs.stamp_ns[order], images.stamp_ns[rows])]
     else:
         near = np.zeros(rows.size, dtype=np.int64)
-    return [stamp_column(SENSOR_TIME, images.stamp_ns[rows]), stamp_column(LOG_TIME, images.log_time_ns[rows]),
+    return [*clock.columns(images.stamp_ns[rows], images.log_time_ns[rows]),
             rr.TimeColumn(OBS_INDEX, sequence=near.astype(np.int64))]
 
 
-def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, view: CameraView,
-                rows: dict[str, int]) -> None:
+def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayResult, clock: Clock,
+                view: CameraView, rows: dict[str, int]) -> None:
     """The chain on a camera's image: corners, projected recomputed and as-run points, the line between them.
 
     Observations with one stamp (several tags in one image) share one row per entity, so the viewer
@@ -302,7 +342,7 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
         if sel.size == 0:
             return
         rec.log(entity, rr.CoordinateFrame(plane), static=True)
-        send_per_stamp(rec, entity, result, sel, columns)
+        send_per_stamp(rec, entity, result, clock, sel, columns)
         rows[entity] = int(sel.size)
 
     radius = np.float32(max(2.0, float(np.nanmax(overlay.width, initial=320)) / 160.0))
@@ -337,14 +377,14 @@ def log_overlay(rec: rr.RecordingStream, overlay: ImageOverlay, result: ReplayRe
         entity = view.entity("/series/error_px", "/series/error_px/as_run")
         rec.log(entity, rr.SeriesLines(names=["as-run vs recomputed in the image (px)"], colors=[overlay.color]),
                 static=True)
-        rec.send_columns(entity, indexes=obs_indexes(result, both),
+        rec.send_columns(entity, indexes=clock.obs_indexes(result, both),
                          columns=rr.Scalars.columns(scalars=error_px[both]))
         rows[entity] = int(both.size)
 
 
 def log_depth(
-    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, view: CameraView, opts: RerunOptions,
-    rows: dict[str, int],
+    rec: rr.RecordingStream, timeline: Timeline, result: ReplayResult, clock: Clock, view: CameraView,
+    opts: RerunOptions, rows: dict[str, int],
 ) -> None:
     """Depth frames of a camera near its observations, decimated to ``max_images``.
 
@@ -375,8 +415,7 @@ def log_depth(
     rec.log(entity, rr.CoordinateFrame(view.plane), static=True)
     rec.send_columns(
         entity,
-        indexes=[stamp_column(SENSOR_TIME, depth.stamp_ns[chosen]),
-                 stamp_column(LOG_TIME, depth.log_time_ns[chosen])],
+        indexes=clock.columns(depth.stamp_ns[chosen], depth.log_time_ns[chosen]),
         columns=rr.DepthImage.columns(buffer=[im.tobytes() for im in images], format=formats,
                                       meter=np.full(chosen.size, 1000.0, dtype=np.float32)),
     )

@@ -24,11 +24,9 @@ from framechain.sinks.colors import (
 )
 from framechain.sinks.rerun_common import (
     REPLAY_FRAME_SUFFIX,
-    SENSOR_TIME,
     CameraView,
+    Clock,
     RerunOptions,
-    obs_indexes,
-    stamp_column,
 )
 from framechain.sinks.text import FindingView
 
@@ -37,7 +35,7 @@ if TYPE_CHECKING:
 
 
 def log_points(
-    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], opts: RerunOptions,
+    rec: rr.RecordingStream, result: ReplayResult, clock: Clock, as_run: Mapping[str, FloatArray], opts: RerunOptions,
     rows: dict[str, int], views: list[CameraView] | None = None,
 ) -> None:
     """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run (camera-frame
@@ -59,7 +57,7 @@ def log_points(
             return
         rec.log(entity, rr.CoordinateFrame(frame), static=True)
         rec.send_columns(
-            entity, indexes=obs_indexes(result, sel),
+            entity, indexes=clock.obs_indexes(result, sel),
             columns=rr.Points3D.columns(
                 positions=xyz[sel], colors=np.tile(np.array(color, dtype=np.uint8), (sel.size, 1)),
                 radii=np.full(sel.size, radius, dtype=np.float32),
@@ -89,12 +87,13 @@ def log_points(
         rec.log(entity, rr.CoordinateFrame(hop_frame[leaf]), static=True)
         delta = logged[both] - recomputed[leaf][both]
         rec.send_columns(
-            entity, indexes=obs_indexes(result, both),
+            entity, indexes=clock.obs_indexes(result, both),
             columns=rr.Arrows3D.columns(
                 origins=recomputed[leaf][both], vectors=delta,
                 colors=np.tile(np.array(ERROR_COLOR, dtype=np.uint8), (both.size, 1)),
                 radii=np.full(both.size, radius / 4, dtype=np.float32),
                 labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
+                show_labels=[False] * both.size,  # on hover: the 3D view's labels name the chain's frames alone
             ),
         )
         rows[entity] = int(both.size)
@@ -102,28 +101,29 @@ def log_points(
 
 
 def log_series(
-    rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], rows: dict[str, int]
+    rec: rr.RecordingStream, result: ReplayResult, clock: Clock, as_run: Mapping[str, FloatArray],
+    rows: dict[str, int],
 ) -> None:
     """Each hop's own error (mm) where as-run exists (:func:`hop_own_errors`), the world point against a target or
     reference, and per-hop time gap (ms), one row per observation."""
     ok = result.replayed
     for hop, err in hop_own_errors(result, as_run).items():
         sel = np.flatnonzero(ok & np.isfinite(err))
-        _send_series(rec, result, f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3,
+        _send_series(rec, result, clock, f"/series/error_mm/{hop.value}", sel, err[sel] * 1e3,
                      f"{hop.value}: this hop's own error (mm)", HOP_COLORS[hop], rows)
     for leaf, color in (("target", AS_RUN_COLOR), ("reference", REFERENCE_COLOR)):
         err = np.linalg.norm(as_run[leaf] - result.p_world, axis=1)
         sel = np.flatnonzero(ok & np.isfinite(err))
-        _send_series(rec, result, f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)", color,
-                     rows)
+        _send_series(rec, result, clock, f"/series/error_mm/{leaf}", sel, err[sel] * 1e3, f"world vs {leaf} (mm)",
+                     color, rows)
 
     hops = result.hops
     for hop in HopName:
         sel_rows = np.flatnonzero((hops.hop == hop.value) & (hops.status == REPLAYED))
         obs_rows = rows_of(result.observations.obs_id, hops.obs_id[sel_rows])
         order = np.argsort(obs_rows, kind="stable")
-        _send_series(rec, result, f"/series/gap_ms/{hop.value}", obs_rows[order], hops.gap_ns[sel_rows][order] / 1e6,
-                     f"{hop.value} gap (ms)", HOP_COLORS[hop], rows)
+        _send_series(rec, result, clock, f"/series/gap_ms/{hop.value}", obs_rows[order],
+                     hops.gap_ns[sel_rows][order] / 1e6, f"{hop.value} gap (ms)", HOP_COLORS[hop], rows)
 
 
 def hop_own_errors(result: ReplayResult, as_run: Mapping[str, FloatArray]) -> dict[HopName, FloatArray]:
@@ -147,7 +147,7 @@ def hop_own_errors(result: ReplayResult, as_run: Mapping[str, FloatArray]) -> di
     return out
 
 
-def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, attribution: Attribution,
+def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, attribution: Attribution,
                         rows: dict[str, int]) -> None:
     """The error the findings explain, per observation the attribution used (``/series/error_mm/world_error``: the
     world point against its evidence, e.g. a static target's own position), and what remains once every finding is
@@ -165,12 +165,13 @@ def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, attributi
         have = np.flatnonzero((obs_rows >= 0) & np.isfinite(values))
         have = have[np.argsort(obs_rows[have], kind="stable")]
         # the world error underneath, wide and pale (as in the report): a hop that carries all of it stays visible
-        _send_series(rec, result, f"/series/error_mm/{leaf}", obs_rows[have], values[have] * 1e3, name, color, rows,
-                     under=leaf == "world_error")
+        _send_series(rec, result, clock, f"/series/error_mm/{leaf}", obs_rows[have], values[have] * 1e3, name,
+                     color, rows, under=leaf == "world_error")
 
 
-def _send_series(rec: rr.RecordingStream, result: ReplayResult, entity: str, sel: IntArray, values: FloatArray,
-                 name: str, color: tuple[int, int, int], rows: dict[str, int], *, under: bool = False) -> None:
+def _send_series(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, entity: str, sel: IntArray,
+                 values: FloatArray, name: str, color: tuple[int, int, int], rows: dict[str, int], *,
+                 under: bool = False) -> None:
     """One scalar series over observation rows ``sel`` (lines and points: a single observation still shows;
     ``under``: wide and translucent, for a series others may lie on)."""
     import rerun as rr
@@ -180,12 +181,12 @@ def _send_series(rec: rr.RecordingStream, result: ReplayResult, entity: str, sel
     rgba = (*color, 90 if under else 255)
     rec.log(entity, rr.SeriesLines(names=[name], colors=[rgba], widths=[5.0] if under else None), rr.SeriesPoints(
         names=[name], colors=[rgba], marker_sizes=[2.0]), static=True)
-    rec.send_columns(entity, indexes=obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
+    rec.send_columns(entity, indexes=clock.obs_indexes(result, sel), columns=rr.Scalars.columns(scalars=values))
     rows[entity] = int(sel.size)
 
 
-def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[FindingView],
-              rows: dict[str, int], *, start_ns: int | None = None, verdict: str = "") -> None:
+def log_text(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, findings: Iterable[FindingView],
+             rows: dict[str, int], *, start_ns: int | None = None, verdict: str = "") -> None:
     """Findings (at the first observation; without observations at ``start_ns``, the log's first moment;
     without findings, ``/log/verdict``: why there are none), rejected and stale observations, and a summary."""
     import rerun as rr
@@ -196,16 +197,16 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
     entries = rr.TextLog.columns(text=[f.text() for f in found], level=[rr.TextLogLevel.ERROR] * len(found))
     if not found and verdict and len(obs):
         first = np.array([int(np.argmin(obs.stamp_ns))], dtype=np.int64)
-        rec.send_columns("/log/verdict", indexes=obs_indexes(result, first),
+        rec.send_columns("/log/verdict", indexes=clock.obs_indexes(result, first),
                          columns=rr.TextLog.columns(text=[verdict], level=[rr.TextLogLevel.INFO]))
         rows["/log/verdict"] = 1
     if found and len(obs):
         first = np.full(len(found), int(np.argmin(obs.stamp_ns)), dtype=np.int64)
-        rec.send_columns("/log/findings", indexes=obs_indexes(result, first), columns=entries)
+        rec.send_columns("/log/findings", indexes=clock.obs_indexes(result, first), columns=entries)
         rows["/log/findings"] = len(found)
     elif found and start_ns is not None:
         # An episode measured by its cameras' motion: the viewer's text log view shows timed entries, not static ones.
-        rec.send_columns("/log/findings", indexes=[stamp_column(SENSOR_TIME, np.full(len(found), start_ns))],
+        rec.send_columns("/log/findings", indexes=clock.columns(np.full(len(found), start_ns)),
                          columns=entries)
         rows["/log/findings"] = len(found)
     elif found:
@@ -215,7 +216,7 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
     rejected = np.flatnonzero(~result.replayed)
     if rejected.size:
         texts = [_rejection_text(result, int(i)) for i in rejected]
-        rec.send_columns("/log/rejected", indexes=obs_indexes(result, rejected),
+        rec.send_columns("/log/rejected", indexes=clock.obs_indexes(result, rejected),
                          columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.WARN] * rejected.size))
         rows["/log/rejected"] = int(rejected.size)
     stale = np.flatnonzero(result.stale & result.replayed)
@@ -230,7 +231,7 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, findings: Iterable[F
             worst = int(np.argmax(np.abs(gaps[i])))
             texts.append(f"obs {int(obs.obs_id[i])} stale: {list(HopName)[worst].value} used a sample "
                          f"{gaps[i, worst] / 1e6:+.1f} ms from the observation stamp (budget {budget_ms:g} ms)")
-        rec.send_columns("/log/stale", indexes=obs_indexes(result, stale),
+        rec.send_columns("/log/stale", indexes=clock.obs_indexes(result, stale),
                          columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.INFO] * stale.size))
         rows["/log/stale"] = int(stale.size)
     rec.log("/summary", rr.TextDocument(summary_markdown(result, found, verdict), media_type=rr.MediaType.MARKDOWN),

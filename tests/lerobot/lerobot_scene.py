@@ -166,13 +166,17 @@ def write_arm_dataset(
     depth: bool = False,
     jitter_s: float = 0.0,
     seed: int = 0,
+    start_s: float = 0.0,
+    wall_clock_s: float | None = None,
 ) -> ArmDataset:
     """Write the arm dataset; each episode starts at a different phase of the motion.
 
     The camera takes frame k at ``t_k + camera_delay_s``; with ``camera_timestamp_column`` that
     time is recorded in ``observation.images.wrist.timestamp``. The detection feature holds
     (u, v, depth) of the target at the camera's true time. ``jitter_s`` makes the recording
-    variable-rate: frame times and each camera frame's delay wander by up to that much (seeded).
+    variable-rate: frame times and each camera frame's delay wander by up to that much (seeded). ``start_s``:
+    the first row's timestamp (GR00T's datasets start at 0.05 s); ``wall_clock_s``: a per-frame column of Unix
+    times (s, float64) ``observation.unix_time``, the first row's at that time.
     """
     rng = np.random.default_rng(seed)
     features: dict[str, FeatureSpec] = {
@@ -189,6 +193,8 @@ def write_arm_dataset(
         features["observation.detection.wrist"] = FeatureSpec("float32", (3,), ["u", "v", "depth_m"])
     if depth:
         features["observation.depth.wrist"] = FeatureSpec("uint16", (DEPTH_H, DEPTH_W), ["height", "width"])
+    if wall_clock_s is not None:
+        features["observation.unix_time"] = FeatureSpec("float64", (1,), None)
     episodes = []
     stamps = []
     camera_times = []
@@ -197,7 +203,11 @@ def write_arm_dataset(
         if jitter_s:
             t = np.cumsum(np.r_[0.0, 1.0 / FPS + rng.uniform(-jitter_s, jitter_s, n - 1)])
             t = t.astype(np.float32).astype(np.float64)
+        if start_s:
+            t = (t + start_s).astype(np.float32).astype(np.float64)
         frames: dict[str, Any] = {"observation.state": state_vectors(t), "action": state_vectors(t + 0.05)}
+        if wall_clock_s is not None:
+            frames["observation.unix_time"] = wall_clock_s + (t - t[0])
         t_cam = t + camera_delay_s + (rng.uniform(-jitter_s, jitter_s, n) if jitter_s else 0.0)
         if camera_timestamp_column:
             frames["observation.images.wrist.timestamp"] = t_cam
@@ -210,7 +220,7 @@ def write_arm_dataset(
             if depth:
                 frames["observation.depth.wrist"] = np.broadcast_to(
                     np.round(z * 1000.0)[:, None, None], (n, DEPTH_H, DEPTH_W)).astype(np.uint16)
-        episodes.append(EpisodeData(frames, task=f"reach {e % 2}", timestamp_s=t if jitter_s else None))
+        episodes.append(EpisodeData(frames, task=f"reach {e % 2}", timestamp_s=t if jitter_s or start_s else None))
         stamps.append(t)
         camera_times.append(t_cam)
     # A seven-joint arm of its own (with a wrist yaw): no robot type framechain bundles a URDF for.

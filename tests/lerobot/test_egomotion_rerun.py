@@ -19,7 +19,7 @@ pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not fou
 
 
 def series(rrd: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
-    """(sensor_time ns, value) of a Scalars entity, in time order."""
+    """(episode_time ns, value) of a Scalars entity, in time order."""
     from rerun.chunk import RrdReader
 
     times, values = [], []
@@ -27,7 +27,7 @@ def series(rrd: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
         if chunk.entity_path != entity or chunk.is_static:
             continue
         batch = chunk.to_record_batch()
-        times.append(np.asarray(batch.column("sensor_time").cast("int64")))
+        times.append(np.asarray(batch.column("episode_time").cast("int64")))
         values.append(np.array([v[0] for v in batch.column("Scalars:scalars").to_pylist()]))
     t, v = np.concatenate(times), np.concatenate(values)
     order = np.argsort(t)

@@ -42,13 +42,15 @@ Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 
 
 def _rows(batches: Batches, entity: str, column: str) -> tuple[np.ndarray, list[Any]]:
-    """(sensor_time ns, values) of the temporal rows of ``entity``, in sensor-time order."""
+    """(stamp ns, values) of the temporal rows of ``entity``, in stamp order (``sensor_time``; an episode's
+    ``episode_time``)."""
     times: list[int] = []
     values: list[Any] = []
     for static, batch in batches.get(entity, []):
         if static or column not in batch.schema.names:
             continue
-        times.extend(batch.column("sensor_time").cast(pa.int64()).to_pylist())
+        stamps = "episode_time" if "episode_time" in batch.schema.names else "sensor_time"
+        times.extend(batch.column(stamps).cast(pa.int64()).to_pylist())
         values.extend(batch.column(column).to_pylist())
     order = np.argsort(times, kind="stable")
     return np.asarray(times, dtype=np.int64)[order], [values[i] for i in order]
@@ -173,9 +175,18 @@ def test_demo_blueprint_puts_the_camera_beside_the_3d_view(demo: Run) -> None:
                 kinds[chunk.entity_path] = batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0]
                 origins[chunk.entity_path] = batch.column("ViewBlueprint:space_origin").to_pylist()[-1][0]
     two_d = [p for p, k in kinds.items() if k == "2D" and origins[p] == "/camera"]
-    assert len(two_d) == 2  # the camera (image and overlay) and its depth
+    # the camera (image and overlay); no depth view: this scene's depth comes with its detections, not as images
+    assert len(two_d) == 1
     assert "3D" in kinds.values()
     assert "TimeSeries" in kinds.values()
+
+
+def test_demo_shows_no_view_without_data_and_names_only_its_chain_frames(demo: Run) -> None:
+    from rrd_views import labels_in_3d, views_without_data
+
+    assert views_without_data(demo.rrd) == []
+    frames = demo.scene.chain.frames
+    assert sorted(labels_in_3d(demo.rrd)) == sorted({frames.world, frames.body, frames.camera})
 
 
 def test_images_none_and_all(demo: Run, tmp_path: Path) -> None:

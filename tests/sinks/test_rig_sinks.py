@@ -96,6 +96,18 @@ def test_blueprint_has_a_view_per_camera_beside_the_3d_view(made: Made) -> None:
     assert ["3D"] in classes
 
 
+def test_a_rig_shows_no_view_without_data_and_names_only_its_chain_frames(made: Made) -> None:
+    from rrd_views import labels_in_3d, views_without_data
+
+    assert views_without_data(made.rrd) == []
+    chain = made.scene.chain
+    frames = {chain.frames.body, *(c.frame for c in chain.cameras), *([chain.frames.world] if chain.has_pose else [])}
+    labels = labels_in_3d(made.rrd)
+    assert labels
+    assert {name for label in labels for name in label.split(" = ")} <= frames
+    assert len(labels) == len(set(labels))
+
+
 def test_foxglove_annotates_every_camera(made: Made) -> None:
     messages = foxglove_messages(made.run)
     topics = {m.topic for m in messages}

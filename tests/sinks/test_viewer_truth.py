@@ -94,7 +94,8 @@ def test_replay_frames_are_named_only_where_the_log_lacks_the_frame(
         fiducial_scene: dict[str, list[tuple[bool, Any]]]) -> None:
     # base_link and camera_optical_frame are in the log's tree: their @replay copies sit on them, unnamed
     for frame in ("base_link", "camera_optical_frame"):
-        assert _rows(fiducial_scene, f"/frames/{frame}", "TransformAxes3D:show_frame") == [[True]]
+        assert _rows(fiducial_scene, f"/frames/{frame}", "Points3D:labels") == [[frame]]
+        assert _rows(fiducial_scene, f"/frames/replay/{frame}", "Points3D:labels") == []
         assert _rows(fiducial_scene, f"/frames/replay/{frame}", "TransformAxes3D:show_frame") == [[False]]
 
 
@@ -139,7 +140,9 @@ def test_a_log_of_one_moment_has_a_time_axis_of_seconds(tmp_path: Path) -> None:
         batch = chunk.to_record_batch()
         if "TimeAxis:view_range" in batch.schema.names:
             ranges[chunk.entity_path].extend(batch.column("TimeAxis:view_range").to_pylist())
-    assert len(ranges) == 2  # the error and time-gap series (no images here: no pixel series)
+    # the time-gap series alone: no as-run points (no error series), no images (no pixel series)
+    assert not any(entity.startswith(("/series/error_mm", "/series/error_px")) for entity in _read(rrd))
+    assert len(ranges) == 1
     for values in ranges.values():
         assert values[-1] == [{"start": -1_000_000_000, "end": 1_000_000_000}]  # ns either side of the cursor
     verdict = [t[0] for t in _rows(_read(rrd), "/log/verdict", "TextLog:text")]

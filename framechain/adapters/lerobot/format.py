@@ -397,13 +397,38 @@ class DatasetReader:
 
     def episode(self, index: int) -> EpisodeInfo:
         """Metadata of one episode (its data file, length, tasks, videos)."""
+        self._check_known(index)
+        if self.layout is Layout.V2:
+            return self._episode_v2(index)
+        return self._episode_v3(index)
+
+    def _check_known(self, index: int) -> None:
         if index not in self._episode_ids:
             ids = self._episode_ids
             shown = f"{ids[0]}..{ids[-1]}" if ids == list(range(ids[0], ids[-1] + 1)) else str(ids)
             raise DatasetError(self.root, f"no episode {index}; episodes are {shown}")
+
+    def episode_patterns(self, index: int) -> list[str]:
+        """Where episode ``index``'s data file and videos are, relative to the root, as glob patterns (a
+        variable LeRobot does not define matches anything), whether or not the files are on disk yet: what
+        to fetch of a dataset whose metadata alone is here."""
+        self._check_known(index)
         if self.layout is Layout.V2:
-            return self._episode_v2(index)
-        return self._episode_v3(index)
+            chunk = index // self.chunks_size
+            data = {"episode_chunk": chunk, "chunk_index": chunk, "episode_index": index}
+            videos = {key: {**data, "video_key": key} for key in self.video_keys}
+        else:
+            row = self._episode_row_v3(index)
+            data = {"chunk_index": int(row["data/chunk_index"]), "file_index": int(row["data/file_index"]),
+                    "episode_index": index}
+            videos = {key: {"video_key": key, "chunk_index": int(c), "file_index": int(f), "episode_index": index}
+                      for key in self.video_keys
+                      if (c := row.get(f"videos/{key}/chunk_index")) is not None
+                      and (f := row.get(f"videos/{key}/file_index")) is not None}
+        patterns = [self._pattern("data_path", self.data_path, data)[0]]
+        if self.video_path is not None:
+            patterns += [self._pattern("video_path", self.video_path, fields)[0] for fields in videos.values()]
+        return patterns
 
     def _episode_v2(self, index: int) -> EpisodeInfo:
         row = self._episodes_v2[index]
@@ -421,22 +446,7 @@ class DatasetReader:
                            data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0))
 
     def _episode_v3(self, index: int) -> EpisodeInfo:
-        episodes = self._episodes_table_v3()
-        names = set(episodes.column_names)
-        wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
-                  "dataset_from_index", "dataset_to_index"]
-        for key in self.video_keys:
-            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp",
-                       f"videos/{key}/to_timestamp"]
-        where = self.root / "meta" / "episodes"
-        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
-
-        table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
-        if table.num_rows == 0:
-            raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
-        row = {k: v[0] for k, v in table.to_pydict().items()}
-        if any(row.get(c) is None for c in ("length", "data/chunk_index", "data/file_index")):
-            raise DatasetError(where, f"episode {index}'s row lacks its length or data file")
+        row = self._episode_row_v3(index)
         fields = {"chunk_index": int(row["data/chunk_index"]), "file_index": int(row["data/file_index"]),
                   "episode_index": index}
         data_file = self._fill("data_path", self.data_path, fields)
@@ -462,6 +472,26 @@ class DatasetReader:
             video_files=videos, video_from_s=video_from, video_to_s=video_to,
         )
 
+    def _episode_row_v3(self, index: int) -> dict[str, Any]:
+        """Episode ``index``'s row of the episodes parquet files: its length, tasks, data file and videos."""
+        episodes = self._episodes_table_v3()
+        names = set(episodes.column_names)
+        wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
+                  "dataset_from_index", "dataset_to_index"]
+        for key in self.video_keys:
+            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp",
+                       f"videos/{key}/to_timestamp"]
+        where = self.root / "meta" / "episodes"
+        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
+
+        table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
+        if table.num_rows == 0:
+            raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
+        row = {k: v[0] for k, v in table.to_pydict().items()}
+        if any(row.get(c) is None for c in ("length", "data/chunk_index", "data/file_index")):
+            raise DatasetError(where, f"episode {index}'s row lacks its length or data file")
+        return row
+
     def _fill(self, key: str, template: str, fields: Mapping[str, Any]) -> Path:
         """``template`` (info.json's ``key``) filled with ``fields``; a variable LeRobot does not define (a
         recorder's own, ``{robot_id}``) is matched against the files on disk (with a note), which must be one."""
@@ -472,22 +502,9 @@ class DatasetReader:
     def _fill_if_found(self, key: str, template: str, fields: Mapping[str, Any], *,
                        required: bool = False) -> Path | None:
         """:meth:`_fill`, None when a template with a variable LeRobot does not define matches no single file."""
-        import glob
-        import string
-
-        try:
-            parsed = list(string.Formatter().parse(template))
-        except ValueError as err:
-            raise DatasetError(self._info_path, f"{key} {template!r} is not a path template ({err})") from err
-        unknown = sorted({name for _text, name, _spec, _conv in parsed if name and name not in fields})
-        try:
-            if not unknown:
-                return self.root / template.format(**fields)
-            pattern = "".join(glob.escape(text) + ("" if name is None else "*" if name in unknown
-                                                   else format(fields[name], spec or ""))
-                              for text, name, spec, _conv in parsed)
-        except (KeyError, IndexError, ValueError) as err:
-            raise DatasetError(self._info_path, f"{key} {template!r} cannot be filled ({err})") from err
+        pattern, unknown = self._pattern(key, template, fields)
+        if not unknown:
+            return self.root / template.format(**fields)
         matches = sorted(self.root.glob(pattern))
         if len(matches) == 1:
             self.note(self._info_path, f"{key} uses {', '.join('{' + u + '}' for u in unknown)}, which LeRobot does "
@@ -498,6 +515,24 @@ class DatasetReader:
         found = "no file" if not matches else f"{len(matches)} files ({matches[0].name}, ...)"
         raise DatasetError(self._info_path, f"{key} {template!r} uses {', '.join(unknown)}, which LeRobot does not "
                            f"define, and {found} on disk match{'es' if len(matches) == 1 else ''} the rest")
+
+    def _pattern(self, key: str, template: str, fields: Mapping[str, Any]) -> tuple[str, list[str]]:
+        """``template`` filled with ``fields`` as a glob pattern relative to the root (a variable LeRobot does not
+        define, a recorder's own ``{robot_id}``, matches anything), and those variables."""
+        import glob
+        import string
+
+        try:
+            parsed = list(string.Formatter().parse(template))
+        except ValueError as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} is not a path template ({err})") from err
+        unknown = sorted({name for _text, name, _spec, _conv in parsed if name and name not in fields})
+        try:
+            return "".join(glob.escape(text) + ("" if name is None else "*" if name in unknown
+                                                else glob.escape(format(fields[name], spec or "")))
+                           for text, name, spec, _conv in parsed), unknown
+        except (KeyError, IndexError, ValueError) as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} cannot be filled ({err})") from err
 
     def read(self, index: int, columns: Sequence[str] = ()) -> EpisodeFrames:
         """One episode's frames: timestamps, frame and global indices, and ``columns`` as arrays.

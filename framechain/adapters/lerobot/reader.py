@@ -24,6 +24,8 @@ The Timeline holds:
 - depth_frames: per-frame depth features of the cameras that have one.
 
 Times are nanoseconds from the episode start (LeRobot timestamps restart at 0 per episode).
+``metadata["episode_start_ns"]`` is the first row's stamp, and ``metadata["wall_clock_start_ns"]`` that
+row's wall-clock time where the dataset stores one (:mod:`framechain.adapters.lerobot.wall_clock`).
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ from framechain.adapters.lerobot.format import (
     is_lerobot_dataset,
 )
 from framechain.adapters.lerobot.markers import video_markers
+from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clock_start_ns
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.adapters.robot.binding import arm_root, joint_positions, robot_model
 from framechain.adapters.robot.kinematics import RobotModel
@@ -102,7 +105,8 @@ def open_dataset(
         sources.append(DetectionSource(table=Path(detections)))
     names = reader.names(cfg.state_feature)
     cfg.check_names(names)
-    frames = reader.read(episode, _columns(cfg, reader, sources))
+    wall_features = wall_clock_features(reader)
+    frames = reader.read(episode, list(dict.fromkeys([*_columns(cfg, reader, sources), *wall_features])))
     state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
     bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
     if bad.any():
@@ -133,6 +137,9 @@ def open_dataset(
           if cam.video_key is not None and cam.video_key in frames.columns),
     ])
     metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
+    wall = wall_clock_start_ns(frames, wall_features)
+    if wall is not None:
+        metadata["wall_clock_feature"], metadata["wall_clock_start_ns"] = wall
     spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
     if spec is not None:
         observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
@@ -208,6 +215,8 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
         "length": len(frames),
         "tasks": list(frames.episode.tasks),
         "time_span_ns": [int(state_ns[0]), int(state_ns[-1])],
+        # its first row: where the episode's own time starts (a viewer shows durations from it)
+        "episode_start_ns": int(state_ns[0]),
         "state_feature": cfg.state_feature,
         "urdf": str(cfg.urdf),
         "robot_config": cfg.source,
