@@ -40,7 +40,7 @@ __all__ = ["Joint", "joint_fit"]
 
 #: Steps (s) of the bracketing search, of the grid the intervals are measured on, and its half-width in steps.
 BRACKET_STEP_S = 0.02
-GRID_STEP_S = 0.0025
+GRID_STEP_S = 0.004
 GRID_HALF = 3
 
 #: Makes the translation prior of a link, mount rotation (xyzw), camera position on the link (m) and offset (s).
@@ -83,6 +83,17 @@ class _Trials:
             self.costs[key] = _fixed_offset_fit(self.table(key), self.orientations, self.origin, self.span, key,
                                                 self.opts.max_offset_s)[0]
         return self.costs[key]
+
+    def mount_cost(self, offset: float, mount: Rotation) -> float:
+        """The joint cost with ``mount`` used for the prior and the comparison alike (no mount fitted)."""
+        table = self.measure(self.prior_of(self.link, mount.as_quat(), self.xyz, round(offset, 6)))
+        pairs = frame_pairs(table, self.origin, self.span, self.opts.max_offset_s)
+        if pairs.t0.size == 0:
+            return float("inf")
+        link_rv = link_rotvecs(self.orientations, pairs, np.array([offset]))[0]
+        residual = np.linalg.norm(pairs.rotvec - link_rv @ mount.as_matrix(), axis=1)
+        weights = pairs.weight * robust_weights(residual, np.linalg.norm(pairs.rotvec, axis=1))
+        return float(np.sqrt((weights * residual**2).sum() / weights.sum()))
 
     def fitted_mount(self, offset: float) -> Rotation:
         """The mount fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
@@ -170,6 +181,29 @@ def _remount(trials: _Trials, best: float) -> None:
         trials.use_mount(base * Rotation.from_rotvec(state))
 
 
+#: Step (deg) of the joint search of the mount about each axis.
+MOUNT_STEP_DEG = 1.0
+
+
+def _mount_search(trials: _Trials, best: float) -> None:
+    """The mount of least joint cost near the fixed point: a parabola along each of three axes through steps of
+    MOUNT_STEP_DEG, one step of their vertices taken when it lowers the cost (a measurement leans towards its
+    prior's mount as towards its prior's offset, so the fixed point is near, not at, the best mount)."""
+    base = Rotation.from_quat(trials.q_link_cam)
+    centre = trials.mount_cost(best, base)
+    h = np.deg2rad(MOUNT_STEP_DEG)
+    step = np.zeros(3)
+    for k in range(3):
+        axis = np.eye(3)[k] * h
+        minus, plus = (trials.mount_cost(best, base * Rotation.from_rotvec(sign * axis)) for sign in (-1.0, 1.0))
+        curvature = minus - 2.0 * centre + plus
+        if curvature > 0:
+            step[k] = float(np.clip(0.5 * (minus - plus) / curvature, -2.0, 2.0)) * h
+    moved = base * Rotation.from_rotvec(step)
+    if trials.mount_cost(best, moved) < centre:
+        trials.use_mount(moved)
+
+
 def anderson(inputs: list[FloatArray], outputs: list[FloatArray]) -> FloatArray:
     """The next iterate of a fixed-point map from its last few inputs and outputs (Anderson type II)."""
     if len(inputs) == 1:
@@ -193,6 +227,8 @@ def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: lis
     if not np.isfinite(trials.cost(best)):
         return None
     _remount(trials, best)
+    grid, best = _grid(trials, best, limit)
+    _mount_search(trials, best)
     grid, best = _grid(trials, best, limit)
     tables = [trials.table(float(x)) for x in grid]
     cost, mount, weights, pairs = _fixed_offset_fit(trials.table(best), trials.orientations, trials.origin,
