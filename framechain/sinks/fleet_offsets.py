@@ -1,8 +1,10 @@
 """The fleet's video/state time offsets: one per episode (its camera's own motion), their spread, and which disagree.
 
 Episodes of one recording share a camera and a recorder, so their offsets should agree: an episode
-whose 95% interval does not hold the fleet's median offset disagrees (a camera that was restarted,
-a recorder that dropped frames, a different rig). Rendered into the fleet report from the fleet
+whose offset departs from the fleet's median by more than it could find a latency of (its bound: two
+half-widths of its 95% interval, at least 5 ms; the interval alone holds the resampling spread, not
+the few milliseconds episodes of one recording differ by) disagrees (a camera that was restarted, a
+recorder that dropped frames, a different rig). Rendered into the fleet report from the fleet
 table's per-log columns ``video_camera``, ``video_offset_s``, ``video_offset_low_s``,
 ``video_offset_high_s``.
 """
@@ -15,14 +17,16 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_OFFSET_S
+
 __all__ = ["OffsetRow", "OffsetSpread", "offset_html", "offset_markdown", "video_offsets"]
 
-OFFSET_COLUMNS = ("log", "camera", "offset", "95% interval", "agrees with the median")
+OFFSET_COLUMNS = ("log", "camera", "offset", "95% interval", "within its bound of the median")
 
 
 @dataclass(frozen=True)
 class OffsetRow:
-    """One log's offset (s) and interval, and whether the interval holds the fleet's median."""
+    """One log's offset (s) and interval, and whether it is within its bound of the fleet's median."""
 
     unit: str
     camera: str
@@ -54,9 +58,15 @@ class OffsetSpread:
                 f"{self.std_s * 1e3:.1f} ms, range {lo * 1e3:+.1f} .. {hi * 1e3:+.1f} ms. ")
         off = self.disagreeing
         if not off:
-            return text + "Every log's 95% interval holds the median: the offsets agree."
+            return text + "Every log's offset is within its bound of the median: the offsets agree."
         names = ", ".join(r.unit for r in off[:10]) + (", ..." if len(off) > 10 else "")
-        return text + f"{len(off)} log(s) whose 95% interval does not hold the median disagree: {names}."
+        return (text + f"{len(off)} log(s) whose offset departs from the median by more than its bound disagree: "
+                f"{names}.")
+
+
+def _bound(low_s: float, high_s: float) -> float:
+    """The smallest offset the episode's fit would have made a finding of (s)."""
+    return max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high_s - low_s))
 
 
 def video_offsets(table: pa.Table) -> OffsetSpread | None:
@@ -74,7 +84,7 @@ def video_offsets(table: pa.Table) -> OffsetSpread | None:
         return None
     offsets = np.array([v[2] for v in seen.values()])
     median = float(np.median(offsets))
-    rows = tuple(OffsetRow(unit, camera, offset, low, high, bool(low <= median <= high))
+    rows = tuple(OffsetRow(unit, camera, offset, low, high, bool(abs(offset - median) <= _bound(low, high)))
                  for unit, camera, offset, low, high in seen.values())
     return OffsetSpread(rows=rows, median_s=median, std_s=float(offsets.std(ddof=1)) if offsets.size > 1 else 0.0)
 

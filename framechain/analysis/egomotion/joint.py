@@ -84,16 +84,29 @@ class _Trials:
                                                 self.opts.max_offset_s)[0]
         return self.costs[key]
 
-    def mount_cost(self, offset: float, mount: Rotation) -> float:
-        """The joint cost with ``mount`` used for the prior and the comparison alike (no mount fitted)."""
+    def mount_cost(self, offset: float, mount: Rotation, focal_scale: float = 1.0) -> float:
+        """The joint cost with ``mount`` used for the prior and the comparison alike (no mount fitted), the measured
+        rotation across the optical axis taken as ``focal_scale`` times the true one (so that a wrong focal length
+        is not made up for by tilting the mount)."""
         table = self.measure(self.prior_of(self.link, mount.as_quat(), self.xyz, round(offset, 6)))
         pairs = frame_pairs(table, self.origin, self.span, self.opts.max_offset_s)
         if pairs.t0.size == 0:
             return float("inf")
         link_rv = link_rotvecs(self.orientations, pairs, np.array([offset]))[0]
-        residual = np.linalg.norm(pairs.rotvec - link_rv @ mount.as_matrix(), axis=1)
+        measured = pairs.rotvec * np.array([1.0 / focal_scale, 1.0 / focal_scale, 1.0])
+        residual = np.linalg.norm(measured - link_rv @ mount.as_matrix(), axis=1)
         weights = pairs.weight * robust_weights(residual, np.linalg.norm(pairs.rotvec, axis=1))
         return float(np.sqrt((weights * residual**2).sum() / weights.sum()))
+
+    def focal_scale(self, offset: float) -> float:
+        """Measured over predicted rotation across the optical axis at ``offset`` with the mount fitted there."""
+        _cost, mount, weights, pairs = _fixed_offset_fit(self.table(offset), self.orientations, self.origin,
+                                                         self.span, offset, self.opts.max_offset_s)
+        if pairs.t0.size == 0:
+            return 1.0
+        predicted = (link_rotvecs(self.orientations, pairs, np.array([offset]))[0] @ mount)[:, :2]
+        den = float(weights @ (predicted**2).sum(axis=1))
+        return float(weights @ (predicted * pairs.rotvec[:, :2]).sum(axis=1)) / den if den > 0 else 1.0
 
     def fitted_mount(self, offset: float) -> Rotation:
         """The mount fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
@@ -183,6 +196,9 @@ def _remount(trials: _Trials, best: float) -> None:
 
 #: Step (deg) of the joint search of the mount about each axis.
 MOUNT_STEP_DEG = 1.0
+#: The mount is searched only on measurements whose implied focal length is within this of the one used: a focal
+#: length clearly off distorts the measured rotation more than a scale can say, and the caller measures again.
+FOCAL_SETTLED = 0.05
 
 
 def _mount_search(trials: _Trials, best: float) -> None:
@@ -190,17 +206,21 @@ def _mount_search(trials: _Trials, best: float) -> None:
     MOUNT_STEP_DEG, one step of their vertices taken when it lowers the cost (a measurement leans towards its
     prior's mount as towards its prior's offset, so the fixed point is near, not at, the best mount)."""
     base = Rotation.from_quat(trials.q_link_cam)
-    centre = trials.mount_cost(best, base)
+    scale = trials.focal_scale(best)
+    if abs(scale - 1.0) > FOCAL_SETTLED:  # measured again with the focal length it implies first (run.py)
+        return
+    centre = trials.mount_cost(best, base, scale)
     h = np.deg2rad(MOUNT_STEP_DEG)
     step = np.zeros(3)
     for k in range(3):
         axis = np.eye(3)[k] * h
-        minus, plus = (trials.mount_cost(best, base * Rotation.from_rotvec(sign * axis)) for sign in (-1.0, 1.0))
+        minus, plus = (trials.mount_cost(best, base * Rotation.from_rotvec(sign * axis), scale)
+                       for sign in (-1.0, 1.0))
         curvature = minus - 2.0 * centre + plus
         if curvature > 0:
             step[k] = float(np.clip(0.5 * (minus - plus) / curvature, -2.0, 2.0)) * h
     moved = base * Rotation.from_rotvec(step)
-    if trials.mount_cost(best, moved) < centre:
+    if trials.mount_cost(best, moved, scale) < centre:
         trials.use_mount(moved)
 
 
