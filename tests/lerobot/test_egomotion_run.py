@@ -325,3 +325,25 @@ def test_a_focal_length_a_little_off_is_a_note(clean: tuple[VideoDatasetTruth, P
     (note,) = [n for n in result["notes"] if "implies a focal length" in n]
     implied = float(note.split("implies a focal length ")[1].split(" ")[0])
     assert implied == pytest.approx(1 / 1.06, abs=0.03)
+
+
+def test_motors_mapped_onto_another_robot_are_inconclusive(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """An SO-101's motors mapped onto a Panda's joints: forward kinematics of another robot cannot explain the
+    camera's motion, and the verdict says so instead of "no fault" or a confident mount."""
+    truth, robot = clean
+    panda = URDF.parents[1] / "panda" / "panda.urdf"
+    config = yaml.safe_load(robot.read_text())
+    config["urdf"] = str(panda)
+    config["joints"] = {"shoulder_pan.pos": "panda_joint1", "shoulder_lift.pos": "panda_joint2",
+                        "elbow_flex.pos": "panda_joint4", "wrist_flex.pos": "panda_joint6",
+                        "wrist_roll.pos": "panda_joint7"}
+    config["hold"] = {"panda_joint3": 0.0, "panda_joint5": 0.0}
+    config["cameras"]["wrist"]["mount"]["parent"] = "panda_hand"
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
+    result = attribute(truth.root, tmp_path / "robot.yaml", tmp_path / "out", capsys)
+    assert not result["findings"]
+    assert result["verdict"].startswith("Inconclusive: the model does not explain the motion of camera "
+                                        "wrist_optical_frame")
+    assert "No fault" not in result["verdict"]
+    assert camera_entry(result)["explained"] is False
