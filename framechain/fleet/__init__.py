@@ -49,6 +49,9 @@ class ResultStore:
     def __init__(self, out_dir: str | Path) -> None:
         self.directory = Path(out_dir) / RESULTS_DIR
         self.directory.mkdir(parents=True, exist_ok=True)
+        # A batch killed while writing a record (SIGKILL: no cleanup runs) leaves its temporary file: never a record.
+        for stale in self.directory.glob(".*.tmp"):
+            stale.unlink(missing_ok=True)
 
     def path_for(self, key: str) -> Path:
         return self.directory / f"{key}.json"

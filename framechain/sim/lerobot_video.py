@@ -358,7 +358,10 @@ def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
 
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
 #: Fast encoder presets: generation time, not file size, matters here.
-_FAST = {"libx264": {"preset": "veryfast"}, "libx265": {"preset": "veryfast"}, "libsvtav1": {"preset": "10"},
+#: One encoder thread: a threaded libx264 codes the same frames differently from run to run (a test would measure
+#: another video each time).
+_FAST = {"libx264": {"preset": "veryfast", "threads": "1"}, "libx265": {"preset": "veryfast", "threads": "1"},
+         "libsvtav1": {"preset": "10"},
          # MPEG-4 Part 2 at the quality of a real recording (a frame sent twice decodes within about a grey level).
          "mpeg4": {"b": "2500000"}}
 
