@@ -46,7 +46,7 @@ from functools import cached_property
 import numpy as np
 
 from framechain.analysis.chain_model import CameraDelta, ChainInputs, Perturbation, hop1, hop2, hop3
-from framechain.analysis.checks import SIZE_KEYS, Bound, family_name, size_text
+from framechain.analysis.checks import DIRECTED, SIZE_KEYS, Bound, family_name, size_text, tolerance_text
 from framechain.analysis.cross_camera import CrossCameraObjective
 from framechain.analysis.estimates import axis_text
 from framechain.analysis.fault_model import FaultModel, Mode
@@ -59,13 +59,14 @@ from framechain.catalogue import Fault, HopName
 from framechain.replay import CameraModel
 
 #: Families with a size, the only ones a bound applies to (the others are discrete choices).
-SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)
+SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)
 #: The largest size searched per family (in parameter units: s, rad, a scale's deviation from 1): past
 #: these a fault is another family (a frame swap), or a scale a static target cannot tell from collapse.
-MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2, Fault.DEPTH_SCALE: 0.8,
-            Fault.INTRINSICS: 0.8}
-#: Central-difference steps of the linearised search (s, rad, scale).
-STEP = {Fault.LATENCY: 2e-3, Fault.ROTATION_ERROR: 1e-3, Fault.DEPTH_SCALE: 1e-3, Fault.INTRINSICS: 1e-3}
+MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2, Fault.TRANSLATION_ERROR: 0.5,
+            Fault.DEPTH_SCALE: 0.8, Fault.INTRINSICS: 0.8}
+#: Central-difference steps of the linearised search (s, rad, m, scale).
+STEP = {Fault.LATENCY: 2e-3, Fault.ROTATION_ERROR: 1e-3, Fault.TRANSLATION_ERROR: 1e-3, Fault.DEPTH_SCALE: 1e-3,
+        Fault.INTRINSICS: 1e-3}
 #: Bisection steps between the last undetected and the first detected size (each halves a factor of 1.5).
 BISECT = 6
 #: A bound must also be detected at these multiples of it (up to 4x: twice the test's 2x), and the
@@ -123,6 +124,8 @@ class _Noise:
     floor_m: float  # noise floor of a median (two standard errors)
     total_m: float  # median error before the findings
     gate_m: float | None
+    #: the effect worth acting on (m): with it, a fault is detected only when it also moves the median error by this
+    tolerance_m: float | None = None
 
     @classmethod
     def of(cls, stage: Stage, base: Perturbation) -> _Noise:
@@ -168,6 +171,8 @@ class _Noise:
         spread = 1.2533 * float(np.std(change)) / np.sqrt(both.sum())
         if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
             return False
+        if self.tolerance_m is not None and share < self.tolerance_m:
+            return False
         if self.gate_m is not None and self._departure_median <= self.gate_m:
             return _median_norm(self.departure + s) > self.gate_m
         return True
@@ -201,9 +206,10 @@ Found = Sequence[tuple[FaultModel, FloatArray]]
 
 
 def bounds(stages: Sequence[Stage], found: Found, *, say: Callable[[str], None] = lambda _m: None,
-           no_depth: bool = False) -> tuple[Bound, ...]:
+           no_depth: bool = False, tolerance_m: float = 0.0) -> tuple[Bound, ...]:
     """One :class:`Bound` per sized fault family and hop the stages can fit (``found``: the findings'
-    models and parameters). ``no_depth``: bearing-only evidence, where a depth scale has nothing to scale."""
+    models and parameters). ``no_depth``: bearing-only evidence, where a depth scale has nothing to scale;
+    ``tolerance_m``: the effect worth acting on, under which a fault is no finding (0: the noise alone)."""
     out: list[Bound] = []
     for stage in stages:
         mine = [(m, x) for m, x in found if m.hop in stage.hops]
@@ -216,9 +222,9 @@ def bounds(stages: Sequence[Stage], found: Found, *, say: Callable[[str], None] 
         clean = _clean(stage, base)
         for fault, hop, variants in candidates:
             others = [(m, x) for m, x in mine if m.n_params and m.family != variants[0][0].family]
-            results = [_bound_one(_Probe(stage, *clean, base, model, theta0, others), noise)
+            results = [_bound_one(_Probe(stage, *clean, base, model, theta0, others), noise, tolerance_m)
                        for model, theta0 in variants]
-            out.append(_assemble(stage, fault, hop, results, noise))
+            out.append(_assemble(stage, fault, hop, results, noise, tolerance_m))
     if no_depth:
         out.append(Bound(HopName.PIXEL_TO_CAMERA, Fault.DEPTH_SCALE, False, None,
                          "bearing only: the detections carry no depth to scale"))
@@ -235,8 +241,8 @@ def without_evidence(inputs: ChainInputs) -> tuple[Bound, ...]:
     families = [(Fault.LATENCY, HopName.BODY_TO_WORLD)]
     if inputs.camera_is_dynamic:
         families.append((Fault.LATENCY, HopName.CAMERA_TO_BODY))
-    families += [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY), (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA),
-                 (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA)]
+    families += [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY), (Fault.TRANSLATION_ERROR, HopName.CAMERA_TO_BODY),
+                 (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA), (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA)]
     return tuple(Bound(hop, fault, False, None, "no evidence to measure the chain against") for fault, hop in families)
 
 
@@ -395,9 +401,12 @@ class _Result:
     injected: float | None = None
     confirmed: bool = True  # the injection check's refit cleared the thresholds
     tolerated: bool = False  # the model's tolerance, not the evidence, sets the size (a smaller fault is no finding)
+    statistical: float | None = None  # the size the noise alone sets (parameter units), when the tolerance sets size
 
 
-def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
+def _bound_one(probe: _Probe, noise: _Noise, tolerance_m: float = 0.0) -> _Result:
+    """The smallest fault of the probe's model the noise lets the fit find, raised to the smallest that moves the
+    median error by ``tolerance_m`` where that is larger (``statistical`` keeps the first)."""
     model = probe.model
     jac = probe.jacobian()
     values, vectors = np.linalg.eigh(jac.T @ jac)
@@ -414,8 +423,25 @@ def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
             blind.append(direction)
             continue
         best = float(min(linear[-1], limit)) if len(values) > 1 else None
-        return _checked(noise, probe, direction, size, tuple(blind), best)
+        practical = _practical(probe, noise, direction, size, limit, tolerance_m)
+        if practical <= size:
+            return _checked(noise, probe, direction, size, tuple(blind), best)
+        return replace(_checked(noise, probe, direction, practical, tuple(blind), best), statistical=size)
     return _Result(model, None, vectors[:, 0], tuple(blind))
+
+
+def _practical(probe: _Probe, noise: _Noise, direction: FloatArray, size: float, limit: float,
+               tolerance_m: float) -> float:
+    """The smallest fault from ``size`` up that also moves the median error by ``tolerance_m`` (``limit`` when none
+    up to it does; ``size`` itself when it already does, or without a tolerance)."""
+    if tolerance_m <= 0:
+        return size
+    gated = replace(noise, tolerance_m=tolerance_m)
+    if _detected_at(probe, gated, direction, size) and all(
+            _detected_at(probe, gated, direction, f * size) for f in STABLE_FACTORS[:2] if f * size <= limit):
+        return size
+    found = _smallest(probe, gated, direction, size, limit)
+    return limit if found is None else max(found, size)
 
 
 def _detected_at(probe: _Probe, noise: _Noise, direction: FloatArray, a: float) -> bool:
@@ -549,12 +575,15 @@ def _size_of(model: FaultModel, theta0: FloatArray, theta: FloatArray, mode: Mod
         return float(theta[0] - theta0[0])
     if model.fault == Fault.ROTATION_ERROR:
         return float(np.rad2deg(np.linalg.norm(theta - theta0)))
+    if model.fault == Fault.TRANSLATION_ERROR:
+        return float(np.linalg.norm(theta - theta0))
     ratio = float(theta[0] / theta0[0])
     return (ratio if mode == "as_run" else 1.0 / ratio) - 1.0
 
 
 # -- the bound in words -----------------------------------------------------------------------
-def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: _Noise) -> Bound:
+def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: _Noise,
+              tolerance_m: float = 0.0) -> Bound:
     """The family's bound: the worse of its models (intrinsics: two variants), with the sentence."""
     camera = results[0].model.camera or ""  # a rig camera's own models name it
     blind = [r for r in results if r.size is None]
@@ -563,6 +592,7 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
     worst = max(results, key=lambda r: r.size or 0.0)
     assert worst.size is not None
     size = _estimate_size(fault, worst.size, stage.mode)
+    statistical = None if worst.statistical is None else _estimate_size(fault, worst.statistical, stage.mode)
     axes = tuple(_axis3(v) for v in worst.unobservable)
     n_obs = len(stage.inputs)
     over = f"{n_obs} observations"
@@ -570,17 +600,50 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
         k = next(i for i, c in enumerate(stage.inputs.rig_cameras) if c.frame == worst.model.camera)
         mine = int((stage.inputs.camera_index == k).sum())
         over = f"{n_obs} observations ({mine} of {worst.model.camera}, measured against the other cameras)"
-    rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
-    noise_text = f"{rms_mm:.2g} mm rms of residual"
-    if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
-        noise_text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
     name = "latency (stamp offset)" if fault == Fault.LATENCY and worst.model.camera else family_name(fault, hop)
-    what = f"{size_text(fault, size)} is the smallest {name}"
-    if fault == Fault.ROTATION_ERROR:
-        what += f" (about {axis_text(_unit(worst.direction).tolist())}, the weakest axis seen"
-        what += f"; {np.rad2deg(worst.best):.2g} deg about the best)" if worst.best is not None else ")"
+    what = f"{size_text(fault, size)} is the smallest {name}{_direction_text(fault, worst)}"
     if len(results) > 1:
         what += f" (of K's variants, {worst.model.name} is the harder to see)"
+    axis = _axis3(worst.direction) if fault in DIRECTED else None
+    key = SIZE_KEYS[fault]
+    return Bound(hop, fault, True, {key: round(size, 6)},
+                 f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
+                 f"{_noise_text(noise)} over {over}{_limit_text(fault, statistical, tolerance_m)}"
+                 f"{_check_text(stage, fault, worst)}.", axes, axis, camera,
+                 statistical=None if statistical is None else {key: round(statistical, 6)},
+                 limited_by="tolerance" if statistical is not None else "cross-check" if worst.tolerated else "noise",
+                 tolerance_m=tolerance_m)
+
+
+def _direction_text(fault: Fault, worst: _Result) -> str:
+    """`` (about [..], the weakest axis seen; 0.1 deg about the best)`` for a rotation, ``along`` for a translation."""
+    if fault not in DIRECTED:
+        return ""
+    about, what = ("along", "direction") if fault == Fault.TRANSLATION_ERROR else ("about", "axis")
+    text = f" ({about} {axis_text(_unit(worst.direction).tolist())}, the weakest {what} seen"
+    if worst.best is None:
+        return text + ")"
+    best = f"{np.rad2deg(worst.best):.2g} deg" if fault == Fault.ROTATION_ERROR else f"{worst.best * 1e3:.2g} mm"
+    return text + f"; {best} {about} the best)"
+
+
+def _noise_text(noise: _Noise) -> str:
+    rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
+    text = f"{rms_mm:.2g} mm rms of residual"
+    if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
+        text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
+    return text
+
+
+def _limit_text(fault: Fault, statistical: float | None, tolerance_m: float) -> str:
+    if statistical is None:
+        return ""
+    return (f", and moves the median error by the {tolerance_text(tolerance_m)} tolerance (tolerance_m): from "
+            f"{size_text(fault, statistical)} the noise would let it be found, but it would change the error by "
+            "less, a note")
+
+
+def _check_text(stage: Stage, fault: Fault, worst: _Result) -> str:
     check = ""
     if worst.refound is not None and worst.injected is not None:
         where = "observations" if stage.static else "logged points"
@@ -591,10 +654,7 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
     if worst.tolerated:
         check += ("; the tolerance of a rig camera's fault sets it (a smaller one is no finding however well it "
                   "fits), not the evidence")
-    axis = _axis3(worst.direction) if fault == Fault.ROTATION_ERROR else None
-    return Bound(hop, fault, True, {SIZE_KEYS[fault]: round(size, 6)},
-                 f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
-                 f"{noise_text} over {over}{check}.", axes, axis, camera)
+    return check
 
 
 def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
@@ -602,6 +662,8 @@ def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
     scale ``1 +- a`` is the fault ``1 / (1 +- a)``, whose larger deviation from 1 is ``a / (1 - a)``."""
     if fault == Fault.ROTATION_ERROR:
         return float(np.rad2deg(size))
+    if fault == Fault.TRANSLATION_ERROR:
+        return size
     if fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS) and mode == "correction":
         return size / (1.0 - size)
     return size
@@ -612,6 +674,8 @@ def _key_text(fault: Fault, value: float) -> str:
         return f"{value * 1e3:+.2f} ms"
     if fault == Fault.ROTATION_ERROR:
         return f"{value:.3g} deg"
+    if fault == Fault.TRANSLATION_ERROR:
+        return f"{value * 1e3:.3g} mm"
     return f"{value * 100:+.3g}%"
 
 
@@ -640,11 +704,15 @@ def _why_blind(stage: Stage, fault: Fault, hop: HopName) -> str:
         return "the body does not move while the targets are seen: a pose taken at another time is the same pose"
     if stage.static and still.all():
         what = {Fault.LATENCY: "shifts nothing", Fault.ROTATION_ERROR: "only turns each target's fitted position",
+                Fault.TRANSLATION_ERROR: "only moves each target's fitted position by as much",
                 Fault.DEPTH_SCALE: "only moves each target's fitted position along its ray",
                 Fault.INTRINSICS: "only moves each target's fitted position"}[fault]
         return f"the camera does not move relative to the static targets: {_article(family_name(fault, hop))} {what}"
     limit = MAX_SIZE[fault]
     largest = float(np.rad2deg(limit)) if fault == Fault.ROTATION_ERROR else limit
+    if fault == Fault.TRANSLATION_ERROR and stage.static and _body_orientation_still(inputs):
+        return ("the camera does not turn while the targets are seen: a mount moved in position only moves each "
+                "target's fitted position by as much")
     return (f"too weak a signal here: no {family_name(fault, hop)} up to {size_text(fault, largest)} changes the "
             "error beyond framechain's thresholds")
 
@@ -659,6 +727,16 @@ def _body_still(inputs: ChainInputs) -> bool:
         return True
     turned = np.abs(np.abs(np.einsum("ij,j->i", inputs.q_wb, inputs.q_wb[0])) - 1.0)
     return bool(np.linalg.norm(inputs.t_wb - inputs.t_wb[0], axis=1).max() < STILL_M and turned.max() < STILL_M**2)
+
+
+def _body_orientation_still(inputs: ChainInputs) -> bool:
+    """Whether the camera's orientation in the world is the same at every observation."""
+    if len(inputs) == 0:
+        return True
+    origin = _world_of(inputs, Perturbation(), np.zeros((len(inputs), 3)))
+    axes = [_world_of(inputs, Perturbation(), np.tile(np.eye(3)[k], (len(inputs), 1))) - origin for k in range(3)]
+    turned = sum(np.linalg.norm(a - a[0], axis=1) for a in axes)
+    return bool(np.nanmax(np.nan_to_num(turned, nan=np.inf)) < STILL_M)
 
 
 def _still(inputs: ChainInputs) -> BoolArray:

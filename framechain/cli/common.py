@@ -235,15 +235,16 @@ def print_findings(result: Any) -> None:
         table = Table()
         cameras = any(f.camera for f in result.findings)
         for col in ("#", "fault", "hop", *(("camera",) if cameras else ()), "estimate", "95% interval", "share",
-                    "confidence", "strength"):
+                    "effect", "confidence", "strength"):
             table.add_column(col, overflow="fold")
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
             table.add_row(str(i), c.fault, c.hop, *((c.camera,) if cameras else ()), c.estimate, c.interval, c.share,
-                          c.confidence, c.strength, style="dim" if c.strength == "weak" else None)
+                          c.error, c.confidence, c.strength, style=None if f.actionable and c.strength == "strong"
+                          else "dim")
         console.print(table)
     _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
-    if result.labels.suggest_ignore:  # every label only when some disagree
+    if result.labels.suggest_ignore or result.labels.wrongly_sized:  # every label only when some disagree
         _print_table(console, label_columns(result), label_rows(result))
     if len(result.labels.rows) > 1:  # one label (one object) has nothing to compare
         console.print(label_summary(result), markup=False, highlight=False, soft_wrap=True)
@@ -255,6 +256,7 @@ def print_findings(result: Any) -> None:
     console.print(hops)
     for i, f in enumerate(result.findings, start=1):
         on = f" (camera {f.camera})" if f.camera else ""
-        console.print(f"fix {i}{on}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
+        console.print(f"{FindingView.of(f).fix_label()} {i}{on}: {f.fix}", markup=False, highlight=False,
+                      soft_wrap=True)
     for note in result.notes:
         console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)

@@ -19,6 +19,7 @@ from framechain.sinks.colors import (
     ERROR_COLOR,
     HOP_COLORS,
     RECOMPUTED_COLOR,
+    RECORDED_ERROR_COLOR,
     REFERENCE_COLOR,
     legend_text,
 )
@@ -157,7 +158,7 @@ def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, attributi
     what = {"logged_hops": "the as-run world point", "target": "the as-run target", "reference": "the reference",
             "static_spread": "the static target's own position", "cross_camera": "the other cameras' sightings"}
     obs_rows = rows_of(result.observations.obs_id, attribution.inputs.obs_id)
-    series = [("world_error", attribution.error_before, ERROR_COLOR,
+    series = [("world_error", attribution.error_before, RECORDED_ERROR_COLOR,
                f"world error against {what.get(attribution.metric, 'the evidence')} (mm)")]
     if attribution.findings:
         series.append(("corrected", attribution.error_after, CORRECTED_COLOR, "world error, findings corrected (mm)"))

@@ -226,8 +226,9 @@ def test_report_html_is_self_contained(latency_log: tuple[Path, Path], tmp_path:
     assert main(["report", str(log), "--chain", str(chain), "--out", str(out), "--bootstrap", "5", "-q"]) == 0
     page = (out / "report.html").read_text()
     assert "latency at body_to_world" in page  # the verdict comes first
-    # four figures, and the error against each fitted family's size (latency, mount rotation, depth, intrinsics)
-    assert page.count("data:image/png;base64,") == 4 + 4
+    # four figures, and the error against each fitted family's size (latency, mount rotation and translation, depth,
+    # intrinsics)
+    assert page.count("data:image/png;base64,") == 4 + 5
     assert "Median error against the pose latency" not in page  # in the PNG, not the page: its caption is
     assert "Pose latency: the error against the logged hops" in page
     assert "http://" not in page

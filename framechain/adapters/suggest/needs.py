@@ -25,9 +25,9 @@ from framechain.adapters.suggest.facts import (
     frame_path,
     log_facts,
     path_text,
-    tag_size_hint,
 )
 from framechain.adapters.suggest.marker_probe import MarkerProbe, probe_markers
+from framechain.adapters.suggest.tag_sizes import same_sizes, tag_size_hint, tag_sizes
 from framechain.adapters.suggest.typos import did_you_mean, or_list
 from framechain.config.chain import ChainConfig, ChainFrames
 
@@ -309,6 +309,11 @@ def _depth_need(
     tag_size = chain.evidence.tag_size_m
     markers = chain.evidence.markers
     if tag_size is not None and (msgtype in CORNER_DETECTION_TYPES or not msgtype):  # none named, or not in the log
+        beside_sizes = tag_size_hint(beside)
+        if beside_sizes is not None and not same_sizes(tag_size, tag_sizes(beside)):
+            # A tag declared at the wrong size looks like a moving tag: name the sizes the files give.
+            return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP), but "
+                             "the sizes beside the log differ", beside_sizes.as_key())
         return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP)")
     if markers is not None and detections == chain.topics.image:
         if markers.size_m is not None:
