@@ -364,8 +364,8 @@ def unexplained_misfit(metric: Metric, before: FloatArray, after: FloatArray, to
     if median_after <= KNOWN_NOISE[metric] * tolerance_m or median_after <= UNEXPLAINED_SHARE * median_before:
         return ()
     return (Undetermined("the error", f"{median_after * 1e3:.1f} mm of its median {median_before * 1e3:.1f} mm "
-                         f"against {_AGAINST[metric]} is left unexplained, more than that evidence's noise: no fault "
-                         "model of the catalogue explains it"),)
+                         f"against {_AGAINST[metric]} is left unexplained, more than that evidence's noise: none of "
+                         "the catalogue's fault models explains it"),)
 
 
 def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, row: int) -> FixContext:

@@ -96,7 +96,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from framechain.timeline import FramechainError  # after parsing, so that --help loads no tables
 
     try:
-        return int(args.run(args))
+        code = int(args.run(args))
+        sys.stdout.flush()  # a reader gone before the last buffered line (`| head -1`) is met here, not at exit
+        return code
     except FramechainError as err:
         print(f"framechain {args.command}: error: {err}", file=sys.stderr)
         return EXIT_INPUT_ERROR

@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
             notify=lambda msg: print(f"framechain replay: {msg}", file=sys.stderr),
         )
     if made.chain_suggested:
-        print_suggested_chain(made.suggestion or made.chain, quiet)
+        print_suggested_chain(made.suggestion or made.chain, quiet, args.log)
     if args.json:
         print(json.dumps(_report(made, outcome, notes)))
     else:  # --quiet silences progress and the suggested chain, not the result

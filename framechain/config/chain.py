@@ -56,6 +56,7 @@ import yaml
 
 from framechain.config import plausible
 from framechain.config.errors import ChainConfigError
+from framechain.config.file_kinds import not_a_chain
 from framechain.config.schema import ROTATION_KEYS, Section, finite_number, read_yaml, show
 
 #: The error worth acting on when the chain does not say (m): a millimetre.
@@ -288,7 +289,11 @@ class ChainConfig:
         (calibration files, urdf) live, normally the chain file's directory (None: the working
         directory). Plausible but unusual values become :attr:`notes`.
         """
-        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes"), error=ChainConfigError)
+        other = not_a_chain(raw, Path(where).name) if isinstance(raw, Mapping) else None
+        if other is not None:
+            raise ChainConfigError(where, other)
+        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes", "has_pose"),
+                      error=ChainConfigError)
         topics = top.section("topics", _keys(ChainTopics))
         evidence = parse_evidence(top) or ChainEvidence()
         cameras = _rig_cameras(top)
@@ -395,9 +400,10 @@ def _frames(section: Section, cameras: tuple[RigCamera, ...] = ()) -> ChainFrame
     if not cameras:
         frames = ChainFrames(camera=section.frame("camera") or default.camera, body=body,
                              world=section.frame("world") or default.world)
-        if len({frames.camera, frames.body, frames.world}) < 3:
-            section.fail(f"camera, body and world must be three different frames, got {frames.camera!r}, "
-                         f"{frames.body!r}, {frames.world!r}")
+        # world equal to body: a camera on a body that does not move (a fixed rig); the camera is its own frame.
+        if frames.camera in (frames.body, frames.world):
+            section.fail(f"the camera frame {frames.camera!r} must differ from body {frames.body!r} and world "
+                         f"{frames.world!r} (world may equal body: a body that does not move)")
         return frames
     names = [c.frame for c in cameras]
     camera = section.frame("camera") or names[0]
