@@ -246,7 +246,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
 def summary_line(logs: Sequence[FleetLog]) -> str:
     counts = {s: sum(log.status == s for log in logs) for s in STATUS_ORDER}
     parts = [f"{counts[s]} {STATUS_TEXT[s]}" for s in STATUS_ORDER if counts[s]]
-    return f"{len(logs)} logs: " + "; ".join(parts) + "."
+    return f"{len(logs)} log{'s' if len(logs) != 1 else ''}: " + "; ".join(parts) + "."
 
 
 def chains_line(logs: Sequence[FleetLog]) -> str:

@@ -50,34 +50,31 @@ def test_the_stairs_tutorial_offers_no_fix_for_an_effect_under_a_millimetre(real
     # Every bound the tolerance sets is at least what the noise alone allows, and says so.
     for bound in result.bounds:
         if bound.observable:
-            assert bound.size is not None and bound.statistical_size is not None
+            assert bound.size is not None
+            assert bound.statistical_size is not None
             assert bound.size >= bound.statistical_size
             assert (bound.limited_by == "tolerance") == (bound.size > bound.statistical_size)
     assert "(set by the 1 mm tolerance)" in result.verdict
 
 
-def _demo_scene(**changes: object) -> tuple[SceneSpec, object]:
-    """The demo's failure (a mast camera whose extrinsic lost its 30 deg pitch, a pose 30 ms late), hops logged."""
-    faults = (InjectedFault(Fault.MISSING_ROTATION, "robot"), InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}))
-    spec = SceneSpec(seed=7, duration_s=8.0, evidence="hops", faults=faults)
-    scene = generate(spec)
-    return spec, replace(scene.chain, **changes)  # type: ignore[arg-type]
-
-
 def test_the_demo_s_8_mm_latency_beside_a_1_3_m_rotation_stays_a_finding() -> None:
-    """The gate is absolute: a second real fault of millimetres beside one of a metre keeps its fix."""
-    spec, chain = _demo_scene()
-    scene = generate(spec)
-    result = attribute(scene.timeline, chain, bootstrap=0)  # type: ignore[arg-type]
+    """The demo's failure (a mast camera whose extrinsic lost its 30 deg pitch, a pose 30 ms late, hops logged): the
+    gate is absolute, so the second real fault of millimetres beside one of a metre keeps its fix."""
+    faults = (InjectedFault(Fault.MISSING_ROTATION, "robot"),
+              InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}))
+    scene = generate(SceneSpec(seed=7, duration_s=8.0, evidence="hops", faults=faults))
+    chain = scene.chain
+    result = attribute(scene.timeline, chain, bootstrap=0)
     by_fault = {f.fault: f for f in result.findings}
     rotation, latency = by_fault[Fault.MISSING_ROTATION], by_fault[Fault.LATENCY]
     assert rotation.error_m > 1.0
     assert 2e-3 < latency.error_m < 0.02  # a 30 ms late pose at the demo's speeds
-    assert rotation.actionable and latency.actionable
+    assert rotation.actionable
+    assert latency.actionable
     assert latency.fix.startswith("Look up map <- base_link at the detection's header.stamp")
     assert not result.undetermined
     # With a 2 cm tolerance the latency is a note, and the pose latency bound is at least where its effect is 2 cm.
-    strict = attribute(scene.timeline, replace(chain, tolerance_m=0.02), bootstrap=0)  # type: ignore[arg-type]
+    strict = attribute(scene.timeline, replace(chain, tolerance_m=0.02), bootstrap=0)
     noted = next(f for f in strict.findings if f.fault == Fault.LATENCY)
     assert noted.strength == "note"
     assert "no action needed, under the 2 cm tolerance" in noted.fix
@@ -192,4 +189,24 @@ def test_stairs_tags_declared_at_the_default_size_are_named_wrongly_sized(realda
         assert rows[label].size_m == pytest.approx(sized[label], rel=0.05)
     assert not set(result.labels.suggest_ignore) & seen
     line = result.labels.size_line()
-    assert line is not None and line.startswith("evidence.tag_size_m: {default: 0.16, 100: 0.1")
+    assert line is not None
+    assert line.startswith("evidence.tag_size_m: {default: 0.16, 100: 0.1")
+
+
+def test_a_curve_s_axis_is_the_one_the_bounds_table_names(realdata: Path) -> None:
+    """The stairs' mount rotation and translation, not found: the plot's axis is the bound's, sign included (the
+    table and the plot named opposite axes); and the caption says what the median is."""
+    from framechain.analysis.estimates import axis_text
+    from framechain.sinks.checks_view import curve_plots
+
+    result = recorded_attribution(realdata)
+    for fault in (Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR):
+        bound = next(b for b in result.bounds if b.fault == fault)
+        curve = next(c for c in result.curves if c.fault == fault)
+        assert curve.axis is not None
+        assert bound.axis is not None
+        np.testing.assert_allclose(curve.axis, bound.axis)
+        assert axis_text(bound.axis) in bound.why
+        assert axis_text(bound.axis) in curve.axis_label()
+    caption = curve_plots(result)[0][1]
+    assert caption.endswith("each finding's millimetres are a share of its median")
