@@ -65,6 +65,7 @@ from framechain.analysis.shares import (
     bootstrap,
     drop_unexplaining,
     evidence_sentence,
+    own_effect,
     undetermined_because,
     weakened,
 )
@@ -322,7 +323,7 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
             confidence=float(confidence),
             evidence=evidence_sentence(fault, model, level.metric, estimate, alternative, sel.mode,
                                        spread_m=(total, total - float(shapley[k])), rays=rays),
-            fix=fix, model=model.name, camera=model.camera,
+            fix=fix, model=model.name, camera=model.camera, own_effect_m=own_effect(found, k, level.objective, inputs),
         ))
     # What the other findings do to each world point, so that a picture can show one finding's effect alone.
     combined_world = evaluate(inputs, combined)[2]

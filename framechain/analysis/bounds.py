@@ -171,7 +171,7 @@ class _Noise:
         spread = 1.2533 * float(np.std(change)) / np.sqrt(both.sum())
         if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
             return False
-        if self.tolerance_m is not None and share < self.tolerance_m:
+        if self.tolerance_m is not None and _effect(share, with_fault, without, both, s, model) < self.tolerance_m:
             return False
         if self.gate_m is not None and self._departure_median <= self.gate_m:
             return _median_norm(self.departure + s) > self.gate_m
@@ -194,6 +194,16 @@ class _Noise:
     @cached_property
     def _departure_median(self) -> float:
         return _median_norm(self.departure)
+
+
+def _effect(share: float, with_fault: FloatArray, without: FloatArray, both: BoolArray, signal: FloatArray,
+            model: FaultModel) -> float:
+    """How much a fault moves the error, as a finding's effect is measured: the median's change (a rig camera's
+    fault: on its own observations, the ones it moves, as :func:`~framechain.analysis.shares.own_effect`)."""
+    if model.camera is None:
+        return share
+    moved = both & (np.linalg.norm(signal, axis=1) > 0)
+    return float(np.median(with_fault[moved]) - np.median(without[moved])) if moved.any() else 0.0
 
 
 def _median_norm(residual: FloatArray) -> float:

@@ -84,11 +84,19 @@ class Finding:
     actionable: bool = True
     #: Why its fit cannot be trusted (at the edge of its search window, an interval over orders of magnitude).
     undetermined_because: tuple[str, ...] = ()
+    #: A rig camera's finding: the error it removes from that camera's own observations (a share of the whole rig's
+    #: median undersells a fault of one camera among many); None: the finding's effect is ``error_m``.
+    own_effect_m: float | None = None
+
+    @property
+    def effect_m(self) -> float:
+        """The error it removes, in ``error_m``'s unit: what the practical threshold gates."""
+        return self.error_m if self.own_effect_m is None else self.own_effect_m
 
     @property
     def effect(self) -> float:
         """The error it removes in its display unit: millimetres, or deg/s of a camera's rotation rate."""
-        return self.error_m * 1e3 if self.error_unit == "m" else self.error_m
+        return self.effect_m * 1e3 if self.error_unit == "m" else self.effect_m
 
     @property
     def effect_unit(self) -> str:
@@ -112,7 +120,8 @@ class Finding:
             "fix": self.fix,
             "strength": self.strength,
             "weak_because": list(self.weak_because),
-            "effect": {"value": round(self.effect, 4), "unit": self.effect_unit},
+            "effect": {"value": round(self.effect, 4), "unit": self.effect_unit,
+                       **({"on": f"camera {self.camera}'s observations"} if self.own_effect_m is not None else {})},
             "actionable": self.actionable,
         }
         if self.undetermined_because:
@@ -120,6 +129,12 @@ class Finding:
         if self.error_unit != "m":
             out["error_deg_s"] = round(self.error_m, 6)
         return out
+
+
+def _beside_hop(finding: Finding) -> str:
+    """The estimate's text and a comma, unless it only says the hop again (``camera_to_body inverted``)."""
+    text = format_estimate(finding.estimate)
+    return "" if text == f"{finding.hop.value} inverted" else f"{text}, "
 
 
 def as_note(finding: Finding, threshold: float, threshold_text: str) -> Finding:
@@ -141,7 +156,7 @@ def as_undetermined(finding: Finding, why: Sequence[str]) -> Finding:
 def gate_by_effect(findings: Sequence[Finding], threshold: float, threshold_text: str) -> tuple[Finding, ...]:
     """The findings whose effect (``error_m``) is under ``threshold`` made notes (:func:`as_note`); the others,
     and the undetermined, as they are."""
-    return tuple(as_note(f, threshold, threshold_text) if f.strength in ("strong", "weak") and f.error_m < threshold
+    return tuple(as_note(f, threshold, threshold_text) if f.strength in ("strong", "weak") and f.effect_m < threshold
                  else f for f in findings)
 
 
@@ -256,14 +271,15 @@ class Attribution:
             if self.bounds and nothing_observable(self.bounds) and not self.findings:
                 return f"Nothing could be checked ({against}{unseen}): {bounds[0].lower()}{bounds[1:]}"
             lead = "No fault worth acting on" if self.findings else "No fault beyond noise"
-            return f"{lead}: {against}{unseen}{self._notes_clause()}." + (f" {bounds}" if bounds else "")
+            return (f"{lead}: {against}{unseen}{self._notes_clause()}{self._sizes_clause()}." +
+                    (f" {bounds}" if bounds else ""))
         top = actionable[0]
         more = f", plus {len(actionable) - 1} more" if len(actionable) > 1 else ""
         camera = f" on camera {top.camera}" if top.camera else ""
         weak = f" (weak: {'; '.join(top.weak_because)})" if top.strength == "weak" else ""
         found = (f"{top.fault.value} at {top.hop.value}{camera} ({format_estimate(top.estimate)}){weak} explains "
                  f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}"
-                 f"{self._notes_clause()}.")
+                 f"{self._notes_clause()}{self._sizes_clause()}.")
         return found + (f" {bounds}" if bounds else "")
 
     def _notes_clause(self) -> str:
@@ -273,11 +289,19 @@ class Attribution:
         if not notes:
             return ""
         named = [f"{f.fault.value} at {f.hop.value}{f' on camera {f.camera}' if f.camera else ''} "
-                 f"({format_estimate(f.estimate)}, {f.effect_text()})" for f in notes]
+                 f"({_beside_hop(f)}{f.effect_text()})" for f in notes]
         listed = named[0] if len(named) == 1 else f"{', '.join(named[:-1])} and {named[-1]}"
         verb = "is" if len(named) == 1 else "are"
         return (f"; {listed} {verb} clear but under the {tolerance_text(self.config.tolerance_m)} tolerance: "
                 "no action needed")
+
+    def _sizes_clause(self) -> str:
+        """``; labels 100, 101 look wrongly sized, not moving (the label table gives their sizes)`` ("" without)."""
+        wrong = [r.label for r in self.labels.wrongly_sized]
+        if not wrong:
+            return ""
+        return (f"; label{'s' if len(wrong) > 1 else ''} {', '.join(wrong)} look{'' if len(wrong) > 1 else 's'} "
+                "wrongly sized, not moving (the label table gives the sizes that fit)")
 
     def _inconclusive(self, summary: dict[str, Any]) -> str:
         """The verdict when the fits that would decide cannot be trusted: what is undetermined and why, what was

@@ -114,6 +114,26 @@ class Bootstrapped:
     at_edge: float = 0.0
 
 
+def own_effect(found: Sequence[Found], k: int, objective: Objective, inputs: ChainInputs) -> float | None:
+    """A rig camera's finding ``found[k]``: the median error of that camera's own observations without it (the
+    other findings kept) less with every finding (m); None for a finding of the chain as a whole."""
+    model = found[k][0]
+    if model.camera is None or inputs.camera_index is None:
+        return None
+    camera = next(i for i, c in enumerate(inputs.rig_cameras) if c.frame == model.camera)
+    rows = inputs.camera_index == camera
+
+    def error(chosen: Sequence[Found]) -> FloatArray:
+        params = np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
+        pert = perturbation_of([c[0] for c in chosen], params)
+        out: FloatArray = distances(objective(inputs, pert))[rows]
+        return out
+
+    with_all, without = error(found), error([f for i, f in enumerate(found) if i != k])
+    both = np.isfinite(with_all) & np.isfinite(without)
+    return float(np.median(without[both]) - np.median(with_all[both])) if both.any() else None
+
+
 def bootstrap_interval(
     sel: Selected,
     model: FaultModel,

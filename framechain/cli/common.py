@@ -256,7 +256,8 @@ def print_findings(result: Any) -> None:
         cameras = any(f.camera for f in result.findings)
         for col in ("#", "fault", "hop", *(("camera",) if cameras else ()), "estimate", "95% interval", "share",
                     "effect", "confidence", "strength"):
-            table.add_column(col, overflow="fold")
+            # Names stay whole (a fault name folded mid-word reads as two); estimates and intervals fold.
+            table.add_column(col, overflow="fold", no_wrap=col in ("fault", "hop", "effect", "strength"))
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
             table.add_row(str(i), c.fault, c.hop, *((c.camera,) if cameras else ()), c.estimate, c.interval, c.share,
