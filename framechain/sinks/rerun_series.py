@@ -39,10 +39,11 @@ if TYPE_CHECKING:
 
 def log_points(
     rec: rr.RecordingStream, result: ReplayResult, as_run: Mapping[str, FloatArray], opts: RerunOptions,
-    rows: dict[str, int], views: list[CameraView] | None = None,
+    rows: dict[str, int], views: list[CameraView] | None = None, error_color: tuple[int, int, int] = ERROR_COLOR,
 ) -> None:
     """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run (camera-frame
-    points per camera of a rig, ``views``)."""
+    points per camera of a rig, ``views``) in ``error_color``: the colour of the finding that explains them, as
+    the line between the two points in the image (red when none does)."""
     import rerun as rr
 
     frames = result.frames
@@ -93,7 +94,7 @@ def log_points(
             entity, indexes=obs_indexes(result, both),
             columns=rr.Arrows3D.columns(
                 origins=recomputed[leaf][both], vectors=delta,
-                colors=np.tile(np.array(ERROR_COLOR, dtype=np.uint8), (both.size, 1)),
+                colors=np.tile(np.array(error_color, dtype=np.uint8), (both.size, 1)),
                 radii=np.full(both.size, radius / 4, dtype=np.float32),
                 labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
             ),
