@@ -3,7 +3,8 @@
 
 For each log: attribute it as it is, read the bound of every observable fault family
 (``attribution.json``'s ``bounds``), then inject a fault of that family at 2x and at 0.5x the bound
-and attribute again. A fault is *found* when a finding names its family at its hop; at 2x the
+and attribute again. A fault is *found* when a finding worth acting on (not a note under the chain's
+tolerance) names its family at its hop; at 2x the
 estimate is also checked to be within half the bound of the truth. Honest bounds: found at 2x
 nearly always, at 0.5x rarely.
 
@@ -89,7 +90,8 @@ def _value(family: str, estimate: dict[str, Any]) -> float:
 def finding_of(result: Any, family: str, hop: str) -> dict[str, Any] | None:
     """The estimate of the finding that names ``family`` at ``hop`` (None: none does)."""
     faults = ("rotation_error", "missing_rotation") if family == "rotation_error" else (family,)
-    return next((f["estimate"] for f in result.to_json()["findings"] if f["fault"] in faults and f["hop"] == hop),
+    return next((f["estimate"] for f in result.to_json()["findings"] if f["fault"] in faults and f["hop"] == hop
+                 and f.get("actionable", True)),  # a note under the tolerance is no finding to act on
                 None)
 
 

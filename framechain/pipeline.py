@@ -25,7 +25,7 @@ from framechain.analysis.egomotion.run import measure_cameras
 from framechain.analysis.findings import AnalysisError, Attribution, Unattributed
 from framechain.analysis.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
-from framechain.config.chain import ChainConfig
+from framechain.config.chain import ChainConfig, ChainFrames
 from framechain.progress import Progress
 from framechain.replay import ReplayResult
 from framechain.timeline import FramechainError, Timeline
@@ -241,6 +241,9 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: ad
                                   "transform of the log)")
         close = adapters.did_you_mean(name, known)
         hint = f"; did you mean {adapters.or_list(close)}?" if close else ""
+        if role == "world" and name == ChainFrames().world and not close:  # the default, perhaps never written
+            hint = (f" ({name!r} is frames.world's default: name the log's world frame, or set world equal to body "
+                    f"({chain.frames.body}) for a body that does not move)")
         raise FramechainError(f"{target}: the chain's {role} frame {name!r} is in no transform of the log{hint}")
 
 

@@ -29,14 +29,23 @@ import numpy as np
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.bounds import Stage, bounds, without_evidence
 from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
-from framechain.analysis.checks import Bound
+from framechain.analysis.checks import Bound, LabelTable, Undetermined, tolerance_text
 from framechain.analysis.curves import curves, label_table
 from framechain.analysis.estimates import format_estimate
 from framechain.analysis.fault_model import FaultModel
 from framechain.analysis.faults import LATENCY_BOUND_S, classify_rotation, models_for
-from framechain.analysis.findings import AnalysisError, Attribution, Finding, Metric, Unattributed
+from framechain.analysis.findings import (
+    AnalysisError,
+    Attribution,
+    Finding,
+    Metric,
+    Unattributed,
+    as_undetermined,
+    gate_by_effect,
+)
 from framechain.analysis.fit import perturbation_of
 from framechain.analysis.fixes import FixContext, fix_for
+from framechain.analysis.label_sizes import label_size_fits
 from framechain.analysis.replayed import Replayed, replay_chain
 from framechain.analysis.rig import rig_inputs, rig_level, unchecked_bounds
 from framechain.analysis.rig_layout import RigLayout
@@ -50,8 +59,17 @@ from framechain.analysis.selection import (
     reweighted,
     select,
 )
-from framechain.analysis.shares import Found, bootstrap_interval, drop_unexplaining, evidence_sentence, weakened
-from framechain.analysis.static import RayObjective, StaticTargetError, static_objective
+from framechain.analysis.shares import (
+    Bootstrapped,
+    Found,
+    bootstrap,
+    drop_unexplaining,
+    evidence_sentence,
+    own_effect,
+    undetermined_because,
+    weakened,
+)
+from framechain.analysis.static import RayObjective, StaticTargetError, WindowedSpreadObjective, static_objective
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
@@ -106,22 +124,39 @@ def attribute_replayed(
     context = _fix_context(replayed.timeline, chain, result, row)
     assembled = _findings(level, inputs, context, np.random.default_rng(seed), bootstrap,
                           rays=replayed.bearing_only, say=say)
-    found_bounds = (*bounds(level.stages, assembled.kept, say=say, no_depth=replayed.bearing_only), *level.unchecked)
+    found_bounds = (*bounds(level.stages, assembled.kept, say=say, no_depth=replayed.bearing_only,
+                            tolerance_m=chain.tolerance_m), *level.unchecked)
     say("the error against each family's size, and per label")
-    labels = label_table(result.observations.label[result.replayed], assembled.error_after,
-                         static=level.metric == "static_spread")
+    labels = _labels(result, level, inputs, assembled, chain, rays=replayed.bearing_only)
     # Corrections move the recomputed chain towards the truth; as-run faults describe what the
     # robot did, and the recomputed chain stays as it is.
     corrections = ("reference", "static_spread", "cross_camera")
     corrected = evaluate(inputs, assembled.combined)[2] if level.metric in corrections else recomputed_world
+    findings, undetermined = judged(weakened(assembled.findings, found_bounds), chain.tolerance_m)
+    misfit = unexplained_misfit(level.metric, assembled.error_before, assembled.error_after, chain.tolerance_m)
     return Attribution(
         source=base.source, config=chain, replay=result, inputs=inputs, metric=level.metric,
         error_before=assembled.error_before, error_after=assembled.error_after, hop_errors=level.hop_errors,
         evidence_points=level.evidence_world, corrected_world=corrected,
-        findings=weakened(assembled.findings, found_bounds), others_shift=assembled.others_shift, seed=seed,
+        findings=findings, undetermined=(*undetermined, *misfit), others_shift=assembled.others_shift, seed=seed,
         aligned=replayed.aligned, notes=(*notes, *level.notes, *assembled.notes), stage=level.stage,
         bounds=found_bounds, curves=curves(level.stages, assembled.kept, found_bounds), labels=labels, rig=level.rig,
     )
+
+
+def _labels(result: ReplayResult, level: _Level, inputs: ChainInputs, assembled: _Assembled, chain: ChainConfig, *,
+            rays: bool) -> LabelTable:
+    """The per-label table; with static targets whose depth comes from declared sizes, each label's size checked."""
+    labels = result.observations.label[result.replayed]
+    declared = chain.evidence.tag_size_m
+    if declared is None and chain.evidence.markers is not None:
+        declared = chain.evidence.markers.size_m
+    sizes = None
+    if level.metric == "static_spread" and not rays and declared is not None and isinstance(
+            level.objective, WindowedSpreadObjective):
+        sizes = label_size_fits(inputs, assembled.combined, level.objective.groups, labels, declared)
+    return label_table(labels, assembled.error_after, static=level.metric == "static_spread", sizes=sizes,
+                       declared=declared)
 
 
 def _camera_row(result: ReplayResult, chain: ChainConfig) -> int:
@@ -280,14 +315,15 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
         estimate = model.estimate(x, sel.mode, inputs)
         fix = (model.fix(x, sel.mode, inputs) if model.fix is not None else
                fix_for(fault, model.hop, estimate, inputs, x, sel.mode, context=context))
+        boot = bootstrap(sel, model, rng, draws, say) if draws else Bootstrapped({})
         findings.append(Finding(
-            fault=fault, hop=model.hop, estimate=estimate,
-            interval=bootstrap_interval(sel, model, rng, draws, say) if draws else {},
+            fault=fault, hop=model.hop, estimate=estimate, interval=boot.interval,
+            undetermined_because=undetermined_because(model, x, boot.interval, boot.at_edge),
             share=float(shapley[k] / total) if total > 0 else 0.0, error_m=float(shapley[k]),
             confidence=float(confidence),
             evidence=evidence_sentence(fault, model, level.metric, estimate, alternative, sel.mode,
                                        spread_m=(total, total - float(shapley[k])), rays=rays),
-            fix=fix, model=model.name, camera=model.camera,
+            fix=fix, model=model.name, camera=model.camera, own_effect_m=own_effect(found, k, level.objective, inputs),
         ))
     # What the other findings do to each world point, so that a picture can show one finding's effect alone.
     combined_world = evaluate(inputs, combined)[2]
@@ -296,6 +332,41 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
     return _Assembled(tuple(findings[k] for k in order), error_before, distances(level.objective(inputs, combined)),
                       combined, tuple(notes), tuple((f[0], f[1]) for f in found),
                       others_shift=tuple(others[k] for k in order))
+
+
+def judged(findings: tuple[Finding, ...], tolerance_m: float) -> tuple[tuple[Finding, ...], tuple[Undetermined, ...]]:
+    """The findings with their fits judged: an undetermined fit gets no fix (and is listed, so that the verdict is
+    inconclusive), a clear one whose effect is under the tolerance is a note."""
+    undetermined = tuple(Undetermined(f"{f.fault.value} at {f.hop.value} ({format_estimate(f.estimate)})",
+                                      "; ".join(f.undetermined_because), f.camera or "")
+                         for f in findings if f.undetermined_because)
+    judged_fits = tuple(as_undetermined(f, f.undetermined_because) if f.undetermined_because else f for f in findings)
+    return gate_by_effect(judged_fits, tolerance_m, f"the {tolerance_text(tolerance_m)} tolerance (tolerance_m)"), \
+        undetermined
+
+
+#: Evidence whose noise is known, as a multiple of the tolerance: what the findings leave of the error beyond it is a
+#: fault no model of the catalogue explains. The robot's own points recomputed from the same inputs are exact; a
+#: reference (motion capture, a surveyed or declared point) is good to millimetres. A static spread or a rig's
+#: disagreement carries the detector's own noise (centimetres for per-tag PnP far away): no such rule.
+KNOWN_NOISE = {"logged_hops": 1.0, "target": 1.0, "reference": 10.0}
+#: The findings leaving more than this share of the median error (and more than the noise) explain too little.
+UNEXPLAINED_SHARE = 0.5
+_AGAINST = {"logged_hops": "the robot's logged points", "target": "the logged target", "reference": "the reference"}
+
+
+def unexplained_misfit(metric: Metric, before: FloatArray, after: FloatArray, tolerance_m: float
+                       ) -> tuple[Undetermined, ...]:
+    """The misfit the corrections do not explain, against evidence of known noise: undetermined when over that noise
+    and over half the error (a remainder of noise is neither)."""
+    if metric not in KNOWN_NOISE or not np.isfinite(before).any() or not np.isfinite(after).any():
+        return ()
+    median_before, median_after = float(np.nanmedian(before)), float(np.nanmedian(after))
+    if median_after <= KNOWN_NOISE[metric] * tolerance_m or median_after <= UNEXPLAINED_SHARE * median_before:
+        return ()
+    return (Undetermined("the error", f"{median_after * 1e3:.1f} mm of its median {median_before * 1e3:.1f} mm "
+                         f"against {_AGAINST[metric]} is left unexplained, more than that evidence's noise: none of "
+                         "the catalogue's fault models explains it"),)
 
 
 def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, row: int) -> FixContext:

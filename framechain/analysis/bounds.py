@@ -41,31 +41,35 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from functools import cached_property
 
 import numpy as np
 
-from framechain.analysis.chain_model import CameraDelta, ChainInputs, Perturbation, hop1, hop2, hop3
-from framechain.analysis.checks import SIZE_KEYS, Bound, family_name, size_text
+from framechain.analysis.bound_signal import (
+    MAX_SIZE,
+    SIZED,
+    Found,
+    Noise,
+    Probe,
+    Stage,
+    clean_observations,
+    fault_params,
+    median_norm,
+    observations_for,
+    why_blind,
+    world_of,
+)
+from framechain.analysis.chain_model import CameraDelta, ChainInputs, Perturbation, hop1
+from framechain.analysis.checks import DIRECTED, SIZE_KEYS, Bound, family_name, size_text, tolerance_text
 from framechain.analysis.cross_camera import CrossCameraObjective
 from framechain.analysis.estimates import axis_text
 from framechain.analysis.fault_model import FaultModel, Mode
-from framechain.analysis.faults import LATENCY_BOUND_S, models_for
+from framechain.analysis.faults import models_for
 from framechain.analysis.fit import NOISE_FLOOR_M, fit_models, perturbation_of
 from framechain.analysis.selection import MIN_BIC_GAIN, Objective, PointObjective, at_bound
 from framechain.analysis.shares import MIN_SHARE
-from framechain.arrays import BoolArray, FloatArray
+from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
-from framechain.replay import CameraModel
 
-#: Families with a size, the only ones a bound applies to (the others are discrete choices).
-SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)
-#: The largest size searched per family (in parameter units: s, rad, a scale's deviation from 1): past
-#: these a fault is another family (a frame swap), or a scale a static target cannot tell from collapse.
-MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2, Fault.DEPTH_SCALE: 0.8,
-            Fault.INTRINSICS: 0.8}
-#: Central-difference steps of the linearised search (s, rad, scale).
-STEP = {Fault.LATENCY: 2e-3, Fault.ROTATION_ERROR: 1e-3, Fault.DEPTH_SCALE: 1e-3, Fault.INTRINSICS: 1e-3}
 #: Bisection steps between the last undetected and the first detected size (each halves a factor of 1.5).
 BISECT = 6
 #: A bound must also be detected at these multiples of it (up to 4x: twice the test's 2x), and the
@@ -74,136 +78,13 @@ STABLE_FACTORS = (1.25, 1.5, 2.0, 3.0, 4.0)
 STABLE_RESTARTS = 6
 #: Times the injection check raises a bound (by half) when the refit does not find the fault.
 INJECTION_RETRIES = 2
-#: A body whose pose changes by less than this (m, and radians times a metre) over the observations is still.
-STILL_M = 1e-4
-
-
-@dataclass(frozen=True)
-class Stage:
-    """Where faults at ``hops`` are fitted: the objective (unweighted) over the observations with evidence.
-
-    ``gate_m``: with logged hops a stage is only examined when its median departure exceeds this;
-    ``rays``: bearing-only static targets; ``static``: the objective re-fits each target's position.
-    """
-
-    hops: tuple[HopName, ...]
-    objective: Objective
-    inputs: ChainInputs
-    mode: Mode
-    gate_m: float | None = None
-    rays: bool = False
-    #: the models to bound instead of the catalogue's (a rig: each camera's own, bounded per camera)
-    models: tuple[FaultModel, ...] | None = None
-
-    @property
-    def static(self) -> bool:
-        return not isinstance(self.objective, PointObjective)
-
-    @classmethod
-    def over_evidence(cls, hops: tuple[HopName, ...], objective: Objective, inputs: ChainInputs, mode: Mode,
-                      *, gate_m: float | None = None, rays: bool = False,
-                      models: tuple[FaultModel, ...] | None = None) -> Stage:
-        """Only the observations the selection uses (a finite residual without any fault)."""
-        if isinstance(objective, PointObjective):
-            objective = replace(objective, weighting=None)
-        rows = np.flatnonzero(np.isfinite(objective(inputs, Perturbation())).all(axis=1))
-        if rows.size < len(inputs):
-            objective, inputs = objective.take(rows), inputs.take(rows)
-        return cls(hops, objective, inputs, mode, gate_m, rays, models)
-
-
-@dataclass(frozen=True)
-class _Noise:
-    """What a fault's signal is measured against: the residual left by the findings."""
-
-    residual: FloatArray  # (N, 3) with the findings applied
-    departure: FloatArray  # (N, 3) with none (the logged-hop gate)
-    n: int  # residuals as the BIC counts them (3 per observation)
-    variance: float  # per residual, with the noise floor
-    floor_m: float  # noise floor of a median (two standard errors)
-    total_m: float  # median error before the findings
-    gate_m: float | None
-
-    @classmethod
-    def of(cls, stage: Stage, base: Perturbation) -> _Noise:
-        residual = stage.objective(stage.inputs, base)
-        departure = stage.objective(stage.inputs, Perturbation())
-        finite = np.isfinite(residual).all(axis=1)
-        r = residual[finite]
-        n = max(int(r.size), 1)
-        dist = np.linalg.norm(r, axis=1)
-        floor = 2.0 * 1.2533 * float(np.std(dist)) / np.sqrt(dist.size) if dist.size else 0.0
-        before = np.linalg.norm(departure, axis=1)
-        before = before[np.isfinite(before)]
-        total = float(np.median(before)) if before.size else 0.0
-        return cls(residual, departure, n, float(np.sum(r * r)) / n + NOISE_FLOOR_M**2, floor, total, stage.gate_m)
-
-    def needed_ss(self, model: FaultModel) -> float:
-        """The sum of squared signal at which the model's BIC gain reaches :data:`MIN_BIC_GAIN`."""
-        penalty = MIN_BIC_GAIN + model.n_params * np.log(max(self.n, 2)) + 2.0 * model.choice_penalty
-        return float(self.n * self.variance * np.expm1(penalty / self.n))
-
-    def detected(self, signal: FloatArray, model: FaultModel, theta: FloatArray | None = None) -> bool:
-        """Whether a fault adding ``signal`` (N, 3) would be a finding at framechain's thresholds (a fault of
-        parameters ``theta`` within its model's tolerance never is)."""
-        if theta is not None and model.tolerance is not None and model.tolerance(theta):
-            return False
-        s = np.nan_to_num(signal)
-        if float(np.sum(s * s)) < self.needed_ss(model):
-            return False
-        with_fault, without = np.linalg.norm(self.residual + s, axis=1), self._without
-        both = np.isfinite(with_fault) & self._without_finite
-        if not both.any():
-            return False
-        # The share a finding keeps is a difference of medians: another draw of the noise moves it by about
-        # its standard error (paired), which the predicted share must clear as well as the rule.
-        same_rows = self._without_median is not None and bool(np.array_equal(both, self._without_finite))
-        median_without = self._without_median if same_rows else float(np.median(without[both]))
-        share = float(np.median(with_fault[both]) - median_without)
-        change = with_fault[both] - without[both]
-        if model.camera is not None:
-            # A rig camera's fault moves its own rows only, by sizes that differ from row to row: that spread is
-            # the signal's shape, not noise. Its noise part is how far each moved row lands from the signal itself.
-            change = np.minimum(np.abs(change), np.abs(with_fault[both] - np.linalg.norm(s[both], axis=1)))
-        spread = 1.2533 * float(np.std(change)) / np.sqrt(both.sum())
-        if share - spread <= 0 or (share - spread < MIN_SHARE * self.total_m and share - spread < self.floor_m):
-            return False
-        if self.gate_m is not None and self._departure_median <= self.gate_m:
-            return _median_norm(self.departure + s) > self.gate_m
-        return True
-
-    # The residual without a fault is the same at every size a bound's search tries: measured once.
-    @cached_property
-    def _without(self) -> FloatArray:
-        out: FloatArray = np.linalg.norm(self.residual, axis=1)
-        return out
-
-    @cached_property
-    def _without_finite(self) -> BoolArray:
-        return np.isfinite(self._without)
-
-    @cached_property
-    def _without_median(self) -> float | None:
-        return float(np.median(self._without[self._without_finite])) if self._without_finite.any() else None
-
-    @cached_property
-    def _departure_median(self) -> float:
-        return _median_norm(self.departure)
-
-
-def _median_norm(residual: FloatArray) -> float:
-    d = np.linalg.norm(residual, axis=1)
-    d = d[np.isfinite(d)]
-    return float(np.median(d)) if d.size else 0.0
-
-
-Found = Sequence[tuple[FaultModel, FloatArray]]
 
 
 def bounds(stages: Sequence[Stage], found: Found, *, say: Callable[[str], None] = lambda _m: None,
-           no_depth: bool = False) -> tuple[Bound, ...]:
+           no_depth: bool = False, tolerance_m: float = 0.0) -> tuple[Bound, ...]:
     """One :class:`Bound` per sized fault family and hop the stages can fit (``found``: the findings'
-    models and parameters). ``no_depth``: bearing-only evidence, where a depth scale has nothing to scale."""
+    models and parameters). ``no_depth``: bearing-only evidence, where a depth scale has nothing to scale;
+    ``tolerance_m``: the effect worth acting on, under which a fault is no finding (0: the noise alone)."""
     out: list[Bound] = []
     for stage in stages:
         mine = [(m, x) for m, x in found if m.hop in stage.hops]
@@ -212,13 +93,13 @@ def bounds(stages: Sequence[Stage], found: Found, *, say: Callable[[str], None] 
         if not candidates:
             continue
         say(f"bounding what the evidence can see at {', '.join(h.value for h in stage.hops)}")
-        noise = _Noise.of(stage, base)
-        clean = _clean(stage, base)
+        noise = Noise.of(stage, base)
+        clean = clean_observations(stage, base)
         for fault, hop, variants in candidates:
             others = [(m, x) for m, x in mine if m.n_params and m.family != variants[0][0].family]
-            results = [_bound_one(_Probe(stage, *clean, base, model, theta0, others), noise)
+            results = [_bound_one(Probe(stage, *clean, base, model, theta0, others), noise, tolerance_m)
                        for model, theta0 in variants]
-            out.append(_assemble(stage, fault, hop, results, noise))
+            out.append(_assemble(stage, fault, hop, results, noise, tolerance_m))
     if no_depth:
         out.append(Bound(HopName.PIXEL_TO_CAMERA, Fault.DEPTH_SCALE, False, None,
                          "bearing only: the detections carry no depth to scale"))
@@ -235,8 +116,8 @@ def without_evidence(inputs: ChainInputs) -> tuple[Bound, ...]:
     families = [(Fault.LATENCY, HopName.BODY_TO_WORLD)]
     if inputs.camera_is_dynamic:
         families.append((Fault.LATENCY, HopName.CAMERA_TO_BODY))
-    families += [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY), (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA),
-                 (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA)]
+    families += [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY), (Fault.TRANSLATION_ERROR, HopName.CAMERA_TO_BODY),
+                 (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA), (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA)]
     return tuple(Bound(hop, fault, False, None, "no evidence to measure the chain against") for fault, hop in families)
 
 
@@ -260,130 +141,6 @@ def bounds_candidates(stage: Stage, mine: Found) -> list[tuple[Fault, HopName, l
     return [(fault, hop, variants) for (fault, hop, _camera), variants in by_family.items()]
 
 
-# -- the signal of a fault, on noise-free observations ------------------------------------------
-def _world_of(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArray:
-    p_world, ok = hop3(inputs, pert, hop2(inputs, pert, p_cam))
-    p_world[~ok] = np.nan
-    return p_world
-
-
-def observations_for(inputs: ChainInputs, pert: Perturbation, world: FloatArray, *,
-                     keep_depth: bool = False) -> ChainInputs:
-    """The observations (pixels and depths) that the chain under ``pert`` turns into ``world`` (N, 3).
-
-    Hops 2 and 3 are rigid for each observation (``world = o + A p_cam``, ``A`` orthogonal), so
-    ``p_cam = A^T (world - o)``; its pixel comes from the camera model with the perturbation's
-    intrinsics and its depth undoes the depth factor. Rows with no world point, or one behind the
-    camera, keep theirs; ``keep_depth`` keeps every depth (rays at unit depth: only directions count).
-    """
-    n = len(inputs)
-    origin = _world_of(inputs, pert, np.zeros((n, 3)))
-    columns = [_world_of(inputs, pert, np.tile(np.eye(3)[k], (n, 1))) - origin for k in range(3)]
-    a = np.stack(columns, axis=2)  # a[:, i, k]: world component i of camera axis k
-    p_cam = np.einsum("nik,ni->nk", a, world - origin)
-    ok = np.isfinite(p_cam).all(axis=1) & (np.nan_to_num(p_cam[:, 2]) > 1e-9)
-    u, v = inputs.u.copy(), inputs.v.copy()
-    factor = np.full(n, pert.depth_factor)
-    if inputs.camera_index is None:
-        _project(inputs.camera, pert.focal_scale, pert.principal_scale, p_cam, ok, u, v)
-    else:  # a rig: each camera through its own model, with its own focal and depth scales
-        for k, cam in enumerate(inputs.rig_cameras):
-            delta = pert.cameras.get(k, CameraDelta())
-            rows = inputs.camera_index == k
-            _project(cam.camera, pert.focal_scale * delta.focal_scale, pert.principal_scale, p_cam, ok & rows, u, v)
-            factor[rows] *= delta.depth_factor
-    depth = inputs.depth_m.copy()
-    if not keep_depth:
-        depth[ok] = p_cam[ok, 2] / factor[ok]
-    return replace(inputs, u=u, v=v, depth_m=depth)
-
-
-def _project(camera: CameraModel, focal_scale: float, principal_scale: float, p_cam: FloatArray, rows: BoolArray,
-             u: FloatArray, v: FloatArray) -> None:
-    """Write the pixels of ``p_cam[rows]`` through ``camera`` with scaled intrinsics into ``u``, ``v``."""
-    if not rows.any():
-        return
-    k_matrix = camera.K.copy()
-    k_matrix[:2, :2] *= focal_scale
-    k_matrix[:2, 2] *= principal_scale
-    u[rows], v[rows] = replace(camera, K=k_matrix).project(p_cam[rows])
-
-
-def _clean(stage: Stage, base: Perturbation) -> tuple[Objective, ChainInputs]:
-    """The objective over the observations without their noise, and the rows to evaluate: each static
-    target's sightings moved onto its fitted position (the objective's nuisance), a rig's sightings at one
-    instant onto the point where they meet; logged points and references need none (their residual's
-    change is the signal)."""
-    objective = stage.objective
-    if isinstance(objective, PointObjective):
-        return objective, stage.inputs
-    if isinstance(objective, CrossCameraObjective):
-        return objective.over(observations_for(objective.rig, base, objective.consensus(base))), stage.inputs
-    return objective, observations_for(stage.inputs, base, objective.points(stage.inputs, base),
-                                       keep_depth=stage.rays)
-
-
-def _params(model: FaultModel, theta0: FloatArray, direction: FloatArray, a: float) -> FloatArray:
-    """The parameters of a fault of size ``a`` along ``direction`` (a scale multiplies: deviation ``a``)."""
-    if model.fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS):
-        out: FloatArray = theta0 * (1.0 + a * direction)
-        return out
-    return theta0 + a * direction
-
-
-@dataclass
-class _Probe:
-    """The signal of one model's fault on the noise-free observations, with the part the other findings'
-    parameters could absorb (the selection refits them jointly) projected out."""
-
-    stage: Stage
-    objective: Objective  # the stage's, over the noise-free observations
-    clean: ChainInputs
-    base: Perturbation
-    model: FaultModel
-    theta0: FloatArray
-    others: Found = ()  # the other findings with parameters, refitted beside a new fault
-
-    def __post_init__(self) -> None:
-        self.start = self.model.apply(self.base, self.theta0)
-        self.at_zero = self.objective(self.clean, self.start)
-        columns = [self._column(m, np.asarray(x, dtype=float), k) for m, x in self.others for k in range(m.n_params)]
-        self.nuisance = np.linalg.qr(np.stack(columns, axis=1))[0] if columns else None
-
-    def _raw(self, pert: Perturbation) -> FloatArray:
-        out: FloatArray = self.objective(self.clean, pert) - self.at_zero
-        out[~np.isfinite(out).all(axis=1)] = 0.0  # not evaluable at that offset: no evidence either way
-        return out
-
-    def _column(self, other: FaultModel, x: FloatArray, k: int) -> FloatArray:
-        """The signal of another finding's k-th parameter (central differences): what its refit absorbs."""
-        h = STEP[other.fault]
-        step = np.zeros_like(x)
-        step[k] = h
-        plus, minus = self._raw(other.apply(self.start, x + step)), self._raw(other.apply(self.start, x - step))
-        return ((plus - minus) / (2.0 * h)).reshape(-1)
-
-    def signal(self, theta: FloatArray) -> FloatArray:
-        out = self._raw(self.model.apply(self.base, theta))
-        if self.nuisance is None:
-            return out
-        flat = out.reshape(-1)
-        projected: FloatArray = (flat - self.nuisance @ (self.nuisance.T @ flat)).reshape(out.shape)
-        return projected
-
-    def jacobian(self) -> FloatArray:
-        """(3N, k) by central differences at the start."""
-        h = STEP[self.model.fault]
-        cols = []
-        for k in range(self.model.n_params):
-            e = np.zeros(self.model.n_params)
-            e[k] = 1.0
-            plus = self.signal(_params(self.model, self.theta0, e, h))
-            minus = self.signal(_params(self.model, self.theta0, e, -h))
-            cols.append(((plus - minus) / (2.0 * h)).reshape(-1))
-        return np.stack(cols, axis=1)
-
-
 @dataclass(frozen=True)
 class _Result:
     model: FaultModel
@@ -395,9 +152,12 @@ class _Result:
     injected: float | None = None
     confirmed: bool = True  # the injection check's refit cleared the thresholds
     tolerated: bool = False  # the model's tolerance, not the evidence, sets the size (a smaller fault is no finding)
+    statistical: float | None = None  # the size the noise alone sets (parameter units), when the tolerance sets size
 
 
-def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
+def _bound_one(probe: Probe, noise: Noise, tolerance_m: float = 0.0) -> _Result:
+    """The smallest fault of the probe's model the noise lets the fit find, raised to the smallest that moves the
+    median error by ``tolerance_m`` where that is larger (``statistical`` keeps the first)."""
     model = probe.model
     jac = probe.jacobian()
     values, vectors = np.linalg.eigh(jac.T @ jac)
@@ -414,17 +174,34 @@ def _bound_one(probe: _Probe, noise: _Noise) -> _Result:
             blind.append(direction)
             continue
         best = float(min(linear[-1], limit)) if len(values) > 1 else None
-        return _checked(noise, probe, direction, size, tuple(blind), best)
+        practical = _practical(probe, noise, direction, size, limit, tolerance_m)
+        if practical <= size:
+            return _checked(noise, probe, direction, size, tuple(blind), best)
+        return replace(_checked(noise, probe, direction, practical, tuple(blind), best), statistical=size)
     return _Result(model, None, vectors[:, 0], tuple(blind))
 
 
-def _detected_at(probe: _Probe, noise: _Noise, direction: FloatArray, a: float) -> bool:
+def _practical(probe: Probe, noise: Noise, direction: FloatArray, size: float, limit: float,
+               tolerance_m: float) -> float:
+    """The smallest fault from ``size`` up that also moves the median error by ``tolerance_m`` (``limit`` when none
+    up to it does; ``size`` itself when it already does, or without a tolerance)."""
+    if tolerance_m <= 0:
+        return size
+    gated = replace(noise, tolerance_m=tolerance_m)
+    if _detected_at(probe, gated, direction, size) and all(
+            _detected_at(probe, gated, direction, f * size) for f in STABLE_FACTORS[:2] if f * size <= limit):
+        return size
+    found = _smallest(probe, gated, direction, size, limit)
+    return limit if found is None else max(found, size)
+
+
+def _detected_at(probe: Probe, noise: Noise, direction: FloatArray, a: float) -> bool:
     """Detected at size ``a`` in both directions (the worse counts)."""
-    thetas = [_params(probe.model, probe.theta0, s * direction, a) for s in (1.0, -1.0)]
+    thetas = [fault_params(probe.model, probe.theta0, s * direction, a) for s in (1.0, -1.0)]
     return all(noise.detected(probe.signal(theta), probe.model, theta) for theta in thetas)
 
 
-def _smallest(probe: _Probe, noise: _Noise, direction: FloatArray, start: float, limit: float) -> float | None:
+def _smallest(probe: Probe, noise: Noise, direction: FloatArray, start: float, limit: float) -> float | None:
     """The smallest size detected in both directions and at every larger size checked (the median share
     of a small fault jumps with the noise: a size detected once may not be at 1.5 times it), from
     ``start`` down (or up) by factors of 1.5 to a crossing, then bisected; None when nothing up to
@@ -444,7 +221,7 @@ def _smallest(probe: _Probe, noise: _Noise, direction: FloatArray, start: float,
     return None
 
 
-def _crossing(probe: _Probe, noise: _Noise, direction: FloatArray, a: float, limit: float) -> float | None:
+def _crossing(probe: Probe, noise: Noise, direction: FloatArray, a: float, limit: float) -> float | None:
     """A size where detection starts (the first detected going up, or the last going down from ``a``)."""
     if _detected_at(probe, noise, direction, a):
         low, high = a / 1.5, a
@@ -473,7 +250,7 @@ def _injected(stage: Stage, base: Perturbation, model: FaultModel, theta0: Float
         return replace(objective, evidence=objective.evidence + np.nan_to_num(change)), inputs
     if isinstance(objective, CrossCameraObjective):
         return _injected_rig(objective, model.apply(base, theta0), model.apply(base, theta)), inputs
-    world = _world_of(inputs, model.apply(base, theta0), hop1(inputs, model.apply(base, theta0)))
+    world = world_of(inputs, model.apply(base, theta0), hop1(inputs, model.apply(base, theta0)))
     return objective, observations_for(inputs, model.apply(base, theta), world, keep_depth=stage.rays)
 
 
@@ -486,11 +263,11 @@ def _injected_rig(objective: CrossCameraObjective, start: Perturbation, faulty: 
     if shifts and objective.timeless_pose:
         return objective.restamped(shifts)
     rig = objective.rig
-    world = _world_of(rig, start, hop1(rig, start))
+    world = world_of(rig, start, hop1(rig, start))
     return objective.over(observations_for(rig, faulty, world))
 
 
-def refound(stage: Stage, noise: _Noise, base: Perturbation, model: FaultModel, theta0: FloatArray,
+def refound(stage: Stage, noise: Noise, base: Perturbation, model: FaultModel, theta0: FloatArray,
             theta: FloatArray, others: Found = ()) -> tuple[bool, FloatArray]:
     """Inject ``theta``, refit the model from no fault (with the other findings' parameters refitted
     beside it, as selection does): whether the refit clears the thresholds, and its fit."""
@@ -506,12 +283,12 @@ def refound(stage: Stage, noise: _Noise, base: Perturbation, model: FaultModel, 
     ok = (without.bic - fitted.bic >= MIN_BIC_GAIN and share > 0 and not (share < MIN_SHARE * before and share < floor)
           and not at_bound(model, fitted.params[-1])  # a fit on its plausible range's edge is no finding
           and not (model.tolerance is not None and model.tolerance(fitted.params[-1])))
-    if ok and noise.gate_m is not None and _median_norm(noise.departure) <= noise.gate_m:
-        ok = _median_norm(objective(inputs, Perturbation())) > noise.gate_m
+    if ok and noise.gate_m is not None and median_norm(noise.departure) <= noise.gate_m:
+        ok = median_norm(objective(inputs, Perturbation())) > noise.gate_m
     return ok, fitted.params[-1]
 
 
-def _checked(noise: _Noise, probe: _Probe, direction: FloatArray, size: float, blind: tuple[FloatArray, ...],
+def _checked(noise: Noise, probe: Probe, direction: FloatArray, size: float, blind: tuple[FloatArray, ...],
              best: float | None) -> _Result:
     """Inject the fault at ``size`` (either way) and refit; raise the size by half while neither is found.
 
@@ -523,22 +300,22 @@ def _checked(noise: _Noise, probe: _Probe, direction: FloatArray, size: float, b
     theta, fitted, ok = theta0, theta0, False
     for attempt in range(INJECTION_RETRIES + 1):
         for sign in (first, -first):
-            theta = _params(model, theta0, sign * direction, size)
+            theta = fault_params(model, theta0, sign * direction, size)
             ok, fitted = refound(stage, noise, probe.base, model, theta0, theta, probe.others)
             if ok:
                 break
         if ok or attempt == INJECTION_RETRIES or size * 1.5 > MAX_SIZE[model.fault]:
             break
         size *= 1.5
-    below = _params(model, theta0, direction, 0.98 * size)
+    below = fault_params(model, theta0, direction, 0.98 * size)
     tolerated = model.tolerance is not None and model.tolerance(below)
     return _Result(model, size, direction, blind, best, _size_of(model, theta0, fitted, stage.mode),
                    _size_of(model, theta0, theta, stage.mode), ok, tolerated)
 
 
-def _worse_sign(probe: _Probe, direction: FloatArray, size: float) -> float:
+def _worse_sign(probe: Probe, direction: FloatArray, size: float) -> float:
     """The direction whose fault of ``size`` adds the smaller signal."""
-    energy = [float(np.sum(probe.signal(_params(probe.model, probe.theta0, s * direction, size)) ** 2))
+    energy = [float(np.sum(probe.signal(fault_params(probe.model, probe.theta0, s * direction, size)) ** 2))
               for s in (1.0, -1.0)]
     return 1.0 if energy[0] <= energy[1] else -1.0
 
@@ -549,20 +326,24 @@ def _size_of(model: FaultModel, theta0: FloatArray, theta: FloatArray, mode: Mod
         return float(theta[0] - theta0[0])
     if model.fault == Fault.ROTATION_ERROR:
         return float(np.rad2deg(np.linalg.norm(theta - theta0)))
+    if model.fault == Fault.TRANSLATION_ERROR:
+        return float(np.linalg.norm(theta - theta0))
     ratio = float(theta[0] / theta0[0])
     return (ratio if mode == "as_run" else 1.0 / ratio) - 1.0
 
 
 # -- the bound in words -----------------------------------------------------------------------
-def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: _Noise) -> Bound:
+def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Result], noise: Noise,
+              tolerance_m: float = 0.0) -> Bound:
     """The family's bound: the worse of its models (intrinsics: two variants), with the sentence."""
     camera = results[0].model.camera or ""  # a rig camera's own models name it
     blind = [r for r in results if r.size is None]
     if blind:
-        return Bound(hop, fault, False, None, _why_blind(stage, fault, hop), camera=camera)
+        return Bound(hop, fault, False, None, why_blind(stage, fault, hop), camera=camera)
     worst = max(results, key=lambda r: r.size or 0.0)
     assert worst.size is not None
     size = _estimate_size(fault, worst.size, stage.mode)
+    statistical = None if worst.statistical is None else _estimate_size(fault, worst.statistical, stage.mode)
     axes = tuple(_axis3(v) for v in worst.unobservable)
     n_obs = len(stage.inputs)
     over = f"{n_obs} observations"
@@ -570,17 +351,50 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
         k = next(i for i, c in enumerate(stage.inputs.rig_cameras) if c.frame == worst.model.camera)
         mine = int((stage.inputs.camera_index == k).sum())
         over = f"{n_obs} observations ({mine} of {worst.model.camera}, measured against the other cameras)"
-    rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
-    noise_text = f"{rms_mm:.2g} mm rms of residual"
-    if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
-        noise_text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
     name = "latency (stamp offset)" if fault == Fault.LATENCY and worst.model.camera else family_name(fault, hop)
-    what = f"{size_text(fault, size)} is the smallest {name}"
-    if fault == Fault.ROTATION_ERROR:
-        what += f" (about {axis_text(_unit(worst.direction).tolist())}, the weakest axis seen"
-        what += f"; {np.rad2deg(worst.best):.2g} deg about the best)" if worst.best is not None else ")"
+    what = f"{size_text(fault, size)} is the smallest {name}{_direction_text(fault, worst)}"
     if len(results) > 1:
         what += f" (of K's variants, {worst.model.name} is the harder to see)"
+    axis = _axis3(worst.direction) if fault in DIRECTED else None
+    key = SIZE_KEYS[fault]
+    return Bound(hop, fault, True, {key: round(size, 6)},
+                 f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
+                 f"{_noise_text(noise)} over {over}{_limit_text(fault, statistical, tolerance_m)}"
+                 f"{_check_text(stage, fault, worst)}.", axes, axis, camera,
+                 statistical=None if statistical is None else {key: round(statistical, 6)},
+                 limited_by="tolerance" if statistical is not None else "cross-check" if worst.tolerated else "noise",
+                 tolerance_m=tolerance_m)
+
+
+def _direction_text(fault: Fault, worst: _Result) -> str:
+    """`` (about [..], the weakest axis seen; 0.1 deg about the best)`` for a rotation, ``along`` for a translation."""
+    if fault not in DIRECTED:
+        return ""
+    about, what = ("along", "direction") if fault == Fault.TRANSLATION_ERROR else ("about", "axis")
+    text = f" ({about} {axis_text(_unit(worst.direction).tolist())}, the weakest {what} seen"
+    if worst.best is None:
+        return text + ")"
+    best = f"{np.rad2deg(worst.best):.2g} deg" if fault == Fault.ROTATION_ERROR else f"{worst.best * 1e3:.2g} mm"
+    return text + f"; {best} {about} the best)"
+
+
+def _noise_text(noise: Noise) -> str:
+    rms_mm = float(np.sqrt(max(noise.variance - NOISE_FLOOR_M**2, 0.0) * 3.0)) * 1e3
+    text = f"{rms_mm:.2g} mm rms of residual"
+    if rms_mm < np.sqrt(3.0) * NOISE_FLOOR_M * 1e3:  # the BIC's noise floor sets the scale, not the residual
+        text += f" (under the BIC's {NOISE_FLOOR_M * 1e3:g} mm noise floor per axis, which counts instead)"
+    return text
+
+
+def _limit_text(fault: Fault, statistical: float | None, tolerance_m: float) -> str:
+    if statistical is None:
+        return ""
+    return (f", and moves the median error by the {tolerance_text(tolerance_m)} tolerance (tolerance_m): from "
+            f"{size_text(fault, statistical)} the noise would let it be found, but it would change the error by "
+            "less, a note")
+
+
+def _check_text(stage: Stage, fault: Fault, worst: _Result) -> str:
     check = ""
     if worst.refound is not None and worst.injected is not None:
         where = "observations" if stage.static else "logged points"
@@ -591,10 +405,7 @@ def _assemble(stage: Stage, fault: Fault, hop: HopName, results: Sequence[_Resul
     if worst.tolerated:
         check += ("; the tolerance of a rig camera's fault sets it (a smaller one is no finding however well it "
                   "fits), not the evidence")
-    axis = _axis3(worst.direction) if fault == Fault.ROTATION_ERROR else None
-    return Bound(hop, fault, True, {SIZE_KEYS[fault]: round(size, 6)},
-                 f"{what} that clears the BIC gain ({MIN_BIC_GAIN:g} + k log n) and the share rule against "
-                 f"{noise_text} over {over}{check}.", axes, axis, camera)
+    return check
 
 
 def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
@@ -602,6 +413,8 @@ def _estimate_size(fault: Fault, size: float, mode: Mode) -> float:
     scale ``1 +- a`` is the fault ``1 / (1 +- a)``, whose larger deviation from 1 is ``a / (1 - a)``."""
     if fault == Fault.ROTATION_ERROR:
         return float(np.rad2deg(size))
+    if fault == Fault.TRANSLATION_ERROR:
+        return size
     if fault in (Fault.DEPTH_SCALE, Fault.INTRINSICS) and mode == "correction":
         return size / (1.0 - size)
     return size
@@ -612,6 +425,8 @@ def _key_text(fault: Fault, value: float) -> str:
         return f"{value * 1e3:+.2f} ms"
     if fault == Fault.ROTATION_ERROR:
         return f"{value:.3g} deg"
+    if fault == Fault.TRANSLATION_ERROR:
+        return f"{value * 1e3:.3g} mm"
     return f"{value * 100:+.3g}%"
 
 
@@ -623,52 +438,6 @@ def _axis3(v: FloatArray) -> tuple[float, float, float]:
 
 def _unit(v: FloatArray) -> FloatArray:
     out: FloatArray = v / max(float(np.linalg.norm(v)), 1e-300)
-    return out
-
-
-def _why_blind(stage: Stage, fault: Fault, hop: HopName) -> str:
-    """One sentence: why this family cannot be seen here."""
-    inputs = stage.inputs
-    if isinstance(stage.objective, CrossCameraObjective):  # a rig camera, measured against the others
-        limit = MAX_SIZE[fault]
-        largest = float(np.rad2deg(limit)) if fault == Fault.ROTATION_ERROR else limit
-        name = "latency (stamp offset)" if fault == Fault.LATENCY else family_name(fault, hop)
-        return (f"too weak a signal here: no {name} up to {size_text(fault, largest)} changes how the camera agrees "
-                "with the others beyond framechain's thresholds")
-    still = _still(inputs)
-    if fault == Fault.LATENCY and (still.all() or (hop == HopName.BODY_TO_WORLD and _body_still(inputs))):
-        return "the body does not move while the targets are seen: a pose taken at another time is the same pose"
-    if stage.static and still.all():
-        what = {Fault.LATENCY: "shifts nothing", Fault.ROTATION_ERROR: "only turns each target's fitted position",
-                Fault.DEPTH_SCALE: "only moves each target's fitted position along its ray",
-                Fault.INTRINSICS: "only moves each target's fitted position"}[fault]
-        return f"the camera does not move relative to the static targets: {_article(family_name(fault, hop))} {what}"
-    limit = MAX_SIZE[fault]
-    largest = float(np.rad2deg(limit)) if fault == Fault.ROTATION_ERROR else limit
-    return (f"too weak a signal here: no {family_name(fault, hop)} up to {size_text(fault, largest)} changes the "
-            "error beyond framechain's thresholds")
-
-
-def _article(noun: str) -> str:
-    return f"{'an' if noun[:1] in 'aeiou' else 'a'} {noun}"
-
-
-def _body_still(inputs: ChainInputs) -> bool:
-    """Whether the body's recorded pose is the same at every observation."""
-    if len(inputs) == 0:
-        return True
-    turned = np.abs(np.abs(np.einsum("ij,j->i", inputs.q_wb, inputs.q_wb[0])) - 1.0)
-    return bool(np.linalg.norm(inputs.t_wb - inputs.t_wb[0], axis=1).max() < STILL_M and turned.max() < STILL_M**2)
-
-
-def _still(inputs: ChainInputs) -> BoolArray:
-    """Per observation: whether the camera's pose in the world is the same as at the first observation."""
-    if len(inputs) == 0:
-        return np.ones(0, dtype=bool)
-    centre = _world_of(inputs, Perturbation(), np.zeros((len(inputs), 3)))
-    ahead = _world_of(inputs, Perturbation(), np.tile([0.0, 0.0, 1.0], (len(inputs), 1)))
-    moved = np.linalg.norm(centre - centre[0], axis=1) + np.linalg.norm(ahead - ahead[0], axis=1)
-    out: BoolArray = np.nan_to_num(moved, nan=np.inf) < STILL_M
     return out
 
 

@@ -58,6 +58,9 @@ class Perturbation:
     #: the camera mount's rotation changed: R_parent_link' = R_parent_link exp(rotvec_mount), the rotation
     #: vector in the mount's link frame (constant for a camera on a moving arm)
     rotvec_mount: FloatArray = field(default_factory=lambda: np.zeros(3))
+    #: the camera mount's position changed: t_parent_link' = t_parent_link + translation_mount (m, in the mount's
+    #: parent frame; the body frame without a static mount), constant for a camera on a moving arm
+    translation_mount: FloatArray = field(default_factory=lambda: np.zeros(3))
     permutation: FloatArray | None = None  # R_bc' = R_bc P: camera-frame axes permuted / flipped
     invert_camera: bool = False  # T_bc' = inv(T_bc)
     invert_edge: str | None = None  # one recorded edge of the camera path (named by child) inverted
@@ -363,6 +366,9 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
     t_bc, q_bc, ok = inputs.body_from_camera(pert.camera_offset_s, pert.invert_edge, pert.camera_frame)
     if pert.permutation is not None:
         p_cam = p_cam @ pert.permutation.T
+    if np.any(pert.translation_mount):
+        shift = np.asarray(pert.translation_mount, dtype=float)[:, None]
+        t_bc = t_bc + quat_rotate(body_from_mount_parent(inputs, q_bc).T, shift).T
     if np.any(pert.rotvec_mount):
         # R_bc' = R_bc R_cam_link exp(x) R_link_cam = R_bc exp(R_cam_link x)
         q_link_cam = inputs.mount.q_link_cam if inputs.mount is not None else np.array([0.0, 0.0, 0.0, 1.0])
@@ -374,6 +380,17 @@ def hop2(inputs: ChainInputs, pert: Perturbation, p_cam: FloatArray) -> FloatArr
         t_bc, q_bc = invert_rows(t_bc, q_bc)
     out: FloatArray = transform_points(t_bc, q_bc, p_cam)
     out[~ok] = np.nan  # no camera pose at the shifted time
+    return out
+
+
+def body_from_mount_parent(inputs: ChainInputs, q_bc: FloatArray) -> FloatArray:
+    """(N, 4) the rotation of the camera mount's parent frame in the body at each observation (R_body_parent =
+    R_body_cam R_link_cam^T R_parent_link^T; the identity without a static mount)."""
+    mount = inputs.mount
+    if mount is None:
+        return np.tile([0.0, 0.0, 0.0, 1.0], (len(inputs), 1))
+    link_from_parent = quat_multiply(quat_conjugate(mount.q_link_cam), quat_conjugate(mount.q_parent_link))
+    out: FloatArray = quat_multiply(np.asarray(q_bc).T, np.asarray(link_from_parent)[:, None]).T
     return out
 
 

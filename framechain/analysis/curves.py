@@ -11,16 +11,17 @@ command for a difference in the third digit).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from framechain.analysis.bounds import Stage, bounds_candidates, family_order
-from framechain.analysis.checks import SIZE_KEYS, Bound, Curve, LabelRow, LabelTable, LabelVerdict
-from framechain.analysis.estimates import RotationEstimate, estimate_scalars
+from framechain.analysis.checks import DIRECTED, SIZE_KEYS, Bound, Curve, LabelRow, LabelTable, LabelVerdict
+from framechain.analysis.estimates import RotationEstimate, TranslationEstimate, estimate_scalars
 from framechain.analysis.fault_model import FaultModel
 from framechain.analysis.faults import LATENCY_BOUND_S
 from framechain.analysis.fit import FINE_SUBSAMPLE, perturbation_of, subsample
+from framechain.analysis.label_sizes import SizeFit
 from framechain.arrays import FloatArray, StrArray
 from framechain.catalogue import Fault
 
@@ -74,13 +75,16 @@ def _sizes(stage: Stage, model: FaultModel, theta0: FloatArray, bound: Bound | N
             np.arange(-LATENCY_BOUND_S, LATENCY_BOUND_S + 1e-9, COARSE_STEP_S), fine, theta0[0] + fine]),
             -LATENCY_BOUND_S, LATENCY_BOUND_S).round(7))
         return [np.array([v]) for v in values], [float(v) for v in values], None
-    if model.fault == Fault.ROTATION_ERROR:
+    if model.fault in DIRECTED:
         direction = (theta0 / np.linalg.norm(theta0) if is_found and np.linalg.norm(theta0) > 0
                      else np.asarray(bound.axis if bound is not None and bound.axis is not None else (0, 0, 1.0)))
-        reach = max(2.5 * np.deg2rad(size or 1.0), 1.5 * float(np.linalg.norm(theta0)))
+        size_param = np.deg2rad(size or 1.0) if model.fault == Fault.ROTATION_ERROR else (size or 0.01)
+        reach = max(2.5 * size_param, 1.5 * float(np.linalg.norm(theta0)))
         steps = np.linspace(-reach, reach, SIZE_POINTS)
         thetas = [t * direction for t in steps]
-        axis = _fault_axis(model, reach * direction, stage)
+        # The axis the table names: the finding's, else the bound's (its sign as the bound states it).
+        axis = (_fault_axis(model, reach * direction, stage) if is_found or bound is None or bound.axis is None
+                else bound.axis)
         return thetas, [_key_value(model, t, stage, axis) for t in thetas], axis
     reach = max(2.5 * (size or 0.01), 1.5 * abs(float(theta0[0]) - 1.0))
     thetas = [np.array([1.0 + t]) for t in np.linspace(-reach, reach, SIZE_POINTS) if 1.0 + t > 0]
@@ -88,7 +92,12 @@ def _sizes(stage: Stage, model: FaultModel, theta0: FloatArray, bound: Bound | N
 
 
 def _fault_axis(model: FaultModel, theta: FloatArray, stage: Stage) -> tuple[float, float, float]:
+    """The axis (or direction) the estimate of ``theta`` names: the one the table shows, so the plot's sign is
+    the table's."""
     estimate = model.estimate(theta, stage.mode, stage.inputs)
+    if isinstance(estimate, TranslationEstimate):
+        ox, oy, oz = (float(v) / max(estimate.distance_m, 1e-12) for v in estimate.offset_m)
+        return ox, oy, oz
     assert isinstance(estimate, RotationEstimate)
     return estimate.axis
 
@@ -99,6 +108,8 @@ def _key_value(model: FaultModel, theta: FloatArray, stage: Stage, axis: tuple[f
     if isinstance(estimate, RotationEstimate):
         sign = 1.0 if axis is None or float(np.dot(estimate.axis, axis)) >= 0 else -1.0
         return sign * estimate.angle_deg
+    if isinstance(estimate, TranslationEstimate):
+        return float(np.dot(estimate.offset_m, axis)) if axis is not None else estimate.distance_m
     return float(next(iter(estimate_scalars(estimate).values())))
 
 
@@ -113,14 +124,17 @@ OUTLIER_SHARE = 0.2
 OUTLIER_FACTOR = 5.0
 
 
-def label_table(labels: StrArray, errors: FloatArray, *, static: bool) -> LabelTable:
+def label_table(labels: StrArray, errors: FloatArray, *, static: bool, sizes: Mapping[str, SizeFit] | None = None,
+                declared: float | dict[str, float] | None = None) -> LabelTable:
     """Per label of the replayed observations: observations, those used (a finite error), the median
     and 90th percentile of the error after the findings, and a verdict.
 
     For static targets the verdict is ``static``, ``moving`` or ``outlier`` (or ``too few`` sightings
-    to be used); for other evidence ``agrees`` or ``outlier`` (the label disagrees with the evidence
-    as a whole).
+    to be used), and ``wrong size`` for a label that disagrees with itself only as a tag of another size would
+    (``sizes``: each label's fit, :func:`~framechain.analysis.label_sizes.label_size_fits`; ``declared``: the
+    chain's sizes); for other evidence ``agrees`` or ``outlier`` (the label disagrees with the evidence as a whole).
     """
+    sizes = sizes or {}
     finite = np.isfinite(errors)
     if not finite.any():
         return LabelTable()
@@ -134,9 +148,14 @@ def label_table(labels: StrArray, errors: FloatArray, *, static: bool) -> LabelT
             rows.append(LabelRow(name, int(mine.sum()), 0, None, None, "too few"))
             continue
         spread, p90 = float(np.median(used)), float(np.percentile(used, 90))
-        rows.append(LabelRow(name, int(mine.sum()), int(used.size), spread, p90,
-                             _verdict(spread, used, overall, static)))
-    return LabelTable(tuple(rows), overall)
+        verdict = _verdict(spread, used, overall, static)
+        fit = sizes.get(name)
+        if verdict in ("moving", "outlier") and fit is not None and fit.wrong:
+            rows.append(LabelRow(name, int(mine.sum()), int(used.size), spread, p90, "wrong size", fit.size_m,
+                                 fit.declared_m))
+            continue
+        rows.append(LabelRow(name, int(mine.sum()), int(used.size), spread, p90, verdict))
+    return LabelTable(tuple(rows), overall, declared)
 
 
 def _verdict(spread: float, used: FloatArray, overall: float, static: bool) -> LabelVerdict:

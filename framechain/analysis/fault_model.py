@@ -44,6 +44,10 @@ class FaultModel:
     #: whether fitted parameters stay within what the evidence can pin on this fault (then it is no finding,
     #: however well it fits); None: any fit that pays for itself is one
     tolerance: Callable[[FloatArray], bool] | None = None
+    #: weight of a pull towards no fault (residual per parameter unit, added for the optimiser only, never to the
+    #: BIC): a direction the evidence cannot see stays at no fault instead of drifting (a mount moved along the
+    #: only axis the body turns about)
+    ridge: float = 0.0
 
     @property
     def n_params(self) -> int:

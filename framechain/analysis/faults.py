@@ -24,6 +24,7 @@ from framechain.analysis.estimates import (
     PermutationEstimate,
     RotationEstimate,
     ScaleEstimate,
+    TranslationEstimate,
 )
 from framechain.analysis.fault_model import FaultModel, Mode
 from framechain.analysis.frame_swaps import frame_swap_models
@@ -94,6 +95,40 @@ def _rotation() -> FaultModel:
         x_scale=(0.05,) * 3,
         apply=apply,
         estimate=estimate,
+    )
+
+
+#: A camera mount's position may be off by at most this much (m) in a fit: a mount farther off is another frame
+#: (a frame swap), and a fit that runs to it explains by moving the camera away from everything, not by a fault.
+TRANSLATION_BOUND_M = 0.5
+#: The fit's pull of a mount translation towards none (residual metres per metre): a millimetre's residual at a
+#: metre, nothing beside the evidence's, but it keeps a direction the evidence cannot see at none.
+TRANSLATION_RIDGE = 1e-3
+
+
+def _translation() -> FaultModel:
+    """The mount's position off: a constant offset in the mount's parent frame (the body without a static mount)."""
+
+    def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> TranslationEstimate:
+        # The faulty mount's position relative to the right one, in the mount's parent frame.
+        offset = np.asarray(x, dtype=float) if mode == "as_run" else -np.asarray(x, dtype=float)
+        frame = inputs.mount.parent if inputs.mount is not None else inputs.frames.body
+        ox, oy, oz = (round(float(v), 6) + 0.0 for v in offset)  # + 0.0 drops negative zeros
+        return TranslationEstimate(offset_m=(ox, oy, oz), frame=frame,
+                                   faulty="as run" if mode == "as_run" else "recorded data")
+
+    return FaultModel(
+        name="translation[camera_to_body]",
+        fault=Fault.TRANSLATION_ERROR,
+        hop=HopName.CAMERA_TO_BODY,
+        family="camera_translation",
+        x0=(0.0, 0.0, 0.0),
+        lower=(-TRANSLATION_BOUND_M,) * 3,
+        upper=(TRANSLATION_BOUND_M,) * 3,
+        x_scale=(0.01,) * 3,
+        apply=lambda p, x: replace(p, translation_mount=np.asarray(x, dtype=float)),
+        estimate=estimate,
+        ridge=TRANSLATION_RIDGE,
     )
 
 
@@ -251,6 +286,7 @@ def models_for(
         _intrinsics("resolution", blind),
         _intrinsics("focal", blind),
         _rotation(),
+        _translation(),
         _latency(HopName.BODY_TO_WORLD),
     ]
     if inputs.camera_is_dynamic:

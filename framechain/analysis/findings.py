@@ -4,7 +4,7 @@ contract, and the error raised (with its typed reason) when a log cannot be attr
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import Any, Literal
 
@@ -12,7 +12,16 @@ import numpy as np
 
 from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.chain_model import ChainInputs
-from framechain.analysis.checks import Bound, Curve, LabelTable, bounds_sentence, nothing_observable
+from framechain.analysis.checks import (
+    Bound,
+    Curve,
+    LabelTable,
+    Undetermined,
+    bounds_sentence,
+    inconclusive_sentence,
+    nothing_observable,
+    tolerance_text,
+)
 from framechain.analysis.estimates import Estimate, estimate_to_json, format_estimate
 from framechain.analysis.rig_layout import RigLayout
 from framechain.arrays import FloatArray
@@ -60,13 +69,42 @@ class Finding:
     fix: str
     model: str
     #: "weak" when its 95% interval holds "no fault", its confidence is low or it is under the bound of
-    #: its family (``weak_because`` says which): the fix is then a hint to check, not a change to make
-    strength: Literal["strong", "weak"] = "strong"
+    #: its family (``weak_because`` says which): the fix is then a hint to check, not a change to make;
+    #: "note" when its effect is under the practical threshold (no action needed, however certain the fit);
+    #: "undetermined" when its fit cannot be trusted (``undetermined_because``): no fix, and the verdict is
+    #: inconclusive. Strength words follow the effect and the fit, not the BIC alone.
+    strength: Literal["strong", "weak", "note", "undetermined"] = "strong"
     weak_because: tuple[str, ...] = ()
     #: The camera the finding is about (its frame as in the chain); None: the chain's one camera.
     camera: str | None = None
     #: The unit of ``error_m``: metres, or deg/s for a camera's rotation rate (evidence from its own motion).
     error_unit: str = "m"
+    #: Whether its effect (``error_m``, the error it removes) passes the practical threshold: a fix to make.
+    #: False: a note ("statistically clear, 0.2 mm: no action needed"), or an undetermined fit.
+    actionable: bool = True
+    #: Why its fit cannot be trusted (at the edge of its search window, an interval over orders of magnitude).
+    undetermined_because: tuple[str, ...] = ()
+    #: A rig camera's finding: the error it removes from that camera's own observations (a share of the whole rig's
+    #: median undersells a fault of one camera among many); None: the finding's effect is ``error_m``.
+    own_effect_m: float | None = None
+
+    @property
+    def effect_m(self) -> float:
+        """The error it removes, in ``error_m``'s unit: what the practical threshold gates."""
+        return self.error_m if self.own_effect_m is None else self.own_effect_m
+
+    @property
+    def effect(self) -> float:
+        """The error it removes in its display unit: millimetres, or deg/s of a camera's rotation rate."""
+        return self.effect_m * 1e3 if self.error_unit == "m" else self.effect_m
+
+    @property
+    def effect_unit(self) -> str:
+        return "mm" if self.error_unit == "m" else self.error_unit
+
+    def effect_text(self) -> str:
+        """``0.2 mm``, ``1355.4 mm``, ``3.10 deg/s``."""
+        return f"{self.effect:.1f} mm" if self.error_unit == "m" else f"{self.effect:.2f} {self.error_unit}"
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -82,10 +120,44 @@ class Finding:
             "fix": self.fix,
             "strength": self.strength,
             "weak_because": list(self.weak_because),
+            "effect": {"value": round(self.effect, 4), "unit": self.effect_unit,
+                       **({"on": f"camera {self.camera}'s observations"} if self.own_effect_m is not None else {})},
+            "actionable": self.actionable,
         }
+        if self.undetermined_because:
+            out["undetermined_because"] = list(self.undetermined_because)
         if self.error_unit != "m":
             out["error_deg_s"] = round(self.error_m, 6)
         return out
+
+
+def _beside_hop(finding: Finding) -> str:
+    """The estimate's text and a comma, unless it only says the hop again (``camera_to_body inverted``)."""
+    text = format_estimate(finding.estimate)
+    return "" if text == f"{finding.hop.value} inverted" else f"{text}, "
+
+
+def as_note(finding: Finding, threshold: float, threshold_text: str) -> Finding:
+    """The finding as a note: its effect is under the practical ``threshold`` (in ``error_m``'s unit; its words
+    ``threshold_text``, e.g. ``the 1 mm tolerance (tolerance_m)``), so no fix is offered, however certain its fit."""
+    clear = ("statistically clear" if finding.strength == "strong" else
+             f"weak ({'; '.join(finding.weak_because)})")
+    return replace(finding, strength="note", actionable=False,
+                   fix=f"{clear}, {finding.effect_text()}: no action needed, under {threshold_text}.")
+
+
+def as_undetermined(finding: Finding, why: Sequence[str]) -> Finding:
+    """The finding as an undetermined fit: no fix, and the verdict that rests on it is inconclusive."""
+    return replace(finding, strength="undetermined", actionable=False, undetermined_because=tuple(why),
+                   fix=f"undetermined ({'; '.join(why)}): no fix from this fit; get evidence that pins it down "
+                       "before changing anything.")
+
+
+def gate_by_effect(findings: Sequence[Finding], threshold: float, threshold_text: str) -> tuple[Finding, ...]:
+    """The findings whose effect (``error_m``) is under ``threshold`` made notes (:func:`as_note`); the others,
+    and the undetermined, as they are."""
+    return tuple(as_note(f, threshold, threshold_text) if f.strength in ("strong", "weak") and f.effect_m < threshold
+                 else f for f in findings)
 
 
 @dataclass(frozen=True)
@@ -122,6 +194,9 @@ class Attribution:
     rate_residual: tuple[FloatArray, FloatArray] | None = None
     #: a rig's cameras: which are compared with which, the gauges, what cannot be seen (None: one camera)
     rig: RigLayout | None = None
+    #: The fits the verdict would rest on that cannot be trusted: with any, the verdict is "Inconclusive: ..."
+    #: and never says "no fault" (a camera's own motion fills it for its fits as a chain fit does for its own).
+    undetermined: tuple[Undetermined, ...] = ()
     #: Per finding (in the order of ``findings``): how far the other findings' faults together move each world
     #: point, (N, 3), every fault applied minus this one alone. An as-run point less it shows this finding's
     #: own effect; empty where findings do not come from a chain fit (a camera's own motion).
@@ -183,23 +258,71 @@ class Attribution:
         if self.metric == "none":
             return ("No evidence in this log to measure the chain against (no logged points, reference or static "
                     "target): nothing could be checked.")
+        if self.undetermined:
+            return self._inconclusive(summary)
         if self.metric == "camera_motion":
             return self._motion_verdict(summary)
         bounds = self._bounds_sentence()
         unseen = self._rig_unobservable()
-        if not self.findings:
-            against = (f"median error {summary['median'] * 1e3:.1f} mm against the "
-                       f"{METRIC_WORDS.get(self.metric, self.metric.replace('_', ' '))}")
-            if self.bounds and nothing_observable(self.bounds):
+        against = (f"median error {summary['median'] * 1e3:.1f} mm against the "
+                   f"{METRIC_WORDS.get(self.metric, self.metric.replace('_', ' '))}")
+        actionable = [f for f in self.findings if f.actionable]
+        if not actionable:
+            if self.bounds and nothing_observable(self.bounds) and not self.findings:
                 return f"Nothing could be checked ({against}{unseen}): {bounds[0].lower()}{bounds[1:]}"
-            return f"No fault beyond noise: {against}{unseen}." + (f" {bounds}" if bounds else "")
-        top = self.findings[0]
-        more = f", plus {len(self.findings) - 1} more" if len(self.findings) > 1 else ""
+            lead = "No fault worth acting on" if self.findings else "No fault beyond noise"
+            return (f"{lead}: {against}{unseen}{self._notes_clause()}{self._sizes_clause()}." +
+                    (f" {bounds}" if bounds else ""))
+        top = actionable[0]
+        more = f", plus {len(actionable) - 1} more" if len(actionable) > 1 else ""
         camera = f" on camera {top.camera}" if top.camera else ""
         weak = f" (weak: {'; '.join(top.weak_because)})" if top.strength == "weak" else ""
         found = (f"{top.fault.value} at {top.hop.value}{camera} ({format_estimate(top.estimate)}){weak} explains "
-                 f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}.")
+                 f"{top.share:.0%} of a median {summary['median'] * 1e3:.1f} mm error{more}{unseen}"
+                 f"{self._notes_clause()}{self._sizes_clause()}.")
         return found + (f" {bounds}" if bounds else "")
+
+    def _notes_clause(self) -> str:
+        """``; depth_scale at pixel_to_camera (x0.98, 0.2 mm) is statistically clear but under the 1 mm tolerance:
+        no action needed`` for the findings that are notes ("" without)."""
+        notes = [f for f in self.findings if f.strength == "note"]
+        if not notes:
+            return ""
+        named = [f"{f.fault.value} at {f.hop.value}{f' on camera {f.camera}' if f.camera else ''} "
+                 f"({_beside_hop(f)}{f.effect_text()})" for f in notes]
+        listed = named[0] if len(named) == 1 else f"{', '.join(named[:-1])} and {named[-1]}"
+        verb = "is" if len(named) == 1 else "are"
+        return (f"; {listed} {verb} clear but under the {tolerance_text(self.config.tolerance_m)} tolerance: "
+                "no action needed")
+
+    def _sizes_clause(self) -> str:
+        """``; labels 100, 101 look wrongly sized, not moving (the label table gives their sizes)`` ("" without)."""
+        wrong = [r.label for r in self.labels.wrongly_sized]
+        if not wrong:
+            return ""
+        return (f"; label{'s' if len(wrong) > 1 else ''} {', '.join(wrong)} look{'' if len(wrong) > 1 else 's'} "
+                "wrongly sized, not moving (the label table gives the sizes that fit)")
+
+    def _inconclusive(self, summary: dict[str, Any]) -> str:
+        """The verdict when the fits that would decide cannot be trusted: what is undetermined and why, what was
+        measured, and what the log could show once they are; never "no fault"."""
+        if summary["median"] is None:
+            measured = ""
+        elif self.metric == "camera_motion":
+            measured = (f"median rotation-rate misfit {summary['median']:.2f} deg/s against forward kinematics; "
+                        "nothing is concluded from it.")
+        else:
+            words = METRIC_WORDS.get(self.metric, self.metric.replace("_", " "))
+            measured = f"median error {summary['median'] * 1e3:.1f} mm against the {words}"
+            determined = [f for f in self.findings if f.actionable]
+            if determined:
+                top = determined[0]
+                measured += (f"; of the fits that hold, {top.fault.value} at {top.hop.value} "
+                             f"({format_estimate(top.estimate)}) explains {top.share:.0%} of it")
+            measured += f"{self._rig_unobservable()}."
+        found = [(f.fault, f.hop, f.camera or "") for f in self.findings]
+        return inconclusive_sentence(self.undetermined, measured,
+                                     bounds_sentence(self.bounds, found, determined=False) if self.bounds else "")
 
     def _bounds_sentence(self) -> str:
         """The bounds of the families not found, or what was not bounded when nothing measured them."""
@@ -235,6 +358,9 @@ class Attribution:
             "error_m": self.error_summary(),
             "residual_m": self.error_summary(self.error_after),
             "verdict": self.verdict,
+            "inconclusive": bool(self.undetermined),
+            "undetermined": [u.to_json() for u in self.undetermined],
+            "tolerance_m": self.config.tolerance_m,
             "findings": [f.to_json() for f in self.findings],
             "hops": self.hop_summary(),
             "bounds": [b.to_json() for b in self.bounds],
@@ -276,4 +402,5 @@ def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_
             f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{also}{then}")
 
 
-__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed", "motion_verdict"]
+__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed", "as_note", "as_undetermined",
+           "gate_by_effect", "motion_verdict"]

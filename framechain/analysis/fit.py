@@ -122,8 +122,13 @@ def fit_models(
     if grid and x_start is None:
         starts = [_grid_offsets(models, s, objective, inputs, base) for s in starts]
 
+    ridge = np.concatenate([np.full(m.n_params, m.ridge) for m in models])
+    origin = np.concatenate([m.x0 for m in models])
+    pulled = bool(np.any(ridge > 0))
+
     def fun(x: FloatArray) -> FloatArray:
-        return _residual_vector(objective, inputs, perturbation_of(models, x, base))
+        residual = _residual_vector(objective, inputs, perturbation_of(models, x, base))
+        return np.concatenate([residual, ridge * (x - origin)]) if pulled else residual
 
     best: tuple[float, FloatArray] | None = None
     for start in starts:

@@ -15,6 +15,7 @@ from framechain.analysis.estimates import (
     PermutationEstimate,
     RotationEstimate,
     ScaleEstimate,
+    TranslationEstimate,
     axis_text,
 )
 from framechain.analysis.fault_model import Mode
@@ -80,6 +81,8 @@ def fix_for(
         return _frame_fix(fault, estimate, inputs, mode)
     if isinstance(estimate, InvertedEstimate):
         return _inverted_fix(hop, estimate, inputs)
+    if isinstance(estimate, TranslationEstimate):
+        return _translation_fix(estimate, inputs, x, mode)
     return "No fix known for this fault."
 
 
@@ -105,6 +108,35 @@ def _rotation_fix(fault: Fault, estimate: RotationEstimate, inputs: ChainInputs,
         lost = " has no rotation" if fault == Fault.MISSING_ROTATION else " is off"
         lead = f"The recorded mount {parent} -> {child}{lost}; publish (or calibrate to) the corrected one"
     return f"{lead}: {_origin(xyz, rpy)}, i.e. `{_publisher(parent, child, xyz, rpy)}`."
+
+
+def _translation_fix(estimate: TranslationEstimate, inputs: ChainInputs, x: FloatArray, mode: Mode) -> str:
+    """The mount's position: the recorded one (the robot's was off), or the recorded one corrected."""
+    along = axis_text(_unit(estimate.offset_m).tolist())
+    off = f"{estimate.distance_m * 1e3:.1f} mm off in position (along {along} of {estimate.frame})"
+    mount = inputs.mount
+    if mount is None:
+        return f"The camera is {off}: move its position in {inputs.frames.body} by {_xyz(-np.asarray(x))} m."
+    rpy = quat_to_rpy(mount.q_parent_link)
+    recorded = np.asarray(mount.t_parent_link, dtype=float)
+    parent, child = mount.parent, mount.link
+    if mode == "as_run":
+        return (f"The robot's camera-to-body step used a mount {off}; use the recorded {parent} -> {child}: "
+                f"{_origin(recorded, rpy)}, i.e. `{_publisher(parent, child, recorded, rpy)}` (the robot used xyz "
+                f"{_xyz(recorded + np.asarray(x, dtype=float))}).")
+    right = recorded + np.asarray(x, dtype=float)
+    return (f"The recorded mount {parent} -> {child} is {off}; publish (or calibrate to) the corrected one: "
+            f"{_origin(right, rpy)}, i.e. `{_publisher(parent, child, right, rpy)}`.")
+
+
+def _xyz(values: FloatArray) -> str:
+    return "[" + ", ".join(f"{float(v):.4f}" for v in values) + "]"
+
+
+def _unit(vector: tuple[float, float, float]) -> FloatArray:
+    v = np.asarray(vector, dtype=float)
+    out: FloatArray = v / max(float(np.linalg.norm(v)), 1e-12)
+    return out
 
 
 def _latency_fix(hop: HopName, estimate: LatencyEstimate, inputs: ChainInputs, mode: Mode) -> str:

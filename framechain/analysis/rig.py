@@ -130,7 +130,8 @@ def rig_level(inputs: ChainInputs, chain: ChainConfig, labels: StrArray, say: Pr
 
 #: The per-camera families a bound is given for (the sized ones of :func:`rig_models`).
 CAMERA_FAMILIES = ((Fault.LATENCY, HopName.BODY_TO_WORLD), (Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY),
-                   (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA), (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA))
+                   (Fault.TRANSLATION_ERROR, HopName.CAMERA_TO_BODY), (Fault.DEPTH_SCALE, HopName.PIXEL_TO_CAMERA),
+                   (Fault.INTRINSICS, HopName.PIXEL_TO_CAMERA))
 
 
 def unchecked_bounds(layout: RigLayout) -> tuple[Bound, ...]:

@@ -272,6 +272,23 @@ def at_bound(model: FaultModel, x: FloatArray) -> bool:
     return bool((near_lo | near_hi).any())
 
 
+#: A fitted parameter within this share of its plausible range from an edge is at the edge of its search window
+#: (a range over two decades, such as a scale's, measured in decades).
+NEAR_EDGE = 0.05
+
+
+def near_bound(model: FaultModel, x: FloatArray) -> bool:
+    """Whether a fitted parameter lies near an edge of its plausible range (:data:`NEAR_EDGE` of it): its estimate
+    is then the search window's as much as the evidence's."""
+    if not model.lower or not model.plausibility_bounds:
+        return False
+    lo, hi, x = np.asarray(model.lower, float), np.asarray(model.upper, float), np.asarray(x, float)
+    decades = (lo > 0) & (hi >= 100.0 * np.maximum(lo, 1e-300))
+    position = np.where(decades, np.log(np.maximum(x, 1e-300) / np.maximum(lo, 1e-300))
+                        / np.log(np.maximum(hi, 1e-300) / np.maximum(lo, 1e-300)), (x - lo) / (hi - lo))
+    return bool(((position <= NEAR_EDGE) | (position >= 1.0 - NEAR_EDGE)).any())
+
+
 def reweighted(sel: Selected) -> Selected:
     """Refit the chosen faults with residuals whitened along the viewing rays (noisy evidence only).
 

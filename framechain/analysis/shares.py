@@ -6,7 +6,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -14,9 +14,10 @@ from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.checks import Bound, size_text
 from framechain.analysis.estimates import Estimate, estimate_scalars, format_estimate, format_interval
 from framechain.analysis.fault_model import FaultModel, Mode
+from framechain.analysis.faults import LATENCY_BOUND_S, TRANSLATION_BOUND_M
 from framechain.analysis.findings import Finding, Metric
 from framechain.analysis.fit import fit_models, perturbation_of
-from framechain.analysis.selection import Objective, Selected, distances
+from framechain.analysis.selection import Objective, Selected, at_bound, distances, near_bound
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault
 from framechain.progress import Progress
@@ -104,6 +105,35 @@ def shapley_values(
     return values
 
 
+@dataclass(frozen=True)
+class Bootstrapped:
+    """A bootstrap of one model: the 95% intervals of its scalar estimates, and the share of resamples whose refit
+    ran to the edge of the model's search window (its estimate is then the window's, not the evidence's)."""
+
+    interval: dict[str, list[float]]
+    at_edge: float = 0.0
+
+
+def own_effect(found: Sequence[Found], k: int, objective: Objective, inputs: ChainInputs) -> float | None:
+    """A rig camera's finding ``found[k]``: the median error of that camera's own observations without it (the
+    other findings kept) less with every finding (m); None for a finding of the chain as a whole."""
+    model = found[k][0]
+    if model.camera is None or inputs.camera_index is None:
+        return None
+    camera = next(i for i, c in enumerate(inputs.rig_cameras) if c.frame == model.camera)
+    rows = inputs.camera_index == camera
+
+    def error(chosen: Sequence[Found]) -> FloatArray:
+        params = np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
+        pert = perturbation_of([c[0] for c in chosen], params)
+        out: FloatArray = distances(objective(inputs, pert))[rows]
+        return out
+
+    with_all, without = error(found), error([f for i, f in enumerate(found) if i != k])
+    both = np.isfinite(with_all) & np.isfinite(without)
+    return float(np.median(without[both]) - np.median(with_all[both])) if both.any() else None
+
+
 def bootstrap_interval(
     sel: Selected,
     model: FaultModel,
@@ -112,8 +142,13 @@ def bootstrap_interval(
     say: Progress,
 ) -> dict[str, list[float]]:
     """95% intervals of the model's scalar estimates over observation resamples."""
+    return bootstrap(sel, model, rng, draws, say).interval
+
+
+def bootstrap(sel: Selected, model: FaultModel, rng: np.random.Generator, draws: int, say: Progress) -> Bootstrapped:
+    """The model refitted on ``draws`` observation resamples: its intervals and how often it ran to its edge."""
     if model.n_params == 0:
-        return {}
+        return Bootstrapped({})
     stage = f"bootstrapping {model.name}"
     say(stage, 0, draws, "resamples")
     x_fit = np.concatenate(sel.fit.params)
@@ -121,16 +156,50 @@ def bootstrap_interval(
     samples: dict[str, list[float]] = {}
     inputs = sel.inputs
     n = len(inputs)
+    edges = 0
     for draw in range(draws):
         idx = rng.integers(0, n, n)
         refit = fit_models(sel.fit.models, sel.objective.take(idx), inputs.take(idx), x_start=x_fit, grid=False)
+        edges += at_bound(model, refit.params[index])
         scalars = estimate_scalars(model.estimate(refit.params[index], sel.mode, inputs))
         for key, value in scalars.items():
             samples.setdefault(key, []).append(float(value))
         say(stage, draw + 1, draws, "resamples")
-    return {
-        k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)] for k, v in samples.items()
-    }
+    return Bootstrapped({k: [round(float(np.percentile(v, 2.5)), 6), round(float(np.percentile(v, 97.5)), 6)]
+                         for k, v in samples.items()}, edges / max(draws, 1))
+
+
+#: A factor or scale whose 95% interval spans more than this ratio spans orders of magnitude: undetermined.
+UNDETERMINED_RATIO = 10.0
+#: A rotation whose 95% interval is wider than this (deg) cannot say how the mount is turned: undetermined.
+UNDETERMINED_ANGLE_DEG = 45.0
+#: An interval reaching this share of a search window's half-width reaches its edge.
+WINDOW_EDGE = 0.9
+#: A fit with at least this share of its bootstrap refits at the edge of its search window is at the edge.
+UNDETERMINED_EDGE_SHARE = 0.25
+
+
+def undetermined_because(model: FaultModel, x: FloatArray, interval: dict[str, list[float]], at_edge: float
+                         ) -> tuple[str, ...]:
+    """Why a fit's estimate (``x``) cannot be trusted (empty: it can): it lies at the edge of its search window, its
+    95% interval spans orders of magnitude, is wider than a rotation can be read from, or reaches that edge; or its
+    bootstrap refits run to the edge."""
+    why = []
+    if near_bound(model, x):
+        why.append("it lies at the edge of its search window")
+    for key, (lo, hi) in interval.items():
+        text = format_interval({key: [lo, hi]})
+        if key in ("factor", "scale") and lo > 0 and hi / lo > UNDETERMINED_RATIO:
+            why.append(f"its 95% interval {text} spans {math.log10(hi / lo):.1f} orders of magnitude")
+        elif key == "offset_s" and max(abs(lo), abs(hi)) >= WINDOW_EDGE * LATENCY_BOUND_S:
+            why.append(f"its 95% interval {text} reaches the edge of the +-{LATENCY_BOUND_S:g} s searched")
+        elif key == "angle_deg" and hi - lo > UNDETERMINED_ANGLE_DEG:
+            why.append(f"its 95% interval {text} is {hi - lo:.0f} deg wide")
+        elif key == "distance_m" and hi >= WINDOW_EDGE * TRANSLATION_BOUND_M:
+            why.append(f"its 95% interval {text} reaches the edge of the {TRANSLATION_BOUND_M * 1e3:g} mm searched")
+    if at_edge >= UNDETERMINED_EDGE_SHARE:
+        why.append(f"{at_edge:.0%} of its bootstrap refits ran to the edge of its search window")
+    return tuple(why)
 
 
 def evidence_sentence(
@@ -163,6 +232,7 @@ _CHECK = {
                    "each topic's stamp delay)",
     Fault.ROTATION_ERROR: "the mount against a fresh extrinsic calibration",
     Fault.MISSING_ROTATION: "the mount against a fresh extrinsic calibration",
+    Fault.TRANSLATION_ERROR: "the mount's position against a measured one (or a fresh extrinsic calibration)",
     Fault.DEPTH_SCALE: "the declared tag size or the depth units against a measured distance",
     Fault.INTRINSICS: "the calibration against the camera's own (a fresh calibration or the driver's CameraInfo)",
 }
@@ -201,10 +271,11 @@ def _weak_because(finding: Finding, bounds: Sequence[Bound]) -> tuple[str, ...]:
         why.append(f"confidence {finding.confidence:.2f} under {WEAK_CONFIDENCE:g}")
     family = Fault.ROTATION_ERROR if finding.fault == Fault.MISSING_ROTATION else finding.fault
     bound = next((b for b in bounds if b.fault == family and b.hop == finding.hop and b.camera == (finding.camera or "")
-                  and b.size is not None), None)
-    if bound is not None and bound.size is not None and scalars:
+                  and b.statistical_size is not None), None)
+    if bound is not None and bound.statistical_size is not None and scalars:
         value = next(iter(scalars.values()))
-        size = abs(value) if family in (Fault.LATENCY, Fault.ROTATION_ERROR) else abs(value - 1.0)
-        if size < bound.size:
-            why.append(f"under the {size_text(family, bound.size)} this log shows reliably")
+        directed = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR)
+        size = abs(value) if family in directed else abs(value - 1.0)
+        if size < bound.statistical_size:
+            why.append(f"under the {size_text(family, bound.statistical_size)} this log shows reliably")
     return tuple(why)

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     with renderers(None if report_formats else 0, start_now=False):
         made, result, paths = _attribute(args, out, report_formats)
     if made.chain_suggested:
-        print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json)
+        print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json, args.log)
     if args.json:
         print(json.dumps(result.to_json(), indent=2))
         return 0

@@ -171,9 +171,9 @@ def _progress(quiet: bool) -> Iterator[tuple[Callable[[int, int], None], Callabl
 
 def _print_summary(result: Any) -> None:
     import pyarrow.parquet as pq
-    from rich.console import Console
     from rich.table import Table
 
+    from framechain.cli.common import stdout_console
     from framechain.sinks.fleet_report import (
         chains_line,
         estimate_spread,
@@ -182,7 +182,7 @@ def _print_summary(result: Any) -> None:
         summary_line,
     )
 
-    console = Console(width=None if sys.stdout.isatty() else 120)
+    console = stdout_console(120)
     logs = fleet_logs(pq.read_table(result.table_path))
     console.print(f"[bold]{summary_line(logs)}[/bold]", highlight=False)
     console.print(f"computed {result.computed}, kept from an earlier run {result.skipped}", highlight=False)
@@ -198,8 +198,10 @@ def _print_summary(result: Any) -> None:
             table.add_row(row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text)
         console.print(table)
     reasons = not_analysed_reasons(logs)
-    for reason in reasons[:3]:
-        console.print(f"{reason.logs} {reason.status}: {reason.reason}", markup=False, highlight=False, soft_wrap=True)
+    for reason in reasons[:3]:  # each names the log that failed (the first, and how many more)
+        which = reason.example + (f" and {reason.logs - 1} more" if reason.logs > 1 else "")
+        console.print(f"{reason.logs} {reason.status} ({which}): {reason.reason}", markup=False, highlight=False,
+                      soft_wrap=True)
     if len(reasons) > 3:
         console.print(f"... {len(reasons) - 3} other reasons in the fleet report", highlight=False)
     print(f"table: {result.table_path}")

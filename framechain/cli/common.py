@@ -181,14 +181,35 @@ def _how_far(done: int | None, total: int | None, unit: str, elapsed_s: float) -
     return text
 
 
-def print_suggested_chain(chain: Any, quiet: bool) -> None:
-    """Say which configuration was used when none was given (stderr, so --json stays clean).
+def stdout_console(width: int | None = None) -> Any:
+    """A rich Console on stdout whose reader going away (``framechain tf ... | head -1``) ends the command quietly
+    with exit 0, as :func:`framechain.cli.main.main` does for every command (rich's own handling exits 1 with no
+    word). ``width`` when stdout is not a terminal (None: rich's default)."""
+    from rich.console import Console
+
+    class _Quiet(Console):
+        def on_broken_pipe(self) -> None:
+            raise BrokenPipeError  # main() redirects stdout and returns 0
+
+    return _Quiet(width=None if sys.stdout.isatty() else width)
+
+
+def print_suggested_chain(chain: Any, quiet: bool, log: str | Path | None = None) -> None:
+    """Say which configuration was used when none was given (stderr, so --json stays clean), first naming a chain
+    file that lies beside ``log`` and was not used.
 
     ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig. The YAML is
     written as it is, never wrapped: a comment wrapped onto a new line would not be a comment when pasted."""
     if quiet:
         return
-    print("no --chain given; using the suggested configuration (edit it and pass --chain):", file=sys.stderr)
+    from framechain.adapters import chain_files_beside
+
+    beside = chain_files_beside(Path(log)) if log is not None else []
+    if beside:
+        print(f"no --chain given: {beside[0]} lies beside the log but is not used (pass --chain {beside[0]} to use "
+              "it); using the suggested configuration:", file=sys.stderr)
+    else:
+        print("no --chain given; using the suggested configuration (edit it and pass --chain):", file=sys.stderr)
     print(chain.to_yaml().rstrip(), file=sys.stderr)
 
 
@@ -264,14 +285,13 @@ def _print_table(console: Any, columns: Sequence[str], rows: Sequence[Sequence[s
 
 def print_findings(result: Any) -> None:
     """The verdict, the counts, the findings, the per-hop summary, the fixes and the notes, with rich."""
-    from rich.console import Console
     from rich.table import Table
 
     from framechain.sinks.checks_view import BOUND_COLUMNS, bound_rows, label_columns, label_rows, label_summary
     from framechain.sinks.report import HOP_COLUMNS, hop_rows
     from framechain.sinks.text import FindingView
 
-    console = Console(width=None if sys.stdout.isatty() else 120)  # piped output keeps the table readable
+    console = stdout_console(120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
     counts = result.counts()
     console.print(
@@ -282,15 +302,17 @@ def print_findings(result: Any) -> None:
         table = Table()
         cameras = any(f.camera for f in result.findings)
         for col in ("#", "fault", "hop", *(("camera",) if cameras else ()), "estimate", "95% interval", "share",
-                    "confidence", "strength"):
-            table.add_column(col, overflow="fold")
+                    "effect", "confidence", "strength"):
+            # Names stay whole (a fault name folded mid-word reads as two); estimates and intervals fold.
+            table.add_column(col, overflow="fold", no_wrap=col in ("fault", "hop", "effect", "strength"))
         for i, f in enumerate(result.findings, start=1):
             c = FindingView.of(f).cells()
             table.add_row(str(i), c.fault, c.hop, *((c.camera,) if cameras else ()), c.estimate, c.interval, c.share,
-                          c.confidence, c.strength, style="dim" if c.strength == "weak" else None)
+                          c.error, c.confidence, c.strength, style=None if f.actionable and c.strength == "strong"
+                          else "dim")
         console.print(table)
     _print_table(console, BOUND_COLUMNS[:3], [row[:3] for row in bound_rows(result)])
-    if result.labels.suggest_ignore:  # every label only when some disagree
+    if result.labels.suggest_ignore or result.labels.wrongly_sized:  # every label only when some disagree
         _print_table(console, label_columns(result), label_rows(result))
     if len(result.labels.rows) > 1:  # one label (one object) has nothing to compare
         console.print(label_summary(result), markup=False, highlight=False, soft_wrap=True)
@@ -302,6 +324,7 @@ def print_findings(result: Any) -> None:
     console.print(hops)
     for i, f in enumerate(result.findings, start=1):
         on = f" (camera {f.camera})" if f.camera else ""
-        console.print(f"fix {i}{on}: {f.fix}", markup=False, highlight=False, soft_wrap=True)
+        console.print(f"{FindingView.of(f).fix_label()} {i}{on}: {f.fix}", markup=False, highlight=False,
+                      soft_wrap=True)
     for note in result.notes:
         console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)

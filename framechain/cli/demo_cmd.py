@@ -31,7 +31,8 @@ def register(sub: Any) -> None:
         action="append",
         metavar="KIND[:VALUE][@data]",
         help="fault to inject instead of the default (repeatable): latency:-0.03, missing_rotation, "
-        "rotation_error:3, depth_scale:1.05, intrinsics:2, axis_flip, wrong_world_frame, "
+        "rotation_error:3, translation_error:0.05 (m, along the body's y), depth_scale:1.05, intrinsics:2, "
+        "axis_flip, wrong_world_frame, "
         "inverted_transform; @data puts it in the recorded data instead of the robot",
     )
     parser.add_argument(
@@ -76,6 +77,8 @@ def parse_fault(text: str) -> Any:
         params["offset_s"] = number if number is not None else -0.03
     elif kind == Fault.ROTATION_ERROR:
         params.update(angle_deg=number if number is not None else 3.0, axis=[0.0, 1.0, 0.0])
+    elif kind == Fault.TRANSLATION_ERROR:
+        params["offset_m"] = [0.0, number if number is not None else 0.05, 0.0]
     elif kind == Fault.DEPTH_SCALE:
         params["factor"] = number if number is not None else 1.05
     elif kind == Fault.INTRINSICS:

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
             raise FramechainError(f"{made.path}: nothing to export: the log has no messages and nothing was "
                                   "replayed; no file written")
     if made.chain_suggested:
-        print_suggested_chain(made.suggestion or made.chain, quiet)
+        print_suggested_chain(made.suggestion or made.chain, quiet, args.log)
     replay_counts = made.replay.counts()
     if args.json:
         print(json.dumps({"out": str(out), "copied": counts.copied, "added": counts.added,
@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     for topic, n in sorted(counts.added.items()):
         print(f"added         {n:>6} on {topic}")
     print(f"observations  {replay_counts['total']} total, {replay_counts['replayed']} replayed")
-    for hint in viewing_hints(made):
+    for hint in viewing_hints(made, counts.added):
         print(f"annotations   {hint}")
     print(f"wrote         {out} (open it in Foxglove)", file=sys.stdout)
     return 0

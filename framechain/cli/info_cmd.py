@@ -14,6 +14,10 @@ if TYPE_CHECKING:
     from framechain.adapters import EdgeInfo, LoadedLog, SuggestedChain
 
 
+#: Columns of text written to a file or a pipe (no terminal to fit).
+PIPED_WIDTH = 200
+
+
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "info",
@@ -155,15 +159,16 @@ def _edge_label(e: EdgeInfo) -> str:
 
 def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain | None, *,
             chain_given: bool) -> None:
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
     from rich.tree import Tree
 
     from framechain.adapters.suggest.facts import chain_files_beside
     from framechain.adapters.suggest.frame_tree import children_of, tree_roots
+    from framechain.cli.common import stdout_console
 
-    console = Console()
+    # Piped into a file, a terminal's width would cut topic names: wide, and a long name folds in its cell.
+    console = stdout_console(PIPED_WIDTH)
     info = loaded.info
     console.print(f"[bold]{escape(str(info.path))}[/]")
     console.print(f"  format     {info.container or info.format}")
@@ -173,7 +178,7 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
     topics = Table(title="Topics", title_justify="left")
     for col, justify in (("topic", "left"), ("type", "left"), ("count", "right"), ("rate (Hz)", "right"),
                          ("read as", "left")):
-        topics.add_column(col, justify=justify)  # type: ignore[arg-type]
+        topics.add_column(col, justify=justify, overflow="fold")  # type: ignore[arg-type]
     for t in info.topics:
         topics.add_row(escape(t.name), escape(t.msgtype), str(t.count), f"{t.rate_hz:.1f}",
                        loaded.decoded_topics.get(t.name, "[dim]-[/]"))
@@ -197,7 +202,7 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
     if len(cams):
         table = Table(title="Cameras", title_justify="left")
         for col in ("frame", "topic", "size", "fx", "fy", "cx", "cy", "distortion"):
-            table.add_column(col)
+            table.add_column(col, overflow="fold")
         for frame in dict.fromkeys(cams.frame.tolist()):
             i = int(list(cams.frame).index(frame))
             K = cams.K[i]

@@ -42,6 +42,7 @@ def run_tilt(args: argparse.Namespace) -> int:
     import numpy as np
 
     from framechain.analysis.lab import crossing_pitch_deg, tilt_sweep
+    from framechain.cli.common import stdout_console
     from framechain.timeline import FramechainError
 
     if args.max_pitch < 0 or args.max_pitch > 89 or args.step <= 0:
@@ -56,10 +57,9 @@ def run_tilt(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps([{"pitch_deg": r.pitch_deg, "depth_m": r.depth_m, "error_m": r.error_m} for r in rows]))
         return 0
-    from rich.console import Console
     from rich.table import Table
 
-    console = Console()
+    console = stdout_console()
     table = Table(title="World error of a translation-only extrinsic (mm)")
     table.add_column("pitch (deg)", justify="right")
     for d in depths:

@@ -98,7 +98,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         resolve_datasets(args)
-        return int(args.run(args))
+        code = int(args.run(args))
+        sys.stdout.flush()  # a reader gone before the last buffered line (`| head -1`) is met here, not at exit
+        return code
     except FramechainError as err:
         print(f"framechain {args.command}: error: {err}", file=sys.stderr)
         return EXIT_INPUT_ERROR

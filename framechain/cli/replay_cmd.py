@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         )
     say_generated_robot(made, "replay", None if outcome.path is None else Path(outcome.path).with_suffix(".robot.yaml"))
     if made.chain_suggested:
-        print_suggested_chain(made.suggestion or made.chain, quiet)
+        print_suggested_chain(made.suggestion or made.chain, quiet, args.log)
     if args.json:
         print(json.dumps(_report(made, outcome, notes)))
     else:  # --quiet silences progress and the suggested chain, not the result

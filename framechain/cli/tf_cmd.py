@@ -233,13 +233,13 @@ def _series(args: argparse.Namespace, buffer: TransformBuffer, log_start: int) -
 
 
 def _render(r: dict[str, Any], matrix: npt.NDArray[np.float64]) -> None:
-    from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
 
+    from framechain.cli.common import stdout_console
     from framechain.timeline import format_stamp
 
-    console = Console()
+    console = stdout_console()
     name = f"[bold]T_{escape(r['target'])}_{escape(r['source'])}[/]"
     if r["timeless"]:
         console.print(f"{name}: every edge of the path is static (timeless)")

@@ -19,6 +19,7 @@ names them::
       tag_size_m: {default: 0.16, 100: 0.10}   # or one number: tag corners -> depth by PnP
       markers: {dictionary: DICT_5X5_1000, size_m: 0.14}  # markers searched in topics.image
     latency_budget_s: 0.02
+    tolerance_m: 0.001             # a finding that moves the error by less is a note, not a fix
 
 Calibration, mounts and poses from outside the log (paths relative to the chain file)::
 
@@ -55,7 +56,11 @@ import yaml
 
 from framechain.config import plausible
 from framechain.config.errors import ChainConfigError
+from framechain.config.file_kinds import not_a_chain
 from framechain.config.schema import ROTATION_KEYS, Section, finite_number, read_yaml, show
+
+#: The error worth acting on when the chain does not say (m): a millimetre.
+DEFAULT_TOLERANCE_M = 0.001
 
 
 @dataclass(frozen=True)
@@ -184,6 +189,9 @@ class ChainConfig:
     topics: ChainTopics = field(default_factory=ChainTopics)
     evidence: ChainEvidence = field(default_factory=ChainEvidence)
     latency_budget_s: float = 0.02
+    #: The error worth acting on (m): a finding whose effect is smaller is a note ("no action needed"), and no
+    #: bound is under the fault that moves the error by this much.
+    tolerance_m: float = DEFAULT_TOLERANCE_M
     #: Free-form robot section (URDF, joint mapping, calibrations) for joint-driven chains.
     robot: Mapping[str, Any] | None = None
     calibration: tuple[CalibrationSource, ...] = ()
@@ -209,6 +217,8 @@ class ChainConfig:
         raw.pop("notes")
         if not raw.pop("has_pose"):
             raw["frames"].pop("world")
+        if raw["tolerance_m"] == DEFAULT_TOLERANCE_M:
+            raw.pop("tolerance_m")
         for key in ("calibration", "mounts", "cameras"):
             if not raw[key]:
                 raw.pop(key)
@@ -279,7 +289,11 @@ class ChainConfig:
         (calibration files, urdf) live, normally the chain file's directory (None: the working
         directory). Plausible but unusual values become :attr:`notes`.
         """
-        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes"), error=ChainConfigError)
+        other = not_a_chain(raw, Path(where).name) if isinstance(raw, Mapping) else None
+        if other is not None:
+            raise ChainConfigError(where, other)
+        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes", "has_pose"),
+                      error=ChainConfigError)
         topics = top.section("topics", _keys(ChainTopics))
         evidence = parse_evidence(top) or ChainEvidence()
         cameras = _rig_cameras(top)
@@ -299,6 +313,7 @@ class ChainConfig:
         if robot is not None and not isinstance(robot, Mapping):
             top.fail_at("robot", f"must be a mapping, got {show(robot)}")
         budget = latency_budget(top)
+        tolerance = top.number("tolerance_m", DEFAULT_TOLERANCE_M, minimum=0.0, unit="m", check=plausible.tolerance)
         named = {k: topics.name(k, what="a topic name") for k in _keys(ChainTopics, "odometry", "poses")}
         frames_section = top.section("frames", _keys(ChainFrames))
         return cls(
@@ -306,6 +321,7 @@ class ChainConfig:
             topics=ChainTopics(**named, odometry=odometry, poses=tuple(poses)),
             evidence=evidence,
             latency_budget_s=0.02 if budget is None else budget,
+            tolerance_m=DEFAULT_TOLERANCE_M if tolerance is None else tolerance,
             robot=robot,
             calibration=_calibration_sources(top),
             mounts=tuple(_mount_edge(top.child(m, f"mounts[{i}]", _MOUNT_KEYS, what=_MOUNT_WHAT))
@@ -384,9 +400,10 @@ def _frames(section: Section, cameras: tuple[RigCamera, ...] = ()) -> ChainFrame
     if not cameras:
         frames = ChainFrames(camera=section.frame("camera") or default.camera, body=body,
                              world=section.frame("world") or default.world)
-        if len({frames.camera, frames.body, frames.world}) < 3:
-            section.fail(f"camera, body and world must be three different frames, got {frames.camera!r}, "
-                         f"{frames.body!r}, {frames.world!r}")
+        # world equal to body: a camera on a body that does not move (a fixed rig); the camera is its own frame.
+        if frames.camera in (frames.body, frames.world):
+            section.fail(f"the camera frame {frames.camera!r} must differ from body {frames.body!r} and world "
+                         f"{frames.world!r} (world may equal body: a body that does not move)")
         return frames
     names = [c.frame for c in cameras]
     camera = section.frame("camera") or names[0]

@@ -11,6 +11,7 @@ continue a key path: ``evidence.tag_size_m`` + ``" is 160 m, ..."``. The thresho
 - mount translation: over 10 m from its parent (millimetres or centimetres as metres); over 3 m;
 - world position (reference point, world_from_base): over 100 km from the origin;
 - latency_budget_s: over 5 s (milliseconds as seconds); over 1 s;
+- tolerance_m (the error worth acting on): over 1 m (millimetres as metres); over 10 cm;
 - static_window_s: under 10 ms, over an hour (milliseconds as seconds); over 10 minutes;
 - intrinsics: cx or cy outside the image; fx or fy under width / 20 (a field of view over 170
   degrees, or K normalised by the image size) or over width x 50; fx and fy 10 % apart;
@@ -33,6 +34,8 @@ MOUNT_MAX_M, MOUNT_NOTE_M = 10.0, 3.0
 POSITION_MAX_M = 1e5
 #: A latency budget (s) above this is an error, above the note bound a note.
 BUDGET_MAX_S, BUDGET_NOTE_S = 5.0, 1.0
+#: The practical tolerance (m): above the first an error (millimetres as metres), above the second a note.
+TOLERANCE_MAX_M, TOLERANCE_NOTE_M = 1.0, 0.1
 #: Static-target windows (s).
 WINDOW_MIN_S, WINDOW_NOTE_S, WINDOW_MAX_S = 0.01, 600.0, 3600.0
 #: Focal length in pixels against the image width: below the first (a horizontal field of view
@@ -115,6 +118,16 @@ def latency_budget(seconds: float) -> str | None:
         raise Implausible(_too_long(seconds, BUDGET_MAX_S, "a latency budget"))
     if seconds > BUDGET_NOTE_S:
         return f"is {_g(seconds)} s: a budget over {BUDGET_NOTE_S:g} s lets poses that old through"
+    return None
+
+
+def tolerance(metres: float) -> str | None:
+    """The error worth acting on (``tolerance_m``), in metres."""
+    if metres > TOLERANCE_MAX_M:
+        raise Implausible(f"is {_g(metres)} m, too large for the error worth acting on: "
+                          f"{_smaller_unit(metres, 'metre', TOLERANCE_MAX_M)}")
+    if metres > TOLERANCE_NOTE_M:
+        return f"is {_g(metres)} m: findings under {_g(metres * 100)} cm are notes, not fixes"
     return None
 
 

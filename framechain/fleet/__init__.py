@@ -208,6 +208,8 @@ FLEET_SCHEMA = pa.schema([
     ("finding_error_m", pa.float64()),
     ("confidence", pa.float64()),
     ("fix", pa.string()),
+    ("strength", pa.string()),  # strong, weak, note (under the tolerance: no action needed) or undetermined
+    ("actionable", pa.bool_()),  # whether its effect passes the tolerance: a fix to make
     ("elapsed_s", pa.float64()),
     # the first camera's video/state time offset from its own motion, and its 95% interval (null: none measured)
     ("video_camera", pa.string()),
@@ -216,7 +218,7 @@ FLEET_SCHEMA = pa.schema([
     ("video_offset_high_s", pa.float64()),
 ])
 _FINDING_COLUMNS = ("fault", "hop", "camera", "estimate_json", "estimate_text", "estimate_name", "estimate_value",
-                    "estimate_unit", "share", "finding_error_m", "confidence", "fix")
+                    "estimate_unit", "share", "finding_error_m", "confidence", "fix", "strength", "actionable")
 
 
 def fleet_table(records: Sequence[dict[str, Any]]) -> pa.Table:

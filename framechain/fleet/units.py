@@ -22,10 +22,10 @@ SCHEMA = "framechain/batch@1"
 RESULTS_DIR = "results"
 TABLE_NAME = "fleet.parquet"
 
-Status = Literal["findings", "clean", "no_evidence", "nothing_replayed", "error", "crashed"]
+Status = Literal["findings", "inconclusive", "clean", "no_evidence", "nothing_replayed", "error", "crashed"]
 #: Statuses a rerun keeps: the record is the answer for these inputs. "crashed" (a worker that
 #: died, an unexpected exception) may be transient and is computed again.
-FINAL_STATUSES = frozenset({"findings", "clean", "no_evidence", "nothing_replayed", "error"})
+FINAL_STATUSES = frozenset({"findings", "inconclusive", "clean", "no_evidence", "nothing_replayed", "error"})
 Engine = Literal["local", "ray"]
 
 
@@ -241,7 +241,10 @@ def _outcome(made: Run) -> dict[str, Any]:
         return {"status": "nothing_replayed", "error": one_line(Exception(error)), "error_type": "AnalysisError",
                 **span}
     findings = [_finding_row(f) for f in result.findings]
-    status: Status = "no_evidence" if result.metric == "none" else "findings" if findings else "clean"
+    # Findings under the tolerance are notes: a log with only those is clean; one whose deciding fits are undetermined
+    # is inconclusive, whatever else it found.
+    status: Status = ("no_evidence" if result.metric == "none" else "inconclusive" if result.undetermined
+                      else "findings" if any(f.actionable for f in result.findings) else "clean")
     counts = result.counts()
     return {
         "status": status, "verdict": result.verdict, "metric": result.metric, "chain_suggested": made.chain_suggested,
@@ -307,7 +310,7 @@ def _finding_row(finding: Any) -> dict[str, Any]:
         "estimate_name": name, "estimate_value": None if value is None else float(value),
         "estimate_unit": None if name is None else _ESTIMATE_UNITS.get(name, ""),
         "share": data["share"], "finding_error_m": data["error_m"], "confidence": data["confidence"],
-        "fix": data["fix"],
+        "fix": data["fix"], "strength": data["strength"], "actionable": data["actionable"],
     }
 
 

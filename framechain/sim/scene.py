@@ -32,6 +32,7 @@ from framechain.catalogue import FAULT_HOPS, Fault
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.sim import rigid
+from framechain.sim.render import render_color, render_depth
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
@@ -79,6 +80,8 @@ class InjectedFault:
       at or before tau - hold_s instead of interpolating at tau; attribution should report an
       offset of about ``-(hold_s + half an odom period)``).
     - rotation_error ``angle_deg``, ``axis`` (body frame).
+    - translation_error ``offset_m`` (x, y, z in base_link): the mount's position moved by it (robot: the robot
+      used it; data: /tf_static publishes it). Attribution should report ``offset_m`` itself either way.
     - missing_rotation (no parameters: the mount's rotation is dropped, the optical rotation kept).
     - axis_flip ``permutation`` (3x3 signed, applied to camera-frame points; in the data a proper
       rotation published on the optical edge); or ``used="camera_link"``, the real form: in the
@@ -232,6 +235,8 @@ def _expected_finding(spec: SceneSpec, fault: InjectedFault) -> ExpectedFinding:
             estimate["offset_s"], tolerance["offset_s"] = float(p["offset_s"]), 0.002
     elif fault.kind == Fault.ROTATION_ERROR:
         estimate["angle_deg"], tolerance["angle_deg"] = float(p["angle_deg"]), 0.5
+    elif fault.kind == Fault.TRANSLATION_ERROR:
+        estimate["distance_m"], tolerance["distance_m"] = float(np.linalg.norm(p["offset_m"])), 0.005
     elif fault.kind == Fault.MISSING_ROTATION:
         estimate["angle_deg"], tolerance["angle_deg"] = float(abs(spec.mount_pitch_deg)), 0.5
     elif fault.kind == Fault.DEPTH_SCALE:
@@ -259,6 +264,7 @@ class _ChainParams:
     K: FloatArray
     depth_factor: float = 1.0
     mount_quat: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
+    mount_offset: FloatArray = field(default_factory=lambda: np.zeros(3))  # added to the mount's position (m)
     optical_quat: FloatArray = field(default_factory=lambda: np.array(OPTICAL_FROM_LINK_QUAT_XYZW))
     cam_permutation: FloatArray = field(default_factory=lambda: np.eye(3))
     skip_optical_edge: bool = False  # camera_link looked up for optical points
@@ -341,12 +347,13 @@ def generate(spec: SceneSpec) -> Scene:
     observations, cameras, obs_stamp, log_delay = _recorded_detections(spec, rng, recorded, seen)
     image_frames = ImageFrameTable.empty()
     if spec.color_images:
-        image_frames = _render_color(spec, K_true, seen.world_from_optical, obs_stamp, seen.u, seen.v)
+        image_frames = render_color(spec.width, spec.height, spec.optical_frame, COLOR_TOPIC, K_true,
+                                    seen.world_from_optical, obs_stamp, seen.u, seen.v)
     depth_frames = DepthFrameTable.empty()
     if spec.depth_images:
         recorded_depth = np.round(seen.depth_m * recorded.depth_factor, 3)
-        depth_frames = _render_depth(spec, K_true, seen.world_from_optical, obs_stamp, seen.u, seen.v,
-                                     recorded_depth)
+        depth_frames = render_depth(spec.width, spec.height, spec.optical_frame, TOPICS.depth or "", K_true,
+                                    seen.world_from_optical, obs_stamp, seen.u, seen.v, recorded_depth)
     robot_cam, robot_body, robot_world = _robot_points(spec, robot, motion, seen, body_from_footprint)
     evidence, points = _evidence(spec, rng, obs_stamp, log_delay, robot_cam, robot_body, robot_world, obj)
     chain = ChainConfig(
@@ -387,7 +394,7 @@ def _faulty_params(spec: SceneSpec, truth: _ChainParams) -> tuple[_ChainParams, 
 
 def _static_tf(spec: SceneSpec, params: _ChainParams, body_from_footprint: FloatArray | None) -> TransformTable:
     """The recorded /tf_static: the mount, the optical edge, and the frames the faults need."""
-    mount_t, mount_q = np.array([spec.mount_xyz], dtype=float), np.array([params.mount_quat])
+    mount_t, mount_q = np.array([spec.mount_xyz], dtype=float) + params.mount_offset, np.array([params.mount_quat])
     if params.invert_camera:  # the mount published the wrong way round (still one parent per child)
         mount_t, mount_q = rigid.to_rows(rigid.inverse(rigid.matrices(mount_t, mount_q)))
     tables = [
@@ -491,47 +498,9 @@ def _robot_points(spec: SceneSpec, robot: _ChainParams, motion: _Motion, seen: _
     return robot_cam, robot_body, rigid.apply(world_from_body, robot_body)
 
 
-def _render_color(
-    spec: SceneSpec, K: FloatArray, world_from_optical: FloatArray, stamps: IntArray, u: FloatArray, v: FloatArray,
-) -> ImageFrameTable:
-    """JPEG colour images: a 0.5 m checkerboard floor (z = 0), sky above the horizon, and the
-    object as a red disc where it was detected (what the detector saw)."""
-    import io
-
-    from PIL import Image
-
-    cols, rows = np.meshgrid(np.arange(spec.width, dtype=float), np.arange(spec.height, dtype=float))
-    rays = rigid.back_project(K, cols.ravel(), rows.ravel(), np.ones(cols.size)).astype(np.float32)
-    # light tile, dark tile, sky
-    palette = np.array([[150, 150, 140], [95, 100, 95], [190, 210, 235]], dtype=np.uint8)
-    blobs: list[bytes] = []
-    for i in range(stamps.size):  # one image per frame: this loop is over frames, not messages per hop
-        dirs = rays @ world_from_optical[i, :3, :3].T.astype(np.float32)
-        origin = world_from_optical[i, :3, 3].astype(np.float32)
-        down = dirs[:, 2] < -1e-6
-        z = np.where(down, -origin[2] / np.where(down, dirs[:, 2], -1.0), np.inf)
-        hit = z < 30.0
-        x = origin[0] + dirs[:, 0] * np.where(hit, z, 0.0)
-        y = origin[1] + dirs[:, 1] * np.where(hit, z, 0.0)
-        tile = (np.floor(x * 2.0) + np.floor(y * 2.0)).astype(np.int64) & 1  # 0.5 m tiles
-        pix = palette[np.where(hit, tile, 2)].reshape(spec.height, spec.width, 3)
-        r2 = (cols - u[i]) ** 2 + (rows - v[i]) ** 2
-        pix[r2 <= 9.0**2] = (60, 20, 20)
-        pix[r2 <= 7.5**2] = (220, 40, 40)
-        out = io.BytesIO()
-        Image.fromarray(pix, "RGB").save(out, format="JPEG", quality=90)
-        blobs.append(out.getvalue())
-    n = stamps.size
-    return ImageFrameTable(
-        frame=np.full(n, spec.optical_frame), stamp_ns=stamps, log_time_ns=stamps, width=np.full(n, spec.width),
-        height=np.full(n, spec.height), encoding=np.full(n, "jpeg"), source=np.full(n, COLOR_TOPIC),
-        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: blobs[i],
-    )
-
-
 def _base_from_camera(spec: SceneSpec, params: _ChainParams) -> FloatArray:
     """``T_base_link_X`` with X the optical frame (or camera_link when the optical edge is skipped)."""
-    mount = rigid.matrix(spec.mount_xyz, params.mount_quat)
+    mount = rigid.matrix(np.asarray(spec.mount_xyz, dtype=float) + params.mount_offset, params.mount_quat)
     if params.skip_optical_edge:
         return mount
     if params.sibling_optical:
@@ -553,6 +522,8 @@ def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> 
         return replace(params, mount_quat=(error * Rotation.from_quat(truth.mount_quat)).as_quat())
     if kind == Fault.MISSING_ROTATION:
         return replace(params, mount_quat=np.array([0.0, 0.0, 0.0, 1.0]))
+    if kind == Fault.TRANSLATION_ERROR:
+        return replace(params, mount_offset=np.asarray(p["offset_m"], dtype=float))
     if kind == Fault.AXIS_FLIP:
         if fault.used_frame is not None:
             if fault.used_frame != MOUNT_FRAME:
@@ -668,33 +639,3 @@ def _evidence(
     else:
         evidence = ChainEvidence(static_target=True)
     return evidence, PointTable.concat(rows)
-
-
-def _render_depth(
-    spec: SceneSpec,
-    K: FloatArray,
-    world_from_optical: FloatArray,
-    stamps: IntArray,
-    u: FloatArray,
-    v: FloatArray,
-    object_depth: FloatArray,
-) -> DepthFrameTable:
-    """Depth images registered to the colour camera: the floor plane plus a disc at the object.
-
-    The disc carries the measured object depth so the replay's window median returns it exactly
-    (to the millimetre); the floor comes from intersecting each pixel's ray with z = 0.
-    """
-    cols, rows = np.meshgrid(np.arange(spec.width, dtype=float), np.arange(spec.height, dtype=float))
-    rays = rigid.back_project(K, cols.ravel(), rows.ravel(), np.ones(cols.size))
-    images = np.zeros((stamps.size, spec.height, spec.width), dtype=np.float32)
-    radius2 = 8.0**2
-    for i in range(stamps.size):  # one image per frame: this loop is over frames, not messages per hop
-        dirs_world = rays @ world_from_optical[i, :3, :3].T
-        origin_z = world_from_optical[i, 2, 3]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            z = np.where(dirs_world[:, 2] < -1e-6, -origin_z / dirs_world[:, 2], 0.0)
-        floor = np.where((z > 0) & (z < 20.0), z, 0.0).reshape(spec.height, spec.width)
-        disc = (cols - u[i]) ** 2 + (rows - v[i]) ** 2 <= radius2
-        floor[disc] = object_depth[i]
-        images[i] = floor
-    return DepthFrameTable.from_arrays(spec.optical_frame, stamps, images, source=TOPICS.depth or "")

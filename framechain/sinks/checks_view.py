@@ -12,10 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.checks import Bound, Curve, family_name, size_text
+from framechain.analysis.checks import Bound, Curve, family_name, size_text, tolerance_text
 from framechain.analysis.findings import Attribution
 from framechain.catalogue import Fault
-from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
+from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR, hex_color
 from framechain.sinks.plots import new_figure
 from framechain.sinks.text import mm
 
@@ -40,7 +40,7 @@ def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
     """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
     observable", and why."""
     found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop, f.camera or "") for f in result.findings}
-    return [(family_name(b.fault, b.hop) + (f" on camera {b.camera}" if b.camera else ""), b.hop.value,
+    return [(b.family + (f" on camera {b.camera}" if b.camera else ""), b.hop.value,
              _bound_cell(b, (b.fault, b.hop, b.camera) in found), b.why) for b in result.bounds]
 
 
@@ -50,14 +50,23 @@ NOT_BOUNDED = ("Not computed for this evidence: the smallest fault this log woul
 
 
 def _bound_cell(bound: Bound, found: bool) -> str:
+    """``1.3 ms``; ``13 ms (1 mm tolerance; noise 1.3 ms)`` when the tolerance sets it; ``2 deg (cross-check)``."""
     if bound.size is None:
         return "not observable"
-    return f"{size_text(bound.fault, bound.size)}{bound.axes_text()}" + (" beyond the finding" if found else "")
+    limit = ""
+    if bound.limited_by == "tolerance" and bound.statistical_size is not None:
+        limit = (f" ({tolerance_text(bound.tolerance_m)} tolerance; noise "
+                 f"{size_text(bound.fault, bound.statistical_size)})")
+    elif bound.limited_by == "cross-check":
+        limit = " (cross-check)"
+    return (f"{size_text(bound.fault, bound.size)}{bound.axes_text()}" + (" beyond the finding" if found else "")
+            + limit)
 
 
 def label_rows(result: Attribution) -> list[tuple[str, str, str, str, str, str]]:
     """The per-label table as text cells."""
-    return [(r.label, str(r.observations), str(r.used), mm(r.spread_m), mm(r.p90_m), r.verdict)
+    return [(r.label, str(r.observations), str(r.used), mm(r.spread_m), mm(r.p90_m),
+             r.verdict + (f" ({r.size_m:g} m, not {r.declared_m:g})" if r.size_m is not None else ""))
             for r in result.labels.rows]
 
 
@@ -73,7 +82,14 @@ def label_summary(result: Attribution) -> str:
     text = f"labels: {len(rows)} ({', '.join(f'{n} {v}' for v, n in counts.items())}), median {what} " \
            f"{mm(result.labels.overall_m)}"
     line = result.labels.ignore_line()
-    return text + (f"; to leave out the ones that disagree add `{line}`" if line else "")
+    text += f"; to leave out the ones that disagree add `{line}`" if line else ""
+    sized = result.labels.wrongly_sized
+    if sized:
+        names = ", ".join(r.label for r in sized)
+        text += (f"; {names} {'is' if len(sized) == 1 else 'are'} wrongly sized, not moving (each one's spread grows "
+                 f"with its distance from the camera, as a tag of another size gives): declare "
+                 f"`{result.labels.size_line()}`")
+    return text
 
 
 def _what_labels_measure(result: Attribution) -> str:
@@ -96,8 +112,8 @@ def curve_plots(result: Attribution) -> list[tuple[str, str, Any]]:
         name = family_name(curve.fault, curve.hop)
         fig.suptitle(f"Error against the {name} ({curve.hop.value})", fontsize=9)
         caption = (f"{name.capitalize()}: the error against the {result.metric.replace('_', ' ')} as the fault is "
-                   "varied, the other findings applied: its root mean square is what the fit minimises (its dip is "
-                   "the estimate), its median what the findings' millimetres are shares of")
+                   "varied, the other findings applied. The fit minimises its root mean square (the dip is the "
+                   "estimate); each finding's millimetres are a share of its median")
         out.append((f"curve_{curve.fault.value}_{curve.hop.value}", caption, fig))
     return out
 
@@ -110,11 +126,11 @@ def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
         half = max(4.0 * curve.display(curve.bound or 0.0), 20.0)
         keep = np.abs(x - centre) <= half
         x, rms, median = x[keep], rms[keep], median[keep]
-    ax.plot(x, rms, color=hex_color(ERROR_COLOR), lw=1.2, label="rms (fitted)")
-    ax.plot(x, median, color=hex_color(ERROR_COLOR), alpha=0.5, lw=1.0, ls="-.", label="median (shared out)")
+    ax.plot(x, rms, color=hex_color(RECORDED_ERROR_COLOR), lw=1.2, label="rms (fitted)")
+    ax.plot(x, median, color=hex_color(RECORDED_ERROR_COLOR), lw=1.0, ls="-.", label="median (shared out)")
     for i, edge in enumerate(curve.bound_edges() or ()):
-        ax.axvline(curve.display(edge), color=hex_color(BOUND_COLOR), ls=":", lw=1, label="bound" if i else None)
-    ax.axvline(curve.display(curve.no_fault), color="k", lw=0.6, alpha=0.5)
+        ax.axvline(curve.display(edge), color=hex_color(BOUND_COLOR), ls=":", lw=1.2, label="bound" if i else None)
+    ax.axvline(curve.display(curve.no_fault), color=hex_color(BOUND_COLOR), lw=0.8, label="no fault")
     if curve.estimate is not None:
         ax.axvline(curve.display(curve.estimate), color=hex_color(CORRECTED_COLOR), ls="--", lw=1, label="estimate")
     ax.set_xlabel(curve.axis_label() + (" (zoom)" if zoom else ""), fontsize=8)

@@ -17,16 +17,18 @@ import numpy as np
 import pyarrow as pa
 
 from framechain.analysis.estimates import format_interval
+from framechain.sinks.colors import FAULT_COLORS, RECORDED_ERROR_COLOR, UNEXPLAINED_COLOR, hex_color
 from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets
 from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
 from framechain.sinks.text import CSS, mm
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
-STATUS_ORDER = ("findings", "clean", "no_evidence", "nothing_replayed", "error", "crashed")
+STATUS_ORDER = ("findings", "inconclusive", "clean", "no_evidence", "nothing_replayed", "error", "crashed")
 STATUS_TEXT = {
     "findings": "with findings",
-    "clean": "clean (no fault beyond noise)",
+    "inconclusive": "inconclusive (the fits that would decide are undetermined)",
+    "clean": "clean (no fault worth acting on)",
     "no_evidence": "no evidence to measure against",
     "nothing_replayed": "nothing to replay (the reason names the chain key to add)",
     "error": "could not be analysed",
@@ -85,7 +87,7 @@ def fleet_logs(table: pa.Table) -> list[FleetLog]:
             log = logs[row["key"]] = FleetLog(
                 unit=row["unit"], log=row["log"], status=row["status"], error=row["error"], verdict=row["verdict"],
                 error_median_m=row["error_median_m"], findings=[], chain=row.get("chain"))
-        if row["fault"] is not None:
+        if row["fault"] is not None and row.get("actionable") is not False:  # a note is no fault to act on
             log.findings.append(row)
     return list(logs.values())
 
@@ -197,18 +199,23 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
         for fault in {f["fault"] for f in log.findings}:
             faults[fault] = faults.get(fault, 0) + 1
     fig, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
-    ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses], color="tab:blue")
+    ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses],
+                   color=hex_color(RECORDED_ERROR_COLOR))
     ax_status.set_xlabel("logs")
+    ax_status.locator_params(axis="x", integer=True)  # log counts: whole numbers
     ax_status.set_title("Logs by outcome", fontsize=9)
     ax_status.invert_yaxis()
     names = sorted(faults, key=lambda k: -faults[k])
-    ax_fault.barh(names or ["(none)"], [faults[n] for n in names] or [0], color="tab:red")
+    ax_fault.barh(names or ["(none)"], [faults[n] for n in names] or [0],
+                  color=[hex_color(FAULT_COLORS.get(n, UNEXPLAINED_COLOR)) for n in names] or None)
     ax_fault.set_xlabel("logs with the fault")
+    ax_fault.locator_params(axis="x", integer=True)
     ax_fault.set_title("Faults across the fleet", fontsize=9)
     ax_fault.invert_yaxis()
     figures.append(figure_png(fig, "fleet_faults", "Logs by outcome, and how many logs have each fault"))
 
     groups: dict[tuple[str, str], list[float]] = {}
+    colours: dict[str, tuple[int, int, int]] = {}
     for log in logs:
         for f in log.findings:
             name = f["estimate_name"]
@@ -216,6 +223,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
                 scale, unit = _DISPLAY[name]
                 groups.setdefault((f"{f['fault']} at {f['hop']}", f"{name.split('_')[0]} ({unit})"), []).append(
                     f["estimate_value"] * scale)
+                colours[f"{f['fault']} at {f['hop']}"] = FAULT_COLORS.get(f["fault"], UNEXPLAINED_COLOR)
     if groups:
         rng = np.random.default_rng(0)  # jitter only: the same report for the same table
         n = len(groups)
@@ -223,10 +231,11 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
         for ax, ((title, label), values) in zip(axes, sorted(groups.items()), strict=True):
             y = np.asarray(values)
             ax.boxplot(y, widths=0.5, showfliers=False)
-            ax.scatter(1 + rng.uniform(-0.15, 0.15, y.size), y, s=10, alpha=0.6, color="tab:red", zorder=3)
+            ax.scatter(1 + rng.uniform(-0.15, 0.15, y.size), y, s=10, alpha=0.8, color=hex_color(colours[title]),
+                       zorder=3)
             ax.set_xticks([])
             ax.set_ylabel(label)
-            ax.set_title(f"{title} ({y.size} logs)", fontsize=8)
+            ax.set_title(f"{title} ({y.size} log{'s' if y.size != 1 else ''})", fontsize=8)
             ax.grid(True, axis="y", alpha=0.3)
         figures.append(figure_png(fig, "fleet_estimates",
                                   "Each log's estimate, per fault: the spread across the fleet"))
@@ -237,7 +246,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
 def summary_line(logs: Sequence[FleetLog]) -> str:
     counts = {s: sum(log.status == s for log in logs) for s in STATUS_ORDER}
     parts = [f"{counts[s]} {STATUS_TEXT[s]}" for s in STATUS_ORDER if counts[s]]
-    return f"{len(logs)} logs: " + "; ".join(parts) + "."
+    return f"{len(logs)} log{'s' if len(logs) != 1 else ''}: " + "; ".join(parts) + "."
 
 
 def chains_line(logs: Sequence[FleetLog]) -> str:

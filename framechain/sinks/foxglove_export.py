@@ -28,7 +28,7 @@ file it depends on, as Foxglove and ``mcap-protobuf-support`` do.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -120,18 +120,22 @@ def foxglove_messages(run: Run) -> list[ProtobufMessage]:
     return out
 
 
-def viewing_hints(run: Run) -> list[str]:
-    """Per camera, which topics to open its annotations on: its image topic where the log has one, else the
-    calibration written for it."""
+def viewing_hints(run: Run, written: Collection[str]) -> list[str]:
+    """Per camera whose annotations were ``written`` (the topics the export added), which topics to open them on:
+    its image topic where the log has one, and the calibration written for it where one was."""
     images = run.timeline.image_frames
     rig = run.chain.is_rig
     out = []
     for frame in run.chain.camera_frames() if rig else [run.chain.frames.camera]:
         suffix = f"/{frame.strip('/')}" if rig else ""
+        if f"{ANNOTATIONS_TOPIC}{suffix}" not in written:
+            continue  # no annotation of this camera in the file: nothing to open
         mine = images.source[images.frame == frame] if rig else images.source
         topics = sorted(set(mine.tolist()))
         where = f"image {', '.join(topics)}" if topics else "no image in the log"
-        out.append(f"{ANNOTATIONS_TOPIC}{suffix} on camera {frame}: {where}; calibration {CALIBRATION_TOPIC}{suffix}")
+        calibration = f"{CALIBRATION_TOPIC}{suffix}"
+        out.append(f"{ANNOTATIONS_TOPIC}{suffix} on camera {frame}: {where}"
+                   + (f"; calibration {calibration}" if calibration in written else ""))
     return out
 
 
@@ -265,6 +269,11 @@ def _annotations(result: ReplayResult, overlay: ImageOverlay, stamp: IntArray, m
     return out
 
 
+#: The distortion models Foxglove's CameraCalibration knows by another name: OpenCV's fisheye (Kalibr's equidistant)
+#: is Kannala-Brandt's k1..k4; ROS's rational_polynomial and plumb_bob keep theirs.
+FOXGLOVE_DISTORTION = {"equidistant": "kannala_brandt", "fisheye": "kannala_brandt"}
+
+
 def calibration_message(cameras: CameraTable, row: int, stamp_ns: int, frame_id: str) -> bytes:
     """Row ``row`` of the camera table as a serialised ``foxglove.CameraCalibration`` (no rectification:
     R the identity, P = [K | 0]; no distortion written as plumb_bob with zeros)."""
@@ -276,7 +285,8 @@ def calibration_message(cameras: CameraTable, row: int, stamp_ns: int, frame_id:
     msg.width, msg.height = int(cameras.width[row]), int(cameras.height[row])
     k = cameras.K[row]
     n = int(cameras.n_distortion[row])
-    msg.distortion_model = str(cameras.distortion_model[row]) if n else "plumb_bob"
+    model = str(cameras.distortion_model[row])
+    msg.distortion_model = FOXGLOVE_DISTORTION.get(model, model) if n else "plumb_bob"
     msg.D.extend(float(d) for d in (cameras.distortion[row, :n] if n else np.zeros(5)))
     msg.K.extend(float(v) for v in k.ravel())
     msg.R.extend(float(v) for v in np.eye(3).ravel())

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.checks import nothing_observable
+from framechain.analysis.checks import nothing_observable, tolerance_text
 from framechain.analysis.egomotion import rotation_rates
-from framechain.analysis.findings import Attribution
+from framechain.analysis.findings import Attribution, Finding
 from framechain.analysis.run import Run
 from framechain.analysis.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
@@ -29,12 +29,15 @@ from framechain.sinks.colors import (
     AS_RUN_COLOR,
     BOUND_COLOR,
     CORRECTED_COLOR,
-    ERROR_COLOR,
     ERROR_LINE_LEGEND,
+    FAULT_COLORS,
     HOP_COLORS,
+    HOP_LEGEND,
     LEGEND,
     RECOMPUTED_COLOR,
+    RECORDED_ERROR_COLOR,
     REFERENCE_COLOR,
+    UNEXPLAINED_COLOR,
     hex_color,
     legend_text,
 )
@@ -166,7 +169,6 @@ def finding_overlay(run: Run, overlay: ImageOverlay, index: int) -> tuple[ImageO
     """The overlay of finding ``index`` of the run's attribution: in its colour, and where several findings are the
     robot's own and the as-run points carry them all, with the as-run points less the other findings' effect
     (``Attribution.others_shift``), so that the picture shows this finding alone. The bool: whether it does."""
-    from framechain.sinks.colors import FAULT_COLORS, UNEXPLAINED_COLOR
     from framechain.sinks.overlay import project_world_points
 
     result, replay = run.attributed(), run.replay
@@ -217,14 +219,34 @@ def _crops_html(result: Attribution, sections: Sequence[tuple[str, list[Figure]]
 
 # -- figures ----------------------------------------------------------------------------------
 def make_figures(result: Attribution) -> list[Figure]:
-    figures: list[Figure] = []
+    """The report's pictures of the error: each drawn only where it shows what its caption says."""
+    figures = [_error_over_time(result)]
+    speed = robot_speed(result)
+    if np.isfinite(speed).any() and float(np.nanmax(speed)) > STILL_SPEED_M_S:  # a body that never moves: no signature
+        figures.append(_error_against_speed(result, speed))
+    figures.append(_world_top_down(result))
+    top = next((f for f in result.findings if f.actionable), None)
+    if top is not None:
+        sensitivity_figure = _sensitivity(result, top)
+        if sensitivity_figure is not None:
+            figures.append(sensitivity_figure)
+    return figures
+
+
+#: A body whose speed stays under this (m/s) at every observation does not move: error against speed is not drawn.
+STILL_SPEED_M_S = 1e-3
+
+
+def _error_over_time(result: Attribution) -> Figure:
+    """The error against the evidence over time, as recorded and after the findings; each logged hop's own error
+    where the robot logged its hops (then it is "error per hop")."""
     inputs = result.inputs
     t = (inputs.stamp_ns - inputs.stamp_ns.min()) * 1e-9 if len(inputs) else np.zeros(0)
-
+    metric = result.metric.replace("_", " ")
     fig, (ax,) = new_figure(6.4, 3.6)
-    # The world error goes underneath, wide and pale, so a hop that carries all of it stays visible.
-    _line(ax, t, result.error_before * 1e3, lw=4, color=hex_color(ERROR_COLOR), alpha=0.25,
-          label=f"world error ({result.metric.replace('_', ' ')})")
+    # The error as recorded goes underneath, wide and pale, so a hop that carries all of it stays visible.
+    _line(ax, t, result.error_before * 1e3, lw=4, color=hex_color(RECORDED_ERROR_COLOR), alpha=0.35,
+          label=f"error against the {metric}, as recorded")
     for (hop, errors), style in zip(result.hop_errors.items(), ("-", "--", ":"), strict=False):
         _line(ax, t, errors * 1e3, lw=1.2, ls=style, color=hex_color(HOP_COLORS[HopName(hop)]),
               label=f"{hop} (logged vs recomputed)")
@@ -235,11 +257,16 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.set_ylabel("error (mm)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    figures.append(figure_png(fig, "error_per_hop", "Error per hop over time"))
+    if result.hop_errors:
+        return figure_png(fig, "error_per_hop", "Error per hop over time: each logged hop's own departure, and the "
+                          f"error against the {metric}")
+    return figure_png(fig, "error_per_hop", f"Error against the {metric} over time (no hop logged: one error, as "
+                      "recorded and after the findings)")
 
-    speed = robot_speed(result)
+
+def _error_against_speed(result: Attribution, speed: FloatArray) -> Figure:
     fig, (ax,) = new_figure(6.4, 3.6, top="title")
-    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, color=hex_color(ERROR_COLOR), label="as recorded")
+    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, color=hex_color(RECORDED_ERROR_COLOR), label="as recorded")
     if result.findings:
         _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color=hex_color(CORRECTED_COLOR),
               label=_after_label(result))
@@ -248,29 +275,30 @@ def make_figures(result: Attribution) -> list[Figure]:
     ax.set_title("A latency grows with speed", fontsize=9)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=7)
-    figures.append(figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)"))
+    return figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)")
 
-    figures.append(_world_top_down(result))
 
-    if result.findings:
-        top = result.findings[0]
-        x, err, label = sensitivity(result, top)
-        if x.size:
-            fig, (ax,) = new_figure(6.4, 3.6, top="title")
-            ax.plot(x, err * 1e3, color=hex_color(ERROR_COLOR))
-            ax.axhline(10.0, color="k", ls="--", lw=1, label="1 cm gripper tolerance")
-            ax.axvline(x[-1] / 1.5, color=hex_color(BOUND_COLOR), ls=":", lw=1, label="found")
-            ax.set_xlabel(label)
-            # How far the world points move, not the error against the evidence the findings share out
-            # (that is the curves' measure): a depth scale moves points far and static spreads little.
-            ax.set_ylabel("median displacement of the world points (mm)")
-            ax.set_title(f"Sensitivity: how far {top.fault.value} at {top.hop.value} moves the world points",
-                         fontsize=9)
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=7)
-            figures.append(figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this "
-                                      "episode (a displacement, not the error the findings share out)"))
-    return figures
+def _sensitivity(result: Attribution, top: Finding) -> Figure | None:
+    """How far the top finding's fault moves the world points as it grows, against the chain's tolerance."""
+    x, err, label = sensitivity(result, top)
+    if not x.size:
+        return None
+    tolerance = result.config.tolerance_m
+    fig, (ax,) = new_figure(6.4, 3.6, top="title")
+    ax.plot(x, err * 1e3, color=hex_color(FAULT_COLORS.get(top.fault.value, UNEXPLAINED_COLOR)),
+            label=top.fault.value)
+    ax.axhline(tolerance * 1e3, color=hex_color(BOUND_COLOR), ls="--", lw=1,
+               label=f"the {tolerance_text(tolerance)} tolerance (tolerance_m)")
+    ax.axvline(x[-1] / 1.5, color=hex_color(CORRECTED_COLOR), ls="--", lw=1, label="the estimate")
+    ax.set_xlabel(label)
+    # How far the world points move, not the error against the evidence the findings share out
+    # (that is the curves' measure): a depth scale moves points far and static spreads little.
+    ax.set_ylabel("median displacement of the world points (mm)")
+    ax.set_title(f"Sensitivity: how far {top.fault.value} at {top.hop.value} moves the world points", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7)
+    return figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this episode, up to "
+                      "1.5 times its estimate (a displacement, not the error the findings share out)")
 
 
 def _world_top_down(result: Attribution) -> Figure:
@@ -466,7 +494,7 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
     ]
     if result.findings:
         lines += [
-            "| fault | hop | camera | estimate | 95% interval | share | error | confidence | strength | fix |",
+            "| fault | hop | camera | estimate | 95% interval | share | effect | confidence | strength | fix |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
         ]
         for c in (FindingView.of(f).cells() for f in result.findings):
@@ -475,7 +503,7 @@ def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
         lines += [""] + [f"- **{f.fault.value}**{FindingView.of(f).on_camera()}: {f.evidence}"
                          for f in result.findings]
     else:
-        lines.append("No fault beyond noise." if _clean(result) else "Nothing could be checked.")
+        lines.append(_no_findings(result))
     lines += [
         "",
         "## Error",
@@ -513,10 +541,10 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
     if result.findings:
         parts.append(
             "<table><tr><th>fault</th><th>hop</th><th>camera</th><th>estimate</th><th>95% interval</th><th>share</th>"
-            "<th>error</th><th>confidence</th><th>strength</th><th>evidence</th><th>fix</th></tr>"
+            "<th>effect</th><th>confidence</th><th>strength</th><th>evidence</th><th>fix</th></tr>"
         )
         for c in (FindingView.of(f).cells() for f in result.findings):
-            weak = " style='color:#777'" if c.strength == "weak" else ""
+            weak = " style='color:#777'" if c.strength != "strong" else ""
             b = breakable  # frame names wrap at their joints, so the table fits the page
             parts.append(
                 f"<tr{weak}><td><b>{b(c.fault)}</b></td><td>{b(c.hop)}</td><td>{b(c.camera or '-')}</td>"
@@ -525,7 +553,7 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
             )
         parts.append("</table>")
     else:
-        parts.append("<p>No fault beyond noise.</p>" if _clean(result) else "<p>Nothing could be checked.</p>")
+        parts.append(f"<p>{_no_findings(result)}</p>")
     counts = result.counts()
     parts.append(
         f"<h2>Error</h2><p>{e(_error_sentence(result))} Observations: {counts['total']} total, "
@@ -551,15 +579,28 @@ def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
 
 
 def _legend_html() -> str:
-    """The colour legend with a swatch of each colour."""
-    swatches = [f"<span style='color:{hex_color(rgb)}'>&#9679;</span> {html.escape(name)}: {html.escape(meaning)}"
-                for rgb, name, meaning in LEGEND]
-    return "; ".join([*swatches, html.escape(ERROR_LINE_LEGEND)]) + "."
+    """The colour legend with a swatch of each colour of the palette: the meanings, then each fault's and hop's."""
+    def swatch(rgb: tuple[int, int, int]) -> str:
+        return f"<span style='color:{hex_color(rgb)}'>&#9679;</span>"
+
+    meanings = "; ".join(f"{swatch(rgb)} {html.escape(name)}: {html.escape(meaning)}" for rgb, name, meaning in LEGEND)
+    faults = ", ".join(f"{swatch(rgb)} {html.escape(fault)}" for fault, rgb in FAULT_COLORS.items())
+    hops = ", ".join(f"{swatch(rgb)} {html.escape(hop.value)}" for hop, rgb in HOP_COLORS.items())
+    return f"{meanings}. {html.escape(ERROR_LINE_LEGEND)}: {faults}; {html.escape(HOP_LEGEND)}: {hops}."
+
+
+def _no_findings(result: Attribution) -> str:
+    """What the findings section says when there are none."""
+    if result.undetermined:
+        return "No finding: what would decide is undetermined (the verdict above says what and why)."
+    return "No fault beyond noise." if _clean(result) else "Nothing could be checked."
 
 
 def _clean(result: Attribution) -> bool:
-    """No finding, and something could have been found (a log where nothing is observable is not clean)."""
-    return not result.findings and not nothing_observable(result.bounds)
+    """No finding to act on, nothing undetermined, and something could have been found (a log where nothing is
+    observable is not clean)."""
+    return (not any(f.actionable for f in result.findings) and not result.undetermined
+            and not nothing_observable(result.bounds))
 
 
 def _code(text: str) -> str:

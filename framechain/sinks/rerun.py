@@ -358,7 +358,7 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
         log_camera(rec, timeline, result, clock, view, opts, rows)
         log_detections(rec, overlay, result, clock, view, rows)
     as_run = _as_run_points(rec, run, opts, rows)
-    log_points(rec, result, clock, as_run, opts, rows, views)
+    log_points(rec, result, clock, as_run, opts, rows, views, error_color=overlay.color)
     log_series(rec, result, clock, as_run, rows)
     for view in views:
         log_images(rec, timeline, result, clock, view, opts, rows)

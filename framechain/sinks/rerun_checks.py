@@ -19,7 +19,7 @@ from framechain.sinks.checks_view import (
     label_rows,
     label_summary,
 )
-from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR
+from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -29,7 +29,7 @@ CURVES_ROOT = "/curves"
 #: The timeline of the latency curves' series: the time offset of the pose searched.
 OFFSET_TIMELINE = "pose_offset"
 #: The legend's colours: the error red, the estimate (the correction found) purple, the bounds grey.
-CURVE_COLOR = ERROR_COLOR
+CURVE_COLOR = RECORDED_ERROR_COLOR
 ESTIMATE_COLOR = CORRECTED_COLOR
 
 

@@ -19,6 +19,7 @@ from framechain.sinks.colors import (
     ERROR_COLOR,
     HOP_COLORS,
     RECOMPUTED_COLOR,
+    RECORDED_ERROR_COLOR,
     REFERENCE_COLOR,
     legend_text,
 )
@@ -36,10 +37,11 @@ if TYPE_CHECKING:
 
 def log_points(
     rec: rr.RecordingStream, result: ReplayResult, clock: Clock, as_run: Mapping[str, FloatArray], opts: RerunOptions,
-    rows: dict[str, int], views: list[CameraView] | None = None,
+    rows: dict[str, int], views: list[CameraView] | None = None, error_color: tuple[int, int, int] = ERROR_COLOR,
 ) -> None:
     """Recomputed and as-run points at every hop, the reference, arrows recomputed -> as-run (camera-frame
-    points per camera of a rig, ``views``)."""
+    points per camera of a rig, ``views``) in ``error_color``: the colour of the finding that explains them, as
+    the line between the two points in the image (red when none does)."""
     import rerun as rr
 
     frames = result.frames
@@ -90,7 +92,7 @@ def log_points(
             entity, indexes=clock.obs_indexes(result, both),
             columns=rr.Arrows3D.columns(
                 origins=recomputed[leaf][both], vectors=delta,
-                colors=np.tile(np.array(ERROR_COLOR, dtype=np.uint8), (both.size, 1)),
+                colors=np.tile(np.array(error_color, dtype=np.uint8), (both.size, 1)),
                 radii=np.full(both.size, radius / 4, dtype=np.float32),
                 labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
                 show_labels=[False] * both.size,  # on hover: the 3D view's labels name the chain's frames alone
@@ -157,7 +159,7 @@ def log_explained_error(rec: rr.RecordingStream, result: ReplayResult, clock: Cl
     what = {"logged_hops": "the as-run world point", "target": "the as-run target", "reference": "the reference",
             "static_spread": "the static target's own position", "cross_camera": "the other cameras' sightings"}
     obs_rows = rows_of(result.observations.obs_id, attribution.inputs.obs_id)
-    series = [("world_error", attribution.error_before, ERROR_COLOR,
+    series = [("world_error", attribution.error_before, RECORDED_ERROR_COLOR,
                f"world error against {what.get(attribution.metric, 'the evidence')} (mm)")]
     if attribution.findings:
         series.append(("corrected", attribution.error_after, CORRECTED_COLOR, "world error, findings corrected (mm)"))

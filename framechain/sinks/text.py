@@ -33,7 +33,7 @@ class FindingCells(NamedTuple):
     confidence: str
     evidence: str
     fix: str
-    strength: str = "strong"  # "weak": its interval holds no fault, its confidence is low or it is under its bound
+    strength: str = "strong"  # "weak", "note" (under the tolerance: no action needed) or "undetermined"
     camera: str = ""  # the camera the finding concerns ("" for the chain as a whole)
 
 
@@ -55,9 +55,12 @@ class FindingView:
                             camera=f.camera or "")
 
     def error(self) -> str:
-        """The error the finding explains: millimetres, or deg/s of a camera's rotation rate."""
-        f = self.finding
-        return mm(f.error_m) if f.error_unit == "m" else f"{f.error_m:.2f} {f.error_unit}"
+        """The error the finding explains (its effect): millimetres, or deg/s of a camera's rotation rate."""
+        return self.finding.effect_text()
+
+    def fix_label(self) -> str:
+        """What its last sentence is: ``fix`` (a change to make), ``note`` (no action needed) or ``undetermined``."""
+        return {"note": "note", "undetermined": "undetermined"}.get(self.finding.strength, "fix")
 
     def text(self) -> str:
         """One line: fault, hop, estimate, share of the error, evidence and fix."""
@@ -66,7 +69,7 @@ class FindingView:
         if f.evidence:
             line += f" Evidence: {f.evidence.rstrip('.')}."
         if f.fix:
-            line += f" Fix: {f.fix.rstrip('.')}."
+            line += f" {self.fix_label().capitalize()}: {f.fix.rstrip('.')}."
         return line
 
     def headline(self) -> str:
@@ -76,8 +79,10 @@ class FindingView:
         if self.finding.interval:
             estimate += f" (95% interval {c.interval})"
         size = f"{c.error}, {self.finding.share * 100:.0f}% of the error, confidence {c.confidence}"
-        weak = f"weak ({'; '.join(self.finding.weak_because)}): " if self.finding.strength == "weak" else ""
-        return f"{weak}{c.fault} on {c.hop}{self.on_camera()}; {estimate}; {size}."
+        f = self.finding
+        lead = {"weak": f"weak ({'; '.join(f.weak_because)}): ", "note": "note (no action needed): ",
+                "undetermined": f"undetermined ({'; '.join(f.undetermined_because)}): "}.get(f.strength, "")
+        return f"{lead}{c.fault} on {c.hop}{self.on_camera()}; {estimate}; {size}."
 
     def on_camera(self) -> str:
         """`` on camera <frame>`` for a finding that concerns one camera, else ""."""

@@ -38,9 +38,16 @@ def _size(bound: dict[str, Any]) -> float:
     return float(value)
 
 
-def _finding(result: Any, family: str, hop: str) -> dict[str, Any] | None:
+def _finding(result: Any, family: str, hop: str, *, actionable: bool = False) -> dict[str, Any] | None:
+    """The finding of the family at the hop (``actionable``: only one worth acting on, not a note)."""
     faults = ("rotation_error", "missing_rotation") if family == "rotation_error" else (family,)
-    return next((f for f in result.to_json()["findings"] if f["fault"] in faults and f["hop"] == hop), None)
+    return next((f for f in result.to_json()["findings"] if f["fault"] in faults and f["hop"] == hop
+                 and (f["actionable"] or not actionable)), None)
+
+
+def _statistical_size(bound: dict[str, Any]) -> float:
+    (value,) = bound["statistical_min_detectable"].values()
+    return float(value)
 
 
 # -- a camera that does not move ----------------------------------------------------------------
@@ -67,15 +74,16 @@ def test_a_fixed_camera_over_a_static_target_cannot_show_latency_or_its_mount() 
     result = attribute(scene.timeline, scene.chain, bootstrap=0)
     bounds = _bounds(result)
     for key in (("latency", "body_to_world"), ("rotation_error", "camera_to_body"),
-                ("depth_scale", "pixel_to_camera"), ("intrinsics", "pixel_to_camera")):
+                ("translation_error", "camera_to_body"), ("depth_scale", "pixel_to_camera"),
+                ("intrinsics", "pixel_to_camera")):
         assert bounds[key]["observable"] is False, bounds[key]
         assert bounds[key]["min_detectable"] is None
         assert "does not move" in bounds[key]["why"]
     assert _finding(result, "rotation_error", "camera_to_body") is None
     assert result.verdict.startswith("Nothing could be checked")
     assert ("not observable here: pose latency (the body does not move while the targets are seen); mount rotation, "
-            "depth scale and intrinsics scale (the camera does not move relative to the static targets)"
-            ) in result.verdict
+            "mount translation, depth scale and intrinsics scale (the camera does not move relative to the static "
+            "targets)") in result.verdict
     # The same turn seen from a moving robot is found, at its size.
     moving = generate(SceneSpec(seed=4, duration_s=6.0, evidence="static", faults=(turned,)))
     found = _finding(attribute(moving.timeline, moving.chain, bootstrap=0), "rotation_error", "camera_to_body")
@@ -89,7 +97,8 @@ def test_without_evidence_nothing_could_be_checked() -> None:
     doc = attribute(scene.timeline, chain, bootstrap=0).to_json()
     assert doc["bounds"]
     assert all(b["observable"] is False and b["min_detectable"] is None for b in doc["bounds"])
-    assert {b["fault"] for b in doc["bounds"]} == {"latency", "rotation_error", "depth_scale", "intrinsics"}
+    assert {b["fault"] for b in doc["bounds"]} == {"latency", "rotation_error", "translation_error", "depth_scale",
+                                                   "intrinsics"}
     assert "nothing could be checked" in doc["verdict"]
 
 
@@ -103,6 +112,9 @@ def _scene_fault(family: str, where: str, size: float, sign: float, axis_link: l
         axis = Rotation.from_euler("y", pitch_deg, degrees=True).apply(np.asarray(axis_link, dtype=float))
         return InjectedFault(Fault.ROTATION_ERROR, where,  # type: ignore[arg-type]
                              {"angle_deg": sign * size, "axis": axis.tolist()})
+    if family == "translation_error":  # the bound's direction is in the mount's parent, base_link, as the generator's
+        return InjectedFault(Fault.TRANSLATION_ERROR, where,  # type: ignore[arg-type]
+                             {"offset_m": (sign * size * np.asarray(axis_link, dtype=float)).tolist()})
     if family == "depth_scale":
         return InjectedFault(Fault.DEPTH_SCALE, where, {"factor": 1.0 + sign * size})  # type: ignore[arg-type]
     # The bound is that of the harder of K's variants to see: another lens (the focal length alone).
@@ -113,22 +125,31 @@ def _scene_fault(family: str, where: str, size: float, sign: float, axis_link: l
 @pytest.mark.parametrize(("level", "where", "seed"), [("static", "data", 1), ("hops", "robot", 2)])
 def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(level: str, where: str,
                                                                               seed: int) -> None:
+    """Each family's bound is the larger of what the noise allows and what moves the error by the 1 mm tolerance: a
+    fault twice it is a finding to act on, one half of it is not (at most a note); and half the noise's own bound is
+    no finding at all."""
     spec = SceneSpec(seed=seed, duration_s=6.0, evidence=level)  # type: ignore[arg-type]
     clean = generate(spec)
     bounds = _bounds(attribute(clean.timeline, clean.chain, bootstrap=0))
     observable = {k: b for k, b in bounds.items() if b["observable"]}
-    assert {k[0] for k in observable} == {"latency", "rotation_error", "depth_scale", "intrinsics"}
+    assert {k[0] for k in observable} == {"latency", "rotation_error", "translation_error", "depth_scale",
+                                          "intrinsics"}
     found_at_half = 0
     for (family, hop), bound in observable.items():
-        size = _size(bound)
-        for factor, sign in ((2.0, 1.0), (0.5, -1.0)):
-            fault = _scene_fault(family, where, factor * size, sign, bound.get("axis"), spec.mount_pitch_deg)
+        size, statistical = _size(bound), _statistical_size(bound)
+        assert statistical <= size
+        assert bound["limited_by"] == ("noise" if statistical == size else "tolerance")
+        cases = [(2.0 * size, 1.0, True), (0.5 * size, -1.0, True)]
+        if statistical < size:
+            cases.append((0.5 * statistical, 1.0, False))
+        for injected, sign, actionable in cases:
+            fault = _scene_fault(family, where, injected, sign, bound.get("axis"), spec.mount_pitch_deg)
             scene = generate(replace(spec, faults=(fault,)))
-            finding = _finding(attribute(scene.timeline, scene.chain, bootstrap=0), family, hop)
-            if factor == 2.0:
-                assert finding is not None, (family, factor * size)
+            finding = _finding(attribute(scene.timeline, scene.chain, bootstrap=0), family, hop, actionable=actionable)
+            if injected > size:
+                assert finding is not None, (family, injected)
                 if family == "latency":  # the estimate within half the bound of the truth
-                    assert finding["estimate"]["offset_s"] == pytest.approx(sign * factor * size, abs=size / 2)
+                    assert finding["estimate"]["offset_s"] == pytest.approx(sign * injected, abs=size / 2)
             else:
                 found_at_half += finding is not None
     assert found_at_half <= 1
@@ -157,7 +178,8 @@ def test_stairs_odometry_restamped_by_twice_the_bound_is_found_within_half_of_it
     shift_s = factor * stairs_bound
     bag = restamped_bag(realdata, tmp_path / "restamped.bag", round(shift_s * 1e9))
     chain = _chain(realdata)
-    finding = _finding(attribute(load_log(bag, chain).timeline, chain, bootstrap=0), "latency", "body_to_world")
+    finding = _finding(attribute(load_log(bag, chain).timeline, chain, bootstrap=0), "latency", "body_to_world",
+                       actionable=True)
     if factor == 2.0:
         # Odometry stamped late by the shift: the pose that fits a detection at tau is the one stamped tau + shift.
         assert finding is not None
@@ -267,4 +289,5 @@ def test_a_real_fixed_camera_over_static_markers_cannot_show_latency_or_its_moun
     assert result.findings == ()
     assert result.verdict.startswith("Nothing could be checked")
     assert "not observable here: pose latency" in result.verdict
-    assert "mount rotation, depth scale and intrinsics scale (the camera does not move" in result.verdict
+    assert "mount rotation, mount translation, depth scale and intrinsics scale (the camera does not move" in \
+        result.verdict

@@ -61,10 +61,11 @@ def test_the_bounds_sentence_leaves_out_the_families_found() -> None:
               Bound(HopName.CAMERA_TO_BODY, Fault.ROTATION_ERROR, True, {"angle_deg": 0.3}, ""),
               Bound(HopName.PIXEL_TO_CAMERA, Fault.DEPTH_SCALE, True, {"factor": 0.01}, ""),
               Bound(HopName.PIXEL_TO_CAMERA, Fault.INTRINSICS, False, None, "bearing only")]
-    assert bounds_sentence(bounds) == ("No fault above 4 ms pose latency, 0.3 deg mount rotation, 1% depth scale; "
-                                       "not observable here: intrinsics scale (bearing only).")
+    assert bounds_sentence(bounds) == ("No fault above 4 ms pose latency, 0.3 deg mount rotation and 1% depth scale "
+                                       "(set by the noise); not observable here: intrinsics scale (bearing only).")
     assert bounds_sentence(bounds, [(Fault.MISSING_ROTATION, HopName.CAMERA_TO_BODY, None)]) == (
-        "No other fault above 4 ms pose latency, 1% depth scale; not observable here: intrinsics scale (bearing only).")
+        "No other fault above 4 ms pose latency and 1% depth scale (set by the noise); not observable here: "
+        "intrinsics scale (bearing only).")
 
 
 def test_the_bounds_sentence_names_each_camera_once_and_leaves_out_only_that_camera_s_findings() -> None:
@@ -75,11 +76,13 @@ def test_the_bounds_sentence_names_each_camera_once_and_leaves_out_only_that_cam
               Bound(HopName.CAMERA_TO_BODY, Fault.ROTATION_ERROR, False, None, "front is fixed in world",
                     camera="front")]
     assert bounds_sentence(bounds) == (
-        "No fault above 7 ms camera latency and 1.2 deg mount rotation on camera wrist; not observable here: camera "
+        "No fault above 7 ms camera latency and 1.2 deg mount rotation (set by the noise) on camera wrist; not "
+        "observable here: camera "
         "latency and mount rotation on camera front (front is fixed in world).")
     # A latency found on the wrist camera leaves out the wrist's latency bound only.
     assert bounds_sentence(bounds, [(*latency, "wrist")]).startswith(
-        "No other fault above 1.2 deg mount rotation on camera wrist; not observable here: camera latency and")
+        "No other fault above 1.2 deg mount rotation (set by the noise) on camera wrist; not observable here: camera "
+        "latency and")
     assert bounds[0].to_json()["camera"] == "wrist"
 
 
@@ -96,10 +99,12 @@ def test_a_rig_s_bounds_are_said_per_camera() -> None:
               on("cam0", Fault.LATENCY, HopName.BODY_TO_WORLD, None, gauge),
               on("cam0", Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, None, gauge)]
     assert bounds_sentence(bounds) == (
-        "No fault above 25 ms latency and 2 deg mount rotation on camera cam1; 9.5 deg mount rotation on camera cam2; "
-        "not observable here: latency and mount rotation on camera cam0 (cam0 sets the gauge of its pair with cam1).")
+        "No fault above 25 ms latency and 2 deg mount rotation (set by the noise) on camera cam1; 9.5 deg mount "
+        "rotation (set by the noise) on camera cam2; not observable here: latency and mount rotation on camera cam0 "
+        "(cam0 sets the gauge of its pair with cam1).")
     assert bounds_sentence(bounds, [(Fault.ROTATION_ERROR, HopName.CAMERA_TO_BODY, "cam2")]).startswith(
-        "No other fault above 25 ms latency and 2 deg mount rotation on camera cam1; not observable here")
+        "No other fault above 25 ms latency and 2 deg mount rotation (set by the noise) on camera cam1; not "
+        "observable here")
     assert bounds[0].to_json()["camera"] == "cam1"
     assert "camera" not in Bound(HopName.BODY_TO_WORLD, Fault.LATENCY, True, {"offset_s": 0.004}, "").to_json()
 
@@ -123,7 +128,8 @@ def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_share
     assert at_zero == pytest.approx(float(np.nanmedian(result.error_before)), rel=1e-9)
     assert at_zero - at_estimate == pytest.approx(finding.error_m, rel=1e-6)
     doc = result.to_json()
-    assert {c["fault"] for c in doc["curves"]} == {"latency", "rotation_error", "depth_scale", "intrinsics"}
+    assert {c["fault"] for c in doc["curves"]} == {"latency", "rotation_error", "translation_error", "depth_scale",
+                                                   "intrinsics"}
     latency_json = next(c for c in doc["curves"] if c["fault"] == "latency")
     assert latency_json["key"] == "offset_s"
     assert len(latency_json["x"]) == len(latency_json["median_error_m"])

@@ -120,12 +120,13 @@ def _bound(result: Attribution, camera: str, fault: Fault) -> Bound:
 @pytest.mark.slow
 @pytest.mark.parametrize("pose", ["none", "moving"])
 def test_every_camera_has_its_bounds(pose: str) -> None:
-    """Three cameras that all see one another's tags: each camera's four sized families observable, bounded on
+    """Three cameras that all see one another's tags: each camera's five sized families observable, bounded on
     that camera; with a moving pose the pose's own latency too (no camera)."""
     scene, result = _attributed(pose, "none")
     for k in range(BASE.cameras):
         mine = {b.fault: b for b in result.bounds if b.camera == scene.frame(k)}
-        assert set(mine) == {Fault.LATENCY, Fault.ROTATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS}
+        assert set(mine) == {Fault.LATENCY, Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR, Fault.DEPTH_SCALE,
+                             Fault.INTRINSICS}
         assert all(b.observable and b.size is not None and b.size > 0 for b in mine.values())
         assert f"on camera {scene.frame(k)}" in result.verdict
     pose_latency = [b for b in result.bounds if not b.camera]

@@ -169,7 +169,8 @@ def test_unknown_chain_key_is_one_line_error(latency_log: tuple[Path, Path], tmp
     (("body: base_link", "body: base_lnk"),
      "body frame 'base_lnk' is in no transform of the log; did you mean 'base_link'"),
     (("static_target", "reference_point: [a, b, c]\n  static_target"), "reference_point must be [x, y, z]"),
-    (("body: base_link", "body: map"), "three different frames"),
+    # world may equal body (a body that does not move), never the camera
+    (("body: base_link", "body: camera_optical_frame"), "must differ from body 'camera_optical_frame'"),
 ])
 def test_chain_mistakes_are_named(latency_log: tuple[Path, Path], tmp_path: Path, edit: tuple[str, str],
                                   expected: str, capsys: pytest.CaptureFixture[str]) -> None:
@@ -226,8 +227,9 @@ def test_report_html_is_self_contained(latency_log: tuple[Path, Path], tmp_path:
     assert main(["report", str(log), "--chain", str(chain), "--out", str(out), "--bootstrap", "5", "-q"]) == 0
     page = (out / "report.html").read_text()
     assert "latency at body_to_world" in page  # the verdict comes first
-    # four figures, and the error against each fitted family's size (latency, mount rotation, depth, intrinsics)
-    assert page.count("data:image/png;base64,") == 4 + 4
+    # four figures, and the error against each fitted family's size (latency, mount rotation and translation, depth,
+    # intrinsics)
+    assert page.count("data:image/png;base64,") == 4 + 5
     assert "Median error against the pose latency" not in page  # in the PNG, not the page: its caption is
     assert "Pose latency: the error against the logged hops" in page
     assert "http://" not in page

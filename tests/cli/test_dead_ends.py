@@ -378,8 +378,9 @@ def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path
     assert needs["intrinsics"]["status"] == "missing"
     assert needs["intrinsics"]["key"].startswith(f"calibration: {{file: cameras.yaml, camera: {cam}}}")
     assert needs["depth"]["status"] == "missing"
-    # tagslam.yaml's default_tag_size, with where it was found (issue 19, item 2)
-    assert needs["depth"]["key"] == "evidence.tag_size_m: 0.16  (default_tag_size in tagslam.yaml beside the log)"
+    # tagslam.yaml's default_tag_size and each tag's own size, with where they were found
+    assert needs["depth"]["key"].startswith("evidence.tag_size_m: {default: 0.16, 100: 0.1, ")
+    assert needs["depth"]["key"].endswith("(default_tag_size and each tag's size in tagslam.yaml beside the log)")
     assert needs["mount"]["status"] == "missing"
     assert needs["mount"]["key"].startswith("mounts: [{parent: basalt_pose_frame, child: ")
     assert needs["pose"]["status"] == "found"

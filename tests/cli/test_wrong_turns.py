@@ -101,7 +101,10 @@ def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[s
 def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = _real(STAIRS / "tag_detections.bag")
     needs = _needs(bag, capsys)
-    assert needs["depth"]["key"] == "evidence.tag_size_m: 0.16  (default_tag_size in tagslam.yaml beside the log)"
+    # tagslam.yaml's default and the tags it sizes otherwise (100-108 are 0.10 m)
+    assert needs["depth"]["key"] == ("evidence.tag_size_m: {default: 0.16, 100: 0.1, 101: 0.1, 102: 0.1, 103: 0.1, "
+                                     "104: 0.1, 105: 0.1, 106: 0.1, 107: 0.1, 108: 0.1}  (default_tag_size and each "
+                                     "tag's size in tagslam.yaml beside the log)")
     assert needs["intrinsics"]["key"] == ("calibration: {file: cameras.yaml, camera: cam1}  (cameras.yaml beside the "
                                           "log: cam1's tagtopic is /t265/fisheye2/tags)")
     # Beside a chain file: its tag size, named as that file's, and how to use the whole chain.

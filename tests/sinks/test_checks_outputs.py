@@ -86,7 +86,8 @@ def test_the_cli_says_a_fixed_camera_could_check_nothing(tmp_path: Path, capsys:
     assert "not observable" in out  # the bounds table
     doc = yaml.safe_load((tmp_path / "out" / "attribution.json").read_text())
     assert {b["fault"]: b["observable"] for b in doc["bounds"]} == {
-        "latency": False, "rotation_error": False, "depth_scale": False, "intrinsics": False}
+        "latency": False, "rotation_error": False, "translation_error": False, "depth_scale": False,
+        "intrinsics": False}
     page = (tmp_path / "out" / "report.html").read_text()
     assert "class='verdict'" in page  # not the green "clean" box: nothing could be checked
 

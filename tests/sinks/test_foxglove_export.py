@@ -285,3 +285,43 @@ def test_export_without_findings_still_writes_the_chain(realdata: Path, tmp_path
     err = capsys.readouterr().err
     assert "not attributed: static target: no object seen at least 3 times" in err
     assert out.stat().st_size > 0
+
+
+def test_a_fisheye_calibration_is_exported_as_foxglove_s_kannala_brandt(realdata: Path, tmp_path: Path) -> None:
+    """The stairs camera's Kalibr ``equidistant`` model (OpenCV's fisheye) is Foxglove's ``kannala_brandt``, with
+    cameras.yaml's four coefficients; "equidistant" is no model Foxglove knows."""
+    import yaml
+
+    stairs = realdata / "tagslam_stairs"
+    chain = tmp_path / "chain.yaml"
+    chain.write_text(f"""
+frames: {{camera: t265_fisheye1_optical_frame, body: basalt_pose_frame, world: world}}
+topics: {{detections: /t265/fisheye1/tags, odometry: /vio_node/odom}}
+calibration: {{file: {stairs / 'cameras.yaml'}, camera: cam0}}
+mounts: [{{parent: basalt_pose_frame, child: t265_fisheye1_optical_frame, xyz: [0.0107, 0, 0], rotvec: [0, 0, 3.14]}}]
+evidence: {{tag_size_m: 0.16}}
+""")
+    out = tmp_path / "annotated.mcap"
+    assert main(["export", str(stairs / "tag_detections.bag"), "--chain", str(chain), "--out", str(out),
+                 "--no-attribute", "-q"]) == 0
+    _, added, _ = _read(out)
+    (_, calibration), = added[CALIBRATION_TOPIC]
+    cam0 = yaml.safe_load((stairs / "cameras.yaml").read_text())["cam0"]
+    assert cam0["distortion_model"] == "equidistant"
+    assert calibration.distortion_model == "kannala_brandt"
+    np.testing.assert_allclose(list(calibration.D), cam0["distortion_coeffs"])
+
+
+def test_a_log_without_a_camera_gets_no_annotation_hints(realdata: Path, tmp_path: Path,
+                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """evo's tf_example.bag (odometry only): nothing is annotated, so no line points to annotations or a calibration
+    the file does not hold."""
+    out = tmp_path / "annotated.mcap"
+    assert main(["export", str(realdata / "evo" / "tf_example.bag"), "--out", str(out), "-q"]) == 0
+    printed = capsys.readouterr().out
+    copied, added, _ = _read(out)
+    assert ANNOTATIONS_TOPIC not in added
+    assert CALIBRATION_TOPIC not in added
+    assert "annotations" not in printed
+    assert CALIBRATION_TOPIC not in printed
+    assert sum(copied.values()) == 518

@@ -30,7 +30,7 @@ from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.replay import ReplayResult, TransformBuffer, replay
-from framechain.sinks.colors import DETECTION_COLOR
+from framechain.sinks.colors import DETECTION_COLOR, FAULT_COLORS
 from framechain.sinks.rerun import (
     FindingView,
     OutputMode,
@@ -273,6 +273,11 @@ def test_as_run_points_are_matched_and_offset(scene: Scene) -> None:
     np.testing.assert_allclose(arrows, np.tile(BODY_OFFSET, (ok.size, 1)), atol=1e-6)
     camera = np.array([r[0] for r in _rows(scene.chunks, "/points/error/camera", "Arrows3D:vectors")])
     np.testing.assert_allclose(camera, 0.0, atol=1e-7)  # the camera hop agrees: zero-length arrows
+    # The arrows take the colour of the finding that explains them, as the line in the image does (red is only an
+    # error no finding explains): the latency's gold, packed RGBA.
+    colours = {r[0] for r in _rows(scene.chunks, "/points/error/body", "Arrows3D:colors")}
+    r, g, b = FAULT_COLORS["latency"]
+    assert colours == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
 
 
 def test_used_transforms_logged_at_observation_times(scene: Scene) -> None:

@@ -15,6 +15,7 @@ import pytest
 from rerun.chunk import RrdReader
 from test_rerun import T0, _read, _rows, _run, _scene_timeline
 
+from framechain.catalogue import Fault
 from framechain.sinks.colors import (
     AS_RUN_COLOR,
     CORRECTED_COLOR,
@@ -24,6 +25,7 @@ from framechain.sinks.colors import (
     HOP_COLORS,
     LEGEND,
     RECOMPUTED_COLOR,
+    RECORDED_ERROR_COLOR,
     REFERENCE_COLOR,
     STALE_COLOR,
     USED_PIXEL_COLOR,
@@ -170,3 +172,12 @@ def test_one_legend_no_colour_means_two_things() -> None:
     assert "orange: as-run" in text
     assert "purple: corrected" in text
     assert "green: the detection" in text
+    # One palette: a fault's colour, a hop's and a meaning's are never the same, every fault has one, and the
+    # legend names each (the lines between points and the hop series are explained, not only the meanings).
+    assert len(set(HOP_COLORS.values())) == len(HOP_COLORS)
+    assert not set(HOP_COLORS.values()) & set(FAULT_COLORS.values())
+    assert set(FAULT_COLORS) == {f.value for f in Fault}
+    for name, rgb in [*FAULT_COLORS.items(), *((h.value, c) for h, c in HOP_COLORS.items())]:
+        assert f"{name} {'#{:02x}{:02x}{:02x}'.format(*rgb)}" in text
+    # "as recorded" is not drawn in red: red is an error no finding explains
+    assert RECORDED_ERROR_COLOR not in (ERROR_COLOR, STALE_COLOR)

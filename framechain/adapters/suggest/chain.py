@@ -123,8 +123,8 @@ def suggest(loaded: LoadedLog) -> SuggestedChain:
 
     Camera: the frame of the detections (the topic with the most), else a CameraInfo's (colour
     first), else an optical frame of the frame tree. Body: base_link, base_footprint, another
-    ``base`` frame, else the child of a pose topic's edge. World: map, odom, else the root of the
-    body's tree. Detections, depth, CameraInfo and pose topics follow those frames.
+    ``base`` frame, else the child of a pose topic's edge. World: map, odom, a frame named world, else the
+    root of the body's tree. Detections, depth, CameraInfo and pose topics follow those frames.
     """
     facts = log_facts(loaded)
     placeholders: dict[str, str] = {}
@@ -140,7 +140,7 @@ def suggest(loaded: LoadedLog) -> SuggestedChain:
                                 "topic): name it and add mounts: (camera -> body) or urdf:")
     world = _world(loaded.timeline.transforms, facts, camera, body)
     if world is None:
-        placeholders["world"] = ("no world frame in this log (map, odom, or the root of the body's tree): "
+        placeholders["world"] = ("no world frame in this log (map, odom, world, or the root of the body's tree): "
                                  "name it and add topics.odometry:")
     # A slot the log cannot fill holds a name in capitals, as the keys to add do: never a real-looking
     # frame (camera_optical_frame, base_link, map) the log does not have.
@@ -203,10 +203,10 @@ def _body(facts: LogFacts, camera: str | None) -> str | None:
 
 
 def _world(tf: TransformTable, facts: LogFacts, camera: str | None, body: str | None) -> str | None:
-    """map, odom, else the root of the body's tree; never the camera or the body frame (a pose topic
-    ``world -> odom`` makes odom the body: its world is then world, not odom again)."""
+    """map, odom, a frame named world, else the root of the body's tree; never the camera or the body frame (a
+    pose topic ``world -> odom`` makes odom the body: its world is then world, not odom again)."""
     taken = {camera, body}
-    for name in ("map", "odom"):
+    for name in ("map", "odom", "world"):
         if name in facts.frames and name not in taken:
             return name
     if body is None:

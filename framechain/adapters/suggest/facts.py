@@ -171,7 +171,7 @@ class BesideHint:
         return f"{self.key}  ({self.source})"
 
 
-def _from_file(name: str, what: str) -> str:
+def from_file(name: str, what: str) -> str:
     tail = f": `--chain {name}` uses that chain" if is_chain_file(name) else ""
     return f"{what} in {name} beside the log{tail}"
 
@@ -185,7 +185,7 @@ def calibration_hint(beside: list[tuple[str, Any]], detection_topic: str | None)
         cams = {str(k): v for k, v in raw.items() if isinstance(v, Mapping) and isinstance(v.get("intrinsics"), list)}
         if not cams:
             if isinstance(raw.get("camera_matrix"), Mapping):
-                return BesideHint(f"calibration: {{file: {name}}}", _from_file(name, "camera_matrix"))
+                return BesideHint(f"calibration: {{file: {name}}}", from_file(name, "camera_matrix"))
             continue
         hit = [k for k, v in cams.items()
                if detection_topic and detection_topic in (v.get("tagtopic"), v.get("rostopic"))]
@@ -199,34 +199,4 @@ def calibration_hint(beside: list[tuple[str, Any]], detection_topic: str | None)
                           f"{name} beside the log holds {', '.join(sorted(cams))}, none with "
                           f"{detection_topic or 'the detections topic'} as rostopic or tagtopic: pick the "
                           "detections' camera")
-    return None
-
-
-def tag_size_hint(beside: list[tuple[str, Any]]) -> BesideHint | None:
-    """A tag size written in a config beside the log (TagSLAM's ``default_tag_size``, a chain file's
-    ``tag_size_m``), as ``evidence.tag_size_m: SIZE`` with the file and key it came from."""
-
-    def find(value: Any, depth: int = 0) -> tuple[float, str] | None:
-        if depth > 6:
-            return None
-        if isinstance(value, Mapping):
-            for key in ("default_tag_size", "tag_size", "tag_size_m"):
-                size = value.get(key)
-                if isinstance(size, Mapping):  # a chain's {default: 0.16, 100: 0.1}
-                    size = size.get("default")
-                if isinstance(size, int | float) and not isinstance(size, bool) and 0 < size < 10:
-                    return float(size), key
-            for v in value.values():
-                if (hit := find(v, depth + 1)) is not None:
-                    return hit
-        elif isinstance(value, list):
-            for v in value:
-                if (hit := find(v, depth + 1)) is not None:
-                    return hit
-        return None
-
-    for name, raw in beside:
-        if (found := find(raw)) is not None:
-            size, key = found
-            return BesideHint(f"evidence.tag_size_m: {size:g}", _from_file(name, key))
     return None

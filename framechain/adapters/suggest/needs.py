@@ -25,9 +25,10 @@ from framechain.adapters.suggest.facts import (
     frame_path,
     log_facts,
     path_text,
-    tag_size_hint,
 )
 from framechain.adapters.suggest.marker_probe import MarkerProbe, probe_markers
+from framechain.adapters.suggest.mount_hints import tagslam_mount_hint
+from framechain.adapters.suggest.tag_sizes import same_sizes, tag_size_hint, tag_sizes
 from framechain.adapters.suggest.typos import did_you_mean, or_list
 from framechain.config.chain import ChainConfig, ChainFrames
 
@@ -101,7 +102,7 @@ def chain_needs(
     needs.append(_intrinsics_need(chain, holes, facts, loaded, beside, detections))
     needs.append(det_need)
     needs.append(_depth_need(chain, loaded, facts, beside, detections))
-    needs.append(_mount_need(frames, holes, facts))
+    needs.append(_mount_need(frames, holes, facts, beside, detections))
     needs.append(_pose_need(chain, holes, facts))
     needs.append(_evidence_need(chain, detections, facts))
     return needs
@@ -158,12 +159,18 @@ def _camera_need(camera: str, holes: Mapping[str, str], facts: LogFacts, loaded:
         return ChainNeed("camera frame", NeedStatus.MISSING, holes["camera"],
                          f"frames: {{camera: {PLACEHOLDER_FRAMES['camera']}}}")
     if camera not in facts.frames:
+        close = did_you_mean(camera, facts.frames)
+        meant = close[0] if close else "CAMERA_OPTICAL_FRAME"
         return ChainNeed("camera frame", NeedStatus.MISSING, f"{camera} is in no transform, CameraInfo or detection "
-                         "of the log", "frames: {camera: CAMERA_OPTICAL_FRAME}")
+                         f"of the log{_did_you_mean(close)}", f"frames: {{camera: {meant}}}")
     tl = loaded.timeline
     where = sorted({str(s) for s in tl.observations.source[tl.observations.camera_frame == camera].tolist()})
+    # A frame only the detections name is found, but nothing connects it yet: the mount must (it is the real gap).
+    in_tree = any(camera in (e.parent, e.child) for e in facts.edges)
+    unlinked = "" if in_tree else "; no transform of the log names it: the mount must connect it to the body"
     if where:
-        return ChainNeed("camera frame", NeedStatus.FOUND, f"{camera} (header.frame_id of {', '.join(where)})")
+        return ChainNeed("camera frame", NeedStatus.FOUND, f"{camera} (header.frame_id of {', '.join(where)}"
+                         f"{unlinked})")
     cams = sorted({str(s) for s in tl.cameras.source[tl.cameras.frame == camera].tolist()})
     return ChainNeed("camera frame", NeedStatus.FOUND, f"{camera}" + (f" (from {', '.join(cams)})" if cams else ""))
 
@@ -309,6 +316,12 @@ def _depth_need(
     tag_size = chain.evidence.tag_size_m
     markers = chain.evidence.markers
     if tag_size is not None and (msgtype in CORNER_DETECTION_TYPES or not msgtype):  # none named, or not in the log
+        others = [(name, raw) for name, raw in beside if name != chain.origin]  # not the chain being checked
+        beside_sizes = tag_size_hint(others)
+        if beside_sizes is not None and not same_sizes(tag_size, tag_sizes(others)):
+            # A tag declared at the wrong size looks like a moving tag: name the sizes the files give.
+            return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP), but "
+                             "the sizes beside the log differ", beside_sizes.as_key())
         return ChainNeed("depth", NeedStatus.FOUND, f"tag corners and evidence.tag_size_m {tag_size} (PnP)")
     if markers is not None and detections == chain.topics.image:
         if markers.size_m is not None:
@@ -377,21 +390,31 @@ def _rig_need(piece: str, lacking: list[str], found: str, key: str) -> ChainNeed
     return ChainNeed(piece, NeedStatus.FOUND, found)
 
 
+def _did_you_mean(close: list[str]) -> str:
+    return f"; did you mean {or_list(close)}?" if close else ""
+
+
 def _mount_key(body: str, camera: str) -> str:
     return (f"mounts: [{{parent: {body}, child: {camera}, xyz: [X, Y, Z], quat_xyzw: [QX, QY, QZ, QW]}}]; "
             "or urdf: ROBOT.urdf")
 
 
-def _mount_need(frames: ChainFrames, holes: Mapping[str, str], facts: LogFacts) -> ChainNeed:
+def _mount_need(frames: ChainFrames, holes: Mapping[str, str], facts: LogFacts, beside: list[tuple[str, Any]],
+                detections: str | None) -> ChainNeed:
     body = PLACEHOLDER_FRAMES["body"] if "body" in holes else frames.body
     camera = PLACEHOLDER_FRAMES["camera"] if "camera" in holes else frames.camera
     if "camera" in holes or "body" in holes:
         return ChainNeed("mount", NeedStatus.MISSING, "no camera -> body path without both frames",
                          _mount_key(body, camera))
     path = frame_path(facts.edges, frames.body, frames.camera)
+    if path is None and frames.body not in facts.frames and (close := did_you_mean(frames.body, facts.frames)):
+        return ChainNeed("mount", NeedStatus.MISSING, f"the body {frames.body} is in no transform of the log"
+                         f"{_did_you_mean(close)}", f"frames: {{body: {close[0]}}}")
     if path is None:
+        hint = tagslam_mount_hint(beside, body, camera, detections)
         return ChainNeed("mount", NeedStatus.MISSING, f"no path from the camera frame {frames.camera} to the body "
-                         f"{frames.body}", _mount_key(body, camera))
+                         f"{frames.body}", _mount_key(body, camera) if hint is None else
+                         f"{hint.as_key()}; or urdf: ROBOT.urdf")
     return ChainNeed("mount", NeedStatus.FOUND, path_text(path, facts, start=frames.body))
 
 
@@ -411,6 +434,9 @@ def _pose_need(chain: ChainConfig, holes: Mapping[str, str], facts: LogFacts) ->
     if "body" in holes or "world" in holes:
         return ChainNeed("pose", NeedStatus.MISSING, "no body -> world path without both frames", key)
     path = frame_path(facts.edges, frames.world, frames.body)
+    if path is None and frames.world not in facts.frames and (close := did_you_mean(frames.world, facts.frames)):
+        return ChainNeed("pose", NeedStatus.MISSING, f"the world {frames.world} is in no transform of the log"
+                         f"{_did_you_mean(close)}", f"frames: {{world: {close[0]}}}")
     if path is None:
         return ChainNeed("pose", NeedStatus.MISSING, f"no path from the body {frames.body} to the world "
                          f"{frames.world}", key)

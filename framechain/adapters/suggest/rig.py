@@ -12,12 +12,13 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import Any
 
 import numpy as np
 import yaml
 
 from framechain.adapters.model import LoadedLog
+from framechain.adapters.suggest.tag_sizes import tag_sizes
 from framechain.config.calibration import rig_camera_poses
 from framechain.config.chain import (
     CalibrationSource,
@@ -109,38 +110,6 @@ def _camera_frames(loaded: LoadedLog, topics: list[str]) -> dict[str, str]:
     return header if distinct and not crossed else spaces
 
 
-def tag_sizes(beside: list[tuple[str, Any]]) -> float | dict[str, float] | None:
-    """Tag sizes written beside the log (TagSLAM: ``default_tag_size`` and each tag's ``size``)."""
-    default: float | None = None
-    sizes: dict[str, float] = {}
-
-    def walk(value: Any, depth: int = 0) -> None:
-        nonlocal default
-        if depth > 8:
-            return
-        if isinstance(value, Mapping):
-            size, own = value.get("default_tag_size"), value.get("size")
-            if default is None and _size(size):
-                default = float(size)
-            if "id" in value and _size(own):
-                sizes[str(value["id"])] = float(own)
-            for v in value.values():
-                walk(v, depth + 1)
-        elif isinstance(value, list):
-            for v in value:
-                walk(v, depth + 1)
-
-    for _, raw in beside:
-        walk(raw)
-    if not sizes:
-        return default
-    return {**({"default": default} if default is not None else {}), **sizes}
-
-
-def _size(value: Any) -> TypeGuard[float]:
-    return isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < 10
-
-
 def rig_yaml_body(config: ChainConfig) -> list[str]:
     """A rig chain's keys below ``frames:`` as YAML lines, one line per camera and per mount."""
     raw = config.to_dict()
@@ -170,7 +139,7 @@ def _flow(value: Mapping[str, Any]) -> str:
     return yaml.safe_dump(dict(value), default_flow_style=True, sort_keys=False, width=10_000).strip()
 
 
-__all__ = ["RIG_BODY", "kalibr_cameras", "rig_suggestion", "rig_yaml_body", "tag_sizes"]
+__all__ = ["RIG_BODY", "kalibr_cameras", "rig_suggestion", "rig_yaml_body"]
 
 
 def _from_cwd(config: ChainConfig, file: str) -> str:

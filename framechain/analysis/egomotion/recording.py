@@ -176,14 +176,14 @@ def _mount(episodes: list[EpisodeCamera], declared: FloatArray
            ) -> tuple[FloatArray, tuple[tuple[float, float, float], ...]]:
     """Kabsch on every episode's pairs at once; about an axis the link turned too little across in all of them
     together, the declared mount is kept."""
-    mount: FloatArray = kabsch(sum(e.cross for e in episodes))
+    mount: FloatArray = kabsch(np.sum(np.stack([e.cross for e in episodes]), axis=0))
     axes = _weak_axes(episodes)
     return _completed(mount, declared, axes), axes
 
 
 def _weak_axes(episodes: list[EpisodeCamera]) -> tuple[tuple[float, float, float], ...]:
     """Link-frame axes the recording's link turned across by less than OBSERVABLE_RATIO times its misfit."""
-    scatter = sum(e.scatter for e in episodes)
+    scatter = np.sum(np.stack([e.scatter for e in episodes]), axis=0)
     weight = sum(e.weight for e in episodes)
     sigma = np.sqrt(sum(e.weight * e.sigma_deg**2 for e in episodes) / max(weight, 1e-12))
     values, vectors = np.linalg.eigh(scatter)
