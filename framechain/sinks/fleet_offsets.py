@@ -1,11 +1,11 @@
 """The fleet's video/state time offsets: one per episode (its camera's own motion), their spread, and which disagree.
 
 Episodes of one recording share a camera and a recorder, so their offsets should agree: an episode
-whose offset departs from the fleet's median by more than it could find a latency of (its bound: two
-half-widths of its 95% interval, at least 5 ms; the interval alone holds the resampling spread, not
-the few milliseconds episodes of one recording differ by) disagrees (a camera that was restarted, a
-recorder that dropped frames, a different rig). Rendered into the fleet report from the fleet
-table's per-log columns ``video_camera``, ``video_offset_s``, ``video_offset_low_s``,
+whose offset departs from the fleet's median by more than twice what it could find a latency of (its
+bound: two half-widths of its 95% interval, at least 5 ms; the interval alone holds the resampling
+spread, not the few milliseconds generated episodes of one recording differ by, up to 4 ms) disagrees
+(a camera that was restarted, a recorder that dropped frames, a different rig). Rendered into the fleet
+report from the fleet table's per-log columns ``video_camera``, ``video_offset_s``, ``video_offset_low_s``,
 ``video_offset_high_s``.
 """
 
@@ -18,10 +18,11 @@ import numpy as np
 import pyarrow as pa
 
 from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_OFFSET_S
+from framechain.analysis.egomotion.recording import DEPARTURE_BOUNDS
 
 __all__ = ["OffsetRow", "OffsetSpread", "offset_html", "offset_markdown", "video_offsets"]
 
-OFFSET_COLUMNS = ("log", "camera", "offset", "95% interval", "within its bound of the median")
+OFFSET_COLUMNS = ("log", "camera", "offset", "95% interval", "within twice its bound of the median")
 
 
 @dataclass(frozen=True)
@@ -58,15 +59,16 @@ class OffsetSpread:
                 f"{self.std_s * 1e3:.1f} ms, range {lo * 1e3:+.1f} .. {hi * 1e3:+.1f} ms. ")
         off = self.disagreeing
         if not off:
-            return text + "Every log's offset is within its bound of the median: the offsets agree."
+            return text + "Every log's offset is within twice its bound of the median: the offsets agree."
         names = ", ".join(r.unit for r in off[:10]) + (", ..." if len(off) > 10 else "")
-        return (text + f"{len(off)} log(s) whose offset departs from the median by more than its bound disagree: "
+        return (text + f"{len(off)} log(s) whose offset departs from the median by more than twice its bound disagree: "
                 f"{names}.")
 
 
 def _bound(low_s: float, high_s: float) -> float:
-    """The smallest offset the episode's fit would have made a finding of (s)."""
-    return max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high_s - low_s))
+    """How far from the median an episode's offset may lie (s): twice the smallest offset its fit would have made a
+    finding of (the median has an error of its own)."""
+    return DEPARTURE_BOUNDS * max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high_s - low_s))
 
 
 def video_offsets(table: pa.Table) -> OffsetSpread | None:
