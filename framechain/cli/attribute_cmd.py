@@ -9,6 +9,7 @@ from typing import Any
 
 from framechain.cli.common import (
     add_log_arguments,
+    episodes_or_all,
     imports_set_aside,
     make_out_dir,
     non_negative_int,
@@ -37,6 +38,12 @@ def register(sub: Any) -> None:
     parser.add_argument("--bootstrap", type=non_negative_int, default=30,
                         help="bootstrap resamples for intervals, 0 for none (default 30)")
     parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
+    parser.add_argument("--episodes", type=episodes_or_all, default=False, metavar="all|SPEC",
+                        help="LeRobot datasets: attribute these episodes (all, or e.g. 0-9,20) and fit each camera's "
+                        "link and mount across them; writes DIR/recording.json, fleet_cameras.parquet, the fleet "
+                        "table and report, one result per episode in DIR/results")
+    parser.add_argument("--jobs", "-j", type=int, metavar="N", help="with --episodes: worker processes (default: the "
+                        "CPU count)")
     parser.set_defaults(run=run)
 
 
@@ -79,6 +86,10 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     out = Path(args.out)
     make_out_dir(out)  # fail on an unusable --out before the analysis, not after
     report_formats = [f for f in formats if f in ("md", "html")]
+    if getattr(args, "episodes", False) is not False:
+        from framechain.cli.recording_cmd import attribute_recording
+
+        return attribute_recording(args, out, report_formats)
     # Started once the log is read (start_renderers): they load matplotlib while this process replays and
     # attributes on one core; during the read they would compete with its two threads.
     with renderers(None if report_formats else 0, start_now=False):

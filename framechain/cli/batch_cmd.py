@@ -9,7 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import PlainProgress, add_revision_argument, make_out_dir, non_negative_int
+from framechain.cli.common import PlainProgress, add_revision_argument, episode_set, make_out_dir, non_negative_int
 
 EPILOG = """exit codes:
   0    the batch ran: every log has its row in DIR/fleet.parquet (a log that failed is a row with its error)
@@ -71,26 +71,6 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be 1 or more, got {value}")
     return value
-
-
-def episode_set(text: str) -> frozenset[int]:
-    """argparse type: ``0-9,20`` -> {0, ..., 9, 20}."""
-    out: set[int] = set()
-    for part in (p.strip() for p in text.split(",")):
-        try:
-            if "-" in part.lstrip("-"):
-                lo, hi = (int(x) for x in part.split("-", 1))
-                if hi < lo or lo < 0:
-                    raise ValueError
-                out.update(range(lo, hi + 1))
-            else:
-                value = int(part)
-                if value < 0:
-                    raise ValueError
-                out.add(value)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected episode numbers like 0-9,20, got {part!r}") from None
-    return frozenset(out)
 
 
 def parse_report_formats(text: str) -> list[str]:

@@ -44,6 +44,31 @@ def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
     add_revision_argument(parser)
 
 
+def episode_set(text: str) -> frozenset[int]:
+    """argparse type: ``0-9,20`` -> {0, ..., 9, 20}."""
+    out: set[int] = set()
+    for part in (p.strip() for p in text.split(",")):
+        try:
+            if "-" in part.lstrip("-"):
+                lo, hi = (int(x) for x in part.split("-", 1))
+                if hi < lo or lo < 0:
+                    raise ValueError
+                out.update(range(lo, hi + 1))
+            else:
+                value = int(part)
+                if value < 0:
+                    raise ValueError
+                out.add(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected episode numbers like 0-9,20, got {part!r}") from None
+    return frozenset(out)
+
+
+def episodes_or_all(text: str) -> frozenset[int] | None:
+    """argparse type: ``all`` (None: every episode) or an episode set (:func:`episode_set`)."""
+    return None if text.strip() == "all" else episode_set(text)
+
+
 def add_revision_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--revision", metavar="REV", help="a dataset named by its Hugging Face Hub id: the branch, "
                         "tag or commit (default: main)")
@@ -56,8 +81,11 @@ def resolve_datasets(args: argparse.Namespace) -> None:
     log, inputs = getattr(args, "log", None), getattr(args, "inputs", None)
     revision = getattr(args, "revision", None)
     if isinstance(log, str):
-        episode = getattr(args, "episode", None)
-        args.log = _resolved(log, revision, () if episode is None else (episode,))
+        episode, asked = getattr(args, "episode", None), getattr(args, "episodes", False)
+        wanted: Sequence[int] | None = () if episode is None else (episode,)
+        if isinstance(asked, frozenset) or asked is None:  # attribute --episodes: these episodes (None: all)
+            wanted = None if asked is None else sorted(asked)
+        args.log = _resolved(log, revision, wanted)
     elif isinstance(inputs, list):
         episodes = getattr(args, "episodes", None)
         args.inputs = [_resolved(item, revision, None if episodes is None else sorted(episodes)) for item in inputs]

@@ -24,8 +24,10 @@ from typing import Any
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.config.chain import ChainConfig
 from framechain.fleet.engines import map_local, map_ray, usable_cpus
+from framechain.fleet.recordings import recording_fits, write_recordings
 from framechain.fleet.units import (
     FINAL_STATUSES,
     RESULTS_DIR,
@@ -96,6 +98,8 @@ class BatchResult:
     report_paths: dict[str, Path] = field(default_factory=dict)
     #: What the batch left out and why (files framechain wrote among the inputs).
     notes: list[str] = field(default_factory=list)
+    #: Per LeRobot dataset, each camera fitted across its episodes (:mod:`framechain.fleet.recordings`).
+    recordings: dict[str, tuple[CameraRecordingFit, ...]] = field(default_factory=dict)
 
     def status_counts(self) -> dict[str, int]:
         counts: dict[str, int] = {}
@@ -163,14 +167,17 @@ def run_batch(
             on_record(record)
     gathered = [store.load(t.key) or crashed_record(t, "no record was written") for t in tasks]
     table_path = write_fleet_table(gathered, Path(out_dir) / TABLE_NAME)
+    fits = recording_fits(gathered, seed=seed)
+    recording_paths = write_recordings(fits, out_dir)
     report_paths: dict[str, Path] = {}
     if report_formats:
         from framechain.sinks.fleet_report import render_fleet_report
 
         report_paths = render_fleet_report(pq.read_table(table_path), out_dir, formats=report_formats,
-                                           notes=found.skipped)
+                                           notes=found.skipped, recordings=fits)
     return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
-                       table_path=table_path, report_paths=report_paths, notes=found.skipped)
+                       table_path=table_path, report_paths={**recording_paths, **report_paths}, notes=found.skipped,
+                       recordings=fits)
 
 
 

@@ -252,7 +252,18 @@ def _outcome(made: Run) -> dict[str, Any]:
         "error_median_m": result.error_summary()["median"], "error_p95_m": result.error_summary()["p95"],
         "residual_median_m": result.error_summary(result.error_after)["median"],
         "findings": findings, "notes": list(result.notes), **_video_offset(result.camera_motion),
+        "cameras": [_camera_record(entry) for entry in result.camera_motion if entry.get("link")],
     }
+
+
+#: What a recording-level fit needs of each camera's ``camera_motion`` entry (framechain.fleet.recordings).
+_CAMERA_KEYS = ("camera", "name", "link", "declared_link", "offset_s", "offset_interval_s", "q_link_cam",
+                "mount_error_deg", "mount_error_interval_deg", "focal_scale", "explained", "link_misfits",
+                "mount_evidence", "pairing")
+
+
+def _camera_record(entry: dict[str, Any]) -> dict[str, Any]:
+    return {key: entry.get(key) for key in _CAMERA_KEYS}
 
 
 def _video_offset(entries: Sequence[dict[str, Any]]) -> dict[str, Any]:

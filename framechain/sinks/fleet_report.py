@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import html
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,8 +16,10 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.analysis.estimates import format_interval
 from framechain.sinks.colors import FAULT_COLORS, RECORDED_ERROR_COLOR, UNEXPLAINED_COLOR, hex_color
+from framechain.sinks.fleet_cameras import camera_figures, cameras_html, cameras_markdown
 from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets
 from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
 from framechain.sinks.text import CSS, mm
@@ -164,28 +166,34 @@ def estimate_spread(logs: Sequence[FleetLog]) -> list[SpreadRow]:
 
 def render_fleet_report(
     table: pa.Table, out_dir: str | Path, *, formats: Sequence[str] = ("md", "html"), notes: Sequence[str] = (),
+    recordings: Mapping[str, Sequence[CameraRecordingFit]] | None = None,
 ) -> dict[str, Path]:
     """Write fleet_report.md (with its PNGs) and/or fleet_report.html into ``out_dir``; ``notes``: what the batch
-    left out and why (files framechain wrote among the inputs)."""
+    left out and why (files framechain wrote among the inputs); ``recordings``: each dataset's cameras fitted
+    across its episodes (:mod:`framechain.fleet.recordings`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     logs = fleet_logs(table)
     spread = estimate_spread(logs)
     figures = make_fleet_figures(logs)
     offsets = video_offsets(table)
+    cameras = recordings or {}
+    camera_figs = camera_figures(cameras)
     paths: dict[str, Path] = {}
     marker = "\n\n## Which logs have which fault"
     if "md" in formats:
-        for fig in figures:
+        for fig in (*figures, *camera_figs):
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["fleet_md"] = out / "fleet_report.md"
         page = fleet_markdown(logs, spread, figures, notes)
-        paths["fleet_md"].write_text(page.replace(marker, "\n".join(offset_markdown(offsets)) + marker, 1))
+        inserted = [*cameras_markdown(cameras, camera_figs), *offset_markdown(offsets)]
+        paths["fleet_md"].write_text(page.replace(marker, "\n".join(inserted) + marker, 1))
     if "html" in formats:
         paths["fleet_html"] = out / "fleet_report.html"
         page = fleet_html(logs, spread, figures, notes)
         heading = "<h2>Which logs have which fault</h2>"
-        paths["fleet_html"].write_text(page.replace(heading, "".join(offset_html(offsets)) + heading, 1))
+        inserted_html = [*cameras_html(cameras, camera_figs), *offset_html(offsets)]
+        paths["fleet_html"].write_text(page.replace(heading, "".join(inserted_html) + heading, 1))
     return paths
 
 

@@ -418,7 +418,11 @@ def _entry(motion: CameraMotion, declaration: MountDeclaration | None, misfit: _
         "rotation_deg_per_pair": _num(fit.camera_rotation_deg),
         "corrections": [p.kind for p in proposals],
         "notes": list(dict.fromkeys((*motion.notes, *fit.notes))),
+        "link_misfits": {name: _num(value) for name, value in fit.link_misfits},
     })
+    if fit.evidence is not None:
+        entry["mount_evidence"] = {**fit.evidence.to_json(),
+                                   "declared_q_link_cam": [_num(v) for v in motion.declared_q_link_cam]}
     if misfit is not None:
         entry["misfit_deg_s"] = {"declared": _num(misfit.rms(frozenset())),
                                  "corrected": _num(misfit.rms(frozenset(p.kind for p in proposals))),

@@ -58,6 +58,7 @@ from framechain.analysis.egomotion.solve import (
     interval,
     link_fit,
     link_rotvecs,
+    mount_evidence,
     observed,
     offset_undetermined,
     solve,
@@ -172,12 +173,13 @@ def fit_camera_motion(
 
     ``measure(prior)`` measures the camera's motion (:func:`framechain.adapters.messages.egomotion.
     measure_egomotion` with the camera's tracks). Rotation-only first, to see whether the camera
-    turns at all and to rank the candidates; the declared link is kept when it fits about as well
-    as the best. Then up to ``refinements`` times with the translation forward kinematics predicts
-    for that link under the current mount and offset, starting from the declared mount (near
-    scenery moves with the camera's translation, which a rotation-only measurement reads as
-    rotation). The candidates are ranked again on the final measurement; when another link fits
-    clearly better there, it is refined instead.
+    turns at all and to rank every candidate link. The declared link, and the links that fit about as
+    well as the best without moving rigidly with the declared one (at most :data:`_MAX_CANDIDATES`),
+    are then each fitted with their own translation prior (:mod:`.joint`, from the declared mount
+    and from their rotation-only mount, so a placeholder mount does no harm); the one whose own
+    measurement fits best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
+    (near scenery moves with the camera's translation, which a rotation-only measurement reads as
+    rotation, so only measurements made with each link's own prior are compared).
     """
     opts = options or EgoMotionFitOptions()
     table = measure(None)
@@ -195,32 +197,43 @@ def fit_camera_motion(
                       np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam, dtype=float))
     by_name = {link.link: link for link in links}
     first = (table, ranked)
-    candidates: list[str] = []
-    joint: Joint | None = None
-    if declared_link in _similar(ranked, ranked[0], opts):
-        own = next(f for f in ranked if f.link == declared_link)
-        table, fit, ranked, joint = _refined(measure, by_name[declared_link], [declared, _Start(
-            own.q_link_cam, own.offset_s, declared.xyz)], first, links, refinements, opts)
-        if ranked[0].link != declared_link and ranked[0].residual_deg * opts.same_fit_ratio < fit.residual_deg:
-            notes.append(f"camera {camera}: measured with {declared_link}'s translation, its motion fits "
-                         f"{ranked[0].link} better; refined on the links that fit best")
-            candidates = [f.link for f in ranked if f.link != declared_link][:_MAX_CANDIDATES]
-    else:
-        candidates = list(_similar(ranked, ranked[0], opts))[:_MAX_CANDIDATES]
-    if candidates:
-        # Each candidate from the declared mount (the same link on another arm) and from its rotation-only
-        # fit (another link); the one its own measurement fits best wins.
-        tried = [_refined(measure, by_name[name], [declared, _Start(f.q_link_cam, f.offset_s, np.zeros(3))],
-                          first, links, refinements, opts)
-                 for name in candidates for f in first[1] if f.link == name]
-        table, fit, ranked, joint = min(tried, key=lambda item: item[1].residual_deg)
+    tried = {name: _refined(measure, by_name[name], [declared, _Start(f.q_link_cam, f.offset_s, declared.xyz)],
+                            first, links, refinements, opts)
+             for name in _to_refine(ranked, declared_link, by_name, opts) for f in ranked if f.link == name}
+    misfit = {name: item[1].residual_deg for name, item in tried.items()}
+    best = min(misfit, key=lambda name: misfit[name])
+    if declared_link in misfit and misfit[declared_link] <= opts.same_fit_ratio * misfit[best]:
+        best = declared_link
+    table, fit, ranked, joint = tried[best]
     link = by_name[fit.link]
     similar = _similar(ranked, next((f for f in ranked if f.link == fit.link), fit), opts)
     return _final(table, link, fit, ranked, similar, declared_link, np.asarray(declared_q_link_cam, dtype=float),
                   camera, turning, notes, opts, joint)
 
 
-#: At most this many candidate links are refined when the declared one does not fit.
+def _to_refine(ranked: list[LinkFit], declared_link: str, by_name: dict[str, LinkMotion],
+               opts: EgoMotionFitOptions) -> list[str]:
+    """The declared link (when ranked) and the best-ranked links within ``same_fit_ratio`` of the best that do not
+    move rigidly with a link already chosen (at most :data:`_MAX_CANDIDATES` in all)."""
+    out = [declared_link] if any(f.link == declared_link for f in ranked) else []
+    for f in ranked:
+        if len(out) >= _MAX_CANDIDATES or f.residual_deg > opts.same_fit_ratio * ranked[0].residual_deg:
+            break
+        if f.link not in out and not any(_rigid(by_name[f.link], by_name[name]) for name in out):
+            out.append(f.link)
+    return out or [ranked[0].link]
+
+
+def _rigid(a: LinkMotion, b: LinkMotion) -> bool:
+    """``a`` and ``b`` turn together: their relative rotation changes by under 0.5 deg over the recording."""
+    if a.stamps_ns.size != b.stamps_ns.size or not np.array_equal(a.stamps_ns, b.stamps_ns):
+        return False
+    relative = Rotation.from_quat(a.quat_xyzw).inv() * Rotation.from_quat(b.quat_xyzw)
+    spread = (relative[0].inv() * relative).magnitude()
+    return bool(np.rad2deg(spread.max()) < 0.5)
+
+
+#: At most this many candidate links are fitted with their own translation prior.
 _MAX_CANDIDATES = 3
 
 
@@ -298,7 +311,8 @@ def _final(
     boot = bootstrap(pairs, solved, opts)
     mount = Rotation.from_matrix(solved.mount)
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
-    seen = observed(information(orientations, pairs, solved, link_rv))
+    info = information(orientations, pairs, solved, link_rv)
+    seen = observed(info)
     if seen.unobservable:
         notes.append(f"camera {camera}: {seen.unobservable}: its time offset and mount are not observable")
     elif seen.axes:
@@ -335,6 +349,8 @@ def _final(
         mount_observable=mount_observable, notes=tuple(notes), offset_undetermined=undetermined,
         unobservable=seen.unobservable, mount_unobservable_axes=seen.axes,
         bias_rad_s=(float(solved.bias[0]), float(solved.bias[1]), float(solved.bias[2])), table=table,
+        evidence=mount_evidence(solved.weights, link_rv, pairs.rotvec, info.sigma_deg),
+        link_misfits=tuple((f.link, f.residual_deg) for f in ranked),
     )
 
 

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
-__all__ = ["EgoMotionFit", "EgoMotionFitOptions", "LinkFit", "LinkMotion", "Measure", "MountError"]
+__all__ = ["EgoMotionFit", "EgoMotionFitOptions", "LinkFit", "LinkMotion", "Measure", "MountError", "MountEvidence"]
 
 #: Measures the camera's motion from its images, given a translation prior (None: rotation only).
 Measure = Callable[[TranslationPrior | None], EgoMotionTable]
@@ -83,6 +84,23 @@ class MountError:
 
 
 @dataclass(frozen=True)
+class MountEvidence:
+    """What a fit's mount rests on, to be combined with other episodes' (:mod:`.recording`): at the fitted offset,
+    ``cross = sum w a b^T`` and ``scatter = sum w a a^T`` of the link's (a) and camera's (b) rotation vectors, the
+    weights' sum and the robust misfit per pair."""
+
+    cross: FloatArray  # (3, 3)
+    scatter: FloatArray  # (3, 3)
+    weight: float
+    sigma_deg: float
+
+    def to_json(self) -> dict[str, Any]:
+        return {"cross": [round(float(v), 9) for v in self.cross.ravel()],
+                "scatter": [round(float(v), 9) for v in self.scatter.ravel()],
+                "weight": round(self.weight, 6), "sigma_deg": round(self.sigma_deg, 6)}
+
+
+@dataclass(frozen=True)
 class EgoMotionFit:
     """What the camera's own motion says about its time offset, mount and link."""
 
@@ -113,6 +131,9 @@ class EgoMotionFit:
     bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: The measurement the fit rests on (made with the chosen link's translation prior at the fitted offset).
     table: EgoMotionTable = field(default_factory=EgoMotionTable.empty)
+    #: The sums the mount rests on (None: not measured), and every candidate's misfit on the final measurement.
+    evidence: MountEvidence | None = None
+    link_misfits: tuple[tuple[str, float], ...] = ()
 
     @property
     def wrong_link(self) -> bool:

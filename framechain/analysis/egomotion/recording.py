@@ -233,12 +233,12 @@ def _departures(episodes: list[EpisodeCamera], link: str, median: float,
         elif abs(e.offset_s - median) > e.offset_bound_s:
             out.append(Departure(e.episode, e.camera, "offset", f"its offset ({e.offset_s * 1e3:+.1f} ms) departs from "
                                  f"the recording's median ({median * 1e3:+.1f} ms) by "
-                                 f"{abs(e.offset_s - median) * 1e3:.1f} ms, more than its bound "
-                                 f"({e.offset_bound_s * 1e3:.1f} ms)"))
+                                 f"{abs(e.offset_s - median) * 1e3:.1f} ms, more than the "
+                                 f"{e.offset_bound_s * 1e3:.1f} ms it may (twice its bound)"))
         bound = DEPARTURE_BOUNDS * (MIN_ANGLE_DEG + BOUND_HALF_WIDTHS * e.mount_half_width_deg)
         if e.episode in angles and angles[e.episode] > bound:
             out.append(Departure(e.episode, e.camera, "mount", f"its mount is {angles[e.episode]:.1f} deg from the "
-                                 f"recording's, more than it may ({bound:.1f} deg)"))
+                                 f"recording's, more than the {bound:.1f} deg it may (twice its bound)"))
     return out
 
 

@@ -33,8 +33,8 @@ from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = ["CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "measure_cameras"]
 
-#: At most this many candidate frames are fitted per camera.
-MAX_CANDIDATES = 9
+#: At most this many candidate frames are ranked per camera (two six-joint arms have a dozen moving links).
+MAX_CANDIDATES = 24
 
 
 class CameraImages(Protocol):
@@ -273,42 +273,11 @@ def _moves(buffer: TransformBuffer, world: str, link: str) -> bool:
     return path.connected and any(not hop.is_static for hop in path.hops)
 
 
-def _moving_ancestors(buffer: TransformBuffer, link: str, count: int) -> list[str]:
-    """Up to ``count`` frames above ``link`` that are children of moving edges."""
-    edges = buffer.edges
-    out: list[str] = []
-    current = edges[link].parent if link in edges else None
-    while current is not None and len(out) < count:
-        edge = edges.get(current)
-        if edge is None:
-            break
-        if not edge.is_static:
-            out.append(current)
-        current = edge.parent
-    return out
-
-
-def _alike(a: str, b: str) -> bool:
-    """``a`` and ``b`` name the same part after a different prefix (``left_gripper_link``, ``right_gripper_link``)."""
-    k = 0
-    while k < min(len(a), len(b)) and a[-1 - k] == b[-1 - k]:
-        k += 1
-    while k > 0 and not (_boundary(a, len(a) - k) and _boundary(b, len(b) - k)):
-        k -= 1
-    return 0 < k < min(len(a), len(b)) and 2 * k >= max(len(a), len(b)) - 1
-
-
-def _boundary(name: str, position: int) -> bool:
-    return position == 0 or name[position - 1] in "_/:."
-
-
 def _candidates(buffer: TransformBuffer, link: str) -> list[str]:
-    """The declared link, its two moving ancestors, and the same of each alike frame (another arm)."""
+    """The declared link first, then every link that moves: every child of a moving edge, on every arm (a camera
+    declared on a link may ride its parent, its child or the same link of the other arm)."""
     moving = [child for child, edge in buffer.edges.items() if not edge.is_static]
-    out = [link, *_moving_ancestors(buffer, link, 2)]
-    for other in sorted(m for m in moving if m != link and _alike(m, link)):
-        out += [other, *_moving_ancestors(buffer, other, 2)]
-    return list(dict.fromkeys(out))[:MAX_CANDIDATES]
+    return list(dict.fromkeys([link, *moving]))[:MAX_CANDIDATES]
 
 
 def _link_motion(buffer: TransformBuffer, world: str, link: str) -> LinkMotion | None:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.egomotion.model import EgoMotionFitOptions, LinkFit, LinkMotion
+from framechain.analysis.egomotion.model import EgoMotionFitOptions, LinkFit, LinkMotion, MountEvidence
 from framechain.arrays import FloatArray
 from framechain.geometry.rotations import kabsch, quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
 from framechain.timeline import EgoMotionTable
@@ -388,3 +388,10 @@ def focal_scale(pairs: Pairs, solved: Solved, link_rv: FloatArray, boot: Boot) -
 def interval(values: FloatArray) -> tuple[float, float]:
     lo, hi = np.percentile(values, [2.5, 97.5])
     return float(lo), float(hi)
+
+
+def mount_evidence(weights: FloatArray, link_rv: FloatArray, cam_rv: FloatArray, sigma_deg: float) -> MountEvidence:
+    """The sums a mount fit rests on (:class:`MountEvidence`), for combining episodes."""
+    return MountEvidence(cross=np.einsum("n,ni,nj->ij", weights, link_rv, cam_rv),
+                         scatter=np.einsum("n,ni,nj->ij", weights, link_rv, link_rv), weight=float(weights.sum()),
+                         sigma_deg=sigma_deg)

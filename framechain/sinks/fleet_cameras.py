@@ -1,0 +1,105 @@
+"""The fleet report's section on each recording's cameras: one link and one mount per camera across the episodes,
+each episode's offset with its interval, and the episodes that depart from the recording (and why).
+
+Drawn from the recording-level fits (:mod:`framechain.fleet.recordings`), which the sinks only render.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from framechain.analysis.egomotion.recording import CameraRecordingFit
+from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
+from framechain.sinks.plots import Figure, figure_png, new_figure
+
+__all__ = ["camera_figures", "camera_summary", "cameras_html", "cameras_markdown"]
+
+COLUMNS = ("episode", "link", "offset", "95% interval", "mount from the recording's", "departs")
+
+Recordings = Mapping[str, Sequence[CameraRecordingFit]]
+
+
+def camera_summary(log: str, fit: CameraRecordingFit) -> str:
+    """One camera's recording-level fit in one sentence."""
+    high = fit.mount_interval_deg[1]
+    mount = (f"mount within {high:.1f} deg (95%) across episodes" if np.isfinite(high) else "mount from one episode")
+    declared = ("" if not np.isfinite(fit.mount_from_declared_deg)
+                else f", {fit.mount_from_declared_deg:.1f} deg from the declared one")
+    moved = "" if fit.link == fit.declared_link else f" (declared on {fit.declared_link})"
+    axes = "" if not fit.unobservable_axes else (
+        "; about " + ", ".join("[" + ", ".join(f"{v:.2f}" for v in a) + "]" for a in fit.unobservable_axes)
+        + f" in {fit.link} the mount is not observable (kept as declared)")
+    departs = len({d.episode for d in fit.departures})
+    return (f"{log}, camera {fit.camera}: rides {fit.link}{moved} in all {len(fit.episodes)} episodes' fit; "
+            f"{mount}{declared}{axes}; median offset {fit.median_offset_s * 1e3:+.1f} ms; "
+            f"{departs} episode(s) depart.")
+
+
+def _rows(fit: CameraRecordingFit) -> list[list[str]]:
+    why: dict[int, list[str]] = {}
+    for d in fit.departures:
+        why.setdefault(d.episode, []).append(d.why)
+    rows = []
+    for e in fit.episodes:
+        angle = fit.episode_mount_deg.get(e.episode)
+        low, high = e.offset_interval_s
+        rows.append([str(e.episode), e.link, f"{e.offset_s * 1e3:+.1f} ms", f"{low * 1e3:+.1f} .. {high * 1e3:+.1f} ms",
+                     "" if angle is None else f"{angle:.1f} deg", "; ".join(why.get(e.episode, [])) or "no"])
+    return rows
+
+
+def cameras_markdown(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[str]:
+    if not recordings:
+        return []
+    lines = ["", "## Cameras across each recording's episodes", ""]
+    for fig in figures:
+        lines += [f"![{fig.caption}]({fig.name}.png)", ""]
+    for log, fits in recordings.items():
+        for fit in fits:
+            lines += [camera_summary(log, fit), "", "| " + " | ".join(COLUMNS) + " |", "|" + " --- |" * len(COLUMNS)]
+            lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in _rows(fit)]
+            lines.append("")
+    return lines
+
+
+def cameras_html(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[str]:
+    if not recordings:
+        return []
+    from framechain.sinks.plots import figure_html
+
+    e = html.escape
+    parts = ["<h2>Cameras across each recording's episodes</h2>", *(figure_html(f) for f in figures)]
+    for log, fits in recordings.items():
+        for fit in fits:
+            head = "".join(f"<th>{e(c)}</th>" for c in COLUMNS)
+            parts.append(f"<p>{e(camera_summary(log, fit))}</p><table><tr>{head}</tr>")
+            parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in _rows(fit)]
+            parts.append("</table>")
+    return parts
+
+
+def camera_figures(recordings: Recordings) -> list[Figure]:
+    """Per recording, each camera's offset per episode with its 95% interval (departing episodes in red), the
+    median as a line: one panel per camera."""
+    out = []
+    for k, (log, fits) in enumerate(recordings.items()):
+        fig, axes = new_figure(max(4.2 * len(fits), 4.8), 3.2, columns=len(fits), top="title")
+        for ax, fit in zip(axes, fits, strict=True):
+            departing = {d.episode for d in fit.departures}
+            for e in fit.episodes:
+                low, high = e.offset_interval_s
+                colour = hex_color(ERROR_COLOR if e.episode in departing else CORRECTED_COLOR)
+                spread = [[(e.offset_s - low) * 1e3], [(high - e.offset_s) * 1e3]]
+                ax.errorbar([e.episode], [e.offset_s * 1e3], yerr=spread, fmt="o", color=colour, ms=4, capsize=2)
+            ax.axhline(fit.median_offset_s * 1e3, color=hex_color(BOUND_COLOR), ls="--", lw=1)
+            ax.set_xlabel("episode")
+            ax.set_ylabel("video/state offset (ms)")
+            ax.locator_params(axis="x", integer=True)
+            ax.set_title(f"{fit.camera} on {fit.link}", fontsize=8)
+            ax.grid(True, alpha=0.3)
+        out.append(figure_png(fig, f"fleet_camera_offsets_{k}", f"{log}: each camera's offset per episode, with its "
+                              "95% interval (red: the episode departs from the recording), the median dashed"))
+    return out
