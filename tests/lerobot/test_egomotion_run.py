@@ -348,3 +348,22 @@ def test_motors_mapped_onto_another_robot_are_inconclusive(clean: tuple[VideoDat
                                         "wrist_optical_frame")
     assert "No fault" not in result["verdict"]
     assert camera_entry(result)["explained"] is False
+
+
+def test_a_camera_declared_on_the_wrist_that_rides_the_gripper_is_named(clean: tuple[VideoDatasetTruth, Path],
+                                                                       tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Declared on wrist_link, the camera rides gripper_link (its child, through wrist_roll): every moving link is a
+    candidate, and the finding gives the mount on gripper_link."""
+    truth, robot = clean
+    config = yaml.safe_load(robot.read_text())
+    config["cameras"]["wrist"]["mount"]["parent"] = "wrist_link"
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(config))
+    result = attribute(truth.root, tmp_path / "robot.yaml", tmp_path / "out", capsys)
+    (found,) = [f for f in result["findings"] if f["fault"] == "wrong_camera_frame"]
+    assert found["estimate"] == {"used": "wrist_link", "meant": "gripper_link", "hop": "camera_to_body"}
+    assert "mount: {parent: gripper_link" in found["fix"]
+    entry = camera_entry(result)
+    assert entry["link"] == "gripper_link"
+    measured = Rotation.from_quat(entry["q_link_cam"])
+    assert np.rad2deg((measured.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude()) < 3.0
