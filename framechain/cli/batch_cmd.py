@@ -49,6 +49,9 @@ def register(sub: Any) -> None:
                         help="Ray cluster to join (default: RAY_ADDRESS, else the cluster `ray start` left "
                         "running on this machine, else a new local instance)")
     parser.add_argument("--format", default="md,html", help="fleet report formats: md, html, none (default md,html)")
+    parser.add_argument("--rrd", metavar="FILE.rrd", help="LeRobot datasets: a Rerun recording of each camera's offset "
+                        "and mount across the episodes (departing episodes marked), and each episode's own recording "
+                        "in FILE.rrd.episodes/ (open them together: rerun FILE.rrd FILE.rrd.episodes/*.rrd)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     parser.add_argument("--bootstrap", type=non_negative_int, default=30,
                         help="bootstrap resamples per log, 0 for none (default 30)")
@@ -95,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         result = run_batch(
             args.inputs, out, chain=args.chain, robot=args.robot, episodes=args.episodes, jobs=args.jobs,
             engine=args.engine, ray_address=args.ray_address, seed=args.seed, bootstrap=args.bootstrap,
-            report_formats=formats, on_start=on_start, on_record=on_record,
+            report_formats=formats, on_start=on_start, on_record=on_record, rrd=args.rrd,
         )
     _print_summary(result)
     return 0

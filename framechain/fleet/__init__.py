@@ -66,6 +66,11 @@ class ResultStore:
             return None
         return record if isinstance(record, dict) and record.get("schema") == SCHEMA else None
 
+    def has_recording(self, key: str) -> bool:
+        """The unit's record names a Rerun recording that is there."""
+        record = self.load(key) or {}
+        return bool(record.get("rrd")) and Path(str(record["rrd"])).is_file()
+
     def is_done(self, key: str) -> bool:
         record = self.load(key)
         return record is not None and record.get("status") in FINAL_STATUSES
@@ -123,6 +128,7 @@ def run_batch(
     report_formats: Sequence[str] = ("md", "html"),
     on_start: Callable[[int, int], None] | None = None,
     on_record: Callable[[dict[str, Any]], None] | None = None,
+    rrd: str | Path | None = None,
 ) -> BatchResult:
     """Attribute every unit of ``inputs`` not already in ``OUT/results``; write the fleet table and report.
 
@@ -131,7 +137,8 @@ def run_batch(
     main module again, so a script that calls this with ``jobs > 1`` needs the
     ``if __name__ == "__main__":`` guard, as for any process pool.
     ``on_start(total, skipped)`` is called once the units are known; ``on_record(record)`` for each
-    unit computed now, as it finishes. Each log is analysed with the chain file beside it
+    unit computed now, as it finishes. ``rrd``: a Rerun recording of each dataset's cameras across its
+    episodes, and each unit's own recording in ``<rrd>.episodes/``. Each log is analysed with the chain file beside it
     (``<log name>.chain.yaml``, else ``chain.yaml`` or ``CHAIN.yaml`` in its folder), else ``chain``.
     """
     from framechain import adapters
@@ -147,13 +154,15 @@ def run_batch(
     store = ResultStore(out_dir)
     chain_arg = None if chain is None else os.path.abspath(chain)
     robot_arg = None if robot is None else str(Path(robot).resolve())
+    rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
     tasks = []
     for u in found.units:  # the chain beside a log (adapters.chain_files_beside) wins over --chain
         unit_chain = next((str(c) for c in adapters.chain_files_beside(u.path)), chain_arg)
         tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
                                                    bootstrap=bootstrap),
-                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap))
-    todo = [t for t in tasks if not store.is_done(t.key)]
+                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir))
+    # A unit done before without its recording, when one is asked for now, is done again.
+    todo = [t for t in tasks if not store.is_done(t.key) or (rrd_dir is not None and not store.has_recording(t.key))]
     if on_start is not None:
         on_start(len(tasks), len(tasks) - len(todo))
     records: Iterator[dict[str, Any]]
@@ -169,6 +178,10 @@ def run_batch(
     table_path = write_fleet_table(gathered, Path(out_dir) / TABLE_NAME)
     fits = recording_fits(gathered, seed=seed)
     recording_paths = write_recordings(fits, out_dir)
+    if rrd is not None and fits:
+        from framechain.sinks.rerun_recording import write_recording_view
+
+        recording_paths["rrd"] = write_recording_view(fits, rrd)
     report_paths: dict[str, Path] = {}
     if report_formats:
         from framechain.sinks.fleet_report import render_fleet_report
@@ -179,6 +192,12 @@ def run_batch(
                        table_path=table_path, report_paths={**recording_paths, **report_paths}, notes=found.skipped,
                        recordings=fits)
 
+
+
+def _episode_recordings(rrd: str | Path) -> Path:
+    from framechain.sinks.rerun_recording import episode_recordings_dir
+
+    return episode_recordings_dir(rrd)
 
 
 # -- the fleet table --------------------------------------------------------------------------

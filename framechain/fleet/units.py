@@ -62,6 +62,8 @@ class UnitTask:
     robot: str | None = None  # robot.yaml path (LeRobot datasets)
     seed: int = 0
     bootstrap: int = 30
+    #: Where the unit also saves its replay as a Rerun recording of its own (None: it does not).
+    rrd_dir: str | None = None
 
 
 # -- finding the units ------------------------------------------------------------------------
@@ -224,6 +226,8 @@ def run_unit(task: UnitTask) -> dict[str, Any]:
         record.update(_span_of(unit))
     else:
         record.update(_outcome(made))
+        if task.rrd_dir is not None:
+            record["rrd"] = _save_recording(made, Path(task.rrd_dir), unit)
     record["elapsed_s"] = round(time.perf_counter() - start, 4)
     record["cpu_s"] = round(time.process_time() - start_cpu, 4)
     return record
@@ -264,6 +268,17 @@ _CAMERA_KEYS = ("camera", "name", "link", "declared_link", "offset_s", "offset_i
 
 def _camera_record(entry: dict[str, Any]) -> dict[str, Any]:
     return {key: entry.get(key) for key in _CAMERA_KEYS}
+
+
+def _save_recording(made: Run, directory: Path, unit: LogUnit) -> str:
+    """The unit's replay saved as a Rerun recording of its own (``<log>: episode N``) in ``directory``."""
+    from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
+
+    name = unit.path.name if unit.episode is None else f"{unit.path.name}_episode_{unit.episode}"
+    path = directory / f"{name}.rrd"
+    label = unit.path.name if unit.episode is None else f"{unit.path.name}: episode {unit.episode}"
+    stream_replay(made, RerunTarget.save(path), options=RerunOptions(recording_id=label), notify=lambda _m: None)
+    return str(path)
 
 
 def _video_offset(entries: Sequence[dict[str, Any]]) -> dict[str, Any]:

@@ -36,7 +36,8 @@ def swapped(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth
                             repeat_share=0.15, camera_delays_s=(0.06, 0.09), episode_delays_s=delays)
     truth = generate_video_dataset(folder / "dataset", spec)
     robot = write_robot_yaml(truth, folder / "robot.yaml")
-    return truth, robot, run_batch([truth.root], folder / "out", robot=robot, jobs=1, report_formats=("md",))
+    return truth, robot, run_batch([truth.root], folder / "out", robot=robot, jobs=1, report_formats=("md",),
+                                   rrd=folder / "out" / "recording.rrd")
 
 
 def test_the_recording_names_the_swap_for_both_cameras(swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
@@ -90,3 +91,42 @@ def test_attribute_episodes_prints_the_recording(swapped: tuple[VideoDatasetTrut
         assert f"camera {camera.name}_optical_frame: rides {camera.camera_link} (declared on {camera.declared_link})" \
             in said
     assert f"episode {LATE_EPISODE}: its offset" in said
+
+
+def _series(path: Path, entity: str) -> dict[int, float]:
+    """A scalar series of a saved recording, by episode (read back with rerun.chunk)."""
+    from rerun.chunk import RrdReader
+
+    out: dict[int, float] = {}
+    for chunk in RrdReader(path).stream().filter(content=entity, components="Scalars:scalars"):
+        batch = chunk.to_record_batch()
+        for episode, value in zip(batch.column("episode").to_pylist(), batch.column("Scalars:scalars").to_pylist(),
+                                  strict=True):
+            out[int(episode)] = float(value[0])
+    return out
+
+
+def test_the_recording_view_shows_each_cameras_offsets_and_reaches_every_episode(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
+    from rerun.chunk import RrdReader
+
+    truth, _robot, result = swapped
+    path = result.report_paths["rrd"]
+    rows = pq.read_table(result.report_paths["cameras"]).to_pylist()
+    for camera in truth.cameras:
+        frame = f"{camera.name}_optical_frame"
+        offsets = _series(path, f"/recording/{frame}/offset_ms/offset")
+        expected = {r["episode"]: r["offset_s"] * 1e3 for r in rows if r["name"] == camera.name}
+        assert offsets == pytest.approx(expected, abs=1e-3)
+        low = _series(path, f"/recording/{frame}/offset_ms/low")
+        assert all(low[e] < offsets[e] for e in offsets)
+        assert set(_series(path, f"/recording/{frame}/mount_deg")) == set(range(EPISODES))
+        warnings = [line for chunk in RrdReader(path).stream().filter(content=f"/recording/{frame}/departs",
+                                                                      components="TextLog:text")
+                    for line in chunk.to_record_batch().column("TextLog:text").to_pylist()]
+        assert len(warnings) == 1
+        assert warnings[0][0].startswith(f"episode {LATE_EPISODE}: its offset")
+    episodes = sorted(path.with_name(f"{path.name}.episodes").glob("*.rrd"))
+    assert len(episodes) == EPISODES
+    ids = {str(r) for e in episodes for r in RrdReader(e).recordings()}
+    assert len(ids) == EPISODES
