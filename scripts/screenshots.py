@@ -17,6 +17,7 @@ native viewer under Xvfb with llvmpipe gave all-black captures on this machine. 
     .venv/bin/python scripts/screenshots.py --rrd aruco.rrd --out docs/images/aruco_viewer.png
     .venv/bin/python scripts/screenshots.py --rrd quad.rrd --body rig --world rig --out quad.png
     .venv/bin/python scripts/screenshots.py --rrd episode.rrd --world world --out episode.png
+    .venv/bin/python scripts/screenshots.py --rrd recording.rrd --blueprint recording.rbl --out recording.png
 
 Needs ``chromium`` on PATH (Debian: ``apt-get install chromium``).
 """
@@ -325,6 +326,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--world", default="map")
     parser.add_argument("--curves-first", action="store_true",
                         help="show the error-against-size curves before the per-hop error (static targets)")
+    parser.add_argument("--blueprint", type=Path, metavar="VIEW.rbl",
+                        help="a blueprint file to use as it is (a batch's recording view writes FILE.rbl beside it)")
     parser.add_argument("--size", default="1600x900")
     parser.add_argument("--settle", type=float, default=20.0, metavar="S",
                         help="seconds to wait once the data shows, for images to decode (default 20)")
@@ -344,8 +347,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.out is None:
                 parser.error("--rrd needs --out")
             rrd, out = args.rrd, args.out
-        blueprint = work / "view.rbl"
-        write_blueprint(blueprint, rrd, body=args.body, world=args.world, curves_first=args.curves_first)
+        blueprint: Path | None = args.blueprint
+        if blueprint is None:
+            blueprint = work / "view.rbl"
+            write_blueprint(blueprint, rrd, body=args.body, world=args.world, curves_first=args.curves_first)
         out.parent.mkdir(parents=True, exist_ok=True)
         screenshot(rrd, out, blueprint, size=(width, height), chromium=chromium, settle_s=args.settle,
                    timeout_s=args.timeout)

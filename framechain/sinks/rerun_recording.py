@@ -7,7 +7,8 @@ camera, ``/recording/<camera>/offset_ms/{offset,low,high}`` (the interval as two
 (a warning at each departing episode, with why) and ``/recording/summary`` (one sentence per camera). Each
 episode's own replay is a recording of its own (``<dataset>: episode N``, written by the batch's workers
 beside it), so the viewer opened on all of them (``rerun FILE FILE.episodes/*.rrd``) lists the recording
-and every episode, as the Rerun docs advise for datasets.
+and every episode, as the Rerun docs advise for datasets. The layout is the recording's default blueprint,
+and is saved beside it as ``FILE.rbl`` too.
 """
 
 from __future__ import annotations
@@ -51,9 +52,11 @@ def write_recording_view(recordings: Mapping[str, Sequence[CameraRecordingFit]],
             views.append(_log_camera(rec, fit))
         rec.log("/recording/summary", rr.TextDocument("\n\n".join(camera_summary(log, f) for f in fits)),
                 static=True)
-    rec.send_blueprint(_blueprint(views), make_active=False, make_default=True)
+    blueprint = _blueprint(views)
+    rec.send_blueprint(blueprint, make_active=False, make_default=True)
     rec.flush(timeout_sec=60.0)
     rec.disconnect()
+    blueprint.save("framechain", out.with_suffix(".rbl"))  # the layout on its own, for a viewer given it by hand
     return out
 
 

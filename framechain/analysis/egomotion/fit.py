@@ -213,11 +213,13 @@ def fit_camera_motion(
 
 def _to_refine(ranked: list[LinkFit], declared_link: str, by_name: dict[str, LinkMotion],
                opts: EgoMotionFitOptions) -> list[str]:
-    """The declared link (when ranked) and the best-ranked links within ``same_fit_ratio`` of the best that do not
-    move rigidly with a link already chosen (at most :data:`_MAX_CANDIDATES` in all)."""
-    out = [declared_link] if any(f.link == declared_link for f in ranked) else []
+    """The declared link (when ranked), and the links ranked above it within ``same_fit_ratio`` of the best that do
+    not move rigidly with a link already chosen (at most :data:`_MAX_CANDIDATES` in all)."""
+    declared = next((f for f in ranked if f.link == declared_link), None)
+    out = [declared_link] if declared is not None else []
     for f in ranked:
-        if len(out) >= _MAX_CANDIDATES or f.residual_deg > opts.same_fit_ratio * ranked[0].residual_deg:
+        if (len(out) >= _MAX_CANDIDATES or f.residual_deg > opts.same_fit_ratio * ranked[0].residual_deg
+                or (declared is not None and f.residual_deg >= declared.residual_deg)):
             break
         if f.link not in out and not any(_rigid(by_name[f.link], by_name[name]) for name in out):
             out.append(f.link)
@@ -268,8 +270,10 @@ def _refined(
 
 
 def _rank(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:
-    """Every candidate's best fit to the measured motion, best first."""
-    return sorted((f for f in (fit_link(table, link, opts) for link in links) if f is not None),
+    """Every candidate's best fit to the measured motion, best first (offsets on a grid of 20 ms at least: a ranking
+    needs no finer)."""
+    coarse = opts.for_ranking()
+    return sorted((f for f in (fit_link(table, link, coarse) for link in links) if f is not None),
                   key=lambda f: f.residual_deg)
 
 

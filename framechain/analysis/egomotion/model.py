@@ -6,7 +6,7 @@ See :mod:`framechain.analysis.egomotion` for what the fit does.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from framechain.arrays import FloatArray, IntArray
@@ -52,6 +52,11 @@ class EgoMotionFitOptions:
     #: Fit a constant rate bias of the reference too (a gyro's; forward kinematics has none).
     rate_bias: bool = False
     seed: int = 0
+
+    def for_ranking(self) -> EgoMotionFitOptions:
+        """The options candidate links are ranked with: offsets on a grid of 20 ms at least (a ranking needs no
+        finer, and it fits every link)."""
+        return replace(self, step_s=max(self.step_s, 0.02))
 
 
 @dataclass(frozen=True)

@@ -183,10 +183,16 @@ def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: s
     if not source.pairing or not source.alternatives:
         return []
     table = source.measure(None)
-    own = _best_misfit(table, links, options)
+    ranked = sorted((f for f in (fit_link(table, link, options.for_ranking()) for link in links) if f is not None),
+                    key=lambda f: f.residual_deg)
+    if not ranked:
+        return []
+    # The other pairings on the link that fits best as paired: a wrong pairing is much worse on any link.
+    link = next(m for m in links if m.link == ranked[0].link)
+    own = _best_misfit(table, [link], options)
     if own is None:
         return []
-    others = {name: _best_misfit(source.restamp(table, name), links, options) for name in source.alternatives}
+    others = {name: _best_misfit(source.restamp(table, name), [link], options) for name in source.alternatives}
     scored = sorted((v, k) for k, v in others.items() if v is not None)
     said = "; ".join(f"{v:.3f} by {k}" for v, k in scored)
     if not scored or scored[0][0] * PAIRING_CONTRADICTED >= own:
