@@ -155,13 +155,6 @@ def _search(trials: _Trials, starts: list[float], limit: float) -> float:
     return float(np.clip(parabola_min(grid, costs[None])[0], -limit, limit))
 
 
-def _local(trials: _Trials, centre: float, limit: float) -> float:
-    """The parabola's vertex through the costs one grid step either side of ``centre`` (three measurements)."""
-    grid = np.clip(centre + GRID_STEP_S * np.array([-1.0, 0.0, 1.0]), -limit, limit)
-    costs = np.array([trials.cost(float(x)) for x in grid])
-    return float(np.clip(parabola_min(grid, costs[None])[0], centre - GRID_STEP_S, centre + GRID_STEP_S))
-
-
 def _grid(trials: _Trials, centre: float, limit: float) -> tuple[FloatArray, float]:
     """Trial offsets GRID_STEP_S apart around ``centre`` with the least cost inside them (moved out to three times
     when it lies at an end), and the parabola's vertex there."""
@@ -254,7 +247,7 @@ def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: lis
     if not np.isfinite(trials.cost(best)):
         return None
     _remount(trials, best)
-    best = _local(trials, best, limit)
+    grid, best = _grid(trials, best, limit)
     _mount_search(trials, best)
     grid, best = _grid(trials, best, limit)
     tables = [trials.table(float(x)) for x in grid]

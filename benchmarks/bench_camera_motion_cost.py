@@ -1,0 +1,88 @@
+"""What the cameras' own motion costs the user, side by side with decoding their videos, and a whole recording's batch.
+
+1. ``framechain attribute`` on one episode, from process start to exit (reports written), against a process
+   that only decodes the episode's videos with PyAV (every frame to grey: the floor of any image-based
+   method), taken in turn, the least of ``ROUNDS`` each: a 224x224 MPEG-4 two-camera episode recorded as
+   real recorders do (15 s at ~18.6 Hz) and a 640x480 AV1 one-camera episode (15 s at 30 fps).
+2. ``framechain batch`` (2 workers) on a 25-episode two-camera recording of 15 s episodes, end to end.
+
+Generated with :mod:`framechain.sim.lerobot_video`; needs ../shared/realdata/urdf/so101. Prints figures and
+ratios; asserts nothing. ``FRAMECHAIN_BENCH_EPISODES`` shortens the recording (default 25).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+URDF = HERE.parent.parent / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
+ROUNDS = 3
+EPISODES = int(os.environ.get("FRAMECHAIN_BENCH_EPISODES", "25"))
+FRAMECHAIN = str(Path(sys.executable).with_name("framechain"))
+#: Generated videos are the same bytes every run (libx264 reads uninitialised memory otherwise; see the Makefile).
+ENV = {**os.environ, "MALLOC_PERTURB_": "165"}
+
+DECODE = """
+import sys, av
+from pathlib import Path
+for path in sorted(Path(sys.argv[1]).rglob("*.mp4")):
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        stream.thread_type = "AUTO"
+        for frame in container.decode(stream):
+            frame.to_ndarray(format="gray")
+"""
+
+
+def _generate(root: Path, kind: str, episodes: int = 1) -> tuple[Path, Path]:
+    from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
+
+    spec = (VideoDatasetSpec(URDF, seed=3, episodes=episodes, duration_s=15.0, fps=20, codec="mpeg4", bimanual=True,
+                             camera_per_arm=True, clock="realtime", focal_px=112.0, repeat_share=0.15,
+                             camera_delays_s=(0.06, 0.09))
+            if kind == "mpeg4" else
+            VideoDatasetSpec(URDF, seed=3, episodes=episodes, duration_s=15.0, fps=30, codec="libsvtav1", width=640,
+                             height=480, focal_px=500.0, video_delay_s=0.05))
+    truth = generate_video_dataset(root / "dataset", spec)
+    return truth.root, write_robot_yaml(truth, root / "robot.yaml")
+
+
+def _seconds(argv: list[str]) -> float:
+    start = time.perf_counter()
+    subprocess.run(argv, check=True, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return time.perf_counter() - start
+
+
+def _episode(root: Path, kind: str) -> None:
+    dataset, robot = _generate(root / kind, kind)
+    attribute = [FRAMECHAIN, "attribute", str(dataset), "--episode", "0", "--robot", str(robot), "--out",
+                 str(root / kind / "out"), "-q"]
+    decode = [sys.executable, "-c", DECODE, str(dataset)]
+    pairs = [(_seconds(attribute), _seconds(decode)) for _ in range(ROUNDS)]
+    best_attribute, best_decode = min(a for a, _ in pairs), min(d for _, d in pairs)
+    print(f"   {kind:6s} episode: attribute {best_attribute:5.1f} s, decoding its videos {best_decode:4.2f} s: "
+          f"{best_attribute / best_decode:4.1f}x (rounds: {', '.join(f'{a / d:.1f}x' for a, d in pairs)})")
+
+
+def main() -> None:
+    if not URDF.is_file():
+        print(f"   skipped: {URDF} not found")
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for kind in ("mpeg4", "av1"):
+            _episode(root, kind)
+        dataset, robot = _generate(root / "recording", "mpeg4", EPISODES)
+        seconds = _seconds([FRAMECHAIN, "batch", str(dataset), "--robot", str(robot), "--out", str(root / "batch"),
+                            "-j", "2", "-q", "--format", "md"])
+        print(f"   batch of a {EPISODES}-episode two-camera recording (15 s episodes, 2 workers): {seconds:.0f} s "
+              f"({seconds / EPISODES:.1f} s per episode)")
+
+
+if __name__ == "__main__":
+    main()
