@@ -121,28 +121,49 @@ def rotations_along_translation(
     from eight times ``threshold_rad`` down to it (halving per step); ``weights`` (P, M) zero the
     matches left out. Stops when no pair's step exceeds 1e-7 rad.
     """
-    across_t = _across(batch.b0, direction[:, None, :])
-    along = across_t / np.maximum(np.linalg.norm(across_t, axis=-1, keepdims=True), 1e-12)
+    # Vectors are held component first, (3, P, M): a product summed over three contiguous planes is about three
+    # times faster than over a trailing axis of three, and this loop is most of what a camera's motion costs.
+    b0, b1 = np.moveaxis(batch.b0, -1, 0).copy(), np.moveaxis(batch.b1, -1, 0).copy()
+    t = direction.T[:, :, None]
+    across_t = t - _dot(t, b0) * b0
+    along = across_t / np.maximum(np.sqrt(_dot(across_t, across_t)), 1e-12)
     rot = rotation
     for it in range(iterations):
         scale = threshold_rad * max(1.0, 8.0 * 0.5**it)
-        u = batch.b1 @ np.swapaxes(rot, 1, 2)
-        err = _across(batch.b0, u)
-        flow_part = (err * along).sum(-1, keepdims=True)
-        ahead = ((err * across_t).sum(-1) < 0)[..., None]  # a positive depth explains part of it
-        err = np.where(ahead, err - flow_part * along, err)
-        w = (weights / (1.0 + (np.linalg.norm(err, axis=-1) / scale) ** 2))[..., None]
+        u = np.einsum("pij,jpm->ipm", rot, b1)
+        err = u - _dot(u, b0) * b0
+        ahead = _dot(err, across_t) < 0  # a positive depth explains part of it
+        err = np.where(ahead, err - _dot(err, along) * along, err)
+        w = weights / (1.0 + _dot(err, err)[0] / scale**2)
         # err = Proj u with Proj = I - b0 b0^T (- along along^T when ahead), d(u) = omega x u, so
         # J^T J = |u|^2 I - u u^T - (u x b0)(u x b0)^T (- (u x along)(u x along)^T), J^T err = u x err.
-        cross_b0 = np.cross(u, batch.b0)
-        cross_along = np.where(ahead, np.cross(u, along), 0.0)
-        normal = (np.eye(3) * (w * (u * u).sum(-1, keepdims=True)).sum(1)[:, :, None]
-                  - _gram(w, u) - _gram(w, cross_b0) - _gram(w, cross_along) + 1e-15 * np.eye(3))
-        step = np.linalg.solve(normal, -(w * np.cross(u, err)).sum(1)[..., None])[..., 0]
+        cross_along = np.where(ahead, _cross(u, along), 0.0)
+        normal = (np.eye(3) * (w * _dot(u, u)[0]).sum(1)[:, None, None]
+                  - _planes_gram(w, u) - _planes_gram(w, _cross(u, b0)) - _planes_gram(w, cross_along)
+                  + 1e-15 * np.eye(3))
+        rhs = -(w * _cross(u, err)).sum(2).T
+        step = np.linalg.solve(normal, rhs[..., None])[..., 0]
         rot = rotation_matrices(step) @ rot
         if float(np.abs(step).max(initial=0.0)) < 1e-7:
             break
     return rot
+
+
+def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Dot products of component-first vectors (3, ...), kept as (1, ...)."""
+    out: FloatArray = (a[0] * b[0] + a[1] * b[1] + a[2] * b[2])[None]
+    return out
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross products of component-first vectors (3, ...)."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def _planes_gram(weights: FloatArray, v: FloatArray) -> FloatArray:
+    """``sum_m w v v^T`` per pair (P, 3, 3), for ``weights`` (P, M) and component-first ``v`` (3, P, M)."""
+    out: FloatArray = np.einsum("ipm,jpm->pij", weights * v, v)
+    return out
 
 
 def _gram(weights: FloatArray, v: FloatArray) -> FloatArray:

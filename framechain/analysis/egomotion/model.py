@@ -51,12 +51,14 @@ class EgoMotionFitOptions:
     min_pairs: int = 20
     #: Fit a constant rate bias of the reference too (a gyro's; forward kinematics has none).
     rate_bias: bool = False
+    #: The offset refined past the fine grid's parabola by a bounded scalar search (a ranking needs no such care).
+    continuous: bool = True
     seed: int = 0
 
     def for_ranking(self) -> EgoMotionFitOptions:
         """The options candidate links are ranked with: offsets on a grid of 20 ms at least (a ranking needs no
-        finer, and it fits every link)."""
-        return replace(self, step_s=max(self.step_s, 0.02))
+        finer, nor the continuous minimum past its parabola, and it fits every link)."""
+        return replace(self, step_s=max(self.step_s, 0.02), continuous=False)
 
 
 @dataclass(frozen=True)

@@ -201,7 +201,8 @@ def solve(orientations: Orientations, pairs: Pairs, opts: EgoMotionFitOptions) -
     fine = float(coarse[best]) + np.arange(-half, half + 0.5 * opts.fine_step_s, opts.fine_step_s)
     fine_scatter = Scatter(link_rotvecs(orientations, pairs, fine), pairs.rotvec, dt)
     vertex = float(parabola_min(fine, fine_scatter.fit(weights)[1]))
-    offset = continuous_minimum(orientations, pairs, weights, dt, vertex, opts.fine_step_s)
+    offset = (continuous_minimum(orientations, pairs, weights, dt, vertex, opts.fine_step_s) if opts.continuous
+              else vertex)
     at = link_rotvecs(orientations, pairs, np.array([offset]))
     scatter = Scatter(at, pairs.rotvec, dt)
     mount = scatter.fit(weights)[0][0]
