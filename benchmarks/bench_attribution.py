@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.attribute import attribute
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.sim.scene import REALSENSE_OPTICAL_FRAME, REALSENSE_OPTICAL_XYZ, InjectedFault, SceneSpec, generate
 

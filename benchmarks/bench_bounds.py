@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import attribute
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.sim.scene import InjectedFault, SceneSpec, generate

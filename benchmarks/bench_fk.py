@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.robot.kinematics import RobotModel
+from framechain.robot.kinematics import RobotModel
 
 HERE = Path(__file__).resolve().parent
 ARM6 = HERE.parent / "tests" / "lerobot" / "data" / "arm6.urdf"

@@ -18,17 +18,19 @@ from pathlib import Path
 from typing import Any
 
 from framechain import adapters
+from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
-from framechain.analysis.attribute import attribute_replayed
 from framechain.analysis.egomotion.attribution import with_camera_motion
 from framechain.analysis.egomotion.run import measure_cameras
-from framechain.analysis.findings import AnalysisError, Attribution, Unattributed
-from framechain.analysis.replayed import replay_chain
+from framechain.analysis.evidence.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
+from framechain.analysis.verdict.attribute import attribute_replayed
+from framechain.analysis.verdict.findings import AnalysisError, Attribution, Unattributed
 from framechain.config.chain import ChainConfig, ChainFrames
+from framechain.errors import FramechainError
 from framechain.progress import Progress
 from framechain.replay import ReplayResult
-from framechain.timeline import FramechainError, Timeline
+from framechain.timeline import Timeline
 
 #: The path of a run made from a Timeline in memory rather than a file.
 IN_MEMORY = Path("<timeline>")
@@ -96,12 +98,12 @@ def load_log(
         warnings = _disagreements(loaded, config)
         return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=False,
                          info=loaded.info, notes=[*warnings, *_named_typos(loaded.info, config)], warnings=warnings)
-    loaded = _with_notes(read_log(target, None, progress=progress, point_roles=adapters.evidence_roles), found)
-    suggestion = adapters.suggest(loaded)
+    loaded = _with_notes(read_log(target, None, progress=progress, point_roles=suggestions.evidence_roles), found)
+    suggestion = suggestions.suggest(loaded)
     if suggestion.config.cameras:  # a rig calibrated by files beside the log: read through them
         loaded = read_log(target, suggestion.config, progress=progress)
     else:
-        loaded = adapters.as_suggested(loaded, suggestion.config)
+        loaded = suggestions.as_suggested(loaded, suggestion.config)
     warnings = _disagreements(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
                      info=loaded.info, notes=[*warnings, *loaded.info.notes, *_chain_beside(target)],
@@ -177,8 +179,8 @@ def _disagreements(loaded: adapters.LoadedLog, chain: ChainConfig) -> list[str]:
     """What to say before any finding: a calibration of another topic's camera, and detections of the chain's
     topic stamped with another camera's frame."""
     topic = chain.topics.detections
-    stamped = [n for n in adapters.frame_id_disagreements(loaded) if topic and n.startswith(f"topic {topic}:")]
-    return [*adapters.calibration_disagreements(chain, loaded.info), *stamped]
+    stamped = [n for n in suggestions.frame_id_disagreements(loaded) if topic and n.startswith(f"topic {topic}:")]
+    return [*suggestions.calibration_disagreements(chain, loaded.info), *stamped]
 
 
 def _with_notes(loaded: adapters.LoadedLog, notes: list[str]) -> adapters.LoadedLog:
@@ -187,7 +189,7 @@ def _with_notes(loaded: adapters.LoadedLog, notes: list[str]) -> adapters.Loaded
 
 def _chain_beside(log: Path) -> list[str]:
     """Without --chain, a chain file beside the log is not used silently: a note names it."""
-    beside = adapters.chain_files_beside(log)
+    beside = suggestions.chain_files_beside(log)
     if not beside:
         return []
     return [f"{beside[0]} lies beside the log but no --chain was given: the chain was suggested (pass --chain "
@@ -196,13 +198,13 @@ def _chain_beside(log: Path) -> list[str]:
 
 def _named_typos(info: adapters.LogInfo, chain: ChainConfig) -> list[str]:
     """The reader's notes, a topic the chain names but the log lacks followed by what it may have meant."""
-    close = {m.topic: m.close for m in adapters.missing_topics(info, chain) if m.close}
+    close = {m.topic: m.close for m in suggestions.missing_topics(info, chain) if m.close}
     out = []
     for note in info.notes:
         out.append(note)
         topic = note.removeprefix("topic ").split(": named by the chain as ", 1)[0]
         if note.startswith("topic ") and ": named by the chain as " in note and topic in close:
-            out.append(f"topic {topic}: did you mean {adapters.or_list(close[topic])}?")
+            out.append(f"topic {topic}: did you mean {suggestions.or_list(close[topic])}?")
     return out
 
 
@@ -229,7 +231,7 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: ad
     if not len(transforms):
         return  # said elsewhere, with the counts
     known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
-    missing = adapters.missing_topics(info, chain)
+    missing = suggestions.missing_topics(info, chain)
     named = [(role, getattr(chain.frames, role)) for role in ("camera", "body", "world")]
     named += [("camera", frame) for frame in chain.camera_frames()[1:]]  # a rig's other cameras
     for role, name in named:
@@ -239,8 +241,8 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: ad
         if cause is not None:
             raise FramechainError(f"{target}: {cause.line()} (without it the chain's {role} frame {name!r} is in no "
                                   "transform of the log)")
-        close = adapters.did_you_mean(name, known)
-        hint = f"; did you mean {adapters.or_list(close)}?" if close else ""
+        close = suggestions.did_you_mean(name, known)
+        hint = f"; did you mean {suggestions.or_list(close)}?" if close else ""
         if role == "world" and name == ChainFrames().world and not close:  # the default, perhaps never written
             hint = (f" ({name!r} is frames.world's default: name the log's world frame, or set world equal to body "
                     f"({chain.frames.body}) for a body that does not move)")
@@ -264,9 +266,10 @@ def _load_lerobot(
     generated = None
     if "episode" not in section or not _ROBOT_KEYS & set(section):
         # What is missing, asked for at once; a known arm's robot.yaml needs neither.
-        generated = adapters.generated_robot(target, section.get("episode")) if not _ROBOT_KEYS & set(section) else None
+        generated = (suggestions.generated_robot(target, section.get("episode")) if not _ROBOT_KEYS & set(section)
+                     else None)
         if generated is None:
-            raise FramechainError(adapters.dataset_needs(target, episode=section.get("episode"),
+            raise FramechainError(suggestions.dataset_needs(target, episode=section.get("episode"),
                                                          robot_given=bool(_ROBOT_KEYS & set(section))))
         section.update(generated.mapping(), episode=generated.episode)
     given = {"episode": section["episode"], "config": generated.config()} if generated is not None else section
@@ -398,7 +401,7 @@ def _why_nothing_replayed(loaded: LoadedRun, result: ReplayResult) -> str | None
     if nothing is None:
         return None
     log = adapters.LoadedLog(timeline=loaded.timeline, info=loaded.info, decoded_topics={})
-    why = adapters.why_nothing_replayed(log, loaded.chain, nothing)
+    why = suggestions.why_nothing_replayed(log, loaded.chain, nothing)
     # What the reader noticed on the chain's topics (an undecodable topic) often is the cause; a topic the line
     # already says the log lacks is not said twice.
     why += "".join(f"; {n}" for n in loaded.chain_topic_notes()

@@ -22,7 +22,7 @@ import pytest
 from framechain import pipeline
 from framechain.adapters.formats.mcap.reader import McapLog
 from framechain.adapters.formats.rosbag.reader import RosbagsLog
-from framechain.analysis.alignment import align_evidence
+from framechain.analysis.evidence.alignment import align_evidence
 from framechain.catalogue import Fault
 from framechain.cli.main import main
 from framechain.replay import replay

@@ -15,7 +15,7 @@ from framechain.adapters.formats.rosbag.reader import RosbagsLog
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
 from framechain.adapters.model import LoadedLog, LogInfo
-from framechain.adapters.robot.mounts import chain_additions
+from framechain.adapters.mounts import chain_additions
 from framechain.config.chain import ChainConfig
 from framechain.progress import Progress
 
@@ -61,7 +61,7 @@ def detect(path: str | Path) -> tuple[str, Path, list[str]]:
         if (p / "meta" / "info.json").is_file():
             raise UnsupportedLogError(
                 p, "a LeRobot dataset, not a log: read an episode with "
-                "framechain.adapters.lerobot.reader.open_dataset(path, episode=..., robot=robot.yaml)",
+                "framechain.adapters.lerobot.adapter.open_dataset(path, episode=..., robot=robot.yaml)",
             )
         storage = sorted(p.glob("*.db3")) + sorted(p.glob("*.mcap"))
         if len(storage) == 1:
@@ -162,7 +162,7 @@ def open_log(
     fmt, target, notes = detect(p)
     additions = chain_additions(chain)  # a missing calibration file fails before the log is read
     if chain is not None and chain.evidence.markers is not None:  # a bad dictionary too, naming the chain file
-        from framechain.adapters.messages.markers import dictionary_id
+        from framechain.vision.markers import dictionary_id
 
         dictionary_id(chain.evidence.markers.dictionary, where=str(chain_file(chain)))
     notes.extend(additions.notes)

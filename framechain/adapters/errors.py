@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from framechain.timeline import FramechainError
+from framechain.errors import FramechainError
 
 
 class AdapterError(FramechainError):

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from framechain.analysis.alignment import AlignedEvidence
 from framechain.analysis.egomotion.run import CameraMotionEvidence
-from framechain.analysis.findings import AnalysisError, Attribution, Finding, Unattributed
+from framechain.analysis.evidence.alignment import AlignedEvidence
+from framechain.analysis.verdict.findings import AnalysisError, Attribution, Finding, Unattributed
 from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer
 from framechain.timeline import Timeline

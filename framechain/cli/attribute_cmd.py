@@ -70,7 +70,7 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -
 
 
 def parse_formats(text: str) -> list[str]:
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     formats = [f.strip() for f in text.split(",") if f.strip()]
     unknown = sorted(set(formats) - set(FORMATS))

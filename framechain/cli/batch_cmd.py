@@ -77,7 +77,7 @@ def positive_int(text: str) -> int:
 
 
 def parse_report_formats(text: str) -> list[str]:
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     formats = [f.strip() for f in text.split(",") if f.strip()]
     if formats == ["none"]:

@@ -127,7 +127,7 @@ def non_negative_int(text: str) -> int:
 
 def make_out_dir(out: Path) -> None:
     """Create ``--out``; a path that exists and is not a directory is a user mistake, said in one line."""
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     if out.exists() and not out.is_dir():
         raise FramechainError(f"--out {out}: exists and is not a directory (give a directory for the outputs)")
@@ -230,7 +230,7 @@ def print_suggested_chain(chain: Any, quiet: bool, log: str | Path | None = None
     written as it is, never wrapped: a comment wrapped onto a new line would not be a comment when pasted."""
     if quiet:
         return
-    from framechain.adapters import chain_files_beside
+    from framechain.suggest import chain_files_beside
 
     beside = chain_files_beside(Path(log)) if log is not None else []
     if beside:
@@ -284,7 +284,7 @@ def warner(command: str) -> Callable[[str], None]:
 def say_unattributed(run: Run, command: str) -> list[str]:
     """Say on stderr why a replayed run has no findings, and why nothing was replayed (with the chain key to
     add); the outputs are still written. Returns the note to record beside them."""
-    from framechain.analysis.findings import Unattributed
+    from framechain.analysis.verdict.findings import Unattributed
 
     # Reasons the user hears otherwise: asked for none, or why nothing replayed (below).
     said_elsewhere = {Unattributed.NOT_ASKED, Unattributed.NO_DETECTIONS, Unattributed.NOTHING_REPLAYED}

@@ -55,8 +55,8 @@ def register(sub: Any) -> None:
 
 def parse_fault(text: str) -> Any:
     from framechain.catalogue import Fault
+    from framechain.errors import FramechainError
     from framechain.sim.scene import InjectedFault
-    from framechain.timeline import FramechainError
 
     where = "robot"
     if text.endswith("@data"):

@@ -49,11 +49,11 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
-    from framechain.adapters.formats.mcap.export import copies_messages, write_mcap_with
+    from framechain.adapters.formats.mcap.writer import copies_messages, write_mcap_with
     from framechain.adapters.lerobot.media import encoded_frames
+    from framechain.errors import FramechainError
     from framechain.sinks.foxglove_export import foxglove_messages, viewing_hints
     from framechain.sinks.foxglove_timeline import timeline_messages
-    from framechain.timeline import FramechainError
 
     out = Path(args.out)
     if out.suffix.lower() != ".mcap":

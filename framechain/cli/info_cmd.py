@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Any
 from framechain.cli.common import add_dataset_arguments
 
 if TYPE_CHECKING:
-    from framechain.adapters import EdgeInfo, LoadedLog, SuggestedChain
+    from framechain.adapters import LoadedLog
+    from framechain.suggest import EdgeInfo, SuggestedChain
 
 
 #: Columns of text written to a file or a pipe (no terminal to fit).
@@ -43,9 +44,9 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
-    from framechain.adapters import (
-        LeRobotAdapter,
-        LoadedLog,
+    from framechain.adapters import LeRobotAdapter, LoadedLog
+    from framechain.errors import FramechainError
+    from framechain.suggest import (
         SuggestedChain,
         calibration_disagreements,
         chain_needs,
@@ -53,7 +54,6 @@ def run(args: argparse.Namespace) -> int:
         frame_tree,
         suggest,
     )
-    from framechain.timeline import FramechainError
 
     chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
     print_chain = args.chain is True
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     skeleton: str | None = None
     dataset = LeRobotAdapter().probe(Path(args.log))
     if dataset and args.episode is not None and args.robot is None and chain_file is None:
-        from framechain.adapters.lerobot.skeleton import robot_yaml_skeleton
+        from framechain.suggest.lerobot import robot_yaml_skeleton
 
         # No robot.yaml yet: the dataset's episode, and a robot.yaml to start from.
         loaded, skeleton = _dataset_summary(args.log, args.episode), robot_yaml_skeleton(args.log, args.episode)
@@ -163,9 +163,9 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
     from rich.table import Table
     from rich.tree import Tree
 
-    from framechain.adapters.suggest.facts import chain_files_beside
-    from framechain.adapters.suggest.frame_tree import children_of, tree_roots
     from framechain.cli.common import stdout_console
+    from framechain.suggest.facts import chain_files_beside
+    from framechain.suggest.frame_tree import children_of, tree_roots
 
     # Piped into a file, a terminal's width would cut topic names: wide, and a long name folds in its cell.
     console = stdout_console(PIPED_WIDTH)

@@ -27,7 +27,7 @@ def register(sub: Any) -> None:
 
 
 def _depths(text: str) -> list[float]:
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     try:
         values = [float(x) for x in text.split(",") if x.strip()]
@@ -43,7 +43,7 @@ def run_tilt(args: argparse.Namespace) -> int:
 
     from framechain.analysis.lab import crossing_pitch_deg, tilt_sweep
     from framechain.cli.common import stdout_console
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     if args.max_pitch < 0 or args.max_pitch > 89 or args.step <= 0:
         raise FramechainError("--max-pitch must be within 0..89 degrees and --step positive")

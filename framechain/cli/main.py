@@ -94,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for variable in BLAS_THREAD_VARIABLES:
         os.environ.setdefault(variable, "1")
     from framechain.cli.common import resolve_datasets
-    from framechain.timeline import FramechainError  # after parsing, so that --help loads no tables
+    from framechain.errors import FramechainError  # after parsing, so that --help loads no tables
 
     try:
         resolve_datasets(args)

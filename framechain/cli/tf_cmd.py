@@ -54,7 +54,7 @@ def parse_stamp(text: str, log_start_ns: int) -> int:
     """``--at`` in ns: seconds since the epoch (>= 1e8), else seconds after ``log_start_ns``."""
     from decimal import Decimal, InvalidOperation
 
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     try:
         seconds = Decimal(text.strip())
@@ -72,8 +72,8 @@ def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
     from framechain.adapters import LeRobotAdapter
     from framechain.adapters.api import TREE_KINDS
+    from framechain.errors import FramechainError
     from framechain.replay import LATEST, TransformBuffer
-    from framechain.timeline import FramechainError
 
     show_progress = sys.stderr.isatty() and not (args.json or args.csv or args.quiet)
     salvage: dict[str, Any] | None = None
@@ -126,9 +126,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_frames(args: argparse.Namespace, transforms: Any) -> None:
     """A frame no transform mentions: one line with what it may have meant, and where else frames come from."""
-    from framechain.adapters import did_you_mean, or_list
-    from framechain.adapters.suggest.facts import chain_files_beside
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
+    from framechain.suggest import did_you_mean, or_list
+    from framechain.suggest.facts import chain_files_beside
 
     known = set(transforms.parent.tolist()) | set(transforms.child.tolist())
     unknown = [n for n in dict.fromkeys((args.target, args.source)) if n not in known and n.lstrip("/") not in known]
@@ -192,8 +192,8 @@ def _csv_row(r: dict[str, Any]) -> list[Any]:
 def _series(args: argparse.Namespace, buffer: TransformBuffer, log_start: int) -> int:
     import numpy as np
 
+    from framechain.errors import FramechainError
     from framechain.replay import ConnectivityError
-    from framechain.timeline import FramechainError
 
     path = buffer.path(args.target, args.source)
     if not path.connected:

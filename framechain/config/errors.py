@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from framechain.timeline.errors import FramechainError
+from framechain.errors import FramechainError
 
 
 class ConfigError(FramechainError):

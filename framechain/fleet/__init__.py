@@ -141,7 +141,7 @@ def run_batch(
     episodes, and each unit's own recording in ``<rrd>.episodes/``. Each log is analysed with the chain file beside it
     (``<log name>.chain.yaml``, else ``chain.yaml`` or ``CHAIN.yaml`` in its folder), else ``chain``.
     """
-    from framechain import adapters
+    from framechain import suggest as suggestions
 
     chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
     robot_given = robot is not None or bool(chain_config and chain_config.robot and (
@@ -156,8 +156,8 @@ def run_batch(
     robot_arg = None if robot is None else str(Path(robot).resolve())
     rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
     tasks = []
-    for u in found.units:  # the chain beside a log (adapters.chain_files_beside) wins over --chain
-        unit_chain = next((str(c) for c in adapters.chain_files_beside(u.path)), chain_arg)
+    for u in found.units:  # the chain beside a log (suggestions.chain_files_beside) wins over --chain
+        unit_chain = next((str(c) for c in suggestions.chain_files_beside(u.path)), chain_arg)
         tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
                                                    bootstrap=bootstrap),
                               chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir))

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from framechain import __version__
-from framechain.timeline import FramechainError
+from framechain.errors import FramechainError
 
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
@@ -163,9 +163,9 @@ def _tree_fingerprint(directory: Path) -> tuple[int, int]:
 def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -> Iterator[LogUnit]:
     """One unit per episode; without robot.yaml, only for an arm framechain bundles a URDF for (each episode's
     robot.yaml is then generated), else one unit whose problem says what to give."""
-    from framechain.adapters import dataset_needs
-    from framechain.adapters.lerobot.format import DatasetReader
-    from framechain.adapters.robot.known_arms import known_arm
+    from framechain.adapters.lerobot.reader import DatasetReader
+    from framechain.robot.known_arms import known_arm
+    from framechain.suggest import dataset_needs
 
     size, mtime = _tree_fingerprint(directory)
     try:
@@ -324,7 +324,7 @@ _ESTIMATE_UNITS = {"offset_s": "s", "angle_deg": "deg", "factor": "ratio", "scal
 
 
 def _finding_row(finding: Any) -> dict[str, Any]:
-    from framechain.analysis.estimates import estimate_scalars, format_estimate
+    from framechain.analysis.model.estimates import estimate_scalars, format_estimate
 
     data = finding.to_json()
     scalars = estimate_scalars(finding.estimate)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from framechain.timeline import FramechainError, format_stamp
+from framechain.errors import FramechainError
+from framechain.timeline import format_stamp
 
 
 class TransformLookupError(FramechainError):

@@ -30,13 +30,13 @@ from scipy.spatial.transform import Rotation
 from framechain.arrays import FloatArray, IntArray
 from framechain.catalogue import FAULT_HOPS, Fault
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
+from framechain.errors import FramechainError
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.sim import rigid
 from framechain.sim.render import render_color, render_depth
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
-    FramechainError,
     ImageFrameTable,
     ObservationTable,
     PointRole,

@@ -1,6 +1,6 @@
 """The scene generator's own URDF forward kinematics: the XML read with ElementTree, chains in NumPy.
 
-Independent of framechain's kinematics (:mod:`framechain.adapters.robot.kinematics`, which parses with
+Independent of framechain's kinematics (:mod:`framechain.robot.kinematics`, which parses with
 yourdfpy and chains quaternions): here every joint is a ``(T, 4, 4)`` matrix stack, ``origin @
 motion``, multiplied from the root, so that the generated truth checks that code rather than repeats
 it. Conventions are URDF's: ``rpy`` is fixed-axis roll, pitch, yaw (``R = Rz(y) Ry(p) Rx(r)``);

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.checks import Bound, Curve, family_name, size_text, tolerance_text
-from framechain.analysis.findings import Attribution
+from framechain.analysis.verdict.checks import Bound, Curve, family_name, size_text, tolerance_text
+from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR, hex_color
 from framechain.sinks.plots import new_figure

@@ -16,8 +16,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain import __version__
-from framechain.analysis.findings import Attribution
 from framechain.analysis.run import Run
+from framechain.analysis.verdict.findings import Attribution
 from framechain.arrays import rows_of
 from framechain.catalogue import HopName
 from framechain.replay import CameraModel

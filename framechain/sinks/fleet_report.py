@@ -17,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 
 from framechain.analysis.egomotion.recording import CameraRecordingFit
-from framechain.analysis.estimates import format_interval
+from framechain.analysis.model.estimates import format_interval
 from framechain.sinks.colors import FAULT_COLORS, RECORDED_ERROR_COLOR, UNEXPLAINED_COLOR, hex_color
 from framechain.sinks.fleet_cameras import camera_figures, cameras_html, cameras_markdown
 from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets

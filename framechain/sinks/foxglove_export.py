@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.findings import Finding
-from framechain.analysis.rig_layout import PairLines
+from framechain.analysis.evidence.alignment import AlignedEvidence
+from framechain.analysis.evidence.rig_layout import PairLines
 from framechain.analysis.run import Run
+from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import ReplayResult
 from framechain.replay.camera import distinct_models
@@ -60,7 +60,7 @@ FOXGLOVE_FROM_OPENCV_PX = 0.5
 
 @dataclass(frozen=True)
 class ProtobufMessage:
-    """One serialised message with its schema (matches ``framechain.adapters.formats.mcap.export.ExtraMessage``)."""
+    """One serialised message with its schema (matches ``framechain.adapters.formats.mcap.writer.ExtraMessage``)."""
 
     topic: str
     schema_name: str

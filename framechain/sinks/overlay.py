@@ -21,8 +21,8 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
-from framechain.analysis.alignment import AlignedEvidence
-from framechain.analysis.findings import Finding
+from framechain.analysis.evidence.alignment import AlignedEvidence
+from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.replay import ReplayResult
 from framechain.replay.camera import distinct_models

@@ -314,7 +314,7 @@ def start_renderers() -> None:
 def _renderers_wanted() -> int:
     text = os.environ.get(RENDERERS_VARIABLE, str(RENDERERS))
     if not text.strip().isdigit():
-        from framechain.timeline import FramechainError
+        from framechain.errors import FramechainError
 
         raise FramechainError(f"{RENDERERS_VARIABLE}={text!r}: expected a whole number of renderer processes (0: none)")
     return int(text)

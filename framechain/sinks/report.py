@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.checks import nothing_observable, tolerance_text
 from framechain.analysis.egomotion import rotation_rates
-from framechain.analysis.findings import Attribution, Finding
 from framechain.analysis.run import Run
-from framechain.analysis.sensitivity import robot_speed, sensitivity
+from framechain.analysis.verdict.checks import nothing_observable, tolerance_text
+from framechain.analysis.verdict.findings import Attribution, Finding
+from framechain.analysis.verdict.sensitivity import robot_speed, sensitivity
 from framechain.arrays import FloatArray, IntArray
 from framechain.catalogue import HopName
 from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots

@@ -27,7 +27,7 @@ What the recording holds (entity paths; frames are Rerun named frames, TF style)
   ``/series/error_px/as_run`` the length of that line.
 - ``/points/recomputed/{camera,body,world}``: the replay's point at every hop, in the hop's frame;
   ``/points/as_run/{camera,body,world,target}``: the robot's own logged points as the attribution
-  aligned them (:mod:`framechain.analysis.alignment`: matched to observations, in the hop's
+  aligned them (:mod:`framechain.analysis.evidence.alignment`: matched to observations, in the hop's
   frame); ``/points/reference``: reference truth; ``/points/error/<hop>``: arrows from recomputed
   to as-run.
 - ``/series/error_mm/<hop>`` (recomputed vs as-run, and ``target``/``reference``) and
@@ -68,6 +68,7 @@ import numpy as np
 
 from framechain.analysis.run import Run
 from framechain.arrays import FloatArray
+from framechain.errors import FramechainError
 from framechain.sinks.colors import REFERENCE_COLOR
 from framechain.sinks.overlay import ImageOverlay, ImageSelection, image_overlay
 from framechain.sinks.rerun_blueprint import default_blueprint, image_view_bounds
@@ -101,7 +102,7 @@ from framechain.sinks.rerun_series import (
     summary_markdown,
 )
 from framechain.sinks.text import FindingView
-from framechain.timeline import FramechainError, Timeline
+from framechain.timeline import Timeline
 
 if TYPE_CHECKING:
     import rerun as rr

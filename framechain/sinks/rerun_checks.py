@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from framechain.analysis.checks import Curve, family_name
-from framechain.analysis.findings import Attribution
+from framechain.analysis.verdict.checks import Curve, family_name
+from framechain.analysis.verdict.findings import Attribution
 from framechain.sinks.checks_view import (
     BOUND_COLUMNS,
     LABEL_COLUMNS,

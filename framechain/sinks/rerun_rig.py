@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from framechain.analysis.rig_layout import RigLayout
+from framechain.analysis.evidence.rig_layout import RigLayout
 from framechain.arrays import rows_of
 from framechain.replay import ReplayResult
 from framechain.sinks.colors import ERROR_COLOR

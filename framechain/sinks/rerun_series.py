@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from framechain.analysis.findings import Attribution
+from framechain.analysis.verdict.findings import Attribution
 from framechain.arrays import FloatArray, IntArray, rows_of
 from framechain.catalogue import HopName
 from framechain.replay import REPLAYED, ReplayResult

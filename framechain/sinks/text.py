@@ -2,7 +2,7 @@
 
 The CLI table, both reports, the Rerun text log and the Foxglove findings word a finding with
 :class:`FindingView`, so the same estimate reads the same everywhere; the estimate text itself is
-:func:`~framechain.analysis.estimates.format_estimate`'s.
+:func:`~framechain.analysis.model.estimates.format_estimate`'s.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import re
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from framechain.analysis.estimates import format_estimate, format_interval
-from framechain.analysis.findings import Finding
+from framechain.analysis.model.estimates import format_estimate, format_interval
+from framechain.analysis.verdict.findings import Finding
 
 
 def mm(value_m: float | None) -> str:

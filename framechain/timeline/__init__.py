@@ -1,7 +1,6 @@
 """The model room: columnar tables of one log, nothing format-specific; imports nothing of framechain's other rooms."""
 
 from framechain.timeline.errors import (
-    FramechainError,
     InvalidCameraError,
     InvalidTransformError,
     TimelineError,
@@ -33,7 +32,6 @@ __all__ = [
     "DepthLoader",
     "DepthWindows",
     "EgoMotionTable",
-    "FramechainError",
     "ImageFrameTable",
     "InvalidCameraError",
     "InvalidTransformError",

@@ -1,15 +1,10 @@
-"""The root exception of framechain and the errors of the model room.
-
-Every room raises a subclass of :class:`FramechainError`; the CLI turns any of them into one
-line on stderr and a non-zero exit. Messages are built from structured fields so that callers
-can also read the fields.
-"""
+"""The errors of the model room: tables given inconsistent or invalid data."""
 
 from __future__ import annotations
 
+from framechain.errors import FramechainError
 
-class FramechainError(Exception):
-    """Root of every error framechain raises on purpose (a user mistake or bad input)."""
+__all__ = ["InvalidCameraError", "InvalidTransformError", "TimelineError"]
 
 
 class TimelineError(FramechainError):

@@ -14,10 +14,10 @@ import yaml
 
 from framechain.adapters import open_log
 from framechain.adapters.messages.fiducials import FiducialRows, counts_reconcile, resolve_fiducials
-from framechain.adapters.messages.tag_pose import PinholeModel, solve_square_tags, square_object_points
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.timeline import CameraTable
+from framechain.vision.tag_pose import PinholeModel, solve_square_tags, square_object_points
 
 T0 = 1_700_000_000 * 10**9
 K = np.array([[600.0, 0.0, 320.0], [0.0, 610.0, 240.0], [0.0, 0.0, 1.0]])
@@ -551,7 +551,7 @@ def test_opencv_is_imported_only_when_needed(monkeypatch: pytest.MonkeyPatch) ->
     import subprocess
     import sys
 
-    from framechain.adapters.messages.tag_pose import MissingOpenCVError
+    from framechain.vision.tag_pose import MissingOpenCVError
 
     code = "import sys, framechain.adapters, framechain.adapters.messages.fiducials; print('cv2' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() \

@@ -7,7 +7,7 @@ from pathlib import Path
 from mcap.writer import Writer
 
 from framechain.adapters import framechain_output
-from framechain.adapters.formats.mcap.export import FRAMECHAIN_METADATA
+from framechain.adapters.formats.mcap.writer import FRAMECHAIN_METADATA
 
 
 def _mcap(path: Path, *, metadata: dict[str, str] | None, chunks: int = 3, offsets: bool = True) -> Path:

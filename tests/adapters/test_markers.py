@@ -12,9 +12,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.adapters import open_log
-from framechain.adapters.messages.markers import image_pixels
 from framechain.config.chain import ChainConfig
-from framechain.timeline import FramechainError
+from framechain.errors import FramechainError
+from framechain.vision.markers import image_pixels
 
 T0 = 1_700_000_000 * 10**9
 K = np.array([[620.0, 0.0, 319.5], [0.0, 620.0, 239.5], [0.0, 0.0, 1.0]])

@@ -16,8 +16,8 @@ from framechain.adapters import open_log
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
+from framechain.errors import FramechainError
 from framechain.replay import TransformBuffer
-from framechain.timeline import FramechainError
 
 T0 = 1_700_000_000 * 10**9
 NS = 10**9

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters import frame_tree, open_log
+from framechain.adapters import open_log
 from framechain.cli.main import main
 from framechain.replay import LATEST, TransformBuffer
+from framechain.suggest import frame_tree
 
 #: log -> (edges "parent>child" with static flag, sample counts of dynamic edges)
 TREES: dict[str, dict[str, tuple[bool, int]]] = {

@@ -10,8 +10,8 @@ import pytest
 import yaml
 from shared_paths import REALDATA
 
-from framechain.adapters.suggest.facts import beside_yaml
-from framechain.adapters.suggest.tag_sizes import same_sizes, tag_size_hint, tag_sizes
+from framechain.suggest.facts import beside_yaml
+from framechain.suggest.tag_sizes import same_sizes, tag_size_hint, tag_sizes
 
 KALIBR_APRILGRID = """target_type: 'aprilgrid' #gridtype
 tagCols: 6               #number of apriltags

@@ -25,12 +25,12 @@ import numpy.typing as npt
 from gpmf import SensorStream, axes_matrix
 
 from framechain.adapters.lerobot.video import probe_video, read_frames
-from framechain.adapters.messages.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
 from framechain.analysis.egomotion import LinkMotion
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.rotations import quat_from_rotvec, quat_multiply
 from framechain.timeline import EgoMotionTable
+from framechain.vision.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
 
 #: The link name the gyro's orientation goes by.
 GYRO_LINK = "gopro_gyro"

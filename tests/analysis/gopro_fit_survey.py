@@ -30,11 +30,11 @@ from gpmf import read_stream
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.messages.tag_pose import PinholeModel, undistort_normalised
 from framechain.analysis.egomotion import EgoMotionFitOptions, LinkMotion, fit_camera_motion, rotation_rates
 from framechain.arrays import FloatArray
 from framechain.config.calibration import Intrinsics
 from framechain.timeline import EgoMotionTable
+from framechain.vision.tag_pose import PinholeModel, undistort_normalised
 
 CLIPS = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "gopro_gpmf"
 #: (clip, window name, from s, to s)

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.estimates import estimate_to_json
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 

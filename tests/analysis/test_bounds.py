@@ -18,10 +18,10 @@ import pytest
 from scipy.spatial.transform import Rotation
 from test_tagslam_stairs import _chain, recorded_attribution, restamped_bag
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.bounds import observations_for
-from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
-from framechain.analysis.replayed import replay_chain
+from framechain.analysis.evidence.replayed import replay_chain
+from framechain.analysis.model.chain import ChainInputs, Perturbation, evaluate
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.bounds import observations_for
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig, ChainEvidence
 from framechain.pipeline import load_log

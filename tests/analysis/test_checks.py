@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from test_tagslam_stairs import BAG, _chain
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.checks import Bound, bounds_sentence
-from framechain.analysis.curves import label_table
-from framechain.analysis.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
-from framechain.analysis.findings import Finding
-from framechain.analysis.shares import WEAK_CONFIDENCE, weakened
+from framechain.analysis.fit.shares import WEAK_CONFIDENCE, weakened
+from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.checks import Bound, bounds_sentence
+from framechain.analysis.verdict.curves import label_table
+from framechain.analysis.verdict.findings import Finding
 from framechain.catalogue import Fault, HopName
 from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
@@ -139,8 +139,8 @@ def test_a_long_log_s_curves_are_measured_on_evenly_spread_observations(monkeypa
     """Past CURVE_ROWS observations a curve is measured on that many, evenly spread (as the fit's fine
     grid is): its dip stays at the estimate, and its value at no offset stays the median error the
     findings share out, to the spread a median of fewer observations has."""
-    from framechain.analysis import curves
-    from framechain.analysis.fit import subsample
+    from framechain.analysis.fit.least_squares import subsample
+    from framechain.analysis.verdict import curves
 
     latency = InjectedFault(Fault.LATENCY, "data", {"offset_s": 0.030})
     scene = generate(SceneSpec(seed=6, duration_s=6.0, evidence="static", faults=(latency,)))

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.corrections import NothingToCorrectError, apply_corrections
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.corrections import NothingToCorrectError, apply_corrections
 from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 

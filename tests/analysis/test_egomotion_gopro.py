@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from framechain.analysis.egomotion import EgoMotionFitOptions, fit_camera_motion
 from framechain.analysis.egomotion.findings import MotionFindings, motion_findings
 from framechain.analysis.egomotion.run import CameraMotion, CameraMotionEvidence
-from framechain.analysis.findings import motion_verdict
+from framechain.analysis.verdict.findings import motion_verdict
 from framechain.timeline import EgoMotionTable
 
 #: karma.mp4 pans right at up to 45 deg/s from about 11.4 s; its gimbal holds the camera still before.

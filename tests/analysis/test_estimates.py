@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from rerun.chunk import RrdReader
 
-from framechain.analysis.estimates import (
+from framechain.analysis.model.estimates import (
     Estimate,
     FrameEstimate,
     InvertedEstimate,

@@ -19,9 +19,9 @@ import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation, Slerp
 
-from framechain.analysis.alignment import PointFate, align_evidence
-from framechain.analysis.attribute import Attribution
-from framechain.analysis.estimates import estimate_to_json
+from framechain.analysis.evidence.alignment import PointFate, align_evidence
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.analysis.verdict.attribute import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainFrames
 from framechain.pipeline import run

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from framechain.analysis.attribute import attribute
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.replay import replay
 from framechain.sim.scene import InjectedFault, SceneSpec, generate

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.estimates import ScaleEstimate
-from framechain.analysis.fixes import FixContext, fix_for
+from framechain.analysis.model.estimates import ScaleEstimate
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.fixes import FixContext, fix_for
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.chain_model import ChainInputs, Perturbation, evaluate
-from framechain.analysis.estimates import estimate_to_json
-from framechain.analysis.frame_swaps import (
+from framechain.analysis.model.chain import ChainInputs, Perturbation, evaluate
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.analysis.model.frame_swaps import (
     body_frame_candidates,
     camera_frame_candidates,
     camera_swap_fault,
     is_signed_permutation,
 )
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainFrames
 from framechain.replay import CameraModel, TransformBuffer
@@ -121,7 +121,7 @@ def test_a_body_swap_looks_up_the_footprint() -> None:
 
 @pytest.mark.parametrize("frame", ["camera_link", "camera_depth_optical_frame"])
 def test_swapped_frames_name_themselves_in_the_estimate(frame: str) -> None:
-    from framechain.analysis.faults import models_for
+    from framechain.analysis.model.faults import models_for
 
     inputs = _inputs(_tree())
     model = next(m for m in models_for(inputs) if m.name == f"frame_swap[camera:{frame}]")

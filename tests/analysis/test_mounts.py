@@ -7,8 +7,8 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.estimates import estimate_to_json
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.sim.scene import START_NS, InjectedFault, SceneSpec, generate
 from framechain.timeline import TransformTable

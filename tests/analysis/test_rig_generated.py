@@ -13,12 +13,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
-from framechain.analysis.bounds import observations_for
-from framechain.analysis.chain_model import Perturbation, evaluate
-from framechain.analysis.checks import Bound
-from framechain.analysis.findings import Attribution
-from framechain.analysis.replayed import replay_chain
-from framechain.analysis.rig import rig_evidence, rig_inputs
+from framechain.analysis.evidence.replayed import replay_chain
+from framechain.analysis.evidence.rig import rig_evidence, rig_inputs
+from framechain.analysis.model.chain import Perturbation, evaluate
+from framechain.analysis.verdict.bounds import observations_for
+from framechain.analysis.verdict.checks import Bound
+from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.sim import rigid
 from framechain.sim.rig import RigScene, RigSpec, generate_rig

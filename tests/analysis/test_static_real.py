@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from test_tagslam_stairs import BAG, _chain, recorded_attribution
 
-from framechain.analysis.attribute import AnalysisError, attribute
+from framechain.analysis.verdict.attribute import AnalysisError, attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import attribute_log, load_log

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.attribute import AnalysisError, attribute
-from framechain.analysis.static import StaticTargetError, fit_static_points, intersect_rays, static_groups
+from framechain.analysis.evidence.static import StaticTargetError, fit_static_points, intersect_rays, static_groups
+from framechain.analysis.verdict.attribute import AnalysisError, attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError

@@ -17,8 +17,8 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
-from framechain.analysis.checks import Bound
-from framechain.analysis.findings import Attribution
+from framechain.analysis.verdict.checks import Bound
+from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 

@@ -16,9 +16,9 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation, Slerp
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.estimates import estimate_to_json
-from framechain.analysis.findings import Attribution
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log

@@ -17,11 +17,11 @@ import pytest
 import yaml
 from test_tagslam_stairs import BAG, _chain, recorded_attribution
 
-from framechain.analysis.attribute import attribute
-from framechain.analysis.checks import Undetermined
-from framechain.analysis.faults import models_for
-from framechain.analysis.selection import near_bound
-from framechain.analysis.shares import undetermined_because
+from framechain.analysis.fit.selection import near_bound
+from framechain.analysis.fit.shares import undetermined_because
+from framechain.analysis.model.faults import models_for
+from framechain.analysis.verdict.attribute import attribute
+from framechain.analysis.verdict.checks import Undetermined
 from framechain.catalogue import Fault
 from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
@@ -122,8 +122,8 @@ def test_a_fit_at_its_window_s_edge_or_over_orders_of_magnitude_is_undetermined(
 
 def _models() -> list:  # type: ignore[type-arg]
     scene = generate(SceneSpec(seed=1, duration_s=2.0, evidence="hops"))
-    from framechain.analysis.chain_model import ChainInputs
-    from framechain.analysis.replayed import replay_chain
+    from framechain.analysis.evidence.replayed import replay_chain
+    from framechain.analysis.model.chain import ChainInputs
     from framechain.replay import CameraModel
 
     replayed = replay_chain(scene.timeline, scene.chain)
@@ -196,7 +196,7 @@ def test_stairs_tags_declared_at_the_default_size_are_named_wrongly_sized(realda
 def test_a_curve_s_axis_is_the_one_the_bounds_table_names(realdata: Path) -> None:
     """The stairs' mount rotation and translation, not found: the plot's axis is the bound's, sign included (the
     table and the plot named opposite axes); and the caption says what the median is."""
-    from framechain.analysis.estimates import axis_text
+    from framechain.analysis.model.estimates import axis_text
     from framechain.sinks.checks_view import curve_plots
 
     result = recorded_attribution(realdata)

@@ -356,7 +356,7 @@ def test_attribute_sets_its_imports_aside_from_the_collector_while_it_runs(
     import gc
 
     from framechain import pipeline
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     log, chain = latency_log
     run = pipeline.run

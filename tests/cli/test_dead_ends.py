@@ -240,7 +240,7 @@ def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(realdata: Path, tmp_p
     import pyarrow.parquet as pq
     import yourdfpy
 
-    from framechain.adapters.lerobot.reader import open_dataset
+    from framechain.adapters.lerobot.adapter import open_dataset
     from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
     from framechain.replay import TransformBuffer
 

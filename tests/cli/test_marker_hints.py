@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 from framechain.adapters.api import open_log
-from framechain.adapters.suggest.chain import suggest
-from framechain.adapters.suggest.marker_probe import probe_markers
 from framechain.cli.main import main
+from framechain.suggest.chain import suggest
+from framechain.suggest.marker_probe import probe_markers
 
 IMAGE = "/raspicam_node/image/compressed"
 

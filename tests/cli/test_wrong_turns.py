@@ -268,7 +268,7 @@ def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest
 
 # -- 8: a hint that can work ------------------------------------------------------------------------------
 def test_the_static_target_hint_says_what_can_help() -> None:
-    from framechain.analysis.static import _what_can_help
+    from framechain.analysis.evidence.static import _what_can_help
 
     labels = np.array(["1", "2", "1", "2", "1"])
     one_image = np.full(5, T0)

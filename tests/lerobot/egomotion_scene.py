@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.lerobot.format import DatasetReader
+from framechain.adapters.lerobot.reader import DatasetReader
 from framechain.adapters.lerobot.video import (
     VideoFrames,
     VideoHealth,
@@ -26,8 +26,6 @@ from framechain.adapters.lerobot.video import (
     read_frames,
     video_health,
 )
-from framechain.adapters.messages.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
-from framechain.adapters.robot.kinematics import RobotModel
 from framechain.analysis.egomotion import (
     EgoMotionFit,
     EgoMotionFitOptions,
@@ -36,8 +34,10 @@ from framechain.analysis.egomotion import (
 )
 from framechain.arrays import IntArray
 from framechain.config.calibration import Intrinsics
+from framechain.robot.kinematics import RobotModel
 from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetTruth
 from framechain.timeline import EgoMotionTable, TranslationPrior
+from framechain.vision.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
 
 #: The links every test offers as candidates (per arm).
 CANDIDATE_LINKS = ("gripper_link", "wrist_link", "lower_arm_link")

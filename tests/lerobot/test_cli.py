@@ -10,7 +10,7 @@ import pytest
 from lerobot_scene import FPS, ArmDataset, target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot.reader import LeRobotAdapter, scan_dataset
+from framechain.adapters.lerobot.adapter import LeRobotAdapter, scan_dataset
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
 

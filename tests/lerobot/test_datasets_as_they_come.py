@@ -16,8 +16,7 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from framechain.adapters.lerobot.reader import open_dataset
-from framechain.adapters.lerobot.skeleton import guess_unit
+from framechain.adapters.lerobot.adapter import open_dataset
 from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 from framechain.cli.main import main
 from framechain.config.robot import RobotConfig
@@ -30,6 +29,7 @@ from framechain.sim.lerobot_video import (
     write_robot_yaml,
 )
 from framechain.sim.urdf_chain import UrdfChain
+from framechain.suggest.lerobot import guess_unit
 
 URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 

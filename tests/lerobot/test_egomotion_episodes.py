@@ -16,7 +16,6 @@ import pytest
 from egomotion_scene import EpisodeEvidence, episode_evidence, fit_episode, shifted_copy
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.messages.egomotion import measure_egomotion, track_features
 from framechain.analysis.egomotion import EgoMotionFit, fit_camera_motion
 from framechain.config.calibration import Intrinsics
 from framechain.sim.lerobot_video import (
@@ -27,6 +26,7 @@ from framechain.sim.lerobot_video import (
     gripper_pads,
 )
 from framechain.sim.urdf_chain import UrdfChain
+from framechain.vision.egomotion import measure_egomotion, track_features
 
 URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DURATION_S = 5.0

@@ -20,7 +20,7 @@ from egomotion_scene import shifted_copy
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
-from framechain.analysis.estimates import LatencyEstimate
+from framechain.analysis.model.estimates import LatencyEstimate
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.messages.two_view import (
+from framechain.arrays import FloatArray
+from framechain.vision.two_view import (
     PairBatch,
     off_flow_residuals,
     rotation_matrices,
@@ -16,7 +17,6 @@ from framechain.adapters.messages.two_view import (
     rotations_ransac,
     translation_directions,
 )
-from framechain.arrays import FloatArray
 
 FOCAL = 180.0
 

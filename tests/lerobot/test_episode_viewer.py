@@ -100,7 +100,7 @@ def test_an_episodes_time_axis_starts_at_zero_with_the_wall_clock_beside(tmp_pat
     (np.float64(np.nan), None),
 ])
 def test_a_unix_time_column_in_any_unit_is_the_wall_clock(first: np.generic, expected_ns: int | None) -> None:
-    from framechain.adapters.lerobot.format import EpisodeFrames, EpisodeInfo
+    from framechain.adapters.lerobot.reader import EpisodeFrames, EpisodeInfo
     from framechain.adapters.lerobot.wall_clock import wall_clock_start_ns
 
     frames = EpisodeFrames(EpisodeInfo(0, 2, (), Path("x.parquet")), np.array([0.0, 0.1]), np.arange(2),

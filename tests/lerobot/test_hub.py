@@ -21,7 +21,7 @@ import pytest
 from hf_cache import put_in_hf_cache
 from lerobot_scene import write_arm_dataset
 
-from framechain.adapters.lerobot.format import DatasetReader
+from framechain.adapters.lerobot.reader import DatasetReader
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
 
 URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"

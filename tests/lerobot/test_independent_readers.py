@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from lerobot_scene import ArmDataset
 
-from framechain.adapters.lerobot.format import DatasetReader
+from framechain.adapters.lerobot.reader import DatasetReader
 
 
 def _rerun_series(root: Path, episode: int, entity: str) -> tuple[np.ndarray, np.ndarray]:

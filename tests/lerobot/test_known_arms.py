@@ -16,15 +16,15 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.lerobot.reader import open_dataset
-from framechain.adapters.lerobot.skeleton import guess_arm_units
+from framechain.adapters.lerobot.adapter import open_dataset
 from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
-from framechain.adapters.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, match_state_names
 from framechain.cli.main import main
 from framechain.config.robot import RobotConfig
 from framechain.replay import TransformBuffer
+from framechain.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, match_state_names
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
 from framechain.sim.urdf_chain import UrdfChain
+from framechain.suggest.lerobot import guess_arm_units
 
 VIDEO = {"video.fps": 30, "video.codec": "av1", "video.pix_fmt": "yuv420p", "video.is_depth_map": False}
 

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from framechain.adapters.robot.binding import convert_joint
 from framechain.config.robot import JointMapping, RobotConfig, RobotConfigError
+from framechain.robot.binding import convert_joint
 
 #: As LeRobot writes it (``calibration/robots/so101_follower/<id>.json``): one entry per motor.
 CALIBRATION = {

@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from framechain.adapters.lerobot.format import DatasetError
+from framechain.adapters.lerobot.reader import DatasetError
 from framechain.adapters.lerobot.video import (
     VideoError,
     encode_video,

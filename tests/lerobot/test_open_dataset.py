@@ -22,9 +22,9 @@ from lerobot_scene import (
     write_robot_yaml,
 )
 
-from framechain.adapters.lerobot.format import DatasetError
-from framechain.adapters.lerobot.reader import open_dataset
-from framechain.analysis.estimates import estimate_to_json
+from framechain.adapters.lerobot.adapter import open_dataset
+from framechain.adapters.lerobot.reader import DatasetError
+from framechain.analysis.model.estimates import estimate_to_json
 from framechain.catalogue import HopName
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.config.robot import RobotConfig, RobotConfigError
@@ -168,7 +168,7 @@ def test_variable_rate_state_and_camera_times(tmp_path: Path) -> None:
 
 
 def test_unrecorded_camera_latency_is_attributed(tmp_path: Path) -> None:
-    attribute = pytest.importorskip("framechain.analysis.attribute").attribute
+    attribute = pytest.importorskip("framechain.analysis.verdict.attribute").attribute
     delay = 0.04
     ds = write_arm_dataset(tmp_path / "ds", version="v2.1", lengths=(90,), camera_delay_s=delay)
     # Detections away from the episode's ends: the latency fit looks the camera up at +-0.25 s.

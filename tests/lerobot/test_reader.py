@@ -13,14 +13,14 @@ import pytest
 from lerobot_scene import FPS, STATE_NAMES, ArmDataset, episode_times, state_vectors, write_arm_dataset
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot.format import (
+from framechain.adapters.lerobot.reader import (
     DatasetError,
     DatasetReader,
     Layout,
     flatten_names,
     is_lerobot_dataset,
 )
-from framechain.timeline import FramechainError
+from framechain.errors import FramechainError
 
 
 def test_episodes_and_boundaries(arm_dataset: ArmDataset) -> None:

@@ -10,7 +10,7 @@ import yaml
 from lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.estimates import estimate_to_json
+from framechain.analysis.model.estimates import estimate_to_json
 from framechain.catalogue import Fault
 from framechain.pipeline import attribute_log
 

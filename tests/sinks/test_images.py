@@ -24,8 +24,8 @@ from scipy.spatial.transform import Rotation
 from test_rerun import _read  # the .rrd read back per entity, as the Rerun sink tests read it
 
 from framechain.adapters import write_log
-from framechain.analysis.attribute import Attribution
 from framechain.analysis.run import Run as PipelineRun
+from framechain.analysis.verdict.attribute import Attribution
 from framechain.cli.demo_cmd import parse_fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import run

@@ -173,7 +173,7 @@ def test_the_figures_of_a_renderer_that_died_are_drawn_here() -> None:
 
 
 def test_the_number_of_renderers_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
-    from framechain.timeline import FramechainError
+    from framechain.errors import FramechainError
 
     monkeypatch.setenv(plots.RENDERERS_VARIABLE, "two")
     with pytest.raises(FramechainError, match="FRAMECHAIN_RENDERERS='two'"), plots.renderers():

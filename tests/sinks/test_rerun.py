@@ -22,10 +22,10 @@ from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
-from framechain.analysis.alignment import align_evidence
-from framechain.analysis.attribute import Attribution, Finding
-from framechain.analysis.estimates import LatencyEstimate, RotationEstimate
+from framechain.analysis.evidence.alignment import align_evidence
+from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimate
 from framechain.analysis.run import Run
+from framechain.analysis.verdict.attribute import Attribution, Finding
 from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames

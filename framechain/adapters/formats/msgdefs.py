@@ -4,6 +4,7 @@ for ROS 1, tf2_msgs (missing from ROS1_NOETIC)."""
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 from typing import Any, Literal
 
 DetectionLayout = Literal["ros2", "ros2-old", "ros1"]
@@ -61,3 +62,13 @@ def typestore(*, ros1: bool, layout: DetectionLayout = "ros2") -> Any:
         types.update(get_types_from_msg(text, name))
     store.register(types)
     return store
+
+
+@dataclass
+class OutMessage:
+    """A message to write: a rosbags message object of ``msgtype`` on ``topic`` at ``log_time_ns``."""
+
+    log_time_ns: int
+    topic: str
+    msgtype: str
+    msg: Any

@@ -17,7 +17,7 @@ from collections.abc import Collection
 from pathlib import Path
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot.format import DatasetReader
+from framechain.adapters.lerobot.reader import DatasetReader
 
 __all__ = ["HubError", "is_hub_id", "resolve_dataset"]
 

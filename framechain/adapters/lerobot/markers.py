@@ -1,6 +1,6 @@
 """Markers (ArUco, AprilTag) found in a LeRobot camera's frames, as observations: static-target evidence.
 
-The ``evidence.markers`` path of ROS images (:mod:`framechain.adapters.messages.markers`) on a
+The ``evidence.markers`` path of ROS images (:mod:`framechain.vision.markers`) on a
 dataset's video (or image-in-Parquet) frames: each frame of the camera is decoded (grey), searched
 with OpenCV's ArucoDetector, and each marker becomes a detection stamped with the camera's time of
 its frame, its log time the state row's; the corners are then resolved with the camera's model
@@ -19,9 +19,9 @@ import numpy as np
 
 from framechain.adapters.messages.egomotion_frames import camera_image_rows, decode_grey
 from framechain.adapters.messages.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
-from framechain.adapters.messages.markers import MarkerFinder
 from framechain.config.chain import MarkerSpec
 from framechain.timeline import CameraTable, ImageFrameTable
+from framechain.vision.markers import MarkerFinder
 
 __all__ = ["VideoMarkers", "video_markers"]
 

@@ -1,616 +1,683 @@
-"""One LeRobot episode as a framechain Timeline: joint states, FK transforms, cameras, detections.
+"""LeRobot datasets on disk (v2.0, v2.1, v3.0) read with pyarrow alone: no lerobot, no torch.
 
-LeRobot datasets store joint states, actions and camera videos, but no transforms, no intrinsics
-and no hardware timestamps. :func:`open_dataset` brings them in from the robot configuration
-(robot.yaml, :mod:`framechain.adapters.robot.config`): the URDF and the mapping of state names to
-joints give the transforms by batched forward kinematics, the calibration files give intrinsics
-and camera mounts, and detections come from a side table or a dataset feature.
+Layouts (``meta/info.json`` in both; see REFERENCE.md section 4):
 
-The Timeline holds:
+- v2.x: ``meta/episodes.jsonl`` (``episode_index``, ``tasks``, ``length``), one episode per data
+  file ``data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet`` with
+  ``episode_chunk = episode_index // chunks_size``; videos one mp4 per episode and key.
+- v3.0: ``meta/episodes/chunk-*/file-*.parquet`` (one row per episode: ``length``,
+  ``data/chunk_index``, ``data/file_index``, ``dataset_from_index``, ``dataset_to_index``,
+  ``videos/<key>/...``), many episodes per data file ``data/chunk-{c:03d}/file-{f:03d}.parquet``;
+  an episode's rows are those with its ``episode_index``.
 
-- transforms: a static ``world -> <URDF root>`` edge (``world_from_base`` in robot.yaml); one
-  edge per URDF joint ``parent_link -> child_link``, dynamic (one sample per frame, stamped with
-  the frame's timestamp) for joints the dataset drives and their mimics, static for fixed and
-  held joints; static camera mounts ``link -> <camera>_optical_frame`` (through
-  ``<camera>_link`` when the mount is not optical). A wrist camera's extrinsic thus follows the
-  live joint state.
-- cameras: one row per calibrated camera (stamp 0: valid throughout).
-- observations: detections, stamped with the **camera's** time of their frame (the frame's
-  timestamp, plus the camera's ``timing.offset_s``, or its ``timing.timestamp_column``); their
-  ``log_time_ns`` is the frame's dataset timestamp, the time the state was recorded. So
-  ``stamp_ns - log_time_ns`` is each observation's camera-vs-state gap, and the replay's
-  per-hop gaps and stale accounting see the same offsets as for bags.
-- joint_states: the mapped joints in SI units (long form, one row per joint per frame).
-- depth_frames: per-frame depth features of the cameras that have one.
+Per-frame columns: ``timestamp`` (seconds from the episode start), ``frame_index`` (0..length-1),
+``index`` (global), ``episode_index``, ``task_index``, and one column per non-video feature
+(vectors as ``fixed_size_list`` or ``list``). Only the columns asked for are read.
 
-Times are nanoseconds from the episode start (LeRobot timestamps restart at 0 per episode).
-``metadata["episode_start_ns"]`` is the first row's stamp, and ``metadata["wall_clock_start_ns"]`` that
-row's wall-clock time where the dataset stores one (:mod:`framechain.adapters.lerobot.wall_clock`).
+Metadata that disagrees with the files is handled in two ways. What would make the frames read
+wrong (an episode whose row count differs from its declared length, a data file missing or
+holding another episode, timestamps that go backwards, names that do not fit a feature's shape)
+raises :class:`DatasetError` naming the file and the inconsistency. What does not (a
+``total_chunks`` that does not count the chunk folders, a declared video key with no files,
+timestamps offset from ``frame_index / fps``) becomes a note on :attr:`DatasetReader.notes`, or
+a :class:`DatasetError` with ``strict=True``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
-import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot.clock import (
-    VIDEO_REFERENCE_NUDGE_NS,
-    VideoClock,
-    episode_frame_times_s,
-    video_clock,
-)
-from framechain.adapters.lerobot.format import (
-    DatasetError,
-    DatasetReader,
-    EpisodeFrames,
-    Layout,
-    is_lerobot_dataset,
-)
-from framechain.adapters.lerobot.markers import video_markers
-from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clock_start_ns
-from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
-from framechain.adapters.robot.binding import arm_root, joint_positions, robot_model
-from framechain.adapters.robot.kinematics import RobotModel
 from framechain.arrays import FloatArray, IntArray
-from framechain.config.calibration import CameraCalibration
-from framechain.config.chain import ChainConfig, MarkerSpec
-from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
-from framechain.timeline import (
-    CameraTable,
-    DepthFrameTable,
-    ImageFrameTable,
-    JointStateTable,
-    ObservationTable,
-    Timeline,
-    TransformTable,
-)
-from framechain.timeline.frames import VIDEO_ENCODING
 
-#: ``Timeline.metadata["format"]`` of a LeRobot episode.
-FORMAT = "lerobot"
+#: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
+TIMESTAMP_TOLERANCE_S = 1e-4
+#: The per-frame columns lerobot adds to every dataset.
+INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 
-__all__ = ["FORMAT", "LeRobotAdapter", "camera_stamps_ns", "is_lerobot_dataset", "open_dataset", "scan_dataset"]
-
-
-def open_dataset(
-    path: str | Path,
-    *,
-    episode: int,
-    robot: RobotConfig | str | Path,
-    detections: str | Path | None = None,
-    strict: bool = False,
-    markers: MarkerSpec | None = None,
-) -> Timeline:
-    """Read episode ``episode`` of the LeRobot dataset at ``path`` into a Timeline.
-
-    ``robot`` is a :class:`RobotConfig` or the path of robot.yaml; ``detections`` adds a side
-    table (Parquet or CSV) to those robot.yaml names. ``strict`` turns metadata notes (harmless
-    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`. ``markers`` (else
-    robot.yaml's ``chain.evidence.markers``) are searched in the chain camera's frames
-    (:mod:`framechain.adapters.lerobot.markers`) and become observations too.
-    """
-    cfg = robot if isinstance(robot, RobotConfig) else RobotConfig.load(robot)
-    reader = DatasetReader(path, strict=strict)
-    model = robot_model(cfg)
-    sources = list(cfg.detections)
-    if detections is not None:
-        sources.append(DetectionSource(table=Path(detections)))
-    names = reader.names(cfg.state_feature)
-    cfg.check_names(names)
-    wall_features = wall_clock_features(reader)
-    frames = reader.read(episode, list(dict.fromkeys([*_columns(cfg, reader, sources), *wall_features])))
-    state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
-    bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
-    if bad.any():
-        k = int(np.flatnonzero(bad.any(axis=1))[0])
-        raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
-    q = joint_positions(cfg, model, state, names)
-    state_ns = frames.stamp_ns
-    source_name = f"{Path(path).name}:{cfg.state_feature}"
-
-    transforms = TransformTable.concat([
-        _world_edge(cfg, model),
-        *_joint_edges(model, cfg, q, state_ns, source_name),
-        *_mount_edges(cfg),
-    ])
-    cameras = CameraTable.concat([c.camera_table() for c in cfg.cameras.values()])
-    cam_ns = {name: camera_stamps_ns(frames, cam) for name, cam in cfg.cameras.items()}
-    observations = _observations(sources, cfg, frames, cam_ns, state_ns, episode, Path(path))
-    depth = DepthFrameTable.concat([
-        _depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
-    ])
-    joint_states = _joint_states(cfg, q, state_ns, source_name)
-    clocks = {cam.name: _clock(cam.video_key, frames, reader.fps, cam.timing.pairing) for cam in cfg.cameras.values()
-              if cam.video_key is not None and cam.video_key in frames.episode.video_files}
-    videos = ImageFrameTable.concat([
-        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns, clocks[cam.name]) for cam in cfg.cameras.values()
-          if cam.name in clocks),
-        *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
-          if cam.video_key is not None and cam.video_key in frames.columns),
-    ])
-    metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
-    wall = wall_clock_start_ns(frames, wall_features)
-    if wall is not None:
-        metadata["wall_clock_feature"], metadata["wall_clock_start_ns"] = wall
-    spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
-    if spec is not None:
-        observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
-    return Timeline(transforms=transforms, cameras=cameras, observations=observations,
-                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
+__all__ = [
+    "INDEX_COLUMNS",
+    "DatasetError",
+    "DatasetReader",
+    "EpisodeFrames",
+    "EpisodeInfo",
+    "FeatureInfo",
+    "Layout",
+    "flatten_names",
+    "is_lerobot_dataset",
+]
 
 
-def _with_markers(observations: ObservationTable, images: ImageFrameTable, cameras: CameraTable, cfg: RobotConfig,
-                  spec: MarkerSpec, metadata: dict[str, Any]) -> ObservationTable:
-    """The markers in the chain camera's frames added as observations (their corners in the metadata)."""
-    name = cfg.chain_camera or next((n for n, c in cfg.cameras.items() if c.video_key is not None), None)
-    cam = cfg.cameras.get(name or "")
-    if cam is None or cam.video_key is None:
-        raise RobotConfigError(cfg.source, "evidence.markers are searched in the chain camera's frames: give it a "
-                               "video_key")
-    found = video_markers(images, cameras, cam.optical_frame, spec, source=cam.video_key)
-    metadata["notes"] = [*metadata["notes"], *found.notes]
-    r = found.resolved
-    first = len(observations)
-    table = ObservationTable(
-        obs_id=np.arange(first, first + r.stamp_ns.size, dtype=np.int64), stamp_ns=r.stamp_ns,
-        log_time_ns=r.log_time_ns, camera_frame=r.camera_frame, u=r.u, v=r.v, depth_m=r.depth_m, label=r.label,
-        score=r.score, source=r.source)
-    side = dict(r.side)
-    position = np.searchsorted(r.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
-    metadata["fiducials"] = {"counts": r.counts, "corners": {"obs_id": (first + position).tolist(), **side}}
-    return ObservationTable.concat([observations, table])
+class DatasetError(AdapterError):
+    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency (one line:
+    pyarrow's and FFmpeg's messages may span several)."""
+
+    def __init__(self, path: str | Path, what: str) -> None:
+        super().__init__(path, " ".join(what.split()))
 
 
-def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
-    """The per-frame columns an episode is read with; camera features of the wrong kind fail here."""
-    for cam in cfg.cameras.values():
-        if cam.video_key is not None:
-            feat = reader.feature(cam.video_key)
-            if not feat.is_video and feat.dtype != "image":
-                raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
-                                       f"{feat.dtype} feature, not video or image")
-    columns = [cfg.state_feature]
-    columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
-    # Frames stored in the Parquet (image features: PNG/JPEG bytes) rather than in an mp4.
-    columns += [c.video_key for c in cfg.cameras.values()
-                if c.video_key is not None and reader.feature(c.video_key).dtype == "image"]
-    columns += [s.feature for s in sources if s.feature is not None]
-    for cam in cfg.cameras.values():
-        if cam.depth is not None:
-            feat = reader.feature(cam.depth.feature)
-            if feat.is_video or feat.dtype == "image":
-                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is "
-                                   f"{'a video' if feat.is_video else 'an encoded image'}: framechain does not "
-                                   "decode images; store depth as an array feature (height, width)")
-            columns.append(cam.depth.feature)
-    return list(dict.fromkeys(columns))
+class Layout(StrEnum):
+    """On-disk layout family: v2 (one episode per file) or v3 (many episodes per file)."""
+
+    V2 = "v2"
+    V3 = "v3"
 
 
-def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, reader: DatasetReader,
-              frames: EpisodeFrames, clocks: Mapping[str, VideoClock]) -> dict[str, Any]:
-    """What the episode came from: dataset, robot configuration, joints held or at zero, cameras, chain."""
-    held = {name: float(v) for name, v in cfg.hold.items()}
-    driven = {m.joint for m in cfg.joints}
-    zeroed = [j for j in model.actuated if j not in driven and j not in held]
-    camera = cfg.cameras.get(cfg.chain_camera or next(iter(cfg.cameras), ""))
-    chain = cfg.chain_config(root=arm_root(cfg, model, camera.mount.parent if camera else None)) \
-        if cfg.cameras else None
-    state_ns = frames.stamp_ns
-    return {
-        "format": FORMAT,
-        "source": {"path": str(path.resolve()), "format": FORMAT, "episode": episode},
-        "source_path": str(path.resolve()),
-        "codebase_version": reader.version,
-        "robot_type": reader.robot_type,
-        "episode": episode,
-        "fps": reader.fps,
-        "length": len(frames),
-        "tasks": list(frames.episode.tasks),
-        "time_span_ns": [int(state_ns[0]), int(state_ns[-1])],
-        # its first row: where the episode's own time starts (a viewer shows durations from it)
-        "episode_start_ns": int(state_ns[0]),
-        "state_feature": cfg.state_feature,
-        "urdf": str(cfg.urdf),
-        "robot_config": cfg.source,
-        "joint_map": {m.state: {"joint": m.joint, "unit": m.unit.value, "sign": m.sign, "offset": m.offset}
-                      for m in cfg.joints},
-        "held_joints": held,
-        "joints_at_zero": zeroed,
-        "cameras": {
-            name: {
-                "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
-                "xyz": list(cam.mount.translation), "source": cam.source,
-                "focal_px": [cam.intrinsics.fx, cam.intrinsics.fy],
-                "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
-                                                       "timestamp_column": cam.timing.timestamp_column},
-                "video_file": _video_file(frames, cam.video_key),
-                "video_from_s": frames.episode.video_from_s.get(cam.video_key or "", 0.0),
-                "clock": clocks[name].to_json() if name in clocks else None,
-            }
-            for name, cam in cfg.cameras.items()
-        },
-        "chain_frames": None if chain is None else {"camera": chain.frames.camera, "body": chain.frames.body,
-                                                    "world": chain.frames.world},
-        "chain": None if chain is None else chain.to_dict(),
-        "notes": [*reader.notes, *cfg.notes, *(c.summary() for c in clocks.values())],
-    }
+class InfoJson(TypedDict, total=False):
+    """The keys of ``meta/info.json`` framechain reads."""
+
+    codebase_version: str
+    robot_type: str | None
+    fps: float
+    total_episodes: int
+    total_frames: int
+    total_chunks: int
+    chunks_size: int
+    data_path: str
+    video_path: str | None
+    features: dict[str, dict[str, Any]]
+    splits: dict[str, str]
 
 
-def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArray:
-    """Per-frame capture time of ``camera``: its timestamp column (or the frame's), plus its offset."""
-    timing = camera.timing
-    if timing.timestamp_column is not None:
-        base = np.asarray(frames.columns[timing.timestamp_column], dtype=np.float64).reshape(len(frames))
-        if not np.isfinite(base).all():
-            raise DatasetError(frames.episode.data_file, f"camera timestamp column {timing.timestamp_column!r} "
-                               "has non-finite values")
-        base_ns: IntArray = np.round(base * 1e9).astype(np.int64)
-    else:
-        base_ns = frames.stamp_ns
-    out: IntArray = base_ns + round(timing.offset_s * 1e9)
-    return out
+@dataclass(frozen=True)
+class FeatureInfo:
+    """One entry of ``info.json`` ``features``; ``names`` flattened (nested lists and dicts)."""
+
+    key: str
+    dtype: str
+    shape: tuple[int, ...]
+    names: tuple[str, ...] | None
+    info: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_video(self) -> bool:
+        return self.dtype == "video"
+
+    @property
+    def is_depth_map(self) -> bool:
+        return bool(self.info.get("video.is_depth_map", False))
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape)) if self.shape else 1
 
 
-def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
-    if model.root == cfg.world_frame:  # several arms: their bases hang from the world in the model
-        return TransformTable.empty()
-    return TransformTable.from_rows(
-        cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
-        is_static=True, source=f"{cfg.source}:world_from_base",
-    )
+@dataclass(frozen=True)
+class EpisodeInfo:
+    """One episode's metadata: where its frames and videos live."""
+
+    index: int
+    length: int
+    tasks: tuple[str, ...]
+    data_file: Path
+    from_index: int | None = None  # v3: global index range [from, to)
+    to_index: int | None = None
+    video_files: Mapping[str, Path] = field(default_factory=dict)
+    #: v3: where the episode starts inside the shared mp4, per video key (s); v2: 0.
+    video_from_s: Mapping[str, float] = field(default_factory=dict)
+    #: v3: where it ends (s, exclusive), per video key; v2: absent (the file's end).
+    video_to_s: Mapping[str, float] = field(default_factory=dict)
 
 
-def _joint_edges(
-    model: RobotModel, cfg: RobotConfig, q: Mapping[str, FloatArray], stamps: IntArray, source: str
-) -> list[TransformTable]:
-    n = stamps.shape[0]
-    given: dict[str, FloatArray] = dict(q)
-    for name, value in cfg.hold.items():
-        given[name] = np.full(n, value)
-    local = model.joint_poses(given, default=0.0)
-    dynamic = set(q)
-    for joint in model.joints.values():
-        if joint.mimic is not None and joint.mimic.joint in dynamic:
-            dynamic.add(joint.name)
-    out: list[TransformTable] = []
-    for name, joint in model.joints.items():
-        translation, quat = local[name]
-        if name in dynamic:
-            out.append(TransformTable.from_rows(joint.parent, joint.child, stamps, translation, quat,
-                                                source=f"{source}->{name}"))
-        else:  # fixed, held or left at zero: one timeless sample
-            out.append(TransformTable.from_rows(joint.parent, joint.child, [0], translation[:1], quat[:1],
-                                                is_static=True, source=f"{model.source}:{name}"))
-    return out
+@dataclass(frozen=True)
+class EpisodeFrames:
+    """The frames of one episode, sorted by ``index``: timestamps, indices and requested columns."""
 
+    episode: EpisodeInfo
+    timestamp_s: FloatArray
+    frame_index: IntArray
+    index: IntArray
+    columns: Mapping[str, npt.NDArray[Any]]
 
-def _mount_edges(cfg: RobotConfig) -> list[TransformTable]:
-    out: list[TransformTable] = []
-    for cam in cfg.cameras.values():
-        for parent, child, t, quat in cam.mount_edges():
-            out.append(TransformTable.from_rows(parent, child, [0], [t], [quat], is_static=True, source=cam.source))
-    return out
+    def __len__(self) -> int:
+        return int(self.timestamp_s.shape[0])
 
-
-def _joint_states(
-    cfg: RobotConfig, q: Mapping[str, FloatArray], stamps: IntArray, source: str
-) -> JointStateTable:
-    parts: list[JointStateTable] = []
-    n = stamps.shape[0]
-    for m in cfg.joints:
-        parts.append(JointStateTable(
-            stamp_ns=stamps, log_time_ns=stamps, joint=np.full(n, m.joint), position=q[m.joint],
-            velocity=np.full(n, np.nan), effort=np.full(n, np.nan), source=np.full(n, f"{source}[{m.state}]"),
-        ))
-    return JointStateTable.concat(parts)
-
-
-def _read_side_table(path: Path) -> pa.Table:
-    if not path.is_file():
-        raise DatasetError(path, "detections table not found")
-    try:
-        if path.suffix.lower() == ".csv":
-            return pacsv.read_csv(path)
-        return pq.read_table(path)
-    except (OSError, pa.ArrowInvalid) as err:
-        raise DatasetError(path, f"cannot read detections table ({err})") from err
-
-
-def _pick(table: pa.Table, names: Sequence[str]) -> str | None:
-    return next((n for n in names if n in table.column_names), None)
-
-
-def _observations(
-    sources: Sequence[DetectionSource], cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
-    state_ns: IntArray, episode: int, dataset: Path,
-) -> ObservationTable:
-    parts: list[dict[str, Any]] = []
-    n_frames = len(frames)
-    for src in sources:
-        if src.feature is not None:
-            assert src.camera is not None
-            arr = np.asarray(frames.columns[src.feature], dtype=float).reshape(n_frames, -1)
-            if arr.shape[1] not in (2, 3):
-                raise DatasetError(dataset, f"detection feature {src.feature!r} has {arr.shape[1]} values per "
-                                   "frame; expected [u, v] or [u, v, depth_m]")
-            rows = np.flatnonzero(np.isfinite(arr[:, 0]) & np.isfinite(arr[:, 1]))
-            parts.append({
-                "camera": np.full(rows.size, src.camera), "stamp": cam_ns[src.camera][rows],
-                "log": state_ns[rows], "u": arr[rows, 0], "v": arr[rows, 1],
-                "depth": arr[rows, 2] if arr.shape[1] == 3 else np.full(rows.size, np.nan),
-                "label": np.full(rows.size, src.camera), "score": np.full(rows.size, np.nan),
-                "source": f"{dataset.name}:{src.feature}",
-            })
-            continue
-        assert src.table is not None
-        parts.append(_table_observations(src, cfg, frames, cam_ns, state_ns, episode))
-    if not parts:
-        return ObservationTable.empty()
-    counts = [len(p["u"]) for p in parts]
-    total = sum(counts)
-    cam = np.concatenate([p["camera"] for p in parts]).astype(str)
-    frame = np.array([cfg.cameras[c].optical_frame for c in cam], dtype=str) if total else np.array([], dtype=str)
-    return ObservationTable(
-        obs_id=np.arange(total, dtype=np.int64),
-        stamp_ns=np.concatenate([p["stamp"] for p in parts]).astype(np.int64),
-        log_time_ns=np.concatenate([p["log"] for p in parts]).astype(np.int64),
-        camera_frame=frame,
-        u=np.concatenate([p["u"] for p in parts]),
-        v=np.concatenate([p["v"] for p in parts]),
-        depth_m=np.concatenate([p["depth"] for p in parts]),
-        label=np.concatenate([p["label"] for p in parts]).astype(str),
-        score=np.concatenate([p["score"] for p in parts]),
-        source=np.concatenate([np.full(c, p["source"]) for c, p in zip(counts, parts, strict=True)]).astype(str),
-    )
-
-
-def _table_observations(
-    src: DetectionSource, cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
-    state_ns: IntArray, episode: int,
-) -> dict[str, Any]:
-    assert src.table is not None
-    path = src.table
-    table = _read_side_table(path)
-    for required in ("u", "v"):
-        if required not in table.column_names:
-            raise DatasetError(path, f"detections table has no {required!r} column; it has {table.column_names}")
-    ep_col = _pick(table, ("episode_index", "episode"))
-    if ep_col is not None:
-        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
-
-        table = table.filter(pc.equal(table.column(ep_col), episode))
-    n = table.num_rows
-    cam_col = _pick(table, ("camera", "camera_name"))
-    if cam_col is not None:
-        cams = np.asarray(table.column(cam_col).to_pylist(), dtype=str)
-    elif src.camera is not None or len(cfg.cameras) == 1:
-        cams = np.full(n, src.camera or next(iter(cfg.cameras)))
-    else:
-        raise DatasetError(path, f"detections table has no camera column and robot.yaml has several cameras "
-                           f"{sorted(cfg.cameras)}")
-    unknown = sorted(set(cams.tolist()) - set(cfg.cameras))
-    if unknown:
-        raise DatasetError(path, f"detections name cameras {unknown} that robot.yaml does not calibrate "
-                           f"(cameras: {sorted(cfg.cameras)})")
-    frame_col = _pick(table, ("frame_index",))
-    ts_col = _pick(table, ("timestamp", "timestamp_s"))
-    stamp = np.zeros(n, dtype=np.int64)
-    log = np.zeros(n, dtype=np.int64)
-    if frame_col is not None:
-        fi = np.asarray(table.column(frame_col).to_numpy(zero_copy_only=False))
-        if fi.size and (fi.dtype.kind not in "iu" or fi.min() < 0 or fi.max() >= len(frames)):
-            raise DatasetError(path, f"frame_index must be integers in 0..{len(frames) - 1} for episode {episode}")
-        fi = fi.astype(np.int64)
-        for name in np.unique(cams):
-            sel = cams == name
-            stamp[sel] = cam_ns[str(name)][fi[sel]]
-        log = state_ns[fi]
-    elif ts_col is not None:
-        ts = np.asarray(table.column(ts_col).to_numpy(zero_copy_only=False), dtype=float)
-        stamp = np.round(ts * 1e9).astype(np.int64)
-        nearest = np.clip(np.searchsorted(state_ns, stamp), 0, len(frames) - 1)
-        prev = np.clip(nearest - 1, 0, len(frames) - 1)
-        nearest = np.where(np.abs(state_ns[prev] - stamp) <= np.abs(state_ns[nearest] - stamp), prev, nearest)
-        log = state_ns[nearest]
-    else:
-        raise DatasetError(path, "detections table needs a frame_index or a timestamp column (seconds)")
-    depth_col = _pick(table, ("depth_m", "depth"))
-    depth = (np.asarray(table.column(depth_col).to_numpy(zero_copy_only=False), dtype=float)
-             if depth_col is not None else np.full(n, np.nan))
-    label = (np.asarray(table.column("label").to_pylist(), dtype=str) if "label" in table.column_names
-             else cams.copy())
-    score = (np.asarray(table.column("score").to_numpy(zero_copy_only=False), dtype=float)
-             if "score" in table.column_names else np.full(n, np.nan))
-    return {
-        "camera": cams, "stamp": stamp, "log": log,
-        "u": np.asarray(table.column("u").to_numpy(zero_copy_only=False), dtype=float),
-        "v": np.asarray(table.column("v").to_numpy(zero_copy_only=False), dtype=float),
-        "depth": depth, "label": label, "score": score, "source": str(path),
-    }
-
-
-def _depth_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray
-) -> DepthFrameTable:
-    assert cam.depth is not None
-    images = np.asarray(frames.columns[cam.depth.feature])
-    if images.ndim != 3:
-        raise DatasetError(frames.episode.data_file, f"depth feature {cam.depth.feature!r} has shape "
-                           f"{list(images.shape[1:])} per frame; expected (height, width)")
-    n, h, w = images.shape
-    scale = cam.depth.scale_m
-    encoding = "32FC1" if images.dtype.kind == "f" else f"{images.dtype.itemsize * 8}UC1"
-
-    def load(i: int) -> npt.NDArray[np.float32]:
-        out: npt.NDArray[np.float32] = (images[i].astype(np.float64) * scale).astype(np.float32)
+    @property
+    def stamp_ns(self) -> IntArray:
+        """Timestamps as integer nanoseconds (rounded)."""
+        out: IntArray = np.round(self.timestamp_s * 1e9).astype(np.int64)
         return out
 
-    return DepthFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, w),
-        height=np.full(n, h), encoding=np.full(n, encoding), source=np.full(n, cam.depth.feature), loader=load,
-    )
 
+def flatten_names(raw: Any) -> tuple[str, ...] | None:
+    """``names`` of a feature as one flat tuple: lists, nested lists (Unitree) and dicts of lists."""
+    if raw is None:
+        return None
+    out: list[str] = []
 
-def _clock(key: str, frames: EpisodeFrames, fps: float, forced: str | None = None) -> VideoClock:
-    """How video ``key``'s frames pair with the episode's rows (:mod:`framechain.adapters.lerobot.clock`)."""
-    from_s = float(frames.episode.video_from_s.get(key, 0.0))
-    to_s = frames.episode.video_to_s.get(key)
-    if to_s is None and frames.episode.video_from_s:  # v3.0 without to_timestamp: the rows' nominal span
-        to_s = from_s + len(frames) / fps
-    times = episode_frame_times_s(frames.episode.video_files[key], from_s, to_s)
-    return video_clock(key, times, frames.timestamp_s, frames.frame_index, fps=fps, from_s=from_s, to_s=to_s,
-                       forced=forced)
-
-
-def _video_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, clock: VideoClock
-) -> ImageFrameTable:
-    """One row per row of the episode: the mp4 and the time in it of the frame the clock pairs with the row (not
-    decoded; -1: the row has no frame). v3.0 concatenates episodes in one file (from_timestamp is where the
-    episode starts in it), v2.1 has one file per episode."""
-    assert cam.video_key is not None
-    path = frames.episode.video_files[cam.video_key]
-    in_file = clock.file_times_ns(frames.timestamp_s)
-    n = len(frames)
-    size = cam.camera_table()
-    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
-    return ImageFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns,
-        width=np.full(n, width), height=np.full(n, height),
-        encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
-        video_time_ns=np.where(in_file >= 0, in_file + VIDEO_REFERENCE_NUDGE_NS, -1),
-    )
-
-
-_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
-
-
-def _stored_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, root: Path
-) -> ImageFrameTable:
-    """One row per frame of an image feature: the PNG/JPEG bytes stored in the Parquet (HF ``Image``: a struct
-    of ``bytes`` and ``path``; a path is read relative to the dataset when there are no bytes)."""
-    assert cam.video_key is not None
-    cells = frames.columns[cam.video_key].reshape(len(frames))
-    encoded: list[bytes] = []
-    for k, cell in enumerate(cells.tolist()):
-        data = cell.get("bytes") if isinstance(cell, dict) else cell if isinstance(cell, bytes) else None
-        if not data and isinstance(cell, dict) and cell.get("path"):
-            file = root / str(cell["path"])
-            data = file.read_bytes() if file.is_file() else None
-        if not data:
-            raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} has no bytes at frame {k}")
-        encoded.append(bytes(data))
-    kinds = [next((kind for magic, kind in _MAGIC.items() if data.startswith(magic)), "") for data in encoded]
-    if "" in kinds:
-        k = kinds.index("")
-        raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} holds neither PNG nor JPEG at "
-                           f"frame {k}")
-    n = len(frames)
-    size = cam.camera_table()
-    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
-    return ImageFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, width),
-        height=np.full(n, height), encoding=np.array(kinds), source=np.full(n, cam.video_key),
-        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: encoded[i],
-    )
-
-
-def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
-    path = frames.episode.video_files.get(key) if key is not None else None
-    return None if path is None else str(path)
-
-
-def scan_dataset(path: str | Path, episode: int | None = None, *, clocks: bool = False) -> LogInfo:
-    """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes.
-
-    With ``episode``, the counts and the span are that episode's, not the whole dataset's. With
-    ``clocks``, a note per video says how its frames pair with the rows and why (of ``episode``, else of
-    the first episode): frames against rows, the declared fps against the stamps' rate, the largest
-    departure of the stamps from ``frame_index / fps``.
-    """
-    reader = DatasetReader(path)
-    lengths = reader.lengths()
-    if episode is not None:
-        frames = longest = lengths.get(episode, 0)
-    else:
-        total = reader.info.get("total_frames")
-        frames = int(total) if isinstance(total, int) else 0
-        longest = max(lengths.values(), default=0)
-    topics = tuple(
-        TopicInfo(name=key, msgtype=f"lerobot/{feat.dtype}{list(feat.shape)}", count=frames, rate_hz=reader.fps,
-                  encoding="video" if feat.is_video else "parquet")
-        for key, feat in reader.features.items()
-    )
-    layout = "one episode per file" if reader.layout is Layout.V2 else "episodes share files"
-    said = _clock_notes(reader, episode) if clocks else []
-    return LogInfo(
-        format="lerobot", path=Path(path), start_ns=0, end_ns=round(max(longest - 1, 0) / reader.fps * 1e9),
-        topics=topics, notes=(*reader.notes, *said), message_count=frames,
-        container=f"lerobot {reader.version} ({len(reader.episodes())} episodes, {layout}, {reader.fps:g} fps)",
-    )
-
-
-def _clock_notes(reader: DatasetReader, episode: int | None) -> list[str]:
-    """One line per video of the episode (the first one when None): how its frames pair with the rows."""
-    episodes = reader.episodes()
-    if not episodes or not reader.video_keys:
-        return []
-    index = episodes[0] if episode is None else episode
-    frames = reader.read(index)
-    out = []
-    for key in reader.video_keys:
-        if key not in frames.episode.video_files:
-            continue
-        line = _clock(key, frames, reader.fps).summary()
-        out.append(line if episode is not None else f"{line} (episode {index})")
-    return out
-
-
-class LeRobotAdapter:
-    """The :class:`framechain.adapters.LogAdapter` of LeRobot dataset directories.
-
-    ``open(path, chain)`` takes the episode and the robot configuration from ``chain.robot``:
-    ``{"episode": N, "config": "robot.yaml"}`` (or a :class:`RobotConfig`), or the robot.yaml keys inline
-    plus ``episode``.
-    Register it with ``framechain.adapters.register_adapter(LeRobotAdapter())``.
-    """
-
-    name = "lerobot"
-
-    def probe(self, path: Path) -> bool:
-        return is_lerobot_dataset(path)
-
-    def scan(self, path: Path) -> LogInfo:
-        return scan_dataset(path)
-
-    def open(self, path: Path, chain: ChainConfig | None, *, progress: bool = False) -> LoadedLog:
-        section = dict(chain.robot) if chain is not None and chain.robot else {}
-        episode = section.pop("episode", None)
-        if isinstance(episode, bool) or not isinstance(episode, int):
-            raise AdapterError(path, "a LeRobot dataset needs an episode: chain robot section {episode: N, "
-                               "config: robot.yaml} (framechain ... --episode N --robot robot.yaml)")
-        config = section.pop("config", None)
-        robot: RobotConfig | Path
-        if isinstance(config, RobotConfig):  # made in memory (a known arm's generated robot.yaml)
-            robot = config
-        elif config is not None:
-            robot = Path(str(config))
-        elif "urdf" in section or "arms" in section:
-            robot = RobotConfig.from_mapping(section, base_dir=Path.cwd(), source="chain robot section")
+    def walk(node: Any) -> None:
+        if isinstance(node, str):
+            out.append(node)
+        elif isinstance(node, Mapping):
+            for value in node.values():
+                walk(value)
+        elif isinstance(node, list | tuple):
+            for value in node:
+                walk(value)
         else:
-            raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
-                               "{episode: N, config: robot.yaml}")
-        markers = chain.evidence.markers if chain is not None else None
-        timeline = open_dataset(path, episode=episode, robot=robot, markers=markers)
-        info = scan_dataset(path, episode).with_notes(list(timeline.metadata.get("notes", [])))
-        decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
-        return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)
+            out.append(str(node))
+
+    walk(raw)
+    return tuple(out)
+
+
+def is_lerobot_dataset(path: str | Path) -> bool:
+    """True when ``path`` is a directory with ``meta/info.json``: a LeRobot dataset, perhaps a damaged one
+    (an info.json that cannot be read, or of another codebase version, is for :class:`DatasetReader` to
+    say in one line, not a reason to read the folder as something else)."""
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
+class DatasetReader:
+    """A LeRobot dataset directory: its metadata, its episodes, one episode's columns at a time.
+
+    Constructing it reads ``meta/info.json`` and the episode index (episodes.jsonl or the
+    episodes parquet's ``episode_index`` column) and checks them against the files present.
+    """
+
+    def __init__(self, root: str | Path, *, strict: bool = False) -> None:
+        self.root = Path(root)
+        self.strict = strict
+        self.notes: list[str] = []
+        info_path = self.root / "meta" / "info.json"
+        if not self.root.is_dir():
+            raise DatasetError(self.root, "not a directory")
+        if not info_path.is_file():
+            raise DatasetError(info_path, "missing: not a LeRobot dataset (no meta/info.json)")
+        try:
+            raw = json.loads(info_path.read_text())
+        except (OSError, ValueError) as err:
+            raise DatasetError(info_path, f"cannot read as JSON ({err})") from err
+        if not isinstance(raw, dict):
+            raise DatasetError(info_path, "expected a JSON object")
+        self._info_path = info_path
+        self.info: InfoJson = raw  # type: ignore[assignment]
+        self.version = str(raw.get("codebase_version", ""))
+        if self.version.startswith("v2"):
+            self.layout = Layout.V2
+        elif self.version.startswith("v3"):
+            self.layout = Layout.V3
+        else:
+            raise DatasetError(info_path, f"codebase_version {self.version!r} is not v2.x or v3.x")
+        fps = raw.get("fps")
+        if isinstance(fps, bool) or not isinstance(fps, int | float) or not fps > 0 or not math.isfinite(fps):
+            raise DatasetError(info_path, f"fps must be a positive number, got {fps!r}")
+        self.fps = float(fps)
+        self.robot_type = raw.get("robot_type")
+        feats = raw.get("features")
+        if not isinstance(feats, dict) or not feats:
+            raise DatasetError(info_path, "features is missing or empty")
+        self.features: dict[str, FeatureInfo] = {k: self._feature(k, v) for k, v in feats.items()}
+        self.chunks_size = int(raw.get("chunks_size") or 1000)
+        data_path = raw.get("data_path")
+        if not isinstance(data_path, str):
+            raise DatasetError(info_path, "data_path template is missing")
+        self.data_path = data_path
+        video_path = raw.get("video_path")
+        self.video_path = video_path if isinstance(video_path, str) else None
+        self._episodes_v3: pa.Table | None = None
+        if self.layout is Layout.V2:
+            self._episodes_v2 = self._read_episodes_v2()
+            self._episode_ids = sorted(self._episodes_v2)
+        else:
+            self._episode_ids = self._read_episode_ids_v3()
+        self._check_totals()
+        self._check_videos()
+
+    # ------------------------------------------------------------------------------- metadata
+
+    def note(self, path: str | Path, what: str) -> None:
+        """Record a harmless inconsistency (raise it with ``strict=True``)."""
+        if self.strict:
+            raise DatasetError(path, what)
+        text = f"{path}: {what}"
+        if text not in self.notes:
+            self.notes.append(text)
+
+    def _feature(self, key: str, raw: Any) -> FeatureInfo:
+        if not isinstance(raw, Mapping) or "dtype" not in raw:
+            raise DatasetError(self._info_path, f"feature {key!r} has no dtype")
+        shape_raw = raw.get("shape") or [1]
+        try:
+            shape = tuple(int(s) for s in shape_raw)
+        except (TypeError, ValueError):
+            raise DatasetError(
+                self._info_path, f"feature {key!r} has shape {shape_raw!r}, not a list of ints"
+            ) from None
+        info = raw.get("info") or raw.get("video_info") or {}
+        return FeatureInfo(key, str(raw["dtype"]), shape, flatten_names(raw.get("names")),
+                           dict(info) if isinstance(info, Mapping) else {})
+
+    def feature(self, key: str) -> FeatureInfo:
+        try:
+            return self.features[key]
+        except KeyError:
+            raise DatasetError(
+                self._info_path, f"no feature {key!r}; features are {sorted(self.features)}"
+            ) from None
+
+    def names(self, key: str) -> tuple[str, ...]:
+        """Element names of a vector feature (``key_0``... when info.json gives none)."""
+        feat = self.feature(key)
+        n = feat.size
+        if feat.names is None:
+            return tuple(f"{key}_{i}" for i in range(n))
+        if len(feat.names) != n:
+            raise DatasetError(
+                self._info_path,
+                f"feature {key!r} has shape {list(feat.shape)} ({n} values) but {len(feat.names)} names",
+            )
+        return feat.names
+
+    @property
+    def video_keys(self) -> list[str]:
+        return [k for k, f in self.features.items() if f.is_video]
+
+    def episodes(self) -> list[int]:
+        """Episode indices, ascending."""
+        return list(self._episode_ids)
+
+    def lengths(self) -> dict[int, int]:
+        """Declared frame count of every episode (episodes.jsonl or the episodes parquet)."""
+        if self.layout is Layout.V2:
+            return {e: int(row["length"]) for e, row in sorted(self._episodes_v2.items())}
+        table = self._episodes_table_v3()
+        pairs = zip(table.column("episode_index").to_pylist(), table.column("length").to_pylist(), strict=True)
+        return {int(e): int(n) for e, n in sorted(pairs)}
+
+    def _read_episodes_v2(self) -> dict[int, dict[str, Any]]:
+        path = self.root / "meta" / "episodes.jsonl"
+        if not path.is_file():
+            raise DatasetError(path, "missing: a v2 dataset lists its episodes here")
+        out: dict[int, dict[str, Any]] = {}
+        for lineno, row in _jsonl(path, self.note):
+            ep, length = _whole(row.get("episode_index")), _whole(row.get("length"))
+            if ep is None or length is None or length < 0:
+                self.note(path, f"line {lineno} lacks a whole episode_index or length; left out")
+                continue
+            if ep in out:
+                self.note(path, f"line {lineno}: episode {ep} is listed twice; the first is kept")
+                continue
+            out[ep] = row
+        if not out:
+            raise DatasetError(path, "lists no episode that can be read")
+        return out
+
+    def _episodes_files_v3(self) -> list[Path]:
+        folder = self.root / "meta" / "episodes"
+        files = sorted(folder.glob("chunk-*/file-*.parquet"))
+        if not files:
+            raise DatasetError(folder, "no episodes parquet files (chunk-*/file-*.parquet): not a v3 dataset?")
+        return files
+
+    def _episodes_table_v3(self) -> pa.Table:
+        """Every readable episodes parquet file as one table (read once); a file that cannot be read is a note
+        and its episodes are left out, the others kept."""
+        if self._episodes_v3 is not None:
+            return self._episodes_v3
+        folder = self.root / "meta" / "episodes"
+        tables = []
+        for path in self._episodes_files_v3():
+            try:
+                table = pq.read_table(path)
+            except (OSError, pa.ArrowException) as err:
+                self.note(path, f"cannot read ({_one_line(err)}); its episodes are left out")
+                continue
+            missing = [c for c in ("episode_index", "length", "data/chunk_index", "data/file_index")
+                       if c not in table.column_names]
+            if missing:
+                self.note(path, f"lacks columns {missing}; its episodes are left out")
+                continue
+            tables.append(table)
+        if not tables:
+            raise DatasetError(folder, "no episodes parquet file can be read (see above): no episode is known")
+        try:
+            self._episodes_v3 = pa.concat_tables(tables, promote_options="permissive")
+        except pa.ArrowException as err:
+            raise DatasetError(folder, f"the episodes parquet files disagree on their columns ({_one_line(err)})") \
+                from err
+        return self._episodes_v3
+
+    def _read_episode_ids_v3(self) -> list[int]:
+        table = self._episodes_table_v3()
+        ids = table.column("episode_index").to_numpy(zero_copy_only=False)
+        if not np.isfinite(ids.astype(np.float64)).all():
+            raise DatasetError(self.root / "meta" / "episodes", "an episode row has no episode_index")
+        if np.unique(ids).size != ids.size:
+            raise DatasetError(self.root / "meta" / "episodes", "an episode_index appears in two episode rows")
+        return sorted(int(i) for i in ids)
+
+    def _check_totals(self) -> None:
+        info = self.info
+        total = info.get("total_episodes")
+        if isinstance(total, int) and total != len(self._episode_ids):
+            self.note(self._info_path, f"total_episodes is {total} but {len(self._episode_ids)} episodes are listed")
+        if self.layout is Layout.V2:
+            frames = sum(int(r["length"]) for r in self._episodes_v2.values())
+            if isinstance(info.get("total_frames"), int) and info["total_frames"] != frames:
+                self.note(self._info_path, f"total_frames is {info['total_frames']} but the episodes' lengths "
+                          f"add up to {frames}")
+            chunks = sorted(p.name for p in (self.root / "data").glob("chunk-*") if p.is_dir())
+            declared = info.get("total_chunks")
+            if isinstance(declared, int) and declared != len(chunks):
+                self.note(self._info_path, f"total_chunks is {declared} but data/ holds {len(chunks)} chunk folders "
+                          f"({', '.join(chunks) or 'none'})")
+        splits = info.get("splits") or {}
+        for split, span in splits.items() if isinstance(splits, Mapping) else ():
+            try:
+                lo, hi = (int(x) for x in str(span).split(":"))
+            except ValueError:
+                self.note(self._info_path, f"split {split!r} is {span!r}, not 'start:stop'")
+                continue
+            if hi > len(self._episode_ids) or lo < 0:
+                self.note(self._info_path, f"split {split!r} is {span!r} but the dataset has "
+                          f"{len(self._episode_ids)} episodes")
+
+    def _check_videos(self) -> None:
+        for key in self.video_keys:
+            present = any((self.root / "videos").glob(f"**/{key}/*.mp4")) or any(
+                (self.root / "videos" / key).glob("chunk-*/*.mp4")
+            )
+            if not present:
+                self.note(self._info_path, f"video feature {key!r} is declared but no video files exist for it "
+                          f"under {self.root / 'videos'}")
+
+    # ------------------------------------------------------------------------------- episodes
+
+    def episode(self, index: int) -> EpisodeInfo:
+        """Metadata of one episode (its data file, length, tasks, videos)."""
+        self._check_known(index)
+        if self.layout is Layout.V2:
+            return self._episode_v2(index)
+        return self._episode_v3(index)
+
+    def _check_known(self, index: int) -> None:
+        if index not in self._episode_ids:
+            ids = self._episode_ids
+            shown = f"{ids[0]}..{ids[-1]}" if ids == list(range(ids[0], ids[-1] + 1)) else str(ids)
+            raise DatasetError(self.root, f"no episode {index}; episodes are {shown}")
+
+    def episode_patterns(self, index: int) -> list[str]:
+        """Where episode ``index``'s data file and videos are, relative to the root, as glob patterns (a
+        variable LeRobot does not define matches anything), whether or not the files are on disk yet: what
+        to fetch of a dataset whose metadata alone is here."""
+        self._check_known(index)
+        if self.layout is Layout.V2:
+            chunk = index // self.chunks_size
+            data = {"episode_chunk": chunk, "chunk_index": chunk, "episode_index": index}
+            videos = {key: {**data, "video_key": key} for key in self.video_keys}
+        else:
+            row = self._episode_row_v3(index)
+            data = {"chunk_index": int(row["data/chunk_index"]), "file_index": int(row["data/file_index"]),
+                    "episode_index": index}
+            videos = {key: {"video_key": key, "chunk_index": int(c), "file_index": int(f), "episode_index": index}
+                      for key in self.video_keys
+                      if (c := row.get(f"videos/{key}/chunk_index")) is not None
+                      and (f := row.get(f"videos/{key}/file_index")) is not None}
+        patterns = [self._pattern("data_path", self.data_path, data)[0]]
+        if self.video_path is not None:
+            patterns += [self._pattern("video_path", self.video_path, fields)[0] for fields in videos.values()]
+        return patterns
+
+    def _episode_v2(self, index: int) -> EpisodeInfo:
+        row = self._episodes_v2[index]
+        chunk = index // self.chunks_size
+        fields = {"episode_chunk": chunk, "chunk_index": chunk, "episode_index": index}
+        data_file = self._fill("data_path", self.data_path, fields)
+        videos: dict[str, Path] = {}
+        if self.video_path is not None:
+            for key in self.video_keys:
+                vf = self._fill_if_found("video_path", self.video_path, {**fields, "video_key": key})
+                if vf is not None and vf.is_file():
+                    videos[key] = vf
+        tasks = row.get("tasks") or []
+        return EpisodeInfo(index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks),
+                           data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0))
+
+    def _episode_v3(self, index: int) -> EpisodeInfo:
+        row = self._episode_row_v3(index)
+        fields = {"chunk_index": int(row["data/chunk_index"]), "file_index": int(row["data/file_index"]),
+                  "episode_index": index}
+        data_file = self._fill("data_path", self.data_path, fields)
+        videos: dict[str, Path] = {}
+        video_from: dict[str, float] = {}
+        video_to: dict[str, float] = {}
+        for key in self.video_keys:
+            c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
+            if c is None or f is None or self.video_path is None:
+                continue
+            vf = self._fill_if_found("video_path", self.video_path, {"video_key": key, "chunk_index": int(c),
+                                                                      "file_index": int(f), "episode_index": index})
+            if vf is not None and vf.is_file():
+                videos[key] = vf
+                video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
+                if row.get(f"videos/{key}/to_timestamp") is not None:
+                    video_to[key] = float(row[f"videos/{key}/to_timestamp"])
+        tasks = row.get("tasks") or []
+        return EpisodeInfo(
+            index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks), data_file=data_file,
+            from_index=None if row.get("dataset_from_index") is None else int(row["dataset_from_index"]),
+            to_index=None if row.get("dataset_to_index") is None else int(row["dataset_to_index"]),
+            video_files=videos, video_from_s=video_from, video_to_s=video_to,
+        )
+
+    def _episode_row_v3(self, index: int) -> dict[str, Any]:
+        """Episode ``index``'s row of the episodes parquet files: its length, tasks, data file and videos."""
+        episodes = self._episodes_table_v3()
+        names = set(episodes.column_names)
+        wanted = ["episode_index", "length", "tasks", "data/chunk_index", "data/file_index",
+                  "dataset_from_index", "dataset_to_index"]
+        for key in self.video_keys:
+            wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp",
+                       f"videos/{key}/to_timestamp"]
+        where = self.root / "meta" / "episodes"
+        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
+
+        table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
+        if table.num_rows == 0:
+            raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
+        row = {k: v[0] for k, v in table.to_pydict().items()}
+        if any(row.get(c) is None for c in ("length", "data/chunk_index", "data/file_index")):
+            raise DatasetError(where, f"episode {index}'s row lacks its length or data file")
+        return row
+
+    def _fill(self, key: str, template: str, fields: Mapping[str, Any]) -> Path:
+        """``template`` (info.json's ``key``) filled with ``fields``; a variable LeRobot does not define (a
+        recorder's own, ``{robot_id}``) is matched against the files on disk (with a note), which must be one."""
+        path = self._fill_if_found(key, template, fields, required=True)
+        assert path is not None  # required: raised otherwise
+        return path
+
+    def _fill_if_found(self, key: str, template: str, fields: Mapping[str, Any], *,
+                       required: bool = False) -> Path | None:
+        """:meth:`_fill`, None when a template with a variable LeRobot does not define matches no single file."""
+        pattern, unknown = self._pattern(key, template, fields)
+        if not unknown:
+            return self.root / template.format(**fields)
+        matches = sorted(self.root.glob(pattern))
+        if len(matches) == 1:
+            self.note(self._info_path, f"{key} uses {', '.join('{' + u + '}' for u in unknown)}, which LeRobot does "
+                      "not define; matched by the other fields")
+            return matches[0]
+        if not required:
+            return None
+        found = "no file" if not matches else f"{len(matches)} files ({matches[0].name}, ...)"
+        raise DatasetError(self._info_path, f"{key} {template!r} uses {', '.join(unknown)}, which LeRobot does not "
+                           f"define, and {found} on disk match{'es' if len(matches) == 1 else ''} the rest")
+
+    def _pattern(self, key: str, template: str, fields: Mapping[str, Any]) -> tuple[str, list[str]]:
+        """``template`` filled with ``fields`` as a glob pattern relative to the root (a variable LeRobot does not
+        define, a recorder's own ``{robot_id}``, matches anything), and those variables."""
+        import glob
+        import string
+
+        try:
+            parsed = list(string.Formatter().parse(template))
+        except ValueError as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} is not a path template ({err})") from err
+        unknown = sorted({name for _text, name, _spec, _conv in parsed if name and name not in fields})
+        try:
+            return "".join(glob.escape(text) + ("" if name is None else "*" if name in unknown
+                                                else glob.escape(format(fields[name], spec or "")))
+                           for text, name, spec, _conv in parsed), unknown
+        except (KeyError, IndexError, ValueError) as err:
+            raise DatasetError(self._info_path, f"{key} {template!r} cannot be filled ({err})") from err
+
+    def read(self, index: int, columns: Sequence[str] = ()) -> EpisodeFrames:
+        """One episode's frames: timestamps, frame and global indices, and ``columns`` as arrays.
+
+        Vector features come back as ``(T, *shape)``, scalars as ``(T,)``. Only the columns asked
+        for (plus the index columns) are read from the Parquet file.
+        """
+        ep = self.episode(index)
+        path = ep.data_file
+        if not path.is_file():
+            raise DatasetError(path, f"data file of episode {index} is missing")
+        try:
+            schema = pq.read_schema(path)
+        except (OSError, pa.ArrowException) as err:
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
+        present = set(schema.names)
+        for col in columns:
+            if col in self.features and self.features[col].is_video:
+                raise DatasetError(self._info_path, f"feature {col!r} is a video: it has no Parquet column")
+            if col not in present:
+                declared = "declared in info.json but " if col in self.features else ""
+                raise DatasetError(path, f"column {col!r} is {declared}not in this file; it has {sorted(present)}")
+        index_cols = [c for c in ("timestamp", "frame_index", "episode_index", "index") if c in present]
+        read_cols = list(dict.fromkeys([*index_cols, *columns]))
+        filters = [("episode_index", "=", index)] if self.layout is Layout.V3 and "episode_index" in present else None
+        try:
+            table = pq.read_table(path, columns=read_cols, filters=filters)
+        except (OSError, pa.ArrowException) as err:
+            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
+        if "index" in present:
+            table = table.sort_by("index")
+        n = table.num_rows
+        if n == 0:
+            raise DatasetError(path, f"holds no rows of episode {index}")
+        if "episode_index" in present:
+            eps = np.unique(table.column("episode_index").to_numpy())
+            if eps.tolist() != [index]:
+                raise DatasetError(path, f"expected rows of episode {index}, found episode_index {eps.tolist()}")
+        if n != ep.length:
+            raise DatasetError(path, f"episode {index} has {n} rows but its metadata declares length {ep.length}")
+        global_index = (table.column("index").to_numpy().astype(np.int64) if "index" in present
+                        else np.arange(n, dtype=np.int64))
+        if ep.from_index is not None and ep.to_index is not None and (
+            ep.to_index - ep.from_index != n or int(global_index[0]) != ep.from_index
+        ):
+            raise DatasetError(path, f"episode {index} rows have index {global_index[0]}..{global_index[-1]} but "
+                               f"the episodes parquet declares [{ep.from_index}, {ep.to_index})")
+        if "frame_index" in present:
+            frame_index = table.column("frame_index").to_numpy().astype(np.int64)
+            if not np.array_equal(frame_index, np.arange(n)):
+                self.note(path, f"frame_index of episode {index} is not 0..{n - 1}")
+        else:
+            frame_index = global_index - global_index[0]
+            self.note(path, "no frame_index column: frame indices derived from index")
+        ts = self._timestamps(table, path, index, frame_index)
+        out: dict[str, npt.NDArray[Any]] = {}
+        for col in columns:
+            arr = _column(table.column(col), path, col)
+            feat = self.features.get(col)
+            if feat is not None and feat.shape and feat.size > 1 and arr.ndim >= 2 and arr[0].size == feat.size:
+                arr = arr.reshape((n, *feat.shape))
+            out[col] = arr
+        return EpisodeFrames(episode=ep, timestamp_s=ts, frame_index=frame_index, index=global_index,
+                             columns=out)
+
+    def _timestamps(self, table: pa.Table, path: Path, index: int, frame_index: IntArray) -> FloatArray:
+        """The episode's timestamps (s), checked: finite, increasing, near ``frame_index / fps`` (else a note);
+        derived from ``frame_index / fps`` when the file has none."""
+        n = table.num_rows
+        if "timestamp" not in table.column_names:
+            self.note(path, "no timestamp column: timestamps derived from frame_index / fps")
+            derived: FloatArray = frame_index / self.fps
+            return derived
+        ts: FloatArray = _column(table.column("timestamp"), path, "timestamp").astype(np.float64).reshape(n)
+        if not np.isfinite(ts).all():
+            raise DatasetError(path, f"episode {index} has non-finite timestamps")
+        if n > 1 and not (np.diff(ts) > 0).all():
+            k = int(np.flatnonzero(np.diff(ts) <= 0)[0])
+            raise DatasetError(path, f"timestamps of episode {index} do not increase at frame {k + 1} "
+                               f"({ts[k]:.6f} s then {ts[k + 1]:.6f} s)")
+        dev = ts - frame_index / self.fps
+        if np.abs(dev).max() > TIMESTAMP_TOLERANCE_S:
+            if np.ptp(dev) <= TIMESTAMP_TOLERANCE_S:
+                self.note(path, f"timestamps start at {ts[0]:.6g} s, not 0: offset {dev[0]:+.6g} s "
+                          f"from frame_index / fps ({self.fps:g} fps)")
+            else:
+                self.note(path, f"timestamps depart from frame_index / fps by up to "
+                          f"{np.abs(dev).max():.6g} s (variable rate)")
+        return ts
+
+
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split()) or type(err).__name__
+
+
+def _whole(value: Any) -> int | None:
+    """``value`` as an int when it is a finite whole number (JSON may write 12 as 12.0), else None."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        return None
+    return int(value) if float(value).is_integer() else None
+
+
+def _jsonl(path: Path, note: Callable[[Path, str], None]) -> list[tuple[int, dict[str, Any]]]:
+    """(line number, object) of each line that is a JSON object; every other line is a note (a cut file
+    loses its last line, not its episodes)."""
+    rows: list[tuple[int, dict[str, Any]]] = []
+    try:
+        lines = path.read_bytes().decode("utf-8", errors="replace").splitlines()
+    except OSError as err:
+        raise DatasetError(path, f"cannot read ({err.strerror})") from err
+    for lineno, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except ValueError as err:
+            note(path, f"line {lineno} is not JSON ({err}); left out")
+            continue
+        if not isinstance(row, dict):
+            note(path, f"line {lineno} is not a JSON object; left out")
+            continue
+        rows.append((lineno, row))
+    return rows
+
+
+def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
+    """An Arrow column as NumPy: scalars (T,); lists and fixed-size lists (T, n) or (T, n, m)."""
+    arr = col.combine_chunks()
+    n = len(arr)
+    shape: list[int] = [n]
+    while pa.types.is_list(arr.type) or pa.types.is_fixed_size_list(arr.type) or pa.types.is_large_list(arr.type):
+        if arr.null_count:
+            raise DatasetError(path, f"column {name!r} has null rows")
+        import pyarrow.compute as pc
+
+        lengths = pc.list_value_length(arr).to_numpy(zero_copy_only=False)
+        width = int(lengths[0]) if lengths.size else 0
+        if lengths.size and not (lengths == width).all():
+            raise DatasetError(path, f"column {name!r} holds lists of different lengths "
+                               f"({int(lengths.min())}..{int(lengths.max())})")
+        shape.append(width)
+        arr = arr.flatten()
+    if pa.types.is_struct(arr.type) or pa.types.is_binary(arr.type) or pa.types.is_string(arr.type):
+        return np.asarray(arr.to_pylist(), dtype=object).reshape(shape)
+    if arr.null_count and (pa.types.is_floating(arr.type) or pa.types.is_integer(arr.type)):
+        arr = arr.cast(pa.float64()).fill_null(math.nan)
+    values = arr.to_numpy(zero_copy_only=False)
+    return np.asarray(values).reshape(shape)

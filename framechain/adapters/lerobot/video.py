@@ -35,7 +35,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.lerobot.format import DatasetError
+from framechain.adapters.lerobot.reader import DatasetError
 from framechain.arrays import BoolArray, IntArray
 
 __all__ = [

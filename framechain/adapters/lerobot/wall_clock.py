@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from framechain.adapters.lerobot.format import INDEX_COLUMNS, DatasetReader, EpisodeFrames
+from framechain.adapters.lerobot.reader import INDEX_COLUMNS, DatasetReader, EpisodeFrames
 
 __all__ = ["wall_clock_features", "wall_clock_start_ns"]
 

@@ -24,7 +24,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from framechain.adapters.lerobot.format import DatasetError
+from framechain.adapters.lerobot.reader import DatasetError
 
 __all__ = ["EpisodeData", "FeatureSpec", "write_lerobot_dataset"]
 

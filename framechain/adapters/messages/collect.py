@@ -40,7 +40,7 @@ from framechain.adapters.messages.rows import (
     TransformRows,
     log_order,
 )
-from framechain.adapters.robot.mounts import (
+from framechain.adapters.mounts import (
     FileCamera,
     StaticEdge,
     log_urdf_edges,
@@ -111,7 +111,7 @@ class Collector:
         self.roles = chain.evidence_topics() if chain else {}
         #: Pose topics and the child frame their entry names (None: the message's, else the body frame).
         self.pose_children = {p.topic: p.child for p in chain.pose_topics()} if chain else {}
-        #: Static edges and camera models the chain file adds (see framechain.adapters.robot.mounts).
+        #: Static edges and camera models the chain file adds (see framechain.adapters.mounts).
         self.chain_edges: list[StaticEdge] = []
         self.file_cameras: list[FileCamera] = []
         self.notes: list[str] = []
@@ -429,7 +429,7 @@ class Collector:
         if spec is None:
             return None
         if spec.dictionary not in self.marker_finders:
-            from framechain.adapters.messages.markers import MarkerFinder
+            from framechain.vision.markers import MarkerFinder
 
             self.marker_finders[spec.dictionary] = MarkerFinder(spec.dictionary, self.fiducials)
         if own is not None and own.size_m is not None:

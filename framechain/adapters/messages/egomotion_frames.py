@@ -24,17 +24,17 @@ import numpy.typing as npt
 
 from framechain.adapters.lerobot.clock import alternative_stamps
 from framechain.adapters.lerobot.video import read_frames
-from framechain.adapters.messages.egomotion import (
+from framechain.arrays import BoolArray, FloatArray, IntArray
+from framechain.config.calibration import Intrinsics
+from framechain.timeline import EgoMotionTable, ImageFrameTable, Timeline, TranslationPrior, normalize_frame
+from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
+from framechain.vision.egomotion import (
     EgoMotionOptions,
     FeatureTracks,
     measure_egomotion,
     track_features,
 )
-from framechain.adapters.messages.tag_pose import require_cv2
-from framechain.arrays import BoolArray, FloatArray, IntArray
-from framechain.config.calibration import Intrinsics
-from framechain.timeline import EgoMotionTable, ImageFrameTable, Timeline, TranslationPrior, normalize_frame
-from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
+from framechain.vision.tag_pose import require_cv2
 
 __all__ = [
     "CameraFrames",

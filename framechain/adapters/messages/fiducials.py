@@ -4,7 +4,7 @@ Message handlers append primitives per detection: the tag's four pixel corners (
 detector's centre pixel) or a 3D point in the camera frame. Once the camera models are known,
 :func:`resolve_fiducials` turns them into observation rows, vectorised per camera model:
 
-- corners with a tag size: square-marker PnP (:mod:`framechain.adapters.messages.tag_pose`); the pixel is
+- corners with a tag size: square-marker PnP (:mod:`framechain.vision.tag_pose`); the pixel is
   the projection of the tag centre, the depth its z in the camera frame;
 - corners without a tag size: a bearing only (depth NaN, sampled from depth images at replay if
   any); the pixel is the image of the tag centre (the diagonals' intersection, undistorted);
@@ -42,15 +42,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.messages.tag_pose import (
+from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
+from framechain.timeline import CameraTable, normalize_frames
+from framechain.vision.tag_pose import (
     MAX_REPROJECTION_PX,
     PinholeModel,
     project,
     solve_square_tags,
     undistort_normalised,
 )
-from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
-from framechain.timeline import CameraTable, normalize_frames
 
 NS = 1_000_000_000
 _CORNERS = 0  # a detection given by its four pixel corners

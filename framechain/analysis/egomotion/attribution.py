@@ -15,12 +15,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from framechain.analysis.chain_model import ChainInputs
 from framechain.analysis.egomotion.findings import motion_findings
 from framechain.analysis.egomotion.run import CameraMotionEvidence
-from framechain.analysis.estimates import format_estimate
-from framechain.analysis.findings import Attribution
-from framechain.analysis.replayed import Replayed
+from framechain.analysis.evidence.replayed import Replayed
+from framechain.analysis.model.chain import ChainInputs
+from framechain.analysis.model.estimates import format_estimate
+from framechain.analysis.verdict.findings import Attribution
 from framechain.config.chain import ChainConfig
 from framechain.replay import CameraModel
 from framechain.timeline import CameraTable, Timeline

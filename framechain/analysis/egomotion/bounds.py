@@ -31,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit
 from framechain.analysis.egomotion.run import CameraMotion
+from framechain.analysis.verdict.checks import Bound
 from framechain.catalogue import Fault, HopName
 
 __all__ = [

@@ -30,7 +30,6 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.checks import Bound
 from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
 from framechain.analysis.egomotion.bounds import (
     FOCAL_CLEAR,
@@ -43,7 +42,7 @@ from framechain.analysis.egomotion.bounds import (
     observability,
 )
 from framechain.analysis.egomotion.run import CameraMotion, CameraMotionEvidence
-from framechain.analysis.estimates import (
+from framechain.analysis.model.estimates import (
     Estimate,
     FrameEstimate,
     LatencyEstimate,
@@ -51,7 +50,8 @@ from framechain.analysis.estimates import (
     RotationEstimate,
     ScaleEstimate,
 )
-from framechain.analysis.findings import Finding
+from framechain.analysis.verdict.checks import Bound
+from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW

@@ -171,7 +171,7 @@ def fit_camera_motion(
 ) -> EgoMotionFit:
     """Offset, mount and carrying link of a camera from its measured motion against the candidate links' FK.
 
-    ``measure(prior)`` measures the camera's motion (:func:`framechain.adapters.messages.egomotion.
+    ``measure(prior)`` measures the camera's motion (:func:`framechain.vision.egomotion.
     measure_egomotion` with the camera's tracks). Rotation-only first, to see whether the camera
     turns at all and to rank every candidate link. The declared link, and the links that fit about as
     well as the best without moving rigidly with the declared one (at most :data:`_MAX_CANDIDATES`),

@@ -1,0 +1,616 @@
+"""One LeRobot episode as a framechain Timeline: joint states, FK transforms, cameras, detections.
+
+LeRobot datasets store joint states, actions and camera videos, but no transforms, no intrinsics
+and no hardware timestamps. :func:`open_dataset` brings them in from the robot configuration
+(robot.yaml, :mod:`framechain.adapters.robot.config`): the URDF and the mapping of state names to
+joints give the transforms by batched forward kinematics, the calibration files give intrinsics
+and camera mounts, and detections come from a side table or a dataset feature.
+
+The Timeline holds:
+
+- transforms: a static ``world -> <URDF root>`` edge (``world_from_base`` in robot.yaml); one
+  edge per URDF joint ``parent_link -> child_link``, dynamic (one sample per frame, stamped with
+  the frame's timestamp) for joints the dataset drives and their mimics, static for fixed and
+  held joints; static camera mounts ``link -> <camera>_optical_frame`` (through
+  ``<camera>_link`` when the mount is not optical). A wrist camera's extrinsic thus follows the
+  live joint state.
+- cameras: one row per calibrated camera (stamp 0: valid throughout).
+- observations: detections, stamped with the **camera's** time of their frame (the frame's
+  timestamp, plus the camera's ``timing.offset_s``, or its ``timing.timestamp_column``); their
+  ``log_time_ns`` is the frame's dataset timestamp, the time the state was recorded. So
+  ``stamp_ns - log_time_ns`` is each observation's camera-vs-state gap, and the replay's
+  per-hop gaps and stale accounting see the same offsets as for bags.
+- joint_states: the mapped joints in SI units (long form, one row per joint per frame).
+- depth_frames: per-frame depth features of the cameras that have one.
+
+Times are nanoseconds from the episode start (LeRobot timestamps restart at 0 per episode).
+``metadata["episode_start_ns"]`` is the first row's stamp, and ``metadata["wall_clock_start_ns"]`` that
+row's wall-clock time where the dataset stores one (:mod:`framechain.adapters.lerobot.wall_clock`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from framechain.adapters.errors import AdapterError
+from framechain.adapters.lerobot.clock import (
+    VIDEO_REFERENCE_NUDGE_NS,
+    VideoClock,
+    episode_frame_times_s,
+    video_clock,
+)
+from framechain.adapters.lerobot.markers import video_markers
+from framechain.adapters.lerobot.reader import (
+    DatasetError,
+    DatasetReader,
+    EpisodeFrames,
+    Layout,
+    is_lerobot_dataset,
+)
+from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clock_start_ns
+from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.arrays import FloatArray, IntArray
+from framechain.config.calibration import CameraCalibration
+from framechain.config.chain import ChainConfig, MarkerSpec
+from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
+from framechain.robot.binding import arm_root, joint_positions, robot_model
+from framechain.robot.kinematics import RobotModel
+from framechain.timeline import (
+    CameraTable,
+    DepthFrameTable,
+    ImageFrameTable,
+    JointStateTable,
+    ObservationTable,
+    Timeline,
+    TransformTable,
+)
+from framechain.timeline.frames import VIDEO_ENCODING
+
+#: ``Timeline.metadata["format"]`` of a LeRobot episode.
+FORMAT = "lerobot"
+
+__all__ = ["FORMAT", "LeRobotAdapter", "camera_stamps_ns", "is_lerobot_dataset", "open_dataset", "scan_dataset"]
+
+
+def open_dataset(
+    path: str | Path,
+    *,
+    episode: int,
+    robot: RobotConfig | str | Path,
+    detections: str | Path | None = None,
+    strict: bool = False,
+    markers: MarkerSpec | None = None,
+) -> Timeline:
+    """Read episode ``episode`` of the LeRobot dataset at ``path`` into a Timeline.
+
+    ``robot`` is a :class:`RobotConfig` or the path of robot.yaml; ``detections`` adds a side
+    table (Parquet or CSV) to those robot.yaml names. ``strict`` turns metadata notes (harmless
+    inconsistencies, listed in ``metadata["notes"]``) into :class:`DatasetError`. ``markers`` (else
+    robot.yaml's ``chain.evidence.markers``) are searched in the chain camera's frames
+    (:mod:`framechain.adapters.lerobot.markers`) and become observations too.
+    """
+    cfg = robot if isinstance(robot, RobotConfig) else RobotConfig.load(robot)
+    reader = DatasetReader(path, strict=strict)
+    model = robot_model(cfg)
+    sources = list(cfg.detections)
+    if detections is not None:
+        sources.append(DetectionSource(table=Path(detections)))
+    names = reader.names(cfg.state_feature)
+    cfg.check_names(names)
+    wall_features = wall_clock_features(reader)
+    frames = reader.read(episode, list(dict.fromkeys([*_columns(cfg, reader, sources), *wall_features])))
+    state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
+    bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
+    if bad.any():
+        k = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
+    q = joint_positions(cfg, model, state, names)
+    state_ns = frames.stamp_ns
+    source_name = f"{Path(path).name}:{cfg.state_feature}"
+
+    transforms = TransformTable.concat([
+        _world_edge(cfg, model),
+        *_joint_edges(model, cfg, q, state_ns, source_name),
+        *_mount_edges(cfg),
+    ])
+    cameras = CameraTable.concat([c.camera_table() for c in cfg.cameras.values()])
+    cam_ns = {name: camera_stamps_ns(frames, cam) for name, cam in cfg.cameras.items()}
+    observations = _observations(sources, cfg, frames, cam_ns, state_ns, episode, Path(path))
+    depth = DepthFrameTable.concat([
+        _depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
+    ])
+    joint_states = _joint_states(cfg, q, state_ns, source_name)
+    clocks = {cam.name: _clock(cam.video_key, frames, reader.fps, cam.timing.pairing) for cam in cfg.cameras.values()
+              if cam.video_key is not None and cam.video_key in frames.episode.video_files}
+    videos = ImageFrameTable.concat([
+        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns, clocks[cam.name]) for cam in cfg.cameras.values()
+          if cam.name in clocks),
+        *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
+          if cam.video_key is not None and cam.video_key in frames.columns),
+    ])
+    metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
+    wall = wall_clock_start_ns(frames, wall_features)
+    if wall is not None:
+        metadata["wall_clock_feature"], metadata["wall_clock_start_ns"] = wall
+    spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
+    if spec is not None:
+        observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
+    return Timeline(transforms=transforms, cameras=cameras, observations=observations,
+                    joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
+
+
+def _with_markers(observations: ObservationTable, images: ImageFrameTable, cameras: CameraTable, cfg: RobotConfig,
+                  spec: MarkerSpec, metadata: dict[str, Any]) -> ObservationTable:
+    """The markers in the chain camera's frames added as observations (their corners in the metadata)."""
+    name = cfg.chain_camera or next((n for n, c in cfg.cameras.items() if c.video_key is not None), None)
+    cam = cfg.cameras.get(name or "")
+    if cam is None or cam.video_key is None:
+        raise RobotConfigError(cfg.source, "evidence.markers are searched in the chain camera's frames: give it a "
+                               "video_key")
+    found = video_markers(images, cameras, cam.optical_frame, spec, source=cam.video_key)
+    metadata["notes"] = [*metadata["notes"], *found.notes]
+    r = found.resolved
+    first = len(observations)
+    table = ObservationTable(
+        obs_id=np.arange(first, first + r.stamp_ns.size, dtype=np.int64), stamp_ns=r.stamp_ns,
+        log_time_ns=r.log_time_ns, camera_frame=r.camera_frame, u=r.u, v=r.v, depth_m=r.depth_m, label=r.label,
+        score=r.score, source=r.source)
+    side = dict(r.side)
+    position = np.searchsorted(r.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
+    metadata["fiducials"] = {"counts": r.counts, "corners": {"obs_id": (first + position).tolist(), **side}}
+    return ObservationTable.concat([observations, table])
+
+
+def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
+    """The per-frame columns an episode is read with; camera features of the wrong kind fail here."""
+    for cam in cfg.cameras.values():
+        if cam.video_key is not None:
+            feat = reader.feature(cam.video_key)
+            if not feat.is_video and feat.dtype != "image":
+                raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
+                                       f"{feat.dtype} feature, not video or image")
+    columns = [cfg.state_feature]
+    columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
+    # Frames stored in the Parquet (image features: PNG/JPEG bytes) rather than in an mp4.
+    columns += [c.video_key for c in cfg.cameras.values()
+                if c.video_key is not None and reader.feature(c.video_key).dtype == "image"]
+    columns += [s.feature for s in sources if s.feature is not None]
+    for cam in cfg.cameras.values():
+        if cam.depth is not None:
+            feat = reader.feature(cam.depth.feature)
+            if feat.is_video or feat.dtype == "image":
+                raise DatasetError(reader.root, f"depth feature {feat.key!r} of camera {cam.name!r} is "
+                                   f"{'a video' if feat.is_video else 'an encoded image'}: framechain does not "
+                                   "decode images; store depth as an array feature (height, width)")
+            columns.append(cam.depth.feature)
+    return list(dict.fromkeys(columns))
+
+
+def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, reader: DatasetReader,
+              frames: EpisodeFrames, clocks: Mapping[str, VideoClock]) -> dict[str, Any]:
+    """What the episode came from: dataset, robot configuration, joints held or at zero, cameras, chain."""
+    held = {name: float(v) for name, v in cfg.hold.items()}
+    driven = {m.joint for m in cfg.joints}
+    zeroed = [j for j in model.actuated if j not in driven and j not in held]
+    camera = cfg.cameras.get(cfg.chain_camera or next(iter(cfg.cameras), ""))
+    chain = cfg.chain_config(root=arm_root(cfg, model, camera.mount.parent if camera else None)) \
+        if cfg.cameras else None
+    state_ns = frames.stamp_ns
+    return {
+        "format": FORMAT,
+        "source": {"path": str(path.resolve()), "format": FORMAT, "episode": episode},
+        "source_path": str(path.resolve()),
+        "codebase_version": reader.version,
+        "robot_type": reader.robot_type,
+        "episode": episode,
+        "fps": reader.fps,
+        "length": len(frames),
+        "tasks": list(frames.episode.tasks),
+        "time_span_ns": [int(state_ns[0]), int(state_ns[-1])],
+        # its first row: where the episode's own time starts (a viewer shows durations from it)
+        "episode_start_ns": int(state_ns[0]),
+        "state_feature": cfg.state_feature,
+        "urdf": str(cfg.urdf),
+        "robot_config": cfg.source,
+        "joint_map": {m.state: {"joint": m.joint, "unit": m.unit.value, "sign": m.sign, "offset": m.offset}
+                      for m in cfg.joints},
+        "held_joints": held,
+        "joints_at_zero": zeroed,
+        "cameras": {
+            name: {
+                "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
+                "xyz": list(cam.mount.translation), "source": cam.source,
+                "focal_px": [cam.intrinsics.fx, cam.intrinsics.fy],
+                "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
+                                                       "timestamp_column": cam.timing.timestamp_column},
+                "video_file": _video_file(frames, cam.video_key),
+                "video_from_s": frames.episode.video_from_s.get(cam.video_key or "", 0.0),
+                "clock": clocks[name].to_json() if name in clocks else None,
+            }
+            for name, cam in cfg.cameras.items()
+        },
+        "chain_frames": None if chain is None else {"camera": chain.frames.camera, "body": chain.frames.body,
+                                                    "world": chain.frames.world},
+        "chain": None if chain is None else chain.to_dict(),
+        "notes": [*reader.notes, *cfg.notes, *(c.summary() for c in clocks.values())],
+    }
+
+
+def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArray:
+    """Per-frame capture time of ``camera``: its timestamp column (or the frame's), plus its offset."""
+    timing = camera.timing
+    if timing.timestamp_column is not None:
+        base = np.asarray(frames.columns[timing.timestamp_column], dtype=np.float64).reshape(len(frames))
+        if not np.isfinite(base).all():
+            raise DatasetError(frames.episode.data_file, f"camera timestamp column {timing.timestamp_column!r} "
+                               "has non-finite values")
+        base_ns: IntArray = np.round(base * 1e9).astype(np.int64)
+    else:
+        base_ns = frames.stamp_ns
+    out: IntArray = base_ns + round(timing.offset_s * 1e9)
+    return out
+
+
+def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
+    if model.root == cfg.world_frame:  # several arms: their bases hang from the world in the model
+        return TransformTable.empty()
+    return TransformTable.from_rows(
+        cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
+        is_static=True, source=f"{cfg.source}:world_from_base",
+    )
+
+
+def _joint_edges(
+    model: RobotModel, cfg: RobotConfig, q: Mapping[str, FloatArray], stamps: IntArray, source: str
+) -> list[TransformTable]:
+    n = stamps.shape[0]
+    given: dict[str, FloatArray] = dict(q)
+    for name, value in cfg.hold.items():
+        given[name] = np.full(n, value)
+    local = model.joint_poses(given, default=0.0)
+    dynamic = set(q)
+    for joint in model.joints.values():
+        if joint.mimic is not None and joint.mimic.joint in dynamic:
+            dynamic.add(joint.name)
+    out: list[TransformTable] = []
+    for name, joint in model.joints.items():
+        translation, quat = local[name]
+        if name in dynamic:
+            out.append(TransformTable.from_rows(joint.parent, joint.child, stamps, translation, quat,
+                                                source=f"{source}->{name}"))
+        else:  # fixed, held or left at zero: one timeless sample
+            out.append(TransformTable.from_rows(joint.parent, joint.child, [0], translation[:1], quat[:1],
+                                                is_static=True, source=f"{model.source}:{name}"))
+    return out
+
+
+def _mount_edges(cfg: RobotConfig) -> list[TransformTable]:
+    out: list[TransformTable] = []
+    for cam in cfg.cameras.values():
+        for parent, child, t, quat in cam.mount_edges():
+            out.append(TransformTable.from_rows(parent, child, [0], [t], [quat], is_static=True, source=cam.source))
+    return out
+
+
+def _joint_states(
+    cfg: RobotConfig, q: Mapping[str, FloatArray], stamps: IntArray, source: str
+) -> JointStateTable:
+    parts: list[JointStateTable] = []
+    n = stamps.shape[0]
+    for m in cfg.joints:
+        parts.append(JointStateTable(
+            stamp_ns=stamps, log_time_ns=stamps, joint=np.full(n, m.joint), position=q[m.joint],
+            velocity=np.full(n, np.nan), effort=np.full(n, np.nan), source=np.full(n, f"{source}[{m.state}]"),
+        ))
+    return JointStateTable.concat(parts)
+
+
+def _read_side_table(path: Path) -> pa.Table:
+    if not path.is_file():
+        raise DatasetError(path, "detections table not found")
+    try:
+        if path.suffix.lower() == ".csv":
+            return pacsv.read_csv(path)
+        return pq.read_table(path)
+    except (OSError, pa.ArrowInvalid) as err:
+        raise DatasetError(path, f"cannot read detections table ({err})") from err
+
+
+def _pick(table: pa.Table, names: Sequence[str]) -> str | None:
+    return next((n for n in names if n in table.column_names), None)
+
+
+def _observations(
+    sources: Sequence[DetectionSource], cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
+    state_ns: IntArray, episode: int, dataset: Path,
+) -> ObservationTable:
+    parts: list[dict[str, Any]] = []
+    n_frames = len(frames)
+    for src in sources:
+        if src.feature is not None:
+            assert src.camera is not None
+            arr = np.asarray(frames.columns[src.feature], dtype=float).reshape(n_frames, -1)
+            if arr.shape[1] not in (2, 3):
+                raise DatasetError(dataset, f"detection feature {src.feature!r} has {arr.shape[1]} values per "
+                                   "frame; expected [u, v] or [u, v, depth_m]")
+            rows = np.flatnonzero(np.isfinite(arr[:, 0]) & np.isfinite(arr[:, 1]))
+            parts.append({
+                "camera": np.full(rows.size, src.camera), "stamp": cam_ns[src.camera][rows],
+                "log": state_ns[rows], "u": arr[rows, 0], "v": arr[rows, 1],
+                "depth": arr[rows, 2] if arr.shape[1] == 3 else np.full(rows.size, np.nan),
+                "label": np.full(rows.size, src.camera), "score": np.full(rows.size, np.nan),
+                "source": f"{dataset.name}:{src.feature}",
+            })
+            continue
+        assert src.table is not None
+        parts.append(_table_observations(src, cfg, frames, cam_ns, state_ns, episode))
+    if not parts:
+        return ObservationTable.empty()
+    counts = [len(p["u"]) for p in parts]
+    total = sum(counts)
+    cam = np.concatenate([p["camera"] for p in parts]).astype(str)
+    frame = np.array([cfg.cameras[c].optical_frame for c in cam], dtype=str) if total else np.array([], dtype=str)
+    return ObservationTable(
+        obs_id=np.arange(total, dtype=np.int64),
+        stamp_ns=np.concatenate([p["stamp"] for p in parts]).astype(np.int64),
+        log_time_ns=np.concatenate([p["log"] for p in parts]).astype(np.int64),
+        camera_frame=frame,
+        u=np.concatenate([p["u"] for p in parts]),
+        v=np.concatenate([p["v"] for p in parts]),
+        depth_m=np.concatenate([p["depth"] for p in parts]),
+        label=np.concatenate([p["label"] for p in parts]).astype(str),
+        score=np.concatenate([p["score"] for p in parts]),
+        source=np.concatenate([np.full(c, p["source"]) for c, p in zip(counts, parts, strict=True)]).astype(str),
+    )
+
+
+def _table_observations(
+    src: DetectionSource, cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
+    state_ns: IntArray, episode: int,
+) -> dict[str, Any]:
+    assert src.table is not None
+    path = src.table
+    table = _read_side_table(path)
+    for required in ("u", "v"):
+        if required not in table.column_names:
+            raise DatasetError(path, f"detections table has no {required!r} column; it has {table.column_names}")
+    ep_col = _pick(table, ("episode_index", "episode"))
+    if ep_col is not None:
+        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
+
+        table = table.filter(pc.equal(table.column(ep_col), episode))
+    n = table.num_rows
+    cam_col = _pick(table, ("camera", "camera_name"))
+    if cam_col is not None:
+        cams = np.asarray(table.column(cam_col).to_pylist(), dtype=str)
+    elif src.camera is not None or len(cfg.cameras) == 1:
+        cams = np.full(n, src.camera or next(iter(cfg.cameras)))
+    else:
+        raise DatasetError(path, f"detections table has no camera column and robot.yaml has several cameras "
+                           f"{sorted(cfg.cameras)}")
+    unknown = sorted(set(cams.tolist()) - set(cfg.cameras))
+    if unknown:
+        raise DatasetError(path, f"detections name cameras {unknown} that robot.yaml does not calibrate "
+                           f"(cameras: {sorted(cfg.cameras)})")
+    frame_col = _pick(table, ("frame_index",))
+    ts_col = _pick(table, ("timestamp", "timestamp_s"))
+    stamp = np.zeros(n, dtype=np.int64)
+    log = np.zeros(n, dtype=np.int64)
+    if frame_col is not None:
+        fi = np.asarray(table.column(frame_col).to_numpy(zero_copy_only=False))
+        if fi.size and (fi.dtype.kind not in "iu" or fi.min() < 0 or fi.max() >= len(frames)):
+            raise DatasetError(path, f"frame_index must be integers in 0..{len(frames) - 1} for episode {episode}")
+        fi = fi.astype(np.int64)
+        for name in np.unique(cams):
+            sel = cams == name
+            stamp[sel] = cam_ns[str(name)][fi[sel]]
+        log = state_ns[fi]
+    elif ts_col is not None:
+        ts = np.asarray(table.column(ts_col).to_numpy(zero_copy_only=False), dtype=float)
+        stamp = np.round(ts * 1e9).astype(np.int64)
+        nearest = np.clip(np.searchsorted(state_ns, stamp), 0, len(frames) - 1)
+        prev = np.clip(nearest - 1, 0, len(frames) - 1)
+        nearest = np.where(np.abs(state_ns[prev] - stamp) <= np.abs(state_ns[nearest] - stamp), prev, nearest)
+        log = state_ns[nearest]
+    else:
+        raise DatasetError(path, "detections table needs a frame_index or a timestamp column (seconds)")
+    depth_col = _pick(table, ("depth_m", "depth"))
+    depth = (np.asarray(table.column(depth_col).to_numpy(zero_copy_only=False), dtype=float)
+             if depth_col is not None else np.full(n, np.nan))
+    label = (np.asarray(table.column("label").to_pylist(), dtype=str) if "label" in table.column_names
+             else cams.copy())
+    score = (np.asarray(table.column("score").to_numpy(zero_copy_only=False), dtype=float)
+             if "score" in table.column_names else np.full(n, np.nan))
+    return {
+        "camera": cams, "stamp": stamp, "log": log,
+        "u": np.asarray(table.column("u").to_numpy(zero_copy_only=False), dtype=float),
+        "v": np.asarray(table.column("v").to_numpy(zero_copy_only=False), dtype=float),
+        "depth": depth, "label": label, "score": score, "source": str(path),
+    }
+
+
+def _depth_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray
+) -> DepthFrameTable:
+    assert cam.depth is not None
+    images = np.asarray(frames.columns[cam.depth.feature])
+    if images.ndim != 3:
+        raise DatasetError(frames.episode.data_file, f"depth feature {cam.depth.feature!r} has shape "
+                           f"{list(images.shape[1:])} per frame; expected (height, width)")
+    n, h, w = images.shape
+    scale = cam.depth.scale_m
+    encoding = "32FC1" if images.dtype.kind == "f" else f"{images.dtype.itemsize * 8}UC1"
+
+    def load(i: int) -> npt.NDArray[np.float32]:
+        out: npt.NDArray[np.float32] = (images[i].astype(np.float64) * scale).astype(np.float32)
+        return out
+
+    return DepthFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, w),
+        height=np.full(n, h), encoding=np.full(n, encoding), source=np.full(n, cam.depth.feature), loader=load,
+    )
+
+
+def _clock(key: str, frames: EpisodeFrames, fps: float, forced: str | None = None) -> VideoClock:
+    """How video ``key``'s frames pair with the episode's rows (:mod:`framechain.adapters.lerobot.clock`)."""
+    from_s = float(frames.episode.video_from_s.get(key, 0.0))
+    to_s = frames.episode.video_to_s.get(key)
+    if to_s is None and frames.episode.video_from_s:  # v3.0 without to_timestamp: the rows' nominal span
+        to_s = from_s + len(frames) / fps
+    times = episode_frame_times_s(frames.episode.video_files[key], from_s, to_s)
+    return video_clock(key, times, frames.timestamp_s, frames.frame_index, fps=fps, from_s=from_s, to_s=to_s,
+                       forced=forced)
+
+
+def _video_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, clock: VideoClock
+) -> ImageFrameTable:
+    """One row per row of the episode: the mp4 and the time in it of the frame the clock pairs with the row (not
+    decoded; -1: the row has no frame). v3.0 concatenates episodes in one file (from_timestamp is where the
+    episode starts in it), v2.1 has one file per episode."""
+    assert cam.video_key is not None
+    path = frames.episode.video_files[cam.video_key]
+    in_file = clock.file_times_ns(frames.timestamp_s)
+    n = len(frames)
+    size = cam.camera_table()
+    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
+    return ImageFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns,
+        width=np.full(n, width), height=np.full(n, height),
+        encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
+        video_time_ns=np.where(in_file >= 0, in_file + VIDEO_REFERENCE_NUDGE_NS, -1),
+    )
+
+
+_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
+
+
+def _stored_frames(
+    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, root: Path
+) -> ImageFrameTable:
+    """One row per frame of an image feature: the PNG/JPEG bytes stored in the Parquet (HF ``Image``: a struct
+    of ``bytes`` and ``path``; a path is read relative to the dataset when there are no bytes)."""
+    assert cam.video_key is not None
+    cells = frames.columns[cam.video_key].reshape(len(frames))
+    encoded: list[bytes] = []
+    for k, cell in enumerate(cells.tolist()):
+        data = cell.get("bytes") if isinstance(cell, dict) else cell if isinstance(cell, bytes) else None
+        if not data and isinstance(cell, dict) and cell.get("path"):
+            file = root / str(cell["path"])
+            data = file.read_bytes() if file.is_file() else None
+        if not data:
+            raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} has no bytes at frame {k}")
+        encoded.append(bytes(data))
+    kinds = [next((kind for magic, kind in _MAGIC.items() if data.startswith(magic)), "") for data in encoded]
+    if "" in kinds:
+        k = kinds.index("")
+        raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} holds neither PNG nor JPEG at "
+                           f"frame {k}")
+    n = len(frames)
+    size = cam.camera_table()
+    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
+    return ImageFrameTable(
+        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, width),
+        height=np.full(n, height), encoding=np.array(kinds), source=np.full(n, cam.video_key),
+        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: encoded[i],
+    )
+
+
+def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
+    path = frames.episode.video_files.get(key) if key is not None else None
+    return None if path is None else str(path)
+
+
+def scan_dataset(path: str | Path, episode: int | None = None, *, clocks: bool = False) -> LogInfo:
+    """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes.
+
+    With ``episode``, the counts and the span are that episode's, not the whole dataset's. With
+    ``clocks``, a note per video says how its frames pair with the rows and why (of ``episode``, else of
+    the first episode): frames against rows, the declared fps against the stamps' rate, the largest
+    departure of the stamps from ``frame_index / fps``.
+    """
+    reader = DatasetReader(path)
+    lengths = reader.lengths()
+    if episode is not None:
+        frames = longest = lengths.get(episode, 0)
+    else:
+        total = reader.info.get("total_frames")
+        frames = int(total) if isinstance(total, int) else 0
+        longest = max(lengths.values(), default=0)
+    topics = tuple(
+        TopicInfo(name=key, msgtype=f"lerobot/{feat.dtype}{list(feat.shape)}", count=frames, rate_hz=reader.fps,
+                  encoding="video" if feat.is_video else "parquet")
+        for key, feat in reader.features.items()
+    )
+    layout = "one episode per file" if reader.layout is Layout.V2 else "episodes share files"
+    said = _clock_notes(reader, episode) if clocks else []
+    return LogInfo(
+        format="lerobot", path=Path(path), start_ns=0, end_ns=round(max(longest - 1, 0) / reader.fps * 1e9),
+        topics=topics, notes=(*reader.notes, *said), message_count=frames,
+        container=f"lerobot {reader.version} ({len(reader.episodes())} episodes, {layout}, {reader.fps:g} fps)",
+    )
+
+
+def _clock_notes(reader: DatasetReader, episode: int | None) -> list[str]:
+    """One line per video of the episode (the first one when None): how its frames pair with the rows."""
+    episodes = reader.episodes()
+    if not episodes or not reader.video_keys:
+        return []
+    index = episodes[0] if episode is None else episode
+    frames = reader.read(index)
+    out = []
+    for key in reader.video_keys:
+        if key not in frames.episode.video_files:
+            continue
+        line = _clock(key, frames, reader.fps).summary()
+        out.append(line if episode is not None else f"{line} (episode {index})")
+    return out
+
+
+class LeRobotAdapter:
+    """The :class:`framechain.adapters.LogAdapter` of LeRobot dataset directories.
+
+    ``open(path, chain)`` takes the episode and the robot configuration from ``chain.robot``:
+    ``{"episode": N, "config": "robot.yaml"}`` (or a :class:`RobotConfig`), or the robot.yaml keys inline
+    plus ``episode``.
+    Register it with ``framechain.adapters.register_adapter(LeRobotAdapter())``.
+    """
+
+    name = "lerobot"
+
+    def probe(self, path: Path) -> bool:
+        return is_lerobot_dataset(path)
+
+    def scan(self, path: Path) -> LogInfo:
+        return scan_dataset(path)
+
+    def open(self, path: Path, chain: ChainConfig | None, *, progress: bool = False) -> LoadedLog:
+        section = dict(chain.robot) if chain is not None and chain.robot else {}
+        episode = section.pop("episode", None)
+        if isinstance(episode, bool) or not isinstance(episode, int):
+            raise AdapterError(path, "a LeRobot dataset needs an episode: chain robot section {episode: N, "
+                               "config: robot.yaml} (framechain ... --episode N --robot robot.yaml)")
+        config = section.pop("config", None)
+        robot: RobotConfig | Path
+        if isinstance(config, RobotConfig):  # made in memory (a known arm's generated robot.yaml)
+            robot = config
+        elif config is not None:
+            robot = Path(str(config))
+        elif "urdf" in section or "arms" in section:
+            robot = RobotConfig.from_mapping(section, base_dir=Path.cwd(), source="chain robot section")
+        else:
+            raise AdapterError(path, "a LeRobot dataset needs a robot configuration: chain robot section "
+                               "{episode: N, config: robot.yaml}")
+        markers = chain.evidence.markers if chain is not None else None
+        timeline = open_dataset(path, episode=episode, robot=robot, markers=markers)
+        info = scan_dataset(path, episode).with_notes(list(timeline.metadata.get("notes", [])))
+        decoded = {str(timeline.metadata["state_feature"]): "joint_state"}
+        return LoadedLog(timeline=timeline, info=info, decoded_topics=decoded)

@@ -1,1 +1,0 @@
-"""What a log has against what a chain needs: the frame tree, the suggested chain, the marker probe."""

@@ -1,0 +1,148 @@
+"""robot.yaml bound to the URDF's model: the joints it maps exist and move, the cameras hang below
+driven joints, and the dataset's joint values become joint positions in SI units.
+
+Reading and checking the file itself is :mod:`framechain.config.robot`'s job.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.arrays import FloatArray
+from framechain.config.errors import RobotConfigError
+from framechain.config.robot import ArmConfig, JointMapping, JointUnit, RobotConfig
+from framechain.geometry.rotations import homogeneous
+from framechain.robot.kinematics import Joint, JointType, Mimic, RobotModel
+
+__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "robot_model"]
+
+
+def robot_model(config: RobotConfig) -> RobotModel:
+    """The URDF's kinematic model (several arms: one tree under the world frame, each arm's frames and
+    joints prefixed, its base placed by a fixed joint), checked against the joint mapping and the mounts."""
+    if not config.arms:
+        model = RobotModel.from_urdf(config.urdf)
+    else:
+        joints: list[Joint] = []
+        for arm in config.arms:
+            joints.extend(_arm_joints(config.world_frame, arm, RobotModel.from_urdf(arm.urdf)))
+        model = RobotModel(joints, source=config.source, name="+".join(a.name for a in config.arms))
+    check_robot(config, model)
+    return model
+
+
+def arm_root(config: RobotConfig, model: RobotModel, link: str | None = None) -> str:
+    """The root link of the arm ``link`` belongs to (the first arm's by default; the model's root for one URDF)."""
+    if not config.arms:
+        return model.root
+    arms = [a for a in config.arms if link is not None and link.startswith(a.prefix)] or [config.arms[0]]
+    return next(j.child for j in model.joints.values() if j.name == _base_joint(config.world_frame, arms[0]))
+
+
+def _base_joint(world: str, arm: ArmConfig) -> str:
+    return f"{world}_to_{arm.prefix}base"
+
+
+def _arm_joints(world: str, arm: ArmConfig, model: RobotModel) -> list[Joint]:
+    """One arm's joints, names prefixed, below a fixed joint from the world frame to its root."""
+    p = arm.prefix
+    origin = homogeneous(np.asarray(arm.world_from_base_quat_xyzw, dtype=float),
+                         np.asarray(arm.world_from_base_translation, dtype=float), n=1)[0]
+    out = [Joint(name=_base_joint(world, arm), type=JointType.FIXED, parent=world, child=p + model.root,
+                 origin=origin, axis=np.array([0.0, 0.0, 1.0]))]
+    for j in model.joints.values():
+        mimic = None if j.mimic is None else Mimic(p + j.mimic.joint, j.mimic.multiplier, j.mimic.offset)
+        out.append(Joint(name=p + j.name, type=j.type, parent=p + j.parent, child=p + j.child, origin=j.origin,
+                         axis=j.axis, lower=j.lower, upper=j.upper, mimic=mimic))
+    return out
+
+
+def convert_joint(mapping: JointMapping, values: npt.ArrayLike, lower: float | None, upper: float | None
+                  ) -> FloatArray:
+    """Dataset values of one state -> the joint's position in SI (radians or metres)."""
+    x = np.asarray(values, dtype=float)
+    if mapping.unit in (JointUnit.RAD, JointUnit.M):
+        si = x
+    elif mapping.unit is JointUnit.DEG:
+        si = np.deg2rad(x)
+    elif mapping.unit is JointUnit.MM:
+        si = x * 1e-3
+    elif mapping.unit is JointUnit.TICKS:
+        si = _ticks_angle(mapping, x)
+    else:
+        frac = x / 100.0 if mapping.unit is JointUnit.RANGE_0_100 else (x + 100.0) / 200.0
+        if mapping.ticks_range is not None:  # LeRobot's normalisation of a calibrated range, read back to ticks
+            lo, hi = mapping.ticks_range
+            si = _ticks_angle(mapping, lo + (1.0 - frac if mapping.inverted else frac) * (hi - lo))
+        elif lower is None or upper is None:
+            raise RobotConfigError(
+                mapping.state, f"unit {mapping.unit.value} needs joint limits, and joint {mapping.joint!r} has none"
+            )
+        else:
+            si = lower + frac * (upper - lower)
+    out: FloatArray = mapping.sign * si + mapping.offset
+    return out
+
+
+def _ticks_angle(mapping: JointMapping, ticks: FloatArray) -> FloatArray:
+    out: FloatArray = (ticks - mapping.zero_ticks) * (2.0 * np.pi / mapping.ticks_per_turn)
+    return out
+
+
+def joint_positions(config: RobotConfig, model: RobotModel, values: npt.ArrayLike, names: Sequence[str]
+                    ) -> dict[str, FloatArray]:
+    """``(T, n)`` dataset state vectors with column ``names`` -> ``{joint: (T,)}`` in SI units."""
+    arr = np.asarray(values, dtype=float)
+    config.check_names(names)
+    index = {n: i for i, n in enumerate(names)}
+    out: dict[str, FloatArray] = {}
+    for m in config.joints:
+        lower, upper = model.limits(m.joint)
+        out[m.joint] = convert_joint(m, arr[:, index[m.state]], lower, upper)
+    return out
+
+
+def check_robot(config: RobotConfig, model: RobotModel) -> None:
+    """Every mapped or held joint exists and moves; every camera path is fully driven."""
+    fail = config.source
+    for m in config.joints:
+        joint = model.joints.get(m.joint)
+        if joint is None:
+            raise RobotConfigError(fail, f"joints.{m.state}: the URDF has no joint {m.joint!r}; its moving joints are "
+                                   f"{list(model.actuated)}")
+        if not joint.moves or joint.mimic is not None:
+            raise RobotConfigError(fail, f"joints.{m.state}: joint {m.joint!r} is fixed or a mimic joint")
+        if (m.unit is JointUnit.TICKS or m.ticks_range is not None) and joint.type is JointType.PRISMATIC:
+            how = "unit ticks" if m.unit is JointUnit.TICKS else f"unit {m.unit.value} with a calibration JSON"
+            raise RobotConfigError(fail, f"joints.{m.state}: {how} turns a revolute joint; {m.joint!r} slides")
+        if (m.unit in (JointUnit.RANGE_0_100, JointUnit.RANGE_M100_100) and m.ticks_range is None
+                and (joint.lower is None or joint.upper is None)):
+            raise RobotConfigError(fail, f"joints.{m.state}: unit {m.unit.value} needs limits on joint {m.joint!r}, "
+                                   "which has none")
+    for name in config.hold:
+        if name not in model.actuated:
+            raise RobotConfigError(fail, f"hold.{name}: not a moving, non-mimic URDF joint")
+    driven = {m.joint for m in config.joints} | set(config.hold)
+    for cam in config.cameras.values():
+        # A camera named "wrist" on an SO-101 would add a second parent to the URDF's wrist_link.
+        frames = [cam.optical_frame] if cam.mount.optical else [cam.link_frame, cam.optical_frame]
+        taken = [f for f in frames if model.has_link(f) or f == config.world_frame]
+        if taken:
+            raise RobotConfigError(fail, f"camera {cam.name!r}: its frame {taken[0]!r} is already a link of the URDF; "
+                                   f"give the camera another name (e.g. {cam.name}_cam)")
+        parent = cam.mount.parent
+        if parent == config.world_frame:
+            continue
+        if not model.has_link(parent):
+            raise RobotConfigError(fail, f"camera {cam.name!r} is mounted on {parent!r}, which is neither a URDF link "
+                                   f"nor the world frame {config.world_frame!r}")
+        free = [j.name for j in model.path_joints(parent) if j.moves and j.mimic is None and j.name not in driven]
+        if free:
+            raise RobotConfigError(fail, f"camera {cam.name!r} hangs below joints {free} that no dataset state drives: "
+                                   "map them under joints or fix them under hold")
+    body = config.chain_body
+    if body is not None and body != config.world_frame and not model.has_link(body):
+        raise RobotConfigError(fail, f"chain.body {body!r} is not a URDF link")

@@ -1,0 +1,366 @@
+"""A robot.yaml to start from, written from what a LeRobot dataset has: ``framechain info DATASET --episode N``.
+
+As ``framechain info LOG`` suggests a chain for a ROS log, this suggests robot.yaml for a dataset:
+the state feature and its names mapped to joints, a unit guessed from the episode's values (radians,
+degrees, raw servo ticks, LeRobot's -100..100 and 0-100 ranges), one arm per prefix, and a camera
+per video or image feature with its size and a guessed focal length.
+
+When the dataset's ``robot_type`` names an arm framechain bundles a URDF for
+(:mod:`framechain.robot.known_arms`: SO-100, SO-101, Koch), the file is complete: that URDF,
+the state names matched to its joints under any per-arm prefix (``left_``, ``arm1_``, ``follower_``,
+numbered ``arm1_j1``), and each camera on the gripper link of the arm its name mentions (a wrist
+camera of one arm, else the world), its mount a placeholder that the camera's motion measures.
+:func:`generated_robot` gives it to a run without ``--robot``. Otherwise what cannot be known from
+the data is a placeholder in capitals (``URDF``, ``LINK``) with a comment, as in the chain suggestion.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, FeatureInfo
+from framechain.config.robot import RobotConfig
+from framechain.robot.kinematics import RobotModel
+from framechain.robot.known_arms import ArmJoints, KnownArm, known_arm, match_state_names
+
+__all__ = ["GeneratedRobot", "dataset_needs", "generated_robot", "guess_arm_units", "guess_unit",
+           "robot_yaml_skeleton"]
+
+#: What a generated robot.yaml is called in messages and fixes (it is written beside a run's outputs).
+GENERATED_SOURCE = "robot.yaml (generated)"
+#: Field of view assumed for a focal length guess.
+GUESSED_FOV_DEG = 70.0
+#: URDFs of LeRobot's robot types framechain does not bundle.
+URDF_HINTS = {"aloha": "aloha (vx300s arms)"}
+#: Words of a camera name that put it on an arm's wrist.
+_WRIST_WORDS = {"wrist", "gripper", "hand", "arm", "ee"}
+
+
+@dataclass(frozen=True)
+class GeneratedRobot:
+    """robot.yaml made for a known arm, with the one line that says what it assumed."""
+
+    text: str
+    line: str
+    episode: int
+
+    def mapping(self) -> dict[str, Any]:
+        """robot.yaml's keys (what a chain's inline robot section holds)."""
+        import yaml
+
+        raw: dict[str, Any] = yaml.safe_load(self.text)
+        return raw
+
+    def config(self) -> RobotConfig:
+        """The parsed configuration; findings' fixes name it ``robot.yaml (generated)``."""
+        return RobotConfig.from_mapping(self.mapping(), source=GENERATED_SOURCE)
+
+
+@dataclass(frozen=True)
+class _Joint:
+    state: str
+    joint: str | None  # None: the URDF has no joint this state could drive
+    unit: str
+    why_not: str = ""
+
+
+@dataclass(frozen=True)
+class _Arm:
+    name: str
+    prefix: str  # frames' prefix (arms) or "" (one URDF)
+    joints: tuple[_Joint, ...]
+    unit_note: str
+    #: URDF joints no state drives, held at zero
+    hold: tuple[str, ...] = ()
+
+    @property
+    def default_unit(self) -> str:
+        """The commonest unit of the mapped joints."""
+        units = [j.unit for j in self.joints if j.joint is not None] or ["deg"]
+        return Counter(units).most_common(1)[0][0]
+
+
+def guess_unit(name: str, values: np.ndarray) -> str:
+    """The unit a state's values look recorded in: rad, deg, ticks (0..4095 servo counts) or range_0_100."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return "deg"
+    lo, hi = float(finite.min()), float(finite.max())
+    if "gripper" in name.lower() and lo >= 0.0 and hi <= 100.0 and hi - lo > 2 * math.pi:
+        return "range_0_100"
+    if -2 * math.pi <= lo and hi <= 2 * math.pi:
+        return "rad"
+    if lo >= 0.0 and hi <= 4096.0 and hi > 400.0 and np.allclose(finite, np.round(finite)):
+        return "ticks"
+    return "deg"
+
+
+def guess_arm_units(names: Sequence[str], values: np.ndarray) -> tuple[list[str], str]:
+    """The units of one arm's states (``values``: (T, n) columns) and the guess in words.
+
+    The arm's joints share a unit (LeRobot records an arm in one mode), guessed from all of them; the
+    gripper takes LeRobot's 0-100 unless the arm records raw ticks or radians."""
+    gripper = np.array(["gripper" in n.lower() for n in names], dtype=bool)
+    body = values[:, ~gripper] if (~gripper).any() else values
+    finite = body[np.isfinite(body)]
+    top = float(np.abs(finite).max()) if finite.size else 0.0
+    if finite.size == 0:
+        unit, why = "deg", "no finite values to guess from"
+    elif finite.min() >= 0.0 and 400.0 < top <= 4096.0 and np.allclose(finite, np.round(finite)):
+        unit, why = "ticks", f"whole numbers {finite.min():.0f}..{top:.0f}: raw servo ticks"
+    elif top <= 2 * math.pi:
+        unit, why = "rad", f"values within +-{top:.2f}"
+    elif top > 100.5:
+        unit, why = "deg", f"values reach {top:.0f}"
+    elif top >= 99.5:
+        unit, why = "range_m100_100", "values stop at +-100, where LeRobot clamps range_m100_100"
+    else:
+        unit, why = "deg", f"values within +-{top:.0f}; LeRobot's default range_m100_100 would fit too"
+    units = [unit if not g or unit in ("ticks", "rad") else guess_unit(n, values[:, i])
+             for i, (n, g) in enumerate(zip(names, gripper, strict=True))]
+    return units, why
+
+
+def robot_yaml_skeleton(path: str | Path, episode: int) -> str:
+    """robot.yaml text for the dataset at ``path``, from its metadata and episode ``episode``'s values."""
+    return _skeleton(DatasetReader(path), Path(path), episode)[0]
+
+
+def generated_robot(path: str | Path, episode: int | None = None) -> GeneratedRobot | None:
+    """robot.yaml for a dataset whose ``robot_type`` framechain bundles a URDF for (None: another arm, or no
+    state name matched). ``episode`` None: the first episode."""
+    reader = DatasetReader(path)
+    if known_arm(reader.robot_type) is None or not reader.episodes():
+        return None
+    chosen = reader.episodes()[0] if episode is None else episode
+    text, line = _skeleton(reader, Path(path), chosen)
+    if not line:
+        return None
+    first = "" if episode is not None else f"episode {chosen} (no --episode given); "
+    return GeneratedRobot(text=text, line=first + line, episode=chosen)
+
+
+def dataset_needs(path: str | Path, *, episode: int | None, robot_given: bool) -> str:
+    """One line asking for everything a run of the dataset lacks (the episode, robot.yaml, or both), and where a
+    robot.yaml to start from comes from."""
+    reader = DatasetReader(path)
+    ids = reader.episodes()
+    shown = "none" if not ids else f"{ids[0]}..{ids[-1]}" if ids == list(range(ids[0], ids[-1] + 1)) else str(ids)
+    asks = ([] if episode is not None else [f"--episode N (episodes {shown})"]) + (
+        [] if robot_given else ["--robot robot.yaml (URDF, joints, cameras)"])
+    line = f"{path}: a LeRobot dataset needs {' and '.join(asks)}"
+    if robot_given:
+        return line
+    robot_type = reader.robot_type
+    arm = known_arm(robot_type)
+    unknown = (f"its state names match no joint of the bundled {arm.title} URDF" if arm is not None else
+               f"robot_type {robot_type!r} is no arm framechain bundles a URDF for" if robot_type else "no robot_type")
+    example = episode if episode is not None else (ids[0] if ids else 0)
+    return f"{line} ({unknown}); `framechain info {path} --episode {example}` prints a robot.yaml to start from"
+
+
+def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str]:
+    """robot.yaml text, and the line saying what it assumed when the arm is known ("" otherwise)."""
+    reader.episode(episode)  # a missing episode says so in one line
+    state = _state_feature(reader)
+    names = list(reader.names(state)) if state else []
+    values, note = _values(reader, episode, state, len(names))
+    robot_type = str(reader.robot_type or "")
+    arm = known_arm(robot_type)
+    arms = _known_arms(arm, names, values) if arm is not None else []
+    lines = [f"# robot.yaml suggested by `framechain info` from {path} episode {episode}; edit before use",
+             f"# robot_type {robot_type or 'not given'}, {reader.fps:g} fps, codebase {reader.version}"]
+    if arm is None or not arms:
+        arms = _generic_arms(names, values)
+        lines.append("# FILL IN the CAPITALS: the URDF, and each camera's link, mount and calibrated intrinsics")
+        urdf = "URDF  # the robot's URDF" + "".join(f", e.g. {h}" for k, h in URDF_HINTS.items() if k in robot_type)
+    else:
+        lines.append(f"# the bundled {arm.title} URDF ({arm.source}); GUESSED: the units, the bases, and each "
+                     "camera's intrinsics and mount (its link and mount are measured from its motion)")
+        urdf = f"{arm.urdf}  # bundled {arm.title} URDF ({arm.source})"
+    if note:
+        lines.append(f"# note: {note}")
+    lines.append(f"state_feature: {state or 'STATE_FEATURE'}")
+    lines += _arm_lines(arms, urdf)
+    link = arm.camera_link if arm is not None and arms else "gripper_link"
+    lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms))
+    text = "\n".join(lines) + "\n"
+    if arm is None or not arms:
+        return text, ""
+    mapped = sum(j.joint is not None for a in arms for j in a.joints)
+    units: dict[str, str] = {}
+    for a in arms:
+        units.setdefault(a.default_unit, a.unit_note)
+    on = f"{len(arms)} arms ({', '.join(a.prefix for a in arms)})" if len(arms) > 1 else "1 arm"
+    return text, (f"used the bundled {arm.title} URDF and a guessed mapping ({mapped} of {len(names)} state names "
+                  f"on {on}; units {'; '.join(f'{u}: {n}' for u, n in units.items())}; cameras' intrinsics and "
+                  "mounts guessed)")
+
+
+def _state_feature(reader: DatasetReader) -> str | None:
+    if "observation.state" in reader.features:
+        return "observation.state"
+    vectors = [k for k, f in reader.features.items() if "state" in k and f.dtype.startswith(("float", "int"))]
+    return vectors[0] if vectors else None
+
+
+def _values(reader: DatasetReader, episode: int, state: str | None, width: int) -> tuple[np.ndarray, str]:
+    """The episode's state values (T, n); NaN and a note when they cannot be read (units then guessed as deg)."""
+    if state is None:
+        return np.full((1, width), np.nan), "no state feature found: name it under state_feature"
+    try:
+        frames = reader.read(episode, [state])
+    except DatasetError as err:
+        return np.full((1, width), np.nan), f"units not guessed: {err}"
+    return np.asarray(frames.columns[state], dtype=np.float64).reshape(len(frames), -1), ""
+
+
+def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray) -> list[_Arm]:
+    """The dataset's arms matched to the known arm's joints (by name, by number, else by position)."""
+    groups, _unmatched = match_state_names(names, arm.motors)
+    if not groups and names and len(names) % len(arm.motors) == 0:  # unnamed columns: LeRobot's order
+        n = len(names) // len(arm.motors)
+        prefixes = ("left_", "right_") if n == 2 else tuple(f"arm{i + 1}_" if n > 1 else "" for i in range(n))
+        k = len(arm.motors)
+        groups = [ArmJoints(p, tuple(zip(names[i * k:(i + 1) * k], arm.motors, strict=True)))
+                  for i, p in enumerate(prefixes)]
+    model = RobotModel.from_urdf(arm.urdf)
+    out = []
+    for group in groups:
+        states = [s for s, _m in group.motors]
+        units, why = guess_arm_units(states, values[:, [list(names).index(s) for s in states]])
+        joints = []
+        for (state, motor), unit in zip(group.motors, units, strict=True):
+            joint = arm.joints.get(motor)
+            no_limits = joint is not None and unit.startswith("range") and None in model.limits(joint)
+            why_not = ("the bundled URDF has no such joint" if joint is None else
+                       f"its URDF joint {joint!r} has no limits for {unit}" if no_limits else "")
+            joints.append(_Joint(state, None if why_not else joint, unit, why_not))
+        driven = {j.joint for j in joints}
+        hold = tuple(j for j in arm.joints.values() if j not in driven)
+        prefix = (group.prefix or f"{group.name}_") if len(groups) > 1 else ""
+        out.append(_Arm(group.name, prefix, tuple(joints), why, hold))
+    return out
+
+
+def _generic_arms(names: Sequence[str], values: np.ndarray) -> list[_Arm]:
+    """An unknown arm: one arm per prefix shared by several names with the same endings, the joints named by
+    what follows the prefix (to check against the URDF)."""
+    stems = [n.removesuffix(".pos") for n in names]
+    split = [s.split("_", 1) if "_" in s else ["", s] for s in stems]
+    endings: dict[str, set[str]] = {}
+    for head, rest in split:
+        endings.setdefault(head, set()).add(rest)
+    shared = [h for h, e in endings.items() if h and len(e) >= 2 and sum(e == o for o in endings.values()) >= 2]
+    if not (len(shared) >= 2 and all(head in shared for head, _rest in split)):
+        shared = [""]
+    out = []
+    for head in shared:
+        idx = [i for i, (h, _r) in enumerate(split) if head in (h, "")]
+        # Another robot's joints may differ in kind (a base in metres, a hand in radians): a unit per joint.
+        joints = tuple(_Joint(names[i], split[i][1] if head else stems[i], guess_unit(names[i], values[:, i]))
+                       for i in idx)
+        out.append(_Arm(head or "arm", f"{head}_" if head else "", joints, "per joint, from its values"))
+    return out
+
+
+def _arm_lines(arms: Sequence[_Arm], urdf: str) -> list[str]:
+    if len(arms) == 1 and not arms[0].prefix:
+        return [f"urdf: {urdf}", *_joint_lines(arms[0], "")]
+    lines = ["arms:"]
+    for i, arm in enumerate(arms):
+        y = _base_y(arm.name, i, len(arms))
+        lines += [f"  {arm.name}:", f"    urdf: {urdf}", f"    prefix: {arm.prefix}",
+                  f"    world_from_base: {{xyz: [0.0, {y:.1f}, 0.0], rpy: [0.0, 0.0, 0.0]}}  "
+                  "# GUESSED: measure the bases",
+                  *_joint_lines(arm, "    ")]
+    return lines
+
+
+def _base_y(name: str, i: int, n: int) -> float:
+    """Arms side by side 0.4 m apart along y, the left one (or the first) at +y."""
+    side = {"left": 0, "l": 0, "right": n - 1, "r": n - 1}.get(name.lower(), i)
+    return 0.2 * (n - 1) - 0.4 * side
+
+
+def _joint_lines(arm: _Arm, indent: str) -> list[str]:
+    """``default_unit`` (the commonest, with the guess said) and the joints, each naming the URDF joint it drives."""
+    mapped = [j for j in arm.joints if j.joint is not None]
+    if not mapped:
+        return [f"{indent}joints: {{}}  # FILL IN: state name -> URDF joint"]
+    default = arm.default_unit
+    lines = [f"{indent}default_unit: {default}  # guessed: {arm.unit_note}"]
+    if default == "ticks":
+        lines.append(f"{indent}# ticks: (value - 2048) * 2 pi / 4096; calibration: ARM.json (LeRobot's) reads them "
+                     "as LeRobot does")
+    lines.append(f"{indent}joints:  # state name -> the URDF joint it drives")
+    for j in arm.joints:
+        if j.joint is None:
+            lines.append(f"{indent}  # {j.state}: not mapped ({j.why_not})")
+            continue
+        joint = _yaml_name(j.joint)
+        lines.append(f"{indent}  {j.state}: " + (joint if j.unit == default else f"{{joint: {joint}, unit: {j.unit}}}"))
+    if arm.hold:
+        lines.append(f"{indent}hold:  # GUESSED: joints no state drives, held at 0")
+        lines += [f"{indent}  {_yaml_name(j)}: 0.0" for j in arm.hold]
+    return lines
+
+
+def _yaml_name(name: str) -> str:
+    return name if re.fullmatch(r"[A-Za-z_][\w.-]*", name) else f"'{name}'"
+
+
+def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, known: bool) -> list[str]:
+    """One camera per video (or image) feature: its key, size and guessed intrinsics, and its mount."""
+    features = [f for f in reader.features.values() if f.is_video or f.dtype == "image"]
+    if not features:
+        return ["cameras: {}  # the dataset has no video or image feature"]
+    prefixed = len(arms) > 1 or bool(arms and arms[0].prefix)
+    lines = ["cameras:"]
+    for feature in features:
+        name = feature.key.split(".")[-1]
+        width, height = _size(feature)
+        focal = 0.5 * width / math.tan(math.radians(GUESSED_FOV_DEG / 2))
+        arm = _camera_arm(name, arms)
+        parent = "world" if arm is None else f"{arm.prefix if prefixed else ''}{link}"
+        mount = ("GUESSED: a placeholder; the link and mount are measured from the camera's motion" if known
+                 else "FILL IN: the link (or world) and the measured mount")
+        codec = feature.info.get("video.codec", "image" if feature.dtype == "image" else "?")
+        lines += [f"  {name}:  # {feature.key}: {codec}, {width}x{height}",
+                  f"    video_key: {feature.key}",
+                  f"    intrinsics: {{fx: {focal:.1f}, fy: {focal:.1f}, cx: {(width - 1) / 2:g}, "
+                  f"cy: {(height - 1) / 2:g}, width: {width}, height: {height}}}  "
+                  f"# GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
+                  f"    mount: {{parent: {parent}, xyz: [0.0, 0.0, 0.0], rpy: [0.0, 0.0, 0.0], "
+                  f"optical: true}}  # {mount}"]
+    return lines
+
+
+def _camera_arm(name: str, arms: Sequence[_Arm]) -> _Arm | None:
+    """The arm a camera rides, from its name: the arm it names (``left_wrist``, ``arm2``), else the first arm for a
+    wrist camera; None: a camera fixed in the world (``top``, ``front``)."""
+    words = set(re.split(r"[^a-z0-9]+", name.lower()))
+    words |= {{"left": "l", "right": "r", "l": "left", "r": "right"}.get(w, w) for w in words}
+    named = [a for a in arms if a.prefix and (a.name.lower() in words or name.lower().startswith(a.prefix.lower()))]
+    if named:
+        return named[0]
+    wrist = bool(words & _WRIST_WORDS) or any(w.startswith(("wrist", "arm")) for w in words)
+    return arms[0] if wrist and arms else None
+
+
+def _size(feature: FeatureInfo) -> tuple[int, int]:
+    """(width, height) from the feature's shape and names (channels last or first)."""
+    names = list(feature.names or ())
+    shape = list(feature.shape)
+    if "height" in names and "width" in names and len(shape) == len(names):
+        return shape[names.index("width")], shape[names.index("height")]
+    dims = [d for d in shape if d > 4]
+    return (dims[1], dims[0]) if len(dims) >= 2 else (640, 480)
