@@ -60,6 +60,7 @@ from framechain.arrays import FloatArray
 from framechain.config import plausible
 from framechain.config.errors import CalibrationError
 from framechain.config.schema import Section, finite_number, read_yaml, show
+from framechain.geometry.camera import CameraModel
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.geometry.rotations import quat_from_matrix, quat_from_rotvec
 from framechain.timeline import CameraTable
@@ -96,6 +97,10 @@ class Intrinsics:
     @property
     def K(self) -> FloatArray:
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def camera_model(self, frame: str = "") -> CameraModel:
+        """The camera model these intrinsics declare, for the optical frame ``frame``."""
+        return CameraModel(frame, self.K, self.width, self.height, self.distortion_model, np.asarray(self.distortion))
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""The replay room: TransformBuffer (tf2 semantics, vectorised), camera models, the hop-by-hop replay."""
+"""The replay room: TransformBuffer (tf2 semantics, vectorised), the hop-by-hop replay (the camera model is
+:mod:`framechain.geometry.camera`)."""
 
 from framechain.replay.buffer import (
     LATEST,
@@ -10,10 +11,8 @@ from framechain.replay.buffer import (
     PathHop,
     TransformBuffer,
 )
-from framechain.replay.camera import CameraModel
 from framechain.replay.depth import DepthSamples, sample_depth
 from framechain.replay.errors import (
-    CameraModelError,
     ConnectivityError,
     ExtrapolationError,
     FrameGraphError,
@@ -32,8 +31,6 @@ from framechain.replay.replay import (
 __all__ = [
     "LATEST",
     "REPLAYED",
-    "CameraModel",
-    "CameraModelError",
     "ConnectivityError",
     "DepthSamples",
     "Edge",

@@ -32,7 +32,3 @@ class ExtrapolationError(TransformLookupError):
             f"lookup at {format_stamp(stamp_ns)} s would extrapolate {direction} on edge {parent} -> {child}, "
             f"recorded from {format_stamp(first_ns)} s to {format_stamp(last_ns)} s"
         )
-
-
-class CameraModelError(FramechainError):
-    """A camera model cannot be used (unknown distortion model, bad coefficients)."""

@@ -17,9 +17,9 @@ import numpy as np
 from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
 from framechain.catalogue import HopName, NothingReplayed, RejectReason
 from framechain.config.chain import ChainFrames
+from framechain.geometry.camera import CameraModel, distinct_models
 from framechain.geometry.transforms import transform_points
 from framechain.replay.buffer import LookupResult, LookupStatus, TransformBuffer
-from framechain.replay.camera import CameraModel, distinct_models
 from framechain.replay.depth import sample_depth
 from framechain.timeline import CameraTable, Column, ColumnTable, ObservationTable, Timeline, normalize_frame
 

@@ -19,8 +19,8 @@ import numpy as np
 from framechain.arrays import IntArray
 from framechain.catalogue import HopName, RejectReason
 from framechain.config.chain import ChainFrames
+from framechain.geometry.camera import CameraModel
 from framechain.replay.buffer import LookupResult, TransformBuffer
-from framechain.replay.camera import CameraModel
 from framechain.replay.replay import HopRecordTable, HopSampleTable, ReplayOptions, ReplayResult, replay
 from framechain.timeline import ObservationTable, Timeline, normalize_frame
 

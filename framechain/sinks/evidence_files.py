@@ -20,7 +20,7 @@ from framechain.analysis.run import Run
 from framechain.analysis.verdict.findings import Attribution
 from framechain.arrays import rows_of
 from framechain.catalogue import HopName
-from framechain.replay import CameraModel
+from framechain.geometry.camera import CameraModel
 from framechain.timeline import arrow_array
 
 METRICS = {

@@ -39,8 +39,8 @@ from framechain.analysis.evidence.rig_layout import PairLines
 from framechain.analysis.run import Run
 from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
+from framechain.geometry.camera import distinct_models
 from framechain.replay import ReplayResult
-from framechain.replay.camera import distinct_models
 from framechain.sinks.colors import AS_RUN_COLOR, DETECTION_COLOR, ERROR_COLOR, RECOMPUTED_COLOR
 from framechain.sinks.overlay import ImageOverlay, image_overlay
 from framechain.sinks.rerun_common import REPLAY_FRAME_SUFFIX

@@ -24,8 +24,8 @@ import numpy.typing as npt
 from framechain.analysis.evidence.alignment import AlignedEvidence
 from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
+from framechain.geometry.camera import distinct_models
 from framechain.replay import ReplayResult
-from framechain.replay.camera import distinct_models
 from framechain.replay.stamps import nearest
 from framechain.sinks.colors import (
     AS_RUN_COLOR,

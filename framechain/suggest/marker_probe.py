@@ -87,7 +87,7 @@ def probe_markers(
     (no OpenCV, an encoding markers cannot be searched in, an unreadable log)."""
     try:
         from framechain.vision.markers import dictionary_id, image_pixels
-        from framechain.vision.tag_pose import require_cv2
+        from framechain.vision.opencv import require_cv2
 
         cv2 = require_cv2()
         greys = [g for g in (image_pixels(m) for m in first_images(path, topic, n)) if g is not None]

@@ -40,8 +40,9 @@ from scipy.spatial.transform import Rotation
 
 from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
+from framechain.geometry.camera import CameraModel
 from framechain.timeline import EgoMotionTable, TranslationPrior
-from framechain.vision.tag_pose import PinholeModel, require_cv2, undistort_normalised
+from framechain.vision.opencv import require_cv2, undistort_normalised
 from framechain.vision.two_view import (
     PairBatch,
     off_flow_residuals,
@@ -218,8 +219,7 @@ def _first_rotations(
 
 def _gather(tracks: FeatureTracks, stamps: IntArray, intrinsics: Intrinsics, opts: EgoMotionOptions) -> _Pairs | None:
     """The frame pairs ``spans`` apart with enough matches: padded bearings, stamps, match counts."""
-    model = PinholeModel(K=intrinsics.K, distortion_model=intrinsics.distortion_model,
-                         distortion=np.asarray(intrinsics.distortion, dtype=float))
+    model = intrinsics.camera_model()
     # One OpenCV call for every frame's pixels (each point is undistorted on its own: the same bearings).
     counts = [len(px) for px in tracks.pixels]
     flat = _bearings(model, np.concatenate(tracks.pixels).reshape(-1, 2) if counts else np.zeros((0, 2)))
@@ -251,7 +251,7 @@ def _gather(tracks: FeatureTracks, stamps: IntArray, intrinsics: Intrinsics, opt
     return batch, s0[forward], s1[forward], valid[forward].sum(axis=1).astype(np.int64)
 
 
-def _bearings(model: PinholeModel, pixels: FloatArray) -> FloatArray:
+def _bearings(model: CameraModel, pixels: FloatArray) -> FloatArray:
     xy = undistort_normalised(model, pixels)
     rays = np.concatenate([xy, np.ones((xy.shape[0], 1))], axis=1)
     out: FloatArray = rays / np.linalg.norm(rays, axis=1, keepdims=True)

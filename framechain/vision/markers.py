@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.config.errors import ChainConfigError
-from framechain.vision.tag_pose import require_cv2
+from framechain.vision.opencv import require_cv2
 
 _CHANNELS = {"mono8": 1, "8uc1": 1, "rgb8": 3, "bgr8": 3, "8uc3": 3, "rgba8": 4, "bgra8": 4, "8uc4": 4}
 

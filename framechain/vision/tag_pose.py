@@ -1,4 +1,4 @@
-"""Square-marker pose from four pixel corners, and camera-model projections, with OpenCV.
+"""Square-marker pose from four pixel corners (PnP), with OpenCV.
 
 Conventions: pixels ``(u, v)`` with the origin at the centre of the top-left pixel; camera points
 in the optical frame (x right, y down, z forward, REP-103). A tag's corners are given in the
@@ -8,103 +8,24 @@ bottom-right, bottom-left seen from the front, marker y up), so the image quad w
 on screen (y down). A quad that winds the other way is the same square read in mirror order;
 its correspondences are reversed (corner 0 kept), which leaves the centre where it is.
 
-Distortion models follow ROS names: ``plumb_bob`` and ``rational_polynomial`` (OpenCV's
-``undistortPoints``/``projectPoints``), ``equidistant`` (OpenCV's ``cv2.fisheye``), ``none``.
-Every undistortion and projection is one OpenCV call per camera model; only ``solvePnP`` runs
+The camera model is :class:`framechain.geometry.camera.CameraModel`, undistorted and projected
+through OpenCV (:mod:`framechain.vision.opencv`, one call per model); only ``solvePnP`` runs
 once per detection (OpenCV has no batched form).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
 
 from framechain.arrays import BoolArray, FloatArray
-from framechain.errors import FramechainError
+from framechain.geometry.camera import CameraModel
+from framechain.vision.opencv import project, require_cv2, undistort_normalised
 
 #: Tags whose corners reproject further than this (RMS over the four corners, pixels) are rejected.
 MAX_REPROJECTION_PX = 2.0
-_FISHEYE = frozenset({"equidistant", "fisheye", "kannala_brandt"})
-_N_COEFFS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4, "none": 0}
-
-
-class MissingOpenCVError(FramechainError):
-    """OpenCV is needed (tag corners, markers in images) but cannot be imported."""
-
-
-def require_cv2() -> ModuleType:
-    """``cv2``, imported on first use (an install without it still reads logs without fiducials)."""
-    try:
-        import cv2
-    except ImportError as err:
-        raise MissingOpenCVError(
-            "fiducial corners and markers in images need OpenCV: pip install 'opencv-python-headless>=4.10' "
-            f"({err})"
-        ) from err
-    return cv2
-
-
-@dataclass(frozen=True)
-class PinholeModel:
-    """One camera model: ``K`` (3x3), ROS distortion model name and its coefficients."""
-
-    K: FloatArray
-    distortion_model: str
-    distortion: FloatArray
-
-    @property
-    def fisheye(self) -> bool:
-        return self.distortion_model.strip().lower() in _FISHEYE
-
-    def coefficients(self) -> FloatArray:
-        """Coefficients in OpenCV's layout (4 for fisheye, 5 or 8 otherwise, zeros if none)."""
-        model = self.distortion_model.strip().lower()
-        n = 4 if self.fisheye else _N_COEFFS.get(model, max(self.distortion.size, 5))
-        out = np.zeros(max(n, 4 if self.fisheye else 5))
-        given = np.asarray(self.distortion, dtype=np.float64).reshape(-1)[: out.size]
-        if model != "none":
-            out[: given.size] = given
-        return out
-
-
-def undistort_normalised(model: PinholeModel, pixels: npt.ArrayLike) -> FloatArray:
-    """Undistorted normalised image coordinates ``(x, y)`` (N, 2) of pixels (N, 2): one OpenCV call."""
-    cv2 = require_cv2()
-    pts = np.ascontiguousarray(np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2))
-    if pts.shape[0] == 0:
-        return np.zeros((0, 2))
-    k = np.asarray(model.K, dtype=np.float64)
-    if model.fisheye:
-        # Newton iterations to convergence; OpenCV's default criteria stop after 10.
-        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
-        out = cv2.fisheye.undistortPoints(pts, k, model.coefficients(), criteria=criteria)
-    else:
-        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
-        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4: the iterated form is a separate function
-            out = cv2.undistortPointsIter(pts, k, model.coefficients(), None, None, criteria)
-        else:  # OpenCV 5 folded it into undistortPoints
-            out = cv2.undistortPoints(pts, k, model.coefficients(), criteria=criteria)
-    result: FloatArray = np.asarray(out, dtype=np.float64).reshape(-1, 2)
-    return result
-
-
-def project(model: PinholeModel, points_cam: npt.ArrayLike) -> FloatArray:
-    """Pixels (N, 2) of camera-frame points (N, 3), distortion applied: one OpenCV call."""
-    cv2 = require_cv2()
-    pts = np.ascontiguousarray(np.asarray(points_cam, dtype=np.float64).reshape(-1, 1, 3))
-    if pts.shape[0] == 0:
-        return np.zeros((0, 2))
-    zero = np.zeros(3)
-    k = np.asarray(model.K, dtype=np.float64)
-    if model.fisheye:
-        out, _ = cv2.fisheye.projectPoints(pts, zero, zero, k, model.coefficients())
-    else:
-        out, _ = cv2.projectPoints(pts, zero, zero, k, model.coefficients())
-    result: FloatArray = np.asarray(out, dtype=np.float64).reshape(-1, 2)
-    return result
 
 
 def square_object_points(size_m: float) -> FloatArray:
@@ -140,7 +61,7 @@ class TagPoses:
     reversed_order: BoolArray
 
 
-def solve_square_tags(model: PinholeModel, corners_px: npt.ArrayLike, sizes_m: npt.ArrayLike) -> TagPoses:
+def solve_square_tags(model: CameraModel, corners_px: npt.ArrayLike, sizes_m: npt.ArrayLike) -> TagPoses:
     """Pose of each square tag (N, 4, 2 pixel corners; N sizes in metres) seen by ``model``.
 
     One undistortion call for all corners, ``solvePnP(SOLVEPNP_IPPE_SQUARE)`` per tag on the

@@ -16,8 +16,9 @@ from framechain.adapters import open_log
 from framechain.adapters.messages.fiducials import FiducialRows, counts_reconcile, resolve_fiducials
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
+from framechain.geometry.camera import CameraModel
 from framechain.timeline import CameraTable
-from framechain.vision.tag_pose import PinholeModel, solve_square_tags, square_object_points
+from framechain.vision.tag_pose import solve_square_tags, square_object_points
 
 T0 = 1_700_000_000 * 10**9
 K = np.array([[600.0, 0.0, 320.0], [0.0, 610.0, 240.0], [0.0, 0.0, 1.0]])
@@ -56,7 +57,7 @@ def test_pnp_recovers_known_centres(model: str) -> None:
     sizes = rng.uniform(0.05, 0.3, 40)
     corners = np.stack([_render(model, r, t, square_object_points(s)) for r, t, s in zip(rvecs, tvecs, sizes,
                                                                                           strict=True)])
-    cam = PinholeModel(K, model, MODELS[model])
+    cam = CameraModel("cam", K, 0, 0, model, MODELS[model])
     poses = solve_square_tags(cam, corners, sizes)
     assert poses.ok.all()
     assert np.abs(poses.centre_cam - tvecs).max() < 1e-6
@@ -77,7 +78,7 @@ def test_pnp_with_pixel_noise(model: str) -> None:
     tvecs[:, 2] = rng.uniform(0.5, 1.5, n)
     corners = np.stack([_render(model, r, t, square_object_points(size)) for r, t in zip(rvecs, tvecs, strict=True)])
     noisy = corners + rng.normal(scale=0.3, size=corners.shape)
-    poses = solve_square_tags(PinholeModel(K, model, MODELS[model]), noisy, size)
+    poses = solve_square_tags(CameraModel("cam", K, 0, 0, model, MODELS[model]), noisy, size)
     assert poses.ok.all()
     depth_err = np.abs(poses.centre_cam[:, 2] - tvecs[:, 2]) / tvecs[:, 2]
     lateral = np.linalg.norm(poses.centre_cam[:, :2] - tvecs[:, :2], axis=1)
@@ -342,8 +343,6 @@ def test_apriltag_ros2_mcap_fisheye(tmp_path: Path) -> None:
     assert np.abs(obs.depth_m - tvecs[:, 2]).max() < 1e-6
     assert np.abs(np.column_stack([obs.u, obs.v]) - _expected_pixels("equidistant", tvecs)).max() < 1e-5
     # Hop 1 of the replay (its own fisheye undistortion) takes the pixel and depth back to the tag centre.
-    from framechain.replay.camera import CameraModel
-
     p_cam = CameraModel.from_table(timeline.cameras).pixel_to_camera(obs.u, obs.v, obs.depth_m)
     assert np.abs(p_cam - tvecs).max() < 1e-6
 
@@ -424,8 +423,6 @@ def test_camera_points_need_no_intrinsics(tmp_path: Path) -> None:
     cams = loaded.timeline.cameras
     assert (cams.frame.tolist(), cams.width.tolist(), cams.height.tolist()) == (["cam_optical"], [0], [0])
     assert any("no intrinsics; its detections are 3D points in the camera frame" in n for n in loaded.info.notes)
-    from framechain.replay.camera import CameraModel
-
     model = CameraModel.from_table(cams)  # hop 1 of the replay gives the logged points back, unbounded by an image
     assert model.inside(bare.u, bare.v).all()
     assert np.abs(model.pixel_to_camera(bare.u, bare.v, bare.depth_m) - pts[:2]).max() < 1e-15
@@ -551,14 +548,14 @@ def test_opencv_is_imported_only_when_needed(monkeypatch: pytest.MonkeyPatch) ->
     import subprocess
     import sys
 
-    from framechain.vision.tag_pose import MissingOpenCVError
+    from framechain.vision.opencv import MissingOpenCVError
 
     code = "import sys, framechain.adapters, framechain.adapters.messages.fiducials; print('cv2' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() \
         == "False"
     monkeypatch.setitem(sys.modules, "cv2", None)  # as if not installed
     with pytest.raises(MissingOpenCVError, match=r"need OpenCV: pip install 'opencv-python-headless>=4.10'"):
-        solve_square_tags(PinholeModel(K, "none", np.zeros(0)), np.zeros((1, 4, 2)), 0.1)
+        solve_square_tags(CameraModel("cam", K, 0, 0), np.zeros((1, 4, 2)), 0.1)
 
 
 def test_apriltag_ros2_old_array_layout() -> None:

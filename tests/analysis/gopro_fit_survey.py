@@ -34,7 +34,7 @@ from framechain.analysis.egomotion import EgoMotionFitOptions, LinkMotion, fit_c
 from framechain.arrays import FloatArray
 from framechain.config.calibration import Intrinsics
 from framechain.timeline import EgoMotionTable
-from framechain.vision.tag_pose import PinholeModel, undistort_normalised
+from framechain.vision.opencv import undistort_normalised
 
 CLIPS = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "gopro_gpmf"
 #: (clip, window name, from s, to s)
@@ -105,9 +105,7 @@ def horizon_up(frames: ClipFrames, intrinsics: Intrinsics) -> FloatArray:
     curvature = below - 2.0 * at + above
     rows = 205.5 + row + np.where(curvature < 0, 0.5 * (below - above) / np.where(curvature < 0, curvature, 1), 0)
     pixels = np.stack([np.broadcast_to(columns + 14.5, rows.shape), rows], axis=-1).reshape(-1, 2)
-    model = PinholeModel(K=intrinsics.K, distortion_model=intrinsics.distortion_model,
-                         distortion=np.asarray(intrinsics.distortion, dtype=float))
-    rays = np.concatenate([undistort_normalised(model, pixels), np.ones((len(pixels), 1))], axis=1)
+    rays = np.concatenate([undistort_normalised(intrinsics.camera_model(), pixels), np.ones((len(pixels), 1))], axis=1)
     rays = (rays / np.linalg.norm(rays, axis=1, keepdims=True)).reshape(*rows.shape, 3)
     normals = np.linalg.svd(rays)[2][:, -1]
     out: FloatArray = normals * np.sign(-normals[:, 1])[:, None]

@@ -24,8 +24,8 @@ from framechain.analysis.verdict.attribute import attribute
 from framechain.analysis.verdict.bounds import observations_for
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig, ChainEvidence
+from framechain.geometry.camera import CameraModel
 from framechain.pipeline import load_log
-from framechain.replay import CameraModel
 from framechain.sim import InjectedFault, SceneSpec, generate
 
 

@@ -22,7 +22,8 @@ from framechain.analysis.model.frame_swaps import (
 from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainFrames
-from framechain.replay import CameraModel, TransformBuffer
+from framechain.geometry.camera import CameraModel
+from framechain.replay import TransformBuffer
 from framechain.sim.scene import (
     REALSENSE_OPTICAL_FRAME,
     REALSENSE_OPTICAL_XYZ,

@@ -124,7 +124,7 @@ def _models() -> list:  # type: ignore[type-arg]
     scene = generate(SceneSpec(seed=1, duration_s=2.0, evidence="hops"))
     from framechain.analysis.evidence.replayed import replay_chain
     from framechain.analysis.model.chain import ChainInputs
-    from framechain.replay import CameraModel
+    from framechain.geometry.camera import CameraModel
 
     replayed = replay_chain(scene.timeline, scene.chain)
     camera = CameraModel.from_table(scene.timeline.cameras, replayed.replay.main_camera_row())

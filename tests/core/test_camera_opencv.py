@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from framechain.replay import CameraModel, CameraModelError
+from framechain.geometry.camera import CameraModel, CameraModelError
 from framechain.timeline import CameraTable
 
 K = np.array([[612.5, 0.0, 318.2], [0.0, 609.8, 243.7], [0.0, 0.0, 1.0]])
@@ -139,7 +139,7 @@ def test_points_not_in_front_of_the_camera_have_no_pixel(model: str) -> None:
 def test_distinct_models_groups_rows_by_their_whole_model() -> None:
     """Rows share a model exactly when frame, size, K, distortion model and its coefficients are equal:
     checked pair by pair against plain Python tuples, on two cameras interleaved and in runs."""
-    from framechain.replay.camera import distinct_models
+    from framechain.geometry.camera import distinct_models
     from framechain.timeline import CameraTable
 
     rng = np.random.default_rng(4)

@@ -6,7 +6,8 @@ import numpy as np
 from core_helpers import assert_same_rotation
 from scipy.spatial.transform import Rotation
 
-from framechain.replay import CameraModel, LookupStatus, TransformBuffer
+from framechain.geometry.camera import CameraModel
+from framechain.replay import LookupStatus, TransformBuffer
 from framechain.timeline import TransformTable
 
 Q_LINK_OPTICAL = [-0.5, 0.5, -0.5, 0.5]

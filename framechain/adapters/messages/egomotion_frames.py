@@ -34,7 +34,7 @@ from framechain.vision.egomotion import (
     measure_egomotion,
     track_features,
 )
-from framechain.vision.tag_pose import require_cv2
+from framechain.vision.opencv import require_cv2
 
 __all__ = [
     "CameraFrames",

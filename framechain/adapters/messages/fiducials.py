@@ -43,14 +43,10 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
+from framechain.geometry.camera import CameraModel, distinct_models
 from framechain.timeline import CameraTable, normalize_frames
-from framechain.vision.tag_pose import (
-    MAX_REPROJECTION_PX,
-    PinholeModel,
-    project,
-    solve_square_tags,
-    undistort_normalised,
-)
+from framechain.vision.opencv import project, undistort_normalised
+from framechain.vision.tag_pose import MAX_REPROJECTION_PX, solve_square_tags
 
 NS = 1_000_000_000
 _CORNERS = 0  # a detection given by its four pixel corners
@@ -243,11 +239,11 @@ class ResolvedFiducials:
     unprojected: frozenset[str] = frozenset()
 
 
-def camera_models_at(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> tuple[list[PinholeModel], IntArray]:
+def camera_models_at(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> tuple[list[CameraModel], IntArray]:
     """Distinct camera models of ``frame`` and, per stamp, which one is in force (-1: none).
 
-    The latest camera row at or before the stamp; before the first one, the first. Rows with
-    the same K, distortion model and coefficients share one model (one OpenCV call each).
+    The latest camera row at or before the stamp; before the first one, the first. Rows of one
+    model share it (:func:`~framechain.geometry.camera.distinct_models`: one OpenCV call each).
     """
     mine = np.flatnonzero(cameras.frame == frame)
     if mine.size == 0:
@@ -255,20 +251,7 @@ def camera_models_at(cameras: CameraTable, frame: str, stamps_ns: IntArray) -> t
     order = mine[np.argsort(cameras.stamp_ns[mine], kind="stable")]
     pos = np.searchsorted(cameras.stamp_ns[order], stamps_ns, side="right") - 1
     rows = order[np.clip(pos, 0, order.size - 1)]
-    models: list[PinholeModel] = []
-    keys: dict[bytes, int] = {}
-    row_model: dict[int, int] = {}
-    for r in np.unique(rows).tolist():
-        n = int(cameras.n_distortion[r])
-        key = (cameras.K[r].tobytes() + cameras.distortion[r, :n].tobytes()
-               + str(cameras.distortion_model[r]).encode())
-        if key not in keys:
-            keys[key] = len(models)
-            models.append(PinholeModel(cameras.K[r].copy(), str(cameras.distortion_model[r]),
-                                       cameras.distortion[r, :n].copy()))
-        row_model[r] = keys[key]
-    which = np.array([row_model[r] for r in rows.tolist()], dtype=np.int64)
-    return models, which
+    return distinct_models(cameras, rows)
 
 
 def _diagonal_centre(norm: FloatArray) -> FloatArray:
@@ -382,7 +365,7 @@ def _json_float(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def _resolve_points(model: PinholeModel, idx: IntArray, point: FloatArray, u: FloatArray, v: FloatArray,
+def _resolve_points(model: CameraModel, idx: IntArray, point: FloatArray, u: FloatArray, v: FloatArray,
                     depth: FloatArray, reason: npt.NDArray[Any]) -> None:
     if idx.size == 0:
         return
@@ -393,7 +376,7 @@ def _resolve_points(model: PinholeModel, idx: IntArray, point: FloatArray, u: Fl
     u[ok], v[ok], depth[ok] = px[:, 0], px[:, 1], point[ok, 2]
 
 
-def _resolve_sized(model: PinholeModel, idx: IntArray, corners: FloatArray, size: FloatArray, u: FloatArray,
+def _resolve_sized(model: CameraModel, idx: IntArray, corners: FloatArray, size: FloatArray, u: FloatArray,
                    v: FloatArray, depth: FloatArray, reproj: FloatArray, reason: npt.NDArray[Any],
                    reversed_order: BoolArray) -> None:
     if idx.size == 0:
@@ -410,7 +393,7 @@ def _resolve_sized(model: PinholeModel, idx: IntArray, corners: FloatArray, size
     u[ok], v[ok], depth[ok] = px[:, 0], px[:, 1], poses.centre_cam[good, 2]
 
 
-def _resolve_bearing(model: PinholeModel, idx: IntArray, corners: FloatArray, u: FloatArray, v: FloatArray) -> None:
+def _resolve_bearing(model: CameraModel, idx: IntArray, corners: FloatArray, u: FloatArray, v: FloatArray) -> None:
     if idx.size == 0:
         return
     norm = undistort_normalised(model, corners[idx].reshape(-1, 2)).reshape(-1, 4, 2)

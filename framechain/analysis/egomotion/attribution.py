@@ -22,7 +22,7 @@ from framechain.analysis.model.chain import ChainInputs
 from framechain.analysis.model.estimates import format_estimate
 from framechain.analysis.verdict.findings import Attribution
 from framechain.config.chain import ChainConfig
-from framechain.replay import CameraModel
+from framechain.geometry.camera import CameraModel
 from framechain.timeline import CameraTable, Timeline
 
 __all__ = ["with_camera_motion"]

@@ -36,8 +36,8 @@ from framechain.analysis.verdict.findings import AnalysisError, Unattributed
 from framechain.arrays import BoolArray, FloatArray, IntArray, StrArray
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
+from framechain.geometry.camera import CameraModel
 from framechain.progress import Progress
-from framechain.replay import CameraModel
 
 #: A camera's mount turned less than this from the others' (degrees) is not worth a note.
 NOTED_DEG = 0.1

@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.chain import ChainFrames
+from framechain.geometry.camera import CameraModel
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.geometry.rotations import (
     quat_angle_between,
@@ -28,7 +29,7 @@ from framechain.geometry.rotations import (
     quat_rotate,
 )
 from framechain.geometry.transforms import invert_rows, transform_points
-from framechain.replay import CameraModel, LookupStatus, ReplayResult, TransformBuffer
+from framechain.replay import LookupStatus, ReplayResult, TransformBuffer
 from framechain.replay.composition import compose_hops
 
 #: Shifted pose lookups :class:`ChainInputs` keeps (a few: each holds N poses).

@@ -79,8 +79,9 @@ from framechain.analysis.verdict.fixes import FixContext, fix_for
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
+from framechain.geometry.camera import CameraModel
 from framechain.progress import Progress, no_progress
-from framechain.replay import CameraModel, ReplayResult
+from framechain.replay import ReplayResult
 from framechain.timeline import PointRole, Timeline
 
 Say = Progress  # a stage's name, and for counted stages how far into it

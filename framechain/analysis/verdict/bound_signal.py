@@ -26,7 +26,7 @@ from framechain.analysis.model.faults import LATENCY_BOUND_S
 from framechain.analysis.verdict.checks import family_name, size_text
 from framechain.arrays import BoolArray, FloatArray
 from framechain.catalogue import Fault, HopName
-from framechain.replay import CameraModel
+from framechain.geometry.camera import CameraModel
 
 #: Families with a size, the only ones a bound applies to (the others are discrete choices).
 SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)

@@ -8,26 +8,55 @@ z-depth Z. Distortion follows OpenCV (and ROS ``sensor_msgs/CameraInfo``):
 - ``rational_polynomial``: k1, k2, p1, p2, k3, k4, k5, k6;
 - ``equidistant``: k1..k4 on the incidence angle (OpenCV's ``cv::fisheye``).
 
-Undistortion is iterated to convergence (tests agree with OpenCV to 1e-6 rad).
+Undistortion is iterated to convergence (tests agree with OpenCV to 1e-6 rad). Where OpenCV does
+the work (square-marker PnP, a camera's own motion), :mod:`framechain.vision.opencv` hands it this
+model's ``K`` and :meth:`CameraModel.opencv_distortion`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from framechain.arrays import FloatArray, IntArray, names_and_codes
-from framechain.replay.errors import CameraModelError
-from framechain.timeline import CameraTable
+from framechain.arrays import FloatArray, IntArray, StrArray, names_and_codes
+from framechain.errors import FramechainError
 
+__all__ = ["CameraModel", "CameraModelError", "CameraRows", "distinct_models"]
+
+#: Coefficients of each distortion model (ROS names), in OpenCV's order.
 _N_COEFFS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4, "none": 0}
 # librealsense's "Inverse Brown Conrady" is deprojected by current rsutil.h with the same iteration
 # OpenCV uses to undistort plumb_bob (older copies applied the polynomial in closed form instead);
 # the D435 samples carry zero coefficients, where every reading agrees.
 _ALIASES = {"": "none", "brown_conrady": "plumb_bob", "brown conrady": "plumb_bob",
             "inverse brown conrady": "plumb_bob", "fisheye": "equidistant", "kannala_brandt": "equidistant"}
+
+
+class CameraModelError(FramechainError):
+    """A camera model cannot be used (unknown distortion model, bad coefficients)."""
+
+
+class CameraRows(Protocol):
+    """The columns of a table of camera models, one row per model (:class:`framechain.timeline.CameraTable`):
+    ``distortion`` zero-padded, ``n_distortion`` the coefficients each row gave."""
+
+    @property
+    def frame(self) -> StrArray: ...
+    @property
+    def K(self) -> FloatArray: ...
+    @property
+    def width(self) -> IntArray: ...
+    @property
+    def height(self) -> IntArray: ...
+    @property
+    def distortion_model(self) -> StrArray: ...
+    @property
+    def distortion(self) -> FloatArray: ...
+    @property
+    def n_distortion(self) -> IntArray: ...
 
 
 @dataclass(frozen=True)
@@ -56,7 +85,7 @@ class CameraModel:
         object.__setattr__(self, "K", np.asarray(self.K, dtype=float).reshape(3, 3))
 
     @classmethod
-    def from_table(cls, table: CameraTable, row: int = 0) -> CameraModel:
+    def from_table(cls, table: CameraRows, row: int = 0) -> CameraModel:
         n = int(table.n_distortion[row])
         return cls(
             frame=str(table.frame[row]), K=table.K[row], width=int(table.width[row]),
@@ -83,6 +112,19 @@ class CameraModel:
     @property
     def is_distorted(self) -> bool:
         return self.distortion_model != "none" and bool(np.any(self.distortion))
+
+    @property
+    def is_fisheye(self) -> bool:
+        """Equidistant distortion: OpenCV's ``cv2.fisheye`` functions, not its pinhole ones."""
+        return self.distortion_model == "equidistant"
+
+    def opencv_distortion(self) -> FloatArray:
+        """The coefficients as OpenCV takes them: 4 for ``cv2.fisheye``, else 5 or 8 (zeros without distortion)."""
+        if self.is_fisheye:
+            return self.distortion.copy()
+        out = np.zeros(max(self.distortion.size, 5))
+        out[: self.distortion.size] = self.distortion
+        return out
 
     def inside(self, u: FloatArray, v: FloatArray) -> npt.NDArray[np.bool_]:
         """Pixels within the image (pixel centres at integers, edges at -0.5 and size - 0.5). A model without
@@ -171,7 +213,7 @@ class CameraModel:
         return k[0, 0] * x + k[0, 1] * y + k[0, 2], k[1, 1] * y + k[1, 2]
 
 
-def distinct_models(table: CameraTable, rows: IntArray) -> tuple[list[CameraModel], IntArray]:
+def distinct_models(table: CameraRows, rows: IntArray) -> tuple[list[CameraModel], IntArray]:
     """The distinct camera models among ``rows`` (all >= 0) of ``table`` and, per row, its model's index.
 
     A log republishes its CameraInfo at the camera's rate, so thousands of rows are usually one

@@ -1,0 +1,74 @@
+"""OpenCV, imported on first use, and the camera model through it: undistortion and projection.
+
+Pixels ``(u, v)`` have their origin at the centre of the top-left pixel; camera points are in the
+optical frame (x right, y down, z forward, REP-103). The camera model is
+:class:`framechain.geometry.camera.CameraModel`: ``plumb_bob`` and ``rational_polynomial`` go through
+OpenCV's ``undistortPoints``/``projectPoints``, ``equidistant`` through ``cv2.fisheye``. Every
+undistortion and projection is one OpenCV call per camera model.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+
+import numpy as np
+import numpy.typing as npt
+
+from framechain.arrays import FloatArray
+from framechain.errors import FramechainError
+from framechain.geometry.camera import CameraModel
+
+__all__ = ["MissingOpenCVError", "project", "require_cv2", "undistort_normalised"]
+
+
+class MissingOpenCVError(FramechainError):
+    """OpenCV is needed (tag corners, markers in images) but cannot be imported."""
+
+
+def require_cv2() -> ModuleType:
+    """``cv2``, imported on first use (an install without it still reads logs without fiducials)."""
+    try:
+        import cv2
+    except ImportError as err:
+        raise MissingOpenCVError(
+            "fiducial corners and markers in images need OpenCV: pip install 'opencv-python-headless>=4.10' "
+            f"({err})"
+        ) from err
+    return cv2
+
+
+def undistort_normalised(model: CameraModel, pixels: npt.ArrayLike) -> FloatArray:
+    """Undistorted normalised image coordinates ``(x, y)`` (N, 2) of pixels (N, 2): one OpenCV call."""
+    cv2 = require_cv2()
+    pts = np.ascontiguousarray(np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2))
+    if pts.shape[0] == 0:
+        return np.zeros((0, 2))
+    k = np.asarray(model.K, dtype=np.float64)
+    if model.is_fisheye:
+        # Newton iterations to convergence; OpenCV's default criteria stop after 10.
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+        out = cv2.fisheye.undistortPoints(pts, k, model.opencv_distortion(), criteria=criteria)
+    else:
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4: the iterated form is a separate function
+            out = cv2.undistortPointsIter(pts, k, model.opencv_distortion(), None, None, criteria)
+        else:  # OpenCV 5 folded it into undistortPoints
+            out = cv2.undistortPoints(pts, k, model.opencv_distortion(), criteria=criteria)
+    result: FloatArray = np.asarray(out, dtype=np.float64).reshape(-1, 2)
+    return result
+
+
+def project(model: CameraModel, points_cam: npt.ArrayLike) -> FloatArray:
+    """Pixels (N, 2) of camera-frame points (N, 3), distortion applied: one OpenCV call."""
+    cv2 = require_cv2()
+    pts = np.ascontiguousarray(np.asarray(points_cam, dtype=np.float64).reshape(-1, 1, 3))
+    if pts.shape[0] == 0:
+        return np.zeros((0, 2))
+    zero = np.zeros(3)
+    k = np.asarray(model.K, dtype=np.float64)
+    if model.is_fisheye:
+        out, _ = cv2.fisheye.projectPoints(pts, zero, zero, k, model.opencv_distortion())
+    else:
+        out, _ = cv2.projectPoints(pts, zero, zero, k, model.opencv_distortion())
+    result: FloatArray = np.asarray(out, dtype=np.float64).reshape(-1, 2)
+    return result
