@@ -19,15 +19,27 @@ matrices (:func:`quat_from_matrix`, :func:`quat_to_matrix`, :func:`homogeneous`)
 (:func:`quat_angle`, :func:`quat_angle_between`) and rigid transforms ``T_a_b`` as a translation
 and a quaternion (:func:`compose`, :func:`invert`); :mod:`framechain.geometry.transforms` applies
 them to the rows tables hold.
+
+Rotations as rows, for fits that hold a few rotations or rows of them (the camera's motion):
+quaternion rows ``(..., 4)``, matrices ``(..., 3, 3)``, a :class:`RotationVector`, the
+:class:`Inverse` of one, or a tuple of them (their product as written), read and converted by
+scipy's Rotation (quaternions normalised as they are read; a product formed once, however many
+of its forms are asked for): :func:`quat_of`, :func:`matrix_of`, :func:`rotvec_of`,
+:func:`rpy_of`, :func:`angle_of`, :func:`rotate_by`.
 """
 
 from __future__ import annotations
 
 import warnings
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
 
 from framechain.arrays import FloatArray
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 
@@ -102,13 +114,8 @@ def quat_from_rpy(rpy: FloatArray) -> FloatArray:
 def quat_to_rpy(q: FloatArray) -> FloatArray:
     """URDF/tf2 roll-pitch-yaw (3, ...) of unit quaternions (4, ...): the inverse of :func:`quat_from_rpy`
     (tf2's ``getRPY``, scipy's ``as_euler("xyz")``), pitch in [-pi/2, pi/2], roll and yaw in [-pi, pi]."""
-    from scipy.spatial.transform import Rotation
-
     arr = np.asarray(q, dtype=float)
-    with warnings.catch_warnings():  # at pitch +-pi/2 any split of roll and yaw is right: scipy warns
-        warnings.filterwarnings("ignore", message="Gimbal lock detected")
-        rpy = Rotation.from_quat(arr.reshape(4, -1).T).as_euler("xyz")
-    out: FloatArray = rpy.T.reshape(3, *arr.shape[1:])
+    out: FloatArray = rpy_of(arr.reshape(4, -1).T).T.reshape(3, *arr.shape[1:])
     return out
 
 
@@ -156,11 +163,8 @@ def quat_to_matrix(q: QuatLike) -> FloatArray:
 
 def quat_from_matrix(matrix: FloatArray) -> FloatArray:
     """Unit quaternions (4, ...) of rotation matrices (..., 3, 3) (scipy's conversion, w >= 0 not enforced)."""
-    from scipy.spatial.transform import Rotation
-
     m = np.asarray(matrix, dtype=float)
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat()
-    out: FloatArray = q.T.reshape(4, *m.shape[:-2])
+    out: FloatArray = quat_of(m.reshape(-1, 3, 3)).T.reshape(4, *m.shape[:-2])
     return out
 
 
@@ -291,4 +295,82 @@ def kabsch(cross: FloatArray) -> FloatArray:
     u = u.copy()
     u[..., :, 2] *= d[..., None]
     out: FloatArray = u @ vt
+    return out
+
+
+# -- rotations as rows, through scipy ----------------------------------------------------------------
+
+
+class RotationVector(NamedTuple):
+    """Rotations given by their rotation vectors (..., 3): axis times angle, radians."""
+
+    rotvec: FloatArray
+
+
+class Inverse(NamedTuple):
+    """The inverse of a rotation: ``(Inverse(a), b)`` is ``a^-1 b``."""
+
+    rotation: Rotations
+
+
+#: One rotation or rows of them: quaternions (..., 4) xyzw or matrices (..., 3, 3) (arrays), a
+#: :class:`RotationVector`, an :class:`Inverse`, or a tuple of these, their product as written
+#: (``(a, b)`` is ``a b``: ``b`` first, then ``a``; nest tuples to group).
+Rotations: TypeAlias = "FloatArray | RotationVector | Inverse | tuple[Rotations, ...]"
+
+
+def _read(rotation: Rotations) -> Rotation:
+    """scipy's Rotation of ``rotation`` (see :data:`Rotations`)."""
+    from scipy.spatial.transform import Rotation
+
+    if isinstance(rotation, Inverse):
+        return _read(rotation.rotation).inv()
+    if isinstance(rotation, RotationVector):
+        return Rotation.from_rotvec(rotation.rotvec)
+    if isinstance(rotation, tuple):
+        product = _read(rotation[0])
+        for factor in rotation[1:]:
+            product = product * _read(factor)
+        return product
+    if not isinstance(rotation, np.ndarray):
+        raise TypeError(f"a rotation is an array of quaternions or matrices, not {type(rotation).__name__}")
+    if rotation.shape[-2:] == (3, 3):
+        return Rotation.from_matrix(rotation)
+    return Rotation.from_quat(rotation)
+
+
+def quat_of(rotation: Rotations) -> FloatArray:
+    """Quaternion rows (..., 4) xyzw of ``rotation`` (as scipy keeps them: w >= 0 not enforced)."""
+    out: FloatArray = _read(rotation).as_quat()
+    return out
+
+
+def matrix_of(rotation: Rotations) -> FloatArray:
+    """Rotation matrices (..., 3, 3) of ``rotation``."""
+    out: FloatArray = _read(rotation).as_matrix()
+    return out
+
+
+def rotvec_of(rotation: Rotations) -> FloatArray:
+    """Rotation vectors (..., 3) of ``rotation``, angles in [0, pi]."""
+    out: FloatArray = _read(rotation).as_rotvec()
+    return out
+
+
+def rpy_of(rotation: Rotations) -> FloatArray:
+    """URDF/tf2 roll-pitch-yaw (..., 3) of ``rotation`` (fixed axes x, y, z: scipy's ``as_euler("xyz")``)."""
+    with warnings.catch_warnings():  # at pitch +-pi/2 any split of roll and yaw is right: scipy warns
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        out: FloatArray = _read(rotation).as_euler("xyz")
+    return out
+
+
+def angle_of(rotation: Rotations) -> FloatArray:
+    """Rotation angles (...) of ``rotation``, radians in [0, pi]."""
+    return np.asarray(_read(rotation).magnitude(), dtype=float)
+
+
+def rotate_by(rotation: Rotations, vectors: npt.ArrayLike) -> FloatArray:
+    """``vectors`` (..., 3) rotated by ``rotation`` (row by row; one rotation or one vector broadcasts)."""
+    out: FloatArray = _read(rotation).apply(vectors)
     return out

@@ -36,11 +36,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation
 
 from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.camera import CameraModel
+from framechain.geometry.rotations import quat_of
 from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.opencv import require_cv2, undistort_normalised
 from framechain.vision.two_view import (
@@ -194,7 +194,7 @@ def measure_egomotion(
     direction_out = np.where((parallax >= opts.min_parallax_px)[:, None], measured[keep], np.nan)
     table = EgoMotionTable(
         frame=np.full(int(keep.sum()), frame), stamp0_ns=s0[keep], stamp1_ns=s1[keep],
-        quat_xyzw=Rotation.from_matrix(rotation[keep]).as_quat() if keep.any() else np.zeros((0, 4)),
+        quat_xyzw=quat_of(rotation[keep]) if keep.any() else np.zeros((0, 4)),
         direction=direction_out, tracks=matched[keep], inliers=count[keep].astype(np.int64), residual_px=rms,
         parallax_px=parallax,
     )

@@ -216,3 +216,31 @@ def test_kabsch_matches_scipy_align_vectors() -> None:
         got = kabsch(np.einsum("n,ni,nj->ij", w, a, b)[None])[0]
         assert np.allclose(got, expected.as_matrix(), atol=1e-10)
         assert np.linalg.det(got) == pytest.approx(1.0)
+
+
+def test_rotations_as_rows_read_products_inverses_and_rotation_vectors_as_written() -> None:
+    from framechain.geometry.rotations import (
+        Inverse,
+        RotationVector,
+        angle_of,
+        matrix_of,
+        quat_of,
+        rotate_by,
+        rotvec_of,
+    )
+
+    rng = np.random.default_rng(3)
+    a, b = Rotation.random(5, random_state=1), Rotation.random(5, random_state=2)
+    turn = rng.normal(size=3) * 0.3
+    # (a, b) is a b; Inverse inverts; a matrix reads as the same rotation; nested tuples group.
+    assert_same_rotation(quat_of((a.as_quat(), b.as_matrix())), (a * b).as_quat())
+    assert_same_rotation(quat_of((Inverse(a.as_quat()), b.as_quat())), (a.inv() * b).as_quat())
+    assert_same_rotation(quat_of((a.as_quat(), RotationVector(turn))), (a * Rotation.from_rotvec(turn)).as_quat())
+    np.testing.assert_allclose(matrix_of(a.as_quat()), a.as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(rotvec_of((Inverse(a.as_matrix()), a.as_quat())), np.zeros((5, 3)), atol=1e-7)
+    np.testing.assert_allclose(angle_of((Inverse(a.as_quat()), b.as_quat())), (a.inv() * b).magnitude(), atol=1e-12)
+    vectors = rng.normal(size=(5, 3))
+    np.testing.assert_allclose(rotate_by(Inverse((a.as_quat(), b.as_quat())), vectors), (a * b).inv().apply(vectors),
+                               atol=1e-12)
+    with pytest.raises(TypeError, match="an array of quaternions or matrices"):
+        quat_of((0.0, 0.0, 0.0, 1.0))  # type: ignore[arg-type]

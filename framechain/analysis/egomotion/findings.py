@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
 from framechain.analysis.egomotion.bounds import (
@@ -55,6 +54,7 @@ from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
+from framechain.geometry.rotations import Inverse, Rotations, angle_of, matrix_of, rpy_of
 
 __all__ = ["MotionFindings", "MountDeclaration", "motion_findings"]
 
@@ -65,6 +65,7 @@ _EVERY = frozenset({"latency", "link", "mount", "focal"})
 FOCAL_NOTE = 0.03
 #: Off a signed axis permutation by less than this (deg): the mount's axes were swapped or flipped.
 FLIP_TOLERANCE_DEG = 10.0
+_OPTICAL_FROM_LINK = np.asarray(OPTICAL_FROM_LINK_QUAT_XYZW)
 
 
 @dataclass(frozen=True)
@@ -347,18 +348,18 @@ def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
     no rotation of its own) or rotation_error."""
     error = fit.mount_error
     assert error is not None
-    declared = Rotation.from_quat(motion.declared_q_link_cam)
-    change = (declared.inv() * Rotation.from_quat(fit.q_link_cam)).as_matrix()
+    declared = motion.declared_q_link_cam
+    change = matrix_of((Inverse(declared), fit.q_link_cam))
     permutation = np.round(change)
     is_permutation = bool((np.abs(permutation).sum(axis=0) == 1).all() and (np.abs(permutation).sum(axis=1) == 1).all())
-    off = np.rad2deg((Rotation.from_matrix(change).inv() * Rotation.from_matrix(permutation)).magnitude()) \
+    off = np.rad2deg(angle_of((Inverse(change), permutation))) \
         if is_permutation and np.isclose(np.linalg.det(permutation), 1.0) else 180.0
     if error.angle_deg > 45.0 and off < FLIP_TOLERANCE_DEG:
         rows = tuple((int(row[0]), int(row[1]), int(row[2])) for row in permutation.astype(int))
         return Fault.AXIS_FLIP, PermutationEstimate(permutation=rows)
     optical = declaration.optical if declaration is not None else True
-    own = declared if optical else declared * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
-    fault = Fault.MISSING_ROTATION if np.rad2deg(own.magnitude()) < 0.5 else Fault.ROTATION_ERROR
+    own: Rotations = declared if optical else (declared, Inverse(_OPTICAL_FROM_LINK))
+    fault = Fault.MISSING_ROTATION if np.rad2deg(angle_of(own)) < 0.5 else Fault.ROTATION_ERROR
     return fault, RotationEstimate(angle_deg=error.angle_deg, axis=error.axis, axis_frame=motion.camera,
                                    faulty="recorded data")
 
@@ -384,10 +385,10 @@ def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaratio
 def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: MountDeclaration | None) -> str:
     """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}``."""
     optical = declaration.optical if declaration is not None else True
-    rotation = Rotation.from_quat(q_link_cam)
+    rotation: Rotations = q_link_cam
     if not optical:  # the file gives camera_link; the optical rotation hangs below it
-        rotation = rotation * Rotation.from_quat(OPTICAL_FROM_LINK_QUAT_XYZW).inv()
-    rpy = rotation.as_euler("xyz")
+        rotation = (q_link_cam, Inverse(_OPTICAL_FROM_LINK))
+    rpy = rpy_of(rotation)
     position = declaration.xyz if declaration is not None else tuple(float(v) for v in xyz)
     return (f"{{parent: {link}, xyz: [{', '.join(f'{v:.4f}' for v in position)}], "
             f"rpy: [{', '.join(f'{v:.5f}' for v in rpy)}], optical: {str(optical).lower()}}}")

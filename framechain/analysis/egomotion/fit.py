@@ -35,7 +35,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.joint import Joint, joint_fit
 from framechain.analysis.egomotion.model import (
@@ -64,6 +63,7 @@ from framechain.analysis.egomotion.solve import (
     solve,
 )
 from framechain.arrays import FloatArray, IntArray
+from framechain.geometry.rotations import Inverse, angle_of, matrix_of, quat_of, rotate_by, rotvec_of
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = ["RotationRates", "fit_camera_motion", "fit_link", "rotation_rates", "translation_prior"]
@@ -95,9 +95,9 @@ def translation_prior(
     origin = int(link.stamps_ns[0])
     orientations = Orientations(link, origin)
     times = orientations.times
-    rot = Rotation.from_quat(np.asarray(link.quat_xyzw, dtype=float))
-    centres = np.asarray(link.xyz, dtype=float) + rot.apply(np.asarray(xyz_link_cam, dtype=float))
-    mount = Rotation.from_quat(np.asarray(q_link_cam, dtype=float))
+    centres = np.asarray(link.xyz, dtype=float) + rotate_by(np.asarray(link.quat_xyzw, dtype=float),
+                                                             np.asarray(xyz_link_cam, dtype=float))
+    mount = np.asarray(q_link_cam, dtype=float)
 
     def prior(stamp0_ns: IntArray, stamp1_ns: IntArray) -> FloatArray:
         t0 = (np.asarray(stamp0_ns, dtype=np.int64) - origin) * 1e-9 + offset_s
@@ -108,8 +108,8 @@ def translation_prior(
             return out
         c0 = np.stack([np.interp(t0[inside], times, centres[:, i]) for i in range(3)], axis=1)
         c1 = np.stack([np.interp(t1[inside], times, centres[:, i]) for i in range(3)], axis=1)
-        cam0 = Rotation.from_quat(orientations.at(t0[inside]).T) * mount
-        move = cam0.inv().apply(c1 - c0)
+        cam0 = (orientations.at(t0[inside]).T, mount)
+        move = rotate_by(Inverse(cam0), c1 - c0)
         norm = np.linalg.norm(move, axis=1, keepdims=True)
         out[inside] = np.where(norm > 1e-9, move / np.maximum(norm, 1e-12), np.nan)
         return out
@@ -148,12 +148,12 @@ def rotation_rates(
     t0: FloatArray = ((measured.stamp0_ns - origin) * 1e-9).astype(np.float64)
     t1: FloatArray = ((measured.stamp1_ns - origin) * 1e-9).astype(np.float64)
     dt = t1 - t0
-    camera = Rotation.from_quat(measured.quat_xyzw).as_rotvec() if len(measured) else np.zeros((0, 3))
+    camera = rotvec_of(measured.quat_xyzw) if len(measured) else np.zeros((0, 3))
     camera = camera * np.array([1.0 / focal_scale, 1.0 / focal_scale, 1.0])
     pairs = Pairs(t0=t0, t1=t1, rotvec=camera, weight=np.ones(t0.size))
     link_rv = link_rotvecs(orientations, pairs, np.array([offset_s]))[0]
     inside = (t0 + offset_s >= orientations.times[0]) & (t1 + offset_s <= orientations.times[-1])
-    predicted = np.where(inside[:, None], link_rv @ Rotation.from_quat(q_link_cam).as_matrix(), np.nan)
+    predicted = np.where(inside[:, None], link_rv @ matrix_of(np.asarray(q_link_cam, dtype=float)), np.nan)
     return RotationRates(stamp0_ns=measured.stamp0_ns, stamp1_ns=measured.stamp1_ns, measured=camera / dt[:, None],
                          predicted=predicted / dt[:, None])
 
@@ -184,7 +184,7 @@ def fit_camera_motion(
     opts = options or EgoMotionFitOptions()
     table = measure(None)
     notes: list[str] = []
-    turning = _rms_deg(Rotation.from_quat(table.quat_xyzw).as_rotvec()) if len(table) else 0.0
+    turning = _rms_deg(rotvec_of(table.quat_xyzw)) if len(table) else 0.0
     if turning < opts.min_rotation_deg:
         notes.append(f"camera {camera} does not turn ({turning:.3f} deg RMS per frame pair): a fixed camera or a "
                      "still arm; its time offset, mount and link are not observable from its images")
@@ -230,8 +230,9 @@ def _rigid(a: LinkMotion, b: LinkMotion) -> bool:
     """``a`` and ``b`` turn together: their relative rotation changes by under 0.5 deg over the recording."""
     if a.stamps_ns.size != b.stamps_ns.size or not np.array_equal(a.stamps_ns, b.stamps_ns):
         return False
-    relative = Rotation.from_quat(a.quat_xyzw).inv() * Rotation.from_quat(b.quat_xyzw)
-    spread = (relative[0].inv() * relative).magnitude()
+    relative = (Inverse(a.quat_xyzw), b.quat_xyzw)
+    first = (Inverse(a.quat_xyzw[0]), b.quat_xyzw[0])
+    spread = angle_of((Inverse(first), relative))
     return bool(np.rad2deg(spread.max()) < 0.5)
 
 
@@ -313,7 +314,7 @@ def _final(
         pairs = frame_pairs(table, origin, span, opts.max_offset_s)
         solved = solve(orientations, pairs, opts)
     boot = bootstrap(pairs, solved, opts)
-    mount = Rotation.from_matrix(solved.mount)
+    mount = solved.mount
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
     info = information(orientations, pairs, solved, link_rv)
     seen = observed(info)
@@ -324,8 +325,8 @@ def _final(
         notes.append(f"link {link.link} turned about one axis only ([{shown}] in {link.link}) against the misfit: the "
                      "camera's mount rotation about that axis is not observable (it is kept as declared)")
         axis_link = np.asarray(seen.axes[0])
-        declared_m = Rotation.from_quat(declared_q).as_matrix()
-        mount = Rotation.from_matrix(complete_mount(solved.mount, declared_m, axis_link))
+        declared_m = matrix_of(declared_q)
+        mount = complete_mount(solved.mount, declared_m, axis_link)
         boot = replace(boot, mounts=complete_mount(boot.mounts, declared_m, axis_link))
     mount_observable = not seen.unobservable
     undetermined = "" if seen.unobservable else offset_undetermined(solved, boot, opts)
@@ -334,9 +335,8 @@ def _final(
     focal, focal_boot = focal_scale(pairs, solved, link_rv, boot)
     error = None
     if link.link == declared_link:
-        wrong = mount.inv() * Rotation.from_quat(declared_q)
-        angles = np.rad2deg((Rotation.from_matrix(boot.mounts).inv() * Rotation.from_quat(declared_q)).magnitude())
-        rotvec = wrong.as_rotvec()
+        angles = np.rad2deg(angle_of((Inverse(boot.mounts), declared_q)))
+        rotvec = rotvec_of((Inverse(mount), declared_q))
         angle = float(np.linalg.norm(rotvec))
         axis = rotvec / angle if angle > 0 else np.array([0.0, 0.0, 1.0])
         error = MountError(angle_deg=float(np.rad2deg(angle)), axis=(float(axis[0]), float(axis[1]), float(axis[2])),
@@ -348,7 +348,7 @@ def _final(
         camera=camera, link=link.link, declared_link=declared_link,
         alternatives=tuple(name for name in similar if name != link.link), links=links,
         offset_s=solved.offset_s, offset_interval_s=interval(boot.offsets),
-        q_link_cam=mount.as_quat(), mount_error=error, focal_scale=focal, focal_scale_interval=interval(focal_boot),
+        q_link_cam=quat_of(mount), mount_error=error, focal_scale=focal, focal_scale_interval=interval(focal_boot),
         camera_rotation_deg=turning, offset_observable=not (undetermined or seen.unobservable),
         mount_observable=mount_observable, notes=tuple(notes), offset_undetermined=undetermined,
         unobservable=seen.unobservable, mount_unobservable_axes=seen.axes,

@@ -20,7 +20,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.model import EgoMotionFitOptions, LinkMotion, Measure
 from framechain.analysis.egomotion.solve import (
@@ -34,6 +33,7 @@ from framechain.analysis.egomotion.solve import (
     robust_weights,
 )
 from framechain.arrays import BoolArray, FloatArray
+from framechain.geometry.rotations import Inverse, Rotations, RotationVector, matrix_of, quat_of, rotvec_of
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = ["Joint", "joint_fit"]
@@ -84,17 +84,17 @@ class _Trials:
                                                 self.opts.max_offset_s)[0]
         return self.costs[key]
 
-    def mount_cost(self, offset: float, mount: Rotation, focal_scale: float = 1.0) -> float:
+    def mount_cost(self, offset: float, mount: Rotations, focal_scale: float = 1.0) -> float:
         """The joint cost with ``mount`` used for the prior and the comparison alike (no mount fitted), the measured
         rotation across the optical axis taken as ``focal_scale`` times the true one (so that a wrong focal length
         is not made up for by tilting the mount)."""
-        table = self.measure(self.prior_of(self.link, mount.as_quat(), self.xyz, round(offset, 6)))
+        table = self.measure(self.prior_of(self.link, quat_of(mount), self.xyz, round(offset, 6)))
         pairs = frame_pairs(table, self.origin, self.span, self.opts.max_offset_s)
         if pairs.t0.size == 0:
             return float("inf")
         link_rv = link_rotvecs(self.orientations, pairs, np.array([offset]))[0]
         measured = pairs.rotvec * np.array([1.0 / focal_scale, 1.0 / focal_scale, 1.0])
-        residual = np.linalg.norm(measured - link_rv @ mount.as_matrix(), axis=1)
+        residual = np.linalg.norm(measured - link_rv @ matrix_of(mount), axis=1)
         weights = pairs.weight * robust_weights(residual, np.linalg.norm(pairs.rotvec, axis=1))
         return float(np.sqrt((weights * residual**2).sum() / weights.sum()))
 
@@ -108,14 +108,14 @@ class _Trials:
         den = float(weights @ (predicted**2).sum(axis=1))
         return float(weights @ (predicted * pairs.rotvec[:, :2]).sum(axis=1)) / den if den > 0 else 1.0
 
-    def fitted_mount(self, offset: float) -> Rotation:
-        """The mount fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
-        return Rotation.from_matrix(_fixed_offset_fit(self.table(offset), self.orientations, self.origin, self.span,
-                                                      offset, self.opts.max_offset_s)[1])
+    def fitted_mount(self, offset: float) -> FloatArray:
+        """The mount (matrix) fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
+        return _fixed_offset_fit(self.table(offset), self.orientations, self.origin, self.span, offset,
+                                 self.opts.max_offset_s)[1]
 
-    def use_mount(self, mount: Rotation) -> None:
+    def use_mount(self, mount: Rotations) -> None:
         """Measure from now on with the translation prior of ``mount``."""
-        self.q_link_cam = mount.as_quat()
+        self.q_link_cam = quat_of(mount)
         self.tables.clear()
         self.costs.clear()
 
@@ -180,18 +180,18 @@ REMOUNT_DEG = 0.2
 
 def _remount(trials: _Trials, best: float) -> None:
     """The mount's fixed point at offset ``best``: each measurement's fitted mount fed back into its prior."""
-    base = Rotation.from_quat(trials.q_link_cam)
+    base = trials.q_link_cam
     inputs: list[FloatArray] = []
     outputs: list[FloatArray] = []
     state = np.zeros(3)
     for _ in range(REMOUNTS):
-        result = (base.inv() * trials.fitted_mount(best)).as_rotvec()
+        result = rotvec_of((Inverse(base), trials.fitted_mount(best)))
         if np.rad2deg(np.linalg.norm(result - state)) < REMOUNT_DEG:
             break
         inputs.append(state)
         outputs.append(result)
         state = anderson(inputs[-3:], outputs[-3:])
-        trials.use_mount(base * Rotation.from_rotvec(state))
+        trials.use_mount((base, RotationVector(state)))
 
 
 #: Step (deg) of the joint search of the mount about each axis.
@@ -205,7 +205,7 @@ def _mount_search(trials: _Trials, best: float) -> None:
     """The mount of least joint cost near the fixed point: a parabola along each of three axes through steps of
     MOUNT_STEP_DEG, one step of their vertices taken when it lowers the cost (a measurement leans towards its
     prior's mount as towards its prior's offset, so the fixed point is near, not at, the best mount)."""
-    base = Rotation.from_quat(trials.q_link_cam)
+    base = trials.q_link_cam
     scale = trials.focal_scale(best)
     if abs(scale - 1.0) > FOCAL_SETTLED:  # measured again with the focal length it implies first (run.py)
         return
@@ -214,12 +214,12 @@ def _mount_search(trials: _Trials, best: float) -> None:
     step = np.zeros(3)
     for k in range(3):
         axis = np.eye(3)[k] * h
-        minus, plus = (trials.mount_cost(best, base * Rotation.from_rotvec(sign * axis), scale)
+        minus, plus = (trials.mount_cost(best, (base, RotationVector(sign * axis)), scale)
                        for sign in (-1.0, 1.0))
         curvature = minus - 2.0 * centre + plus
         if curvature > 0:
             step[k] = float(np.clip(0.5 * (minus - plus) / curvature, -2.0, 2.0)) * h
-    moved = base * Rotation.from_rotvec(step)
+    moved = (base, RotationVector(step))
     if trials.mount_cost(best, moved, scale) < centre:
         trials.use_mount(moved)
 
@@ -287,5 +287,5 @@ def _rotvecs_of(table: EgoMotionTable, pairs: Pairs, origin: int) -> FloatArray:
     out = np.full((pairs.t0.size, 3), np.nan)
     found = rows >= 0
     if found.any():
-        out[found] = Rotation.from_quat(table.quat_xyzw[rows[found]]).as_rotvec()
+        out[found] = rotvec_of(table.quat_xyzw[rows[found]])
     return out

@@ -24,12 +24,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_ANGLE_DEG, MIN_OFFSET_S
 from framechain.analysis.egomotion.solve import OBSERVABLE_RATIO, complete_mount
 from framechain.arrays import FloatArray
-from framechain.geometry.rotations import kabsch
+from framechain.geometry.rotations import angle_of, kabsch, matrix_of, quat_of
 
 __all__ = ["CameraRecordingFit", "Departure", "EpisodeCamera", "fit_recording"]
 
@@ -147,17 +146,17 @@ def _one_camera(episodes: list[EpisodeCamera], seed: int, resamples: int) -> Cam
     first = episodes[0]
     link = _recording_link(episodes)
     on_link = [e for e in episodes if e.explained and e.link == link]
-    declared = Rotation.from_quat(first.declared_q_link_cam).as_matrix()
-    mount, axes = _mount(on_link, declared) if on_link else (Rotation.from_quat(first.q_link_cam).as_matrix(), ())
+    declared = matrix_of(first.declared_q_link_cam)
+    mount, axes = _mount(on_link, declared) if on_link else (matrix_of(first.q_link_cam), ())
     interval = _mount_interval(on_link, declared, mount, axes, seed, resamples)
     explained = [e for e in episodes if e.explained]
     median = float(np.median([e.offset_s for e in explained])) if explained else float("nan")
-    angles = {e.episode: _angle_deg(_completed(Rotation.from_quat(e.q_link_cam).as_matrix(), mount, axes), mount)
+    angles = {e.episode: _angle_deg(_completed(matrix_of(e.q_link_cam), mount, axes), mount)
               for e in on_link}
     from_declared = _angle_deg(mount, declared) if link == first.declared_link else float("nan")
     return CameraRecordingFit(
         camera=first.camera, name=first.name, link=link, declared_link=first.declared_link,
-        q_link_cam=Rotation.from_matrix(mount).as_quat(), mount_interval_deg=interval,
+        q_link_cam=quat_of(mount), mount_interval_deg=interval,
         mount_from_declared_deg=from_declared, unobservable_axes=axes, median_offset_s=median,
         episodes=tuple(episodes), episode_mount_deg=angles,
         departures=tuple(_departures(episodes, link, median, angles)))
@@ -243,7 +242,7 @@ def _departures(episodes: list[EpisodeCamera], link: str, median: float,
 
 
 def _angle_deg(a: FloatArray, b: FloatArray) -> float:
-    return float(np.rad2deg(Rotation.from_matrix(a.T @ b).magnitude()))
+    return float(np.rad2deg(angle_of(a.T @ b)))
 
 
 def _round(value: float | None) -> float | None:

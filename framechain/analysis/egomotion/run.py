@@ -22,12 +22,12 @@ from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, LinkMotion, fit_camera_motion, fit_link
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.config.chain import ChainConfig
+from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_by
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
@@ -260,17 +260,18 @@ def _declared_mount(buffer: TransformBuffer, camera: str) -> tuple[str, FloatArr
     ("", identity, zeros) when the camera is not in the tree; the root when every edge above is static.
     """
     edges = buffer.edges
-    rotation, translation = Rotation.identity(), np.zeros(3)
+    rotation: Rotations = IDENTITY
+    translation = np.zeros(3)
     current = camera
     if current not in edges:
         return "", np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
     while current in edges and edges[current].is_static:
         edge = edges[current]
-        step = Rotation.from_quat(edge.quat_xyzw[-1])
-        translation = edge.translation[-1] + step.apply(translation)
-        rotation = step * rotation
+        step = edge.quat_xyzw[-1]
+        translation = edge.translation[-1] + rotate_by(step, translation)
+        rotation = (step, rotation)  # each edge's rotation composed onto those below it, as they are climbed
         current = edge.parent
-    return current, rotation.as_quat(), translation
+    return current, quat_of(rotation), translation
 
 
 def _moves(buffer: TransformBuffer, world: str, link: str) -> bool:

@@ -10,11 +10,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.model import EgoMotionFitOptions, LinkFit, LinkMotion, MountEvidence
 from framechain.arrays import FloatArray
-from framechain.geometry.rotations import kabsch, quat_conjugate, quat_from_rotvec, quat_multiply, quat_to_rotvec
+from framechain.geometry.rotations import (
+    kabsch,
+    quat_conjugate,
+    quat_from_rotvec,
+    quat_multiply,
+    quat_of,
+    quat_to_rotvec,
+    rotvec_of,
+)
 from framechain.timeline import EgoMotionTable
 
 
@@ -40,7 +47,7 @@ def frame_pairs(measured: EgoMotionTable, origin_ns: int, span_s: tuple[float, f
     t1: FloatArray = (measured.stamp1_ns - origin_ns).astype(np.float64) * 1e-9
     inside = (t0 - max_offset_s >= span_s[0]) & (t1 + max_offset_s <= span_s[1])
     inside &= np.isfinite(measured.quat_xyzw).all(axis=1)
-    rotvec = Rotation.from_quat(measured.quat_xyzw[inside]).as_rotvec()
+    rotvec = rotvec_of(measured.quat_xyzw[inside])
     return Pairs(t0=t0[inside], t1=t1[inside], rotvec=rotvec, weight=np.ones(int(inside.sum())))
 
 
@@ -231,7 +238,7 @@ def link_fit(name: str, pairs: Pairs, solved: Solved, orientations: Orientations
     w = solved.weights
     rms = float(np.sqrt((w * solved.residual**2).sum() / w.sum()))
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0]
-    return LinkFit(link=name, offset_s=solved.offset_s, q_link_cam=Rotation.from_matrix(solved.mount).as_quat(),
+    return LinkFit(link=name, offset_s=solved.offset_s, q_link_cam=quat_of(solved.mount),
                    residual_deg=float(np.rad2deg(rms)),
                    link_rotation_deg=float(np.rad2deg(np.sqrt((link_rv**2).sum(1).mean()))), pairs=pairs.t0.size,
                    at_window_edge=solved.at_window_edge,
