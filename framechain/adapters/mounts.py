@@ -15,6 +15,7 @@ Precedence, decided once here and documented in the README:
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import NamedTuple
 
 import numpy as np
@@ -23,19 +24,10 @@ import numpy.typing as npt
 from framechain.config.calibration import CalibrationError, Intrinsics, read_intrinsics_file
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
+from framechain.config.mount import Mount
 from framechain.geometry.rotations import invert, quat_angle_between, quat_from_matrix
 from framechain.robot.kinematics import JointType, RobotModelError, UrdfJoints, read_urdf, read_urdf_text
 from framechain.timeline import CameraTable, TransformTable
-
-
-class StaticEdge(NamedTuple):
-    """``T_parent_child`` that holds at all times, and where it came from."""
-
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    quat_xyzw: tuple[float, float, float, float]
-    source: str
 
 
 class FileCamera(NamedTuple):
@@ -50,7 +42,7 @@ class ChainAdditions(NamedTuple):
     """Everything a chain file adds to the log it is read with."""
 
     cameras: list[FileCamera]
-    edges: list[StaticEdge]  # explicit (mounts, then the chain's URDF): they win over the log
+    edges: list[Mount]  # explicit (mounts, then the chain's URDF): they win over the log
     notes: list[str]
 
 
@@ -74,8 +66,7 @@ def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
             raise CalibrationError(f"{chain.origin} calibration",
                                    f"frame {cam.frame!r} gets two calibrations ({seen[cam.frame]}, {cam.source})")
         seen[cam.frame] = cam.source
-    edges = [StaticEdge(m.parent, m.child, m.xyz, m.quat_xyzw, f"{chain.origin} mounts[{i}]")
-             for i, m in enumerate(chain.mounts)]
+    edges = [replace(m, source=f"{chain.origin} mounts[{i}]") for i, m in enumerate(chain.mounts)]
     children: dict[str, str] = {}
     for e in edges:
         if e.child in children:
@@ -96,23 +87,22 @@ def chain_additions(chain: ChainConfig | None) -> ChainAdditions:
     return ChainAdditions(cameras, edges, notes)
 
 
-def urdf_fixed_edges(urdf: UrdfJoints, source: str) -> list[StaticEdge]:
-    """The fixed joints of a URDF as static edges ``T_parent_link_child_link`` (the joint's origin)."""
-    out: list[StaticEdge] = []
+def urdf_fixed_edges(urdf: UrdfJoints, source: str) -> list[Mount]:
+    """The fixed joints of a URDF as mounts ``T_parent_link_child_link`` (the joint's origin)."""
+    out: list[Mount] = []
     for joint in urdf.joints:
         if joint.type is not JointType.FIXED:
             continue
         t = joint.origin[:3, 3]
         q = quat_from_matrix(joint.origin[:3, :3])
-        out.append(StaticEdge(joint.parent.lstrip("/"), joint.child.lstrip("/"),
-                              (float(t[0]), float(t[1]), float(t[2])),
-                              (float(q[0]), float(q[1]), float(q[2]), float(q[3])), source))
+        out.append(Mount(joint.parent.lstrip("/"), joint.child.lstrip("/"), (float(t[0]), float(t[1]), float(t[2])),
+                         (float(q[0]), float(q[1]), float(q[2]), float(q[3])), source=source))
     return out
 
 
-def log_urdf_edges(descriptions: dict[str, str]) -> tuple[list[StaticEdge], list[str]]:
+def log_urdf_edges(descriptions: dict[str, str]) -> tuple[list[Mount], list[str]]:
     """Fixed joints of the robot descriptions a log carries (topic -> URDF text); a bad one is a note."""
-    edges: list[StaticEdge] = []
+    edges: list[Mount] = []
     notes: list[str] = []
     for topic, text in sorted(descriptions.items()):
         try:
@@ -131,57 +121,20 @@ def _edge_text(parent: str, child: str, xyz: npt.ArrayLike, quat: npt.ArrayLike)
 
 
 def merge_static_edges(
-    table: TransformTable, explicit: list[StaticEdge], described: list[StaticEdge]
+    table: TransformTable, explicit: list[Mount], described: list[Mount]
 ) -> tuple[TransformTable, list[str]]:
     """The log's edges plus the chain's (``explicit``: they replace the log's edge with the same child,
     or the same edge reversed) and the log's URDF joints (``described``: only where the log has none)."""
     notes: list[str] = []
     keep = np.ones(len(table), dtype=bool)
     for e in explicit:
-        same = table.child == e.child
-        reverse = (table.child == e.parent) & (table.parent == e.child)
-        hit = (same | reverse) & keep
-        if not hit.any():
-            continue
-        rows = np.flatnonzero(hit)
-        first = int(rows[0])
-        moving = hit & ~table.is_static & (table.parent != e.parent)
-        if moving.any():  # replacing a moving parent would cut the tree, never what a mount means
-            r = int(np.flatnonzero(moving)[0])
-            raise ChainConfigError(
-                e.source, f"frame {e.child!r} already has the moving parent {str(table.parent[r])!r} in the log "
-                f"({table.source[r]}); a frame has one parent: give the mount the other way round "
-                f"(parent: {e.child}, child: {e.parent}, the inverse transform)")
-        t, q = table.translation[first], table.quat_xyzw[first]
-        if reverse[first]:  # compare like with like: T_parent_child both
-            t, q = invert(t, q)
-        moved_mm = float(np.linalg.norm(np.asarray(e.xyz) - t)) * 1e3
-        turned_deg = float(np.degrees(quat_angle_between(q, np.asarray(e.quat_xyzw))))
-        how = "static" if table.is_static[rows].all() else f"dynamic, {rows.size} samples, the first shown"
-        logged = _edge_text(str(table.parent[first]), str(table.child[first]), table.translation[first],
-                            table.quat_xyzw[first])
-        notes.append(
-            f"{e.source}: {_edge_text(e.parent, e.child, e.xyz, e.quat_xyzw)} is used instead of the log's {logged} "
-            f"({how}; on {', '.join(sorted(set(table.source[rows].tolist())))}): they differ by {moved_mm:.1f} mm "
-            f"and {turned_deg:.2f} deg"
-        )
-        keep &= ~hit
+        hit = ((table.child == e.child) | ((table.child == e.parent) & (table.parent == e.child))) & keep
+        if hit.any():
+            notes.append(_replacement_note(table, e, hit))
+            keep &= ~hit
     parent_of = dict(zip(table.child[keep].tolist(), table.parent[keep].tolist(), strict=True))
     parent_of.update({e.child: e.parent for e in explicit})
-    filled: list[StaticEdge] = []
-    for e in described:
-        if e.child in parent_of:
-            continue
-        frame: str | None = e.parent
-        seen = set()
-        while frame is not None and frame not in seen and frame != e.child:
-            seen.add(frame)
-            frame = parent_of.get(frame)
-        if frame == e.child:
-            notes.append(f"{e.source}: fixed joint {e.parent} -> {e.child} not added (it would close a loop)")
-            continue
-        filled.append(e)
-        parent_of[e.child] = e.parent
+    filled = _fill_in(described, parent_of, notes)
     for source in sorted({e.source for e in filled}):
         mine = [e.child for e in filled if e.source == source]
         notes.append(f"{source}: {len(mine)} fixed joint{'s' if len(mine) != 1 else ''} of the robot description "
@@ -196,6 +149,51 @@ def merge_static_edges(
         is_static=True, source=[e.source for e in added],
     )
     return TransformTable.concat([extra, table.take(keep)]), notes
+
+
+def _replacement_note(table: TransformTable, e: Mount, hit: npt.NDArray[np.bool_]) -> str:
+    """What the log's rows ``hit`` (the mount's edge, or the same edge reversed) held, and how far the mount that
+    replaces them differs; a mount whose child moves under another parent in the log is an error."""
+    rows = np.flatnonzero(hit)
+    first = int(rows[0])
+    moving = hit & ~table.is_static & (table.parent != e.parent)
+    if moving.any():  # replacing a moving parent would cut the tree, never what a mount means
+        r = int(np.flatnonzero(moving)[0])
+        raise ChainConfigError(
+            e.source, f"frame {e.child!r} already has the moving parent {str(table.parent[r])!r} in the log "
+            f"({table.source[r]}); a frame has one parent: give the mount the other way round "
+            f"(parent: {e.child}, child: {e.parent}, the inverse transform)")
+    t, q = table.translation[first], table.quat_xyzw[first]
+    if table.child[first] != e.child:  # the edge reversed: compare like with like, T_parent_child both
+        t, q = invert(t, q)
+    moved_mm = float(np.linalg.norm(np.asarray(e.xyz) - t)) * 1e3
+    turned_deg = float(np.degrees(quat_angle_between(q, np.asarray(e.quat_xyzw))))
+    how = "static" if table.is_static[rows].all() else f"dynamic, {rows.size} samples, the first shown"
+    logged = _edge_text(str(table.parent[first]), str(table.child[first]), table.translation[first],
+                        table.quat_xyzw[first])
+    return (f"{e.source}: {_edge_text(e.parent, e.child, e.xyz, e.quat_xyzw)} is used instead of the log's {logged} "
+            f"({how}; on {', '.join(sorted(set(table.source[rows].tolist())))}): they differ by {moved_mm:.1f} mm "
+            f"and {turned_deg:.2f} deg")
+
+
+def _fill_in(described: list[Mount], parent_of: dict[str, str], notes: list[str]) -> list[Mount]:
+    """The fixed joints of a log's robot description for frames without a parent (``parent_of``, updated), none
+    that would close a loop (a note says so)."""
+    filled: list[Mount] = []
+    for e in described:
+        if e.child in parent_of:
+            continue
+        frame: str | None = e.parent
+        seen = set()
+        while frame is not None and frame not in seen and frame != e.child:
+            seen.add(frame)
+            frame = parent_of.get(frame)
+        if frame == e.child:
+            notes.append(f"{e.source}: fixed joint {e.parent} -> {e.child} not added (it would close a loop)")
+            continue
+        filled.append(e)
+        parent_of[e.child] = e.parent
+    return filled
 
 
 def merge_file_cameras(table: CameraTable, cameras: list[FileCamera]) -> tuple[CameraTable, list[str]]:

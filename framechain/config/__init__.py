@@ -4,17 +4,16 @@ what it can physically be (:mod:`framechain.config.plausible`), every mistake on
 file, the key and the value (:class:`ConfigError`)."""
 
 from framechain.config.chain import (
-    CalibrationSource,
     ChainConfig,
     ChainEvidence,
     ChainFrames,
     ChainTopics,
     HopTopics,
-    MarkerSpec,
-    MountEdge,
     PoseTopic,
 )
+from framechain.config.chain_cameras import CalibrationSource, MarkerSpec, RigCamera
 from framechain.config.errors import CalibrationError, ChainConfigError, ConfigError, RobotConfigError
+from framechain.config.mount import Mount
 
 __all__ = [
     "CalibrationError",
@@ -27,7 +26,8 @@ __all__ = [
     "ConfigError",
     "HopTopics",
     "MarkerSpec",
-    "MountEdge",
+    "Mount",
     "PoseTopic",
+    "RigCamera",
     "RobotConfigError",
 ]

@@ -59,10 +59,10 @@ import yaml
 from framechain.arrays import FloatArray
 from framechain.config import plausible
 from framechain.config.errors import CalibrationError
+from framechain.config.mount import CAMERA_MOUNT_KEYS, Mount, camera_mount
 from framechain.config.schema import Section, finite_number, read_yaml, show
 from framechain.geometry.camera import CameraModel
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
-from framechain.geometry.rotations import quat_from_matrix, quat_from_rotvec
 from framechain.timeline import CameraTable
 
 __all__ = [
@@ -71,10 +71,8 @@ __all__ = [
     "CameraTiming",
     "DepthSource",
     "Intrinsics",
-    "Mount",
     "load_calibration",
     "read_intrinsics_file",
-    "rig_camera_poses",
 ]
 
 
@@ -101,19 +99,6 @@ class Intrinsics:
     def camera_model(self, frame: str = "") -> CameraModel:
         """The camera model these intrinsics declare, for the optical frame ``frame``."""
         return CameraModel(frame, self.K, self.width, self.height, self.distortion_model, np.asarray(self.distortion))
-
-
-@dataclass(frozen=True)
-class Mount:
-    """``T_parent_frame`` of the camera: translation (m) and rotation ``quat_xyzw``.
-
-    With ``optical`` False the mount gives a camera_link (FLU) and the optical frame hangs below it.
-    """
-
-    parent: str
-    translation: tuple[float, float, float]
-    quat_xyzw: tuple[float, float, float, float]
-    optical: bool
 
 
 @dataclass(frozen=True)
@@ -169,20 +154,18 @@ class CameraCalibration:
             distortion_model=i.distortion_model, distortion=i.distortion, source=i.source or self.source,
         )
 
-    def mount_edges(self) -> list[tuple[str, str, FloatArray, FloatArray]]:
-        """Static edges ``(parent, child, translation, quat_xyzw)`` from the mount link to the optical frame."""
+    def mount_edges(self) -> list[Mount]:
+        """The static edges from the mount's parent to the optical frame: the mount, and below a camera_link
+        the REP-103 rotation to the optical frame."""
         m = self.mount
         if m.optical:
-            return [(m.parent, self.optical_frame, np.asarray(m.translation), np.asarray(m.quat_xyzw))]
-        return [
-            (m.parent, self.link_frame, np.asarray(m.translation), np.asarray(m.quat_xyzw)),
-            (self.link_frame, self.optical_frame, np.zeros(3), np.asarray(OPTICAL_FROM_LINK_QUAT_XYZW)),
-        ]
+            return [m]
+        return [m, Mount(self.link_frame, self.optical_frame, (0.0, 0.0, 0.0), OPTICAL_FROM_LINK_QUAT_XYZW, True,
+                         m.source)]
 
 
 _TOP_KEYS = {"name", "frame", "intrinsics", "intrinsics_file", "mount", "video_key", "timing", "depth"}
 _INTRINSICS_KEYS = {"fx", "fy", "cx", "cy", "width", "height", "distortion_model", "distortion"}
-_MOUNT_KEYS = {"parent", "xyz", "rpy", "quat_xyzw", "rotvec", "optical"}
 
 
 def load_calibration(
@@ -214,19 +197,22 @@ def load_calibration(
     intrinsics = _intrinsics(top, folder)
     if "mount" not in top:
         top.fail("no mount: give mount: {parent, xyz, rpy | quat_xyzw | rotvec, optical}")
-    mount = _mount(top.section("mount", _MOUNT_KEYS))
+    mount = camera_mount(top.section("mount", CAMERA_MOUNT_KEYS))
     timing = top.section("timing", {"timestamp_column", "offset_s", "pairing"})
     offset_s = timing.number("offset_s", 0.0, unit="s", check=plausible.camera_offset)
     pairing = timing.name("pairing", what="a pairing")
     if pairing is not None and pairing not in PAIRINGS:
         timing.expected("pairing", f"one of {', '.join(PAIRINGS)}", pairing)
-    return CameraCalibration(
+    calibration = CameraCalibration(
         name=cam_name, intrinsics=intrinsics, mount=mount, frame=top.frame("frame") or "",
         video_key=top.name("video_key", what="a feature name"),
         timing=CameraTiming(timing.name("timestamp_column", what="a column name"), offset_s or 0.0, pairing),
         # Inline intrinsics noted into this file's notes already; a file's own come with its intrinsics.
         depth=_depth(top), source=source, notes=tuple(dict.fromkeys((*intrinsics.notes, *top.notes))),
     )
+    # The mount's child is the camera's optical frame, or its camera_link: named now the frame is read.
+    child = calibration.optical_frame if mount.optical else calibration.link_frame
+    return replace(calibration, mount=replace(mount, child=child))
 
 
 def _intrinsics(top: Section, folder: Path) -> Intrinsics:
@@ -281,18 +267,6 @@ def _make_intrinsics(section: Section, pinhole: tuple[float, float, float, float
                             within=True)
     return Intrinsics(fx, fy, cx, cy, int(width), int(height), model, tuple(float(c) for c in coeffs),
                       section.source, tuple(section.notes[before:]))
-
-
-def _mount(section: Section) -> Mount:
-    parent = section.frame("parent", required=True, hint="the link the camera is mounted on")
-    if not isinstance(section.get("optical"), bool):
-        section.fail_at(
-            section.path("optical"),
-            "must be stated, true or false: true if the mount gives the optical frame (x right, y down, z "
-            "forward), false if it gives a camera_link (x forward, y left, z up)",
-        )
-    pose = section.pose(rotation_required=False)
-    return Mount(parent or "", pose.xyz, pose.quat_xyzw, bool(section.get("optical")))
 
 
 # ------------------------------------------------------------------------------ intrinsics files
@@ -448,60 +422,3 @@ def _kalibr_camera(top: Section, camera: str | None) -> Intrinsics:
 def _first(section: Section, keys: tuple[str, ...]) -> str | None:
     """The first of ``keys`` the section gives."""
     return next((key for key in keys if key in section), None)
-
-
-# ------------------------------------------------------------------------------ rig extrinsics
-
-
-def rig_camera_poses(raw: Any) -> dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
-    """Each camera's pose in its rig, ``T_rig_cam`` as (xyz, quat_xyzw), from a parsed calibration file of several
-    cameras (empty when it gives none):
-
-    - TagSLAM's ``camera_poses.yaml``: ``camN: {pose: {position: {x, y, z}, rotation: {x, y, z}}}``, the
-      rotation a rotation vector (radians); TagSLAM's ``T_rig_cam`` (points of the camera into the rig);
-    - a Kalibr camchain: ``camN: {T_cn_cnm1: 4x4}`` maps points of camera N-1 into camera N; the rig is the
-      first camera (``T_rig_cam0`` the identity) and ``T_rig_camN = T_rig_camN-1 inv(T_cn_cnm1)``.
-    """
-    if not isinstance(raw, Mapping):
-        return {}
-    entries = [(str(k), v) for k, v in raw.items() if isinstance(v, Mapping)]
-    out: dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]] = {}
-    for name, entry in entries:
-        pose = entry.get("pose")
-        if not isinstance(pose, Mapping):
-            continue
-        position, rotation = pose.get("position"), pose.get("rotation")
-        if not (isinstance(position, Mapping) and isinstance(rotation, Mapping)):
-            continue
-        values = [position.get(a) for a in "xyz"] + [rotation.get(a) for a in "xyz"]
-        if all(finite_number(v) for v in values):
-            numbers = np.asarray(values, dtype=float)
-            x, y, z = (float(v) for v in numbers[:3])
-            out[name] = ((x, y, z), _quat_of_rotvec(numbers[3:]))
-    if out:
-        return out
-    chained = [(name, e.get("T_cn_cnm1")) for name, e in entries if isinstance(e.get("intrinsics"), list)]
-    if len(chained) < 2 or any(not _is_matrix(m) for _, m in chained[1:]):
-        return {}
-    rig_from_cam = np.eye(4)
-    for i, (name, matrix) in enumerate(chained):
-        if i:
-            rig_from_cam = rig_from_cam @ np.linalg.inv(np.asarray(matrix, dtype=float))
-        t = rig_from_cam[:3, 3]
-        out[name] = ((float(t[0]), float(t[1]), float(t[2])), _quat_of_matrix(rig_from_cam[:3, :3]))
-    return out
-
-
-def _is_matrix(value: Any) -> bool:
-    return (isinstance(value, list) and len(value) == 4
-            and all(isinstance(r, list) and len(r) == 4 and all(finite_number(x) for x in r) for r in value))
-
-
-def _quat_of_rotvec(rotvec: FloatArray) -> tuple[float, float, float, float]:
-    q = quat_from_rotvec(rotvec)
-    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-
-
-def _quat_of_matrix(matrix: FloatArray) -> tuple[float, float, float, float]:
-    q = quat_from_matrix(matrix)
-    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))

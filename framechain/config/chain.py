@@ -48,16 +48,26 @@ observation belongs to, whatever its header.frame_id says)::
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from framechain.config import plausible
+from framechain.config.chain_cameras import (
+    CalibrationSource,
+    MarkerSpec,
+    RigCamera,
+    calibration_sources,
+    latency_budget,
+    marker_spec,
+    rig_cameras,
+)
 from framechain.config.errors import ChainConfigError
 from framechain.config.file_kinds import not_a_chain
-from framechain.config.schema import ROTATION_KEYS, Section, finite_number, read_yaml, show
+from framechain.config.mount import Mount, chain_mounts
+from framechain.config.schema import Section, as_list, dataclass_keys, finite_number, read_yaml, show
 
 #: The error worth acting on when the chain does not say (m): a millimetre.
 DEFAULT_TOLERANCE_M = 0.001
@@ -101,64 +111,12 @@ class PoseTopic:
 
 
 @dataclass(frozen=True)
-class CalibrationSource:
-    """A camera calibration file (ROS camera_info, Kalibr camchain, OpenCV YAML) for one camera.
-
-    ``camera`` picks the camera in a file of several (Kalibr: by name, rostopic or tagtopic);
-    ``frame`` is the camera's optical frame (default: the chain's camera frame).
-    """
-
-    file: str
-    camera: str | None = None
-    frame: str | None = None
-
-
-@dataclass(frozen=True)
-class MountEdge:
-    """A static edge ``T_parent_child`` the user declares (metres; rotation as ``quat_xyzw``)."""
-
-    parent: str
-    child: str
-    xyz: tuple[float, float, float]
-    quat_xyzw: tuple[float, float, float, float]
-    #: The rotation key the file gave (``quat_xyzw``, ``rpy`` or ``rotvec``): a fix writes the mount back in it.
-    form: str = field(default="quat_xyzw", compare=False)
-
-
-@dataclass(frozen=True)
 class HopTopics:
     """Topics where the robot logged its own point at each hop (PointStamped)."""
 
     camera: str | None = None
     body: str | None = None
     world: str | None = None
-
-
-@dataclass(frozen=True)
-class MarkerSpec:
-    """Markers to find in ``topics.image``: an OpenCV dictionary name and the side length in metres."""
-
-    dictionary: str
-    size_m: float | None = None
-
-
-@dataclass(frozen=True)
-class RigCamera:
-    """One camera of a rig: its optical frame, the topics that are its own (its detections decide which
-    camera an observation belongs to), its calibration, markers and latency budget (None: the chain's)."""
-
-    frame: str
-    detections: str
-    calibration: CalibrationSource | None = None
-    camera_info: str | None = None
-    image: str | None = None
-    depth: str | None = None
-    markers: MarkerSpec | None = None
-    latency_budget_s: float | None = None
-
-    def topics(self) -> tuple[str, ...]:
-        """Every topic of this camera (detections, camera_info, image, depth)."""
-        return tuple(t for t in (self.detections, self.camera_info, self.image, self.depth) if t)
 
 
 @dataclass(frozen=True)
@@ -195,7 +153,7 @@ class ChainConfig:
     #: Free-form robot section (URDF, joint mapping, calibrations) for joint-driven chains.
     robot: Mapping[str, Any] | None = None
     calibration: tuple[CalibrationSource, ...] = ()
-    mounts: tuple[MountEdge, ...] = ()
+    mounts: tuple[Mount, ...] = ()
     urdf: str | None = None
     #: The cameras of a rig (empty: the one camera of ``frames.camera``); ``frames.camera`` is the first.
     cameras: tuple[RigCamera, ...] = ()
@@ -222,8 +180,9 @@ class ChainConfig:
         for key in ("calibration", "mounts", "cameras"):
             if not raw[key]:
                 raw.pop(key)
-        for mount in raw.get("mounts", []):
-            mount.pop("form")
+        for mount in raw.get("mounts", []):  # what a chain's mounts: entry has not (see framechain.config.mount)
+            for key in ("optical", "source", "form"):
+                mount.pop(key)
         for camera in raw.get("cameras", []):
             if camera["calibration"] is not None:
                 camera["calibration"].pop("frame")
@@ -292,11 +251,11 @@ class ChainConfig:
         other = not_a_chain(raw, Path(where).name) if isinstance(raw, Mapping) else None
         if other is not None:
             raise ChainConfigError(where, other)
-        top = Section(raw, source=where, known=_keys(cls, "base_dir", "origin", "notes", "has_pose"),
+        top = Section(raw, source=where, known=dataclass_keys(cls, "base_dir", "origin", "notes", "has_pose"),
                       error=ChainConfigError)
-        topics = top.section("topics", _keys(ChainTopics))
+        topics = top.section("topics", dataclass_keys(ChainTopics))
         evidence = parse_evidence(top) or ChainEvidence()
-        cameras = _rig_cameras(top)
+        cameras = rig_cameras(top)
         if cameras:
             given = sorted(k for k in ("detections", "camera_info", "image", "depth") if k in topics)
             if given:
@@ -314,8 +273,8 @@ class ChainConfig:
             top.fail_at("robot", f"must be a mapping, got {show(robot)}")
         budget = latency_budget(top)
         tolerance = top.number("tolerance_m", DEFAULT_TOLERANCE_M, minimum=0.0, unit="m", check=plausible.tolerance)
-        named = {k: topics.name(k, what="a topic name") for k in _keys(ChainTopics, "odometry", "poses")}
-        frames_section = top.section("frames", _keys(ChainFrames))
+        named = {k: topics.name(k, what="a topic name") for k in dataclass_keys(ChainTopics, "odometry", "poses")}
+        frames_section = top.section("frames", dataclass_keys(ChainFrames))
         return cls(
             frames=_frames(frames_section, cameras),
             topics=ChainTopics(**named, odometry=odometry, poses=tuple(poses)),
@@ -323,9 +282,8 @@ class ChainConfig:
             latency_budget_s=0.02 if budget is None else budget,
             tolerance_m=DEFAULT_TOLERANCE_M if tolerance is None else tolerance,
             robot=robot,
-            calibration=_calibration_sources(top),
-            mounts=tuple(_mount_edge(top.child(m, f"mounts[{i}]", _MOUNT_KEYS, what=_MOUNT_WHAT))
-                         for i, m in enumerate(_as_list(top.get("mounts")))),
+            calibration=calibration_sources(top),
+            mounts=chain_mounts(top),
             urdf=top.name("urdf", what="a file name"),
             cameras=cameras,
             has_pose=not cameras or "world" in frames_section,
@@ -356,22 +314,12 @@ class ChainConfig:
         return out
 
 
-def _keys(cls: type, *internal: str) -> set[str]:
-    """The keys a file may give for a dataclass: its fields, less the ``internal`` ones."""
-    return {f.name for f in fields(cls)} - set(internal)
-
-
-def latency_budget(section: Section) -> float | None:
-    """``latency_budget_s`` of a chain (or of robot.yaml's ``chain:``): seconds, 0 or more."""
-    return section.number("latency_budget_s", minimum=0.0, unit="s", check=plausible.latency_budget)
-
-
 def parse_evidence(parent: Section) -> ChainEvidence | None:
     """The ``evidence`` mapping of CHAIN.yaml (or of robot.yaml's ``chain:``); None when not given."""
     if "evidence" not in parent:
         return None
-    section = parent.section("evidence", _keys(ChainEvidence))
-    hops = section.section("hops", _keys(HopTopics))
+    section = parent.section("evidence", dataclass_keys(ChainEvidence))
+    hops = section.section("hops", dataclass_keys(HopTopics))
     point = section.vector("reference_point", 3, what="[x, y, z], three finite numbers in metres",
                            check=plausible.position)
     both = sorted(set(_labels(section, "ignore_labels")) & set(_labels(section, "moving_labels")))
@@ -379,7 +327,7 @@ def parse_evidence(parent: Section) -> ChainEvidence | None:
         section.fail(f"labels {both} are both in ignore_labels (not used) and moving_labels (used when seen by "
                      "several cameras at once): keep them in one")
     return ChainEvidence(
-        hops=HopTopics(**{k: hops.name(k, what="a topic name") for k in _keys(HopTopics)}),
+        hops=HopTopics(**{k: hops.name(k, what="a topic name") for k in dataclass_keys(HopTopics)}),
         target=section.name("target", what="a topic name"),
         reference=section.name("reference", what="a topic name"),
         reference_point=None if point is None else (point[0], point[1], point[2]),
@@ -388,7 +336,7 @@ def parse_evidence(parent: Section) -> ChainEvidence | None:
         moving_labels=_labels(section, "moving_labels"),
         static_window_s=section.number("static_window_s", positive=True, unit="s", check=plausible.static_window),
         tag_size_m=_tag_size(section),
-        markers=_marker_spec(section),
+        markers=marker_spec(section),
     )
 
 
@@ -442,16 +390,6 @@ def _tag_size(section: Section) -> float | dict[str, float] | None:
     return section.number_value(raw, path, check=plausible.tag_size)
 
 
-def _marker_spec(section: Section) -> MarkerSpec | None:
-    if "markers" not in section:
-        return None
-    markers = section.section("markers", _keys(MarkerSpec))
-    name = markers.name("dictionary")
-    if name is None:
-        markers.fail("needs dictionary: an OpenCV marker dictionary such as DICT_5X5_1000")
-    return MarkerSpec(name, markers.number("size_m", positive=True, unit="m", check=plausible.tag_size))
-
-
 def _drop_none(value: Any) -> Any:
     if isinstance(value, dict):
         return {k: _drop_none(v) for k, v in value.items() if v is not None}
@@ -460,24 +398,18 @@ def _drop_none(value: Any) -> Any:
     return value
 
 
-def _as_list(raw: Any) -> list[Any]:
-    if raw is None:
-        return []
-    return list(raw) if isinstance(raw, list | tuple) else [raw]
-
-
 def _pose_topics(topics: Section, key: str) -> list[PoseTopic]:
     """``/odom``, ``{topic: /pose, child: base_link}`` or a list of them."""
     raw = topics.get(key)
     out: list[PoseTopic] = []
-    for i, entry in enumerate(_as_list(raw)):
+    for i, entry in enumerate(as_list(raw)):
         here = f"{topics.path(key)}[{i}]" if isinstance(raw, list | tuple) else topics.path(key)
         if isinstance(entry, str) and entry.strip():
             out.append(PoseTopic(entry.strip()))
             continue
         if not isinstance(entry, Mapping) or not isinstance(entry.get("topic"), str):
             topics.expected_at(here, "a topic name or {topic: /name, child: frame}", entry)
-        pose = topics.child(entry, here, _keys(PoseTopic))
+        pose = topics.child(entry, here, dataclass_keys(PoseTopic))
         out.append(PoseTopic(pose.name("topic", required=True, what="a topic name") or "", pose.frame("child")))
     return out
 
@@ -492,81 +424,3 @@ def _merge_pose_topics(poses: list[PoseTopic], topics: Section) -> list[PoseTopi
         if known is None or pose.child:
             merged[pose.topic] = pose
     return list(merged.values())
-
-
-def _calibration_source(top: Section, entry: Any, here: str, *, frame: str | None = None) -> CalibrationSource:
-    """``{file, camera, frame}`` (or a file name); a rig camera's entry has its frame and names none."""
-    known = _keys(CalibrationSource) - ({"frame"} if frame else set())
-    what = "a file name or {file, camera}" if frame else "a file name or {file, camera, frame}"
-    source = top.child({"file": entry} if isinstance(entry, str) else entry, here, known, what=what)
-    file = source.name("file", required=False, what="a file name")
-    if file is None:
-        source.fail("needs file: the calibration file (relative to the chain file)")
-    return CalibrationSource(file, source.name("camera", what="a camera name"), frame or source.frame("frame"))
-
-
-def _calibration_sources(top: Section) -> tuple[CalibrationSource, ...]:
-    raw = top.get("calibration")
-    out: list[CalibrationSource] = []
-    for i, entry in enumerate(_as_list(raw)):
-        here = f"calibration[{i}]" if isinstance(raw, list | tuple) else "calibration"
-        out.append(_calibration_source(top, entry, here))
-    defaulted = [i for i, c in enumerate(out) if c.frame is None]
-    if len(defaulted) > 1:
-        top.fail(f"calibration[{defaulted[1]}]: give frame: (the camera's optical frame); only one entry can "
-                 "default to frames.camera")
-    return tuple(out)
-
-
-_RIG_CAMERA_KEYS = {f.name for f in fields(RigCamera)}
-
-
-def _rig_cameras(top: Section) -> tuple[RigCamera, ...]:
-    """``cameras:``, a list of ``{frame, detections, calibration, camera_info, image, depth, markers,
-    latency_budget_s}``; frames and topics are each one camera's."""
-    if "cameras" not in top:
-        return ()
-    raw = top.get("cameras")
-    if not isinstance(raw, list | tuple) or not raw:
-        top.expected("cameras", "a list of cameras, each {frame, detections, calibration, ...}", raw)
-    out: list[RigCamera] = []
-    for i, entry in enumerate(raw):
-        cam = top.child(entry, f"cameras[{i}]", _RIG_CAMERA_KEYS, what="{frame, detections, calibration, ...}")
-        frame = cam.frame("frame", required=True, hint="the camera's optical frame") or ""
-        calibration = cam.get("calibration")
-        markers = _marker_spec(cam)
-        out.append(RigCamera(
-            frame=frame,
-            detections=cam.name("detections", required=True, hint="the camera's detections topic",
-                                what="a topic name") or "",
-            calibration=None if calibration is None else _calibration_source(
-                top, calibration, cam.path("calibration"), frame=frame),
-            camera_info=cam.name("camera_info", what="a topic name"), image=cam.name("image", what="a topic name"),
-            depth=cam.name("depth", what="a topic name"), markers=markers,
-            latency_budget_s=latency_budget(cam),
-        ))
-        if markers is not None and out[-1].image is None:
-            cam.fail("markers needs image (the camera's image topic to find them in)")
-    for key in ("frame", "detections"):
-        seen: dict[str, int] = {}
-        for i, c in enumerate(out):
-            value = getattr(c, key)
-            if value in seen:
-                top.fail(f"cameras[{i}] and cameras[{seen[value]}] have the same {key} {value!r}")
-            seen[value] = i
-    return tuple(out)
-
-
-_MOUNT_KEYS = {"parent", "child", "xyz", *ROTATION_KEYS}
-_MOUNT_WHAT = "{parent, child, xyz, quat_xyzw | rpy | rotvec}"
-
-
-def _mount_edge(mount: Section) -> MountEdge:
-    """``{parent, child, xyz, quat_xyzw | rpy | rotvec}`` as ``T_parent_child``."""
-    parent = mount.frame("parent", required=True, hint="a frame name") or ""
-    child = mount.frame("child", required=True, hint="a frame name") or ""
-    if parent == child:
-        mount.fail(f"parent and child are the same frame {parent!r}")
-    pose = mount.pose(rotation_required=True)
-    form = next(k for k in ROTATION_KEYS if k in mount)
-    return MountEdge(parent, child, pose.xyz, pose.quat_xyzw, form)

@@ -80,9 +80,9 @@ from framechain.config.chain import (
     ChainEvidence,
     ChainFrames,
     ChainTopics,
-    latency_budget,
     parse_evidence,
 )
+from framechain.config.chain_cameras import latency_budget
 from framechain.config.errors import RobotConfigError
 from framechain.config.schema import Section, read_yaml, show
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Collection, Iterator, Mapping
+from dataclasses import fields
 from pathlib import Path
 from typing import Any, NamedTuple, NoReturn
 
@@ -32,7 +33,7 @@ from framechain.config import plausible
 from framechain.config.errors import ConfigError
 from framechain.geometry.rotations import quat_from_rotvec, quat_from_rpy
 
-__all__ = ["ROTATION_KEYS", "Pose", "Section", "finite_number", "read_yaml", "show"]
+__all__ = ["ROTATION_KEYS", "Pose", "Section", "as_list", "dataclass_keys", "finite_number", "read_yaml", "show"]
 
 #: The rotation keys of a pose; exactly one may be given.
 ROTATION_KEYS = ("quat_xyzw", "rpy", "rotvec")
@@ -80,6 +81,18 @@ def _yaml_problem(err: yaml.YAMLError) -> str:
         mark = err.problem_mark
         return f"line {mark.line + 1}, column {mark.column + 1}: {err.problem or err.context or 'unreadable'}"
     return " ".join(str(err).split())
+
+
+def dataclass_keys(cls: type, *internal: str) -> set[str]:
+    """The keys a file may give for a dataclass: its fields, less the ``internal`` ones."""
+    return {f.name for f in fields(cls)} - set(internal)
+
+
+def as_list(raw: Any) -> list[Any]:
+    """A key given as one entry or a list of them, as a list (empty when not given)."""
+    if raw is None:
+        return []
+    return list(raw) if isinstance(raw, list | tuple) else [raw]
 
 
 def finite_number(value: Any) -> bool:

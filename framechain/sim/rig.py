@@ -22,7 +22,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, RigCamera
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
+from framechain.config.chain_cameras import RigCamera
 from framechain.sim import rigid
 from framechain.timeline import CameraTable, ObservationTable, Timeline, TransformTable
 

@@ -18,7 +18,8 @@ import yaml
 
 from framechain.adapters.messages.kinds import normalize_msgtype
 from framechain.adapters.model import LoadedLog, LogInfo
-from framechain.config.chain import CalibrationSource, ChainConfig
+from framechain.config.chain import ChainConfig
+from framechain.config.chain_cameras import CalibrationSource
 from framechain.suggest.facts import DETECTION_TYPES, HINT_FILE_MAX_BYTES
 
 

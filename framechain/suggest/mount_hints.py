@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.config.calibration import rig_camera_poses
+from framechain.config.rig_poses import rig_camera_poses
 from framechain.config.schema import finite_number
 from framechain.geometry.rotations import quat_from_rotvec, quat_to_rotvec
 from framechain.geometry.transforms import compose_rows, invert_rows

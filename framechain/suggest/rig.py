@@ -18,15 +18,10 @@ import numpy as np
 import yaml
 
 from framechain.adapters.model import LoadedLog
-from framechain.config.calibration import rig_camera_poses
-from framechain.config.chain import (
-    CalibrationSource,
-    ChainConfig,
-    ChainEvidence,
-    ChainFrames,
-    MountEdge,
-    RigCamera,
-)
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
+from framechain.config.chain_cameras import CalibrationSource, RigCamera
+from framechain.config.mount import Mount
+from framechain.config.rig_poses import rig_camera_poses
 from framechain.geometry.rotations import quat_to_rotvec
 from framechain.suggest.tag_sizes import tag_sizes
 
@@ -65,7 +60,7 @@ def rig_suggestion(loaded: LoadedLog, topics: list[str], beside: list[tuple[str,
     rig_body = body or str(next((v.get("rig_body") for v in cams.values() if v.get("rig_body")), RIG_BODY))
     cameras = tuple(RigCamera(frame=frames[t], detections=t,
                               calibration=CalibrationSource(file, by_topic[t], frames[t])) for t in order)
-    mounts = tuple(MountEdge(rig_body, frames[t], *poses[str(by_topic[t])], form="rotvec") for t in order)
+    mounts = tuple(Mount(rig_body, frames[t], *poses[str(by_topic[t])], form="rotvec") for t in order)
     comments = [f"cameras and calibration: {file} (each detections topic is the camera whose tagtopic or rostopic "
                 "it is)", f"mounts: {pose_file}, each camera's pose in the rig (T_rig_cam)"]
     if any(frames[t] != _header_frame(loaded, t) for t in order):

@@ -12,9 +12,9 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
-from framechain.config.calibration import rig_camera_poses
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
+from framechain.config.rig_poses import rig_camera_poses
 
 RIG: dict[str, Any] = {
     "frames": {"body": "rig", "world": "arena"},

@@ -11,6 +11,7 @@ from lerobot_scene import LINK_FROM_OPTICAL, rx, ry, rz
 from scipy.spatial.transform import Rotation
 
 from framechain.config.calibration import CalibrationError, load_calibration, read_intrinsics_file
+from framechain.config.mount import Mount
 
 INTRINSICS = {"fx": 600.0, "fy": 610.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
 
@@ -38,12 +39,12 @@ projection_matrix:
 """
 
 
-def _compose(edges: list[tuple[str, str, np.ndarray, np.ndarray]]) -> np.ndarray:
+def _compose(edges: list[Mount]) -> np.ndarray:
     T = np.eye(4)
-    for _parent, _child, t, q in edges:
+    for edge in edges:
         step = np.eye(4)
-        step[:3, :3] = Rotation.from_quat(q).as_matrix()
-        step[:3, 3] = t
+        step[:3, :3] = Rotation.from_quat(edge.quat_xyzw).as_matrix()
+        step[:3, 3] = edge.xyz
         T = T @ step
     return T
 
@@ -55,14 +56,15 @@ def test_inline_optical_false_appends_rep103_rotation() -> None:
     }, name="wrist")
     assert cal.optical_frame == "wrist_optical_frame"
     edges = cal.mount_edges()
-    assert [(p, c) for p, c, _, _ in edges] == [("flange_link", "wrist_link"), ("wrist_link", "wrist_optical_frame")]
+    assert [(e.parent, e.child, e.optical) for e in edges] == [("flange_link", "wrist_link", False),
+                                                              ("wrist_link", "wrist_optical_frame", True)]
     T = _compose(edges)
     # URDF rpy: R = Rz(yaw) Ry(pitch) Rx(roll), then camera_link -> optical (REP-103) by hand.
     expected = rz(0.1) @ ry(-0.2) @ rx(0.3) @ LINK_FROM_OPTICAL
     np.testing.assert_allclose(T[:3, :3], expected, atol=1e-12)
     np.testing.assert_allclose(T[:3, 3], [0.1, 0.2, 0.3])
     # Optical z (forward) is camera_link x (forward).
-    np.testing.assert_allclose(Rotation.from_quat(edges[1][3]).apply([0, 0, 1.0]), [1.0, 0, 0], atol=1e-15)
+    np.testing.assert_allclose(Rotation.from_quat(edges[1].quat_xyzw).apply([0, 0, 1.0]), [1.0, 0, 0], atol=1e-15)
     table = cal.camera_table()
     assert table.frame.tolist() == ["wrist_optical_frame"]
     np.testing.assert_allclose(table.K[0], [[600, 0, 320], [0, 610, 240], [0, 0, 1]])
@@ -76,8 +78,8 @@ def test_optical_true_mount_is_the_optical_frame_and_quaternion_accepted() -> No
     }, name="scene")
     edges = cal.mount_edges()
     assert len(edges) == 1
-    assert edges[0][:2] == ("tool0", "cam_optical")
-    np.testing.assert_allclose(edges[0][3], q)
+    assert (edges[0].parent, edges[0].child, edges[0].optical) == ("tool0", "cam_optical", True)
+    np.testing.assert_allclose(edges[0].quat_xyzw, q)
 
 
 def test_ros_camera_info_file(tmp_path: Path) -> None:

@@ -59,7 +59,8 @@ from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clo
 from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
-from framechain.config.chain import ChainConfig, MarkerSpec
+from framechain.config.chain import ChainConfig
+from framechain.config.chain_cameras import MarkerSpec
 from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
 from framechain.robot.binding import arm_root, joint_positions, robot_model
 from framechain.robot.kinematics import RobotModel
@@ -227,7 +228,7 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
         "cameras": {
             name: {
                 "frame": cam.optical_frame, "parent": cam.mount.parent, "optical_mount": cam.mount.optical,
-                "xyz": list(cam.mount.translation), "source": cam.source,
+                "xyz": list(cam.mount.xyz), "source": cam.source,
                 "focal_px": [cam.intrinsics.fx, cam.intrinsics.fy],
                 "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
                                                        "timestamp_column": cam.timing.timestamp_column},
@@ -295,8 +296,9 @@ def _joint_edges(
 def _mount_edges(cfg: RobotConfig) -> list[TransformTable]:
     out: list[TransformTable] = []
     for cam in cfg.cameras.values():
-        for parent, child, t, quat in cam.mount_edges():
-            out.append(TransformTable.from_rows(parent, child, [0], [t], [quat], is_static=True, source=cam.source))
+        for edge in cam.mount_edges():
+            out.append(TransformTable.from_rows(edge.parent, edge.child, [0], [edge.xyz], [edge.quat_xyzw],
+                                                is_static=True, source=cam.source))
     return out
 
 

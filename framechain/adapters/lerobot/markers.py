@@ -19,7 +19,7 @@ import numpy as np
 
 from framechain.adapters.messages.egomotion_frames import camera_image_rows, decode_grey
 from framechain.adapters.messages.fiducials import FiducialRows, ResolvedFiducials, resolve_fiducials, tag_size_lookup
-from framechain.config.chain import MarkerSpec
+from framechain.config.chain_cameras import MarkerSpec
 from framechain.timeline import CameraTable, ImageFrameTable
 from framechain.vision.markers import MarkerFinder
 

@@ -42,13 +42,13 @@ from framechain.adapters.messages.rows import (
 )
 from framechain.adapters.mounts import (
     FileCamera,
-    StaticEdge,
     log_urdf_edges,
     merge_file_cameras,
     merge_static_edges,
 )
 from framechain.arrays import distinct_names
 from framechain.config.chain import ChainConfig
+from framechain.config.mount import Mount
 from framechain.timeline import CameraTable, DepthFrameTable, ImageFrameTable, Timeline, TransformTable
 
 NS = 1_000_000_000
@@ -112,7 +112,7 @@ class Collector:
         #: Pose topics and the child frame their entry names (None: the message's, else the body frame).
         self.pose_children = {p.topic: p.child for p in chain.pose_topics()} if chain else {}
         #: Static edges and camera models the chain file adds (see framechain.adapters.mounts).
-        self.chain_edges: list[StaticEdge] = []
+        self.chain_edges: list[Mount] = []
         self.file_cameras: list[FileCamera] = []
         self.notes: list[str] = []
         self.depth_from_pose: dict[str, int] = {}  # detections whose hypothesis pose carried a depth, by topic

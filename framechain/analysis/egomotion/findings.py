@@ -56,7 +56,7 @@ from framechain.catalogue import Fault, HopName
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.geometry.rotations import Inverse, Rotations, angle_of, matrix_of, rpy_of
 
-__all__ = ["MotionFindings", "MountDeclaration", "motion_findings"]
+__all__ = ["CameraDeclaration", "MotionFindings", "motion_findings"]
 
 #: Every correction a camera's fit can propose.
 _EVERY = frozenset({"latency", "link", "mount", "focal"})
@@ -69,8 +69,11 @@ _OPTICAL_FROM_LINK = np.asarray(OPTICAL_FROM_LINK_QUAT_XYZW)
 
 
 @dataclass(frozen=True)
-class MountDeclaration:
-    """Where a camera is declared (robot.yaml or its calibration file) and how: for fixes in that file's form."""
+class CameraDeclaration:
+    """Where a camera is declared (robot.yaml or its calibration file) and what that file says of it, as the
+    episode's metadata carries it: fixes are written in that file's keys and form. Not a mount
+    (:class:`framechain.config.mount.Mount`): of the camera's mount it keeps whether it is optical and its
+    position, with the camera's timing offset and focal length."""
 
     name: str
     source: str  # the file declaring the mount and timing
@@ -81,7 +84,7 @@ class MountDeclaration:
     focal_px: tuple[float, float] | None = None  # the declared fx, fy
 
     @classmethod
-    def from_metadata(cls, metadata: Mapping[str, Any], camera: str) -> MountDeclaration | None:
+    def from_metadata(cls, metadata: Mapping[str, Any], camera: str) -> CameraDeclaration | None:
         """The declaration of the camera whose optical frame is ``camera`` (a LeRobot episode's metadata)."""
         cameras = metadata.get("cameras")
         if not isinstance(cameras, Mapping):
@@ -173,7 +176,7 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
     bounds: list[Bound] = []
     totals = 0.0
     for motion in evidence.cameras:
-        declaration = MountDeclaration.from_metadata(metadata, motion.camera)
+        declaration = CameraDeclaration.from_metadata(metadata, motion.camera)
         misfit = _misfit(motion, motion.fit) if motion.observable and motion.fit is not None else None
         if misfit is None or misfit.rows.size == 0:
             why = [] if misfit is None else [f"camera {motion.camera}: no measured frame pair inside the span of its "
@@ -250,7 +253,7 @@ def _shapley(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:
 
 
 # -- the corrections proposed ----------------------------------------------------------------------
-def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None,
+def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaration | None,
                judgement: Judgement) -> list[_Proposal]:
     """The corrections that are findings: determined, clear of "nothing wrong", past their bound; none at all
     when the fitted model does not explain the motion."""
@@ -291,7 +294,7 @@ def _focal_notes(motion: CameraMotion, fit: EgoMotionFit, proposals: Sequence[_P
     return []
 
 
-def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaration | None) -> _Proposal:
     ms = fit.offset_s * 1e3
     when = "before" if ms < 0 else "after"
     evidence = (f"the images of {motion.camera} turn as {fit.link} did {abs(ms):.1f} ms {when} their stamps "
@@ -309,7 +312,7 @@ def _latency(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclarat
                      {"offset_s": list(fit.offset_interval_s)}, 0.95, evidence, fix)
 
 
-def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaration | None) -> _Proposal:
     declared = next((f for f in fit.links if f.link == motion.declared_link), None)
     best = fit.links[0]
     ratio = best.residual_deg / declared.residual_deg if declared is not None and declared.residual_deg > 0 else 0.0
@@ -327,7 +330,7 @@ def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration
                      {}, float(np.clip(1.0 - ratio, 0.0, 0.99)), evidence, fix)
 
 
-def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaration | None) -> _Proposal:
     error = fit.mount_error
     assert error is not None
     fault, estimate = _mount_fault(motion, fit, declaration)
@@ -343,7 +346,7 @@ def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaratio
 
 
 def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
-                 declaration: MountDeclaration | None) -> tuple[Fault, Estimate]:
+                 declaration: CameraDeclaration | None) -> tuple[Fault, Estimate]:
     """axis_flip (the mounts differ by a signed axis permutation), missing_rotation (the declared mount has
     no rotation of its own) or rotation_error."""
     error = fit.mount_error
@@ -364,7 +367,7 @@ def _mount_fault(motion: CameraMotion, fit: EgoMotionFit,
                                    faulty="recorded data")
 
 
-def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaration | None) -> _Proposal:
+def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaration | None) -> _Proposal:
     scale = 1.0 / fit.focal_scale
     low, high = fit.focal_scale_interval
     evidence = (f"the images of {motion.camera} turn {1.0 / fit.focal_scale:.3f} times as far across the optical axis "
@@ -382,7 +385,7 @@ def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: MountDeclaratio
                      0.95, evidence, fix)
 
 
-def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: MountDeclaration | None) -> str:
+def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: CameraDeclaration | None) -> str:
     """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}``."""
     optical = declaration.optical if declaration is not None else True
     rotation: Rotations = q_link_cam
@@ -395,7 +398,7 @@ def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration:
 
 
 # -- the JSON entry ---------------------------------------------------------------------------------
-def _entry(motion: CameraMotion, declaration: MountDeclaration | None, misfit: _Misfit | None,
+def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: _Misfit | None,
            proposals: Sequence[_Proposal], judgement: Judgement | None) -> dict[str, Any]:
     """One camera's ``camera_motion`` entry: the measurement, and what it can and cannot observe."""
     fit = motion.fit

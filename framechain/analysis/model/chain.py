@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.chain import ChainFrames
+from framechain.config.mount import Mount
 from framechain.geometry.camera import CameraModel
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.geometry.rotations import (
@@ -29,7 +30,7 @@ from framechain.geometry.rotations import (
     quat_rotate,
 )
 from framechain.geometry.transforms import invert_rows, transform_points
-from framechain.replay import LookupStatus, ReplayResult, TransformBuffer
+from framechain.replay import Edge, LookupStatus, ReplayResult, TransformBuffer
 from framechain.replay.composition import compose_hops
 
 #: Shifted pose lookups :class:`ChainInputs` keeps (a few: each holds N poses).
@@ -84,22 +85,36 @@ class Perturbation:
 
 
 @dataclass(frozen=True)
-class Mount:
-    """The static edge a camera hangs from (parent -> link) and the link -> camera rotation.
+class CameraMount:
+    """A camera's mount as the replayed frame graph holds it: the static edge it hangs from (``edge``,
+    parent -> link, as recorded) and the rotation from that link to the camera below it.
 
     For a ROS camera, ``base_link -> camera_link`` with the REP-103 optical rotation below it; for
     a wrist camera, ``flange -> wrist_link``; for a camera frame published directly, the camera's
-    own edge (``link`` is then the camera frame and ``q_link_cam`` the identity).
+    own edge (``link`` is then the camera frame, ``edge.optical`` True, and ``q_link_cam`` the identity).
     """
 
-    parent: str
-    link: str
+    edge: Mount
     q_link_cam: FloatArray
-    t_parent_link: FloatArray  # the recorded mount
-    q_parent_link: FloatArray
+
+    @property
+    def parent(self) -> str:
+        return self.edge.parent
+
+    @property
+    def link(self) -> str:
+        return self.edge.child
+
+    @property
+    def t_parent_link(self) -> FloatArray:
+        return np.asarray(self.edge.xyz)
+
+    @property
+    def q_parent_link(self) -> FloatArray:
+        return np.asarray(self.edge.quat_xyzw)
 
 
-def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
+def find_mount(buffer: TransformBuffer, body: str, camera: str) -> CameraMount | None:
     """The camera's mount on the path from ``camera`` up to ``body`` (None when there is no static one)."""
     path = buffer.path(body, camera)
     if not path.connected or not path.hops or path.hops[0].inverse:
@@ -112,19 +127,24 @@ def find_mount(buffer: TransformBuffer, body: str, camera: str) -> Mount | None:
     if len(path.hops) > 1 and not path.hops[1].inverse and np.rad2deg(off_optical) < 1.0:
         mount = edges[path.hops[1].child]
         if mount.is_static:
-            return Mount(mount.parent, mount.child, first.quat_xyzw[0].copy(), mount.translation[0].copy(),
-                         mount.quat_xyzw[0].copy())
-    return Mount(first.parent, first.child, np.array([0.0, 0.0, 0.0, 1.0]), first.translation[0].copy(),
-                 first.quat_xyzw[0].copy())
+            return CameraMount(_recorded(mount, optical=False), first.quat_xyzw[0].copy())
+    return CameraMount(_recorded(first, optical=True), np.array([0.0, 0.0, 0.0, 1.0]))
+
+
+def _recorded(edge: Edge, *, optical: bool) -> Mount:
+    """A static edge of the frame graph as a mount (its one sample)."""
+    t, q = edge.translation[0].tolist(), edge.quat_xyzw[0].tolist()
+    return Mount(edge.parent, edge.child, (t[0], t[1], t[2]), (q[0], q[1], q[2], q[3]), optical, edge.source)
 
 
 @dataclass(frozen=True)
-class RigCamera:
-    """One camera of a rig as the analysis sees it: its optical frame, model and static mount."""
+class CameraInputs:
+    """One rig camera's part of the chain's inputs: its optical frame, camera model and static mount (not the
+    camera a chain declares: :class:`framechain.config.chain_cameras.RigCamera`)."""
 
     frame: str
     camera: CameraModel
-    mount: Mount | None
+    mount: CameraMount | None
 
 
 @dataclass(frozen=True)
@@ -150,7 +170,7 @@ class ChainInputs:
     camera_is_dynamic: bool
     #: A resample's source and its rows there (see :meth:`take`); None for inputs taken from a replay.
     resampled_from: tuple[ChainInputs, IntArray] | None = field(default=None, compare=False, repr=False)
-    rig_cameras: tuple[RigCamera, ...] = ()
+    rig_cameras: tuple[CameraInputs, ...] = ()
     camera_index: IntArray | None = None  # (N,) index into rig_cameras (None: one camera)
 
     def __len__(self) -> int:
@@ -162,7 +182,7 @@ class ChainInputs:
         """The inputs of a rig's replay: ``models`` gives each camera frame's model, in the rig's order
         (the first is the chain's camera)."""
         frames = list(models)
-        cameras = tuple(RigCamera(f, models[f], find_mount(buffer, result.frames.body, f)) for f in frames)
+        cameras = tuple(CameraInputs(f, models[f], find_mount(buffer, result.frames.body, f)) for f in frames)
         base = cls.from_replay(result, buffer, models[frames[0]])
         observed = result.observations.camera_frame[result.replayed]
         index = np.full(observed.shape[0], -1, dtype=np.int64)
@@ -244,7 +264,7 @@ class ChainInputs:
         return out
 
     @cached_property
-    def mount(self) -> Mount | None:
+    def mount(self) -> CameraMount | None:
         """The camera's static mount, where mount rotation errors are expressed and fixed."""
         return find_mount(self.buffer, self.frames.body, self.frames.camera)
 

@@ -23,7 +23,7 @@ from framechain.analysis.model.fault import FaultModel, Mode
 from framechain.analysis.model.faults import LATENCY_BOUND_S, SAME_ROTATION_DEG
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
-from framechain.config.chain import MountEdge
+from framechain.config.mount import Mount
 from framechain.geometry.rotations import (
     quat_angle,
     quat_from_rotvec,
@@ -50,7 +50,7 @@ SCALE_TOLERANCE = 0.05
 LATENCY_TOLERANCE_FRAMES = 0.5
 
 
-def rig_models(inputs: ChainInputs, layout: RigLayout, mounts: Mapping[str, MountEdge],
+def rig_models(inputs: ChainInputs, layout: RigLayout, mounts: Mapping[str, Mount],
                camera_sources: Mapping[int, str]) -> list[FaultModel]:
     """Every per-camera fault the rig's evidence can show.
 
@@ -83,7 +83,7 @@ def _model(k: int, frame: str, what: str, fault: Fault, hop: HopName, **kwargs: 
                       **kwargs)  # type: ignore[arg-type]
 
 
-def _rotation(k: int, frame: str, mounts: Mapping[str, MountEdge], note: str) -> FaultModel:
+def _rotation(k: int, frame: str, mounts: Mapping[str, Mount], note: str) -> FaultModel:
     def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> RotationEstimate:
         rotvec = -np.asarray(x, dtype=float)  # the faulty mount relative to the right one
         angle = float(np.linalg.norm(rotvec))
@@ -110,7 +110,7 @@ def _rotation(k: int, frame: str, mounts: Mapping[str, MountEdge], note: str) ->
                   fix=fix, tolerance=lambda x: float(np.rad2deg(np.linalg.norm(x))) <= ROTATION_TOLERANCE_DEG)
 
 
-def _translation(k: int, frame: str, mounts: Mapping[str, MountEdge], note: str) -> FaultModel:
+def _translation(k: int, frame: str, mounts: Mapping[str, Mount], note: str) -> FaultModel:
     def estimate(x: FloatArray, mode: Mode, inputs: ChainInputs) -> TranslationEstimate:
         ox, oy, oz = (round(-float(v), 6) + 0.0 for v in x)
         return TranslationEstimate(offset_m=(ox, oy, oz), frame=inputs.frames.body, faulty="recorded data")
@@ -192,7 +192,7 @@ def _numbers(values: FloatArray) -> str:
     return "[" + ", ".join(f"{float(v):.6f}" for v in values) + "]"
 
 
-def _mount_text(parent: str, child: str, xyz: FloatArray, quat: FloatArray, mounts: Mapping[str, MountEdge]) -> str:
+def _mount_text(parent: str, child: str, xyz: FloatArray, quat: FloatArray, mounts: Mapping[str, Mount]) -> str:
     """The mount as the chain writes it (its ``mounts:`` entry, in the rotation key it used), else as a static
     transform publisher command."""
     xyz = np.asarray(xyz, dtype=float)
