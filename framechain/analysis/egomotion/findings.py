@@ -21,8 +21,6 @@ camera's calibration file), in that file's own form.
 
 from __future__ import annotations
 
-import itertools
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -41,6 +39,7 @@ from framechain.analysis.egomotion.bounds import (
     observability,
 )
 from framechain.analysis.egomotion.run import CameraMotion, CameraMotionEvidence
+from framechain.analysis.fit.shapley import shapley_values
 from framechain.analysis.model.estimates import (
     Estimate,
     FrameEstimate,
@@ -188,7 +187,7 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
         fit = misfit.fit
         judgement = judge(motion, fit, misfit.rms(frozenset()), misfit.rms(_EVERY), misfit.motion_rms())
         proposals = _proposals(motion, fit, declaration, judgement)
-        values = _shapley(misfit, [p.kind for p in proposals])
+        values = _shares(misfit, [p.kind for p in proposals])
         totals += misfit.rms(frozenset())
         before.append(misfit.residual(frozenset()))
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
@@ -229,27 +228,9 @@ def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
     return _Misfit(motion, fit, weights, rows)
 
 
-def _shapley(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:
+def _shares(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:
     """Each correction's Shapley value of the misfit removed (deg/s), over every subset of the others."""
-    n = len(kinds)
-    cache: dict[frozenset[str], float] = {}
-
-    def value(subset: frozenset[str]) -> float:
-        if subset not in cache:
-            cache[subset] = misfit.rms(frozenset()) - misfit.rms(subset)
-        return cache[subset]
-
-    out = []
-    for kind in kinds:
-        others = [k for k in kinds if k != kind]
-        total = 0.0
-        for size in range(n):
-            weight = math.factorial(size) * math.factorial(n - size - 1) / math.factorial(n)
-            for subset in itertools.combinations(others, size):
-                base = frozenset(subset)
-                total += weight * (value(base | {kind}) - value(base))
-        out.append(total)
-    return out
+    return shapley_values(len(kinds), lambda s: misfit.rms(frozenset()) - misfit.rms(frozenset(kinds[i] for i in s)))
 
 
 # -- the corrections proposed ----------------------------------------------------------------------

@@ -49,7 +49,7 @@ from framechain.analysis.egomotion.solve import (
     Orientations,
     Pairs,
     Solved,
-    bootstrap,
+    block_bootstrap,
     complete_mount,
     focal_scale,
     frame_pairs,
@@ -313,7 +313,7 @@ def _final(
     else:
         pairs = frame_pairs(table, origin, span, opts.max_offset_s)
         solved = solve(orientations, pairs, opts)
-    boot = bootstrap(pairs, solved, opts)
+    boot = block_bootstrap(pairs, solved, opts)
     mount = solved.mount
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
     info = information(orientations, pairs, solved, link_rv)

@@ -11,7 +11,7 @@ treated as one unknown: for each trial offset ``d``, the motion is measured with
 compared with forward kinematics at ``d`` (the mount fitted, robust weights), and the offset is the
 ``d`` whose measurement fits best. Found by bracketing and a parabola, then measured on a grid of
 offsets around it, whose costs give the bootstrap intervals (:func:`framechain.analysis.egomotion.solve.
-bootstrap`). Each measurement costs one pass over the tracks (tens of milliseconds for an episode).
+block_bootstrap`). Each measurement costs one pass over the tracks (tens of milliseconds for an episode).
 """
 
 from __future__ import annotations

@@ -249,7 +249,7 @@ def link_fit(name: str, pairs: Pairs, solved: Solved, orientations: Orientations
 EDGE_SHARE = 0.05
 
 
-def offset_undetermined(solved: Solved, boot: Boot, opts: EgoMotionFitOptions) -> str:
+def offset_undetermined(solved: Solved, boot: BlockBootstrap, opts: EgoMotionFitOptions) -> str:
     """Why the time offset cannot be trusted ("" when it can): its best value at an end of the search window
     (the true one may lie beyond), or resamples whose best lies at the edge of the grid around it (a flat
     or many-valleyed misfit)."""
@@ -262,16 +262,21 @@ def offset_undetermined(solved: Solved, boot: Boot, opts: EgoMotionFitOptions) -
 
 
 @dataclass(frozen=True)
-class Boot:
+class BlockBootstrap:
+    """Resamples of the offset and mount by :func:`block_bootstrap`, and how often a resample's best offset sat
+    at the fine grid's edge."""
+
     offsets: FloatArray  # (B,)
     mounts: FloatArray  # (B, 3, 3)
     weights: FloatArray  # (B, N)
     at_edge: float  # share of resamples whose minimum is at the fine grid's edge
 
 
-def bootstrap(pairs: Pairs, solved: Solved, opts: EgoMotionFitOptions) -> Boot:
+def block_bootstrap(pairs: Pairs, solved: Solved, opts: EgoMotionFitOptions) -> BlockBootstrap:
     """Block bootstrap over frame pairs (blocks of ``block_s`` of consecutive frames, by the first stamp: pairs
-    that share frames are not independent) on the fine offset grid."""
+    that share frames are not independent) on the fine offset grid: each resample reweights the blocks and reads
+    its offset and mount off the grid's products, nothing is refitted (unlike the fault models' bootstrap,
+    :func:`framechain.analysis.fit.shares.refit_bootstrap`, which resamples observations and refits)."""
     rng = np.random.default_rng(opts.seed)
     block = np.floor((pairs.t0 - pairs.t0.min()) / opts.block_s).astype(np.int64)
     blocks = int(block.max()) + 1
@@ -290,7 +295,7 @@ def bootstrap(pairs: Pairs, solved: Solved, opts: EgoMotionFitOptions) -> Boot:
     alpha = (where - k)[:, None, None]
     rows = np.arange(opts.bootstrap)
     mounts = kabsch((1.0 - alpha) * cross[rows, k] + alpha * cross[rows, k + 1])
-    return Boot(offsets=offsets, mounts=mounts, weights=weights, at_edge=at_edge)
+    return BlockBootstrap(offsets=offsets, mounts=mounts, weights=weights, at_edge=at_edge)
 
 
 @dataclass(frozen=True)
@@ -370,7 +375,7 @@ def observed(info: Information) -> Observed:
     return Observed("", tuple((float(a[0]), float(a[1]), float(a[2])) for a in weak))
 
 
-def focal_scale(pairs: Pairs, solved: Solved, link_rv: FloatArray, boot: Boot) -> tuple[float, FloatArray]:
+def focal_scale(pairs: Pairs, solved: Solved, link_rv: FloatArray, boot: BlockBootstrap) -> tuple[float, FloatArray]:
     """Measured over predicted rotation across the optical axis (x and y of the optical frame), and its bootstrap.
 
     A rotation about the optical x or y axis moves the image by ``f * angle``; measured with an

@@ -3,7 +3,6 @@ noise), its bootstrap interval, and the sentence that says what it was found fro
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -12,6 +11,7 @@ import numpy as np
 
 from framechain.analysis.fit.least_squares import fit_models, perturbation_of
 from framechain.analysis.fit.selection import Objective, Selected, at_bound, distances, near_bound
+from framechain.analysis.fit.shapley import shapley_values
 from framechain.analysis.model.chain import ChainInputs
 from framechain.analysis.model.estimates import Estimate, estimate_scalars, format_estimate, format_interval
 from framechain.analysis.model.fault import FaultModel, Mode
@@ -56,7 +56,7 @@ def drop_unexplaining(
     kept = list(found)
     dropped: list[Found] = []
     while True:
-        shapley = shapley_values(kept, objective, inputs)
+        shapley = fault_shapley_values(kept, objective, inputs)
         if not kept:
             return kept, shapley, dropped
         combined = perturbation_of([f[0] for f in kept], np.concatenate([f[1] for f in kept]))
@@ -74,35 +74,20 @@ def drop_unexplaining(
         dropped.append((model, x, value, why, sel))
 
 
-def shapley_values(
+def fault_shapley_values(
     found: Sequence[Found], objective: Objective, inputs: ChainInputs
 ) -> list[float]:
     """Shapley values of the median error explained, over the faults found (2^k replays)."""
-    k = len(found)
-    if k == 0:
-        return []
-    cache: dict[frozenset[int], float] = {}
 
-    def error(subset: frozenset[int]) -> float:
-        if subset not in cache:
-            chosen = [found[i] for i in sorted(subset)]
-            pert = perturbation_of(
-                [c[0] for c in chosen], np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
-            )
-            cache[subset] = float(np.nanmedian(distances(objective(inputs, pert))))
-        return cache[subset]
+    def lowered(subset: frozenset[int]) -> float:
+        """Minus the median error with the faults ``subset`` applied: the error each coalition takes away."""
+        chosen = [found[i] for i in sorted(subset)]
+        pert = perturbation_of(
+            [c[0] for c in chosen], np.concatenate([c[1] for c in chosen]) if chosen else np.zeros(0)
+        )
+        return -float(np.nanmedian(distances(objective(inputs, pert))))
 
-    values = []
-    for i in range(k):
-        others = [j for j in range(k) if j != i]
-        phi = 0.0
-        for size in range(k):
-            weight = math.factorial(size) * math.factorial(k - size - 1) / math.factorial(k)
-            for subset in itertools.combinations(others, size):
-                s = frozenset(subset)
-                phi += weight * (error(s) - error(s | {i}))
-        values.append(phi)
-    return values
+    return shapley_values(len(found), lowered)
 
 
 @dataclass(frozen=True)
@@ -134,19 +119,11 @@ def own_effect(found: Sequence[Found], k: int, objective: Objective, inputs: Cha
     return float(np.median(without[both]) - np.median(with_all[both])) if both.any() else None
 
 
-def bootstrap_interval(
-    sel: Selected,
-    model: FaultModel,
-    rng: np.random.Generator,
-    draws: int,
-    say: Progress,
-) -> dict[str, list[float]]:
-    """95% intervals of the model's scalar estimates over observation resamples."""
-    return bootstrap(sel, model, rng, draws, say).interval
-
-
-def bootstrap(sel: Selected, model: FaultModel, rng: np.random.Generator, draws: int, say: Progress) -> Bootstrapped:
-    """The model refitted on ``draws`` observation resamples: its intervals and how often it ran to its edge."""
+def refit_bootstrap(sel: Selected, model: FaultModel, rng: np.random.Generator, draws: int, say: Progress
+                    ) -> Bootstrapped:
+    """The model refitted on ``draws`` observation resamples (drawn with replacement): its 95% intervals and how
+    often it ran to its edge. (A camera's motion is bootstrapped otherwise: blocks of frame pairs reweighted on
+    a grid, nothing refitted, :func:`framechain.analysis.egomotion.solve.block_bootstrap`.)"""
     if model.n_params == 0:
         return Bootstrapped({})
     stage = f"bootstrapping {model.name}"

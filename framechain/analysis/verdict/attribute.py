@@ -52,10 +52,10 @@ from framechain.analysis.fit.selection import (
 from framechain.analysis.fit.shares import (
     Bootstrapped,
     Found,
-    bootstrap,
     drop_unexplaining,
     evidence_sentence,
     own_effect,
+    refit_bootstrap,
     undetermined_because,
     weakened,
 )
@@ -322,7 +322,7 @@ def _findings(level: _Level, inputs: ChainInputs, context: FixContext, rng: np.r
         estimate = model.estimate(x, sel.mode, inputs)
         fix = (model.fix(x, sel.mode, inputs) if model.fix is not None else
                fix_for(fault, model.hop, estimate, inputs, x, sel.mode, context=context))
-        boot = bootstrap(sel, model, rng, draws, say) if draws else Bootstrapped({})
+        boot = refit_bootstrap(sel, model, rng, draws, say) if draws else Bootstrapped({})
         findings.append(Finding(
             fault=fault, hop=model.hop, estimate=estimate, interval=boot.interval,
             undetermined_because=undetermined_because(model, x, boot.interval, boot.at_edge),
