@@ -176,3 +176,19 @@ def test_distinct_models_groups_rows_by_their_whole_model() -> None:
         model = models[which[i]]
         assert (model.frame, model.width, model.height, tuple(model.K.ravel()), model.distortion_model,
                 tuple(model.distortion)) == keys[i]
+
+
+@pytest.mark.parametrize("model", [*sorted(DISTORTIONS), "none", "fisheye"])
+def test_numpy_and_opencv_paths_of_one_model_agree(rng: np.random.Generator, model: str) -> None:
+    """vision.opencv hands OpenCV the model's own coefficients: both undistortions give the same rays."""
+    from framechain.vision.opencv import project, undistort_normalised
+
+    camera = CameraModel("cam", K, W, H, model, DISTORTIONS.get(model, DISTORTIONS["equidistant"]))
+    layout = {"equidistant": 4, "plumb_bob": 5, "rational_polynomial": 8, "none": 5}[camera.distortion_model]
+    assert camera.opencv_distortion().shape == (layout,)
+    u, v = random_pixels(rng, 200)
+    x, y = camera.pixel_to_normalized(u, v)
+    xy = undistort_normalised(camera, np.stack([u, v], axis=1))
+    assert ray_angle(x, y, xy[:, 0], xy[:, 1]).max() < 1e-6
+    np.testing.assert_allclose(project(camera, np.stack([x, y, np.ones_like(x)], axis=1)), np.stack([u, v], axis=1),
+                               atol=1e-6)
