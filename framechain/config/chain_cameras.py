@@ -4,7 +4,7 @@ in its images (``evidence.markers``), its latency budget, and a rig's cameras, e
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from framechain.config import plausible
@@ -104,7 +104,7 @@ def calibration_sources(top: Section) -> tuple[CalibrationSource, ...]:
     return tuple(out)
 
 
-_RIG_CAMERA_KEYS = {f.name for f in fields(RigCamera)}
+_RIG_CAMERA_KEYS = dataclass_keys(RigCamera)
 
 
 def rig_cameras(top: Section) -> tuple[RigCamera, ...]:
