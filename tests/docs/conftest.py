@@ -13,15 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-#: Inputs that are folders of ../shared/realdata, their files linked in.
-_REAL = {"stairs": "tagslam_stairs", "quad_rig": "tagslam_quad_rig", "evo": "evo"}
+#: Inputs that are folders of ../shared/realdata, their files linked in ("fleet": the stairs bag without the
+#: tutorial's chain.yaml, which only files of the input "stairs" get).
+_REAL = {"stairs": "tagslam_stairs", "fleet": "tagslam_stairs", "quad_rig": "tagslam_quad_rig", "evo": "evo"}
 _SO101_URDF = Path("urdf") / "so101" / "so101_new_calib.urdf"
 _SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 
 
 def _link_all(source: Path, folder: Path) -> None:
     for entry in source.iterdir():
-        (folder / entry.name).symlink_to(entry)
+        if not (folder / entry.name).exists():  # two inputs' LICENSE files: the first one's
+            (folder / entry.name).symlink_to(entry)
 
 
 def _demo(folder: Path) -> None:
@@ -65,13 +67,17 @@ def _so101_dataset(root: Path) -> None:
 @pytest.fixture(scope="session")
 def doc_inputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
                ) -> Callable[[str, Path], None]:
-    """Lays the named inputs into a folder (skipping the test when they are not on this machine)."""
+    """Lays the named inputs (``a+b``: both) into a folder (skipping the test when they are not on this machine)."""
     made: dict[str, Path] = {}
 
     def realdata() -> Path:
         return request.getfixturevalue("realdata")  # type: ignore[no-any-return]
 
-    def lay(name: str, folder: Path) -> None:
+    def lay(names: str, folder: Path) -> None:
+        for name in names.split("+"):
+            lay_one(name, folder)
+
+    def lay_one(name: str, folder: Path) -> None:
         if name == "empty":
             return
         if name in _REAL:
