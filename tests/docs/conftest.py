@@ -1,11 +1,12 @@
 """The inputs the documentation's blocks run beside (``in=`` of a block's check), each laid into the test's
 folder: the real logs from ../shared/realdata (linked, never copied), the demo's output, and a generated
-SO-101 dataset. A missing input skips the blocks that need it, with the reason."""
+SO-101 dataset with LeRobot calibration files ("so101"; "so101_urdf": the URDF alone). A missing input skips the blocks that need it, with the reason."""
 
 from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -64,6 +65,14 @@ def _so101_dataset(root: Path) -> None:
                    root / "detections.parquet")
 
 
+def _lerobot_calibrations(folder: Path) -> None:
+    """LeRobot calibration JSONs of two SO-101 followers (the docs' two-arm example names them)."""
+    motors = {j: {"id": i + 1, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000}
+              for i, j in enumerate(_SO101_JOINTS)}
+    for arm in ("left", "right"):
+        (folder / f"{arm}_follower.json").write_text(json.dumps(motors))
+
+
 @pytest.fixture(scope="session")
 def doc_inputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory,
                ) -> Callable[[str, Path], None]:
@@ -90,12 +99,14 @@ def doc_inputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPath
                 made["demo"] = tmp_path_factory.mktemp("demo")
                 _demo(made["demo"])
             _link_all(made["demo"], folder)
-        elif name == "so101":
+        elif name in ("so101", "so101_urdf"):
             urdf = realdata() / _SO101_URDF
             if not urdf.is_file():
                 pytest.skip(f"{urdf} not present")
             (folder / urdf.name).symlink_to(urdf)
-            _so101_dataset(folder)
+            if name == "so101":
+                _so101_dataset(folder)
+                _lerobot_calibrations(folder)
         else:
             raise AssertionError(f"no input named {name!r} for the docs' blocks")
 

@@ -132,11 +132,13 @@ def test_every_block_says_what_it_is() -> None:
 
 
 @pytest.mark.parametrize("block", [b for b in ALL_BLOCKS if b.lang == "yaml"], ids=lambda b: b.where)
-def test_yaml_blocks_parse_and_load(block: Block, tmp_path: Path) -> None:
+def test_yaml_blocks_parse_and_load(block: Block, tmp_path: Path, doc_inputs: Callable[[str, Path], None]) -> None:
     from framechain.config.chain import ChainConfig
     from framechain.config.robot import RobotConfig
 
     raw = yaml.safe_load(block.text)
+    if block.kind in ("chain", "robot"):
+        doc_inputs(block.options.get("in", "empty"), tmp_path)  # the files it names
     if block.kind == "chain":
         ChainConfig.from_dict(raw, where=block.where, base_dir=tmp_path)
     elif block.kind == "robot":
