@@ -1,6 +1,7 @@
 """The inputs the documentation's blocks run beside (``in=`` of a block's check), each laid into the test's
 folder: the real logs from ../shared/realdata (linked, never copied), the demo's output, and a generated
-SO-101 dataset with LeRobot calibration files ("so101"; "so101_urdf": the URDF alone). A missing input skips the blocks that need it, with the reason."""
+SO-101 dataset with LeRobot calibration files ("so101"; "so101_urdf": the URDF alone). A missing input
+skips the blocks that need it, with the reason."""
 
 from __future__ import annotations
 

@@ -182,7 +182,8 @@ def run_command(line: str, cwd: Path) -> tuple[int, str]:
     redirect = None
     if len(tokens) > 2 and tokens[-2] == ">":
         redirect, tokens = tokens[-1], tokens[:-2]
-    assert tokens and tokens[0] == "framechain", f"only framechain runs here: {line!r}"
+    assert tokens, line
+    assert tokens[0] == "framechain", f"only framechain runs here: {line!r}"
     out, err = io.StringIO(), io.StringIO()
     with _environment(cwd, env), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -291,7 +292,7 @@ def _write_files(blocks: list[Block], folder: Path) -> None:
         (folder / block.options["file"]).write_text(block.text)
 
 
-@pytest.mark.parametrize(("page", "inputs"), _sequences(), ids=lambda v: str(v))
+@pytest.mark.parametrize(("page", "inputs"), _sequences(), ids=str)
 def test_the_blocks_run_and_print_what_they_show(page: str, inputs: str, tmp_path: Path,
                                                   doc_inputs: Callable[[str, Path], None]) -> None:
     doc_inputs(inputs, tmp_path)
