@@ -81,7 +81,8 @@ def doc_inputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPath
     made: dict[str, Path] = {}
 
     def realdata() -> Path:
-        return request.getfixturevalue("realdata")  # type: ignore[no-any-return]
+        root: Path = request.getfixturevalue("realdata")  # skips the test without ../shared/realdata
+        return root
 
     def lay(names: str, folder: Path) -> None:
         for name in names.split("+"):

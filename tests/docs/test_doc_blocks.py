@@ -6,10 +6,11 @@ page: ``<!-- check: KIND [in=INPUTS] [file=NAME] [set=FILE:KEY=VALUE] [cmd="COMM
 
 - ``chain`` / ``robot``: YAML loaded as CHAIN.yaml / robot.yaml; a ``yaml`` block without a check only parses.
 - ``run``: ``console`` blocks hold ``$ COMMAND`` lines, each followed by its output; ``sh`` blocks hold
-  commands only (each must succeed); a ``text`` block with ``cmd=`` is that command's output; ``python``
-  blocks run. ``in=`` names the inputs they run beside (tests/docs/conftest.py); the blocks of one page with
+  commands only (each must succeed); a ``text`` (or ``yaml``) block with ``cmd=`` is that command's output;
+  ``python`` blocks run. ``in=`` names the inputs they run beside (tests/docs/conftest.py); the blocks of one page with
   the same inputs run in page order in one folder, as a reader follows them.
-- ``file=NAME``: the block is also that file among the inputs (on other pages, from the start).
+- ``file=NAME``: the block is also that file among the inputs: on its page from where it stands (a command's
+  output once the command ran), on other pages from the start.
 - ``set=FILE:KEY=VALUE``: for this block only, FILE's dotted KEY set to the YAML VALUE (a variant).
 - ``illustrative (WHY)``: not run (a placeholder path, a command that needs what tests lack), and says why.
 
@@ -35,7 +36,8 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The pages checked: the manual, and the README and ARCHITECTURE.md at the top.
-PAGES = sorted([*(ROOT / "docs").glob("*.md"), ROOT / "README.md", ROOT / "ARCHITECTURE.md"])
+#: (docs/architecture.md is ARCHITECTURE.md, linked: one page.)
+PAGES = sorted({p.resolve() for p in [*(ROOT / "docs").glob("*.md"), ROOT / "README.md", ROOT / "ARCHITECTURE.md"]})
 LANGUAGES = {"yaml", "python", "console", "sh", "text"}
 KINDS = {"chain", "robot", "yaml", "run", "illustrative"}
 #: Illustrative blocks are the exception: a few, each with its reason.
