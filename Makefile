@@ -24,9 +24,11 @@ lint: $(STAMP)
 # MALLOC_PERTURB_: libx264 reads uninitialised memory at widths that are not a multiple of 64 (the tests' 224 px
 # wrist videos), so the same frames encode differently from run to run and every camera-motion test would
 # measure another video each time; glibc filling fresh allocations makes the generated videos the same bytes.
+# The manual (docs/, mkdocs.yml) is built strictly into a scratch folder: a broken link or anchor fails.
 test: lint
 	MALLOC_PERTURB_=165 $(PY) -m pytest -q -n 2 tests
 	$(PY) -m pytest -q -p no:xdist --nbmake notebooks
+	site=$$(mktemp -d) && $(VENV)/bin/mkdocs build --strict --quiet --site-dir "$$site"; status=$$?; rm -rf "$$site"; exit $$status
 
 bench: $(STAMP)
 	$(PY) benchmarks/run.py

@@ -302,8 +302,8 @@ def _check_not_urdf(robot: Path) -> None:
     if robot.suffix.lower() in (".urdf", ".xacro", ".xml") or head.startswith(b"<"):
         raise FramechainError(
             f"--robot {robot}: a URDF; --robot takes a robot.yaml that names it (urdf: {robot.name}) and maps "
-            "the dataset's joint states to its joints and the cameras to their links (README: 'LeRobot "
-            "datasets: robot.yaml')")
+            "the dataset's joint states to its joints and the cameras to their links (see "
+            "docs/lerobot.md#the-robot-file)")
 
 
 def run(

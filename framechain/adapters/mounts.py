@@ -2,7 +2,8 @@
 ``mounts:`` and from the fixed joints of a URDF (the chain's ``urdf:`` file, or the log's
 ``/robot_description``).
 
-Precedence, decided once here and documented in the README:
+Precedence, decided once here and documented in
+docs/cli.md#calibration-mounts-and-poses-from-outside-the-log:
 
 - a calibration file the chain names is used for its camera frame; the log's CameraInfo for that
   frame is dropped, with a note giving both values when they differ;

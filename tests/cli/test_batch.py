@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import shutil
 import signal
 import subprocess
@@ -438,14 +437,3 @@ def test_paths_stay_as_given_through_a_symlinked_folder(fleet: Path, tmp_path: P
     # The same logs through the resolved path are the same units: nothing is computed again.
     again = run_batch([fleet.resolve()], tmp_path / "out", jobs=1, bootstrap=0, report_formats=())
     assert (again.computed, again.skipped) == (0, result.computed)
-
-
-def test_readme_names_the_fleet_table_columns() -> None:
-    from framechain.fleet import FLEET_SCHEMA
-
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    section = readme[readme.index("### `framechain batch"):readme.index("### `framechain demo")]
-    named = re.findall(r"`([a-z_]+)`", section.split("fleet.parquet", 1)[1].split(";", 1)[0])
-    assert named, "the README lists the fleet table's columns"
-    assert set(named) <= set(FLEET_SCHEMA.names), set(named) - set(FLEET_SCHEMA.names)
-    assert {"log", "chain"} <= set(named)

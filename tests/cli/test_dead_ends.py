@@ -1,6 +1,6 @@
 """No dead ends: `info` says what the chain needs and which key supplies a missing piece; `replay`
 and `attribute` with nothing to replay say why in one line; every real log gets a chain that runs
-or the list of what it lacks; the README's robot.yaml example loads."""
+or the list of what it lacks."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from scipy.spatial.transform import Rotation
 
 from framechain.adapters import write_log
 from framechain.cli.main import main
@@ -219,81 +218,7 @@ def test_bare_urdf_as_robot_points_at_robot_yaml(tmp_path: Path, capsys: pytest.
         assert main([command[0], str(root), "--episode", "0", "--robot", str(urdf), *command[1:]]) == 1
         line = _one_line(capsys.readouterr().err)
         assert "a URDF; --robot takes a robot.yaml" in line
-        assert "README" in line
-
-
-# -- the README's robot.yaml example ---------------------------------------------------------------------
-def _readme_robot_yaml() -> str:
-    text = (ROOT / "README.md").read_text()
-    marker = text.index("<!-- robot.yaml example")
-    block = re.search(r"```yaml\n(.*?)```", text[marker:], flags=re.DOTALL)
-    assert block is not None
-    return block.group(1)
-
-
-def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(realdata: Path, tmp_path: Path,
-                                                           capsys: pytest.CaptureFixture[str]) -> None:
-    urdf = realdata / "urdf" / "so101" / "so101_new_calib.urdf"
-    if not urdf.is_file():
-        pytest.skip(f"{urdf} not present")
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-    import yourdfpy
-
-    from framechain.adapters.lerobot.adapter import open_dataset
-    from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
-    from framechain.replay import TransformBuffer
-
-    text = _readme_robot_yaml()
-    raw = yaml.safe_load(text)
-    (tmp_path / raw["urdf"]).symlink_to(urdf)
-    (tmp_path / "robot.yaml").write_text(text)
-    joints = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
-    rng = np.random.default_rng(3)
-    n = 8
-    state = np.hstack([rng.uniform(-60, 60, (n, 5)), rng.uniform(0, 100, (n, 1))]).astype(np.float32)
-    features = {
-        "observation.state": FeatureSpec("float32", (6,), [f"{j}.pos" for j in joints]),
-        "observation.images.wrist": FeatureSpec("video", (480, 640, 3), ["height", "width", "channels"],
-                                                {"video.fps": 30, "video.codec": "av1", "video.is_depth_map": False}),
-    }
-    root = write_lerobot_dataset(tmp_path / "so101", [EpisodeData({"observation.state": state})], features=features,
-                                 fps=30, version="v3.0")
-    pq.write_table(pa.table({"episode_index": [0, 0], "frame_index": [2, 5], "camera": ["wrist_cam", "wrist_cam"],
-                             "u": [300.0, 340.0], "v": [200.0, 260.0], "depth_m": [0.3, 0.35]}),
-                   tmp_path / "detections.parquet")
-    tl = open_dataset(root, episode=0, robot=tmp_path / "robot.yaml")
-    assert len(tl.observations) == 2
-    # base_link <- wrist optical frame by independent maths: yourdfpy FK, the mount, REP-103.
-    ref = yourdfpy.URDF.load(str(urdf), load_meshes=False, build_collision_scene_graph=False)
-    lo, hi = ref.joint_map["gripper"].limit.lower, ref.joint_map["gripper"].limit.upper
-    cam = raw["cameras"]["wrist_cam"]["mount"]
-    mount = np.eye(4)
-    mount[:3, :3] = Rotation.from_euler("xyz", cam["rpy"]).as_matrix()
-    mount[:3, 3] = cam["xyz"]
-    optical = np.eye(4)
-    optical[:3, :3] = Rotation.from_quat(OPTICAL_Q).as_matrix()
-    stamps = np.round((np.arange(n) / 30).astype(np.float32).astype(np.float64) * 1e9).astype(np.int64)
-    got = TransformBuffer.from_timeline(tl).lookup("base_link", "wrist_cam_optical_frame", stamps)
-    for i in range(n):
-        cfg = {j: float(state[i, k]) * np.pi / 180 for k, j in enumerate(joints[:5])}
-        cfg["gripper"] = lo + float(state[i, 5]) / 100 * (hi - lo)
-        ref.update_cfg(cfg)
-        expected = ref.get_transform(frame_to="gripper_link", frame_from="base_link") @ mount @ optical
-        np.testing.assert_allclose(got.translation[i], expected[:3, 3], atol=1e-9)
-        q = Rotation.from_matrix(expected[:3, :3]).as_quat()
-        assert abs(float(np.dot(got.quat_xyzw[i], q))) == pytest.approx(1.0, abs=1e-9)
-    assert main(["info", str(root), "--episode", "0", "--robot", str(tmp_path / "robot.yaml"), "--json", "-q"]) == 0
-    info = json.loads(capsys.readouterr().out)
-    assert info["suggested_chain"]["frames"] == {"camera": "wrist_cam_optical_frame", "body": "base_link",
-                                                 "world": "world"}
-    needs = {n["piece"]: n["status"] for n in info["needs"]}
-    assert needs["mount"] == needs["pose"] == needs["intrinsics"] == needs["evidence"] == "found"
-    # The trap the example avoids: lerobot names the camera "wrist", and SO-101 has a wrist_link.
-    (tmp_path / "robot.yaml").write_text(text.replace("wrist_cam", "wrist"))
-    assert main(["info", str(root), "--episode", "0", "--robot", str(tmp_path / "robot.yaml")]) == 1
-    line = _one_line(capsys.readouterr().err)
-    assert "camera 'wrist': its frame 'wrist_link' is already a link of the URDF" in line
+        assert "docs/lerobot.md#the-robot-file" in line
 
 
 # -- every real log --------------------------------------------------------------------------------------
