@@ -13,6 +13,7 @@ from framechain.adapters import open_log
 from framechain.cli.main import main
 from framechain.config.calibration import CalibrationError, read_intrinsics_file
 from framechain.config.chain import ChainConfig
+from tests.helpers.realdata import STAIRS
 
 T0 = 1_700_000_000 * 10**9
 
@@ -134,7 +135,7 @@ def test_kalibr_camera_errors_list_the_names(tmp_path: Path) -> None:
 
 
 def test_real_tagslam_cameras_yaml(realdata: Path) -> None:
-    path = realdata / "tagslam_stairs/cameras.yaml"
+    path = realdata / STAIRS / "cameras.yaml"
     fisheye = read_intrinsics_file(path, camera="/t265/fisheye2/tags")
     np.testing.assert_array_equal(fisheye.K, _k(286.80, 286.692, 424.236, 401.151))
     assert (fisheye.width, fisheye.height, fisheye.distortion_model) == (848, 800, "equidistant")
@@ -256,7 +257,7 @@ def test_real_tagslam_bag_with_calibration_and_mount(realdata: Path, tmp_path: P
 
     from framechain.replay import TransformBuffer
 
-    folder = realdata / "tagslam_stairs"
+    folder = realdata / STAIRS
     entries = "\n".join(
         f"  - {{file: {folder / 'cameras.yaml'}, camera: /{topic}/tags, frame: {frame}}}"
         for topic, frame in (("t265/fisheye1", "t265_fisheye1_optical_frame"),

@@ -17,6 +17,7 @@ from framechain.adapters import write_log
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainFrames, ChainTopics
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
+from tests.helpers.realdata import LEROBOT_DATASETS, ROS_LOGS, SO101_URDF, STAIRS
 
 ROOT = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_000
@@ -233,7 +234,7 @@ def _readme_robot_yaml() -> str:
 
 def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(realdata: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
-    urdf = realdata / "urdf" / "so101" / "so101_new_calib.urdf"
+    urdf = realdata / SO101_URDF
     if not urdf.is_file():
         pytest.skip(f"{urdf} not present")
     import pyarrow as pa
@@ -297,23 +298,14 @@ def test_readme_robot_yaml_loads_and_gives_the_wrist_chain(realdata: Path, tmp_p
 
 
 # -- every real log --------------------------------------------------------------------------------------
-REAL_LOGS = [
-    "evo/tf_example.bag", "evo/tf_example", "evo/nav2_turtlebot.mcap", "fiducials/aruco_images.bag",
-    "fiducials/aruco_marker.bag", "franka_tf/rosbagFrankaPanda.bag", "franka_tf/ros2_bag",
-    "husky_localization/test1.bag", "husky_localization/test1_old_stereo_wheel.bag", "turtlesim/example.bag",
-    "realsense_d435/test_rs.bag", "tagslam_stairs/tag_detections.bag", "tagslam_quad_rig/tag_detections.bag",
-]
-REAL_DATASETS = ["lerobot/gr00t_pick_n_place_v20", "lerobot/unitree_g1_v21"]
-
-
 def test_the_real_log_list_is_complete(realdata: Path) -> None:
     found = {str(p.relative_to(realdata)) for p in realdata.glob("*/*") if p.suffix in (".bag", ".mcap")}
     found |= {str(p.parent.relative_to(realdata)) for p in realdata.glob("*/*/metadata.yaml")}
     found |= {str(p.parent.parent.relative_to(realdata)) for p in realdata.glob("*/*/meta/info.json")}
-    assert found == set(REAL_LOGS) | set(REAL_DATASETS)
+    assert found == set(ROS_LOGS) | set(LEROBOT_DATASETS)
 
 
-@pytest.mark.parametrize("name", REAL_LOGS)
+@pytest.mark.parametrize("name", ROS_LOGS)
 def test_every_real_log_runs_or_says_what_it_lacks(name: str, realdata: Path, tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     log = realdata / name
@@ -348,7 +340,7 @@ def test_every_real_log_runs_or_says_what_it_lacks(name: str, realdata: Path, tm
     assert "add `" in _one_line(capsys.readouterr().err)
 
 
-@pytest.mark.parametrize("name", REAL_DATASETS)
+@pytest.mark.parametrize("name", LEROBOT_DATASETS)
 def test_real_lerobot_datasets_say_what_they_need(name: str, realdata: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     root = realdata / name
@@ -365,7 +357,7 @@ def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """The issue's example: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
     tagslam.yaml beside the bag."""
-    folder = realdata / "tagslam_stairs"
+    folder = realdata / STAIRS
     if not folder.is_dir():
         pytest.skip(f"{folder} not present")
     log = folder / "tag_detections.bag"

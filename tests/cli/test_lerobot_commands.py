@@ -7,12 +7,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lerobot_scene import FPS, ArmDataset, target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 
 from framechain.adapters.errors import AdapterError
 from framechain.adapters.lerobot.adapter import LeRobotAdapter, scan_dataset
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
+from tests.helpers.lerobot_scene import (
+    FPS,
+    ArmDataset,
+    target_world,
+    write_arm_dataset,
+    write_detection_table,
+    write_robot_yaml,
+)
 
 DELAY_S = 0.04
 

@@ -12,26 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros1_bags import Ros1Bag
 from scipy.spatial.transform import Rotation
-from shared_paths import REALDATA
-from test_dead_ends import REAL_LOGS
 
 from framechain import pipeline
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
+from tests.helpers.realdata import QUAD_RIG, QUAD_RIG_BAG, ROS_LOGS, STAIRS, STAIRS_BAG, TF_EXAMPLE_BAG, TURTLESIM_BAG
+from tests.helpers.ros1_bags import Ros1Bag
 
 T0 = 1_700_000_000 * 10**9
-STAIRS = REALDATA / "tagslam_stairs"
-QUAD = REALDATA / "tagslam_quad_rig"
-TF_EXAMPLE = REALDATA / "evo" / "tf_example.bag"
 OPTICAL_Q = (-0.5, 0.5, -0.5, 0.5)  # camera_link (FLU) -> optical (RDF), REP-103
-
-
-def _real(path: Path) -> Path:
-    if not path.exists():
-        pytest.skip("../shared/realdata absent")
-    return path
 
 
 def _one_line(err: str) -> str:
@@ -50,10 +40,10 @@ def _filled(text: str) -> dict[str, object]:
 
 
 # -- 1: the suggestion never produces a chain its own checker rejects ----------------------------------
-@pytest.mark.parametrize("name", REAL_LOGS)
+@pytest.mark.parametrize("name", ROS_LOGS)
 def test_every_real_suggestion_parses_as_a_chain(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    log = _real(REALDATA / name)
+                                                 monkeypatch: pytest.MonkeyPatch, realdata: Path) -> None:
+    log = realdata / name
     monkeypatch.chdir(tmp_path)  # as a user would: `info LOG --chain > chain.yaml` in a folder of their own
     assert main(["info", str(log), "--chain", "-q"]) == 0
     text = capsys.readouterr().out
@@ -98,8 +88,9 @@ def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[s
     return {n["piece"]: n for n in json.loads(capsys.readouterr().out)["needs"]}
 
 
-def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
+def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
     needs = _needs(bag, capsys)
     # tagslam.yaml's default and the tags it sizes otherwise (100-108 are 0.10 m)
     assert needs["depth"]["key"] == ("evidence.tag_size_m: {default: 0.16, 100: 0.1, 101: 0.1, 102: 0.1, 103: 0.1, "
@@ -125,11 +116,11 @@ def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: p
 
 
 # -- 3, 4: a typo is named as the cause, with what it may have meant -----------------------------------
-def _stairs_chain(tmp_path: Path, **topics: str) -> Path:
+def _stairs_chain(tmp_path: Path, realdata: Path, **topics: str) -> Path:
     chain = {
         "frames": {"camera": "t265_fisheye1_optical_frame", "body": "basalt_pose_frame", "world": "world"},
         "topics": {"detections": "/t265/fisheye1/tags", "odometry": "/vio_node/odom", **topics},
-        "calibration": {"file": str(STAIRS / "cameras.yaml"), "camera": "cam0"},
+        "calibration": {"file": str(realdata / STAIRS / "cameras.yaml"), "camera": "cam0"},
         "mounts": [{"parent": "basalt_pose_frame", "child": "t265_fisheye1_optical_frame", "xyz": [0.0107, 0.0, 0.0],
                     "rotvec": [-0.0135696, 0.0062165, -3.1391944]}],
         "evidence": {"static_target": True, "tag_size_m": 0.16},
@@ -140,18 +131,20 @@ def _stairs_chain(tmp_path: Path, **topics: str) -> Path:
 
 
 def test_a_misspelt_pose_topic_is_the_cause_not_the_world_frame(tmp_path: Path,
-                                                                capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    chain = _stairs_chain(tmp_path, odometry="/vio_node/odm")
+                                                                capsys: pytest.CaptureFixture[str],
+                                                                realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    chain = _stairs_chain(tmp_path, realdata, odometry="/vio_node/odm")
     assert main(["attribute", str(bag), "--chain", str(chain), "--out", str(tmp_path / "o"), "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "topics.odometry /vio_node/odm is not in the log; did you mean '/vio_node/odom'?" in line
     assert line.index("topics.odometry") < line.index("world frame 'world'")  # the cause first
 
 
-def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    chain = _stairs_chain(tmp_path, detections="/t265/fisheye1/tag")
+def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    chain = _stairs_chain(tmp_path, realdata, detections="/t265/fisheye1/tag")
     needs = _needs(bag, capsys, "--chain", str(chain))
     assert needs["detections"]["status"] == "missing"
     assert "did you mean '/t265/fisheye1/tags'" in needs["detections"]["detail"]
@@ -163,8 +156,8 @@ def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: p
     assert line.count("did you mean") == 1  # said once
 
 
-def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> None:
-    log = _real(TF_EXAMPLE)
+def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
+    log = realdata / TF_EXAMPLE_BAG
     assert main(["tf", str(log), "vision", "odm"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "frame 'vision' does not exist in the log (no transform names it)" in line
@@ -173,11 +166,12 @@ def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> No
 
 
 # -- 5: a folder of several logs is not silently one of them -------------------------------------------
-def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                         realdata: Path) -> None:
     folder = tmp_path / "logs"
     folder.mkdir()
-    (folder / "tf_example.bag").symlink_to(_real(TF_EXAMPLE))
-    (folder / "example.bag").symlink_to(_real(REALDATA / "turtlesim" / "example.bag"))
+    (folder / "tf_example.bag").symlink_to(realdata / TF_EXAMPLE_BAG)
+    (folder / "example.bag").symlink_to(realdata / TURTLESIM_BAG)
     for command in (["info"], ["attribute", "--out", str(tmp_path / "o")]):
         assert main([command[0], str(folder), *command[1:], "-q"]) == 1
         line = _one_line(capsys.readouterr().err)
@@ -185,10 +179,11 @@ def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys:
         assert f"framechain batch {folder} --out DIR" in line
 
 
-def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                           realdata: Path) -> None:
     folder = tmp_path / "run"
     folder.mkdir()
-    (folder / "tf_example.bag").symlink_to(_real(TF_EXAMPLE))
+    (folder / "tf_example.bag").symlink_to(realdata / TF_EXAMPLE_BAG)
     export = folder / "annotated.mcap"
     assert main(["export", str(folder / "tf_example.bag"), "--out", str(export), "--no-attribute", "-q"]) == 0
     capsys.readouterr()
@@ -201,8 +196,9 @@ def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsy
 
 # -- 6: one suggestion everywhere -----------------------------------------------------------------------
 def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    log = _real(TF_EXAMPLE)  # odometry only: no camera frame
+                                                                    capsys: pytest.CaptureFixture[str],
+                                                                    realdata: Path) -> None:
+    log = realdata / TF_EXAMPLE_BAG  # odometry only: no camera frame
     assert main(["replay", str(log), "--save", str(tmp_path / "r.rrd"), "--no-attribute"]) == 0
     captured = capsys.readouterr()
     assert "chain         CAMERA_OPTICAL_FRAME (FILL IN) -> base_link -> odom (suggested;" in captured.out
@@ -229,9 +225,10 @@ def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: P
 
 # -- 7: a calibration of another camera is said first ---------------------------------------------------
 def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    raw = yaml.safe_load(_stairs_chain(tmp_path).read_text())
+                                                                    capsys: pytest.CaptureFixture[str],
+                                                                    realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    raw = yaml.safe_load(_stairs_chain(tmp_path, realdata).read_text())
     raw["calibration"]["camera"] = "cam1"  # the right fisheye's, for the left fisheye's tags
     chain = tmp_path / "chain.yaml"
     chain.write_text(yaml.safe_dump(raw))
@@ -253,10 +250,11 @@ def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Pa
     assert not any("calibration cameras.yaml" in n for n in json.loads(capsys.readouterr().out)["notes"])
 
 
-def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest.CaptureFixture[str]) -> None:
+def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest.CaptureFixture[str],
+                                                                  realdata: Path) -> None:
     """TagSLAM's quad rig: three of the four tag topics carry another camera's header.frame_id."""
-    bag = _real(QUAD / "tag_detections.bag")
-    cameras = yaml.safe_load((QUAD / "cameras.yaml").read_text())
+    bag = realdata / QUAD_RIG_BAG
+    cameras = yaml.safe_load((realdata / QUAD_RIG / "cameras.yaml").read_text())
     tagtopics = {entry["tagtopic"] for entry in cameras.values()}
     assert main(["info", str(bag), "--json", "-q"]) == 0
     notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if "header.frame_id" in n]

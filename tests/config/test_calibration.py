@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from lerobot_scene import LINK_FROM_OPTICAL, rx, ry, rz
 from scipy.spatial.transform import Rotation
 
 from framechain.config.calibration import CalibrationError, load_calibration, read_intrinsics_file
+from tests.helpers.lerobot_scene import LINK_FROM_OPTICAL, rx, ry, rz
 
 INTRINSICS = {"fx": 600.0, "fy": 610.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
 

@@ -11,17 +11,13 @@ import pytest
 from framechain.fleet import run_batch
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
-
-
-def test_the_fleet_shows_each_episodes_offset_and_which_disagree(tmp_path: Path) -> None:
+def test_the_fleet_shows_each_episodes_offset_and_which_disagree(tmp_path: Path, so101_urdf: Path) -> None:
     # One recording of three episodes whose video is 40 ms late, and one episode of another rig 120 ms late.
     recording = generate_video_dataset(tmp_path / "recording", VideoDatasetSpec(
-        URDF, seed=51, duration_s=4.0, episodes=3, version="v3.0", video_delay_s=0.040))
+        so101_urdf, seed=51, duration_s=4.0, episodes=3, version="v3.0", video_delay_s=0.040))
     other = generate_video_dataset(tmp_path / "other_rig", VideoDatasetSpec(
-        URDF, seed=52, duration_s=4.0, version="v2.1", video_delay_s=0.120))
+        so101_urdf, seed=52, duration_s=4.0, version="v2.1", video_delay_s=0.120))
     robot = write_robot_yaml(recording, tmp_path / "robot.yaml")
     out = tmp_path / "out"
     result = run_batch([recording.root, other.root], out, robot=robot, jobs=1, bootstrap=0, report_formats=("md",))

@@ -20,18 +20,15 @@ from framechain.cli.main import main
 from framechain.fleet import BatchResult, run_batch
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 EPISODES = 5
 LATE_EPISODE = 3
 
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
-
 
 @pytest.fixture(scope="module")
-def swapped(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path, BatchResult]:
+def swapped(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path, BatchResult]:
     folder = tmp_path_factory.mktemp("recording")
     delays = tuple(0.1 if e == LATE_EPISODE else 0.0 for e in range(EPISODES))
-    spec = VideoDatasetSpec(URDF, seed=7, episodes=EPISODES, duration_s=6.0, fps=20, codec="mpeg4", bimanual=True,
+    spec = VideoDatasetSpec(so101_urdf, seed=7, episodes=EPISODES, duration_s=6.0, fps=20, codec="mpeg4", bimanual=True,
                             camera_per_arm=True, swap_cameras=True, clock="realtime", focal_px=112.0,
                             repeat_share=0.15, camera_delays_s=(0.06, 0.09), episode_delays_s=delays)
     truth = generate_video_dataset(folder / "dataset", spec)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_helpers import assert_same_rotation, random_quats
 from scipy.spatial.transform import Rotation
 
 from framechain.geometry.rotations import (
@@ -27,6 +26,7 @@ from framechain.geometry.rotations import (
     quat_to_rpy,
 )
 from framechain.geometry.transforms import invert_rows, transform_points
+from tests.helpers.reference_maths import assert_same_rotation, random_quats
 
 N = 2000
 

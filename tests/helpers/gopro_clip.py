@@ -22,7 +22,6 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-from gpmf import SensorStream, axes_matrix
 
 from framechain.adapters.lerobot.video import probe_video, read_frames
 from framechain.analysis.egomotion import LinkMotion
@@ -31,6 +30,7 @@ from framechain.config.calibration import Intrinsics
 from framechain.geometry.rotations import quat_from_rotvec, quat_multiply
 from framechain.timeline import EgoMotionTable
 from framechain.vision.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
+from tests.helpers.gpmf import SensorStream, axes_matrix
 
 #: The link name the gyro's orientation goes by.
 GYRO_LINK = "gopro_gyro"

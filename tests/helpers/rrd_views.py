@@ -1,5 +1,6 @@
-"""What a saved recording shows, read back with Rerun's own reader: the views of its blueprint store (class, name,
-origin, the entities they query), the entities that hold data, and the labels drawn in 3D."""
+"""What a saved recording shows, read back with Rerun's own reader: its chunks and their columns by entity, the views
+of its blueprint store (class, name, origin, the entities they query), the entities that hold data, and the labels
+drawn in 3D."""
 
 from __future__ import annotations
 
@@ -8,6 +9,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pyarrow as pa
+
+#: A saved recording's chunks by entity path: (static or not, the chunk as a record batch).
+Chunks = dict[str, list[tuple[bool, pa.RecordBatch]]]
 #: Archetypes that draw something or say something (a pinhole, a coordinate frame or a series' style alone do not).
 DATA_ARCHETYPES = frozenset({
     "Transform3D", "Points3D", "Points2D", "Arrows3D", "LineStrips3D", "LineStrips2D", "Image", "EncodedImage",
@@ -104,3 +110,25 @@ def labels_in_3d(rrd: Path) -> list[str]:
                 if texts and not (show and not show[0]):
                     labels.extend(texts)
     return labels
+
+
+def read_chunks(path: Path) -> Chunks:
+    """A saved recording's chunks by entity, in the file's order."""
+    from rerun.chunk import RrdReader
+
+    out: dict[str, list[tuple[bool, pa.RecordBatch]]] = defaultdict(list)
+    for chunk in RrdReader(path).stream():
+        out[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
+    return dict(out)
+
+
+def column_values(chunks: Chunks, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
+    """Values of one column of an entity over all its chunks, in log order (by RowId)."""
+    batches = [b for s, b in chunks.get(entity, []) if static is None or s == static]
+    batches = [b for b in batches if column in b.schema.names]
+    if not batches:
+        return []
+    table = pa.Table.from_batches([b.select(["rerun.controls.RowId", column]) for b in batches])
+    order = np.argsort(np.asarray(table.column("rerun.controls.RowId").to_pylist(), dtype=object), kind="stable")
+    values = table.column(column).to_pylist()
+    return [values[i] for i in order]

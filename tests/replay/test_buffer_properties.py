@@ -1,6 +1,6 @@
 """Property tests: vectorised lookups on random frame trees against one-at-a-time references.
 
-References: :func:`core_helpers.reference_lookup` (bracketing samples found by hand, lerp, scipy
+References: :func:`tests.helpers.reference_maths.reference_lookup` (bracketing samples found by hand, lerp, scipy
 Slerp, 4x4 matrices composed along the path) and pytransform3d's TemporalTransformManager.
 """
 
@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_helpers import OK, RefEdge, assert_same_rotation, random_quats, reference_lookup
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import LookupStatus, TransformBuffer
 from framechain.timeline import TransformTable
+from tests.helpers.reference_maths import OK, RefEdge, assert_same_rotation, random_quats, reference_lookup
 
 MS = 1_000_000
 PROFILE = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -4,15 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from core_helpers import (
-    FUTURE,
-    PAST,
-    RefEdge,
-    assert_same_rotation,
-    matrix,
-    random_quats,
-    reference_lookup,
-)
 from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.replay import (
@@ -24,6 +15,15 @@ from framechain.replay import (
     TransformBuffer,
 )
 from framechain.timeline import InvalidTransformError, TransformTable
+from tests.helpers.reference_maths import (
+    FUTURE,
+    PAST,
+    RefEdge,
+    assert_same_rotation,
+    matrix,
+    random_quats,
+    reference_lookup,
+)
 
 S = 1_000_000_000  # one second in ns
 IDENT = [0.0, 0.0, 0.0, 1.0]

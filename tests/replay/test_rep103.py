@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-from core_helpers import assert_same_rotation
 from scipy.spatial.transform import Rotation
 
 from framechain.replay import CameraModel, LookupStatus, TransformBuffer
 from framechain.timeline import TransformTable
+from tests.helpers.reference_maths import assert_same_rotation
 
 Q_LINK_OPTICAL = [-0.5, 0.5, -0.5, 0.5]
 

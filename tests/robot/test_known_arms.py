@@ -25,12 +25,12 @@ from framechain.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, m
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.suggest.lerobot import guess_arm_units
+from tests.helpers.realdata import KOCH_URDF, SO101_URDF
 
 VIDEO = {"video.fps": 30, "video.codec": "av1", "video.pix_fmt": "yuv420p", "video.is_depth_map": False}
 
 
-@pytest.mark.parametrize(("arm", "official"), [("so101", "so101/so101_new_calib.urdf"),
-                                               ("koch", "koch/low-cost-arm.urdf")])
+@pytest.mark.parametrize(("arm", "official"), [("so101", SO101_URDF), ("koch", KOCH_URDF)])
 def test_bundled_urdfs_keep_the_published_kinematics(realdata: Path, arm: str, official: str) -> None:
     import yourdfpy
 
@@ -38,7 +38,7 @@ def test_bundled_urdfs_keep_the_published_kinematics(realdata: Path, arm: str, o
     assert (bundled.parent / "LICENSE").is_file()
     assert "<mesh" not in bundled.read_text()
     ours = yourdfpy.URDF.load(str(bundled), load_meshes=False, build_scene_graph=True)
-    theirs = yourdfpy.URDF.load(str(realdata / "urdf" / official), load_meshes=False, build_scene_graph=True)
+    theirs = yourdfpy.URDF.load(str(realdata / official), load_meshes=False, build_scene_graph=True)
     assert ours.actuated_joint_names == theirs.actuated_joint_names
     q = np.random.default_rng(4).uniform(-1.0, 1.0, len(ours.actuated_joint_names))
     ours.update_cfg(q)
@@ -113,7 +113,7 @@ def _ticks_dataset(root: Path) -> tuple[Path, np.ndarray, list[str]]:
 
 
 def test_info_prints_a_complete_robot_yaml_for_numbered_joints_in_ticks(
-        realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        so101_urdf: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     root, ticks, names = _ticks_dataset(tmp_path / "ds")
     assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
     text = capsys.readouterr().out
@@ -138,7 +138,7 @@ def test_info_prints_a_complete_robot_yaml_for_numbered_joints_in_ticks(
     q = {m: (ticks[:, names.index(f"arm2_j{k + 1}")] - 2048) * 2 * np.pi / 4096 for k, m in enumerate(LEROBOT_MOTORS)}
     base = np.eye(4)
     base[1, 3] = -0.2
-    expected = base @ UrdfChain(realdata / "urdf" / "so101" / "so101_new_calib.urdf").root_from_link(q, "gripper_link")
+    expected = base @ UrdfChain(so101_urdf).root_from_link(q, "gripper_link")
     np.testing.assert_allclose(found, expected, atol=1e-9)
 
 
@@ -161,7 +161,7 @@ def test_a_koch_state_without_a_urdf_joint_is_left_out_and_said(realdata: Path, 
     link = KNOWN_ARMS["koch"].camera_link
     found = TransformBuffer(timeline.transforms).lookup("base_link", link, np.unique(
         timeline.joint_states.stamp_ns)).matrix()
-    official = yourdfpy.URDF.load(str(realdata / "urdf" / "koch" / "low-cost-arm.urdf"), load_meshes=False)
+    official = yourdfpy.URDF.load(str(realdata / KOCH_URDF), load_meshes=False)
     for i in range(len(deg)):
         official.update_cfg({"Revolute 2": np.radians(deg[i, 0]), "Revolute 3": np.radians(deg[i, 1]),
                              "Revolute 5": np.radians(deg[i, 2]), "Revolute 6": np.radians(deg[i, 4])})
@@ -169,11 +169,10 @@ def test_a_koch_state_without_a_urdf_joint_is_left_out_and_said(realdata: Path, 
 
 
 @pytest.fixture(scope="module")
-def wrist_episode(realdata: Path, tmp_path_factory: pytest.TempPathFactory) -> VideoDatasetTruth:
+def wrist_episode(so101_urdf: Path, tmp_path_factory: pytest.TempPathFactory) -> VideoDatasetTruth:
     """A generated SO-101 episode: video 50 ms late, the camera on gripper_link, a 180 px focal length."""
-    urdf = realdata / "urdf" / "so101" / "so101_new_calib.urdf"
     return generate_video_dataset(tmp_path_factory.mktemp("known") / "dataset",
-                                  VideoDatasetSpec(urdf, seed=23, duration_s=4.0, video_delay_s=0.05))
+                                  VideoDatasetSpec(so101_urdf, seed=23, duration_s=4.0, video_delay_s=0.05))
 
 
 def test_attribute_without_robot_or_episode_runs_on_the_bundled_urdf(

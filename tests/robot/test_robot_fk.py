@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yourdfpy
-from lerobot_scene import ARM6
 
 from framechain.config.robot import JointMapping, JointUnit, RobotConfig, RobotConfigError
 from framechain.robot.binding import convert_joint, joint_positions, robot_model
 from framechain.robot.kinematics import JointType, RobotModel, RobotModelError
+from tests.helpers.lerobot_scene import ARM6
 
 SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 

@@ -12,10 +12,7 @@ import pytest
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DELAY_S = 0.100
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 def series(rrd: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
@@ -34,11 +31,11 @@ def series(rrd: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
     return t[order], v[order]
 
 
-def test_the_rotation_rate_curves_are_shifted_by_the_video_delay(tmp_path: Path) -> None:
+def test_the_rotation_rate_curves_are_shifted_by_the_video_delay(tmp_path: Path, so101_urdf: Path) -> None:
     from rerun.chunk import RrdReader
 
     truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
-        URDF, seed=91, duration_s=4.0, version="v3.0", video_delay_s=DELAY_S))
+        so101_urdf, seed=91, duration_s=4.0, version="v3.0", video_delay_s=DELAY_S))
     robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
     rrd = tmp_path / "episode.rrd"
     assert main(["replay", str(truth.root), "--episode", "0", "--robot", str(robot), "--save", str(rrd), "-q"]) == 0

@@ -5,7 +5,6 @@ chain's frames."""
 
 from __future__ import annotations
 
-import sys
 from collections import Counter
 from pathlib import Path
 
@@ -13,27 +12,22 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from lerobot_scene import write_arm_dataset, write_robot_yaml
 
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset
 from framechain.sim.lerobot_video import write_robot_yaml as write_video_robot_yaml
+from tests.helpers.lerobot_scene import write_arm_dataset, write_robot_yaml
+from tests.helpers.rrd_views import blueprint_views, labels_in_3d, views_without_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "sinks"))
-from rrd_views import blueprint_views, labels_in_3d, views_without_data
-
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 START_S = 0.25  # the first row's timestamp: the time axis still starts at 0
 WALL_S = 1_760_000_000.125  # the first row's Unix time, stored per frame in observation.unix_time
 
 
 @pytest.fixture(scope="module")
-def episode_rrd(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def episode_rrd(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> Path:
     """A 2 s SO-101 episode as recorded (joint states and a wrist video, no detections), replayed to an .rrd."""
-    if not URDF.is_file():
-        pytest.skip(f"SO-101 URDF not found at {URDF}")
     folder = tmp_path_factory.mktemp("episode_viewer")
-    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(URDF, seed=3, duration_s=2.0,
+    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(so101_urdf, seed=3, duration_s=2.0,
                                                                          video_delay_s=0.06))
     robot = write_video_robot_yaml(truth, folder / "robot.yaml")
     rrd = folder / "episode.rrd"

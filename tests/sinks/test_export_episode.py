@@ -21,10 +21,7 @@ from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetSpec, VideoData
 from framechain.sim.lerobot_video import write_robot_yaml as write_video_robot_yaml
 from framechain.sim.urdf_chain import UrdfChain
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 FRAMES = 45  # per episode: 1.5 s at 30 fps
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 def exported(tmp: Path, spec: VideoDatasetSpec, episode: int) -> tuple[VideoDatasetTruth, dict[str, list[Any]]]:
@@ -74,9 +71,9 @@ def video_frames(path: Path, start_s: float, count: int) -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def h264(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, dict[str, list[Any]]]:
+def h264(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, dict[str, list[Any]]]:
     """v3.0, two episodes in one H.264 file without B-frames (key frames every 15): episode 1 exported."""
-    spec = VideoDatasetSpec(URDF, seed=41, duration_s=FRAMES / 30, episodes=2, version="v3.0",
+    spec = VideoDatasetSpec(so101_urdf, seed=41, duration_s=FRAMES / 30, episodes=2, version="v3.0",
                             codec_options=(("bf", "0"), ("g", "15")))
     return exported(tmp_path_factory.mktemp("export_h264"), spec, episode=1)
 
@@ -135,10 +132,10 @@ def test_video_is_h264_access_units_that_decode_to_the_episode(
     assert (calibration.width, calibration.height, calibration.frame_id) == (224, 224, "wrist_optical_frame")
 
 
-def test_other_codecs_become_jpeg_images(tmp_path: Path) -> None:
+def test_other_codecs_become_jpeg_images(tmp_path: Path, so101_urdf: Path) -> None:
     import cv2
 
-    spec = VideoDatasetSpec(URDF, seed=42, duration_s=FRAMES / 30, version="v2.1", codec="mpeg4")
+    spec = VideoDatasetSpec(so101_urdf, seed=42, duration_s=FRAMES / 30, version="v2.1", codec="mpeg4")
     truth, messages = exported(tmp_path, spec, episode=0)
     images = messages["/wrist/image"]
     assert "/wrist/video" not in messages
@@ -150,12 +147,13 @@ def test_other_codecs_become_jpeg_images(tmp_path: Path) -> None:
         assert np.abs(grey.astype(int) - source[k].astype(int)).mean() < 3.0
 
 
-def test_h264_with_b_frames_becomes_jpeg_images(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_h264_with_b_frames_becomes_jpeg_images(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                so101_urdf: Path) -> None:
     """x264's default (B-frames) cannot be remuxed for Foxglove, which does not reorder: each frame is a JPEG."""
     import av
     import cv2
 
-    spec = VideoDatasetSpec(URDF, seed=43, duration_s=FRAMES / 30, version="v2.1")
+    spec = VideoDatasetSpec(so101_urdf, seed=43, duration_s=FRAMES / 30, version="v2.1")
     truth, messages = exported(tmp_path, spec, episode=0)
     source = truth.root / "videos" / "chunk-000" / truth.video_key / "episode_000000.mp4"
     with av.open(str(source)) as container:  # the premise: the stored stream has B-frames

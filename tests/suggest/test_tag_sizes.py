@@ -6,12 +6,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
 import yaml
-from shared_paths import REALDATA
 
 from framechain.suggest.facts import beside_yaml
 from framechain.suggest.tag_sizes import same_sizes, tag_size_hint, tag_sizes
+from tests.helpers.realdata import STAIRS
 
 KALIBR_APRILGRID = """target_type: 'aprilgrid' #gridtype
 tagCols: 6               #number of apriltags
@@ -44,10 +43,8 @@ def test_a_checkerboard_has_no_tags(tmp_path: Path) -> None:
     assert tag_sizes(beside_yaml(tmp_path / "log.bag")) is None
 
 
-def test_tagslam_s_per_tag_sizes_come_before_a_chain_file_s(tmp_path: Path) -> None:
-    source = REALDATA / "tagslam_stairs" / "tagslam.yaml"
-    if not source.is_file():
-        pytest.skip("../shared/realdata absent")
+def test_tagslam_s_per_tag_sizes_come_before_a_chain_file_s(tmp_path: Path, realdata: Path) -> None:
+    source = realdata / STAIRS / "tagslam.yaml"
     (tmp_path / "log.bag").write_bytes(b"")
     (tmp_path / "tagslam.yaml").write_text(source.read_text())
     (tmp_path / "chain.yaml").write_text("evidence: {tag_size_m: 0.15}\n")  # sorts first, describes no tag

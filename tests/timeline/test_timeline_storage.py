@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pytest
-from core_helpers import random_quats
 
 from framechain.timeline import (
     CameraTable,
@@ -23,6 +22,7 @@ from framechain.timeline import (
     TransformTable,
 )
 from framechain.timeline.model import TABLE_TYPES
+from tests.helpers.reference_maths import random_quats
 
 S = 1_000_000_000
 

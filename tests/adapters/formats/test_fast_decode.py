@@ -326,9 +326,8 @@ def test_window_median_equals_numpy_nanmedian() -> None:
 def test_every_container_reads_the_same_with_and_without_layout_decoding(
     container: str, written: dict[str, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from adapter_scene import CHAIN
-
     from framechain.adapters.formats.rosbag import reader as rosbag_log
+    from tests.helpers.adapter_scene import CHAIN
 
     fast = open_log(written[container], CHAIN).timeline
     monkeypatch.setattr(mcap_log, "FEEDERS", {})
@@ -345,9 +344,10 @@ def test_every_container_reads_the_same_with_and_without_layout_decoding(
 def test_depth_frames_fetched_by_location_equal_the_written_ones(
     index: str, scene: Any, written: dict[str, Path], tmp_path: Path
 ) -> None:
-    from adapter_scene import CHAIN
     from mcap.reader import make_reader
     from mcap.writer import IndexType, Writer
+
+    from tests.helpers.adapter_scene import CHAIN
 
     path = written["mcap-ros2"]
     if index == "chunk index only":  # the same messages, no message index records to find them by

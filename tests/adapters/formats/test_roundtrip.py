@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adapter_scene import CHAIN, T0
 
 from framechain.adapters import CONTAINERS, canonical_order, open_log, scan_log, write_log
 from framechain.replay import sample_depth
 from framechain.timeline import Timeline
+from tests.helpers.adapter_scene import CHAIN, T0
 
 TABLES = ("transforms", "cameras", "observations", "joint_states", "points", "depth_frames")
 

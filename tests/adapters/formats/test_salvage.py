@@ -16,6 +16,7 @@ from rosbags.rosbag1 import Reader as Rosbag1Reader
 from framechain.adapters.api import TREE_KINDS, open_log, scan_log
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, MessageRecord
 from framechain.adapters.formats.rosbag.salvage_ros1 import Message, Rosbag1Scanner
+from tests.helpers.realdata import FRANKA_BAG, HUSKY_BAG, NAV2_MCAP
 
 Msg = tuple[str, int, bytes]
 
@@ -363,9 +364,9 @@ def test_ros2_cut_db3_and_stale_metadata(tmp_path: Path) -> None:
 
 # -- the real logs, cut at half ------------------------------------------------------------------------------
 @pytest.mark.parametrize(("name", "at_least"), [
-    ("evo/nav2_turtlebot.mcap", 5000),
-    ("franka_tf/rosbagFrankaPanda.bag", 300),
-    ("husky_localization/test1.bag", 6000),
+    (NAV2_MCAP, 5000),
+    (FRANKA_BAG, 300),
+    (HUSKY_BAG, 6000),
 ])
 def test_real_logs_cut_at_half(realdata: Path, tmp_path: Path, name: str, at_least: int) -> None:
     src = realdata / name

@@ -11,12 +11,14 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers.realdata import TF_EXAMPLE_BAG
+
+ROOT = Path(__file__).resolve().parents[3]
 SMALL_LOGS = ("tf_example.bag", "tf_example", "nav2_turtlebot.mcap")
 
 
 def test_short_fixed_seed_fuzz_run(realdata: Path) -> None:
-    if not (realdata / "evo" / "tf_example.bag").is_file():
+    if not (realdata / TF_EXAMPLE_BAG).is_file():
         pytest.skip("the real logs are not present")
     run = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "fuzz.py"), "--cases", "9", "--seed", "1", "--jobs", "1",

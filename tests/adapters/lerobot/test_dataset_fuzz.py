@@ -11,11 +11,13 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.helpers.realdata import SO101_URDF
+
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_short_fixed_seed_dataset_fuzz_run(realdata: Path) -> None:
-    if not (realdata / "urdf" / "so101" / "so101_new_calib.urdf").is_file():
+    if not (realdata / SO101_URDF).is_file():
         pytest.skip("the SO-101 URDF is not present")
     run = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "fuzz_datasets.py"), "--cases", "32", "--seed", "1", "--json"],

@@ -31,15 +31,11 @@ from framechain.sim.lerobot_video import (
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.suggest.lerobot import guess_unit
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
-
 
 @pytest.fixture(scope="module")
-def bimanual(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def bimanual(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     folder = tmp_path_factory.mktemp("bimanual_data")
-    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(URDF, seed=81, duration_s=1.0,
+    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(so101_urdf, seed=81, duration_s=1.0,
                                                                         bimanual=True, camera_arm="left_"))
     return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
@@ -53,16 +49,17 @@ def stored_state(root: Path) -> tuple[np.ndarray, list[str]]:
     return state.astype(np.float64), list(info["features"]["observation.state"]["names"])
 
 
-def truth_poses(state_deg: np.ndarray, names: list[str], arm: str, link: str) -> np.ndarray:
+def truth_poses(urdf: Path, state_deg: np.ndarray, names: list[str], arm: str, link: str) -> np.ndarray:
     """``T_world_link`` by the generator's own URDF maths (bases 0.4 m apart along y, as it places them)."""
     q = {j: np.deg2rad(state_deg[:, names.index(f"{arm}{j}.pos")]) for j in ARM_JOINTS}
     base = np.eye(4)
     base[1, 3] = 0.2 if arm == "left_" else -0.2
-    out: np.ndarray = base @ UrdfChain(URDF).root_from_link(q, link)
+    out: np.ndarray = base @ UrdfChain(urdf).root_from_link(q, link)
     return out
 
 
-def test_two_arms_in_ticks_with_a_calibration_json(bimanual: tuple[VideoDatasetTruth, Path], tmp_path: Path) -> None:
+def test_two_arms_in_ticks_with_a_calibration_json(bimanual: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                   so101_urdf: Path) -> None:
     truth, robot = bimanual
     state_deg, names = stored_state(truth.root)
     # The same motion recorded as LeRobot records raw Feetech ticks: the servo applies the homing offset
@@ -97,7 +94,7 @@ def test_two_arms_in_ticks_with_a_calibration_json(bimanual: tuple[VideoDatasetT
     stamps = np.unique(timeline.joint_states.stamp_ns)
     for arm in ("left_", "right_"):
         found = buffer.lookup("world", f"{arm}gripper_link", stamps).matrix()
-        expected = truth_poses(state_deg, names, arm, "gripper_link")
+        expected = truth_poses(so101_urdf, state_deg, names, arm, "gripper_link")
         # Ticks are whole counts: 2 pi / 4095 rad each, a few tenths of a millimetre at the gripper.
         assert np.abs(found[:, :3, 3] - expected[:, :3, 3]).max() < 1.5e-3
 
@@ -118,9 +115,10 @@ def test_a_path_template_variable_lerobot_does_not_use(bimanual: tuple[VideoData
     assert any("data_path uses {rig}, which LeRobot does not define" in n for n in timeline.metadata["notes"])
 
 
-def test_frames_stored_in_the_parquet_are_evidence(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_frames_stored_in_the_parquet_are_evidence(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                   so101_urdf: Path) -> None:
     truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
-        URDF, seed=71, duration_s=4.0, version="v3.0", storage="image", video_delay_s=0.060))
+        so101_urdf, seed=71, duration_s=4.0, version="v3.0", storage="image", video_delay_s=0.060))
     assert not (truth.root / "videos").exists()
     robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
     assert main(["attribute", str(truth.root), "--episode", "0", "--robot", str(robot), "--out",
@@ -132,7 +130,7 @@ def test_frames_stored_in_the_parquet_are_evidence(tmp_path: Path, capsys: pytes
 
 
 def test_info_suggests_a_robot_yaml_that_loads(bimanual: tuple[VideoDatasetTruth, Path], tmp_path: Path,
-                                               capsys: pytest.CaptureFixture[str]) -> None:
+                                               capsys: pytest.CaptureFixture[str], so101_urdf: Path) -> None:
     truth, _robot = bimanual
     assert main(["info", str(truth.root), "--episode", "0", "--chain"]) == 0
     text = capsys.readouterr().out
@@ -146,7 +144,7 @@ def test_info_suggests_a_robot_yaml_that_loads(bimanual: tuple[VideoDatasetTruth
     assert skeleton["cameras"]["wrist"]["video_key"] == "observation.images.wrist"
     assert skeleton["cameras"]["wrist"]["intrinsics"]["width"] == 224
     for arm in skeleton["arms"].values():
-        arm["urdf"] = str(URDF)  # what the user fills in
+        arm["urdf"] = str(so101_urdf)  # what the user fills in
     path = tmp_path / "robot.yaml"
     path.write_text(yaml.safe_dump(skeleton))
     config = RobotConfig.load(path)
@@ -162,9 +160,10 @@ def test_units_are_guessed_from_the_values() -> None:
     assert guess_unit("gripper.pos", np.array([3.0, 45.5, 97.0])) == "range_0_100"
 
 
-def test_no_detections_hint_names_robot_yaml_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_no_detections_hint_names_robot_yaml_keys(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                  so101_urdf: Path) -> None:
     """An episode with neither detections nor a video: one line, and the keys robot.yaml can use."""
-    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(URDF, seed=82, duration_s=0.5))
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(so101_urdf, seed=82, duration_s=0.5))
     robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
     config = yaml.safe_load(robot.read_text())
     del config["cameras"]["wrist"]["video_key"]
@@ -177,13 +176,13 @@ def test_no_detections_hint_names_robot_yaml_keys(tmp_path: Path, capsys: pytest
     assert "detections: [{table: DETECTIONS.parquet}]" in err
 
 
-def test_a_cut_episodes_file_keeps_the_episodes_of_the_others(tmp_path: Path,
-                                                              capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_cut_episodes_file_keeps_the_episodes_of_the_others(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              so101_urdf: Path) -> None:
     """v3.0 with its episodes index in two files, one cut: the other file's episodes are still read."""
     import pyarrow as pa
 
-    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(URDF, seed=83, duration_s=0.5, episodes=3,
-                                                                          version="v3.0"))
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(so101_urdf, seed=83, duration_s=0.5,
+                                                                          episodes=3, version="v3.0"))
     robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
     index = sorted((truth.root / "meta" / "episodes").rglob("*.parquet"))
     assert len(index) == 1

@@ -18,13 +18,12 @@ from pathlib import Path
 from typing import ClassVar
 
 import pytest
-from hf_cache import put_in_hf_cache
-from lerobot_scene import write_arm_dataset
 
 from framechain.adapters.lerobot.reader import DatasetReader
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
+from tests.helpers.hf_cache import put_in_hf_cache
+from tests.helpers.lerobot_scene import write_arm_dataset
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DELAY_S = 0.05
 V21_EPISODE_0 = ["data/chunk-000/episode_000000.parquet",
                  "videos/chunk-000/observation.images.wrist/episode_000000.mp4"]
@@ -39,18 +38,16 @@ class HubCache:
 
 
 @pytest.fixture(scope="module")
-def hub_cache(tmp_path_factory: pytest.TempPathFactory) -> HubCache:
+def hub_cache(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> HubCache:
     """Two 1.5 s SO-101 episodes whose wrist video is 50 ms late, as ``lerobot/tiny_v3`` (v3.0, whole) and
     ``lerobot/tiny_v21`` (v2.1, only meta/ and episode 0 in the cache)."""
-    if not URDF.is_file():
-        pytest.skip(f"SO-101 URDF not found at {URDF}")
     from huggingface_hub import scan_cache_dir
 
     folder = tmp_path_factory.mktemp("hub")
     datasets = {}
     for version in ("v3.0", "v2.1"):
         truth = generate_video_dataset(folder / version, VideoDatasetSpec(
-            URDF, seed=5, episodes=2, duration_s=1.5, version=version, video_delay_s=DELAY_S))
+            so101_urdf, seed=5, episodes=2, duration_s=1.5, version=version, video_delay_s=DELAY_S))
         datasets[version] = truth
     robot = write_robot_yaml(datasets["v3.0"], folder / "robot.yaml")
     home = folder / "hf"

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from lerobot_scene import ArmDataset
 
 from framechain.adapters.lerobot.reader import DatasetReader
+from tests.helpers.lerobot_scene import ArmDataset
 
 
 def _rerun_series(root: Path, episode: int, entity: str) -> tuple[np.ndarray, np.ndarray]:

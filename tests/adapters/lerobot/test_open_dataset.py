@@ -8,7 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from lerobot_scene import (
+
+from framechain.adapters.lerobot.adapter import open_dataset
+from framechain.adapters.lerobot.reader import DatasetError
+from framechain.analysis.model.estimates import estimate_to_json
+from framechain.catalogue import HopName
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
+from framechain.config.robot import RobotConfig, RobotConfigError
+from framechain.replay import TransformBuffer, replay
+from framechain.timeline import Timeline
+from tests.helpers.lerobot_scene import (
     ARM_JOINTS,
     FINGER_UPPER_M,
     ArmDataset,
@@ -21,15 +30,6 @@ from lerobot_scene import (
     write_detection_table,
     write_robot_yaml,
 )
-
-from framechain.adapters.lerobot.adapter import open_dataset
-from framechain.adapters.lerobot.reader import DatasetError
-from framechain.analysis.model.estimates import estimate_to_json
-from framechain.catalogue import HopName
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
-from framechain.config.robot import RobotConfig, RobotConfigError
-from framechain.replay import TransformBuffer, replay
-from framechain.timeline import Timeline
 
 FRAMES = ChainFrames(camera="wrist_optical_frame", body="base_link", world="world")
 

@@ -10,7 +10,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from lerobot_scene import FPS, STATE_NAMES, ArmDataset, episode_times, state_vectors, write_arm_dataset
 
 from framechain.adapters.errors import AdapterError
 from framechain.adapters.lerobot.reader import (
@@ -21,6 +20,7 @@ from framechain.adapters.lerobot.reader import (
     is_lerobot_dataset,
 )
 from framechain.errors import FramechainError
+from tests.helpers.lerobot_scene import FPS, STATE_NAMES, ArmDataset, episode_times, state_vectors, write_arm_dataset
 
 
 def test_episodes_and_boundaries(arm_dataset: ArmDataset) -> None:

@@ -14,6 +14,7 @@ import pytest
 from framechain.adapters.lerobot.clock import Pairing, episode_frame_times_s, video_clock
 from framechain.adapters.lerobot.video import encode_video, read_frames
 from framechain.cli.main import main
+from tests.helpers.realdata import GR00T
 
 
 def _video(path: Path, count: int, fps: int = 20) -> Path:
@@ -109,7 +110,7 @@ def test_a_pairing_that_is_not_one_is_one_line(tmp_path: Path) -> None:
 def test_info_says_how_a_real_datasets_video_pairs(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The GR00T sample: 470 rows stamped from 0.05 s (one frame period late) and 470 frames from 0 s: by order,
     which gives row k frame k (by presentation time the last row would have no frame)."""
-    dataset = realdata / "lerobot" / "gr00t_pick_n_place_v20"
+    dataset = realdata / GR00T
     assert main(["info", str(dataset), "--episode", "2"]) == 0
     out = " ".join(capsys.readouterr().out.split())
     assert ("video observation.images.ego_view: frames paired with rows by order: one frame per row: 470 frames for "

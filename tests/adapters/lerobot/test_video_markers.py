@@ -16,17 +16,14 @@ from framechain import pipeline
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 MARKER_M = 0.12
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 @pytest.fixture(scope="module")
-def marked(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def marked(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     folder = tmp_path_factory.mktemp("markers")
     truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(
-        URDF, seed=63, duration_s=4.0, version="v2.1", marker_size_m=MARKER_M, video_delay_s=0.080))
+        so101_urdf, seed=63, duration_s=4.0, version="v2.1", marker_size_m=MARKER_M, video_delay_s=0.080))
     chain = {"camera": "wrist", "evidence": {"markers": {"dictionary": "DICT_4X4_50", "size_m": MARKER_M},
                                              "static_target": True}}
     return truth, write_robot_yaml(truth, folder / "robot.yaml", extra={"chain": chain})

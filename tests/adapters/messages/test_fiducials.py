@@ -18,6 +18,7 @@ from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.timeline import CameraTable
 from framechain.vision.tag_pose import PinholeModel, solve_square_tags, square_object_points
+from tests.helpers.realdata import STAIRS
 
 T0 = 1_700_000_000 * 10**9
 K = np.array([[600.0, 0.0, 320.0], [0.0, 610.0, 240.0], [0.0, 0.0, 1.0]])
@@ -508,7 +509,7 @@ def _tagslam_rows(folder: Path, size: Any) -> FiducialRows:
 
 
 def test_tagslam_stairs_depths(realdata: Path) -> None:
-    folder = realdata / "tagslam_stairs"
+    folder = realdata / STAIRS
     cameras, frames = _tagslam_cameras(folder)
     small = {str(i) for i in range(100, 109)}  # tagslam.yaml: ids 100-108 are 0.10 m, the rest 0.16 m
     res = resolve_fiducials(_tagslam_rows(folder, lambda label: 0.10 if label in small else 0.16), cameras)
@@ -531,7 +532,7 @@ def test_tagslam_stairs_depths(realdata: Path) -> None:
 
 
 def test_tagslam_stairs_through_open_log(realdata: Path) -> None:
-    folder = realdata / "tagslam_stairs"
+    folder = realdata / STAIRS
     chain = ChainConfig.from_dict({
         "frames": {"camera": "t265_fisheye1_optical_frame", "body": "rig", "world": "world"},
         "topics": {"detections": "/t265/fisheye1/tags"},

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from adapter_scene import T0
 
 from framechain.adapters import open_log
 from framechain.adapters.formats.msgdefs import typestore
 from framechain.config.chain import ChainConfig
+from tests.helpers.adapter_scene import T0
 
 
 def _fds(descriptor: Any) -> bytes:

@@ -15,6 +15,7 @@ from framechain.adapters import open_log
 from framechain.config.chain import ChainConfig
 from framechain.errors import FramechainError
 from framechain.vision.markers import image_pixels
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, ARUCO_MARKER_BAG
 
 T0 = 1_700_000_000 * 10**9
 K = np.array([[620.0, 0.0, 319.5], [0.0, 620.0, 239.5], [0.0, 0.0, 1.0]])
@@ -170,10 +171,10 @@ def test_image_pixels_respects_step() -> None:
 
 
 @pytest.mark.parametrize(("name", "ids", "width"), [
-    ("aruco_images", [100, 103, 106, 107, 110, 111, 112], 1280), ("aruco_marker", [1], 1280)])
+    (ARUCO_IMAGES_BAG, [100, 103, 106, 107, 110, 111, 112], 1280), (ARUCO_MARKER_BAG, [1], 1280)])
 def test_real_jpegs(realdata: Path, name: str, ids: list[int], width: int) -> None:
     """UbiquityRobotics' test images: 5x5 markers (its default dictionary, DICT_5X5_1000), 0.14 m."""
-    path = realdata / "fiducials" / f"{name}.bag"
+    path = realdata / name
     chain = ChainConfig.from_dict({
         "frames": {"camera": "raspicam"},
         "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},

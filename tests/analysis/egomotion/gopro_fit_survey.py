@@ -1,6 +1,6 @@
 """The camera-motion fit on the real GoPro clips, gyro as the only candidate link: the numbers, reproducible.
 
-Not a test: ``.venv/bin/python tests/analysis/gopro_fit_survey.py [--hfov 89] [--lens equidistant]``
+Not a test: ``.venv/bin/python -m tests.analysis.egomotion.gopro_fit_survey [--hfov 89] [--lens equidistant]``
 prints, per clip window and fit options, what :func:`framechain.analysis.egomotion.fit_camera_motion`
 returns (offset and interval, mount, focal scale, observability) beside plain residuals computed
 here: the RMS rotation angle per frame pair of ``B`` against ``X^T A X`` (the measured camera
@@ -13,10 +13,17 @@ from __future__ import annotations
 
 import argparse
 import itertools
-from pathlib import Path
 
 import numpy as np
-from gopro_clip import (
+from scipy.ndimage import gaussian_filter1d
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.egomotion import EgoMotionFitOptions, LinkMotion, fit_camera_motion, rotation_rates
+from framechain.arrays import FloatArray
+from framechain.config.calibration import Intrinsics
+from framechain.timeline import EgoMotionTable
+from framechain.vision.tag_pose import PinholeModel, undistort_normalised
+from tests.helpers.gopro_clip import (
     ClipFrames,
     Lens,
     clip_motion,
@@ -26,17 +33,10 @@ from gopro_clip import (
     gopro_intrinsics,
     gyro_link,
 )
-from gpmf import read_stream
-from scipy.ndimage import gaussian_filter1d
-from scipy.spatial.transform import Rotation
+from tests.helpers.gpmf import read_stream
+from tests.helpers.realdata import GOPRO_CLIPS, REALDATA
 
-from framechain.analysis.egomotion import EgoMotionFitOptions, LinkMotion, fit_camera_motion, rotation_rates
-from framechain.arrays import FloatArray
-from framechain.config.calibration import Intrinsics
-from framechain.timeline import EgoMotionTable
-from framechain.vision.tag_pose import PinholeModel, undistort_normalised
-
-CLIPS = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "gopro_gpmf"
+CLIPS = REALDATA / GOPRO_CLIPS
 #: (clip, window name, from s, to s)
 CASES = (("karma.mp4", "whole", 0.0, 99.0), ("karma.mp4", "first half (gimbal still)", 0.0, 6.04),
          ("karma.mp4", "final pan 10.9 s-end", 10.9, 99.0), ("max-heromode.mp4", "whole", 0.0, 99.0))

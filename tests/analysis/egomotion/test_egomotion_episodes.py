@@ -2,7 +2,7 @@
 
 Episodes come from :mod:`framechain.sim.lerobot_video` (its own URDF maths and renderer, encoded
 with PyAV, written as v3.0 and v2.1); the evidence runs the way the pipeline will: framechain's
-dataset reader, video decoder, feature tracker, kinematics and fit (:mod:`egomotion_scene`).
+dataset reader, video decoder, feature tracker, kinematics and fit (:mod:`tests.helpers.egomotion_scene`).
 Every expectation is the generator's truth: the injected video delay, mount rotation and arm.
 """
 
@@ -13,7 +13,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from egomotion_scene import EpisodeEvidence, episode_evidence, fit_episode, shifted_copy
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFit, fit_camera_motion
@@ -27,11 +26,9 @@ from framechain.sim.lerobot_video import (
 )
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.vision.egomotion import measure_egomotion, track_features
+from tests.helpers.egomotion_scene import EpisodeEvidence, episode_evidence, fit_episode, shifted_copy
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DURATION_S = 5.0
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 def mount_error_deg(fit: EgoMotionFit, truth: VideoDatasetTruth) -> float:
@@ -41,29 +38,31 @@ def mount_error_deg(fit: EgoMotionFit, truth: VideoDatasetTruth) -> float:
 
 
 @pytest.fixture(scope="session")
-def faulted(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
+def faulted(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path
+            ) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
     """v2.1: video 80 ms late, declared mount 10 degrees off, 10% of the frames resent."""
-    spec = VideoDatasetSpec(URDF, seed=11, duration_s=DURATION_S, version="v2.1", video_delay_s=0.080,
+    spec = VideoDatasetSpec(so101_urdf, seed=11, duration_s=DURATION_S, version="v2.1", video_delay_s=0.080,
                             mount_error_deg=10.0, repeat_share=0.1)
     truth = generate_video_dataset(tmp_path_factory.mktemp("faulted") / "dataset", spec)
-    evidence = episode_evidence(truth, URDF)
+    evidence = episode_evidence(truth, so101_urdf)
     return truth, evidence, fit_episode(evidence, truth)
 
 
 @pytest.fixture(scope="session")
-def clean(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
+def clean(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path
+          ) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
     """v3.0, two episodes in one mp4: the second one's frames start 5 s into the file."""
-    spec = VideoDatasetSpec(URDF, seed=12, duration_s=DURATION_S, episodes=2, version="v3.0")
+    spec = VideoDatasetSpec(so101_urdf, seed=12, duration_s=DURATION_S, episodes=2, version="v3.0")
     truth = generate_video_dataset(tmp_path_factory.mktemp("clean") / "dataset", spec)
-    evidence = episode_evidence(truth, URDF, episode=1)
+    evidence = episode_evidence(truth, so101_urdf, episode=1)
     return truth, evidence, fit_episode(evidence, truth)
 
 
-def test_generator_kinematics_match_yourdfpy() -> None:
+def test_generator_kinematics_match_yourdfpy(so101_urdf: Path) -> None:
     import yourdfpy
 
-    urdf = yourdfpy.URDF.load(str(URDF), build_scene_graph=True, load_meshes=False)
-    chain = UrdfChain(URDF, prefix="left_")
+    urdf = yourdfpy.URDF.load(str(so101_urdf), build_scene_graph=True, load_meshes=False)
+    chain = UrdfChain(so101_urdf, prefix="left_")
     q = np.random.default_rng(0).uniform(-1.5, 1.5, (20, len(ARM_JOINTS)))
     ours = chain.root_from_link(dict(zip(ARM_JOINTS, q.T, strict=True)), "left_gripper_link")
     for i in range(q.shape[0]):
@@ -113,21 +112,22 @@ def test_a_clean_episode_shows_no_offset_and_no_mount_error(clean: tuple[VideoDa
 
 
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],
-                                                  tmp_path: Path) -> None:
+                                                  tmp_path: Path, so101_urdf: Path) -> None:
     truth, _evidence, fit = clean
     copy = shifted_copy(truth.root, tmp_path / "shifted", 0.100)
-    shifted = episode_evidence(truth, URDF, episode=1, root=copy)
+    shifted = episode_evidence(truth, so101_urdf, episode=1, root=copy)
     moved = fit_episode(shifted, truth)
     # Frames 100 ms later in the file: each row shows the scene 100 ms before its stamp.
     assert moved.offset_s - fit.offset_s == pytest.approx(-0.100, abs=0.015)
     assert moved.link == "gripper_link"
 
 
-def test_the_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.TempPathFactory) -> None:
-    spec = VideoDatasetSpec(URDF, seed=13, duration_s=DURATION_S, bimanual=True, camera_arm="right_",
+def test_the_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.TempPathFactory,
+                                                       so101_urdf: Path) -> None:
+    spec = VideoDatasetSpec(so101_urdf, seed=13, duration_s=DURATION_S, bimanual=True, camera_arm="right_",
                             declared_arm="left_")
     truth = generate_video_dataset(tmp_path_factory.mktemp("bimanual") / "dataset", spec)
-    evidence = episode_evidence(truth, URDF)
+    evidence = episode_evidence(truth, so101_urdf)
     assert {link.link for link in evidence.links} >= {"left_gripper_link", "right_gripper_link"}
     fit = fit_episode(evidence, truth)
     assert fit.link == "right_gripper_link"

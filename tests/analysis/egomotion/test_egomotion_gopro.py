@@ -1,10 +1,10 @@
 """The camera-motion fit on real footage: two GoPro clips, their images against their own gyro.
 
-The gyro (read from the clip's GPMF telemetry by :mod:`gpmf`, integrated by :mod:`gopro_clip`) plays
-the part forward kinematics plays for a camera on a robot link; nothing in framechain knows it is a
-gyro, except that a gyro has a rate bias the fit is asked to carry. The truths are independent of
-framechain: gpmf-parser's documentation of the Hero5's axes (:func:`gopro_clip.documented_mount`),
-and what the clips are.
+The gyro (read from the clip's GPMF telemetry by :mod:`tests.helpers.gpmf`, integrated by
+:mod:`tests.helpers.gopro_clip`) plays the part forward kinematics plays for a camera on a robot link;
+nothing in framechain knows it is a gyro, except that a gyro has a rate bias the fit is asked to carry.
+The truths are independent of framechain: gpmf-parser's documentation of the Hero5's axes
+(:func:`tests.helpers.gopro_clip.documented_mount`), and what the clips are.
 
 - karma.mp4: a camera on a drone's gimbal, still for most of the clip, then one pan at its end.
   The whole clip gives an offset with a narrow interval and a mount that agrees with the documented
@@ -24,8 +24,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from gopro_clip import clip_motion, clip_tracks, decode_clip, documented_mount, gopro_intrinsics, gyro_link
-from gpmf import read_stream
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFitOptions, fit_camera_motion
@@ -33,6 +31,16 @@ from framechain.analysis.egomotion.findings import MotionFindings, motion_findin
 from framechain.analysis.egomotion.run import CameraMotion, CameraMotionEvidence
 from framechain.analysis.verdict.findings import motion_verdict
 from framechain.timeline import EgoMotionTable
+from tests.helpers.gopro_clip import (
+    clip_motion,
+    clip_tracks,
+    decode_clip,
+    documented_mount,
+    gopro_intrinsics,
+    gyro_link,
+)
+from tests.helpers.gpmf import read_stream
+from tests.helpers.realdata import GOPRO_CLIPS
 
 #: karma.mp4 pans right at up to 45 deg/s from about 11.4 s; its gimbal holds the camera still before.
 STILL_UNTIL_S = 6.04
@@ -40,7 +48,7 @@ OPTIONS = EgoMotionFitOptions(max_offset_s=0.1, rate_bias=True)
 
 
 def _clip(realdata: Path, name: str) -> Path:
-    path = realdata / "gopro_gpmf" / name
+    path = realdata / GOPRO_CLIPS / name
     if not path.is_file():
         pytest.skip(f"{path} not found")
     return path

@@ -24,16 +24,13 @@ import yaml
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DELAYS_S = (0.06, 0.09)
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 @pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def recording(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     folder = tmp_path_factory.mktemp("as_recorded")
-    spec = VideoDatasetSpec(URDF, seed=5, episodes=2, duration_s=8.0, fps=20, codec="mpeg4", bimanual=True,
+    spec = VideoDatasetSpec(so101_urdf, seed=5, episodes=2, duration_s=8.0, fps=20, codec="mpeg4", bimanual=True,
                             camera_per_arm=True, clock="realtime", focal_px=112.0, repeat_share=0.18,
                             black_first_episode="right_wrist", table="cloth", camera_delays_s=DELAYS_S)
     truth = generate_video_dataset(folder / "dataset", spec)

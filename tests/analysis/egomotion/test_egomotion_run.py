@@ -16,18 +16,16 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from egomotion_scene import shifted_copy
 from scipy.spatial.transform import Rotation
 
 from framechain import pipeline
 from framechain.analysis.model.estimates import LatencyEstimate
 from framechain.cli.main import main
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
+from tests.helpers.egomotion_scene import shifted_copy
+from tests.helpers.realdata import PANDA_URDF
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 DURATION_S = 5.0
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
 
 
 def attribute(root: Path, robot: Path, out: Path, capsys: pytest.CaptureFixture[str], episode: int = 0
@@ -61,17 +59,17 @@ def generated(factory: pytest.TempPathFactory, name: str, spec: VideoDatasetSpec
 
 
 @pytest.fixture(scope="session")
-def faulted(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def faulted(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     """v2.1: wrist video 80 ms late, the mount declared 10 degrees off, 10% of the frames resent."""
     return generated(tmp_path_factory, "run_faulted", VideoDatasetSpec(
-        URDF, seed=21, duration_s=DURATION_S, version="v2.1", video_delay_s=0.080, mount_error_deg=10.0,
+        so101_urdf, seed=21, duration_s=DURATION_S, version="v2.1", video_delay_s=0.080, mount_error_deg=10.0,
         repeat_share=0.1))
 
 
 @pytest.fixture(scope="session")
-def clean(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def clean(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     """v3.0, two clean episodes in one mp4."""
-    return generated(tmp_path_factory, "run_clean", VideoDatasetSpec(URDF, seed=22, duration_s=DURATION_S,
+    return generated(tmp_path_factory, "run_clean", VideoDatasetSpec(so101_urdf, seed=22, duration_s=DURATION_S,
                                                                      episodes=2, version="v3.0"))
 
 
@@ -157,9 +155,9 @@ def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth
 
 
 def test_a_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
-                                                     capsys: pytest.CaptureFixture[str]) -> None:
+                                                     capsys: pytest.CaptureFixture[str], so101_urdf: Path) -> None:
     truth, robot = generated(tmp_path_factory, "run_bimanual", VideoDatasetSpec(
-        URDF, seed=23, duration_s=DURATION_S, bimanual=True, camera_arm="right_", declared_arm="left_"))
+        so101_urdf, seed=23, duration_s=DURATION_S, bimanual=True, camera_arm="right_", declared_arm="left_"))
     result = attribute(truth.root, robot, tmp_path, capsys)
     top = result["findings"][0]
     assert top["fault"] == "wrong_camera_frame"
@@ -170,9 +168,9 @@ def test_a_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.Te
 
 
 @pytest.fixture(scope="session")
-def still(tmp_path_factory: pytest.TempPathFactory) -> tuple[VideoDatasetTruth, Path]:
+def still(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     """An arm that does not move."""
-    return generated(tmp_path_factory, "run_still", VideoDatasetSpec(URDF, seed=24, duration_s=2.0, still=True))
+    return generated(tmp_path_factory, "run_still", VideoDatasetSpec(so101_urdf, seed=24, duration_s=2.0, still=True))
 
 
 def test_a_still_arm_says_not_observable(still: tuple[VideoDatasetTruth, Path],
@@ -189,9 +187,10 @@ def test_a_still_arm_says_not_observable(still: tuple[VideoDatasetTruth, Path],
 
 @pytest.mark.parametrize("case", ["axis_flip", "missing_rotation"])
 def test_a_flipped_or_bare_mount_is_named_and_fixed(case: str, tmp_path_factory: pytest.TempPathFactory,
-                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+                                                     tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                     so101_urdf: Path) -> None:
     """A camera mounted upside down (180 deg about its optical axis), or a mount declared without rotation."""
-    spec = VideoDatasetSpec(URDF, seed=25, duration_s=DURATION_S, version="v2.1",
+    spec = VideoDatasetSpec(so101_urdf, seed=25, duration_s=DURATION_S, version="v2.1",
                             mount_error_deg=180.0 if case == "axis_flip" else 0.0, mount_error_axis=(0.0, 0.0, 1.0))
     truth, robot = generated(tmp_path_factory, f"run_{case}", spec)
     if case == "missing_rotation":
@@ -235,9 +234,9 @@ def test_a_fixed_camera_is_not_observable_and_not_decoded(faulted: tuple[VideoDa
 
 
 def test_intrinsics_off_by_a_clear_factor_are_a_finding(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
-                                                        capsys: pytest.CaptureFixture[str]) -> None:
+                                                        capsys: pytest.CaptureFixture[str], so101_urdf: Path) -> None:
     truth, robot = generated(tmp_path_factory, "run_focal", VideoDatasetSpec(
-        URDF, seed=26, duration_s=DURATION_S, version="v2.1", focal_scale=1.3))
+        so101_urdf, seed=26, duration_s=DURATION_S, version="v2.1", focal_scale=1.3))
     result = attribute(truth.root, robot, tmp_path, capsys)
     found = {f["fault"]: f for f in result["findings"]}
     assert "intrinsics" in found
@@ -283,15 +282,16 @@ def test_a_clean_episode_says_what_its_motion_bounds(clean: tuple[VideoDatasetTr
 @pytest.mark.parametrize("fault", ["latency", "rotation_error"])
 def test_a_fault_twice_its_bound_is_found(fault: str, clean: tuple[VideoDatasetTruth, Path],
                                           tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
-                                          capsys: pytest.CaptureFixture[str]) -> None:
+                                          capsys: pytest.CaptureFixture[str], so101_urdf: Path) -> None:
     """The clean episode's trajectory again, its video late by twice the latency bound, or its mount off by
     twice the mount bound: a finding, within its bound of the generator's truth. (One fault at a time: two
     small ones together share the misfit they remove, and a small latency beside a wrong mount may be none.)"""
     truth, robot = clean
     bound = camera_bounds(attributed_once(truth.root, robot, tmp_path_factory, capsys)[0])[fault]["min_detectable"]
     size = bound["offset_s" if fault == "latency" else "angle_deg"]
-    spec = (VideoDatasetSpec(URDF, seed=22, duration_s=DURATION_S, video_delay_s=2 * size) if fault == "latency" else
-            VideoDatasetSpec(URDF, seed=22, duration_s=DURATION_S, mount_error_deg=2 * size))
+    spec = (VideoDatasetSpec(so101_urdf, seed=22, duration_s=DURATION_S, video_delay_s=2 * size)
+            if fault == "latency" else
+            VideoDatasetSpec(so101_urdf, seed=22, duration_s=DURATION_S, mount_error_deg=2 * size))
     faulted, faulted_robot = generated(tmp_path_factory, f"run_twice_{fault}", spec)
     found = {f["fault"]: f for f in attribute(faulted.root, faulted_robot, tmp_path / "faulted", capsys)["findings"]}
     assert set(found) == {fault}
@@ -329,11 +329,11 @@ def test_a_focal_length_a_little_off_is_a_note(clean: tuple[VideoDatasetTruth, P
 
 
 def test_motors_mapped_onto_another_robot_are_inconclusive(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
-                                                          capsys: pytest.CaptureFixture[str]) -> None:
+                                                          capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
     """An SO-101's motors mapped onto a Panda's joints: forward kinematics of another robot cannot explain the
     camera's motion, and the verdict says so instead of "no fault" or a confident mount."""
     truth, robot = clean
-    panda = URDF.parents[1] / "panda" / "panda.urdf"
+    panda = realdata / PANDA_URDF
     config = yaml.safe_load(robot.read_text())
     config["urdf"] = str(panda)
     config["joints"] = {"shoulder_pan.pos": "panda_joint1", "shoulder_lift.pos": "panda_joint2",

@@ -1,4 +1,4 @@
-"""The GPMF reader (:mod:`gpmf`) on two real GoPro clips, against facts it does not compute itself.
+"""The GPMF reader (:mod:`tests.helpers.gpmf`) on two real GoPro clips, against facts it does not compute itself.
 
 Facts: the sample rates gpmf-parser documents (gyro ~400 Hz on the Hero5, ~200 Hz on the MAX), the
 file's own running sample count (TSMP), gravity (9.81 m/s^2 along GoPro's Z, up, at rest), the
@@ -14,11 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from gopro_clip import ClipFrames, decode_clip, documented_mount, gyro_link, integrate_rates
-from gpmf import Packet, SensorStream, axes_matrix, camera_orientation, read_packets, read_stream
 from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.adapters.lerobot.video import probe_video
+from tests.helpers.gopro_clip import ClipFrames, decode_clip, documented_mount, gyro_link, integrate_rates
+from tests.helpers.gpmf import Packet, SensorStream, axes_matrix, camera_orientation, read_packets, read_stream
+from tests.helpers.realdata import GOPRO_CLIPS
 
 GRAVITY = 9.80665
 #: karma.mp4's final pan (the camera turns right at up to 45 deg/s) starts at about 11.5 s.
@@ -26,7 +27,7 @@ PAN_FROM_S = 11.2
 
 
 def _clip(realdata: Path, name: str) -> Path:
-    path = realdata / "gopro_gpmf" / name
+    path = realdata / GOPRO_CLIPS / name
     if not path.is_file():
         pytest.skip(f"{path} not found")
     return path

@@ -9,14 +9,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from test_tagslam_stairs import BAG, _chain, recorded_attribution
 
 from framechain.analysis.verdict.attribute import AnalysisError, attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import attribute_log, load_log
-
-ARUCO = "fiducials/aruco_images.bag"
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, STAIRS_BAG
+from tests.helpers.stairs import recorded_attribution, stairs_chain
 
 
 def _without_sizes(chain: ChainConfig, sizes: dict[str, float] | None = None) -> ChainConfig:
@@ -28,8 +27,8 @@ def test_bearing_only_agrees_with_the_sized_run_on_the_mount(realdata: Path) -> 
     puts the tags' 5 s spread at 2.75 mm against 2.58 mm with the mount as written, about 6 %: the
     inverted mount is a small part of the spread, with depth or without."""
     sized = recorded_attribution(realdata)
-    rays_chain = _without_sizes(_chain(realdata))
-    rays = attribute(load_log(realdata / BAG, rays_chain).timeline, rays_chain, bootstrap=0)
+    rays_chain = _without_sizes(stairs_chain(realdata))
+    rays = attribute(load_log(realdata / STAIRS_BAG, rays_chain).timeline, rays_chain, bootstrap=0)
     assert any(n.startswith("bearing only") for n in rays.notes)
     assert rays.counts()["replayed"] == 1274
     sized_inverted = [f for f in sized.findings if f.fault == Fault.INVERTED_TRANSFORM]
@@ -43,14 +42,14 @@ def test_bearing_only_agrees_with_the_sized_run_on_the_mount(realdata: Path) -> 
     assert "shrinks to" in rays_inverted[0].evidence
     assert "rays" in rays_inverted[0].evidence
     # With the mount as written the rays meet no better with it inverted.
-    written = _without_sizes(_chain(realdata, as_tagslam_applies_it=False))
-    other = attribute(load_log(realdata / BAG, written).timeline, written, bootstrap=0)
+    written = _without_sizes(stairs_chain(realdata, as_tagslam_applies_it=False))
+    other = attribute(load_log(realdata / STAIRS_BAG, written).timeline, written, bootstrap=0)
     assert not [f for f in other.findings if f.fault == Fault.INVERTED_TRANSFORM]
 
 
 def test_tags_without_a_size_beside_sized_ones_are_rejected_as_no_tag_size(realdata: Path) -> None:
-    chain = _without_sizes(_chain(realdata), {str(i): 0.16 for i in range(1, 11)})  # no default
-    run = load_log(realdata / BAG, chain)
+    chain = _without_sizes(stairs_chain(realdata), {str(i): 0.16 for i in range(1, 11)})  # no default
+    run = load_log(realdata / STAIRS_BAG, chain)
     result = attribute(run.timeline, chain, bootstrap=0)
     counts = result.counts()
     assert counts["total"] == 1274
@@ -75,7 +74,7 @@ def test_too_few_sightings_is_one_line(realdata: Path, sized: bool) -> None:
         "evidence": {"markers": markers, "static_target": True},
     })
     with pytest.raises(AnalysisError) as err:
-        attribute_log(realdata / ARUCO, chain, bootstrap=0)
+        attribute_log(realdata / ARUCO_IMAGES_BAG, chain, bootstrap=0)
     message = str(err.value)
     assert "\n" not in message
     # One image, seven markers: seven labels, each seen once.

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from test_tagslam_stairs import _chain, recorded_attribution, restamped_bag
 
 from framechain.analysis.evidence.replayed import replay_chain
 from framechain.analysis.model.chain import ChainInputs, Perturbation, evaluate
@@ -27,6 +26,8 @@ from framechain.config.chain import ChainConfig, ChainEvidence
 from framechain.pipeline import load_log
 from framechain.replay import CameraModel
 from framechain.sim import InjectedFault, SceneSpec, generate
+from tests.helpers.realdata import ARUCO_IMAGES_BAG
+from tests.helpers.stairs import recorded_attribution, restamped_bag, stairs_chain
 
 
 def _bounds(result: Any) -> dict[tuple[str, str], dict[str, Any]]:
@@ -177,7 +178,7 @@ def test_stairs_odometry_restamped_by_twice_the_bound_is_found_within_half_of_it
 ) -> None:
     shift_s = factor * stairs_bound
     bag = restamped_bag(realdata, tmp_path / "restamped.bag", round(shift_s * 1e9))
-    chain = _chain(realdata)
+    chain = stairs_chain(realdata)
     finding = _finding(attribute(load_log(bag, chain).timeline, chain, bootstrap=0), "latency", "body_to_world",
                        actionable=True)
     if factor == 2.0:
@@ -220,7 +221,7 @@ def test_one_image_of_markers_cannot_show_a_latency(realdata: Path) -> None:
                    {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
         "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
     })
-    result = attribute(load_log(realdata / "fiducials" / "aruco_images.bag", chain).timeline, chain, bootstrap=0)
+    result = attribute(load_log(realdata / ARUCO_IMAGES_BAG, chain).timeline, chain, bootstrap=0)
     assert result.counts()["replayed"] == 7
     bounds = _bounds(result)
     assert bounds[("latency", "body_to_world")]["observable"] is False
@@ -243,7 +244,7 @@ def _held_bag(realdata: Path, out: Path, frames: int) -> Path:
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
-    with AnyReader([realdata / "fiducials" / "aruco_images.bag"]) as reader, Writer(out) as writer:
+    with AnyReader([realdata / ARUCO_IMAGES_BAG]) as reader, Writer(out) as writer:
         conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
                  for c in reader.connections}
         image = next(m for m in reader.messages() if m[0].topic.endswith("image/compressed"))

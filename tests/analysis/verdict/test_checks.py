@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from test_tagslam_stairs import BAG, _chain
 
 from framechain.analysis.fit.shares import WEAK_CONFIDENCE, weakened
 from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
@@ -20,6 +19,8 @@ from framechain.analysis.verdict.findings import Finding
 from framechain.catalogue import Fault, HopName
 from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
+from tests.helpers.realdata import STAIRS_BAG
+from tests.helpers.stairs import stairs_chain
 
 
 def _finding(fault: Fault, hop: HopName, estimate: Any, interval: dict[str, list[float]], confidence: float) -> Finding:
@@ -185,8 +186,8 @@ def test_label_table_verdicts() -> None:
 def test_a_moving_tag_on_the_stairs_is_named_and_ignoring_it_clears_the_table(realdata: Any) -> None:
     """Tag 22 made to move (its depths swing by 5 % every 3 s, about 10 cm): the table names it alone, and
     the ready line, put in the chain, leaves it out."""
-    chain = _chain(realdata)
-    timeline = load_log(realdata / BAG, chain).timeline
+    chain = stairs_chain(realdata)
+    timeline = load_log(realdata / STAIRS_BAG, chain).timeline
     obs = timeline.observations
     swing = 1.0 + 0.05 * np.sin(2 * np.pi * (obs.stamp_ns - obs.stamp_ns.min()) * 1e-9 / 3.0)
     moved = timeline.replace(observations=replace(obs, depth_m=np.where(obs.label == "22", obs.depth_m * swing,

@@ -19,6 +19,7 @@ from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
 from framechain.sim.scene import TOPICS, InjectedFault, SceneSpec, generate
+from tests.helpers.realdata import ARUCO_IMAGES_BAG
 
 
 def _reference_run(fault: InjectedFault, *, depth_images: bool = False) -> object:
@@ -81,7 +82,7 @@ def test_attribute_knows_depth_came_from_depth_images() -> None:
 def test_findings_that_explain_nothing_are_notes_on_a_real_log(realdata: Path) -> None:
     """The reviewer's case: ArUco markers against a declared reference point. A depth scale fitted
     there made the median error worse (-32 mm of it); it must be a note, not a finding at conf 1.00."""
-    bag = realdata / "fiducials" / "aruco_images.bag"
+    bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
     chain = ChainConfig.from_dict({

@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from test_tagslam_stairs import BAG, _chain, recorded_attribution
 
 from framechain.analysis.fit.selection import near_bound
 from framechain.analysis.fit.shares import undetermined_because
@@ -26,6 +25,8 @@ from framechain.catalogue import Fault
 from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
 from framechain.timeline import PointRole
+from tests.helpers.realdata import STAIRS, STAIRS_BAG
+from tests.helpers.stairs import recorded_attribution, stairs_chain
 
 MOVED_M = np.array([0.0, 0.05, 0.0])  # the mount moved 5 cm along base_link's y
 
@@ -175,10 +176,10 @@ def test_a_fixed_camera_over_static_tags_lists_the_mount_s_translation_as_not_ob
 def test_stairs_tags_declared_at_the_default_size_are_named_wrongly_sized(realdata: Path) -> None:
     """Only tagslam.yaml's default 0.16 m declared: the tags it sizes at 0.10 m spread with their distance from the
     camera. They are named wrongly sized (not moving, not to be ignored), each with the size that fits."""
-    chain = _chain(realdata)
+    chain = stairs_chain(realdata)
     chain = replace(chain, evidence=replace(chain.evidence, tag_size_m=0.16))
-    result = attribute(load_log(realdata / BAG, chain).timeline, chain, bootstrap=0)
-    bodies = yaml.safe_load((realdata / "tagslam_stairs/tagslam.yaml").read_text())["bodies"]
+    result = attribute(load_log(realdata / STAIRS_BAG, chain).timeline, chain, bootstrap=0)
+    bodies = yaml.safe_load((realdata / STAIRS / "tagslam.yaml").read_text())["bodies"]
     sized = {str(t["id"]): float(t["size"]) for t in bodies[0]["house"]["tags"] if float(t["size"]) != 0.16}
     rows = {r.label: r for r in result.labels.rows}
     seen = {label for label in sized if label in rows and rows[label].used >= 3}

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.model.estimates import estimate_to_json
 from framechain.catalogue import Fault
 from framechain.pipeline import attribute_log
+from tests.helpers.lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 
 
 def test_wrist_mount_yaw_error_is_four_degrees_on_the_mount_edge(tmp_path: Path) -> None:
