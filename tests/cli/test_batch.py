@@ -354,7 +354,7 @@ def test_fleet_spread_keeps_the_text_of_estimates_without_a_number() -> None:
     assert (row.logs, row.median, row.median_text, row.p5_p95_text) == (2, None, swap, "-")
 
 
-# -- issue 19: each log's own chain, framechain's outputs skipped, paths as given ------------------------
+# -- each log's own chain, framechain's outputs skipped, paths as given ----------------------------------
 def _write_chain(path: Path, chain: Any, *, evidence: bool) -> Path:
     raw = chain.to_dict()
     if not evidence:
@@ -421,7 +421,7 @@ def test_framechain_exports_are_not_logs(tmp_path: Path, capsys: pytest.CaptureF
     assert main(["batch", str(logs), "--out", str(tmp_path / "out2"), "-j", "1", "--bootstrap", "0"]) == 0
     captured = capsys.readouterr()
     assert f"note: {result.notes[0]}" in captured.out
-    # Not a terminal: the progress is plain lines (issue 19, item 10).
+    # Not a terminal: the progress is plain lines, as a CI log needs them.
     assert captured.err.splitlines()[:2] == ["framechain: attributing logs 0% (0 of 1 logs)",
                                              "framechain: attributing logs 100% (1 of 1 logs)"]
 

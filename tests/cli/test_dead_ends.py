@@ -355,7 +355,7 @@ def test_real_lerobot_datasets_say_what_they_need(name: str, realdata: Path,
 
 def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    """The issue's example: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
+    """TagSLAM's stairs log: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
     tagslam.yaml beside the bag."""
     folder = realdata / STAIRS
     if not folder.is_dir():

@@ -1,7 +1,7 @@
-"""A new user's afternoon without a wrong turn (issue 19, items 1-9): suggestions that the chain checker
-accepts, hints that name where their values come from, typos named as the cause with "did you mean", a folder
-of logs that is not silently one of them, one suggested chain everywhere, calibrations of another camera said
-first, hints that can work, and camera-frame points that need no intrinsics."""
+"""A new user's afternoon without a wrong turn: suggestions that the chain checker accepts, hints that name where
+their values come from, typos named as the cause with "did you mean", a folder of logs that is not silently one of
+them, one suggested chain everywhere, calibrations of another camera said first, hints that can work, and
+camera-frame points that need no intrinsics."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def _filled(text: str) -> dict[str, object]:
     return raw
 
 
-# -- 1: the suggestion never produces a chain its own checker rejects ----------------------------------
+# -- the suggestion never produces a chain its own checker rejects -------------------------------------
 @pytest.mark.parametrize("name", ROS_LOGS)
 def test_every_real_suggestion_parses_as_a_chain(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                  monkeypatch: pytest.MonkeyPatch, realdata: Path) -> None:
@@ -82,7 +82,7 @@ def test_a_pose_topic_into_odom_does_not_make_odom_the_body_and_the_world(
     assert main(["info", str(log), "--chain", str(chain), "--json", "-q"]) == 0
 
 
-# -- 2: a value taken from a file beside the log names the file ----------------------------------------
+# -- a value taken from a file beside the log names the file -------------------------------------------
 def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, dict[str, str]]:
     assert main(["info", str(log), "--json", "-q", *extra]) == 0
     return {n["piece"]: n for n in json.loads(capsys.readouterr().out)["needs"]}
@@ -115,7 +115,7 @@ def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: p
     assert needs["intrinsics"]["key"].startswith("calibration: {file: CAMERAS.yaml, camera: NAME}")
 
 
-# -- 3, 4: a typo is named as the cause, with what it may have meant -----------------------------------
+# -- a typo is named as the cause, with what it may have meant -----------------------------------------
 def _stairs_chain(tmp_path: Path, realdata: Path, **topics: str) -> Path:
     chain = {
         "frames": {"camera": "t265_fisheye1_optical_frame", "body": "basalt_pose_frame", "world": "world"},
@@ -165,7 +165,7 @@ def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str], reald
     assert "mounts: or urdf: need --chain" in line
 
 
-# -- 5: a folder of several logs is not silently one of them -------------------------------------------
+# -- a folder of several logs is not silently one of them ----------------------------------------------
 def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                          realdata: Path) -> None:
     folder = tmp_path / "logs"
@@ -194,7 +194,7 @@ def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsy
     assert any(n.startswith(f"{export} skipped: written by framechain") for n in info["notes"])
 
 
-# -- 6: one suggestion everywhere -----------------------------------------------------------------------
+# -- one suggestion everywhere --------------------------------------------------------------------------
 def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str],
                                                                     realdata: Path) -> None:
@@ -223,7 +223,7 @@ def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: P
     assert incomplete in out
 
 
-# -- 7: a calibration of another camera is said first ---------------------------------------------------
+# -- a calibration of another camera is said first ------------------------------------------------------
 def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Path,
                                                                     capsys: pytest.CaptureFixture[str],
                                                                     realdata: Path) -> None:
@@ -264,7 +264,7 @@ def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest
             "of another topic (/quadruple/bottom_left/tags)") in " ".join(notes)
 
 
-# -- 8: a hint that can work ------------------------------------------------------------------------------
+# -- a hint that can work ---------------------------------------------------------------------------------
 def test_the_static_target_hint_says_what_can_help() -> None:
     from framechain.analysis.evidence.static import _what_can_help
 
@@ -278,7 +278,7 @@ def test_the_static_target_hint_says_what_can_help() -> None:
     assert "cannot help: record more images" in _what_can_help(labels, spread, usable, 4)
 
 
-# -- 9: marker poses in the camera frame need no intrinsics -----------------------------------------------
+# -- marker poses in the camera frame need no intrinsics --------------------------------------------------
 def test_fiducial_transforms_replay_without_intrinsics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """fiducial_msgs/FiducialTransformArray (the markers' poses in the camera frame) and no CameraInfo: the
     needs agree with the chain (intrinsics not needed, detections found) and every marker is replayed to the

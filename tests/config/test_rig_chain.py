@@ -31,7 +31,7 @@ RIG: dict[str, Any] = {
 }
 
 
-def test_the_issue_rig_chain_reads() -> None:
+def test_a_two_camera_rig_chain_reads_with_its_per_camera_keys_and_round_trips() -> None:
     chain = ChainConfig.from_dict(RIG)
     assert chain.is_rig
     assert chain.camera_frames() == ("cam_sync/cam0", "cam_sync/cam1")

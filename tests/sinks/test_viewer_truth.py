@@ -1,6 +1,6 @@
-"""What the Rerun viewer shows is what is true (issue 19, items 14-19): pixels in Rerun's convention, the view of the
-whole image, the detector's own tag centre beside framechain's, one name per frame, the error the findings explain
-as a series, a sane time axis for a log of one moment, and one colour legend."""
+"""What the Rerun viewer shows is what is true: pixels in Rerun's convention, the view of the whole image, the
+detector's own tag centre beside framechain's, one name per frame, the error the findings explain as a series, a sane
+time axis for a log of one moment, and one colour legend."""
 
 from __future__ import annotations
 

@@ -82,7 +82,7 @@ def test_too_few_sightings_is_one_line(realdata: Path, sized: bool) -> None:
     assert "7 labels" in message
     assert "at most 1 sighting" in message
     assert "evidence.static_window_s" in message
-    # A window cannot help one image: the hint says so and asks for what can (issue 19, item 8).
+    # A window cannot help one image: the hint says so and asks for what can.
     assert "one image" in message
     assert "cannot add sightings" in message
     assert "lengthen" not in message

@@ -1,5 +1,5 @@
-"""Bounds (issue 17): what a log's evidence can see of each fault family, and the smallest fault of it
-framechain would have found; checked by injecting faults at twice and half the reported bound.
+"""Bounds: what a log's evidence can see of each fault family, and the smallest fault of it framechain would have
+found; checked by injecting faults at twice and half the reported bound.
 
 The faults are injected with maths independent of framechain's: generated scenes from
 :mod:`framechain.sim` (the generator's own transforms and projection), and a copy of the shared
@@ -53,7 +53,7 @@ def _statistical_size(bound: dict[str, Any]) -> float:
 
 # -- a camera that does not move ----------------------------------------------------------------
 def test_a_fixed_camera_over_a_static_target_cannot_show_latency_or_its_mount() -> None:
-    """The issue's arena camera: its mount turned 5 deg, and a clean verdict said "no fault". A fixed
+    """A camera fixed over an arena, its mount turned 5 deg: a verdict of "no fault" would be wrong. A fixed
     camera over static targets shows no latency, mount rotation or scale: the verdict says so."""
     turned = InjectedFault(Fault.ROTATION_ERROR, "data", {"angle_deg": 5.0, "axis": [0.0, 1.0, 0.0]})
     scene = generate(SceneSpec(seed=4, duration_s=6.0, evidence="static", fixed_camera=True, faults=(turned,)))
@@ -156,7 +156,7 @@ def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(le
     assert found_at_half <= 1
 
 
-# -- the shared stairs bag with the README's chain (the issue's done-when) ------------------------
+# -- the shared stairs bag with the README's chain: its bound, and a fault twice that size ----------
 @functools.cache
 def _stairs_bound(realdata: Path) -> float:
     """The pose latency bound of the stairs bag as recorded (seconds), computed once per process."""
@@ -262,7 +262,7 @@ def _held_bag(realdata: Path, out: Path, frames: int) -> Path:
 def test_a_real_fixed_camera_over_static_markers_cannot_show_latency_or_its_mount(
     realdata: Path, tmp_path: Path, turned_deg: float,
 ) -> None:
-    """The issue's case on a real image: a fixed camera over static markers (the fiducials bag's JPEG held
+    """The same on a real image: a fixed camera over static markers (the fiducials bag's JPEG held
     for 12 frames), its mount as declared or turned 5 deg: latency and the mount rotation are not
     observable, and the verdict says nothing could be checked, not "no fault"."""
     mount = Rotation.from_quat([-0.5, 0.5, -0.5, 0.5]) * Rotation.from_rotvec(np.deg2rad(turned_deg) * np.array(

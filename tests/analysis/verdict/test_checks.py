@@ -1,6 +1,6 @@
-"""What a verdict can be checked against (issue 17): weak findings worded as hints, the error against
-each family's size (the same median error the findings' millimetres are shares of), the per-label
-table with the labels to ignore, and the attribution.json additions."""
+"""What a verdict can be checked against: weak findings worded as hints, the error against each family's size (the
+same median error the findings' millimetres are shares of), the per-label table with the labels to ignore, and the
+attribution.json additions."""
 
 from __future__ import annotations
 

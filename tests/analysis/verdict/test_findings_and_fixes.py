@@ -80,8 +80,8 @@ def test_attribute_knows_depth_came_from_depth_images() -> None:
 
 
 def test_findings_that_explain_nothing_are_notes_on_a_real_log(realdata: Path) -> None:
-    """The reviewer's case: ArUco markers against a declared reference point. A depth scale fitted
-    there made the median error worse (-32 mm of it); it must be a note, not a finding at conf 1.00."""
+    """ArUco markers against a declared reference point: a depth scale fitted there makes the median error worse
+    (-32 mm of it), so it is a note, not a finding at conf 1.00."""
     bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
