@@ -104,7 +104,7 @@ def test_karma_whole_clip_gives_an_offset_with_a_narrow_interval(karma: tuple[Pa
     assert entry["explained"]
     assert high - low < 0.010
     # Phase correlation of the image centre against the gyro reads the images 12 ms behind it
-    # (tests/analysis/test_gpmf_reader.py): the fitted offset agrees to a few milliseconds.
+    # (tests/analysis/egomotion/test_gpmf_reader.py): the fitted offset agrees to a few milliseconds.
     assert entry["offset_s"] == pytest.approx(-0.012, abs=0.005)
     assert low < entry["offset_s"] < high
     (latency,) = [f for f in found.findings if f.fault.value == "latency"]
