@@ -13,12 +13,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # start them where they are what is tested.
 os.environ.setdefault("FRAMECHAIN_RENDERERS", "0")
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.helpers.realdata import GR00T, REALDATA, SO101_URDF, UNITREE
+from tests.helpers.rerun_server import GrpcServer, serving_grpc
 
 # Tests reach the real logs through the ``realdata`` fixture, so each skips cleanly without them.
 
@@ -50,3 +52,10 @@ def unitree(realdata: Path) -> Path:
 @pytest.fixture(scope="session")
 def gr00t(realdata: Path) -> Path:
     return realdata / GR00T
+
+
+@pytest.fixture
+def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
+    """A Rerun gRPC server saving what it receives (the Rerun sink's and the replay command's tests stream to it)."""
+    with serving_grpc(tmp_path) as server:
+        yield server

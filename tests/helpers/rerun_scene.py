@@ -1,4 +1,5 @@
-"""A hand-built timeline for the Rerun sink tests and its run, replayed only, with findings handed to the sinks.
+"""A hand-built timeline for the Rerun sink and replay command tests, the robot's own hop points beside it, and its
+run, replayed only, with findings handed to the sinks.
 
 The scene: a base driving at 0.5 m/s with a slow yaw under ``map -> odom``, a mast camera pitched down 30 deg, depth
 images at 20 Hz and seven detections (five that replay, one outside the image, one after the odometry ends).
@@ -7,6 +8,7 @@ images at 20 Hz and seven detections (five that replay, one outside the image, o
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -15,7 +17,8 @@ from framechain import pipeline
 from framechain.analysis.run import Run
 from framechain.analysis.verdict.attribute import Attribution, Finding
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
-from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
+from framechain.replay import ReplayResult, replay
+from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, PointTable, Timeline, TransformTable
 
 T0 = 1_700_000_000_000_000_000
 MS = 1_000_000
@@ -23,6 +26,8 @@ FRAMES = ChainFrames(camera="camera_optical_frame", body="base_link", world="map
 OPTICAL_QUAT_XYZW = [-0.5, 0.5, -0.5, 0.5]  # camera_link (FLU) -> optical (RDF), REP-103
 MAP_FROM_ODOM_T = np.array([0.5, -0.2, 0.0])
 MAP_FROM_ODOM = Rotation.from_euler("z", 10, degrees=True)
+BODY_OFFSET = np.array([0.05, 0.0, 0.0])  # the robot's body point is off by 5 cm (as-run fault)
+TARGET_OFFSET = np.array([0.0, 0.03, 0.0])
 
 
 def mast_camera_timeline() -> Timeline:
@@ -67,6 +72,40 @@ def mast_camera_timeline() -> Timeline:
     )
     return Timeline(transforms=TransformTable.concat([odom_base, statics]), cameras=camera,
                     observations=observations, depth_frames=depth, metadata={"source": "test scene"})
+
+
+def with_as_run(timeline: Timeline, result: ReplayResult) -> Timeline:
+    """The robot's own hop points: camera exact, body (and so world) off by BODY_OFFSET.
+
+    Matched by obs_id for camera and body; by stamp (obs_id -1) for world, which is logged in
+    ``odom`` to exercise the frame conversion; a target off by TARGET_OFFSET, and a reference.
+    """
+    ok = np.flatnonzero(result.replayed)
+    obs = result.observations
+    m = ok.size
+    world = result.p_world[ok] + BODY_OFFSET  # world_from_body here has the base's yaw: keep it simple
+    world_in_odom = MAP_FROM_ODOM.inv().apply(world - MAP_FROM_ODOM_T)
+
+    def rows(frame: str, xyz: Any, role: str, obs_id: Any, stamp_shift_ns: int = 0) -> PointTable:
+        stamps = obs.stamp_ns[ok] + stamp_shift_ns
+        return PointTable(
+            frame=np.full(m, frame), stamp_ns=stamps, log_time_ns=stamps + 5 * MS, xyz=xyz,
+            quat_xyzw=np.full((m, 4), np.nan), role=np.full(m, role), obs_id=obs_id, source=np.full(m, "/debug"),
+        )
+
+    points = PointTable.concat([
+        rows("camera_optical_frame", result.p_cam[ok], "hop_camera", obs.obs_id[ok]),
+        rows("base_link", result.p_body[ok] + BODY_OFFSET, "hop_body", obs.obs_id[ok]),
+        rows("odom", world_in_odom, "hop_world", np.full(m, -1), stamp_shift_ns=200_000),
+        rows("map", result.p_world[ok] + TARGET_OFFSET, "target", obs.obs_id[ok]),
+    ])
+    return timeline.replace(points=points)
+
+
+def recorded_timeline() -> Timeline:
+    """The scene as a robot that logs its own hop points records it (:func:`with_as_run`)."""
+    timeline = mast_camera_timeline()
+    return with_as_run(timeline, replay(timeline, FRAMES))
 
 
 def replayed_run(timeline: Timeline, *, findings: list[Finding] | None = None,

@@ -2,15 +2,8 @@
 
 from __future__ import annotations
 
-import json
-import shutil
-import signal
-import socket
 import subprocess
-import sys
-import time
 from collections import defaultdict
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +19,6 @@ from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimat
 from framechain.analysis.verdict.attribute import Finding
 from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
-from framechain.config.chain import ChainConfig
 from framechain.replay import ReplayResult, TransformBuffer, replay
 from framechain.sinks.colors import DETECTION_COLOR, FAULT_COLORS
 from framechain.sinks.rerun import (
@@ -41,53 +33,24 @@ from framechain.sinks.rerun import (
 )
 from framechain.timeline import (
     PointRole,
-    PointTable,
     Timeline,
     TransformTable,
 )
 from tests.helpers.realdata import NAV2_MCAP
 from tests.helpers.rerun_scene import (
+    BODY_OFFSET,
     FRAMES,
     MAP_FROM_ODOM,
-    MAP_FROM_ODOM_T,
-    MS,
     T0,
     mast_camera_timeline,
+    recorded_timeline,
     replayed_run,
+    with_as_run,
 )
+from tests.helpers.rerun_server import GrpcServer, free_port, received_entities, rerun_executable
 from tests.helpers.rrd_views import Chunks, column_values, read_chunks
 
-BODY_OFFSET = np.array([0.05, 0.0, 0.0])  # the robot's body point is off by 5 cm (as-run fault)
-TARGET_OFFSET = np.array([0.0, 0.03, 0.0])
 REFERENCE_POINT = (2.0, 0.5, 0.2)
-
-
-def _with_as_run(timeline: Timeline, result: ReplayResult) -> Timeline:
-    """The robot's own hop points: camera exact, body (and so world) off by BODY_OFFSET.
-
-    Matched by obs_id for camera and body; by stamp (obs_id -1) for world, which is logged in
-    ``odom`` to exercise the frame conversion; a target off by TARGET_OFFSET, and a reference.
-    """
-    ok = np.flatnonzero(result.replayed)
-    obs = result.observations
-    m = ok.size
-    world = result.p_world[ok] + BODY_OFFSET  # world_from_body here has the base's yaw: keep it simple
-    world_in_odom = MAP_FROM_ODOM.inv().apply(world - MAP_FROM_ODOM_T)
-
-    def rows(frame: str, xyz: Any, role: str, obs_id: Any, stamp_shift_ns: int = 0) -> PointTable:
-        stamps = obs.stamp_ns[ok] + stamp_shift_ns
-        return PointTable(
-            frame=np.full(m, frame), stamp_ns=stamps, log_time_ns=stamps + 5 * MS, xyz=xyz,
-            quat_xyzw=np.full((m, 4), np.nan), role=np.full(m, role), obs_id=obs_id, source=np.full(m, "/debug"),
-        )
-
-    points = PointTable.concat([
-        rows("camera_optical_frame", result.p_cam[ok], "hop_camera", obs.obs_id[ok]),
-        rows("base_link", result.p_body[ok] + BODY_OFFSET, "hop_body", obs.obs_id[ok]),
-        rows("odom", world_in_odom, "hop_world", np.full(m, -1), stamp_shift_ns=200_000),
-        rows("map", result.p_world[ok] + TARGET_OFFSET, "target", obs.obs_id[ok]),
-    ])
-    return timeline.replace(points=points)
 
 
 @dataclass(frozen=True)
@@ -108,9 +71,7 @@ FINDINGS = [
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
-    timeline = mast_camera_timeline()
-    first = replay(timeline, FRAMES)
-    timeline = _with_as_run(timeline, first)
+    timeline = recorded_timeline()
     made = replayed_run(timeline, findings=FINDINGS, reference_point=REFERENCE_POINT)
     result = made.replay
     rrd = tmp_path_factory.mktemp("rerun") / "scene.rrd"
@@ -295,13 +256,9 @@ def test_camera_images_and_detections(scene: Scene) -> None:
     assert {c for c, good in zip(colors, ok, strict=True) if good} == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
 
 
-def _rerun_exe() -> str | None:
-    return shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
-
-
 def test_rerun_verifies_the_recording(scene: Scene) -> None:
     """Rerun's own `rrd verify`: every component decodes and the footer is well formed."""
-    exe = _rerun_exe()
+    exe = rerun_executable()
     if exe is None:
         pytest.skip("the rerun executable is not installed")
     done = subprocess.run([exe, "rrd", "verify", "--check-footers", "true", str(scene.rrd)],
@@ -362,7 +319,7 @@ def test_resolve_target_keeps_spawn_with_a_display() -> None:
 def test_as_run_matching_by_id_stamp_and_frame() -> None:
     timeline = mast_camera_timeline()
     result = replay(timeline, FRAMES)
-    logged = _with_as_run(timeline, result)
+    logged = with_as_run(timeline, result)
     buffer = TransformBuffer.from_timeline(logged)
     matched = align_evidence(logged.points, result.observations, FRAMES, buffer)
     ok = result.replayed
@@ -394,63 +351,6 @@ def test_finding_view_words_a_typed_finding() -> None:
 # Connect: a headless Rerun gRPC server that saves what it receives (no viewer, no display)
 
 
-@dataclass(frozen=True)
-class GrpcServer:
-    url: str
-    rrd: Path
-    process: subprocess.Popen[bytes]
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-@pytest.fixture
-def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
-    exe = _rerun_exe()
-    if exe is None:
-        pytest.skip("the rerun executable is not installed")
-    port = _free_port()
-    rrd = tmp_path / "received.rrd"
-    process = subprocess.Popen([exe, "--serve-grpc", "--port", str(port), "--save", str(rrd)],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            with socket.socket() as sock:
-                if sock.connect_ex(("127.0.0.1", port)) == 0:
-                    break
-            time.sleep(0.1)
-        else:
-            pytest.fail("the Rerun gRPC server did not start")
-        yield GrpcServer(f"rerun+http://127.0.0.1:{port}/proxy", rrd, process)
-    finally:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-def _received_entities(server: GrpcServer) -> set[str]:
-    deadline = time.monotonic() + 10
-    entities: set[str] = set()
-    while time.monotonic() < deadline:
-        if server.rrd.is_file() and server.rrd.stat().st_size:
-            try:
-                entities = {c.entity_path for c in RrdReader(server.rrd).stream()}
-            except RuntimeError:  # the server is still writing the last message
-                entities = set()
-            if "/summary" in entities:
-                break
-        time.sleep(0.2)
-    return entities
-
-
 # The server's file is a stream without footer; Rerun's reader says so and scans the whole file.
 @pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
 def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer) -> None:
@@ -458,111 +358,16 @@ def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer
     assert outcome.mode is OutputMode.CONNECT
     assert outcome.url == grpc_server.url
     assert outcome.path is None
-    entities = _received_entities(grpc_server)
+    entities = received_entities(grpc_server)
     assert {"/points/recomputed/world", "/tf/base_link", "/summary"} <= entities
 
 
 def test_connect_to_nothing_fails_at_once(scene: Scene) -> None:
-    url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"
+    url = f"rerun+http://127.0.0.1:{free_port()}/proxy"
     with pytest.raises(RerunSinkError, match="no Rerun viewer listening at rerun"):
         stream_replay(replayed_run(scene.timeline), RerunTarget.connect(url), options=RerunOptions())
     with pytest.raises(RerunSinkError, match="not a Rerun gRPC URL"):
         stream_replay(replayed_run(scene.timeline), RerunTarget.connect("http://"))
-
-
-# ----------------------------------------------------------------------------------------------
-# The command
-
-
-@pytest.fixture
-def saved_timeline(tmp_path: Path, scene: Scene) -> Path:
-    directory = tmp_path / "scene_timeline"
-    scene.timeline.replace(metadata={"chain": {"frames": {"camera": "camera_optical_frame", "body": "base_link",
-                                                          "world": "map"}}}).save(directory)
-    return directory
-
-
-def test_cli_replay_saves_and_prints_counts(
-    saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "cli.rrd"
-    assert main(["replay", str(saved_timeline), "--save", str(out), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["counts"] == {"total": 7, "replayed": 5, "rejected": {"extrapolation": 1, "outside_image": 1},
-                                "stale": report["counts"]["stale"]}
-    assert report["output"] == {"mode": "save", "path": str(out), "url": None, "fell_back": False}
-    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
-    entities = {c.entity_path for c in RrdReader(out).stream()}
-    assert "/points/as_run/body" in entities
-
-
-def test_cli_replay_text_output(saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    out = tmp_path / "text.rrd"
-    assert main(["replay", str(saved_timeline), "--save", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "7 total, 5 replayed, 2 rejected" in text
-    assert "extrapolation 1" in text
-    assert "outside_image 1" in text
-    assert str(out) in text
-
-
-def test_cli_replay_spawn_without_display(
-    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.chdir(tmp_path)
-    assert main(["replay", str(saved_timeline), "--spawn", "--quiet"]) == 0
-    captured = capsys.readouterr()
-    assert "no display" in captured.err
-    assert "rerun         saved" in captured.out  # --quiet keeps the result, drops progress
-    assert (tmp_path / "scene_timeline.rrd").is_file()
-
-
-def test_cli_replay_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["replay", str(tmp_path / "missing.mcap"), "--save", str(tmp_path / "x.rrd")]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1
-    assert "missing.mcap" in err[0]
-
-
-@pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
-def test_cli_replay_connect(
-    saved_timeline: Path, grpc_server: GrpcServer, capsys: pytest.CaptureFixture[str]
-) -> None:
-    assert main(["replay", str(saved_timeline), "--connect", grpc_server.url, "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["output"] == {"mode": "connect", "path": None, "url": grpc_server.url, "fell_back": False}
-    assert "/points/as_run/world" in _received_entities(grpc_server)
-
-
-def test_cli_replay_reads_a_recorded_log(
-    scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from framechain.adapters import write_log
-
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "camera_optical_frame", "body": "base_link", "world": "map"},
-        "topics": {"camera_info": "/camera/camera_info", "detections": "/detections",
-                   "depth": "/camera/depth/image_rect_raw"},
-        "evidence": {"hops": {"camera": "/debug/point_camera", "body": "/debug/point_body",
-                              "world": "/debug/point_world"}, "target": "/grasp_target"},
-    })
-    log = write_log(scene.timeline, tmp_path / "scene.mcap", container="mcap-ros2", chain=chain)
-    chain_file = tmp_path / "chain.yaml"
-    chain_file.write_text(chain.to_yaml())
-    out = tmp_path / "mcap.rrd"
-    assert main(["replay", str(log), "--chain", str(chain_file), "--save", str(out), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["source"] == "mcap"
-    assert report["counts"]["replayed"] == 5
-    assert report["entities"]["/series/error_mm/camera_to_body"] == 5  # as-run matched by stamp
-    # Without --chain the frames are suggested, and so are the robot's hop-point topics (found by name).
-    assert main(["replay", str(log), "--save", str(tmp_path / "nochain.rrd"), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
-    assert not any("not used" in note for note in report["notes"])
-    assert report["entities"]["/series/error_mm/camera_to_body"] == 5
 
 
 def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -591,27 +396,6 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
         assert np.array_equal(_times(chunks, entity, "sensor_time"), rows.stamp_ns[order])
 
 
-def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from framechain.catalogue import Fault
-    from framechain.sim.scene import InjectedFault, SceneSpec, generate
-
-    generated = generate(SceneSpec(duration_s=2.0, width=160, height=120, focal_px=150.0,
-                                   faults=(InjectedFault(Fault.MISSING_ROTATION),)))
-    directory = tmp_path / "episode"
-    generated.timeline.replace(metadata={"chain": generated.chain.to_dict()}).save(directory)
-    out = tmp_path / "attributed.rrd"
-    assert main(["replay", str(directory), "--save", str(out), "--json"]) == 0  # attribution is on by default
-    report = json.loads(capsys.readouterr().out)
-    assert report["findings"]
-    assert report["findings"][0].startswith("missing_rotation on camera_to_body")
-    logged = [r[0] for r in column_values(read_chunks(out), "/log/findings", "TextLog:text")]
-    assert logged == report["findings"]
-    plain = tmp_path / "plain.rrd"
-    assert main(["replay", str(directory), "--no-attribute", "--save", str(plain), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["findings"] == []
-    assert "/log/findings" not in read_chunks(plain)
-
-
 def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scene) -> None:
     empty = Timeline()
     outcome = stream_replay(replayed_run(empty), RerunTarget.save(tmp_path / "empty.rrd"))
@@ -626,14 +410,3 @@ def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scen
     assert len(column_values(chunks, "/log/rejected", "TextLog:text")) == len(result)
     assert "/points/recomputed/world" not in chunks
     assert "/series/gap_ms/body_to_world" not in chunks
-
-
-def test_cli_replay_without_output_option_saves_when_headless(
-    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.chdir(tmp_path)
-    assert main(["replay", str(saved_timeline)]) == 0
-    out = capsys.readouterr().out
-    assert f"saved {tmp_path / 'scene_timeline.rrd'}" in out
