@@ -1,4 +1,4 @@
-"""Independent reference maths for the core tests: one time at a time, plain numpy and scipy.
+"""Independent reference maths for the geometry, timeline and replay tests: one time at a time, plain numpy and scipy.
 
 Nothing here calls framechain's interpolation or quaternion code: the reference finds the
 bracketing samples itself, interpolates translations linearly, rotations with scipy's Slerp, and
