@@ -20,11 +20,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests" / "lerobot"))
-
-from egomotion_scene import episode_evidence, fit_episode, shifted_copy  # noqa: E402
+sys.path.insert(0, str(HERE.parent))
 
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset  # noqa: E402
+from tests.helpers.egomotion_scene import episode_evidence, fit_episode, shifted_copy  # noqa: E402
 
 URDF = HERE.parent.parent / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 SEEDS = tuple(range(101, 107))

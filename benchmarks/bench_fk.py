@@ -1,6 +1,6 @@
 """Forward kinematics per second: framechain's batched NumPy FK against yourdfpy (and pinocchio).
 
-The 6-revolute-joint test arm (``tests/lerobot/data/arm6.urdf``, its prismatic gripper held
+The 6-revolute-joint test arm (``tests/helpers/data/arm6.urdf``, its prismatic gripper held
 fixed) and the SO-101 (5 arm joints + gripper, from ../shared/realdata when present). Every
 library computes ``T_base_wrist_camera_link`` (SO-101: ``T_base_gripper_frame_link``) for the same
 random joint vectors; results are checked against each other before timing. framechain runs the
@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 from framechain.robot.kinematics import RobotModel
 
 HERE = Path(__file__).resolve().parent
-ARM6 = HERE.parent / "tests" / "lerobot" / "data" / "arm6.urdf"
+ARM6 = HERE.parent / "tests" / "helpers" / "data" / "arm6.urdf"
 SO101 = HERE.parent.parent / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
 SEED = 20261122
 N_BATCH = 200_000

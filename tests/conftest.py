@@ -1,4 +1,4 @@
-"""Shared test helpers: paths to ../shared/realdata and seeded generators."""
+"""Fixtures every test folder may use: a seeded generator, and the real logs' folder with named paths in it."""
 
 from __future__ import annotations
 
@@ -13,11 +13,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # start them where they are what is tested.
 os.environ.setdefault("FRAMECHAIN_RENDERERS", "0")
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from shared_paths import REALDATA
+
+from tests.helpers.realdata import GR00T, REALDATA, SO101_URDF, UNITREE
+from tests.helpers.rerun_server import GrpcServer, serving_grpc
 
 # Tests reach the real logs through the ``realdata`` fixture, so each skips cleanly without them.
 
@@ -33,3 +36,26 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"real logs not found at {REALDATA}")
     return REALDATA
+
+
+@pytest.fixture(scope="session")
+def so101_urdf(realdata: Path) -> Path:
+    """The published SO-101 URDF (the arm the generated LeRobot episodes move)."""
+    return realdata / SO101_URDF
+
+
+@pytest.fixture(scope="session")
+def unitree(realdata: Path) -> Path:
+    return realdata / UNITREE
+
+
+@pytest.fixture(scope="session")
+def gr00t(realdata: Path) -> Path:
+    return realdata / GR00T
+
+
+@pytest.fixture
+def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
+    """A Rerun gRPC server saving what it receives (the Rerun sink's and the replay command's tests stream to it)."""
+    with serving_grpc(tmp_path) as server:
+        yield server

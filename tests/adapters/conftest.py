@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adapter_scene import CHAIN, make_scene
 
 from framechain.adapters import CONTAINERS, write_log
 from framechain.timeline import Timeline
+from tests.helpers.adapter_scene import CHAIN, make_scene
 
 SUFFIX = {"mcap-ros2": ".mcap", "mcap-ros1": ".mcap", "rosbag1": ".bag", "rosbag2-sqlite": "", "rosbag2-mcap": ""}
 

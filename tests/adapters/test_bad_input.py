@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adapter_scene import CHAIN, T0
 
 from framechain.adapters import AdapterError, EmptyLogError, UnsupportedLogError, open_log, write_log
 from framechain.cli.main import main
 from framechain.timeline import CameraTable, Timeline, TransformTable
+from tests.helpers.adapter_scene import CHAIN, T0
 
 
 def _tf_log(path: Path, n: int = 200) -> Path:

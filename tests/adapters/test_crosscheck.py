@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adapter_scene import CHAIN, OPTICAL_Q, T0, K, body_pose
 from scipy.spatial.transform import Rotation
 
 from framechain.adapters import open_log, write_log
@@ -18,6 +17,7 @@ from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
 from framechain.replay import REPLAYED, replay
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
+from tests.helpers.adapter_scene import CHAIN, OPTICAL_Q, T0, K, body_pose
 
 
 def test_rerun_mcap_reader_agrees_on_tf(written: dict[str, Path]) -> None:

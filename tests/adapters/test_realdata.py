@@ -14,16 +14,29 @@ from framechain.adapters import open_log
 from framechain.cli.main import main
 from framechain.replay import LATEST, TransformBuffer
 from framechain.suggest import frame_tree
+from tests.helpers.realdata import (
+    ARUCO_IMAGES_BAG,
+    ARUCO_MARKER_BAG,
+    FRANKA_BAG,
+    FRANKA_ROS2,
+    HUSKY_BAG,
+    HUSKY_OLD_FRAMES_BAG,
+    NAV2_MCAP,
+    PANDA_URDF,
+    REALSENSE_BAG,
+    TF_EXAMPLE_BAG,
+    TF_EXAMPLE_ROS2,
+    TURTLESIM_BAG,
+)
 
 #: log -> (edges "parent>child" with static flag, sample counts of dynamic edges)
 TREES: dict[str, dict[str, tuple[bool, int]]] = {
-    "evo/tf_example.bag": {"odom>base_footprint": (False, 517), "base_footprint>base_link": (True, 1)},
-    "evo/tf_example": {"odom>base_footprint": (False, 517), "base_footprint>base_link": (True, 1)},
-    "turtlesim/example.bag": {"world>turtle1": (False, 1344), "world>turtle2": (False, 1344),
-                              "turtle1>carrot": (True, 1)},
-    "husky_localization/test1.bag": {"odom>base_link": (False, 3952)},
-    "fiducials/aruco_images.bag": {},
-    "fiducials/aruco_marker.bag": {},
+    TF_EXAMPLE_BAG: {"odom>base_footprint": (False, 517), "base_footprint>base_link": (True, 1)},
+    TF_EXAMPLE_ROS2: {"odom>base_footprint": (False, 517), "base_footprint>base_link": (True, 1)},
+    TURTLESIM_BAG: {"world>turtle1": (False, 1344), "world>turtle2": (False, 1344), "turtle1>carrot": (True, 1)},
+    HUSKY_BAG: {"odom>base_link": (False, 3952)},
+    ARUCO_IMAGES_BAG: {},
+    ARUCO_MARKER_BAG: {},
 }
 
 
@@ -41,8 +54,8 @@ def test_info_reads_real_logs(name: str, realdata: Path, capsys: pytest.CaptureF
 
 
 #: Every ROS log in realdata, including those checked more closely below.
-ALL_ROS_LOGS = [*sorted(TREES), "evo/nav2_turtlebot.mcap", "husky_localization/test1_old_stereo_wheel.bag",
-                "franka_tf/rosbagFrankaPanda.bag", "franka_tf/ros2_bag", "realsense_d435/test_rs.bag"]
+ALL_ROS_LOGS = [*sorted(TREES), NAV2_MCAP, HUSKY_OLD_FRAMES_BAG,
+                FRANKA_BAG, FRANKA_ROS2, REALSENSE_BAG]
 
 
 @pytest.mark.parametrize("name", ALL_ROS_LOGS)
@@ -54,7 +67,7 @@ def test_info_reads_every_ros_log(name: str, realdata: Path, capsys: pytest.Capt
 
 
 def test_tf_static_path_is_timeless(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    log = str(realdata / "evo/tf_example.bag")
+    log = str(realdata / TF_EXAMPLE_BAG)
     assert main(["tf", log, "base_footprint", "base_link", "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
     assert record["timeless"] is True
@@ -68,7 +81,7 @@ def test_tf_static_path_is_timeless(realdata: Path, capsys: pytest.CaptureFixtur
 
 
 def test_turtlebot_sim_time_is_pointed_out(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    info = _info_json(realdata / "evo/nav2_turtlebot.mcap", capsys)
+    info = _info_json(realdata / NAV2_MCAP, capsys)
     assert len(info["edges"]) == 33
     by = {(e["parent"], e["child"]): e for e in info["edges"]}
     assert by[("map", "odom")]["clocks_differ"]
@@ -84,23 +97,23 @@ def test_turtlebot_sim_time_is_pointed_out(realdata: Path, capsys: pytest.Captur
 
 
 def test_husky_old_frames_and_empty_child(realdata: Path) -> None:
-    loaded = open_log(realdata / "husky_localization/test1_old_stereo_wheel.bag")
+    loaded = open_log(realdata / HUSKY_OLD_FRAMES_BAG)
     edges = {(e.parent, e.child) for e in frame_tree(loaded.timeline.transforms)}
     assert all(not p.startswith("/") and not c.startswith("/") for p, c in edges)
     assert any("no child frame in the message; 'base_link'" in n for n in loaded.info.notes)
 
 
 def test_fiducials_cameras_and_clock_gap(realdata: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    info = _info_json(realdata / "fiducials/aruco_marker.bag", capsys)
+    info = _info_json(realdata / ARUCO_MARKER_BAG, capsys)
     cam = info["cameras"][0]
     assert (cam["width"], cam["height"], cam["distortion_model"]) == (1280, 720, "plumb_bob")
     assert any("13293" in n and "behind log time" in n for n in info["notes"])
-    imgs = _info_json(realdata / "fiducials/aruco_images.bag", capsys)
+    imgs = _info_json(realdata / ARUCO_IMAGES_BAG, capsys)
     assert (imgs["cameras"][0]["width"], imgs["cameras"][0]["height"]) == (1280, 960)
 
 
 def test_realsense_depth_pixel_into_colour_camera(realdata: Path) -> None:
-    loaded = open_log(realdata / "realsense_d435/test_rs.bag")
+    loaded = open_log(realdata / REALSENSE_BAG)
     tl = loaded.timeline
     depth_frame, color_frame = "device_0/sensor_0/Depth_0", "device_0/sensor_1/Color_0"
     assert sorted(tl.cameras.frame.tolist()) == [depth_frame, color_frame]
@@ -136,10 +149,10 @@ def test_realsense_depth_pixel_into_colour_camera(realdata: Path) -> None:
 def test_franka_ros1_ros2_and_urdf_forward_kinematics(realdata: Path) -> None:
     import yourdfpy
 
-    r1 = open_log(realdata / "franka_tf/rosbagFrankaPanda.bag").timeline
-    r2 = open_log(realdata / "franka_tf/ros2_bag").timeline
+    r1 = open_log(realdata / FRANKA_BAG).timeline
+    r2 = open_log(realdata / FRANKA_ROS2).timeline
     js = r1.joint_states.take(r1.joint_states.source == "/joint_states")
-    robot = yourdfpy.URDF.load(str(realdata / "urdf/panda/panda.urdf"), build_scene_graph=True, load_meshes=False)
+    robot = yourdfpy.URDF.load(str(realdata / PANDA_URDF), build_scene_graph=True, load_meshes=False)
     names = list(robot.actuated_joint_names)
     stamps, q = js.wide(names)
     assert stamps.size == 110
@@ -157,7 +170,7 @@ def test_franka_ros1_ros2_and_urdf_forward_kinematics(realdata: Path) -> None:
 
 
 def test_legacy_tf_on_two_connections(realdata: Path) -> None:
-    loaded = open_log(realdata / "turtlesim/example.bag")
+    loaded = open_log(realdata / TURTLESIM_BAG)
     assert loaded.decoded_topics["/tf"] == "tf"
     tf = loaded.timeline.transforms
     assert int((tf.child == "turtle1").sum()) == 1344

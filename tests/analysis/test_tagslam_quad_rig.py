@@ -21,6 +21,7 @@ from framechain.analysis.verdict.checks import Bound
 from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
+from tests.helpers.realdata import QUAD_RIG
 
 cv2 = pytest.importorskip("cv2")
 
@@ -157,7 +158,7 @@ def _faulty(folder: Path, turned_deg: float = 0.0, axis: tuple[float, float, flo
 
 @pytest.fixture(scope="module")
 def rig(realdata: Path) -> Path:
-    folder = realdata / "tagslam_quad_rig"
+    folder = realdata / QUAD_RIG
     if not (folder / "tag_detections.bag").is_file():
         pytest.skip("tagslam_quad_rig not found")
     return folder

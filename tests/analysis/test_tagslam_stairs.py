@@ -7,7 +7,6 @@ and scipy's Slerp over the odometry read with rosbags, none of framechain's math
 
 from __future__ import annotations
 
-from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -18,56 +17,33 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from framechain.analysis.model.estimates import estimate_to_json
 from framechain.analysis.verdict.attribute import attribute
-from framechain.analysis.verdict.findings import Attribution
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
+from tests.helpers.realdata import STAIRS, STAIRS_BAG
+from tests.helpers.stairs import (
+    ODOM,
+    T_BODY_ODOM_ROTVEC,
+    T_BODY_ODOM_XYZ,
+    TAGS,
+    recorded_attribution,
+    restamped_bag,
+    stairs_chain,
+)
 
 cv2 = pytest.importorskip("cv2")
-
-BAG = "tagslam_stairs/tag_detections.bag"
-CAMERA = "t265_fisheye1_optical_frame"
-TAGS = "/t265/fisheye1/tags"
-ODOM = "/vio_node/odom"
-#: tagslam.yaml: T_body_odom, position and rotation vector (rad), between the rig (cam0's optical
-#: frame) and the odometry's frame (Basalt's IMU).
-T_BODY_ODOM_XYZ = np.array([0.010699568316340447, 0.0, 0.0])
-T_BODY_ODOM_ROTVEC = np.array([0.0135696, -0.0062165, 3.1391944])
-
-
-def _chain(realdata: Path, *, as_tagslam_applies_it: bool = True) -> ChainConfig:
-    """The chain TagSLAM's files describe. TagSLAM uses T_body_odom as p_body = T_body_odom p_odom,
-    so the camera sits in the odometry frame at its inverse; ``False`` puts the numbers on the edge as
-    written."""
-    rotation = Rotation.from_rotvec(T_BODY_ODOM_ROTVEC)
-    if as_tagslam_applies_it:
-        rotation, xyz = rotation.inv(), -rotation.inv().apply(T_BODY_ODOM_XYZ)
-    else:
-        xyz = T_BODY_ODOM_XYZ
-    sizes: dict[Any, float] = {"default": 0.16}
-    bodies = yaml.safe_load((realdata / "tagslam_stairs/tagslam.yaml").read_text())["bodies"]
-    for tag in bodies[0]["house"]["tags"]:
-        sizes[int(tag["id"])] = float(tag["size"])
-    return ChainConfig.from_dict({
-        "frames": {"camera": CAMERA, "body": "basalt_pose_frame", "world": "world"},
-        "topics": {"detections": TAGS, "odometry": ODOM},
-        "calibration": {"file": str(realdata / "tagslam_stairs/cameras.yaml"), "camera": "cam0"},
-        "mounts": [{"parent": "basalt_pose_frame", "child": CAMERA, "xyz": [float(v) for v in xyz],
-                    "rotvec": [float(v) for v in rotation.as_rotvec()]}],
-        "evidence": {"static_target": True, "tag_size_m": sizes},
-    })
 
 
 def _independent_world_points(realdata: Path, mount: Rotation, mount_xyz: np.ndarray) -> dict[str, Any]:
     """Tag centres in the world: cv2.fisheye undistortion + IPPE_SQUARE, odometry by lerp/Slerp."""
     from rosbags.highlevel import AnyReader
 
-    cams = yaml.safe_load((realdata / "tagslam_stairs/cameras.yaml").read_text())["cam0"]
+    cams = yaml.safe_load((realdata / STAIRS / "cameras.yaml").read_text())["cam0"]
     fx, fy, cx, cy = cams["intrinsics"]
     K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     D = np.array(cams["distortion_coeffs"])
     stamps, ids, centres, odom = [], [], [], []
-    with AnyReader([realdata / BAG]) as reader:
+    with AnyReader([realdata / STAIRS_BAG]) as reader:
         for conn, _t, raw in reader.messages([c for c in reader.connections if c.topic in (TAGS, ODOM)]):
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
@@ -104,18 +80,10 @@ def _median_spread(labels: np.ndarray, world: np.ndarray) -> float:
     return float(np.median(np.concatenate(out)))
 
 
-@cache
-def recorded_attribution(realdata: Path) -> Attribution:
-    """The bag through the README's chain (the mount as TagSLAM applies it), attributed once per process: several
-    tests here and in test_bounds and test_static_real read it (an Attribution is frozen)."""
-    chain = _chain(realdata)
-    return attribute(load_log(realdata / BAG, chain).timeline, chain, bootstrap=0)
-
-
 @pytest.fixture(scope="module")
 def tagslam(realdata: Path) -> tuple[Path, ChainConfig, Any]:
-    chain = _chain(realdata)
-    return realdata, chain, load_log(realdata / BAG, chain)
+    chain = stairs_chain(realdata)
+    return realdata, chain, load_log(realdata / STAIRS_BAG, chain)
 
 
 def test_the_house_tags_stay_put_in_the_world(realdata: Path) -> None:
@@ -153,36 +121,15 @@ def test_the_mount_is_the_other_way_round_from_how_tagslam_applies_it(realdata: 
     spread_written = _median_spread(written["label"], written["world"])
     assert spread_written < spread_tagslam - 0.0005  # 6.9 mm against 8.0 mm over the whole log
     # With the numbers on the edge as written, that finding goes away.
-    as_written = _chain(realdata, as_tagslam_applies_it=False)
-    other = attribute(load_log(realdata / BAG, as_written).timeline, as_written, bootstrap=0)
+    as_written = stairs_chain(realdata, as_tagslam_applies_it=False)
+    other = attribute(load_log(realdata / STAIRS_BAG, as_written).timeline, as_written, bootstrap=0)
     assert not [f for f in other.findings if f.fault == Fault.INVERTED_TRANSFORM]
-
-
-def restamped_bag(realdata: Path, shifted: Path, shift_ns: int) -> Path:
-    """A copy of the bag with the odometry's header stamps moved by ``shift_ns`` (rosbags' own writer)."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag1 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS1_NOETIC)
-    with AnyReader([realdata / BAG]) as reader, Writer(shifted) as writer:
-        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-               for c in reader.connections}
-        for conn, t, raw in reader.messages():
-            data = raw
-            if conn.topic == ODOM:
-                msg = reader.deserialize(raw, conn.msgtype)
-                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec + shift_ns
-                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
-                data = store.serialize_ros1(msg, conn.msgtype)
-            writer.write(out[conn.id], t, data)
-    return shifted
 
 
 @pytest.mark.parametrize("shift_ms", [300, -450])
 def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path, shift_ms: int) -> None:
     shifted = restamped_bag(realdata, tmp_path / "shifted.bag", shift_ms * 1_000_000)
-    chain = _chain(realdata)
+    chain = stairs_chain(realdata)
     result = attribute(load_log(shifted, chain).timeline, chain, bootstrap=0)
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.LATENCY, "body_to_world")
@@ -203,7 +150,7 @@ def test_the_detectors_logged_centres_are_kept_beside_framechains(tagslam: tuple
     result = replay(run.timeline, chain.frames)
     overlay = image_overlay(run.timeline, result, None)
     logged: dict[tuple[int, str], tuple[float, float]] = {}
-    with AnyReader([realdata / BAG]) as reader:
+    with AnyReader([realdata / STAIRS_BAG]) as reader:
         for conn, _t, raw in reader.messages([c for c in reader.connections if c.topic == TAGS]):
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec

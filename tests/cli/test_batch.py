@@ -22,10 +22,7 @@ from framechain.cli.main import main
 from framechain.fleet import RESULTS_DIR, run_batch
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
-
-LEROBOT_TESTS = Path(__file__).resolve().parents[1] / "lerobot"
-if str(LEROBOT_TESTS) not in sys.path:
-    sys.path.insert(0, str(LEROBOT_TESTS))
+from tests.helpers.realdata import STAIRS_BAG, UNITREE
 
 LATENCY_S = -0.03
 ANGLE_DEG = 3.0
@@ -216,7 +213,8 @@ def test_a_dead_worker_costs_one_row_and_the_rerun_redoes_only_it(tmp_path: Path
 
 def test_a_lerobot_dataset_is_one_unit_per_episode(tmp_path: Path) -> None:
     import numpy as np
-    from lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
+
+    from tests.helpers.lerobot_scene import target_world, write_arm_dataset, write_detection_table, write_robot_yaml
 
     delay_s = 0.04
     ds = write_arm_dataset(tmp_path / "ds", version="v3.0", lengths=(90, 30), camera_delay_s=delay_s)
@@ -258,7 +256,7 @@ def test_ray_engine_gives_the_local_engine_s_table(fleet: Path, tmp_path: Path) 
 
 def test_realdata_fleet(realdata: Path, tmp_path: Path) -> None:
     """The ROS logs and the LeRobot datasets of ../shared/realdata: every log one row, a table and a report."""
-    unitree = realdata / "lerobot" / "unitree_g1_v21"
+    unitree = realdata / UNITREE
     names = json.loads((unitree / "meta" / "info.json").read_text())["features"]["observation.state"]["names"][0]
     arm = names[:7]
     links = "".join(f'<link name="l{i}"/>' for i in range(len(arm) + 1))
@@ -283,7 +281,7 @@ def test_realdata_fleet(realdata: Path, tmp_path: Path) -> None:
     episodes = sorted((Path(r["log"]).name, r["episode"]) for r in rows if r["episode"] is not None)
     assert episodes == [(d, e) for d in ("gr00t_pick_n_place_v20", "unitree_g1_v21") for e in range(3)]
     assert all(r["status"] and (r["status"] in ("findings", "clean") or r["error"]) for r in rows)
-    tagslam = next(r for r in rows if r["log"].endswith("tagslam_stairs/tag_detections.bag"))
+    tagslam = next(r for r in rows if r["log"].endswith(STAIRS_BAG))
     assert tagslam["span_s"] == pytest.approx(86.4, abs=0.1)  # the README's 86.4 s
     assert (out / "fleet_report.html").stat().st_size > 0
     assert (out / "fleet_report.md").stat().st_size > 0
@@ -355,7 +353,7 @@ def test_fleet_spread_keeps_the_text_of_estimates_without_a_number() -> None:
     assert (row.logs, row.median, row.median_text, row.p5_p95_text) == (2, None, swap, "-")
 
 
-# -- issue 19: each log's own chain, framechain's outputs skipped, paths as given ------------------------
+# -- each log's own chain, framechain's outputs skipped, paths as given ----------------------------------
 def _write_chain(path: Path, chain: Any, *, evidence: bool) -> Path:
     raw = chain.to_dict()
     if not evidence:
@@ -422,7 +420,7 @@ def test_framechain_exports_are_not_logs(tmp_path: Path, capsys: pytest.CaptureF
     assert main(["batch", str(logs), "--out", str(tmp_path / "out2"), "-j", "1", "--bootstrap", "0"]) == 0
     captured = capsys.readouterr()
     assert f"note: {result.notes[0]}" in captured.out
-    # Not a terminal: the progress is plain lines (issue 19, item 10).
+    # Not a terminal: the progress is plain lines, as a CI log needs them.
     assert captured.err.splitlines()[:2] == ["framechain: attributing logs 0% (0 of 1 logs)",
                                              "framechain: attributing logs 100% (1 of 1 logs)"]
 

@@ -16,6 +16,7 @@ from framechain.adapters import write_log
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainFrames, ChainTopics
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
+from tests.helpers.realdata import LEROBOT_DATASETS, ROS_LOGS, STAIRS
 
 ROOT = Path(__file__).resolve().parents[2]
 T0 = 1_700_000_000_000_000_000
@@ -222,23 +223,14 @@ def test_bare_urdf_as_robot_points_at_robot_yaml(tmp_path: Path, capsys: pytest.
 
 
 # -- every real log --------------------------------------------------------------------------------------
-REAL_LOGS = [
-    "evo/tf_example.bag", "evo/tf_example", "evo/nav2_turtlebot.mcap", "fiducials/aruco_images.bag",
-    "fiducials/aruco_marker.bag", "franka_tf/rosbagFrankaPanda.bag", "franka_tf/ros2_bag",
-    "husky_localization/test1.bag", "husky_localization/test1_old_stereo_wheel.bag", "turtlesim/example.bag",
-    "realsense_d435/test_rs.bag", "tagslam_stairs/tag_detections.bag", "tagslam_quad_rig/tag_detections.bag",
-]
-REAL_DATASETS = ["lerobot/gr00t_pick_n_place_v20", "lerobot/unitree_g1_v21"]
-
-
 def test_the_real_log_list_is_complete(realdata: Path) -> None:
     found = {str(p.relative_to(realdata)) for p in realdata.glob("*/*") if p.suffix in (".bag", ".mcap")}
     found |= {str(p.parent.relative_to(realdata)) for p in realdata.glob("*/*/metadata.yaml")}
     found |= {str(p.parent.parent.relative_to(realdata)) for p in realdata.glob("*/*/meta/info.json")}
-    assert found == set(REAL_LOGS) | set(REAL_DATASETS)
+    assert found == set(ROS_LOGS) | set(LEROBOT_DATASETS)
 
 
-@pytest.mark.parametrize("name", REAL_LOGS)
+@pytest.mark.parametrize("name", ROS_LOGS)
 def test_every_real_log_runs_or_says_what_it_lacks(name: str, realdata: Path, tmp_path: Path,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     log = realdata / name
@@ -273,7 +265,7 @@ def test_every_real_log_runs_or_says_what_it_lacks(name: str, realdata: Path, tm
     assert "add `" in _one_line(capsys.readouterr().err)
 
 
-@pytest.mark.parametrize("name", REAL_DATASETS)
+@pytest.mark.parametrize("name", LEROBOT_DATASETS)
 def test_real_lerobot_datasets_say_what_they_need(name: str, realdata: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     root = realdata / name
@@ -288,9 +280,9 @@ def test_real_lerobot_datasets_say_what_they_need(name: str, realdata: Path,
 
 def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path, tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
-    """The issue's example: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
+    """TagSLAM's stairs log: AprilTag corners and VIO odometry, no /tf, no CameraInfo, cameras.yaml and
     tagslam.yaml beside the bag."""
-    folder = realdata / "tagslam_stairs"
+    folder = realdata / STAIRS
     if not folder.is_dir():
         pytest.skip(f"{folder} not present")
     log = folder / "tag_detections.bag"

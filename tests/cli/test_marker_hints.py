@@ -14,6 +14,7 @@ from framechain.adapters.api import open_log
 from framechain.cli.main import main
 from framechain.suggest.chain import suggest
 from framechain.suggest.marker_probe import probe_markers
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, REALSENSE_BAG
 
 IMAGE = "/raspicam_node/image/compressed"
 
@@ -32,7 +33,7 @@ def _chain(tmp_path: Path, dictionary: str) -> Path:
 
 @pytest.fixture(autouse=True)
 def aruco(realdata: Path) -> Path:
-    bag = realdata / "fiducials" / "aruco_images.bag"
+    bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
     return bag
@@ -70,7 +71,7 @@ def test_suggestion_names_only_a_dictionary_that_found_markers(realdata: Path, a
     # The evidence the FILL IN comments ask for is not also written as false.
     assert "static_target: false" not in text
     assert "evidence.static_target: true" in text
-    rs = realdata / "realsense_d435" / "test_rs.bag"
+    rs = realdata / REALSENSE_BAG
     if rs.is_file():
         text = suggest(open_log(rs)).to_yaml()
         assert "evidence.markers" not in text

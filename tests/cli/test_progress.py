@@ -1,6 +1,5 @@
-"""A long run says how far it is (issue 19, item 10): plain lines on stderr when it is not a terminal (a CI
-log), with counts and time left, at most every few seconds; nothing with -q. Run as a user runs it: a
-subprocess whose stderr is a pipe."""
+"""A long run says how far it is: plain lines on stderr when it is not a terminal (a CI log), with counts and time
+left, at most every few seconds; nothing with -q. Run as a user runs it: a subprocess whose stderr is a pipe."""
 
 from __future__ import annotations
 

@@ -14,23 +14,13 @@ import numpy as np
 import pytest
 import yaml
 from scipy.spatial.transform import Rotation
-from shared_paths import REALDATA
 
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import SceneSpec, generate
-
-STAIRS = REALDATA / "tagslam_stairs"
-FRANKA = REALDATA / "franka_tf" / "rosbagFrankaPanda.bag"
-TF_EXAMPLE = REALDATA / "evo" / "tf_example.bag"
-
-
-def _real(path: Path) -> Path:
-    if not path.exists():
-        pytest.skip("../shared/realdata absent")
-    return path
+from tests.helpers.realdata import FRANKA_BAG, QUAD_RIG_BAG, STAIRS, STAIRS_BAG, TF_EXAMPLE_BAG
 
 
 def _needs(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, dict[str, str]]:
@@ -39,14 +29,15 @@ def _needs(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, dict[str
 
 
 def test_info_says_the_mount_is_the_gap_and_gives_tagslam_s_mount(tmp_path: Path,
-                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+                                                                 capsys: pytest.CaptureFixture[str],
+                                                                 realdata: Path) -> None:
     """The detections' frame is found but in no transform: the mount must connect it, and tagslam.yaml's
     T_body_odom (inverted, as TagSLAM applies it) with cam0's pose in camera_poses.yaml is that mount."""
-    bag = _real(STAIRS / "tag_detections.bag")
+    bag = realdata / STAIRS_BAG
     chain = tmp_path / "chain.yaml"
     chain.write_text(f"frames: {{camera: t265_fisheye1_optical_frame, body: basalt_pose_frame, world: world}}\n"
                      f"topics: {{detections: /t265/fisheye1/tags, odometry: /vio_node/odom}}\n"
-                     f"calibration: {{file: {STAIRS / 'cameras.yaml'}, camera: cam0}}\n"
+                     f"calibration: {{file: {realdata / STAIRS / 'cameras.yaml'}, camera: cam0}}\n"
                      "evidence: {static_target: true, tag_size_m: 0.16}\n")
     needs = _needs(capsys, str(bag), "--chain", str(chain))
     assert "no transform of the log names it: the mount must connect it" in needs["camera frame"]["detail"]
@@ -54,7 +45,7 @@ def test_info_says_the_mount_is_the_gap_and_gives_tagslam_s_mount(tmp_path: Path
     assert "T_body_odom in tagslam.yaml inverted, as TagSLAM applies it" in key
     mount = yaml.safe_load(key.split("  (", 1)[0].removeprefix("mounts: "))[0]
     assert (mount["parent"], mount["child"]) == ("basalt_pose_frame", "t265_fisheye1_optical_frame")
-    rig = yaml.safe_load((STAIRS / "tagslam.yaml").read_text())["bodies"][1]["rig"]["T_body_odom"]
+    rig = yaml.safe_load((realdata / STAIRS / "tagslam.yaml").read_text())["bodies"][1]["rig"]["T_body_odom"]
     rotation = Rotation.from_rotvec([rig["rotation"][a] for a in "xyz"]).inv()
     xyz = -rotation.apply([rig["position"][a] for a in "xyz"])
     np.testing.assert_allclose(mount["xyz"], xyz, atol=1e-6)
@@ -95,14 +86,14 @@ def test_a_batch_names_the_log_that_failed(tmp_path: Path, capsys: pytest.Captur
 
 
 def test_world_may_equal_body_and_a_default_world_missing_from_the_log_says_so(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
     """"world = body: a fixed rig" can be written; a world left out is the default map, and a log without map
     says so and how to name a body that does not move."""
     fixed = ChainConfig.from_dict({"frames": {"camera": "cam", "body": "rig", "world": "rig"}})
     assert (fixed.frames.body, fixed.frames.world) == ("rig", "rig")
     with pytest.raises(ChainConfigError, match="the camera frame 'rig' must differ from body"):
         ChainConfig.from_dict({"frames": {"camera": "rig", "body": "rig", "world": "map"}})
-    bag = _real(STAIRS / "tag_detections.bag")
+    bag = realdata / STAIRS_BAG
     chain = tmp_path / "no_world.yaml"
     chain.write_text("frames: {camera: t265_fisheye1_optical_frame, body: basalt_pose_frame}\n"
                      "topics: {detections: /t265/fisheye1/tags, odometry: /vio_node/odom}\n"
@@ -129,8 +120,8 @@ def test_info_says_did_you_mean_for_the_body_and_the_world(tmp_path: Path,
         assert meant in need["key"]
 
 
-def test_info_piped_keeps_whole_topic_names(capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(REALDATA / "tagslam_quad_rig" / "tag_detections.bag")
+def test_info_piped_keeps_whole_topic_names(capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
+    bag = realdata / QUAD_RIG_BAG
     assert main(["info", str(bag), "-q"]) == 0
     out = capsys.readouterr().out
     for topic in ("/quadruple/bottom_left/tags", "/quadruple/bottom_right/tags", "/quadruple/top_right/tags"):
@@ -139,9 +130,9 @@ def test_info_piped_keeps_whole_topic_names(capsys: pytest.CaptureFixture[str]) 
 
 
 @pytest.mark.parametrize("args", [["tf", "odom", "base_link", "--at", "10.05"], ["info"]])
-def test_a_reader_that_leaves_early_ends_the_command_quietly(args: list[str]) -> None:
+def test_a_reader_that_leaves_early_ends_the_command_quietly(args: list[str], realdata: Path) -> None:
     """`framechain tf ... | head -1`: the reader stops after a line; the command exits 0 and says nothing."""
-    bag = _real(TF_EXAMPLE)
+    bag = realdata / TF_EXAMPLE_BAG
     command = [sys.executable, "-m", "framechain.cli.main", args[0], str(bag), *args[1:]]
     with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as proc:
         assert proc.stdout is not None
@@ -154,8 +145,8 @@ def test_a_reader_that_leaves_early_ends_the_command_quietly(args: list[str]) ->
     assert err == b""
 
 
-def test_a_tree_rooted_at_world_suggests_world(capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(FRANKA)
+def test_a_tree_rooted_at_world_suggests_world(capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
+    bag = realdata / FRANKA_BAG
     assert main(["info", str(bag), "--chain", "-q"]) == 0
     frames = yaml.safe_load(capsys.readouterr().out)["frames"]
     assert frames == {"world": "world"}  # the camera and body are FILL IN comments: this log has neither
@@ -167,9 +158,10 @@ def test_a_tree_rooted_at_world_suggests_world(capsys: pytest.CaptureFixture[str
     ("tagslam.yaml", "this is a TagSLAM configuration, not a chain"),
     ("camera_poses.yaml", "this is a file of camera poses in a rig (cam0), not a chain"),
 ])
-def test_another_file_given_as_a_chain_is_named(name: str, said: str, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    assert main(["attribute", str(bag), "--chain", str(STAIRS / name), "--out", "unused", "-q"]) == 1
+def test_another_file_given_as_a_chain_is_named(name: str, said: str, capsys: pytest.CaptureFixture[str],
+                                                realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    assert main(["attribute", str(bag), "--chain", str(realdata / STAIRS / name), "--out", "unused", "-q"]) == 1
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert said in line
     assert "unknown keys" not in line

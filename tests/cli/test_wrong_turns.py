@@ -1,7 +1,7 @@
-"""A new user's afternoon without a wrong turn (issue 19, items 1-9): suggestions that the chain checker
-accepts, hints that name where their values come from, typos named as the cause with "did you mean", a folder
-of logs that is not silently one of them, one suggested chain everywhere, calibrations of another camera said
-first, hints that can work, and camera-frame points that need no intrinsics."""
+"""A new user's afternoon without a wrong turn: suggestions that the chain checker accepts, hints that name where
+their values come from, typos named as the cause with "did you mean", a folder of logs that is not silently one of
+them, one suggested chain everywhere, calibrations of another camera said first, hints that can work, and
+camera-frame points that need no intrinsics."""
 
 from __future__ import annotations
 
@@ -12,26 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros1_bags import Ros1Bag
 from scipy.spatial.transform import Rotation
-from shared_paths import REALDATA
-from test_dead_ends import REAL_LOGS
 
 from framechain import pipeline
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
+from tests.helpers.realdata import QUAD_RIG, QUAD_RIG_BAG, ROS_LOGS, STAIRS, STAIRS_BAG, TF_EXAMPLE_BAG, TURTLESIM_BAG
+from tests.helpers.ros1_bags import Ros1Bag
 
 T0 = 1_700_000_000 * 10**9
-STAIRS = REALDATA / "tagslam_stairs"
-QUAD = REALDATA / "tagslam_quad_rig"
-TF_EXAMPLE = REALDATA / "evo" / "tf_example.bag"
 OPTICAL_Q = (-0.5, 0.5, -0.5, 0.5)  # camera_link (FLU) -> optical (RDF), REP-103
-
-
-def _real(path: Path) -> Path:
-    if not path.exists():
-        pytest.skip("../shared/realdata absent")
-    return path
 
 
 def _one_line(err: str) -> str:
@@ -49,11 +39,11 @@ def _filled(text: str) -> dict[str, object]:
     return raw
 
 
-# -- 1: the suggestion never produces a chain its own checker rejects ----------------------------------
-@pytest.mark.parametrize("name", REAL_LOGS)
+# -- the suggestion never produces a chain its own checker rejects -------------------------------------
+@pytest.mark.parametrize("name", ROS_LOGS)
 def test_every_real_suggestion_parses_as_a_chain(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    log = _real(REALDATA / name)
+                                                 monkeypatch: pytest.MonkeyPatch, realdata: Path) -> None:
+    log = realdata / name
     monkeypatch.chdir(tmp_path)  # as a user would: `info LOG --chain > chain.yaml` in a folder of their own
     assert main(["info", str(log), "--chain", "-q"]) == 0
     text = capsys.readouterr().out
@@ -92,14 +82,15 @@ def test_a_pose_topic_into_odom_does_not_make_odom_the_body_and_the_world(
     assert main(["info", str(log), "--chain", str(chain), "--json", "-q"]) == 0
 
 
-# -- 2: a value taken from a file beside the log names the file ----------------------------------------
+# -- a value taken from a file beside the log names the file -------------------------------------------
 def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, dict[str, str]]:
     assert main(["info", str(log), "--json", "-q", *extra]) == 0
     return {n["piece"]: n for n in json.loads(capsys.readouterr().out)["needs"]}
 
 
-def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
+def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
     needs = _needs(bag, capsys)
     # tagslam.yaml's default and the tags it sizes otherwise (100-108 are 0.10 m)
     assert needs["depth"]["key"] == ("evidence.tag_size_m: {default: 0.16, 100: 0.1, 101: 0.1, 102: 0.1, 103: 0.1, "
@@ -124,12 +115,12 @@ def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: p
     assert needs["intrinsics"]["key"].startswith("calibration: {file: CAMERAS.yaml, camera: NAME}")
 
 
-# -- 3, 4: a typo is named as the cause, with what it may have meant -----------------------------------
-def _stairs_chain(tmp_path: Path, **topics: str) -> Path:
+# -- a typo is named as the cause, with what it may have meant -----------------------------------------
+def _stairs_chain(tmp_path: Path, realdata: Path, **topics: str) -> Path:
     chain = {
         "frames": {"camera": "t265_fisheye1_optical_frame", "body": "basalt_pose_frame", "world": "world"},
         "topics": {"detections": "/t265/fisheye1/tags", "odometry": "/vio_node/odom", **topics},
-        "calibration": {"file": str(STAIRS / "cameras.yaml"), "camera": "cam0"},
+        "calibration": {"file": str(realdata / STAIRS / "cameras.yaml"), "camera": "cam0"},
         "mounts": [{"parent": "basalt_pose_frame", "child": "t265_fisheye1_optical_frame", "xyz": [0.0107, 0.0, 0.0],
                     "rotvec": [-0.0135696, 0.0062165, -3.1391944]}],
         "evidence": {"static_target": True, "tag_size_m": 0.16},
@@ -140,18 +131,20 @@ def _stairs_chain(tmp_path: Path, **topics: str) -> Path:
 
 
 def test_a_misspelt_pose_topic_is_the_cause_not_the_world_frame(tmp_path: Path,
-                                                                capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    chain = _stairs_chain(tmp_path, odometry="/vio_node/odm")
+                                                                capsys: pytest.CaptureFixture[str],
+                                                                realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    chain = _stairs_chain(tmp_path, realdata, odometry="/vio_node/odm")
     assert main(["attribute", str(bag), "--chain", str(chain), "--out", str(tmp_path / "o"), "-q"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "topics.odometry /vio_node/odm is not in the log; did you mean '/vio_node/odom'?" in line
     assert line.index("topics.odometry") < line.index("world frame 'world'")  # the cause first
 
 
-def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    chain = _stairs_chain(tmp_path, detections="/t265/fisheye1/tag")
+def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    chain = _stairs_chain(tmp_path, realdata, detections="/t265/fisheye1/tag")
     needs = _needs(bag, capsys, "--chain", str(chain))
     assert needs["detections"]["status"] == "missing"
     assert "did you mean '/t265/fisheye1/tags'" in needs["detections"]["detail"]
@@ -163,8 +156,8 @@ def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: p
     assert line.count("did you mean") == 1  # said once
 
 
-def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> None:
-    log = _real(TF_EXAMPLE)
+def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str], realdata: Path) -> None:
+    log = realdata / TF_EXAMPLE_BAG
     assert main(["tf", str(log), "vision", "odm"]) == 1
     line = _one_line(capsys.readouterr().err)
     assert "frame 'vision' does not exist in the log (no transform names it)" in line
@@ -172,12 +165,13 @@ def test_tf_with_a_frame_the_log_lacks(capsys: pytest.CaptureFixture[str]) -> No
     assert "mounts: or urdf: need --chain" in line
 
 
-# -- 5: a folder of several logs is not silently one of them -------------------------------------------
-def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+# -- a folder of several logs is not silently one of them ----------------------------------------------
+def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                         realdata: Path) -> None:
     folder = tmp_path / "logs"
     folder.mkdir()
-    (folder / "tf_example.bag").symlink_to(_real(TF_EXAMPLE))
-    (folder / "example.bag").symlink_to(_real(REALDATA / "turtlesim" / "example.bag"))
+    (folder / "tf_example.bag").symlink_to(realdata / TF_EXAMPLE_BAG)
+    (folder / "example.bag").symlink_to(realdata / TURTLESIM_BAG)
     for command in (["info"], ["attribute", "--out", str(tmp_path / "o")]):
         assert main([command[0], str(folder), *command[1:], "-q"]) == 1
         line = _one_line(capsys.readouterr().err)
@@ -185,10 +179,11 @@ def test_a_folder_of_logs_lists_them_and_points_to_batch(tmp_path: Path, capsys:
         assert f"framechain batch {folder} --out DIR" in line
 
 
-def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                           realdata: Path) -> None:
     folder = tmp_path / "run"
     folder.mkdir()
-    (folder / "tf_example.bag").symlink_to(_real(TF_EXAMPLE))
+    (folder / "tf_example.bag").symlink_to(realdata / TF_EXAMPLE_BAG)
     export = folder / "annotated.mcap"
     assert main(["export", str(folder / "tf_example.bag"), "--out", str(export), "--no-attribute", "-q"]) == 0
     capsys.readouterr()
@@ -199,10 +194,11 @@ def test_a_folder_with_one_log_and_an_export_reads_the_log(tmp_path: Path, capsy
     assert any(n.startswith(f"{export} skipped: written by framechain") for n in info["notes"])
 
 
-# -- 6: one suggestion everywhere -----------------------------------------------------------------------
+# -- one suggestion everywhere --------------------------------------------------------------------------
 def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    log = _real(TF_EXAMPLE)  # odometry only: no camera frame
+                                                                    capsys: pytest.CaptureFixture[str],
+                                                                    realdata: Path) -> None:
+    log = realdata / TF_EXAMPLE_BAG  # odometry only: no camera frame
     assert main(["replay", str(log), "--save", str(tmp_path / "r.rrd"), "--no-attribute"]) == 0
     captured = capsys.readouterr()
     assert "chain         CAMERA_OPTICAL_FRAME (FILL IN) -> base_link -> odom (suggested;" in captured.out
@@ -227,11 +223,12 @@ def test_replay_and_export_show_the_suggestion_with_its_placeholders(tmp_path: P
     assert incomplete in out
 
 
-# -- 7: a calibration of another camera is said first ---------------------------------------------------
+# -- a calibration of another camera is said first ------------------------------------------------------
 def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    bag = _real(STAIRS / "tag_detections.bag")
-    raw = yaml.safe_load(_stairs_chain(tmp_path).read_text())
+                                                                    capsys: pytest.CaptureFixture[str],
+                                                                    realdata: Path) -> None:
+    bag = realdata / STAIRS_BAG
+    raw = yaml.safe_load(_stairs_chain(tmp_path, realdata).read_text())
     raw["calibration"]["camera"] = "cam1"  # the right fisheye's, for the left fisheye's tags
     chain = tmp_path / "chain.yaml"
     chain.write_text(yaml.safe_dump(raw))
@@ -253,10 +250,11 @@ def test_a_calibration_of_another_topic_is_said_before_the_findings(tmp_path: Pa
     assert not any("calibration cameras.yaml" in n for n in json.loads(capsys.readouterr().out)["notes"])
 
 
-def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest.CaptureFixture[str]) -> None:
+def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest.CaptureFixture[str],
+                                                                  realdata: Path) -> None:
     """TagSLAM's quad rig: three of the four tag topics carry another camera's header.frame_id."""
-    bag = _real(QUAD / "tag_detections.bag")
-    cameras = yaml.safe_load((QUAD / "cameras.yaml").read_text())
+    bag = realdata / QUAD_RIG_BAG
+    cameras = yaml.safe_load((realdata / QUAD_RIG / "cameras.yaml").read_text())
     tagtopics = {entry["tagtopic"] for entry in cameras.values()}
     assert main(["info", str(bag), "--json", "-q"]) == 0
     notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if "header.frame_id" in n]
@@ -266,7 +264,7 @@ def test_detections_stamped_with_another_camera_s_frame_are_noted(capsys: pytest
             "of another topic (/quadruple/bottom_left/tags)") in " ".join(notes)
 
 
-# -- 8: a hint that can work ------------------------------------------------------------------------------
+# -- a hint that can work ---------------------------------------------------------------------------------
 def test_the_static_target_hint_says_what_can_help() -> None:
     from framechain.analysis.evidence.static import _what_can_help
 
@@ -280,7 +278,7 @@ def test_the_static_target_hint_says_what_can_help() -> None:
     assert "cannot help: record more images" in _what_can_help(labels, spread, usable, 4)
 
 
-# -- 9: marker poses in the camera frame need no intrinsics -----------------------------------------------
+# -- marker poses in the camera frame need no intrinsics --------------------------------------------------
 def test_fiducial_transforms_replay_without_intrinsics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """fiducial_msgs/FiducialTransformArray (the markers' poses in the camera frame) and no CameraInfo: the
     needs agree with the chain (intrinsics not needed, detections found) and every marker is replayed to the

@@ -12,12 +12,14 @@ from pathlib import Path
 
 import pytest
 
+from tests.helpers.realdata import STAIRS_BAG, UNITREE
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_mutated_configuration_files_give_one_line_never_a_traceback(realdata: Path) -> None:
-    if not (realdata / "tagslam_stairs" / "tag_detections.bag").is_file() or not (
-            realdata / "lerobot" / "unitree_g1_v21").is_dir():
+    if not (realdata / STAIRS_BAG).is_file() or not (
+            realdata / UNITREE).is_dir():
         pytest.skip("the tagslam_stairs bag or the unitree dataset is not present")
     run = subprocess.run(
         [sys.executable, str(ROOT / "tools" / "fuzz_config.py"), "--cases", "210", "--seed", "1", "--mix",

@@ -16,6 +16,7 @@ from framechain.config.calibration import load_calibration, read_intrinsics_file
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import CalibrationError, ChainConfigError, ConfigError, RobotConfigError
 from framechain.config.robot import RobotConfig
+from tests.helpers.realdata import STAIRS
 
 INTRINSICS = {"fx": 600.0, "fy": 600.0, "cx": 320.0, "cy": 240.0, "width": 640, "height": 480}
 MOUNT = {"parent": "link", "xyz": [0.05, 0.0, 0.02], "rpy": [0.0, 0.0, 0.0], "optical": True}
@@ -212,7 +213,7 @@ def test_unit_slips_through_the_cli_are_one_line_and_exit_1(
     realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], edit: tuple[str, str], expected: str,
     command: str,
 ) -> None:
-    stairs = realdata / "tagslam_stairs"
+    stairs = realdata / STAIRS
     (tmp_path / "cameras.yaml").write_text((stairs / "cameras.yaml").read_text())
     assert edit[0] in STAIRS_CHAIN
     bad = tmp_path / "bad.yaml"

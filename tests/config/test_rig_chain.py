@@ -15,6 +15,7 @@ from framechain import pipeline
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.config.rig_poses import rig_camera_poses
+from tests.helpers.realdata import QUAD_RIG
 
 RIG: dict[str, Any] = {
     "frames": {"body": "rig", "world": "arena"},
@@ -30,7 +31,7 @@ RIG: dict[str, Any] = {
 }
 
 
-def test_the_issue_rig_chain_reads() -> None:
+def test_a_two_camera_rig_chain_reads_with_its_per_camera_keys_and_round_trips() -> None:
     chain = ChainConfig.from_dict(RIG)
     assert chain.is_rig
     assert chain.camera_frames() == ("cam_sync/cam0", "cam_sync/cam1")
@@ -84,7 +85,7 @@ def test_a_bad_rig_is_one_line_naming_the_key(change: dict[str, Any], message: s
 
 
 def test_tagslam_camera_poses_are_t_rig_cam(realdata: Path) -> None:
-    raw = yaml.safe_load((realdata / "tagslam_quad_rig" / "camera_poses.yaml").read_text())
+    raw = yaml.safe_load((realdata / QUAD_RIG / "camera_poses.yaml").read_text())
     poses = rig_camera_poses(raw)
     assert sorted(poses) == ["cam0", "cam1", "cam2", "cam3"]
     for name, (xyz, quat) in poses.items():
@@ -116,7 +117,7 @@ def test_kalibr_camchain_chains_t_cn_cnm1_from_the_first_camera() -> None:
 
 
 def test_the_quad_rig_log_suggests_its_rig_chain(realdata: Path) -> None:
-    folder = realdata / "tagslam_quad_rig"
+    folder = realdata / QUAD_RIG
     loaded = pipeline.load_log(folder / "tag_detections.bag")
     chain = loaded.chain
     assert loaded.chain_suggested

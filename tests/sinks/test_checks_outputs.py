@@ -1,5 +1,5 @@
-"""Every output says what a log could check (issue 17): the bounds and the labels in the CLI, both
-reports and the Rerun recording, the curves as report figures and as Rerun bar charts and series."""
+"""Every output says what a log could check: the bounds and the labels in the CLI, both reports and the Rerun
+recording, the curves as report figures and as Rerun bar charts and series."""
 
 from __future__ import annotations
 

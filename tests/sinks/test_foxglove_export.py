@@ -30,6 +30,7 @@ from framechain.sinks.foxglove_export import (
     clip_to_image,
 )
 from framechain.sinks.overlay import image_overlay
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, STAIRS, TF_EXAMPLE_BAG
 
 ADDED = {TF_TOPIC: "foxglove.FrameTransforms", ANNOTATIONS_TOPIC: "foxglove.ImageAnnotations",
          SCENE_TOPIC: "foxglove.SceneUpdate", FINDINGS_TOPIC: "foxglove.Log",
@@ -220,7 +221,7 @@ def test_log_without_images_gets_a_camera(tmp_path: Path, capsys: pytest.Capture
 
 
 def test_real_bag_copied_and_annotated(realdata: Path, tmp_path: Path) -> None:
-    bag = realdata / "fiducials" / "aruco_images.bag"
+    bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
     chain = tmp_path / "chain.yaml"
@@ -280,7 +281,7 @@ def test_export_without_findings_still_writes_the_chain(realdata: Path, tmp_path
         "  - {parent: base_link, child: raspicam, xyz: [0, 0, 0.5], quat_xyzw: [-0.5, 0.5, -0.5, 0.5]}\n"
         "evidence: {markers: {dictionary: DICT_5X5_1000, size_m: 0.14}, static_target: true}\n")
     out = tmp_path / "annotated.mcap"
-    assert main(["export", str(realdata / "fiducials/aruco_images.bag"), "--chain", str(chain), "--out", str(out),
+    assert main(["export", str(realdata / ARUCO_IMAGES_BAG), "--chain", str(chain), "--out", str(out),
                  "-q"]) == 0
     err = capsys.readouterr().err
     assert "not attributed: static target: no object seen at least 3 times" in err
@@ -292,7 +293,7 @@ def test_a_fisheye_calibration_is_exported_as_foxglove_s_kannala_brandt(realdata
     cameras.yaml's four coefficients; "equidistant" is no model Foxglove knows."""
     import yaml
 
-    stairs = realdata / "tagslam_stairs"
+    stairs = realdata / STAIRS
     chain = tmp_path / "chain.yaml"
     chain.write_text(f"""
 frames: {{camera: t265_fisheye1_optical_frame, body: basalt_pose_frame, world: world}}
@@ -317,7 +318,7 @@ def test_a_log_without_a_camera_gets_no_annotation_hints(realdata: Path, tmp_pat
     """evo's tf_example.bag (odometry only): nothing is annotated, so no line points to annotations or a calibration
     the file does not hold."""
     out = tmp_path / "annotated.mcap"
-    assert main(["export", str(realdata / "evo" / "tf_example.bag"), "--out", str(out), "-q"]) == 0
+    assert main(["export", str(realdata / TF_EXAMPLE_BAG), "--out", str(out), "-q"]) == 0
     printed = capsys.readouterr().out
     copied, added, _ = _read(out)
     assert ANNOTATIONS_TOPIC not in added

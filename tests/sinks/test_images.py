@@ -9,7 +9,6 @@ as Rerun's AssetVideo reads them.
 from __future__ import annotations
 
 import io
-import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -21,7 +20,6 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
-from test_rerun import _read  # the .rrd read back per entity, as the Rerun sink tests read it
 
 from framechain.adapters import write_log
 from framechain.analysis.run import Run as PipelineRun
@@ -37,6 +35,8 @@ from framechain.sinks.overlay import ImageSelection
 from framechain.sinks.rerun import RerunOptions, RerunTarget, stream_replay
 from framechain.sinks.rerun_common import RERUN_PIXEL_OFFSET
 from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, PointRole, Timeline, TransformTable
+from tests.helpers.realdata import ARUCO_IMAGES_BAG
+from tests.helpers.rrd_views import read_chunks
 
 Batches = dict[str, list[tuple[bool, pa.RecordBatch]]]
 
@@ -101,7 +101,7 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Run:
     attribution = loaded.attributed()
     rrd = out / "episode.rrd"
     stream_replay(loaded, RerunTarget.save(rrd))
-    return Run(scene, loaded, attribution, rrd, _read(rrd))
+    return Run(scene, loaded, attribution, rrd, read_chunks(rrd))
 
 
 def test_demo_images_are_the_logged_jpegs_at_their_stamps(demo: Run) -> None:
@@ -182,7 +182,7 @@ def test_demo_blueprint_puts_the_camera_beside_the_3d_view(demo: Run) -> None:
 
 
 def test_demo_shows_no_view_without_data_and_names_only_its_chain_frames(demo: Run) -> None:
-    from rrd_views import labels_in_3d, views_without_data
+    from tests.helpers.rrd_views import labels_in_3d, views_without_data
 
     assert views_without_data(demo.rrd) == []
     frames = demo.scene.chain.frames
@@ -194,7 +194,7 @@ def test_images_none_and_all(demo: Run, tmp_path: Path) -> None:
     for selection, expected in ((ImageSelection.NONE, 0), (ImageSelection.ALL, len(timeline.image_frames))):
         rrd = tmp_path / f"{selection.value}.rrd"
         stream_replay(replayed, RerunTarget.save(rrd), options=RerunOptions(images=selection))
-        stamps, _ = _rows(_read(rrd), "/camera/image", "EncodedImage:blob")
+        stamps, _ = _rows(read_chunks(rrd), "/camera/image", "EncodedImage:blob")
         assert stamps.size == expected
 
 
@@ -242,7 +242,7 @@ def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> Non
     assert result.replayed.all()
     rrd = tmp_path / "raw.rrd"
     stream_replay(loaded, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
-    batches = _read(rrd)
+    batches = read_chunks(rrd)
     stamps, buffers = _rows(batches, "/camera/image", "Image:buffer")
     _, formats = _rows(batches, "/camera/image", "Image:format")
     assert stamps.tolist() == images.stamp_ns.tolist()
@@ -265,7 +265,7 @@ def test_raw_encodings_become_rerun_images(encoding: str, tmp_path: Path) -> Non
 def aruco(
     realdata: Path, tmp_path_factory: pytest.TempPathFactory,
 ) -> Iterator[tuple[PipelineRun, ReplayResult, Batches, dict[str, Any]]]:
-    bag = realdata / "fiducials" / "aruco_images.bag"
+    bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
     out = tmp_path_factory.mktemp("aruco")
@@ -281,7 +281,7 @@ def aruco(
     result = loaded.replay
     rrd = out / "aruco.rrd"
     stream_replay(loaded, RerunTarget.save(rrd))
-    return loaded, result, _read(rrd), chain
+    return loaded, result, read_chunks(rrd), chain
 
 
 def test_real_jpeg_is_logged_as_recorded(realdata: Path,
@@ -289,7 +289,7 @@ def test_real_jpeg_is_logged_as_recorded(realdata: Path,
     from rosbags.highlevel import AnyReader
 
     loaded, _, batches, _ = aruco
-    with AnyReader([realdata / "fiducials" / "aruco_images.bag"]) as reader:
+    with AnyReader([realdata / ARUCO_IMAGES_BAG]) as reader:
         conns = [c for c in reader.connections if c.topic == "/raspicam_node/image/compressed"]
         (_, _, raw), = list(reader.messages(connections=conns))
         msg = reader.deserialize(raw, conns[0].msgtype)
@@ -363,8 +363,7 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
     pytest.importorskip("av")
     import rerun as rr
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "lerobot"))
-    from lerobot_scene import FPS, HEIGHT, WIDTH, write_arm_dataset, write_robot_yaml
+    from tests.helpers.lerobot_scene import FPS, HEIGHT, WIDTH, write_arm_dataset, write_robot_yaml
 
     lengths = (12, 15)
     dataset = write_arm_dataset(tmp_path / "ds", version="v3.0", lengths=lengths, detection_feature=True)
@@ -378,7 +377,7 @@ def test_lerobot_video_frames_reference_the_mp4(tmp_path: Path) -> None:
     result = loaded.replay
     rrd = tmp_path / "ep.rrd"
     stream_replay(loaded, RerunTarget.save(rrd), options=RerunOptions(images=ImageSelection.ALL))
-    batches = _read(rrd)
+    batches = read_chunks(rrd)
     assets = [b for s, b in batches["/camera/video"] if s and "AssetVideo:blob" in b.schema.names]
     blob = np.asarray(assets[0].column("AssetVideo:blob").to_pylist()[0][0], dtype=np.uint8)
     assert bytes(blob) == video.read_bytes()

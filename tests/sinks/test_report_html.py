@@ -13,6 +13,7 @@ import pytest
 
 from framechain.sinks.report import _code
 from framechain.sinks.text import CSS, LONG_WORD, breakable
+from tests.helpers.realdata import ARUCO_IMAGES_BAG
 
 
 def _plain(marked: str) -> str:
@@ -81,7 +82,7 @@ def test_a_log_without_evidence_draws_no_empty_error_plots(realdata: Path, tmp_p
     from framechain.pipeline import run
     from framechain.sinks.report import render_report
 
-    bag = realdata / "fiducials" / "aruco_images.bag"
+    bag = realdata / ARUCO_IMAGES_BAG
     chain = tmp_path / "chain.yaml"
     chain.write_text("frames: {camera: raspicam, body: base_link, world: map}\n"
                      "topics: {image: /raspicam_node/image/compressed}\n"

@@ -2,16 +2,9 @@
 
 from __future__ import annotations
 
-import json
-import shutil
-import signal
-import socket
 import subprocess
-import sys
-import time
 from collections import defaultdict
-from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -21,14 +14,11 @@ import pytest
 from rerun.chunk import RrdReader
 from scipy.spatial.transform import Rotation
 
-from framechain import pipeline
 from framechain.analysis.evidence.alignment import align_evidence
 from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimate
-from framechain.analysis.run import Run
-from framechain.analysis.verdict.attribute import Attribution, Finding
+from framechain.analysis.verdict.attribute import Finding
 from framechain.catalogue import Fault, HopName
 from framechain.cli.main import main
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.replay import ReplayResult, TransformBuffer, replay
 from framechain.sinks.colors import DETECTION_COLOR, FAULT_COLORS
 from framechain.sinks.rerun import (
@@ -42,96 +32,25 @@ from framechain.sinks.rerun import (
     stream_replay,
 )
 from framechain.timeline import (
-    CameraTable,
-    DepthFrameTable,
-    ObservationTable,
     PointRole,
-    PointTable,
     Timeline,
     TransformTable,
 )
+from tests.helpers.realdata import NAV2_MCAP
+from tests.helpers.rerun_scene import (
+    BODY_OFFSET,
+    FRAMES,
+    MAP_FROM_ODOM,
+    T0,
+    mast_camera_timeline,
+    recorded_timeline,
+    replayed_run,
+    with_as_run,
+)
+from tests.helpers.rerun_server import GrpcServer, free_port, received_entities, rerun_executable
+from tests.helpers.rrd_views import Chunks, column_values, read_chunks
 
-T0 = 1_700_000_000_000_000_000
-MS = 1_000_000
-FRAMES = ChainFrames(camera="camera_optical_frame", body="base_link", world="map")
-OPTICAL_QUAT_XYZW = [-0.5, 0.5, -0.5, 0.5]  # camera_link (FLU) -> optical (RDF), REP-103
-MAP_FROM_ODOM_T = np.array([0.5, -0.2, 0.0])
-MAP_FROM_ODOM = Rotation.from_euler("z", 10, degrees=True)
-BODY_OFFSET = np.array([0.05, 0.0, 0.0])  # the robot's body point is off by 5 cm (as-run fault)
-TARGET_OFFSET = np.array([0.0, 0.03, 0.0])
 REFERENCE_POINT = (2.0, 0.5, 0.2)
-
-
-def _scene_timeline() -> Timeline:
-    """A base driving at 0.5 m/s with a slow yaw, a mast camera pitched down 30 deg, depth at 20 Hz.
-
-    Observations: five good ones (depth from images or inline), one outside the image, one after the
-    odometry ends (extrapolation).
-    """
-    stamps = T0 + np.arange(0, 2001, 20) * MS  # odom -> base_link at 50 Hz for 2 s
-    t_s = (stamps - T0) / 1e9
-    yaw = 0.2 * t_s
-    odom_base = TransformTable.from_rows(
-        "odom", "base_link", stamps, np.stack([0.5 * t_s, 0.1 * t_s, np.zeros_like(t_s)], axis=1),
-        Rotation.from_euler("z", yaw[:, None]).as_quat(), log_time_ns=stamps + 3 * MS, source="/tf",
-    )
-    statics = TransformTable.concat([
-        TransformTable.from_rows("map", "odom", [T0], [MAP_FROM_ODOM_T], [MAP_FROM_ODOM.as_quat()],
-                                 is_static=True, source="/tf_static"),
-        TransformTable.from_rows("base_link", "mast_link", [T0], [[0.2, 0.0, 1.2]],
-                                 [Rotation.from_euler("y", 30, degrees=True).as_quat()],
-                                 is_static=True, source="/tf_static"),
-        TransformTable.from_rows("mast_link", "camera_optical_frame", [T0], [[0.05, 0.0, 0.0]],
-                                 [OPTICAL_QUAT_XYZW], is_static=True, source="/tf_static"),
-    ])
-    camera = CameraTable.from_intrinsics(
-        "camera_optical_frame", fx=150, fy=150, cx=80, cy=60, width=160, height=120, stamp_ns=T0,
-    )
-    depth_stamps = T0 + np.arange(0, 2001, 50) * MS
-    yy, xx = np.mgrid[0:120, 0:160]
-    base = (1.5 + 0.002 * xx + 0.001 * yy).astype(np.float32)
-    images = np.stack([base + 0.01 * k for k in range(depth_stamps.size)])
-    depth = DepthFrameTable.from_arrays("camera_optical_frame", depth_stamps, images, source="/depth")
-    obs_stamps = T0 + np.array([200, 500, 800, 1100, 1400, 1700, 2500]) * MS
-    n = obs_stamps.size
-    observations = ObservationTable(
-        obs_id=np.arange(100, 100 + n), stamp_ns=obs_stamps, log_time_ns=obs_stamps + 40 * MS,
-        camera_frame=np.full(n, "camera_optical_frame"),
-        u=np.array([80.0, 95.0, 70.0, 88.0, 400.0, 60.0, 80.0]),
-        v=np.array([60.0, 50.0, 72.0, 66.0, 60.0, 40.0, 60.0]),
-        depth_m=np.array([np.nan, np.nan, 1.8, np.nan, np.nan, 1.6, 1.5]),
-        label=np.full(n, "cup"), score=np.full(n, 0.9), source=np.full(n, "/detections"),
-    )
-    return Timeline(transforms=TransformTable.concat([odom_base, statics]), cameras=camera,
-                    observations=observations, depth_frames=depth, metadata={"source": "test scene"})
-
-
-def _with_as_run(timeline: Timeline, result: ReplayResult) -> Timeline:
-    """The robot's own hop points: camera exact, body (and so world) off by BODY_OFFSET.
-
-    Matched by obs_id for camera and body; by stamp (obs_id -1) for world, which is logged in
-    ``odom`` to exercise the frame conversion; a target off by TARGET_OFFSET, and a reference.
-    """
-    ok = np.flatnonzero(result.replayed)
-    obs = result.observations
-    m = ok.size
-    world = result.p_world[ok] + BODY_OFFSET  # world_from_body here has the base's yaw: keep it simple
-    world_in_odom = MAP_FROM_ODOM.inv().apply(world - MAP_FROM_ODOM_T)
-
-    def rows(frame: str, xyz: Any, role: str, obs_id: Any, stamp_shift_ns: int = 0) -> PointTable:
-        stamps = obs.stamp_ns[ok] + stamp_shift_ns
-        return PointTable(
-            frame=np.full(m, frame), stamp_ns=stamps, log_time_ns=stamps + 5 * MS, xyz=xyz,
-            quat_xyzw=np.full((m, 4), np.nan), role=np.full(m, role), obs_id=obs_id, source=np.full(m, "/debug"),
-        )
-
-    points = PointTable.concat([
-        rows("camera_optical_frame", result.p_cam[ok], "hop_camera", obs.obs_id[ok]),
-        rows("base_link", result.p_body[ok] + BODY_OFFSET, "hop_body", obs.obs_id[ok]),
-        rows("odom", world_in_odom, "hop_world", np.full(m, -1), stamp_shift_ns=200_000),
-        rows("map", result.p_world[ok] + TARGET_OFFSET, "target", obs.obs_id[ok]),
-    ])
-    return timeline.replace(points=points)
 
 
 @dataclass(frozen=True)
@@ -150,63 +69,21 @@ FINDINGS = [
 ]
 
 
-def _run(timeline: Timeline, *, findings: list[Finding] | None = None,
-         reference_point: tuple[float, float, float] | None = None) -> Run:
-    """The run of a hand-built timeline through FRAMES, replayed only; ``findings`` handed to the sinks as if
-    an attribution had found them (the sinks draw them; nothing else of the attribution is read)."""
-    chain = ChainConfig(frames=FRAMES, evidence=ChainEvidence(reference_point=reference_point))
-    made = pipeline.run(timeline, chain, attribute=False)
-    if findings is None:
-        return made
-    n = int(made.replay.replayed.sum())
-    found = Attribution(
-        source={}, config=chain, replay=made.replay, inputs=None, metric="none",  # type: ignore[arg-type]
-        error_before=np.full(n, np.nan), error_after=np.full(n, np.nan), hop_errors={},
-        evidence_points=np.full((n, 3), np.nan), corrected_world=np.full((n, 3), np.nan), findings=tuple(findings),
-        seed=0, aligned=made.aligned,
-    )
-    return replace(made, attribution=found, not_attributed=None)
-
-
-def _read(path: Path) -> dict[str, list[tuple[bool, pa.RecordBatch]]]:
-    out: dict[str, list[tuple[bool, pa.RecordBatch]]] = defaultdict(list)
-    for chunk in RrdReader(path).stream():
-        out[chunk.entity_path].append((chunk.is_static, chunk.to_record_batch()))
-    return dict(out)
-
-
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
-    timeline = _scene_timeline()
-    first = replay(timeline, FRAMES)
-    timeline = _with_as_run(timeline, first)
-    made = _run(timeline, findings=FINDINGS, reference_point=REFERENCE_POINT)
+    timeline = recorded_timeline()
+    made = replayed_run(timeline, findings=FINDINGS, reference_point=REFERENCE_POINT)
     result = made.replay
     rrd = tmp_path_factory.mktemp("rerun") / "scene.rrd"
     outcome = stream_replay(made, RerunTarget.save(rrd), options=RerunOptions(recording_id="scene"))
     assert outcome.mode is OutputMode.SAVE
     assert outcome.path == rrd
     assert not outcome.fell_back
-    return Scene(timeline, result, rrd, _read(rrd))
-
-
-Chunks = dict[str, list[tuple[bool, pa.RecordBatch]]]
-
-
-def _rows(chunks: Chunks, entity: str, column: str, *, static: bool | None = None) -> list[Any]:
-    """Values of one column of an entity over all its chunks, in log order (by RowId)."""
-    batches = [b for s, b in chunks.get(entity, []) if static is None or s == static]
-    batches = [b for b in batches if column in b.schema.names]
-    if not batches:
-        return []
-    table = pa.Table.from_batches([b.select(["rerun.controls.RowId", column]) for b in batches])
-    order = np.argsort(np.asarray(table.column("rerun.controls.RowId").to_pylist(), dtype=object), kind="stable")
-    values = table.column(column).to_pylist()
-    return [values[i] for i in order]
+    return Scene(timeline, result, rrd, read_chunks(rrd))
 
 
 def _times(chunks: Chunks, entity: str, timeline: str) -> np.ndarray[Any, Any]:
-    rows = _rows(chunks, entity, timeline, static=False)
+    rows = column_values(chunks, entity, timeline, static=False)
     if rows and hasattr(rows[0], "value"):
         return np.array([r.value for r in rows], dtype=np.int64)
     return np.array([np.datetime64(r, "ns").astype(np.int64) if not isinstance(r, int) else r for r in rows],
@@ -231,28 +108,29 @@ def test_entity_paths_and_frame_names_exist(scene: Scene) -> None:
                    "/frames/replay/camera_optical_frame"):
         assert entity in scene.chunks, entity
     children = {c[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
-                for c in _rows(scene.chunks, e, "Transform3D:child_frame")}
+                for c in column_values(scene.chunks, e, "Transform3D:child_frame")}
     parents = {p[0] for e in ("/tf/base_link", "/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame")
-               for p in _rows(scene.chunks, e, "Transform3D:parent_frame")}
+               for p in column_values(scene.chunks, e, "Transform3D:parent_frame")}
     assert children == {"base_link", "odom", "mast_link", "camera_optical_frame"}
     assert parents == {"map", "odom", "base_link", "mast_link"}
-    assert _rows(scene.chunks, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
-    assert _rows(scene.chunks, "/frames/replay/base_link", "CoordinateFrame:frame") == [["base_link@replay"]]
-    camera_frame = _rows(scene.chunks, "/points/recomputed/camera", "CoordinateFrame:frame")
+    assert column_values(scene.chunks, "/points/recomputed/world", "CoordinateFrame:frame") == [["map"]]
+    assert column_values(scene.chunks, "/frames/replay/base_link", "CoordinateFrame:frame") == [["base_link@replay"]]
+    camera_frame = column_values(scene.chunks, "/points/recomputed/camera", "CoordinateFrame:frame")
     assert camera_frame == [["camera_optical_frame@replay"]]
-    assert _rows(scene.chunks, "/camera/detections", "CoordinateFrame:frame") == [["camera_optical_frame_image_plane"]]
-    pinhole_parent = _rows(scene.chunks, "/camera", "Pinhole:parent_frame")
+    detections_frame = column_values(scene.chunks, "/camera/detections", "CoordinateFrame:frame")
+    assert detections_frame == [["camera_optical_frame_image_plane"]]
+    pinhole_parent = column_values(scene.chunks, "/camera", "Pinhole:parent_frame")
     assert pinhole_parent == [["camera_optical_frame"]]
-    assert _rows(scene.chunks, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
+    assert column_values(scene.chunks, "/camera", "Pinhole:child_frame") == [["camera_optical_frame_image_plane"]]
     # K is stored column-major; the principal point moves half a pixel as the pixels drawn do (Rerun puts (0, 0) at
     # the top-left pixel's corner, OpenCV at its centre): fx 150 and cx 80 of the scene become cx 80.5.
-    k = np.asarray(_rows(scene.chunks, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
+    k = np.asarray(column_values(scene.chunks, "/camera", "Pinhole:image_from_camera")[0][0]).reshape(3, 3).T
     np.testing.assert_allclose(k, [[150.0, 0.0, 80.5], [0.0, 150.0, 60.5], [0.0, 0.0, 1.0]])
 
 
 def test_world_points_equal_the_replay(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    logged = np.array([r[0] for r in _rows(scene.chunks, "/points/recomputed/world", "Points3D:positions")])
+    logged = np.array([r[0] for r in column_values(scene.chunks, "/points/recomputed/world", "Points3D:positions")])
     np.testing.assert_allclose(logged, scene.result.p_world[ok], rtol=1e-6, atol=1e-6)
     assert np.array_equal(logged, scene.result.p_world[ok].astype(np.float32))
     assert np.array_equal(_times(scene.chunks, "/points/recomputed/world", "obs_index"), ok)
@@ -260,47 +138,47 @@ def test_world_points_equal_the_replay(scene: Scene) -> None:
                           scene.result.observations.stamp_ns[ok])
     assert np.array_equal(_times(scene.chunks, "/points/recomputed/world", "log_time"),
                           scene.result.observations.log_time_ns[ok])
-    body = np.array([r[0] for r in _rows(scene.chunks, "/points/recomputed/body", "Points3D:positions")])
+    body = np.array([r[0] for r in column_values(scene.chunks, "/points/recomputed/body", "Points3D:positions")])
     np.testing.assert_allclose(body, scene.result.p_body[ok], rtol=1e-6, atol=1e-6)
 
 
 def test_as_run_points_are_matched_and_offset(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    as_run_world = np.array([r[0] for r in _rows(scene.chunks, "/points/as_run/world", "Points3D:positions")])
+    as_run_world = np.array([r[0] for r in column_values(scene.chunks, "/points/as_run/world", "Points3D:positions")])
     # Logged in odom, matched by stamp 0.2 ms away, brought back into map.
     np.testing.assert_allclose(as_run_world, scene.result.p_world[ok] + BODY_OFFSET, atol=1e-5)
-    arrows = np.array([r[0] for r in _rows(scene.chunks, "/points/error/body", "Arrows3D:vectors")])
+    arrows = np.array([r[0] for r in column_values(scene.chunks, "/points/error/body", "Arrows3D:vectors")])
     np.testing.assert_allclose(arrows, np.tile(BODY_OFFSET, (ok.size, 1)), atol=1e-6)
-    camera = np.array([r[0] for r in _rows(scene.chunks, "/points/error/camera", "Arrows3D:vectors")])
+    camera = np.array([r[0] for r in column_values(scene.chunks, "/points/error/camera", "Arrows3D:vectors")])
     np.testing.assert_allclose(camera, 0.0, atol=1e-7)  # the camera hop agrees: zero-length arrows
     # The arrows take the colour of the finding that explains them, as the line in the image does (red is only an
     # error no finding explains): the latency's gold, packed RGBA.
-    colours = {r[0] for r in _rows(scene.chunks, "/points/error/body", "Arrows3D:colors")}
+    colours = {r[0] for r in column_values(scene.chunks, "/points/error/body", "Arrows3D:colors")}
     r, g, b = FAULT_COLORS["latency"]
     assert colours == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
 
 
 def test_used_transforms_logged_at_observation_times(scene: Scene) -> None:
     ok = np.flatnonzero(scene.result.replayed)
-    t = np.array([r[0] for r in _rows(scene.chunks, "/replay/world_from_body", "Transform3D:translation")])
+    t = np.array([r[0] for r in column_values(scene.chunks, "/replay/world_from_body", "Transform3D:translation")])
     np.testing.assert_allclose(t, scene.result.world_from_body.translation[ok], rtol=1e-6, atol=1e-6)
-    q = np.array([r[0] for r in _rows(scene.chunks, "/replay/body_from_cam", "Transform3D:quaternion")])
+    q = np.array([r[0] for r in column_values(scene.chunks, "/replay/body_from_cam", "Transform3D:quaternion")])
     dots = np.abs(np.sum(q * scene.result.body_from_cam.quat_xyzw[ok], axis=1))
     np.testing.assert_allclose(dots, 1.0, atol=1e-6)
     assert np.array_equal(_times(scene.chunks, "/replay/world_from_body", "sensor_time"),
                           scene.result.observations.stamp_ns[ok])
-    assert _rows(scene.chunks, "/replay/world_from_body", "Transform3D:child_frame")[0] == ["base_link@replay"]
-    assert _rows(scene.chunks, "/replay/body_from_cam", "Transform3D:parent_frame")[0] == ["base_link@replay"]
+    assert column_values(scene.chunks, "/replay/world_from_body", "Transform3D:child_frame")[0] == ["base_link@replay"]
+    assert column_values(scene.chunks, "/replay/body_from_cam", "Transform3D:parent_frame")[0] == ["base_link@replay"]
 
 
 def test_static_edges_are_static_and_dynamic_edges_bulk(scene: Scene) -> None:
     for entity in ("/tf/odom", "/tf/mast_link", "/tf/camera_optical_frame"):
         assert all(static for static, _ in scene.chunks[entity]), entity
-        assert len(_rows(scene.chunks, entity, "Transform3D:translation")) == 1
+        assert len(column_values(scene.chunks, entity, "Transform3D:translation")) == 1
     assert not any(static for static, _ in scene.chunks["/tf/base_link"])
     tf = scene.timeline.transforms
     dynamic = tf.take(tf.child == "base_link")
-    translations = np.array([r[0] for r in _rows(scene.chunks, "/tf/base_link", "Transform3D:translation")])
+    translations = np.array([r[0] for r in column_values(scene.chunks, "/tf/base_link", "Transform3D:translation")])
     assert translations.shape == (len(dynamic), 3)
     np.testing.assert_allclose(translations, dynamic.translation, rtol=1e-6, atol=1e-6)
     assert np.array_equal(_times(scene.chunks, "/tf/base_link", "sensor_time"), dynamic.stamp_ns)
@@ -312,13 +190,13 @@ def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> N
     ok = np.flatnonzero(result.replayed)
     for hop in ("pixel_to_camera", "camera_to_body", "body_to_world"):
         for kind in ("error_mm", "gap_ms"):
-            values = _rows(scene.chunks, f"/series/{kind}/{hop}", "Scalars:scalars")
+            values = column_values(scene.chunks, f"/series/{kind}/{hop}", "Scalars:scalars")
             assert len(values) == ok.size, (kind, hop)
             assert np.array_equal(_times(scene.chunks, f"/series/{kind}/{hop}", "obs_index"), ok)
-        gaps = np.array([v[0] for v in _rows(scene.chunks, f"/series/gap_ms/{hop}", "Scalars:scalars")])
+        gaps = np.array([v[0] for v in column_values(scene.chunks, f"/series/gap_ms/{hop}", "Scalars:scalars")])
         sel = (result.hops.hop == hop) & (result.hops.status == "replayed")
         np.testing.assert_allclose(gaps, result.hops.gap_ns[sel] / 1e6)
-    errors = {hop: np.array([v[0] for v in _rows(scene.chunks, f"/series/error_mm/{hop}", "Scalars:scalars")])
+    errors = {hop: np.array([v[0] for v in column_values(scene.chunks, f"/series/error_mm/{hop}", "Scalars:scalars")])
               for hop in ("pixel_to_camera", "camera_to_body", "body_to_world", "target")}
     np.testing.assert_allclose(errors["pixel_to_camera"], 0.0, atol=1e-9)
     np.testing.assert_allclose(errors["camera_to_body"], 50.0, atol=1e-6)
@@ -331,60 +209,56 @@ def test_per_hop_series_have_one_row_per_replayed_observation(scene: Scene) -> N
     assert (own < 30).all()
     np.testing.assert_allclose(errors["body_to_world"], own, atol=1e-3)
     np.testing.assert_allclose(errors["target"], 30.0, atol=1e-6)
-    reference = np.array([v[0] for v in _rows(scene.chunks, "/series/error_mm/reference", "Scalars:scalars")])
+    reference = np.array([v[0] for v in column_values(scene.chunks, "/series/error_mm/reference", "Scalars:scalars")])
     np.testing.assert_allclose(reference, np.linalg.norm(result.p_world[ok] - REFERENCE_POINT, axis=1) * 1e3)
 
 
 def test_text_log_has_findings_rejections_and_summary(scene: Scene) -> None:
-    findings = [r[0] for r in _rows(scene.chunks, "/log/findings", "TextLog:text")]
+    findings = [r[0] for r in column_values(scene.chunks, "/log/findings", "TextLog:text")]
     assert findings == [FindingView.of(FINDINGS[0]).text()]
     assert "latency on body_to_world" in findings[0]
     assert "estimate +31.0 ms (95% interval +29.50 .. +32.10 ms)" in findings[0]
     assert "62% of the error" in findings[0]
     assert "24.0 mm" in findings[0]
-    rejected = [r[0] for r in _rows(scene.chunks, "/log/rejected", "TextLog:text")]
+    rejected = [r[0] for r in column_values(scene.chunks, "/log/rejected", "TextLog:text")]
     assert len(rejected) == 2
     assert any("outside_image" in r for r in rejected)
     assert any("extrapolation on body_to_world (map <- base_link)" in r for r in rejected)
-    assert _rows(scene.chunks, "/log/rejected", "TextLog:level") == [["WARN"], ["WARN"]]
-    summary = _rows(scene.chunks, "/summary", "TextDocument:text")[0][0]
+    assert column_values(scene.chunks, "/log/rejected", "TextLog:level") == [["WARN"], ["WARN"]]
+    summary = column_values(scene.chunks, "/summary", "TextDocument:text")[0][0]
     assert "| replayed | 5 |" in summary
     assert "| rejected: extrapolation | 1 |" in summary
 
 
 def test_camera_images_and_detections(scene: Scene) -> None:
-    images = _rows(scene.chunks, "/camera/depth", "DepthImage:buffer")
+    images = column_values(scene.chunks, "/camera/depth", "DepthImage:buffer")
     ok = scene.result.replayed
     used = np.unique(scene.result.depth_stamp_ns[ok & ~np.isfinite(scene.result.observations.depth_m)])
     assert 1 <= len(images) <= len(scene.timeline.depth_frames)
     assert set(used.tolist()) <= set(_times(scene.chunks, "/camera/depth", "sensor_time").tolist())
     first = np.frombuffer(bytes(images[0][0]), dtype=np.uint16)  # millimetres
     assert first.size == 160 * 120
-    assert _rows(scene.chunks, "/camera/depth", "DepthImage:meter")[0] == [1000.0]
+    assert column_values(scene.chunks, "/camera/depth", "DepthImage:meter")[0] == [1000.0]
     first_stamp = _times(scene.chunks, "/camera/depth", "sensor_time")[0]
     row = int(np.flatnonzero(scene.timeline.depth_frames.stamp_ns == first_stamp)[0])
     expected = scene.timeline.depth_frames.load(row)
     np.testing.assert_allclose(first.reshape(120, 160) / 1000.0, expected, atol=5e-4)
-    detections = np.array([r[0] for r in _rows(scene.chunks, "/camera/detections", "Points2D:positions")])
+    detections = np.array([r[0] for r in column_values(scene.chunks, "/camera/detections", "Points2D:positions")])
     obs = scene.result.observations
     # OpenCV's pixel (80, 60), the centre of pixel column 80 and row 60, is (80.5, 60.5) in Rerun's image space,
     # where pixel 80 spans 80 .. 81
     np.testing.assert_allclose(detections[0], [80.5, 60.5])
     np.testing.assert_allclose(detections, np.stack([obs.u, obs.v], axis=1) + 0.5)
     # not the recomputed blue: the detector's own pixel, in the detection's green
-    colors = [c for r in _rows(scene.chunks, "/camera/detections", "Points2D:colors") for c in r]
+    colors = [c for r in column_values(scene.chunks, "/camera/detections", "Points2D:colors") for c in r]
     ok = scene.result.replayed & ~scene.result.stale
     r, g, b = DETECTION_COLOR
     assert {c for c, good in zip(colors, ok, strict=True) if good} == {(r << 24) | (g << 16) | (b << 8) | 0xFF}
 
 
-def _rerun_exe() -> str | None:
-    return shutil.which("rerun") or shutil.which("rerun", path=str(Path(sys.executable).parent))
-
-
 def test_rerun_verifies_the_recording(scene: Scene) -> None:
     """Rerun's own `rrd verify`: every component decodes and the footer is well formed."""
-    exe = _rerun_exe()
+    exe = rerun_executable()
     if exe is None:
         pytest.skip("the rerun executable is not installed")
     done = subprocess.run([exe, "rrd", "verify", "--check-footers", "true", str(scene.rrd)],
@@ -395,7 +269,7 @@ def test_rerun_verifies_the_recording(scene: Scene) -> None:
 
 def test_depth_frames_are_decimated(tmp_path: Path, scene: Scene) -> None:
     rrd = tmp_path / "few.rrd"
-    stream_replay(_run(scene.timeline), RerunTarget.save(rrd), options=RerunOptions(max_images=2))
+    stream_replay(replayed_run(scene.timeline), RerunTarget.save(rrd), options=RerunOptions(max_images=2))
     chunks = [c for c in RrdReader(rrd).stream() if c.entity_path == "/camera/depth" and not c.is_static]
     assert sum(c.num_rows for c in chunks) == 2
 
@@ -423,7 +297,7 @@ def test_spawn_without_display_falls_back_to_saving(
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert not display_available()
     fallback = tmp_path / "fallback.rrd"
-    outcome = stream_replay(_run(scene.timeline), RerunTarget.spawn(fallback))
+    outcome = stream_replay(replayed_run(scene.timeline), RerunTarget.spawn(fallback))
     assert outcome.mode is OutputMode.SAVE
     assert outcome.fell_back
     assert outcome.path == fallback
@@ -443,9 +317,9 @@ def test_resolve_target_keeps_spawn_with_a_display() -> None:
 
 
 def test_as_run_matching_by_id_stamp_and_frame() -> None:
-    timeline = _scene_timeline()
+    timeline = mast_camera_timeline()
     result = replay(timeline, FRAMES)
-    logged = _with_as_run(timeline, result)
+    logged = with_as_run(timeline, result)
     buffer = TransformBuffer.from_timeline(logged)
     matched = align_evidence(logged.points, result.observations, FRAMES, buffer)
     ok = result.replayed
@@ -477,183 +351,30 @@ def test_finding_view_words_a_typed_finding() -> None:
 # Connect: a headless Rerun gRPC server that saves what it receives (no viewer, no display)
 
 
-@dataclass(frozen=True)
-class GrpcServer:
-    url: str
-    rrd: Path
-    process: subprocess.Popen[bytes]
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-@pytest.fixture
-def grpc_server(tmp_path: Path) -> Iterator[GrpcServer]:
-    exe = _rerun_exe()
-    if exe is None:
-        pytest.skip("the rerun executable is not installed")
-    port = _free_port()
-    rrd = tmp_path / "received.rrd"
-    process = subprocess.Popen([exe, "--serve-grpc", "--port", str(port), "--save", str(rrd)],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 20
-        while time.monotonic() < deadline:
-            with socket.socket() as sock:
-                if sock.connect_ex(("127.0.0.1", port)) == 0:
-                    break
-            time.sleep(0.1)
-        else:
-            pytest.fail("the Rerun gRPC server did not start")
-        yield GrpcServer(f"rerun+http://127.0.0.1:{port}/proxy", rrd, process)
-    finally:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-
-
-def _received_entities(server: GrpcServer) -> set[str]:
-    deadline = time.monotonic() + 10
-    entities: set[str] = set()
-    while time.monotonic() < deadline:
-        if server.rrd.is_file() and server.rrd.stat().st_size:
-            try:
-                entities = {c.entity_path for c in RrdReader(server.rrd).stream()}
-            except RuntimeError:  # the server is still writing the last message
-                entities = set()
-            if "/summary" in entities:
-                break
-        time.sleep(0.2)
-    return entities
-
-
 # The server's file is a stream without footer; Rerun's reader says so and scans the whole file.
 @pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
 def test_connect_sends_to_a_running_server(scene: Scene, grpc_server: GrpcServer) -> None:
-    outcome = stream_replay(_run(scene.timeline), RerunTarget.connect(grpc_server.url))
+    outcome = stream_replay(replayed_run(scene.timeline), RerunTarget.connect(grpc_server.url))
     assert outcome.mode is OutputMode.CONNECT
     assert outcome.url == grpc_server.url
     assert outcome.path is None
-    entities = _received_entities(grpc_server)
+    entities = received_entities(grpc_server)
     assert {"/points/recomputed/world", "/tf/base_link", "/summary"} <= entities
 
 
 def test_connect_to_nothing_fails_at_once(scene: Scene) -> None:
-    url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"
+    url = f"rerun+http://127.0.0.1:{free_port()}/proxy"
     with pytest.raises(RerunSinkError, match="no Rerun viewer listening at rerun"):
-        stream_replay(_run(scene.timeline), RerunTarget.connect(url), options=RerunOptions())
+        stream_replay(replayed_run(scene.timeline), RerunTarget.connect(url), options=RerunOptions())
     with pytest.raises(RerunSinkError, match="not a Rerun gRPC URL"):
-        stream_replay(_run(scene.timeline), RerunTarget.connect("http://"))
-
-
-# ----------------------------------------------------------------------------------------------
-# The command
-
-
-@pytest.fixture
-def saved_timeline(tmp_path: Path, scene: Scene) -> Path:
-    directory = tmp_path / "scene_timeline"
-    scene.timeline.replace(metadata={"chain": {"frames": {"camera": "camera_optical_frame", "body": "base_link",
-                                                          "world": "map"}}}).save(directory)
-    return directory
-
-
-def test_cli_replay_saves_and_prints_counts(
-    saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "cli.rrd"
-    assert main(["replay", str(saved_timeline), "--save", str(out), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["counts"] == {"total": 7, "replayed": 5, "rejected": {"extrapolation": 1, "outside_image": 1},
-                                "stale": report["counts"]["stale"]}
-    assert report["output"] == {"mode": "save", "path": str(out), "url": None, "fell_back": False}
-    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
-    entities = {c.entity_path for c in RrdReader(out).stream()}
-    assert "/points/as_run/body" in entities
-
-
-def test_cli_replay_text_output(saved_timeline: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    out = tmp_path / "text.rrd"
-    assert main(["replay", str(saved_timeline), "--save", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert "7 total, 5 replayed, 2 rejected" in text
-    assert "extrapolation 1" in text
-    assert "outside_image 1" in text
-    assert str(out) in text
-
-
-def test_cli_replay_spawn_without_display(
-    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.chdir(tmp_path)
-    assert main(["replay", str(saved_timeline), "--spawn", "--quiet"]) == 0
-    captured = capsys.readouterr()
-    assert "no display" in captured.err
-    assert "rerun         saved" in captured.out  # --quiet keeps the result, drops progress
-    assert (tmp_path / "scene_timeline.rrd").is_file()
-
-
-def test_cli_replay_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["replay", str(tmp_path / "missing.mcap"), "--save", str(tmp_path / "x.rrd")]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1
-    assert "missing.mcap" in err[0]
-
-
-@pytest.mark.filterwarnings("ignore:RRD file has no footer:rerun.error_utils.RerunWarning")
-def test_cli_replay_connect(
-    saved_timeline: Path, grpc_server: GrpcServer, capsys: pytest.CaptureFixture[str]
-) -> None:
-    assert main(["replay", str(saved_timeline), "--connect", grpc_server.url, "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["output"] == {"mode": "connect", "path": None, "url": grpc_server.url, "fell_back": False}
-    assert "/points/as_run/world" in _received_entities(grpc_server)
-
-
-def test_cli_replay_reads_a_recorded_log(
-    scene: Scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from framechain.adapters import write_log
-    from framechain.config.chain import ChainConfig
-
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "camera_optical_frame", "body": "base_link", "world": "map"},
-        "topics": {"camera_info": "/camera/camera_info", "detections": "/detections",
-                   "depth": "/camera/depth/image_rect_raw"},
-        "evidence": {"hops": {"camera": "/debug/point_camera", "body": "/debug/point_body",
-                              "world": "/debug/point_world"}, "target": "/grasp_target"},
-    })
-    log = write_log(scene.timeline, tmp_path / "scene.mcap", container="mcap-ros2", chain=chain)
-    chain_file = tmp_path / "chain.yaml"
-    chain_file.write_text(chain.to_yaml())
-    out = tmp_path / "mcap.rrd"
-    assert main(["replay", str(log), "--chain", str(chain_file), "--save", str(out), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["source"] == "mcap"
-    assert report["counts"]["replayed"] == 5
-    assert report["entities"]["/series/error_mm/camera_to_body"] == 5  # as-run matched by stamp
-    # Without --chain the frames are suggested, and so are the robot's hop-point topics (found by name).
-    assert main(["replay", str(log), "--save", str(tmp_path / "nochain.rrd"), "--json"]) == 0
-    report = json.loads(capsys.readouterr().out)
-    assert report["frames"] == {"camera": "camera_optical_frame", "body": "base_link", "world": "map"}
-    assert not any("not used" in note for note in report["notes"])
-    assert report["entities"]["/series/error_mm/camera_to_body"] == 5
+        stream_replay(replayed_run(scene.timeline), RerunTarget.connect("http://"))
 
 
 def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A real TurtleBot 4 Nav2 MCAP (sim-time header stamps): every edge on its /tf/<child> entity."""
     from framechain.adapters import open_log
 
-    log = realdata / "evo" / "nav2_turtlebot.mcap"
+    log = realdata / NAV2_MCAP
     out = tmp_path / "nav2.rrd"
     assert main(["replay", str(log), "--save", str(out), "--quiet"]) == 0
     # No progress bar, no suggested chain: only why nothing was replayed (the frame tree is still written).
@@ -662,62 +383,30 @@ def test_real_nav2_frame_tree(realdata: Path, tmp_path: Path, capsys: pytest.Cap
     assert "no detections topic in the log" in err[0]
     assert "topics.detections" in err[0]
     tf = open_log(log).timeline.transforms
-    chunks = _read(out)
+    chunks = read_chunks(out)
     for child in np.unique(tf.child).tolist():
         entity = f"/tf/{child}"
         rows = tf.take(tf.child == child)
         if rows.is_static.all():
             assert all(static for static, _ in chunks[entity]), entity
             continue
-        translations = np.array([r[0] for r in _rows(chunks, entity, "Transform3D:translation")])
+        translations = np.array([r[0] for r in column_values(chunks, entity, "Transform3D:translation")])
         order = np.argsort(rows.stamp_ns, kind="stable")
         np.testing.assert_allclose(translations, rows.translation[order], rtol=1e-6, atol=1e-6)
         assert np.array_equal(_times(chunks, entity, "sensor_time"), rows.stamp_ns[order])
 
 
-def test_cli_replay_attribute_logs_the_findings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from framechain.catalogue import Fault
-    from framechain.sim.scene import InjectedFault, SceneSpec, generate
-
-    generated = generate(SceneSpec(duration_s=2.0, width=160, height=120, focal_px=150.0,
-                                   faults=(InjectedFault(Fault.MISSING_ROTATION),)))
-    directory = tmp_path / "episode"
-    generated.timeline.replace(metadata={"chain": generated.chain.to_dict()}).save(directory)
-    out = tmp_path / "attributed.rrd"
-    assert main(["replay", str(directory), "--save", str(out), "--json"]) == 0  # attribution is on by default
-    report = json.loads(capsys.readouterr().out)
-    assert report["findings"]
-    assert report["findings"][0].startswith("missing_rotation on camera_to_body")
-    logged = [r[0] for r in _rows(_read(out), "/log/findings", "TextLog:text")]
-    assert logged == report["findings"]
-    plain = tmp_path / "plain.rrd"
-    assert main(["replay", str(directory), "--no-attribute", "--save", str(plain), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["findings"] == []
-    assert "/log/findings" not in _read(plain)
-
-
 def test_empty_and_unreplayable_timelines_still_save(tmp_path: Path, scene: Scene) -> None:
     empty = Timeline()
-    outcome = stream_replay(_run(empty), RerunTarget.save(tmp_path / "empty.rrd"))
+    outcome = stream_replay(replayed_run(empty), RerunTarget.save(tmp_path / "empty.rrd"))
     assert outcome.rows["/summary"] == 1
     # Observations without any transform: all rejected (missing edge), each a text log entry.
-    blind = _run(scene.timeline.replace(transforms=TransformTable.empty()), findings=FINDINGS)
+    blind = replayed_run(scene.timeline.replace(transforms=TransformTable.empty()), findings=FINDINGS)
     result = blind.replay
     assert not result.replayed.any()
     out = tmp_path / "blind.rrd"
     outcome = stream_replay(blind, RerunTarget.save(out))
-    chunks = _read(out)
-    assert len(_rows(chunks, "/log/rejected", "TextLog:text")) == len(result)
+    chunks = read_chunks(out)
+    assert len(column_values(chunks, "/log/rejected", "TextLog:text")) == len(result)
     assert "/points/recomputed/world" not in chunks
     assert "/series/gap_ms/body_to_world" not in chunks
-
-
-def test_cli_replay_without_output_option_saves_when_headless(
-    saved_timeline: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
-) -> None:
-    monkeypatch.delenv("DISPLAY", raising=False)
-    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.chdir(tmp_path)
-    assert main(["replay", str(saved_timeline)]) == 0
-    out = capsys.readouterr().out
-    assert f"saved {tmp_path / 'scene_timeline.rrd'}" in out

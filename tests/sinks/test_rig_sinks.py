@@ -97,7 +97,7 @@ def test_blueprint_has_a_view_per_camera_beside_the_3d_view(made: Made) -> None:
 
 
 def test_a_rig_shows_no_view_without_data_and_names_only_its_chain_frames(made: Made) -> None:
-    from rrd_views import labels_in_3d, views_without_data
+    from tests.helpers.rrd_views import labels_in_3d, views_without_data
 
     assert views_without_data(made.rrd) == []
     chain = made.scene.chain

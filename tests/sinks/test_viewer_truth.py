@@ -1,6 +1,6 @@
-"""What the Rerun viewer shows is what is true (issue 19, items 14-19): pixels in Rerun's convention, the view of the
-whole image, the detector's own tag centre beside framechain's, one name per frame, the error the findings explain
-as a series, a sane time axis for a log of one moment, and one colour legend."""
+"""What the Rerun viewer shows is what is true: pixels in Rerun's convention, the view of the whole image, the
+detector's own tag centre beside framechain's, one name per frame, the error the findings explain as a series, a sane
+time axis for a log of one moment, and one colour legend."""
 
 from __future__ import annotations
 
@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 import pytest
 from rerun.chunk import RrdReader
-from test_rerun import T0, _read, _rows, _run, _scene_timeline
 
 from framechain.catalogue import Fault
 from framechain.sinks.colors import (
@@ -34,6 +33,8 @@ from framechain.sinks.colors import (
 from framechain.sinks.overlay import ImageOverlay
 from framechain.sinks.rerun import RerunTarget, stream_replay
 from framechain.sinks.rerun_blueprint import image_view_bounds
+from tests.helpers.rerun_scene import T0, mast_camera_timeline, replayed_run
+from tests.helpers.rrd_views import column_values, read_chunks
 
 
 def _rgba(rgb: tuple[int, int, int]) -> int:
@@ -65,7 +66,7 @@ def test_camera_view_spans_the_whole_image_in_rerun_space() -> None:
 def fiducial_scene(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[tuple[bool, Any]]]:
     """The test_rerun scene, its first two detections tags: corners around the pixel used, and the centre their
     detector logged 0.7 px right and 0.4 px up of it (as TagSLAM's detector differs from the PnP centre)."""
-    timeline = _scene_timeline()
+    timeline = mast_camera_timeline()
     obs = timeline.observations
     quads = [[[u - 10, v - 10], [u + 10, v - 10], [u + 10, v + 10], [u - 10, v + 10]]
              for u, v in zip(obs.u[:2], obs.v[:2], strict=True)]
@@ -73,22 +74,23 @@ def fiducial_scene(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[t
             "detector_centre_px": [[float(u) + 0.7, float(v) - 0.4] for u, v in zip(obs.u[:2], obs.v[:2], strict=True)]}
     timeline = timeline.replace(metadata={**timeline.metadata, "fiducials": {"corners": side}})
     rrd = tmp_path_factory.mktemp("fiducial") / "scene.rrd"
-    stream_replay(_run(timeline), RerunTarget.save(rrd))
-    return _read(rrd)
+    stream_replay(replayed_run(timeline), RerunTarget.save(rrd))
+    return read_chunks(rrd)
 
 
 def test_the_detectors_centre_is_drawn_beside_the_pixel_framechain_used(
         fiducial_scene: dict[str, list[tuple[bool, Any]]]) -> None:
-    centres = list(_rows(fiducial_scene, "/camera/overlay/detector_centre", "Points2D:positions"))
+    centres = list(column_values(fiducial_scene, "/camera/overlay/detector_centre", "Points2D:positions"))
     # obs 100 used (80, 60), obs 101 (95, 50): the detector said (80.7, 59.6) and (95.7, 49.6), +0.5 in Rerun
     np.testing.assert_allclose([p for row in centres for p in row], [[81.2, 60.1], [96.2, 50.1]], atol=1e-5)
-    labels = [label for r in _rows(fiducial_scene, "/camera/overlay/detector_centre", "Points2D:labels") for label in r]
+    labels = [label for r in column_values(fiducial_scene, "/camera/overlay/detector_centre", "Points2D:labels")
+              for label in r]
     assert labels == ["obs 100: the detector's logged centre", "obs 101: the detector's logged centre"]
-    colors = [c for r in _rows(fiducial_scene, "/camera/detections", "Points2D:colors") for c in r]
+    colors = [c for r in column_values(fiducial_scene, "/camera/detections", "Points2D:colors") for c in r]
     # the two tags' pixels are framechain's estimate (light green); the plain detections the detector's own (green)
     assert colors[:2] == [_rgba(USED_PIXEL_COLOR)] * 2
     assert colors[2] == _rgba(DETECTION_COLOR)
-    detections = [p for r in _rows(fiducial_scene, "/camera/detections", "Points2D:positions") for p in r]
+    detections = [p for r in column_values(fiducial_scene, "/camera/detections", "Points2D:positions") for p in r]
     np.testing.assert_allclose(detections[:2], [[80.5, 60.5], [95.5, 50.5]])
 
 
@@ -96,15 +98,15 @@ def test_replay_frames_are_named_only_where_the_log_lacks_the_frame(
         fiducial_scene: dict[str, list[tuple[bool, Any]]]) -> None:
     # base_link and camera_optical_frame are in the log's tree: their @replay copies sit on them, unnamed
     for frame in ("base_link", "camera_optical_frame"):
-        assert _rows(fiducial_scene, f"/frames/{frame}", "Points3D:labels") == [[frame]]
-        assert _rows(fiducial_scene, f"/frames/replay/{frame}", "Points3D:labels") == []
-        assert _rows(fiducial_scene, f"/frames/replay/{frame}", "TransformAxes3D:show_frame") == [[False]]
+        assert column_values(fiducial_scene, f"/frames/{frame}", "Points3D:labels") == [[frame]]
+        assert column_values(fiducial_scene, f"/frames/replay/{frame}", "Points3D:labels") == []
+        assert column_values(fiducial_scene, f"/frames/replay/{frame}", "TransformAxes3D:show_frame") == [[False]]
 
 
 def test_static_spread_error_and_what_remains_are_series(tmp_path: Path) -> None:
     """With static-target evidence there are no as-run points: the error plot shows the world error the findings
     explain (each observation against its object's own position) and what remains once they are corrected."""
-    made = _run(_scene_timeline(), findings=[])
+    made = replayed_run(mast_camera_timeline(), findings=[])
     obs = made.replay.observations
     used = obs.obs_id[[0, 2, 3]]  # the attribution used three observations
     before, after = np.array([0.004, 0.006, 0.002]), np.array([0.001, 0.002, 0.0005])
@@ -113,27 +115,27 @@ def test_static_spread_error_and_what_remains_are_series(tmp_path: Path) -> None
                           findings=made.attribution.findings if made.attribution else ())
     rrd = tmp_path / "static.rrd"
     stream_replay(replace(made, attribution=attribution), RerunTarget.save(rrd))
-    chunks = _read(rrd)
-    world = np.array([v[0] for v in _rows(chunks, "/series/error_mm/world_error", "Scalars:scalars")])
+    chunks = read_chunks(rrd)
+    world = np.array([v[0] for v in column_values(chunks, "/series/error_mm/world_error", "Scalars:scalars")])
     np.testing.assert_allclose(world, [4.0, 6.0, 2.0])
     index = np.concatenate([b.column("obs_index").to_numpy() for s, b in chunks["/series/error_mm/world_error"]
                             if not s])
     assert index.tolist() == [0, 2, 3]
-    names = _rows(chunks, "/series/error_mm/world_error", "SeriesLines:names")
+    names = column_values(chunks, "/series/error_mm/world_error", "SeriesLines:names")
     assert names == [["world error against the static target's own position (mm)"]]
     assert "/series/error_mm/corrected" not in chunks  # no finding: nothing corrected to show
-    verdict = [t[0] for t in _rows(chunks, "/log/verdict", "TextLog:text")]
+    verdict = [t[0] for t in column_values(chunks, "/log/verdict", "TextLog:text")]
     assert verdict == [attribution.verdict]
 
 
 def test_a_log_of_one_moment_has_a_time_axis_of_seconds(tmp_path: Path) -> None:
     """One image (all observations at one stamp): the series show 1 s either side of it, not months; and the
     findings panel says why nothing was found."""
-    timeline = _scene_timeline()
+    timeline = mast_camera_timeline()
     obs = timeline.observations
     one = replace(obs, stamp_ns=np.full(len(obs), T0 + 500 * 1_000_000),
                   log_time_ns=np.full(len(obs), T0 + 540 * 1_000_000))
-    made = _run(timeline.replace(observations=one))
+    made = replayed_run(timeline.replace(observations=one))
     rrd = tmp_path / "moment.rrd"
     stream_replay(made, RerunTarget.save(rrd))
     reader = RrdReader(rrd)
@@ -143,16 +145,16 @@ def test_a_log_of_one_moment_has_a_time_axis_of_seconds(tmp_path: Path) -> None:
         if "TimeAxis:view_range" in batch.schema.names:
             ranges[chunk.entity_path].extend(batch.column("TimeAxis:view_range").to_pylist())
     # the time-gap series alone: no as-run points (no error series), no images (no pixel series)
-    assert not any(entity.startswith(("/series/error_mm", "/series/error_px")) for entity in _read(rrd))
+    assert not any(entity.startswith(("/series/error_mm", "/series/error_px")) for entity in read_chunks(rrd))
     assert len(ranges) == 1
     for values in ranges.values():
         assert values[-1] == [{"start": -1_000_000_000, "end": 1_000_000_000}]  # ns either side of the cursor
-    verdict = [t[0] for t in _rows(_read(rrd), "/log/verdict", "TextLog:text")]
+    verdict = [t[0] for t in column_values(read_chunks(rrd), "/log/verdict", "TextLog:text")]
     assert len(verdict) == 1
     assert verdict[0].startswith("No attribution")
     # a log that spans 2 s keeps its whole time axis
     whole = tmp_path / "whole.rrd"
-    stream_replay(_run(timeline), RerunTarget.save(whole))
+    stream_replay(replayed_run(timeline), RerunTarget.save(whole))
     reader = RrdReader(whole)
     assert not any("TimeAxis:view_range" in chunk.to_record_batch().schema.names
                    for chunk in reader.stream(store=reader.blueprints()[0]))

@@ -21,7 +21,7 @@ finding, three questions are asked here, one per camera:
 
 Calibrated on generated episodes (standard, and recorded as real recorders do: real-time stamps,
 repeats, MPEG-4, a wide lens, cloth) and on real footage with a gyro (a gimballed and a stabilised
-GoPro): see the tests under tests/lerobot and tests/analysis.
+GoPro): see the tests under tests/analysis/egomotion.
 """
 
 from __future__ import annotations

@@ -1,0 +1,181 @@
+"""A wrist camera's own motion, seen in generated SO-101 LeRobot episodes, against their known truth.
+
+Episodes come from :mod:`framechain.sim.lerobot_video` (its own URDF maths and renderer, encoded
+with PyAV, written as v3.0 and v2.1); the evidence runs the way the pipeline will: framechain's
+dataset reader, video decoder, feature tracker, kinematics and fit (:mod:`tests.helpers.egomotion_scene`).
+Every expectation is the generator's truth: the injected video delay, mount rotation and arm.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from framechain.analysis.egomotion import EgoMotionFit, fit_camera_motion
+from framechain.config.calibration import Intrinsics
+from framechain.sim.lerobot_video import (
+    ARM_JOINTS,
+    VideoDatasetSpec,
+    VideoDatasetTruth,
+    generate_video_dataset,
+    gripper_pads,
+)
+from framechain.sim.urdf_chain import UrdfChain
+from framechain.vision.egomotion import measure_egomotion, track_features
+from tests.helpers.egomotion_scene import EpisodeEvidence, episode_evidence, fit_episode, shifted_copy
+
+DURATION_S = 5.0
+
+
+def mount_error_deg(fit: EgoMotionFit, truth: VideoDatasetTruth) -> float:
+    """The measured mount against the true one (generator's truth)."""
+    return float(np.rad2deg((Rotation.from_quat(fit.q_link_cam).inv() * Rotation.from_quat(truth.q_link_cam))
+                            .magnitude()))
+
+
+@pytest.fixture(scope="session")
+def faulted(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path
+            ) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
+    """v2.1: video 80 ms late, declared mount 10 degrees off, 10% of the frames resent."""
+    spec = VideoDatasetSpec(so101_urdf, seed=11, duration_s=DURATION_S, version="v2.1", video_delay_s=0.080,
+                            mount_error_deg=10.0, repeat_share=0.1)
+    truth = generate_video_dataset(tmp_path_factory.mktemp("faulted") / "dataset", spec)
+    evidence = episode_evidence(truth, so101_urdf)
+    return truth, evidence, fit_episode(evidence, truth)
+
+
+@pytest.fixture(scope="session")
+def clean(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path
+          ) -> tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]:
+    """v3.0, two episodes in one mp4: the second one's frames start 5 s into the file."""
+    spec = VideoDatasetSpec(so101_urdf, seed=12, duration_s=DURATION_S, episodes=2, version="v3.0")
+    truth = generate_video_dataset(tmp_path_factory.mktemp("clean") / "dataset", spec)
+    evidence = episode_evidence(truth, so101_urdf, episode=1)
+    return truth, evidence, fit_episode(evidence, truth)
+
+
+def test_generator_kinematics_match_yourdfpy(so101_urdf: Path) -> None:
+    import yourdfpy
+
+    urdf = yourdfpy.URDF.load(str(so101_urdf), build_scene_graph=True, load_meshes=False)
+    chain = UrdfChain(so101_urdf, prefix="left_")
+    q = np.random.default_rng(0).uniform(-1.5, 1.5, (20, len(ARM_JOINTS)))
+    ours = chain.root_from_link(dict(zip(ARM_JOINTS, q.T, strict=True)), "left_gripper_link")
+    for i in range(q.shape[0]):
+        urdf.update_cfg({**dict(zip(ARM_JOINTS, q[i], strict=True)), "gripper": 0.0})
+        assert np.allclose(ours[i], urdf.get_transform(frame_to="gripper_link"), atol=1e-12)
+
+
+def test_late_video_and_a_rotated_mount_are_measured(faulted: tuple[VideoDatasetTruth, EpisodeEvidence,
+                                                                    EgoMotionFit]) -> None:
+    truth, evidence, fit = faulted
+    assert fit.link == truth.camera_link == "gripper_link"
+    assert not fit.wrong_link
+    assert fit.offset_s == pytest.approx(truth.expected_offset_s, abs=0.010)
+    assert fit.offset_s == pytest.approx(-0.080, abs=0.010)
+    assert fit.mount_error is not None
+    assert fit.mount_error.angle_deg == pytest.approx(10.0, abs=1.0)
+    axis = np.asarray(truth.spec.mount_error_axis) / np.linalg.norm(truth.spec.mount_error_axis)
+    assert np.rad2deg(np.arccos(np.clip(np.dot(fit.mount_error.axis, axis), -1, 1))) < 10.0
+    assert mount_error_deg(fit, truth) < 1.0
+    assert fit.offset_observable
+    assert fit.mount_observable
+    assert fit.focal_scale == pytest.approx(1.0, abs=0.05)
+    # The resent frames were found and left out of the motion.
+    repeated = set(truth.repeated[0])
+    assert set(evidence.health.duplicated) == repeated
+    assert repeated
+    assert not evidence.frames.usable[sorted(repeated)].any()
+
+
+def test_a_clean_episode_shows_no_offset_and_no_mount_error(clean: tuple[VideoDatasetTruth, EpisodeEvidence,
+                                                                         EgoMotionFit]) -> None:
+    truth, evidence, fit = clean
+    assert evidence.health.notes() == []
+    assert evidence.frames.usable.all()
+    assert len(evidence.stamps_ns) == int(DURATION_S * truth.spec.fps)
+    assert fit.link == "gripper_link"
+    assert not fit.wrong_link
+    assert abs(fit.offset_s) < 0.010
+    low, high = fit.offset_interval_s
+    assert low <= 0.010
+    assert high >= -0.010
+    assert high - low < 0.020
+    assert fit.mount_error is not None
+    assert fit.mount_error.angle_deg < 1.0
+    assert fit.mount_error.interval_deg[0] < 1.0
+    assert mount_error_deg(fit, truth) < 1.0
+
+
+def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],
+                                                  tmp_path: Path, so101_urdf: Path) -> None:
+    truth, _evidence, fit = clean
+    copy = shifted_copy(truth.root, tmp_path / "shifted", 0.100)
+    shifted = episode_evidence(truth, so101_urdf, episode=1, root=copy)
+    moved = fit_episode(shifted, truth)
+    # Frames 100 ms later in the file: each row shows the scene 100 ms before its stamp.
+    assert moved.offset_s - fit.offset_s == pytest.approx(-0.100, abs=0.015)
+    assert moved.link == "gripper_link"
+
+
+def test_the_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.TempPathFactory,
+                                                       so101_urdf: Path) -> None:
+    spec = VideoDatasetSpec(so101_urdf, seed=13, duration_s=DURATION_S, bimanual=True, camera_arm="right_",
+                            declared_arm="left_")
+    truth = generate_video_dataset(tmp_path_factory.mktemp("bimanual") / "dataset", spec)
+    evidence = episode_evidence(truth, so101_urdf)
+    assert {link.link for link in evidence.links} >= {"left_gripper_link", "right_gripper_link"}
+    fit = fit_episode(evidence, truth)
+    assert fit.link == "right_gripper_link"
+    assert fit.wrong_link
+    assert fit.declared_link == "left_gripper_link"
+    assert fit.mount_error is None
+    assert any("moves with right_gripper_link, not with the declared left_gripper_link" in note for note in fit.notes)
+    others = [f.residual_deg for f in fit.links if f.link.startswith("left_")]
+    assert min(others) > 5 * fit.links[0].residual_deg
+
+
+def test_the_gripper_pads_are_left_out(faulted: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]) -> None:
+    truth, evidence, _fit = faulted
+    mask = np.zeros((truth.spec.height, truth.spec.width), dtype=np.uint8)
+    for pad in gripper_pads(truth.spec.width, truth.spec.height):
+        cv2.fillPoly(mask, [np.asarray(pad.polygon, dtype=np.int32)], 255)
+    # Inside the pads by more than a pixel or two (a track on the edge follows the scene beside it).
+    mask = cv2.erode(mask, np.ones((5, 5), np.uint8))
+    tracks = evidence.tracks
+    kept = 0
+    for ids, pixels in zip(tracks.ids, tracks.pixels, strict=True):
+        moving = ~np.isin(ids, tracks.fixed)
+        px = np.rint(pixels[moving]).astype(int)
+        kept += int(moving.sum())
+        assert not mask[px[:, 1], px[:, 0]].any()
+    assert kept > 100 * len(tracks.ids)
+
+
+def test_implied_focal_length_when_the_intrinsics_are_wrong(clean: tuple[VideoDatasetTruth, EpisodeEvidence,
+                                                                         EgoMotionFit]) -> None:
+    truth, evidence, _fit = clean
+    fx, fy, cx, cy = truth.intrinsics
+    assumed = Intrinsics(fx=1.25 * fx, fy=1.25 * fy, cx=cx, cy=cy, width=truth.spec.width,
+                         height=truth.spec.height, distortion_model="none")
+    fit = fit_episode(evidence, truth, intrinsics=assumed)
+    assert 1.25 * fx * fit.focal_scale == pytest.approx(fx, rel=0.05)
+
+
+def test_a_still_camera_says_its_motion_is_not_observable(clean: tuple[VideoDatasetTruth, EpisodeEvidence,
+                                                                       EgoMotionFit]) -> None:
+    truth, evidence, _fit = clean
+    still = np.repeat(evidence.frames.row_images()[:1], 60, axis=0)
+    tracks = track_features(still)
+    stamps = evidence.stamps_ns[:60]
+    fit = fit_camera_motion(
+        lambda prior: measure_egomotion(tracks, stamps, evidence.intrinsics, frame="front", translation=prior),
+        evidence.links, camera="front", declared_link="gripper_link", declared_q_link_cam=truth.q_link_cam)
+    assert fit.link == ""
+    assert not fit.offset_observable
+    assert not fit.mount_observable
+    assert "camera front does not turn" in fit.notes[0]

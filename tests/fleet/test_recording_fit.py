@@ -1,0 +1,129 @@
+"""One recording, one rig: a two-arm recording's cameras fitted across its episodes, against the generator's truth.
+
+The generated recording has a wrist camera on each arm, swapped against robot.yaml (each declared on the
+other arm), recorded as real recorders do (real-time stamps, MPEG-4 at 224x224, a wide lens, resent
+frames), each camera late by its own delay, and one episode 100 ms later on top. Truth: which arm
+carries which camera, the true mount, the delays injected.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from scipy.spatial.transform import Rotation
+
+from framechain.cli.main import main
+from framechain.fleet import BatchResult, run_batch
+from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
+
+EPISODES = 5
+LATE_EPISODE = 3
+
+
+@pytest.fixture(scope="module")
+def swapped(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path, BatchResult]:
+    folder = tmp_path_factory.mktemp("recording")
+    delays = tuple(0.1 if e == LATE_EPISODE else 0.0 for e in range(EPISODES))
+    spec = VideoDatasetSpec(so101_urdf, seed=7, episodes=EPISODES, duration_s=6.0, fps=20, codec="mpeg4", bimanual=True,
+                            camera_per_arm=True, swap_cameras=True, clock="realtime", focal_px=112.0,
+                            repeat_share=0.15, camera_delays_s=(0.06, 0.09), episode_delays_s=delays)
+    truth = generate_video_dataset(folder / "dataset", spec)
+    robot = write_robot_yaml(truth, folder / "robot.yaml")
+    return truth, robot, run_batch([truth.root], folder / "out", robot=robot, jobs=1, report_formats=("md",),
+                                   rrd=folder / "out" / "recording.rrd")
+
+
+def test_the_recording_names_the_swap_for_both_cameras(swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
+    truth, _robot, result = swapped
+    (fits,) = result.recordings.values()
+    by_camera = {fit.name: fit for fit in fits}
+    for camera in truth.cameras:
+        fit = by_camera[camera.name]
+        assert fit.declared_link == camera.declared_link != camera.camera_link
+        assert fit.link == camera.camera_link
+        measured = Rotation.from_quat(fit.q_link_cam)
+        assert np.rad2deg((measured.inv() * Rotation.from_quat(camera.q_link_cam)).magnitude()) < 3.0
+        # Each episode's own mount agrees with the recording's.
+        assert max(fit.episode_mount_deg.values()) < 2.0
+        assert len(fit.episode_mount_deg) == EPISODES
+
+
+def test_every_episodes_offset_is_in_the_camera_table_and_the_late_one_departs(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
+    truth, _robot, result = swapped
+    rows = pq.read_table(result.report_paths["cameras"]).to_pylist()
+    assert len(rows) == EPISODES * len(truth.cameras)
+    for camera in truth.cameras:
+        mine = sorted((r for r in rows if r["name"] == camera.name), key=lambda r: r["episode"])
+        for row, delay in zip(mine, camera.delays_s, strict=True):
+            assert row["offset_s"] == pytest.approx(-delay, abs=0.010)
+            assert row["offset_low_s"] < row["offset_s"] < row["offset_high_s"]
+            assert row["link"] == row["recording_link"] == camera.camera_link
+            assert row["mount_from_recording_deg"] is not None
+        assert [r["episode"] for r in mine if r["departs"]] == [LATE_EPISODE]
+        (late,) = [r for r in mine if r["departs"]]
+        assert "departs from the recording's median" in late["why"]
+    document = json.loads(result.report_paths["recording"].read_text())
+    assert {c["name"] for c in document["recordings"][0]["cameras"]} == {c.name for c in truth.cameras}
+    report = (result.table_path.parent / "fleet_report.md").read_text()
+    assert "## Cameras across each recording's episodes" in report
+    assert f"episode {LATE_EPISODE}" not in report or "departs from the recording's median" in report
+
+
+def test_attribute_episodes_prints_the_recording(swapped: tuple[VideoDatasetTruth, Path, BatchResult],
+                                                 tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """attribute DATASET --episodes reuses the batch's results (resumed: nothing measured again) and says per camera
+    which link it rides and which episodes depart."""
+    truth, robot, result = swapped
+    out = result.table_path.parent
+    assert main(["attribute", str(truth.root), "--robot", str(robot), "--episodes", "all", "--out", str(out),
+                 "--format", "md", "-j", "1"]) == 0
+    said = " ".join(capsys.readouterr().out.split())
+    assert f"{EPISODES} episodes:" in said
+    for camera in truth.cameras:
+        assert f"camera {camera.name}_optical_frame: rides {camera.camera_link} (declared on {camera.declared_link})" \
+            in said
+    assert f"episode {LATE_EPISODE}: its offset" in said
+
+
+def _series(path: Path, entity: str) -> dict[int, float]:
+    """A scalar series of a saved recording, by episode (read back with rerun.chunk)."""
+    from rerun.chunk import RrdReader
+
+    out: dict[int, float] = {}
+    for chunk in RrdReader(path).stream().filter(content=entity, components="Scalars:scalars"):
+        batch = chunk.to_record_batch()
+        for episode, value in zip(batch.column("episode").to_pylist(), batch.column("Scalars:scalars").to_pylist(),
+                                  strict=True):
+            out[int(episode)] = float(value[0])
+    return out
+
+
+def test_the_recording_view_shows_each_cameras_offsets_and_reaches_every_episode(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
+    from rerun.chunk import RrdReader
+
+    truth, _robot, result = swapped
+    path = result.report_paths["rrd"]
+    rows = pq.read_table(result.report_paths["cameras"]).to_pylist()
+    for camera in truth.cameras:
+        frame = f"{camera.name}_optical_frame"
+        offsets = _series(path, f"/recording/{frame}/offset_ms/offset")
+        expected = {r["episode"]: r["offset_s"] * 1e3 for r in rows if r["name"] == camera.name}
+        assert offsets == pytest.approx(expected, abs=1e-3)
+        low = _series(path, f"/recording/{frame}/offset_ms/low")
+        assert all(low[e] < offsets[e] for e in offsets)
+        assert set(_series(path, f"/recording/{frame}/mount_deg")) == set(range(EPISODES))
+        warnings = [line for chunk in RrdReader(path).stream().filter(content=f"/recording/{frame}/departs",
+                                                                      components="TextLog:text")
+                    for line in chunk.to_record_batch().column("TextLog:text").to_pylist()]
+        assert len(warnings) == 1
+        assert warnings[0][0].startswith(f"episode {LATE_EPISODE}: its offset")
+    episodes = sorted(path.with_name(f"{path.name}.episodes").glob("*.rrd"))
+    assert len(episodes) == EPISODES
+    ids = {str(r) for e in episodes for r in RrdReader(e).recordings()}
+    assert len(ids) == EPISODES

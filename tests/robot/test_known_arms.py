@@ -1,0 +1,254 @@
+"""Arms framechain knows without a robot.yaml: the bundled URDFs, state names under any prefix, units guessed
+from the values, and a run of a generated SO-101 episode with neither --robot nor --episode.
+
+Truth: the official URDFs in ../shared/realdata (read by yourdfpy and by the generator's own URDF maths,
+:class:`framechain.sim.urdf_chain.UrdfChain`), hand-written mappings, and the generator's injected faults.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from scipy.spatial.transform import Rotation
+
+from framechain.adapters.lerobot.adapter import open_dataset
+from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
+from framechain.cli.main import main
+from framechain.config.robot import RobotConfig
+from framechain.replay import TransformBuffer
+from framechain.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, match_state_names
+from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
+from framechain.sim.urdf_chain import UrdfChain
+from framechain.suggest.lerobot import guess_arm_units
+from tests.helpers.realdata import KOCH_URDF, SO101_URDF
+
+VIDEO = {"video.fps": 30, "video.codec": "av1", "video.pix_fmt": "yuv420p", "video.is_depth_map": False}
+
+
+@pytest.mark.parametrize(("arm", "official"), [("so101", SO101_URDF), ("koch", KOCH_URDF)])
+def test_bundled_urdfs_keep_the_published_kinematics(realdata: Path, arm: str, official: str) -> None:
+    import yourdfpy
+
+    bundled = KNOWN_ARMS[arm].urdf
+    assert (bundled.parent / "LICENSE").is_file()
+    assert "<mesh" not in bundled.read_text()
+    ours = yourdfpy.URDF.load(str(bundled), load_meshes=False, build_scene_graph=True)
+    theirs = yourdfpy.URDF.load(str(realdata / official), load_meshes=False, build_scene_graph=True)
+    assert ours.actuated_joint_names == theirs.actuated_joint_names
+    q = np.random.default_rng(4).uniform(-1.0, 1.0, len(ours.actuated_joint_names))
+    ours.update_cfg(q)
+    theirs.update_cfg(q)
+    for link in theirs.link_map:
+        np.testing.assert_allclose(ours.get_transform(link), theirs.get_transform(link), atol=1e-12)
+
+
+def test_the_so100_urdf_loads_without_meshes_and_names_lerobot_motors() -> None:
+    import yourdfpy
+
+    urdf = yourdfpy.URDF.load(str(KNOWN_ARMS["so100"].urdf), load_meshes=False, build_scene_graph=True)
+    assert set(urdf.actuated_joint_names) == set(LEROBOT_MOTORS)
+    assert KNOWN_ARMS["so100"].camera_link in urdf.link_map
+
+
+@pytest.mark.parametrize(("robot_type", "arm"), [("so101_follower", "so101"), ("bi_so100_follower", "so100"),
+                                                 ("koch_follower", "koch"), ("SO-101", "so101"), ("aloha", None),
+                                                 (None, None)])
+def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) -> None:
+    found = known_arm(robot_type)
+    assert (found.name if found else None) == arm
+
+
+@pytest.mark.parametrize(("names", "expected"), [
+    (["left_shoulder_pan.pos", "left_gripper.pos", "right_shoulder_pan.pos", "right_gripper.pos"],
+     {"left_": [("left_shoulder_pan.pos", "shoulder_pan"), ("left_gripper.pos", "gripper")],
+      "right_": [("right_shoulder_pan.pos", "shoulder_pan"), ("right_gripper.pos", "gripper")]}),
+    (["l_wrist_roll.pos", "r_wrist_roll.pos", "l_wrist_flex.vel"],
+     {"l_": [("l_wrist_roll.pos", "wrist_roll")], "r_": [("r_wrist_roll.pos", "wrist_roll")]}),
+    (["follower_elbow_flex.pos", "follower_shoulder_lift.pos"],
+     {"follower_": [("follower_elbow_flex.pos", "elbow_flex"), ("follower_shoulder_lift.pos", "shoulder_lift")]}),
+    ([f"arm{a}_j{k}" for a in (1, 2) for k in (1, 2, 6)],
+     {"arm1_": [("arm1_j1", "shoulder_pan"), ("arm1_j2", "shoulder_lift"), ("arm1_j6", "gripper")],
+      "arm2_": [("arm2_j1", "shoulder_pan"), ("arm2_j2", "shoulder_lift"), ("arm2_j6", "gripper")]}),
+    (["joint_0", "joint_4"], {"": [("joint_0", "shoulder_pan"), ("joint_4", "wrist_roll")]}),
+])
+def test_state_names_are_matched_under_any_prefix(names: list[str], expected: dict[str, list[tuple[str, str]]]
+                                                  ) -> None:
+    arms, unmatched = match_state_names(names, LEROBOT_MOTORS)
+    assert {a.prefix: list(a.motors) for a in arms} == expected
+    assert unmatched == [n for n in names if n.endswith(".vel")]
+
+
+@pytest.mark.parametrize(("body", "unit", "said"), [
+    ([[12.0, -150.0], [40.0, 88.0]], "deg", "values reach 150"),
+    ([[0.2, -1.5], [2.9, 0.1]], "rad", "values within +-2.90"),
+    ([[812.0, 2048.0], [3301.0, 1990.0]], "ticks", "whole numbers 812..3301"),
+    ([[100.0, -20.0], [-63.5, 4.0]], "range_m100_100", "where LeRobot clamps"),
+    ([[45.0, -20.0], [-63.5, 4.0]], "deg", "range_m100_100 would fit too"),
+])
+def test_units_are_guessed_per_arm_and_said(body: list[list[float]], unit: str, said: str) -> None:
+    values = np.hstack([np.asarray(body), [[3.0], [97.0]]])
+    units, why = guess_arm_units(["shoulder_pan.pos", "elbow_flex.pos", "gripper.pos"], values)
+    assert units[:2] == [unit, unit]
+    assert units[2] == ("range_0_100" if unit in ("deg", "range_m100_100") else unit)
+    assert said in why
+
+
+def _ticks_dataset(root: Path) -> tuple[Path, np.ndarray, list[str]]:
+    """Two SO-101 arms named arm1_j1 .. arm2_j6, raw ticks; a camera on the second arm's wrist and one above."""
+    rng = np.random.default_rng(11)
+    names = [f"arm{a}_j{k}" for a in (1, 2) for k in range(1, 7)]
+    ticks = np.round(2048 + rng.uniform(-600, 600, (12, 12))).astype(np.float32)
+    features = {"observation.state": FeatureSpec("float32", (12,), names),
+                "observation.images.arm2_wrist": FeatureSpec("video", (224, 224, 3), ["height", "width", "channels"],
+                                                             VIDEO),
+                "observation.images.top": FeatureSpec("video", (480, 640, 3), ["height", "width", "channels"], VIDEO)}
+    path = write_lerobot_dataset(root, [EpisodeData({"observation.state": ticks})], features=features, fps=20,
+                                 robot_type="bi_so101_follower")
+    return path, ticks.astype(np.float64), names
+
+
+def test_info_prints_a_complete_robot_yaml_for_numbered_joints_in_ticks(
+        so101_urdf: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    root, ticks, names = _ticks_dataset(tmp_path / "ds")
+    assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
+    text = capsys.readouterr().out
+    skeleton = yaml.safe_load(text)
+    assert set(skeleton["arms"]) == {"arm1", "arm2"}
+    arm2 = skeleton["arms"]["arm2"]
+    assert (arm2["prefix"], arm2["default_unit"]) == ("arm2_", "ticks")
+    assert Path(arm2["urdf"]) == KNOWN_ARMS["so101"].urdf
+    assert arm2["joints"] == {f"arm2_j{k + 1}": m for k, m in enumerate(LEROBOT_MOTORS)}
+    assert skeleton["cameras"]["arm2_wrist"]["mount"]["parent"] == "arm2_gripper_link"
+    assert skeleton["cameras"]["top"]["mount"]["parent"] == "world"
+    assert skeleton["cameras"]["top"]["intrinsics"]["fx"] == pytest.approx(320 / np.tan(np.radians(35)), abs=0.1)
+    assert "FILL IN" not in text
+    assert "whole numbers" in text
+    # As printed, it loads and gives the arms' frame tree: the generator's URDF maths on the official file,
+    # ticks as (value - 2048) * 2 pi / 4096, the second arm's base 0.2 m to the right.
+    del skeleton["cameras"]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(skeleton))
+    timeline = open_dataset(root, episode=0, robot=RobotConfig.load(tmp_path / "robot.yaml"))
+    found = TransformBuffer(timeline.transforms).lookup("world", "arm2_gripper_link",
+                                                        np.unique(timeline.joint_states.stamp_ns)).matrix()
+    q = {m: (ticks[:, names.index(f"arm2_j{k + 1}")] - 2048) * 2 * np.pi / 4096 for k, m in enumerate(LEROBOT_MOTORS)}
+    base = np.eye(4)
+    base[1, 3] = -0.2
+    expected = base @ UrdfChain(so101_urdf).root_from_link(q, "gripper_link")
+    np.testing.assert_allclose(found, expected, atol=1e-9)
+
+
+def test_a_koch_state_without_a_urdf_joint_is_left_out_and_said(realdata: Path, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    import yourdfpy
+
+    deg = np.random.default_rng(5).uniform(-120, 120, (8, 6)).astype(np.float32)
+    deg[:, 5] = np.linspace(5, 95, 8)
+    features = {"observation.state": FeatureSpec("float32", (6,), [f"{m}.pos" for m in LEROBOT_MOTORS])}
+    root = write_lerobot_dataset(tmp_path / "koch", [EpisodeData({"observation.state": deg})], features=features,
+                                 fps=30, robot_type="koch_follower")
+    assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
+    text = capsys.readouterr().out
+    assert "# wrist_flex.pos: not mapped (the bundled URDF has no such joint)" in text
+    assert "# gripper.pos: not mapped (its URDF joint 'Revolute 7' has no limits for range_0_100)" in text
+    path = tmp_path / "robot.yaml"
+    path.write_text(text)
+    timeline = open_dataset(root, episode=0, robot=path)
+    link = KNOWN_ARMS["koch"].camera_link
+    found = TransformBuffer(timeline.transforms).lookup("base_link", link, np.unique(
+        timeline.joint_states.stamp_ns)).matrix()
+    official = yourdfpy.URDF.load(str(realdata / KOCH_URDF), load_meshes=False)
+    for i in range(len(deg)):
+        official.update_cfg({"Revolute 2": np.radians(deg[i, 0]), "Revolute 3": np.radians(deg[i, 1]),
+                             "Revolute 5": np.radians(deg[i, 2]), "Revolute 6": np.radians(deg[i, 4])})
+        np.testing.assert_allclose(found[i], official.get_transform(link, "base_link"), atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def wrist_episode(so101_urdf: Path, tmp_path_factory: pytest.TempPathFactory) -> VideoDatasetTruth:
+    """A generated SO-101 episode: video 50 ms late, the camera on gripper_link, a 180 px focal length."""
+    return generate_video_dataset(tmp_path_factory.mktemp("known") / "dataset",
+                                  VideoDatasetSpec(so101_urdf, seed=23, duration_s=4.0, video_delay_s=0.05))
+
+
+def test_attribute_without_robot_or_episode_runs_on_the_bundled_urdf(
+        wrist_episode: VideoDatasetTruth, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    truth = wrist_episode
+    out = tmp_path / "out"
+    assert main(["attribute", str(truth.root), "--out", str(out), "--format", "json", "-q"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    said = [line for line in err if "no --robot given" in line]
+    assert len(said) == 1
+    for piece in ("episode 0 (no --episode given)", "bundled SO-101 URDF", f"wrote {out / 'robot.yaml'}"):
+        assert piece in said[0]
+    assert RobotConfig.load(out / "robot.yaml").cameras["wrist"].mount.parent == "gripper_link"
+    motion = json.loads((out / "attribution.json").read_text())["camera_motion"][0]
+    assert motion["link"] == "gripper_link"
+    # Nothing declared but the arm: the camera's position on its link (5.8 cm from the guessed origin) and its focal
+    # length are unknown, and the translation prior made from them is off; 9.4 ms and 2.9 deg here.
+    assert motion["offset_s"] == pytest.approx(truth.expected_offset_s, abs=0.015)
+    fitted = Rotation.from_quat(motion["q_link_cam"])
+    assert (fitted.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude() < np.radians(5.0)
+    # The guessed focal length (70 deg field of view) times the scale the motion implies: the true one.
+    guessed = 112.0 / np.tan(np.radians(35.0))
+    assert guessed * motion["focal_scale"] == pytest.approx(truth.intrinsics[0], rel=0.08)
+
+
+def test_tf_without_robot_gives_the_bundled_arm_frames(wrist_episode: VideoDatasetTruth,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["tf", str(wrist_episode.root), "base_link", "gripper_link", "--episode", "0", "--json"]) == 0
+    assert "translation" in capsys.readouterr().out
+
+
+def test_a_dataset_of_an_unknown_arm_asks_for_all_it_lacks_at_once(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    features = {"observation.state": FeatureSpec("float32", (2,), ["a.pos", "b.pos"])}
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": np.zeros((3, 2), np.float32)})
+                                                   for _ in range(3)], features=features, fps=10,
+                                 robot_type="my_arm")
+    out = str(tmp_path / "out")
+    cases = [([], ["--episode N (episodes 0..2) and --robot robot.yaml", f"framechain info {root} --episode 0`"]),
+             (["--episode", "2"], ["needs --robot robot.yaml", "'my_arm' is no arm", f"info {root} --episode 2`"]),
+             (["--robot", str(tmp_path / "robot.yaml")], ["needs --episode N (episodes 0..2)"])]
+    (tmp_path / "robot.yaml").write_text("urdf: arm.urdf\njoints: {a.pos: a}\ndefault_unit: deg\n")
+    for extra, expected in cases:
+        assert main(["attribute", str(root), *extra, "--out", out]) == 1
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1
+        for piece in expected:
+            assert piece in err
+        assert ("--robot" in err) == ("--robot" not in extra)
+
+
+def _info_yaml(root: Path, capsys: pytest.CaptureFixture[str]) -> Any:
+    assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
+    return yaml.safe_load(capsys.readouterr().out)
+
+
+def test_cameras_ride_the_arm_their_name_mentions(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    names = [f"{side}_{m}.pos" for side in ("l", "r") for m in LEROBOT_MOTORS]
+    image = FeatureSpec("video", (96, 128, 3), ["height", "width", "channels"], VIDEO)
+    features = {"observation.state": FeatureSpec("float32", (12,), names), "observation.images.cam_right_wrist": image,
+                "observation.images.left_wrist": image, "observation.images.front": image}
+    state = np.random.default_rng(2).uniform(-80, 80, (5, 12)).astype(np.float32)
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": state})], features=features,
+                                 fps=30, robot_type="bi_so100_follower")
+    skeleton = _info_yaml(root, capsys)
+    assert {name: arm["prefix"] for name, arm in skeleton["arms"].items()} == {"l": "l_", "r": "r_"}
+    parents = {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()}
+    assert parents == {"cam_right_wrist": "r_gripper", "left_wrist": "l_gripper", "front": "world"}
+
+
+def test_an_unknown_arm_gets_one_arm_per_shared_prefix(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    names = [f"arm{a}_j{k}" for a in (1, 2) for k in range(1, 4)]
+    features = {"observation.state": FeatureSpec("float32", (6,), names)}
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": np.zeros((4, 6), np.float32)})],
+                                 features=features, fps=30, robot_type="my_arm")
+    skeleton = _info_yaml(root, capsys)
+    arms = skeleton["arms"]
+    assert {name: (arm["prefix"], arm["urdf"], arm["joints"]) for name, arm in arms.items()} == {
+        f"arm{a}": (f"arm{a}_", "URDF", {f"arm{a}_j{k}": f"j{k}" for k in range(1, 4)}) for a in (1, 2)}
