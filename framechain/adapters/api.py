@@ -14,10 +14,11 @@ from framechain.adapters.formats.mcap.reader import MCAP_MAGIC, McapLog
 from framechain.adapters.formats.rosbag.reader import RosbagsLog
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
-from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.model import LoadedLog
 from framechain.adapters.mounts import chain_additions
 from framechain.config.chain import ChainConfig
 from framechain.progress import Progress
+from framechain.timeline import LogInfo
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"

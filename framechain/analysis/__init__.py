@@ -3,7 +3,7 @@ bounds of what the evidence could see), the run every sink renders, the tilt lab
 
 from framechain.analysis.evidence.replayed import Replayed, replay_chain
 from framechain.analysis.lab import TiltRow, crossing_pitch_deg, tilt_sweep
-from framechain.analysis.run import NotAttributed, Run
+from framechain.analysis.run import LoadedRun, NotAttributed, Run
 from framechain.analysis.verdict.attribute import AnalysisError, Attribution, Finding, attribute_replayed
 from framechain.analysis.verdict.checks import Bound, Curve, LabelTable
 from framechain.analysis.verdict.corrections import NothingToCorrectError, apply_corrections
@@ -16,6 +16,7 @@ __all__ = [
     "Curve",
     "Finding",
     "LabelTable",
+    "LoadedRun",
     "NotAttributed",
     "NothingToCorrectError",
     "Replayed",

@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         loaded, skeleton = _dataset_summary(args.log, args.episode), robot_yaml_skeleton(args.log, args.episode)
     elif dataset and (args.episode is not None or args.robot is not None or chain_file is not None):
         run_ = pipeline.load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
+        assert run_.info is not None  # a dataset is read with what it holds
         loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
         suggestion = SuggestedChain(config=run_.chain)
     elif dataset:

@@ -6,6 +6,7 @@ from framechain.timeline.errors import (
     TimelineError,
 )
 from framechain.timeline.frames import DepthFrameTable, DepthLoader, DepthWindows, ImageFrameTable, pixel_windows
+from framechain.timeline.log_info import LogFormat, LogInfo, TopicInfo
 from framechain.timeline.model import Timeline
 from framechain.timeline.tables import (
     CameraTable,
@@ -36,11 +37,14 @@ __all__ = [
     "InvalidCameraError",
     "InvalidTransformError",
     "JointStateTable",
+    "LogFormat",
+    "LogInfo",
     "ObservationTable",
     "PointRole",
     "PointTable",
     "Timeline",
     "TimelineError",
+    "TopicInfo",
     "TransformTable",
     "TranslationPrior",
     "arrow_array",

@@ -56,7 +56,7 @@ from framechain.adapters.lerobot.reader import (
     is_lerobot_dataset,
 )
 from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clock_start_ns
-from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.adapters.model import LoadedLog
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
 from framechain.config.chain import ChainConfig, MarkerSpec
@@ -68,8 +68,10 @@ from framechain.timeline import (
     DepthFrameTable,
     ImageFrameTable,
     JointStateTable,
+    LogInfo,
     ObservationTable,
     Timeline,
+    TopicInfo,
     TransformTable,
 )
 from framechain.timeline.frames import VIDEO_ENCODING

@@ -47,7 +47,7 @@ from framechain.adapters.formats.mcap.summary import read_summary
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
-from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.timeline import LogInfo, TopicInfo
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
