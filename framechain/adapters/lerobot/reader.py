@@ -455,4 +455,3 @@ def _jsonl(path: Path, note: Callable[[Path, str], None]) -> list[tuple[int, dic
             continue
         rows.append((lineno, row))
     return rows
-
