@@ -1,5 +1,6 @@
 """The model room: columnar tables of one log, nothing format-specific; imports nothing of framechain's other rooms."""
 
+from framechain.timeline.columns import Column, ColumnTable, arrow_array
 from framechain.timeline.errors import (
     InvalidCameraError,
     InvalidTransformError,
@@ -10,8 +11,6 @@ from framechain.timeline.log_info import LogFormat, LogInfo, TopicInfo
 from framechain.timeline.model import Timeline
 from framechain.timeline.tables import (
     CameraTable,
-    Column,
-    ColumnTable,
     EgoMotionTable,
     JointStateTable,
     ObservationTable,
@@ -19,7 +18,6 @@ from framechain.timeline.tables import (
     PointTable,
     TransformTable,
     TranslationPrior,
-    arrow_array,
     format_stamp,
     normalize_frame,
     normalize_frames,
