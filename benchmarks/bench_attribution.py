@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.verdict.attribute import attribute
+from framechain import pipeline
 from framechain.catalogue import Fault
 from framechain.sim.scene import REALSENSE_OPTICAL_FRAME, REALSENSE_OPTICAL_XYZ, InjectedFault, SceneSpec, generate
 
@@ -128,7 +128,7 @@ def one_case(args: tuple[str, int, bool]) -> dict[str, Any]:
     )
     scene = generate(spec)
     started = time.perf_counter()
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     out: dict[str, Any] = {"level": level, "clean": clean, "seconds": time.perf_counter() - started}
     findings = [f.to_json() for f in result.findings]  # estimates read through JSON: dicts or typed objects
     if clean:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.verdict.attribute import attribute
+from framechain import pipeline
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
@@ -118,13 +118,11 @@ Job = tuple[str, float, float, float, str, "list[float] | None", "float | None"]
 
 
 def stairs_case(args: Job) -> dict[str, Any]:
-    from framechain.pipeline import load_log
-
     family, factor, sign, bound, hop, axis, clean = args
     chain = stairs_chain()
-    timeline = load_log(STAIRS / "tag_detections.bag", chain).timeline
+    timeline = pipeline.load_log(STAIRS / "tag_detections.bag", chain).timeline
     size = factor * bound
-    result = attribute(injected(timeline, chain, family, size, sign, axis), chain, bootstrap=0)
+    result = pipeline.run(injected(timeline, chain, family, size, sign, axis), chain, bootstrap=0).attributed()
     found, within = verdict_on(family, finding_of(result, family, hop), clean, sign, size, bound)
     return {"log": "tagslam_stairs", "family": family, "factor": factor, "found": found, "within": within,
             "found_as_recorded": clean is not None}
@@ -154,7 +152,7 @@ def scene_cases(level: str, seed: int) -> list[dict[str, Any]]:
     """One clean scene's bounds, then each observable family injected at 2x and 0.5x (sign by seed)."""
     spec = scene_spec(level, seed)
     clean = generate(spec)
-    result = attribute(clean.timeline, clean.chain, bootstrap=0)
+    result = pipeline.run(clean.timeline, clean.chain, bootstrap=0).attributed()
     out = []
     sign = 1.0 if seed % 2 == 0 else -1.0
     for bound in result.to_json()["bounds"]:
@@ -169,7 +167,7 @@ def scene_cases(level: str, seed: int) -> list[dict[str, Any]]:
         for factor in (2.0, 0.5):
             fault = scene_fault(family, LEVELS[level], factor * size, sign, bound.get("axis"), spec.mount_pitch_deg)
             scene = generate(scene_spec(level, seed, fault))
-            estimate = finding_of(attribute(scene.timeline, scene.chain, bootstrap=0), family, hop)
+            estimate = finding_of(pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed(), family, hop)
             found, within = verdict_on(family, estimate, clean_value, sign, factor * size, size)
             out.append({"log": f"sim {level}", "family": family, "factor": factor, "found": found, "within": within,
                         "found_as_recorded": clean_value is not None})
@@ -177,11 +175,9 @@ def scene_cases(level: str, seed: int) -> list[dict[str, Any]]:
 
 
 def _stairs_jobs() -> list[Job]:
-    from framechain.pipeline import load_log
-
     chain = stairs_chain()
     started = time.perf_counter()
-    result = attribute(load_log(STAIRS / "tag_detections.bag", chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(STAIRS / "tag_detections.bag", chain, bootstrap=0).attributed()
     print(f"  tagslam_stairs as recorded ({time.perf_counter() - started:.1f} s): {result.verdict}")
     jobs: list[Job] = []
     for bound in result.to_json()["bounds"]:

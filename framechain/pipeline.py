@@ -12,7 +12,7 @@ given); :func:`read_log` reads a robot log as it is (``framechain info`` and ``t
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping
-from dataclasses import astuple, dataclass, field, replace
+from dataclasses import replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -21,45 +21,22 @@ from framechain import adapters
 from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.egomotion.attribution import with_camera_motion
-from framechain.analysis.egomotion.run import measure_cameras
-from framechain.analysis.evidence.replayed import replay_chain
-from framechain.analysis.run import NotAttributed, Run
+from framechain.analysis.egomotion.run import CameraMotionEvidence, measure_cameras
+from framechain.analysis.evidence.replayed import Replayed, replay_chain
+from framechain.analysis.run import LoadedRun, NotAttributed, Run
 from framechain.analysis.verdict.attribute import attribute_replayed
 from framechain.analysis.verdict.findings import AnalysisError, Attribution, Unattributed
 from framechain.config.chain import ChainConfig, ChainFrames
 from framechain.errors import FramechainError
 from framechain.progress import Progress
 from framechain.replay import ReplayResult
-from framechain.timeline import Timeline
+from framechain.timeline import LogInfo, Timeline
 
 #: The path of a run made from a Timeline in memory rather than a file.
 IN_MEMORY = Path("<timeline>")
 #: File suffixes of logs among other files in a folder (a ROS 2 bag directory, a LeRobot dataset and a
 #: saved timeline are recognised by their metadata files instead).
 LOG_SUFFIXES = (".mcap", ".bag", ".db3")
-
-
-@dataclass(frozen=True)
-class LoadedRun:
-    """A log in the model, with the chain to replay it through (the reading part of a :class:`Run`)."""
-
-    path: Path
-    timeline: Timeline
-    chain: ChainConfig
-    chain_suggested: bool  # True when no --chain was given and the configuration was suggested
-    info: Any = None  # the adapter's LogInfo (topics, span, notes) when read from a robot log
-    notes: list[str] = field(default_factory=list)
-    #: The suggestion (placeholders, what the log lacks) when no chain was given; None otherwise.
-    suggestion: Any = None
-    #: What disagrees before any fit (a calibration of another camera's topic); first in ``notes`` too.
-    warnings: list[str] = field(default_factory=list)
-    #: The robot.yaml made for a known arm when a LeRobot dataset came without one (adapters' GeneratedRobot).
-    generated_robot: Any = None
-
-    def chain_topic_notes(self) -> list[str]:
-        """The reader's notes on the topics the chain names (an undecodable topic, say)."""
-        named = [t for t in astuple(self.chain.topics) if isinstance(t, str) and t]
-        return [n for n in self.notes if any(n.startswith(f"topic {t}:") for t in named)]
 
 
 def load_chain(chain: ChainConfig | str | Path | None) -> ChainConfig | None:
@@ -96,8 +73,8 @@ def load_log(
         loaded = _with_notes(read_log(target, config, progress=progress), found)
         _check_frames(target, loaded.timeline, config, loaded.info)
         warnings = _disagreements(loaded, config)
-        return LoadedRun(path=target, timeline=loaded.timeline, chain=config, chain_suggested=False,
-                         info=loaded.info, notes=[*warnings, *_named_typos(loaded.info, config)], warnings=warnings)
+        return LoadedRun(path=target, timeline=loaded.timeline, chain=config, info=loaded.info,
+                         notes=(*warnings, *_named_typos(loaded.info, config)), warnings=warnings)
     loaded = _with_notes(read_log(target, None, progress=progress, point_roles=suggestions.evidence_roles), found)
     suggestion = suggestions.suggest(loaded)
     if suggestion.config.cameras:  # a rig calibrated by files beside the log: read through them
@@ -106,7 +83,7 @@ def load_log(
         loaded = suggestions.as_suggested(loaded, suggestion.config)
     warnings = _disagreements(loaded, suggestion.config)
     return LoadedRun(path=target, timeline=loaded.timeline, chain=suggestion.config, chain_suggested=True,
-                     info=loaded.info, notes=[*warnings, *loaded.info.notes, *_chain_beside(target)],
+                     info=loaded.info, notes=(*warnings, *loaded.info.notes, *_chain_beside(target)),
                      suggestion=suggestion, warnings=warnings)
 
 
@@ -116,7 +93,7 @@ def read_log(
     *,
     progress: bool | Progress = False,
     kinds: Collection[str] | None = None,
-    point_roles: Callable[[adapters.LogInfo], Mapping[str, str]] | None = None,
+    point_roles: Callable[[LogInfo], Mapping[str, str]] | None = None,
 ) -> adapters.LoadedLog:
     """Read a robot log (MCAP, ROS 1 bag, ROS 2 bag) into the model as it is: one pass over the topics
     ``chain`` needs (every topic framechain understands without one), narrowed to message ``kinds``
@@ -175,12 +152,12 @@ def _the_log_in(path: Path) -> tuple[Path, list[str]]:
     return path, skipped  # no log in it: the reader says what it is not
 
 
-def _disagreements(loaded: adapters.LoadedLog, chain: ChainConfig) -> list[str]:
+def _disagreements(loaded: adapters.LoadedLog, chain: ChainConfig) -> tuple[str, ...]:
     """What to say before any finding: a calibration of another topic's camera, and detections of the chain's
     topic stamped with another camera's frame."""
     topic = chain.topics.detections
     stamped = [n for n in suggestions.frame_id_disagreements(loaded) if topic and n.startswith(f"topic {topic}:")]
-    return [*suggestions.calibration_disagreements(chain, loaded.info), *stamped]
+    return (*suggestions.calibration_disagreements(chain, loaded.info), *stamped)
 
 
 def _with_notes(loaded: adapters.LoadedLog, notes: list[str]) -> adapters.LoadedLog:
@@ -196,7 +173,7 @@ def _chain_beside(log: Path) -> list[str]:
             f"{beside[0]} to use it; `framechain batch` does)"]
 
 
-def _named_typos(info: adapters.LogInfo, chain: ChainConfig) -> list[str]:
+def _named_typos(info: LogInfo, chain: ChainConfig) -> list[str]:
     """The reader's notes, a topic the chain names but the log lacks followed by what it may have meant."""
     close = {m.topic: m.close for m in suggestions.missing_topics(info, chain) if m.close}
     out = []
@@ -224,7 +201,7 @@ _FRAME_SOURCES = {"camera": ("topics.detections", "topics.camera_info", "topics.
                   "body": ("topics.odometry",), "world": ("topics.odometry",)}
 
 
-def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: adapters.LogInfo | None = None) -> None:
+def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: LogInfo | None = None) -> None:
     """A frame the chain names but no transform mentions is a typo, not a missing edge 235 times; when a topic
     the chain names for that frame is not in the log, the topic is the typo."""
     transforms = timeline.transforms
@@ -284,7 +261,7 @@ def _load_lerobot(
         config = ChainConfig.from_dict(stored, where=f"{target} (suggested by robot.yaml)")
     notes = [f"no --robot given: {generated.line}"] if generated is not None else []
     return LoadedRun(path=target, timeline=loaded.timeline, chain=replace(config, robot=section),
-                     chain_suggested=suggested, info=loaded.info, notes=[*notes, *loaded.info.notes],
+                     chain_suggested=suggested, info=loaded.info, notes=(*notes, *loaded.info.notes),
                      generated_robot=generated)
 
 
@@ -340,33 +317,41 @@ def run(
     # A bearing-only static target is replayed as rays when attributed (decided here, before the replay).
     replayed = replay_chain(loaded.timeline, loaded.chain, rays=attribute)
     nothing = _why_nothing_replayed(loaded, replayed.replay)
+    if not attribute:
+        not_asked = NotAttributed(Unattributed.NOT_ASKED, "attribution was not asked for")
+        return Run(loaded=loaded, replayed=replayed, not_attributed=not_asked, nothing_replayed=nothing)
+    attribution, why, motion = _attributed(loaded, replayed, nothing, seed=seed, bootstrap=bootstrap,
+                                           progress=progress)
+    return Run(loaded=loaded, replayed=replayed, attribution=attribution, not_attributed=why,
+               nothing_replayed=nothing, camera_motion=motion)
+
+
+def _attributed(
+    loaded: LoadedRun, replayed: Replayed, nothing: str | None, *, seed: int, bootstrap: int,
+    progress: Progress | None,
+) -> tuple[Attribution | None, NotAttributed | None, CameraMotionEvidence | None]:
+    """The replay attributed, with the cameras' own motion where it is measured: the attribution (None: it could
+    not be made), why not, and the motion."""
     attribution: Attribution | None = None
-    why: NotAttributed | None = NotAttributed(Unattributed.NOT_ASKED, "attribution was not asked for")
+    why: NotAttributed | None = None
+    try:
+        attribution = attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap, progress=progress)
+    except AnalysisError as err:
+        why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
     motion = None
-    if attribute:
-        try:
-            attribution = attribute_replayed(replayed, loaded.chain, seed=seed, bootstrap=bootstrap, progress=progress)
-            why = None
-        except AnalysisError as err:
-            why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
-        if _measures_camera_motion(loaded, attribution):
-            motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
-                                     partial(camera_motion_source, loaded.timeline), progress=progress)
-        if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
-            # A camera that moves is measured: evidence whatever else the log lacks.
-            unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)
-            attribution, why = with_camera_motion(replayed, loaded.chain, attribution, motion, seed=seed), None
-            attribution = replace(attribution, notes=(*unattributed, *attribution.notes))
-        elif motion is not None and why is not None:  # only fixed cameras: they cannot stand in for detections
-            why = NotAttributed(why.reason, "; ".join([why.detail, *(c.why_not for c in motion.cameras)]))
-        if attribution is not None:
-            attribution = _as_read(loaded, attribution)
-    return Run(
-        path=loaded.path, timeline=loaded.timeline, chain=loaded.chain, buffer=replayed.buffer,
-        replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
-        nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
-        info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
-        generated_robot=loaded.generated_robot)
+    if _measures_camera_motion(loaded, attribution):
+        motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
+                                 partial(camera_motion_source, loaded.timeline), progress=progress)
+    if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
+        # A camera that moves is measured: evidence whatever else the log lacks.
+        unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)
+        attribution, why = with_camera_motion(replayed, loaded.chain, attribution, motion, seed=seed), None
+        attribution = replace(attribution, notes=(*unattributed, *attribution.notes))
+    elif motion is not None and why is not None:  # only fixed cameras: they cannot stand in for detections
+        why = NotAttributed(why.reason, "; ".join([why.detail, *(c.why_not for c in motion.cameras)]))
+    if attribution is not None:
+        attribution = _as_read(loaded, attribution)
+    return attribution, why, motion
 
 
 def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) -> bool:
@@ -374,7 +359,7 @@ def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) 
     recorded, joints and video; beside markers, their corroboration), and for a robot log only when nothing
     else measures the chain (it costs seconds per camera, and images that do not move with the robot, such as a
     screen, would be read as a camera on the wrong link)."""
-    if getattr(loaded.info, "format", None) == "lerobot":
+    if loaded.info is not None and loaded.info.format == "lerobot":
         return True
     return attribution is None or attribution.metric == "none"
 
@@ -400,7 +385,9 @@ def _why_nothing_replayed(loaded: LoadedRun, result: ReplayResult) -> str | None
     nothing = result.nothing_replayed()
     if nothing is None:
         return None
-    log = adapters.LoadedLog(timeline=loaded.timeline, info=loaded.info, decoded_topics={})
+    # A saved timeline has no LogInfo: the suggestions read what there is (their reading of a log's info
+    # allows for none).
+    log = adapters.LoadedLog(timeline=loaded.timeline, info=loaded.info, decoded_topics={})  # type: ignore[arg-type]
     why = suggestions.why_nothing_replayed(log, loaded.chain, nothing)
     # What the reader noticed on the chain's topics (an undecodable topic) often is the cause; a topic the line
     # already says the log lacks is not said twice.
@@ -432,7 +419,7 @@ def _as_read(loaded: LoadedRun, result: Attribution) -> Attribution:
     source.setdefault("path", str(loaded.path))
     if loaded.info is not None:
         source["path"] = str(loaded.path)
-        source["format"] = getattr(loaded.info, "format", source.get("format", "unknown"))
+        source["format"] = loaded.info.format
     return replace(result, source=source)
 
 

@@ -17,7 +17,7 @@ from framechain.adapters.errors import (
 from framechain.adapters.formats.log_writer import CONTAINERS, canonical_order, write_log
 from framechain.adapters.formats.mcap.writer import framechain_output
 from framechain.adapters.lerobot.adapter import LeRobotAdapter, open_dataset, scan_dataset
-from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.adapters.model import LoadedLog
 
 register_adapter(LeRobotAdapter())
 
@@ -29,9 +29,7 @@ __all__ = [
     "LeRobotAdapter",
     "LoadedLog",
     "LogAdapter",
-    "LogInfo",
     "SchemaError",
-    "TopicInfo",
     "UnsupportedLogError",
     "canonical_order",
     "detect",

@@ -14,10 +14,11 @@ from framechain.adapters.formats.mcap.reader import MCAP_MAGIC, McapLog
 from framechain.adapters.formats.rosbag.reader import RosbagsLog
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
-from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.model import LoadedLog
 from framechain.adapters.mounts import chain_additions
 from framechain.config.chain import ChainConfig
 from framechain.progress import Progress
+from framechain.timeline import LogInfo, Timeline
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -172,14 +173,7 @@ def open_log(
     with _source(fmt, target) as src:
         info = src.info().with_notes(notes)
         types = {t.name: normalize_msgtype(t.msgtype) for t in info.topics}
-        selected = select_topics(types, chain)
-        if point_roles is not None:  # read as a chain naming them would: as points, with their roles
-            extra = {t: r for t, r in point_roles(info).items() if t in types}
-            selected.update(dict.fromkeys(extra, Kind.POINT))
-            col.roles = {**col.roles, **extra}
-        if kinds is not None:
-            wanted = {Kind(k) for k in kinds}
-            selected = {t: k for t, k in selected.items() if k in wanted}
+        selected = _selected_topics(types, info, chain, col, kinds=kinds, point_roles=point_roles)
         if chain is not None:
             notes.extend(_check_chain_topics(chain, types))
         total = sum(t.count for t in info.topics if t.name in selected)
@@ -203,12 +197,35 @@ def open_log(
     timeline, found = col.build(_fetcher(fmt, target, summary), metadata)
     info = info.with_notes(found)
     timeline = timeline.replace(metadata={**timeline.metadata, "notes": list(info.notes)})
-    if chain is not None and chain.topics.camera_info and not len(timeline.cameras):
+    if chain is not None:
+        _check_camera_models(p, chain, timeline, info)
+    return LoadedLog(timeline=timeline, info=info, decoded_topics={t: k.value for t, k in selected.items()})
+
+
+def _check_camera_models(path: Path, chain: ChainConfig, timeline: Timeline, info: LogInfo) -> None:
+    """The chain's CameraInfo topic gave no usable camera model: an error saying why (from the reader's notes)."""
+    if chain.topics.camera_info and not len(timeline.cameras):
         bad = [n for n in info.notes if chain.topics.camera_info in n]
         if bad:
-            raise AdapterError(p, bad[0].split(": ", 1)[-1] + "; no usable camera model",
+            raise AdapterError(path, bad[0].split(": ", 1)[-1] + "; no usable camera model",
                                topic=chain.topics.camera_info)
-    return LoadedLog(timeline=timeline, info=info, decoded_topics={t: k.value for t, k in selected.items()})
+
+
+def _selected_topics(
+    types: dict[str, str], info: LogInfo, chain: ChainConfig | None, col: Collector, *,
+    kinds: Collection[str] | None, point_roles: Callable[[LogInfo], Mapping[str, str]] | None,
+) -> dict[str, Kind]:
+    """Topic -> kind of the topics to decode (``types``: topic -> normalised type): those ``chain`` needs, the
+    point topics ``point_roles`` names (their roles given to ``col``), narrowed to ``kinds``."""
+    selected = select_topics(types, chain)
+    if point_roles is not None:  # read as a chain naming them would: as points, with their roles
+        extra = {t: r for t, r in point_roles(info).items() if t in types}
+        selected.update(dict.fromkeys(extra, Kind.POINT))
+        col.roles = {**col.roles, **extra}
+    if kinds is not None:
+        wanted = {Kind(k) for k in kinds}
+        selected = {t: k for t, k in selected.items() if k in wanted}
+    return selected
 
 
 def chain_file(chain: ChainConfig) -> Path | str:

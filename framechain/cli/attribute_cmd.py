@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from framechain.cli.common import (
     add_log_arguments,
@@ -19,6 +19,10 @@ from framechain.cli.common import (
     say_generated_robot,
     warner,
 )
+
+if TYPE_CHECKING:
+    from framechain.analysis.run import Run
+    from framechain.analysis.verdict.findings import Attribution
 
 FORMATS = ("json", "md", "html")
 
@@ -47,7 +51,8 @@ def register(sub: Any) -> None:
     parser.set_defaults(run=run)
 
 
-def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]) -> tuple[Any, Any, dict[str, Path]]:
+def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]
+               ) -> tuple[Run, Attribution, dict[str, Path]]:
     from framechain import pipeline
     from framechain.sinks.evidence_files import write_attribution
     from framechain.sinks.plots import start_renderers

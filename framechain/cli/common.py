@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from framechain.analysis.run import Run
+    from framechain.analysis.run import ChainSuggestion, Run
+    from framechain.config.chain import ChainConfig
     from framechain.progress import Progress
 
 
@@ -222,11 +223,11 @@ def stdout_console(width: int | None = None) -> Any:
     return _Quiet(width=None if sys.stdout.isatty() else width)
 
 
-def print_suggested_chain(chain: Any, quiet: bool, log: str | Path | None = None) -> None:
+def print_suggested_chain(chain: ChainSuggestion | ChainConfig, quiet: bool, log: str | Path | None = None) -> None:
     """Say which configuration was used when none was given (stderr, so --json stays clean), first naming a chain
     file that lies beside ``log`` and was not used.
 
-    ``chain``: the SuggestedChain (its YAML marks the frames the log lacks) or a ChainConfig. The YAML is
+    ``chain``: the suggestion (its YAML marks the frames the log lacks) or a ChainConfig. The YAML is
     written as it is, never wrapped: a comment wrapped onto a new line would not be a comment when pasted."""
     if quiet:
         return
@@ -258,9 +259,8 @@ def say_generated_robot(run: Run, command: str, path: Path | None) -> None:
 def chain_text(run: Run) -> str:
     """The chain a run used, one line: its frames (a suggestion's placeholders marked FILL IN)."""
     frames = run.chain.frames
-    if run.chain_suggested and run.suggestion is not None and hasattr(run.suggestion, "frames_text"):
-        text: str = run.suggestion.frames_text()
-        return text
+    if run.chain_suggested and run.suggestion is not None:
+        return run.suggestion.frames_text()
     cameras = f"{{{', '.join(run.chain.camera_frames())}}}" if run.chain.is_rig else frames.camera
     world = frames.world if run.chain.has_pose else "(no pose)"
     return f"{cameras} -> {frames.body} -> {world}"
@@ -268,10 +268,9 @@ def chain_text(run: Run) -> str:
 
 def incomplete_chain_line(run: Run) -> str | None:
     """When the run's chain was suggested and the log lacks pieces of it: one line saying so and what is missing."""
-    if not run.chain_suggested or run.suggestion is None or not hasattr(run.suggestion, "incomplete_line"):
+    if not run.chain_suggested or run.suggestion is None:
         return None
-    line: str | None = run.suggestion.incomplete_line()
-    return line
+    return run.suggestion.incomplete_line()
 
 
 def warner(command: str) -> Callable[[str], None]:

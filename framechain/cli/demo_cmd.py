@@ -7,10 +7,14 @@ import json
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from framechain.cli.common import make_out_dir
+
+if TYPE_CHECKING:
+    from framechain.sim.scene import SceneSpec
 
 DEFAULT_FAULTS = ("missing_rotation", "latency:-0.03")
 
@@ -93,8 +97,7 @@ def parse_fault(text: str) -> Any:
 def run(args: argparse.Namespace) -> int:
     from framechain import pipeline
     from framechain.cli.common import imports_set_aside, print_findings, progress_reporter
-    from framechain.sim.logs import SUFFIX, write_scene
-    from framechain.sim.scene import SceneSpec, generate
+    from framechain.sim.scene import SceneSpec
     from framechain.sinks.plots import renderers
     from framechain.sinks.report import write_outputs
 
@@ -121,15 +124,7 @@ def run(args: argparse.Namespace) -> int:
     )
     with renderers(), imports_set_aside(), progress_reporter(args.quiet or args.json, "demo") as progress:
         say = progress or (lambda _m: None)
-        say("generating the episode")
-        scene = generate(spec)
-        log_path = out / f"episode{SUFFIX[args.container]}"
-        if log_path.exists():
-            shutil.rmtree(log_path) if log_path.is_dir() else log_path.unlink()
-        say(f"writing {log_path}")
-        write_scene(scene, log_path, container=args.container)
-        chain_path = out / "chain.yaml"
-        chain_path.write_text(scene.chain.to_yaml())
+        log_path, chain_path = _write_episode(spec, out, args.container, say)
         made = pipeline.run(log_path, chain_path, seed=args.seed, progress=progress)
         result = made.attributed()
         paths: dict[str, Path] = {"log": log_path, "chain": chain_path}
@@ -152,3 +147,21 @@ def run(args: argparse.Namespace) -> int:
     viewer = f" or `rerun {paths['rrd']}`" if "rrd" in paths else ""
     print(f"done in {time.perf_counter() - started:.1f} s; open {paths['html']}{viewer}")
     return 0
+
+
+def _write_episode(spec: SceneSpec, out: Path, container: str, say: Callable[[str], None]) -> tuple[Path, Path]:
+    """Generate the episode of ``spec`` and write it as a log in ``container`` (replacing one there) with its chain:
+    the log's path and the chain's."""
+    from framechain.sim.logs import SUFFIX, write_scene
+    from framechain.sim.scene import generate
+
+    say("generating the episode")
+    scene = generate(spec)
+    log_path = out / f"episode{SUFFIX[container]}"
+    if log_path.exists():
+        shutil.rmtree(log_path) if log_path.is_dir() else log_path.unlink()
+    say(f"writing {log_path}")
+    write_scene(scene, log_path, container=container)
+    chain_path = out / "chain.yaml"
+    chain_path.write_text(scene.chain.to_yaml())
+    return log_path, chain_path

@@ -13,6 +13,7 @@ from framechain.cli.common import add_dataset_arguments
 if TYPE_CHECKING:
     from framechain.adapters import LoadedLog
     from framechain.suggest import EdgeInfo, SuggestedChain
+    from framechain.timeline import CameraTable, LogInfo
 
 
 #: Columns of text written to a file or a pipe (no terminal to fit).
@@ -43,48 +44,14 @@ def register(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from framechain import pipeline
-    from framechain.adapters import LeRobotAdapter, LoadedLog
     from framechain.errors import FramechainError
-    from framechain.suggest import (
-        SuggestedChain,
-        calibration_disagreements,
-        chain_needs,
-        frame_id_disagreements,
-        frame_tree,
-        suggest,
-    )
+    from framechain.suggest import frame_tree
 
     chain_file = args.chain_file or (args.chain if isinstance(args.chain, str) else None)
     print_chain = args.chain is True
     if print_chain and args.json:
         raise FramechainError("--chain alone prints the suggested chain as YAML; it does not go with --json")
-    suggestion: SuggestedChain | None = None
-    skeleton: str | None = None
-    dataset = LeRobotAdapter().probe(Path(args.log))
-    if dataset and args.episode is not None and args.robot is None and chain_file is None:
-        from framechain.suggest.lerobot import robot_yaml_skeleton
-
-        # No robot.yaml yet: the dataset's episode, and a robot.yaml to start from.
-        loaded, skeleton = _dataset_summary(args.log, args.episode), robot_yaml_skeleton(args.log, args.episode)
-    elif dataset and (args.episode is not None or args.robot is not None or chain_file is not None):
-        run_ = pipeline.load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
-        loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
-        suggestion = SuggestedChain(config=run_.chain)
-    elif dataset:
-        loaded = _dataset_summary(args.log)
-    else:
-        given = pipeline.load_chain(chain_file)
-        loaded = pipeline.read_log(args.log, given, progress=sys.stderr.isatty() and not (args.json or args.quiet))
-        suggestion = SuggestedChain(config=given) if given is not None else suggest(loaded)
-    if suggestion is not None and not suggestion.needs:
-        suggestion = SuggestedChain(config=suggestion.config,
-                                    needs=tuple(chain_needs(loaded, suggestion.config)))
-    # Names that disagree (detections stamped with another camera's frame, a calibration of another topic).
-    warnings = [*(calibration_disagreements(suggestion.config, loaded.info) if suggestion is not None else []),
-                *frame_id_disagreements(loaded)]
-    loaded = LoadedLog(timeline=loaded.timeline, info=loaded.info.with_notes(warnings),
-                       decoded_topics=loaded.decoded_topics)
+    loaded, suggestion, skeleton = _read(args, chain_file)
     edges = frame_tree(loaded.timeline.transforms)
     if skeleton is not None:
         if print_chain:
@@ -107,6 +74,49 @@ def run(args: argparse.Namespace) -> int:
         return 0
     _render(loaded, edges, suggestion, chain_given=chain_file is not None)
     return 0
+
+
+def _read(args: argparse.Namespace, chain_file: str | None) -> tuple[LoadedLog, SuggestedChain | None, str | None]:
+    """The log as ``info`` shows it, the chain to check against it (given or suggested, with its needs), and for a
+    dataset without robot.yaml the robot.yaml to start from."""
+    from framechain import pipeline
+    from framechain.adapters import LeRobotAdapter, LoadedLog
+    from framechain.suggest import (
+        SuggestedChain,
+        calibration_disagreements,
+        chain_needs,
+        frame_id_disagreements,
+        suggest,
+    )
+
+    suggestion: SuggestedChain | None = None
+    skeleton: str | None = None
+    dataset = LeRobotAdapter().probe(Path(args.log))
+    if dataset and args.episode is not None and args.robot is None and chain_file is None:
+        from framechain.suggest.lerobot import robot_yaml_skeleton
+
+        # No robot.yaml yet: the dataset's episode, and a robot.yaml to start from.
+        loaded, skeleton = _dataset_summary(args.log, args.episode), robot_yaml_skeleton(args.log, args.episode)
+    elif dataset and (args.episode is not None or args.robot is not None or chain_file is not None):
+        run_ = pipeline.load_log(args.log, chain_file, episode=args.episode, robot=args.robot)
+        assert run_.info is not None  # a dataset is read with what it holds
+        loaded = LoadedLog(timeline=run_.timeline, info=run_.info, decoded_topics={})
+        suggestion = SuggestedChain(config=run_.chain)
+    elif dataset:
+        loaded = _dataset_summary(args.log)
+    else:
+        given = pipeline.load_chain(chain_file)
+        loaded = pipeline.read_log(args.log, given, progress=sys.stderr.isatty() and not (args.json or args.quiet))
+        suggestion = SuggestedChain(config=given) if given is not None else suggest(loaded)
+    if suggestion is not None and not suggestion.needs:
+        suggestion = SuggestedChain(config=suggestion.config,
+                                    needs=tuple(chain_needs(loaded, suggestion.config)))
+    # Names that disagree (detections stamped with another camera's frame, a calibration of another topic).
+    warnings = [*(calibration_disagreements(suggestion.config, loaded.info) if suggestion is not None else []),
+                *frame_id_disagreements(loaded)]
+    loaded = LoadedLog(timeline=loaded.timeline, info=loaded.info.with_notes(warnings),
+                       decoded_topics=loaded.decoded_topics)
+    return loaded, suggestion, skeleton
 
 
 def _dataset_summary(path: str, episode: int | None = None) -> LoadedLog:
@@ -160,15 +170,25 @@ def _edge_label(e: EdgeInfo) -> str:
 def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain | None, *,
             chain_given: bool) -> None:
     from rich.markup import escape
-    from rich.table import Table
-    from rich.tree import Tree
 
     from framechain.cli.common import stdout_console
-    from framechain.suggest.facts import chain_files_beside
-    from framechain.suggest.frame_tree import children_of, tree_roots
 
     # Piped into a file, a terminal's width would cut topic names: wide, and a long name folds in its cell.
     console = stdout_console(PIPED_WIDTH)
+    _render_topics(console, loaded)
+    _render_tree(console, edges)
+    _render_cameras(console, loaded.timeline.cameras)
+    for note in loaded.info.notes:
+        console.print(f"[yellow]note:[/] {escape(note)}")
+    if suggestion is not None:
+        _render_needs(console, suggestion, loaded.info, chain_given=chain_given)
+
+
+def _render_topics(console: Any, loaded: LoadedLog) -> None:
+    """The log's path, format, span and message count, and its topics."""
+    from rich.markup import escape
+    from rich.table import Table
+
     info = loaded.info
     console.print(f"[bold]{escape(str(info.path))}[/]")
     console.print(f"  format     {info.container or info.format}")
@@ -183,37 +203,57 @@ def _render(loaded: LoadedLog, edges: list[EdgeInfo], suggestion: SuggestedChain
         topics.add_row(escape(t.name), escape(t.msgtype), str(t.count), f"{t.rate_hz:.1f}",
                        loaded.decoded_topics.get(t.name, "[dim]-[/]"))
     console.print(topics)
-    if edges:
-        kids = children_of(edges)
-        tree = Tree("[bold]Frame tree[/] (parent -> child; delay = log time - header stamp)")
 
-        def add(node: Tree, frame: str, depth: int) -> None:
-            for e in sorted(kids.get(frame, []), key=lambda e: e.child):
-                branch = node.add(_edge_label(e))
-                if depth < 64:
-                    add(branch, e.child, depth + 1)
 
-        for root in tree_roots(edges):
-            add(tree.add(f"[bold]{escape(root)}[/]"), root, 0)
-        console.print(tree)
-    else:
+def _render_tree(console: Any, edges: list[EdgeInfo]) -> None:
+    """The frame tree, each edge with its rate, span and stamp delays."""
+    from rich.markup import escape
+    from rich.tree import Tree
+
+    from framechain.suggest.frame_tree import children_of, tree_roots
+
+    if not edges:
         console.print("[yellow]No transforms (/tf, /tf_static, TransformStamped, Odometry) in this log.[/]")
-    cams = loaded.timeline.cameras
-    if len(cams):
-        table = Table(title="Cameras", title_justify="left")
-        for col in ("frame", "topic", "size", "fx", "fy", "cx", "cy", "distortion"):
-            table.add_column(col, overflow="fold")
-        for frame in dict.fromkeys(cams.frame.tolist()):
-            i = int(list(cams.frame).index(frame))
-            K = cams.K[i]
-            table.add_row(escape(frame), escape(str(cams.source[i])), f"{cams.width[i]}x{cams.height[i]}",
-                          f"{K[0, 0]:.2f}", f"{K[1, 1]:.2f}", f"{K[0, 2]:.2f}", f"{K[1, 2]:.2f}",
-                          f"{cams.distortion_model[i]} ({int(cams.n_distortion[i])})")
-        console.print(table)
-    for note in info.notes:
-        console.print(f"[yellow]note:[/] {escape(note)}")
-    if suggestion is None:
         return
+    kids = children_of(edges)
+    tree = Tree("[bold]Frame tree[/] (parent -> child; delay = log time - header stamp)")
+
+    def add(node: Tree, frame: str, depth: int) -> None:
+        for e in sorted(kids.get(frame, []), key=lambda e: e.child):
+            branch = node.add(_edge_label(e))
+            if depth < 64:
+                add(branch, e.child, depth + 1)
+
+    for root in tree_roots(edges):
+        add(tree.add(f"[bold]{escape(root)}[/]"), root, 0)
+    console.print(tree)
+
+
+def _render_cameras(console: Any, cams: CameraTable) -> None:
+    """One row per camera frame: its topic, size, intrinsics and distortion model."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    if not len(cams):
+        return
+    table = Table(title="Cameras", title_justify="left")
+    for col in ("frame", "topic", "size", "fx", "fy", "cx", "cy", "distortion"):
+        table.add_column(col, overflow="fold")
+    for frame in dict.fromkeys(cams.frame.tolist()):
+        i = int(list(cams.frame).index(frame))
+        K = cams.K[i]
+        table.add_row(escape(frame), escape(str(cams.source[i])), f"{cams.width[i]}x{cams.height[i]}",
+                      f"{K[0, 0]:.2f}", f"{K[1, 1]:.2f}", f"{K[0, 2]:.2f}", f"{K[1, 2]:.2f}",
+                      f"{cams.distortion_model[i]} ({int(cams.n_distortion[i])})")
+    console.print(table)
+
+
+def _render_needs(console: Any, suggestion: SuggestedChain, info: LogInfo, *, chain_given: bool) -> None:
+    """What the chain needs, found or missing with the key that supplies it, and the suggested chain."""
+    from rich.markup import escape
+
+    from framechain.suggest.facts import chain_files_beside
+
     which = "the given chain" if chain_given else "the suggested chain"
     verdict = "[green]ready to replay[/]" if suggestion.ready else "[yellow]not ready: add the keys below[/]"
     console.print(f"[bold]What {which} needs[/] ({verdict})")

@@ -126,7 +126,7 @@ def _log_name(path: Path) -> str:
 
 def _unused_point_topics(loaded: Run) -> list[str]:
     """Without a chain the log does not say which topic holds which hop's point: say so."""
-    topics = sorted(t.name for t in getattr(loaded.info, "topics", ())
+    topics = sorted(t.name for t in (loaded.info.topics if loaded.info is not None else ())
                     if str(t.msgtype).rsplit("/", 1)[-1] in _POINT_TYPES
                     and t.name not in loaded.chain.evidence_topics())
     if not topics:
@@ -135,16 +135,22 @@ def _unused_point_topics(loaded: Run) -> list[str]:
             "(evidence: hops, target, reference) in CHAIN.yaml and pass --chain"]
 
 
+def _source(loaded: Run) -> str:
+    """The log's format, or ``timeline`` for a saved timeline."""
+    return loaded.info.format if loaded.info is not None else "timeline"
+
+
 def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, Any]:
     from framechain.sinks.text import FindingView
 
     frames = loaded.chain.frames
+    suggestion = loaded.suggestion if loaded.chain_suggested else None
     return {
         "log": str(loaded.path),
-        "source": str(getattr(loaded.info, "format", "timeline")),
+        "source": _source(loaded),
         "frames": {"camera": frames.camera, "body": frames.body, "world": frames.world},
         "chain_suggested": loaded.chain_suggested,
-        "placeholders": sorted(getattr(loaded.suggestion, "placeholders", {}) or {}) if loaded.chain_suggested else [],
+        "placeholders": sorted(suggestion.placeholders) if suggestion is not None else [],
         "chain_incomplete": incomplete_chain_line(loaded),
         "latency_budget_s": loaded.chain.latency_budget_s,
         "counts": loaded.replay.counts(),
@@ -166,8 +172,7 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
     detail = ", ".join(f"{reason} {n}" for reason, n in sorted(rejected.items()))
-    source = getattr(loaded.info, "format", "timeline")
-    print(f"log           {loaded.path} ({source})")
+    print(f"log           {loaded.path} ({_source(loaded)})")
     suggested = "suggested; " if loaded.chain_suggested else ""
     print(f"chain         {chain_text(loaded)} ({suggested}latency budget {loaded.chain.latency_budget_s * 1e3:g} ms)")
     incomplete = incomplete_chain_line(loaded)

@@ -89,6 +89,7 @@ from framechain.config.schema import Section, read_yaml, show
 __all__ = [
     "ArmConfig",
     "DetectionSource",
+    "GeneratedRobot",
     "JointMapping",
     "JointUnit",
     "MotorCalibration",
@@ -275,6 +276,30 @@ class RobotConfig:
         return ChainConfig(frames=frames, evidence=evidence, topics=topics,
                            latency_budget_s=0.02 if self.latency_budget_s is None else self.latency_budget_s,
                            robot=robot, origin=Path(self.source).name, notes=self.notes)
+
+
+#: What a generated robot.yaml is called in messages and fixes (it is written beside a run's outputs).
+GENERATED_SOURCE = "robot.yaml (generated)"
+
+
+@dataclass(frozen=True)
+class GeneratedRobot:
+    """robot.yaml made for a known arm, with the one line that says what it assumed."""
+
+    text: str
+    line: str
+    episode: int
+
+    def mapping(self) -> dict[str, Any]:
+        """robot.yaml's keys (what a chain's inline robot section holds)."""
+        import yaml
+
+        raw: dict[str, Any] = yaml.safe_load(self.text)
+        return raw
+
+    def config(self) -> RobotConfig:
+        """The parsed configuration; findings' fixes name it ``robot.yaml (generated)``."""
+        return RobotConfig.from_mapping(self.mapping(), source=GENERATED_SOURCE)
 
 
 def _resolve(value: str | None, base: Path) -> Path:

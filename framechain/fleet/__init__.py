@@ -141,8 +141,6 @@ def run_batch(
     episodes, and each unit's own recording in ``<rrd>.episodes/``. Each log is analysed with the chain file beside it
     (``<log name>.chain.yaml``, else ``chain.yaml`` or ``CHAIN.yaml`` in its folder), else ``chain``.
     """
-    from framechain import suggest as suggestions
-
     chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
     robot_given = robot is not None or bool(chain_config and chain_config.robot and (
         "config" in chain_config.robot or "urdf" in chain_config.robot))
@@ -152,15 +150,8 @@ def run_batch(
     if not found.units:
         raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.skipped)})" if found.skipped else ""))
     store = ResultStore(out_dir)
-    chain_arg = None if chain is None else os.path.abspath(chain)
-    robot_arg = None if robot is None else str(Path(robot).resolve())
     rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
-    tasks = []
-    for u in found.units:  # the chain beside a log (suggestions.chain_files_beside) wins over --chain
-        unit_chain = next((str(c) for c in suggestions.chain_files_beside(u.path)), chain_arg)
-        tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
-                                                   bootstrap=bootstrap),
-                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir))
+    tasks = _unit_tasks(found.units, chain=chain, robot=robot, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir)
     # A unit done before without its recording, when one is asked for now, is done again.
     todo = [t for t in tasks if not store.is_done(t.key) or (rrd_dir is not None and not store.has_recording(t.key))]
     if on_start is not None:
@@ -177,6 +168,30 @@ def run_batch(
     gathered = [store.load(t.key) or crashed_record(t, "no record was written") for t in tasks]
     table_path = write_fleet_table(gathered, Path(out_dir) / TABLE_NAME)
     fits = recording_fits(gathered, seed=seed)
+    paths = _write_views(table_path, fits, out_dir, rrd=rrd, report_formats=report_formats, notes=found.skipped)
+    return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
+                       table_path=table_path, report_paths=paths, notes=found.skipped, recordings=fits)
+
+
+def _unit_tasks(units: Sequence[LogUnit], *, chain: str | Path | None, robot: str | Path | None, seed: int,
+                bootstrap: int, rrd_dir: str | None) -> list[UnitTask]:
+    """Each unit's task, keyed by what its record depends on; the chain beside a log wins over ``chain``."""
+    from framechain import suggest as suggestions
+
+    chain_arg = None if chain is None else os.path.abspath(chain)
+    robot_arg = None if robot is None else str(Path(robot).resolve())
+    tasks = []
+    for u in units:  # the chain beside a log (suggestions.chain_files_beside) wins over --chain
+        unit_chain = next((str(c) for c in suggestions.chain_files_beside(u.path)), chain_arg)
+        tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
+                                                   bootstrap=bootstrap),
+                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir))
+    return tasks
+
+
+def _write_views(table_path: Path, fits: dict[str, tuple[CameraRecordingFit, ...]], out_dir: str | Path, *,
+                 rrd: str | Path | None, report_formats: Sequence[str], notes: list[str]) -> dict[str, Path]:
+    """The recordings' fits, their Rerun view (with ``rrd``) and the fleet report: the paths written."""
     recording_paths = write_recordings(fits, out_dir)
     if rrd is not None and fits:
         from framechain.sinks.rerun_recording import write_recording_view
@@ -187,11 +202,8 @@ def run_batch(
         from framechain.sinks.fleet_report import render_fleet_report
 
         report_paths = render_fleet_report(pq.read_table(table_path), out_dir, formats=report_formats,
-                                           notes=found.skipped, recordings=fits)
-    return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
-                       table_path=table_path, report_paths={**recording_paths, **report_paths}, notes=found.skipped,
-                       recordings=fits)
-
+                                           notes=notes, recordings=fits)
+    return {**recording_paths, **report_paths}
 
 
 def _episode_recordings(rrd: str | Path) -> Path:

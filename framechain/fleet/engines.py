@@ -17,7 +17,8 @@ if TYPE_CHECKING:
     pass
 
 
-from framechain.fleet.units import BatchError, UnitTask, crashed_record, one_line, run_unit
+from framechain.errors import one_line
+from framechain.fleet.units import BatchError, UnitTask, crashed_record, run_unit
 
 
 # -- engines ----------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from framechain import __version__
-from framechain.errors import FramechainError
+from framechain.errors import FramechainError, one_line
 
 if TYPE_CHECKING:
     from framechain.analysis.run import Run
@@ -300,11 +300,6 @@ def _record_head(task: UnitTask) -> dict[str, Any]:
         "observations": None, "replayed": None, "error_median_m": None, "error_p95_m": None, "residual_median_m": None,
         "findings": [], "notes": [], "framechain": __version__, "pid": os.getpid(),
     }
-
-
-def one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split())
-    return text or type(err).__name__
 
 
 def _span_of(unit: LogUnit) -> dict[str, int | None]:

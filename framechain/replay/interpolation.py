@@ -184,10 +184,23 @@ class Interpolant:
             weight[past | future] = 0.0  # the oldest or newest sample itself
         np.equal(weight, 0.0, out=ws.mask)
         np.copyto(out.after, out.before, where=ws.mask)  # exact hits and single samples: one stamp
-        f1, f2, f3 = ws.f[0], ws.f[1], ws.f[2]
+        f1 = ws.f[0]
         for k in range(3):
             np.multiply(g[:, 3 + k], weight, out=f1)
             np.add(g[:, k], f1, out=out.translation[k])
+        self._slerp_into(g, weight, out, ws)
+        if not outside:
+            return False
+        bad = out.status > LookupStatus.NEAREST
+        if bad.any():
+            out.translation[:, bad] = np.nan
+            out.quat[:, bad] = np.nan
+        return True
+
+    def _slerp_into(self, g: FloatArray, weight: FloatArray, out: HopViews, ws: Workspace) -> None:
+        """``out.quat``: each time's rotation, ``weight`` of the way from its sample before to the one after
+        (``g``: each time's gathered row, with both samples' quaternions and the half angle between them)."""
+        f1, f2, f3 = ws.f[0], ws.f[1], ws.f[2]
         np.multiply(g[:, _HALF], weight, out=f1)
         np.sin(f1, out=f2)
         sin_half = g[:, _SIN]
@@ -209,13 +222,6 @@ class Interpolant:
             np.multiply(g[:, 6 + k], f3, out=row)
             np.multiply(g[:, 10 + k], f2, out=f1)
             row += f1
-        if not outside:
-            return False
-        bad = out.status > LookupStatus.NEAREST
-        if bad.any():
-            out.translation[:, bad] = np.nan
-            out.quat[:, bad] = np.nan
-        return True
 
 
 def _aligned_empty(shape: tuple[int, int], dtype: type[np.generic], align: int = 64) -> npt.NDArray[Any]:

@@ -303,6 +303,18 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     if spec.storage == "video":
         for key in keys:
             _write_videos(out, key, videos[key], spec)
+    return _truth(out, spec, layout, keys, arms=arms, names=names, mounts=(mount, declared_mount),
+                  repeated=tuple(repeated), marker=marker, stamps=tuple(stamps))
+
+
+def _truth(
+    out: Path, spec: VideoDatasetSpec, layout: Sequence[tuple[str, str, str]], keys: Sequence[str], *,
+    arms: tuple[str, ...], names: tuple[str, ...], mounts: tuple[FloatArray, FloatArray],
+    repeated: tuple[tuple[int, ...], ...], marker: tuple[float, float, float], stamps: tuple[FloatArray, ...],
+) -> VideoDatasetTruth:
+    """What the dataset written under ``out`` truly is: each camera's link, mount and delays, as declared and as
+    rendered (``mounts``: the true and the declared link-from-camera transforms)."""
+    mount, declared_mount = mounts
     q_true = Rotation.from_matrix(mount[:3, :3]).as_quat()
     q_declared = Rotation.from_matrix(declared_mount[:3, :3]).as_quat()
     cameras = tuple(CameraTruth(
@@ -312,12 +324,13 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         black_episodes=(0,) if name == spec.black_first_episode else ())
         for c, ((name, arm, declared), key) in enumerate(zip(layout, keys, strict=True)))
     first = cameras[0]
+    cx, cy = (spec.width - 1) / 2.0, (spec.height - 1) / 2.0
     return VideoDatasetTruth(
         root=out, spec=spec, video_key=first.video_key, arms=arms, state_names=names,
         camera_link=first.camera_link, declared_link=first.declared_link, q_link_cam=q_true,
         declared_q_link_cam=q_declared, xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float),
         intrinsics=(spec.focal_px, spec.focal_px, cx, cy), declared_focal_px=spec.focal_px * spec.focal_scale,
-        repeated=tuple(repeated), marker_xyz=marker, cameras=cameras, timestamps_s=tuple(stamps),
+        repeated=repeated, marker_xyz=marker, cameras=cameras, timestamps_s=stamps,
     )
 
 

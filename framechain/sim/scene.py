@@ -20,20 +20,37 @@ replay cannot cancel out of the benchmark built on these scenes.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from framechain.arrays import FloatArray, IntArray
-from framechain.catalogue import FAULT_HOPS, Fault
-from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
-from framechain.errors import FramechainError
+from framechain.catalogue import Fault
+from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.sim import rigid
+from framechain.sim.faults import ChainParams, faulty_params
 from framechain.sim.render import render_color, render_depth
+from framechain.sim.spec import (
+    BODY_FRAME,
+    COLOR_TOPIC,
+    DEPTH_OPTICAL_FRAME,
+    FOOTPRINT_FRAME,
+    HOP_TOPICS,
+    MOUNT_FRAME,
+    REALSENSE_OPTICAL_FRAME,
+    REALSENSE_OPTICAL_XYZ,
+    REFERENCE_TOPIC,
+    START_NS,
+    TARGET_TOPIC,
+    TOPICS,
+    ExpectedFinding,
+    InjectedFault,
+    SceneError,
+    SceneSpec,
+    expected_finding,
+)
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
@@ -45,159 +62,21 @@ from framechain.timeline import (
     TransformTable,
 )
 
-START_NS = 1_700_000_000_000_000_000
-TOPICS = ChainTopics(
-    camera_info="/camera/color/camera_info", detections="/detections", depth="/camera/depth/image_rect_raw"
-)
-HOP_TOPICS = HopTopics(camera="/debug/point_camera", body="/debug/point_body", world="/debug/point_world")
-TARGET_TOPIC = "/grasp_target"
-COLOR_TOPIC = "/camera/color/image_raw"
-REFERENCE_TOPIC = "/mocap/target"
-MOUNT_FRAME = "camera_link"
-BODY_FRAME = "base_link"
-FOOTPRINT_FRAME = "base_footprint"
-#: A sibling imager's optical frame at camera_link's origin (a RealSense's depth camera).
-DEPTH_OPTICAL_FRAME = "camera_depth_optical_frame"
-#: A RealSense's colour optical frame: its name and its offset from camera_link (metres, camera_link axes).
-REALSENSE_OPTICAL_FRAME = "camera_color_optical_frame"
-REALSENSE_OPTICAL_XYZ = (0.0, 0.015, 0.0)
-
-Evidence = Literal["hops", "target", "reference", "static"]
-Where = Literal["robot", "data"]
-
-
-class SceneError(FramechainError):
-    """A scene that cannot be generated as asked (a fault where it cannot live)."""
-
-
-@dataclass(frozen=True)
-class InjectedFault:
-    """One fault and where it lives. Parameters by kind:
-
-    - latency ``offset_s`` (robot: the pose used is the one at tau + offset; data: detections are
-      stamped ``-offset_s`` late, so the pose that explains them is again at tau + offset); or
-      ``hold_s`` (robot only, a stale pose held: the robot used the pose at the latest odom sample
-      at or before tau - hold_s instead of interpolating at tau; attribution should report an
-      offset of about ``-(hold_s + half an odom period)``).
-    - rotation_error ``angle_deg``, ``axis`` (body frame).
-    - translation_error ``offset_m`` (x, y, z in base_link): the mount's position moved by it (robot: the robot
-      used it; data: /tf_static publishes it). Attribution should report ``offset_m`` itself either way.
-    - missing_rotation (no parameters: the mount's rotation is dropped, the optical rotation kept).
-    - axis_flip ``permutation`` (3x3 signed, applied to camera-frame points; in the data a proper
-      rotation published on the optical edge); or ``used="camera_link"``, the real form: in the
-      robot, it looked up camera_link instead of the optical frame, so the optical points went
-      through T_base_camera_link alone, losing the optical edge's REP-103 rotation AND its
-      translation; in the data, the detections and their CameraInfo name camera_link (a driver
-      configured with the link as its frame_id) while their pixels are optical. Attribution should
-      report ``used == "camera_link"`` either way.
-    - wrong_camera_frame ``used`` (robot only, default ``"camera_depth_optical_frame"``): the robot
-      looked up the depth imager's optical frame (published at camera_link's origin with the
-      REP-103 rotation) for colour detections: a translation of ``-optical_xyz`` alone, so the
-      scene's ``optical_xyz`` must not be zero.
-    - depth_scale ``factor`` (as-run / true).
-    - intrinsics ``scale`` (as-run K / true K: ``scale=2`` is the camera_info of a 1280x960
-      calibration used for 640x480 images, fx, fy, cx, cy all doubled; with ``variant="focal"`` the
-      focal length alone, another lens).
-    - wrong_world_frame ``used`` (robot only): ``"odom"`` (the default, odom used for map) or
-      ``"base_footprint"`` (the robot looked up base_footprint instead of base_link: the scene
-      then publishes base_link -> base_footprint, ``footprint_height_m`` (default 0.08) below).
-    - inverted_transform ``hop`` (camera_to_body, or body_to_world for the robot only); in the data,
-      the mount published inverted (T_camera_link_base on the base_link -> camera_link edge).
-    """
-
-    kind: Fault
-    where: Where = "robot"
-    params: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def hop(self) -> str:
-        if self.kind == Fault.INVERTED_TRANSFORM:
-            return str(self.params.get("hop", "camera_to_body"))
-        return FAULT_HOPS[self.kind].value
-
-    @property
-    def used_frame(self) -> str | None:
-        """The frame the robot looked up instead of the right one, for the frame-swap forms."""
-        if self.kind == Fault.WRONG_WORLD_FRAME:
-            return str(self.params.get("used", "odom"))
-        if self.kind == Fault.AXIS_FLIP and "used" in self.params:
-            return str(self.params["used"])
-        if self.kind == Fault.WRONG_CAMERA_FRAME:
-            return str(self.params.get("used", DEPTH_OPTICAL_FRAME))
-        return None
-
-
-@dataclass(frozen=True)
-class ExpectedFinding:
-    """What attribution should report for one injected fault.
-
-    ``estimate`` holds attribution.json estimate keys and their true values; ``tolerance`` the
-    allowed absolute error of each numeric key (strings and lists must match exactly).
-    """
-
-    fault: str
-    hop: str
-    estimate: dict[str, Any]
-    tolerance: dict[str, float]
-
-    def names(self, fault: str, hop: str, estimate: Mapping[str, Any]) -> bool:
-        """Whether a finding names this fault: the fault, the hop and, for frame swaps, the frame used."""
-        if (fault, hop) != (self.fault, self.hop):
-            return False
-        return "used" not in self.estimate or estimate.get("used") == self.estimate["used"]
-
-    def estimate_within(self, estimate: Mapping[str, Any]) -> bool:
-        """Whether every expected estimate key is present and within its tolerance."""
-        for key, want in self.estimate.items():
-            got = estimate.get(key)
-            if got is None:
-                return False
-            if isinstance(want, float):
-                if not abs(float(got) - want) <= self.tolerance[key]:
-                    return False
-            elif _plain(got) != _plain(want):
-                return False
-        return True
-
-
-def _plain(value: Any) -> Any:
-    """Tuples and arrays as nested lists, so that [[1, 0], ...] equals ((1, 0), ...)."""
-    if isinstance(value, tuple | list | np.ndarray):
-        return [_plain(v) for v in value]
-    return value
-
-
-@dataclass(frozen=True)
-class SceneSpec:
-    """Everything that shapes a generated episode; equal specs give equal scenes."""
-
-    seed: int = 0
-    duration_s: float = 10.0
-    camera_rate_hz: float = 30.0
-    odom_rate_hz: float = 100.0
-    drift_rate_hz: float = 50.0
-    width: int = 640
-    height: int = 480
-    focal_px: float = 600.0
-    mount_xyz: tuple[float, float, float] = (0.30, 0.0, 1.20)
-    mount_pitch_deg: float = 30.0
-    optical_frame: str = "camera_optical_frame"
-    optical_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # camera_link -> optical offset
-    object_world: tuple[float, float, float] = (3.0, 1.0, 0.10)
-    orbit_radius_m: float = 2.4
-    orbit_rate: float | None = None  # rad/s; None: drawn from the seed
-    wobble_rad: float | None = None
-    #: the base stays where the orbit starts (a fixed camera over a static target: no motion to show
-    #: a latency, and nothing to tell a mount rotation or a scale from the target's position)
-    fixed_camera: bool = False
-    pixel_noise_px: float = 0.5
-    depth_noise_rel: float = 0.003
-    reference_noise_m: float = 0.002
-    evidence: Evidence = "hops"
-    depth_images: bool = False
-    #: JPEG colour images on ``/camera/color/image_raw`` (the floor and the object), one per detection.
-    color_images: bool = False
-    faults: tuple[InjectedFault, ...] = ()
+#: The scene's face: what it is asked to be (:mod:`framechain.sim.spec`) and the episode generated.
+__all__ = [
+    "REALSENSE_OPTICAL_FRAME",
+    "REALSENSE_OPTICAL_XYZ",
+    "START_NS",
+    "TOPICS",
+    "ExpectedFinding",
+    "Fault",
+    "InjectedFault",
+    "Scene",
+    "SceneError",
+    "SceneSpec",
+    "generate",
+    "ns",
+]
 
 
 @dataclass(frozen=True)
@@ -218,65 +97,7 @@ class Scene:
     @property
     def expected_findings(self) -> list[ExpectedFinding]:
         """One expected finding per injected fault, with the estimate it should carry."""
-        return [_expected_finding(self.spec, f) for f in self.spec.faults]
-
-
-def _expected_finding(spec: SceneSpec, fault: InjectedFault) -> ExpectedFinding:
-    p = fault.params
-    estimate: dict[str, Any] = {}
-    tolerance: dict[str, float] = {}
-    if fault.kind == Fault.LATENCY:
-        if "hold_s" in p:
-            # The held sample is between hold_s and hold_s + one odom period old: on average half a period more.
-            period = 1.0 / spec.odom_rate_hz
-            estimate["offset_s"] = -(float(p["hold_s"]) + 0.5 * period)
-            tolerance["offset_s"] = 0.5 * period + 0.002
-        else:
-            estimate["offset_s"], tolerance["offset_s"] = float(p["offset_s"]), 0.002
-    elif fault.kind == Fault.ROTATION_ERROR:
-        estimate["angle_deg"], tolerance["angle_deg"] = float(p["angle_deg"]), 0.5
-    elif fault.kind == Fault.TRANSLATION_ERROR:
-        estimate["distance_m"], tolerance["distance_m"] = float(np.linalg.norm(p["offset_m"])), 0.005
-    elif fault.kind == Fault.MISSING_ROTATION:
-        estimate["angle_deg"], tolerance["angle_deg"] = float(abs(spec.mount_pitch_deg)), 0.5
-    elif fault.kind == Fault.DEPTH_SCALE:
-        estimate["factor"] = float(p["factor"])
-        tolerance["factor"] = 0.01 * abs(estimate["factor"])
-    elif fault.kind == Fault.INTRINSICS:
-        estimate["scale"] = float(p["scale"])
-        tolerance["scale"] = 0.01 * abs(estimate["scale"])
-    elif fault.kind == Fault.AXIS_FLIP:
-        if fault.used_frame is not None:
-            estimate["used"] = fault.used_frame
-        else:
-            estimate["permutation"] = np.asarray(p["permutation"], dtype=int).tolist()
-    elif fault.kind in (Fault.WRONG_WORLD_FRAME, Fault.WRONG_CAMERA_FRAME):
-        estimate["used"] = fault.used_frame
-    elif fault.kind == Fault.INVERTED_TRANSFORM and fault.where == "data":
-        estimate["edge"] = [BODY_FRAME, MOUNT_FRAME]
-    return ExpectedFinding(fault.kind.value, fault.hop, estimate, tolerance)
-
-
-@dataclass(frozen=True)
-class _ChainParams:
-    """One version of the chain: the truth, what was recorded, or what the robot used."""
-
-    K: FloatArray
-    depth_factor: float = 1.0
-    mount_quat: FloatArray = field(default_factory=lambda: np.array([0.0, 0.0, 0.0, 1.0]))
-    mount_offset: FloatArray = field(default_factory=lambda: np.zeros(3))  # added to the mount's position (m)
-    optical_quat: FloatArray = field(default_factory=lambda: np.array(OPTICAL_FROM_LINK_QUAT_XYZW))
-    cam_permutation: FloatArray = field(default_factory=lambda: np.eye(3))
-    skip_optical_edge: bool = False  # camera_link looked up for optical points
-    #: the frame the detections and CameraInfo name (None: the optical frame they are really in)
-    detections_frame: str | None = None
-    sibling_optical: bool = False  # the depth imager's optical frame looked up for colour points
-    pose_offset_ns: int = 0
-    hold_ns: int | None = None  # zero-order hold of the odom sample at or before tau - hold
-    world: str = "map"
-    body: str = BODY_FRAME
-    invert_camera: bool = False
-    invert_pose: bool = False
+        return [expected_finding(self.spec, f) for f in self.spec.faults]
 
 
 class _Motion:
@@ -336,8 +157,8 @@ def generate(spec: SceneSpec) -> Scene:
     motion = _Motion(spec, rng, obj)
     true_mount_q = Rotation.from_euler("y", spec.mount_pitch_deg, degrees=True).as_quat()
     K_true = rigid.intrinsic_matrix(spec.focal_px, spec.focal_px, spec.width / 2, spec.height / 2)
-    truth = _ChainParams(K=K_true, mount_quat=true_mount_q)
-    recorded, robot = _faulty_params(spec, truth)
+    truth = ChainParams(K=K_true, mount_quat=true_mount_q)
+    recorded, robot = faulty_params(spec, truth)
     footprint_height = [float(f.params.get("footprint_height_m", 0.08)) for f in spec.faults
                         if f.used_frame == FOOTPRINT_FRAME]
     body_from_footprint = rigid.matrix([0.0, 0.0, -footprint_height[0] if footprint_height else 0.0], [0, 0, 0, 1.0])
@@ -379,20 +200,7 @@ def generate(spec: SceneSpec) -> Scene:
     return Scene(spec=spec, timeline=timeline, chain=chain, object_world=obj, robot_world=robot_world)
 
 
-def _faulty_params(spec: SceneSpec, truth: _ChainParams) -> tuple[_ChainParams, _ChainParams]:
-    """The chain as recorded in the data and as the robot used it: the truth with the faults injected."""
-    recorded, robot = truth, truth
-    if any(f.used_frame == DEPTH_OPTICAL_FRAME for f in spec.faults) and not np.any(spec.optical_xyz):
-        raise SceneError("wrong_camera_frame needs the colour optical frame off camera_link (optical_xyz not zero)")
-    for fault in spec.faults:
-        if fault.where == "robot":
-            robot = _inject(robot, fault, truth)
-        else:
-            recorded = _inject_data(recorded, fault, truth)
-    return recorded, robot
-
-
-def _static_tf(spec: SceneSpec, params: _ChainParams, body_from_footprint: FloatArray | None) -> TransformTable:
+def _static_tf(spec: SceneSpec, params: ChainParams, body_from_footprint: FloatArray | None) -> TransformTable:
     """The recorded /tf_static: the mount, the optical edge, and the frames the faults need."""
     mount_t, mount_q = np.array([spec.mount_xyz], dtype=float) + params.mount_offset, np.array([params.mount_quat])
     if params.invert_camera:  # the mount published the wrong way round (still one parent per child)
@@ -424,7 +232,7 @@ class _Seen:
     world_from_optical: FloatArray  # (n, 4, 4) the true camera pose
 
 
-def _capture(spec: SceneSpec, rng: np.random.Generator, motion: _Motion, truth: _ChainParams, obj: FloatArray
+def _capture(spec: SceneSpec, rng: np.random.Generator, motion: _Motion, truth: ChainParams, obj: FloatArray
              ) -> _Seen:
     """Camera frames: capture times, the object's true pixel and depth, then noise; the visible ones."""
     t_cam = np.arange(0.1, spec.duration_s - 0.1, 1.0 / spec.camera_rate_hz)
@@ -441,7 +249,7 @@ def _capture(spec: SceneSpec, rng: np.random.Generator, motion: _Motion, truth: 
     return _Seen(capture_ns[visible], u[visible], v[visible], depth_measured[visible], world_from_optical[visible])
 
 
-def _recorded_detections(spec: SceneSpec, rng: np.random.Generator, recorded: _ChainParams, seen: _Seen
+def _recorded_detections(spec: SceneSpec, rng: np.random.Generator, recorded: ChainParams, seen: _Seen
                          ) -> tuple[ObservationTable, CameraTable, IntArray, IntArray]:
     """The detections and CameraInfo as logged (a late camera clock is a data latency fault), with their
     header stamps and log delays."""
@@ -478,7 +286,7 @@ def _recorded_detections(spec: SceneSpec, rng: np.random.Generator, recorded: _C
     return observations, cameras, obs_stamp, log_delay
 
 
-def _robot_points(spec: SceneSpec, robot: _ChainParams, motion: _Motion, seen: _Seen, body_from_footprint: FloatArray
+def _robot_points(spec: SceneSpec, robot: ChainParams, motion: _Motion, seen: _Seen, body_from_footprint: FloatArray
                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The robot's own computation, from the same pixels and measured depth, with its parameters:
     its camera, body and world points."""
@@ -498,7 +306,7 @@ def _robot_points(spec: SceneSpec, robot: _ChainParams, motion: _Motion, seen: _
     return robot_cam, robot_body, rigid.apply(world_from_body, robot_body)
 
 
-def _base_from_camera(spec: SceneSpec, params: _ChainParams) -> FloatArray:
+def _base_from_camera(spec: SceneSpec, params: ChainParams) -> FloatArray:
     """``T_base_link_X`` with X the optical frame (or camera_link when the optical edge is skipped)."""
     mount = rigid.matrix(np.asarray(spec.mount_xyz, dtype=float) + params.mount_offset, params.mount_quat)
     if params.skip_optical_edge:
@@ -510,90 +318,9 @@ def _base_from_camera(spec: SceneSpec, params: _ChainParams) -> FloatArray:
     return out
 
 
-def _inject(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
-    p = fault.params
-    kind = fault.kind
-    if kind == Fault.LATENCY:
-        if "hold_s" in p:
-            return replace(params, hold_ns=round(float(p["hold_s"]) * 1e9))
-        return replace(params, pose_offset_ns=round(float(p["offset_s"]) * 1e9))
-    if kind == Fault.ROTATION_ERROR:
-        error = Rotation.from_rotvec(np.deg2rad(float(p["angle_deg"])) * _unit(p.get("axis", (0, 0, 1))))
-        return replace(params, mount_quat=(error * Rotation.from_quat(truth.mount_quat)).as_quat())
-    if kind == Fault.MISSING_ROTATION:
-        return replace(params, mount_quat=np.array([0.0, 0.0, 0.0, 1.0]))
-    if kind == Fault.TRANSLATION_ERROR:
-        return replace(params, mount_offset=np.asarray(p["offset_m"], dtype=float))
-    if kind == Fault.AXIS_FLIP:
-        if fault.used_frame is not None:
-            if fault.used_frame != MOUNT_FRAME:
-                raise SceneError(f"axis_flip used={fault.used_frame!r}: only {MOUNT_FRAME!r} can stand in for the "
-                                 "optical frame")
-            return replace(params, skip_optical_edge=True)
-        return replace(params, cam_permutation=np.asarray(p["permutation"], dtype=float))
-    if kind == Fault.DEPTH_SCALE:
-        return replace(params, depth_factor=float(p["factor"]))
-    if kind == Fault.INTRINSICS:
-        k = truth.K.copy()
-        if p.get("variant") == "focal":  # another lens: the focal length alone
-            k[:2, :2] *= float(p["scale"])
-        else:
-            k[:2, :] *= float(p["scale"])  # the K of another resolution: focal and principal point scale
-        return replace(params, K=k)
-    if kind == Fault.WRONG_WORLD_FRAME:
-        if fault.used_frame == FOOTPRINT_FRAME:
-            return replace(params, body=FOOTPRINT_FRAME)
-        if fault.used_frame != "odom":
-            raise SceneError(f"wrong_world_frame used={fault.used_frame!r}: 'odom' or {FOOTPRINT_FRAME!r}")
-        return replace(params, world="odom")
-    if kind == Fault.WRONG_CAMERA_FRAME:
-        if fault.used_frame != DEPTH_OPTICAL_FRAME:
-            raise SceneError(f"wrong_camera_frame used={fault.used_frame!r}: only {DEPTH_OPTICAL_FRAME!r} is published")
-        return replace(params, sibling_optical=True)
-    if kind == Fault.INVERTED_TRANSFORM:
-        if fault.hop == "body_to_world":
-            return replace(params, invert_pose=True)
-        return replace(params, invert_camera=True)
-    raise SceneError(f"unknown fault {kind}")
-
-
-def _inject_data(params: _ChainParams, fault: InjectedFault, truth: _ChainParams) -> _ChainParams:
-    """A fault in the recorded data: what the log says differs from what the robot used."""
-    robot_only = (
-        fault.kind == Fault.WRONG_WORLD_FRAME
-        or (fault.kind == Fault.INVERTED_TRANSFORM and fault.hop == "body_to_world")
-        or (fault.used_frame is not None and fault.kind != Fault.AXIS_FLIP)
-        or "hold_s" in fault.params
-    )
-    if robot_only:
-        raise SceneError(f"{fault.kind.value} at {fault.hop} ({fault.params}) is a fault of the robot's computation "
-                         "only; drop @data")
-    if fault.kind == Fault.AXIS_FLIP and fault.used_frame is not None:
-        # The detections (and their CameraInfo) name camera_link while their pixels are optical: the
-        # recorded data skips the optical edge (a driver configured with the link as its frame_id).
-        if fault.used_frame != MOUNT_FRAME:
-            raise SceneError(f"axis_flip used={fault.used_frame!r}: only {MOUNT_FRAME!r} can stand in for the "
-                             "optical frame")
-        return replace(params, detections_frame=MOUNT_FRAME)
-    if fault.kind == Fault.AXIS_FLIP:
-        # A recorded rotation can only permute axes properly (det +1): the optical edge published wrong.
-        perm = np.asarray(fault.params["permutation"], dtype=float)
-        if not np.isclose(np.linalg.det(perm), 1.0):
-            raise SceneError("a recorded axis flip must be a proper rotation (det +1)")
-        wrong = Rotation.from_quat(truth.optical_quat) * Rotation.from_matrix(perm)
-        return replace(params, optical_quat=wrong.as_quat())
-    return _inject(params, fault, truth)
-
-
 def ns(t_s: FloatArray) -> IntArray:
     """Seconds since the episode start to absolute nanoseconds."""
     out: IntArray = START_NS + np.round(t_s * 1e9).astype(np.int64)
-    return out
-
-
-def _unit(axis: Sequence[float]) -> FloatArray:
-    a = np.asarray(axis, dtype=float)
-    out: FloatArray = a / np.linalg.norm(a)
     return out
 
 

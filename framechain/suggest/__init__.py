@@ -6,14 +6,13 @@ from framechain.suggest.consistency import calibration_disagreements, frame_id_d
 from framechain.suggest.explain import why_nothing_replayed
 from framechain.suggest.facts import chain_files_beside
 from framechain.suggest.frame_tree import EdgeInfo, frame_tree
-from framechain.suggest.lerobot import GeneratedRobot, dataset_needs, generated_robot
+from framechain.suggest.lerobot import dataset_needs, generated_robot
 from framechain.suggest.needs import ChainNeed, NeedStatus, chain_needs
 from framechain.suggest.typos import MissingTopic, did_you_mean, missing_topics, or_list
 
 __all__ = [
     "ChainNeed",
     "EdgeInfo",
-    "GeneratedRobot",
     "MissingTopic",
     "NeedStatus",
     "SuggestedChain",

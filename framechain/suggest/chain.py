@@ -13,14 +13,14 @@ import numpy as np
 import yaml
 
 from framechain.adapters.messages.kinds import POSE_TYPES, normalize_msgtype
-from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.model import LoadedLog
 from framechain.arrays import rows_of
 from framechain.config.chain import ChainConfig, ChainEvidence, ChainFrames, ChainTopics, HopTopics
 from framechain.suggest.facts import POINT_TYPES, LogFacts, beside_yaml, detection_topics, log_facts
 from framechain.suggest.frame_tree import tree_roots
 from framechain.suggest.needs import PLACEHOLDER_FRAMES, REPLAY_PIECES, ChainNeed, NeedStatus, chain_needs
 from framechain.suggest.rig import rig_suggestion, rig_yaml_body
-from framechain.timeline import ObservationTable, TransformTable
+from framechain.timeline import LogInfo, ObservationTable, TransformTable
 
 
 @dataclass(frozen=True)

@@ -17,10 +17,11 @@ import numpy as np
 import yaml
 
 from framechain.adapters.messages.kinds import normalize_msgtype
-from framechain.adapters.model import LoadedLog, LogInfo
+from framechain.adapters.model import LoadedLog
 from framechain.config.chain import ChainConfig
 from framechain.config.chain_cameras import CalibrationSource
 from framechain.suggest.facts import DETECTION_TYPES, HINT_FILE_MAX_BYTES
+from framechain.timeline import LogInfo
 
 
 def calibration_disagreements(chain: ChainConfig, info: LogInfo | None = None) -> list[str]:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.adapters.messages.collect import CLOCK_GAP_NOTE_S
+from framechain.adapters.messages.stamps import CLOCK_GAP_NOTE_S
 from framechain.timeline import TransformTable
 
 

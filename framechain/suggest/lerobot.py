@@ -22,46 +22,22 @@ from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, FeatureInfo
-from framechain.config.robot import RobotConfig
+from framechain.config.robot import GeneratedRobot
 from framechain.robot.kinematics import RobotModel
 from framechain.robot.known_arms import ArmJoints, KnownArm, known_arm, match_state_names
 
-__all__ = ["GeneratedRobot", "dataset_needs", "generated_robot", "guess_arm_units", "guess_unit",
-           "robot_yaml_skeleton"]
+__all__ = ["dataset_needs", "generated_robot", "guess_arm_units", "guess_unit", "robot_yaml_skeleton"]
 
-#: What a generated robot.yaml is called in messages and fixes (it is written beside a run's outputs).
-GENERATED_SOURCE = "robot.yaml (generated)"
 #: Field of view assumed for a focal length guess.
 GUESSED_FOV_DEG = 70.0
 #: URDFs of LeRobot's robot types framechain does not bundle.
 URDF_HINTS = {"aloha": "aloha (vx300s arms)"}
 #: Words of a camera name that put it on an arm's wrist.
 _WRIST_WORDS = {"wrist", "gripper", "hand", "arm", "ee"}
-
-
-@dataclass(frozen=True)
-class GeneratedRobot:
-    """robot.yaml made for a known arm, with the one line that says what it assumed."""
-
-    text: str
-    line: str
-    episode: int
-
-    def mapping(self) -> dict[str, Any]:
-        """robot.yaml's keys (what a chain's inline robot section holds)."""
-        import yaml
-
-        raw: dict[str, Any] = yaml.safe_load(self.text)
-        return raw
-
-    def config(self) -> RobotConfig:
-        """The parsed configuration; findings' fixes name it ``robot.yaml (generated)``."""
-        return RobotConfig.from_mapping(self.mapping(), source=GENERATED_SOURCE)
 
 
 @dataclass(frozen=True)

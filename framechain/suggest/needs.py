@@ -14,6 +14,7 @@ import numpy as np
 from framechain.adapters.messages.kinds import POSE_TYPES
 from framechain.adapters.model import LoadedLog
 from framechain.config.chain import ChainConfig, ChainFrames
+from framechain.config.chain_cameras import MarkerSpec
 from framechain.suggest.facts import (
     CAMERA_INFO_TYPES,
     CORNER_DETECTION_TYPES,
@@ -187,45 +188,62 @@ def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: LogFacts) -> 
                                f"{n} detections from the table {t.detections_table}",
                                "" if n else "topics.detections_table: DETECTIONS.parquet")
     if named is None and t.image and markers:
-        n = int((obs.source == t.image).sum()) if len(obs) else 0
-        if t.image not in facts.msgtypes:
-            return t.image, ChainNeed("detections", NeedStatus.MISSING, f"the chain's topics.image {t.image} is not in "
-                                      "the log", f"topics.image: {_image_choice(facts)}")
-        n_images = _count(facts.counts.get(t.image, 0), 'image')
-        if n == 0:  # searched and found none: a wrong dictionary, or no marker in view
-            probe = _probe(loaded, t.image)
-            best = probe.best if probe is not None else None
-            seen = f"; {probe.text()}" if probe is not None else ""
-            key = (f"evidence.markers: {{dictionary: {best}, size_m: {markers.size_m or 'MARKER_EDGE_M'}}}"
-                   if best is not None and best != markers.dictionary else
-                   "evidence.markers.dictionary: another dictionary (the printed markers' family), or topics.image: "
-                   "a topic that sees the markers")
-            return t.image, ChainNeed("detections", NeedStatus.MISSING, f"0 markers found in {n_images} of {t.image} "
-                                      f"with {markers.dictionary}{seen}", key)
-        return t.image, ChainNeed("detections", NeedStatus.FOUND, f"markers in the images of {t.image} "
-                                  f"({n_images}, {_count(n, 'marker')})")
+        return t.image, _markers_need(t.image, markers, loaded, facts)
     candidates = detection_topics(loaded, facts)
     if named is None:
-        images = facts.topics_of(IMAGE_TYPES)
-        images = [i for i in images if "depth" not in i.lower()]
-        key = "topics.detections: DETECTIONS_TOPIC"
-        probe = _probe(loaded, images[0]) if images else None
-        if probe is not None and probe.best is not None:  # only a dictionary that found markers is suggested
-            key += (f"; or topics.image: {images[0]}; evidence.markers: {{dictionary: {probe.best}, "
-                    f"size_m: MARKER_SIZE_M}}  ({probe.text()})")
-        elif probe is not None:
-            key += f"  ({probe.text()})"
-        return None, ChainNeed("detections", NeedStatus.MISSING, "no detections topic in the log "
-                               "(vision_msgs, AprilTag or fiducial detections)" if not candidates else
-                               f"the chain names none (the log has {', '.join(candidates)})",
-                               key if not candidates else f"topics.detections: {candidates[0]}")
+        return None, _unnamed_detections_need(loaded, facts, candidates)
+    return named, _named_detections_need(named, loaded, facts, candidates)
+
+
+def _markers_need(image: str, markers: MarkerSpec, loaded: LoadedLog, facts: LogFacts) -> ChainNeed:
+    """Detections from markers searched in the images of ``image``."""
+    obs = loaded.timeline.observations
+    n = int((obs.source == image).sum()) if len(obs) else 0
+    if image not in facts.msgtypes:
+        return ChainNeed("detections", NeedStatus.MISSING, f"the chain's topics.image {image} is not in the log",
+                         f"topics.image: {_image_choice(facts)}")
+    n_images = _count(facts.counts.get(image, 0), 'image')
+    if n == 0:  # searched and found none: a wrong dictionary, or no marker in view
+        probe = _probe(loaded, image)
+        best = probe.best if probe is not None else None
+        seen = f"; {probe.text()}" if probe is not None else ""
+        key = (f"evidence.markers: {{dictionary: {best}, size_m: {markers.size_m or 'MARKER_EDGE_M'}}}"
+               if best is not None and best != markers.dictionary else
+               "evidence.markers.dictionary: another dictionary (the printed markers' family), or topics.image: "
+               "a topic that sees the markers")
+        return ChainNeed("detections", NeedStatus.MISSING, f"0 markers found in {n_images} of {image} "
+                         f"with {markers.dictionary}{seen}", key)
+    return ChainNeed("detections", NeedStatus.FOUND, f"markers in the images of {image} ({n_images}, "
+                     f"{_count(n, 'marker')})")
+
+
+def _unnamed_detections_need(loaded: LoadedLog, facts: LogFacts, candidates: list[str]) -> ChainNeed:
+    """The chain names no detections topic: the log's own (``candidates``), or markers in its first image topic."""
+    images = facts.topics_of(IMAGE_TYPES)
+    images = [i for i in images if "depth" not in i.lower()]
+    key = "topics.detections: DETECTIONS_TOPIC"
+    probe = _probe(loaded, images[0]) if images else None
+    if probe is not None and probe.best is not None:  # only a dictionary that found markers is suggested
+        key += (f"; or topics.image: {images[0]}; evidence.markers: {{dictionary: {probe.best}, "
+                f"size_m: MARKER_SIZE_M}}  ({probe.text()})")
+    elif probe is not None:
+        key += f"  ({probe.text()})"
+    return ChainNeed("detections", NeedStatus.MISSING, "no detections topic in the log "
+                     "(vision_msgs, AprilTag or fiducial detections)" if not candidates else
+                     f"the chain names none (the log has {', '.join(candidates)})",
+                     key if not candidates else f"topics.detections: {candidates[0]}")
+
+
+def _named_detections_need(named: str, loaded: LoadedLog, facts: LogFacts, candidates: list[str]) -> ChainNeed:
+    """The detections topic the chain names: in the log or not, with detections or not."""
+    obs = loaded.timeline.observations
     if named not in facts.msgtypes and len(obs) == 0:
         close = did_you_mean(named, candidates) or did_you_mean(named, facts.msgtypes)
         also = (f"; did you mean {or_list(close)}?" if close else
                 f" (detection topics in the log: {', '.join(candidates)})" if candidates else "")
         best = close[0] if close else candidates[0] if candidates else "DETECTIONS_TOPIC"
-        return named, ChainNeed("detections", NeedStatus.MISSING, f"the chain names {named}, which the log lacks{also}",
-                                f"topics.detections: {best}")
+        return ChainNeed("detections", NeedStatus.MISSING, f"the chain names {named}, which the log lacks{also}",
+                         f"topics.detections: {best}")
     n_obs = int((obs.source == named).sum()) if len(obs) else 0
     n_msg = facts.counts.get(named, 0)
     others = [c for c in candidates if c != named]
@@ -235,15 +253,15 @@ def _detections_need(chain: ChainConfig, loaded: LoadedLog, facts: LogFacts) -> 
         # Detections were read and all rejected at read (no intrinsics for PnP, say): the topic is right; the
         # piece that is missing says what to add.
         why = ", ".join(f"{reason} {n}" for reason, n in sorted(read["rejected"].items()))
-        return named, ChainNeed("detections", NeedStatus.FOUND, f"{facts.describe(named)}: {n_msg} messages, "
-                                f"{read['detections']} detections, none usable (rejected at read: {why}){also}")
+        return ChainNeed("detections", NeedStatus.FOUND, f"{facts.describe(named)}: {n_msg} messages, "
+                         f"{read['detections']} detections, none usable (rejected at read: {why}){also}")
     if n_obs == 0 and len(obs) == 0:
         key = (f"topics.detections: {others[0]}" if others else
                "topics.detections: DETECTIONS_TOPIC  (a topic whose messages hold detections)")
-        return named, ChainNeed("detections", NeedStatus.MISSING,
-                                f"{facts.describe(named)} has {n_msg} messages but no detection in them", key)
-    return named, ChainNeed("detections", NeedStatus.FOUND,
-                            f"{facts.describe(named)}: {n_msg} messages, {n_obs or len(obs)} detections{also}")
+        return ChainNeed("detections", NeedStatus.MISSING,
+                         f"{facts.describe(named)} has {n_msg} messages but no detection in them", key)
+    return ChainNeed("detections", NeedStatus.FOUND,
+                     f"{facts.describe(named)}: {n_msg} messages, {n_obs or len(obs)} detections{also}")
 
 
 def _read_counts(loaded: LoadedLog, topic: str) -> Mapping[str, Any] | None:

@@ -8,9 +8,9 @@ from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 
 from framechain.adapters.messages.kinds import POSE_TYPES, normalize_msgtype
-from framechain.adapters.model import LogInfo
 from framechain.config.chain import ChainConfig
 from framechain.suggest.facts import CAMERA_INFO_TYPES, DETECTION_TYPES, IMAGE_TYPES, POINT_TYPES
+from framechain.timeline import LogInfo
 
 #: Detections may also be pixels or camera-frame points in a PointStamped.
 _DETECTION_LIKE = DETECTION_TYPES | POINT_TYPES

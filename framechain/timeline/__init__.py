@@ -1,16 +1,16 @@
 """The model room: columnar tables of one log, nothing format-specific; imports nothing of framechain's other rooms."""
 
+from framechain.timeline.columns import Column, ColumnTable, arrow_array
 from framechain.timeline.errors import (
     InvalidCameraError,
     InvalidTransformError,
     TimelineError,
 )
 from framechain.timeline.frames import DepthFrameTable, DepthLoader, DepthWindows, ImageFrameTable, pixel_windows
+from framechain.timeline.log_info import LogFormat, LogInfo, TopicInfo
 from framechain.timeline.model import Timeline
 from framechain.timeline.tables import (
     CameraTable,
-    Column,
-    ColumnTable,
     EgoMotionTable,
     JointStateTable,
     ObservationTable,
@@ -18,7 +18,6 @@ from framechain.timeline.tables import (
     PointTable,
     TransformTable,
     TranslationPrior,
-    arrow_array,
     format_stamp,
     normalize_frame,
     normalize_frames,
@@ -36,11 +35,14 @@ __all__ = [
     "InvalidCameraError",
     "InvalidTransformError",
     "JointStateTable",
+    "LogFormat",
+    "LogInfo",
     "ObservationTable",
     "PointRole",
     "PointTable",
     "Timeline",
     "TimelineError",
+    "TopicInfo",
     "TransformTable",
     "TranslationPrior",
     "arrow_array",

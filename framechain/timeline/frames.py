@@ -13,8 +13,9 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.arrays import IntArray, StrArray
+from framechain.timeline.columns import Column, ColumnTable
 from framechain.timeline.errors import TimelineError
-from framechain.timeline.tables import Column, ColumnTable, normalize_frames
+from framechain.timeline.tables import normalize_frames
 
 #: Loads depth frame ``i`` of a table as metres, shape (height, width), float32; NaN or 0 = none.
 DepthLoader = Callable[[int], npt.NDArray[np.float32]]

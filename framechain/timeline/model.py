@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from framechain.timeline.columns import ColumnTable
 from framechain.timeline.frames import DepthFrameTable, ImageFrameTable
 from framechain.timeline.storage import read_tables, write_tables
 from framechain.timeline.tables import (
     CameraTable,
-    ColumnTable,
     JointStateTable,
     ObservationTable,
     PointTable,

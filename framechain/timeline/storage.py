@@ -17,9 +17,9 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from framechain.timeline.columns import ColumnTable
 from framechain.timeline.errors import TimelineError
 from framechain.timeline.frames import VIDEO_ENCODING, DepthFrameTable, ImageFrameTable
-from framechain.timeline.tables import ColumnTable
 
 _FORMAT = "framechain/timeline@1"
 

@@ -15,8 +15,8 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation, Slerp
 
+from framechain import pipeline
 from framechain.analysis.model.estimates import estimate_to_json
-from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import load_log
@@ -122,7 +122,7 @@ def test_the_mount_is_the_other_way_round_from_how_tagslam_applies_it(realdata: 
     assert spread_written < spread_tagslam - 0.0005  # 6.9 mm against 8.0 mm over the whole log
     # With the numbers on the edge as written, that finding goes away.
     as_written = stairs_chain(realdata, as_tagslam_applies_it=False)
-    other = attribute(load_log(realdata / STAIRS_BAG, as_written).timeline, as_written, bootstrap=0)
+    other = pipeline.run(realdata / STAIRS_BAG, as_written, bootstrap=0).attributed()
     assert not [f for f in other.findings if f.fault == Fault.INVERTED_TRANSFORM]
 
 
@@ -130,7 +130,7 @@ def test_the_mount_is_the_other_way_round_from_how_tagslam_applies_it(realdata: 
 def test_a_known_odometry_stamp_shift_comes_back(realdata: Path, tmp_path: Path, shift_ms: int) -> None:
     shifted = restamped_bag(realdata, tmp_path / "shifted.bag", shift_ms * 1_000_000)
     chain = stairs_chain(realdata)
-    result = attribute(load_log(shifted, chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(shifted, chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.LATENCY, "body_to_world")
     # Odometry stamped late by the shift: the pose that fits a detection at tau is the one stamped tau + shift.

@@ -13,10 +13,9 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.verdict.attribute import attribute
+from framechain import pipeline
 from framechain.analysis.verdict.findings import Attribution
 from framechain.config.chain import ChainConfig
-from framechain.pipeline import load_log
 from tests.helpers.realdata import STAIRS, STAIRS_BAG
 
 CAMERA = "t265_fisheye1_optical_frame"
@@ -53,10 +52,10 @@ def stairs_chain(realdata: Path, *, as_tagslam_applies_it: bool = True) -> Chain
 
 @cache
 def recorded_attribution(realdata: Path) -> Attribution:
-    """The bag through the README's chain (the mount as TagSLAM applies it), attributed once per process: several
+    """The bag through the tutorial's chain (the mount as TagSLAM applies it), attributed once per process: several
     tests of the stairs, the bounds, the verdicts and static targets read it (an Attribution is frozen)."""
     chain = stairs_chain(realdata)
-    return attribute(load_log(realdata / STAIRS_BAG, chain).timeline, chain, bootstrap=0)
+    return pipeline.run(realdata / STAIRS_BAG, chain, bootstrap=0).attributed()
 
 
 def restamped_bag(realdata: Path, shifted: Path, shift_ns: int) -> Path:

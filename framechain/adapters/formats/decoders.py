@@ -10,11 +10,10 @@ JSON.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from framechain.adapters.formats.fast_cdr import LayoutError, parse_cdr_compressed_image, parse_cdr_image
-from framechain.adapters.messages.collect import wrap_json
 from framechain.adapters.messages.depth import parse_ros1_image
 from framechain.adapters.messages.kinds import normalize_msgtype
 
@@ -130,3 +129,37 @@ def protobuf_decoder(name: str, descriptor_set: bytes) -> Decoder:
 
 def json_decoder() -> Decoder:
     return lambda raw: wrap_json(json.loads(bytes(raw)))
+
+
+class _Obj:
+    """Attribute access over a JSON object (Foxglove JSON encoding)."""
+
+    __slots__ = ("_d",)
+
+    def __init__(self, d: Mapping[str, Any]) -> None:
+        self._d = d
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return wrap_json(self._d[name])
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+class _JsonStamp:
+    __slots__ = ("nanos", "seconds")
+
+    def __init__(self, d: Mapping[str, Any]) -> None:
+        self.seconds = int(d.get("sec", 0))
+        self.nanos = int(d.get("nsec", 0))
+
+
+def wrap_json(value: Any) -> Any:
+    """JSON values with attribute access; ``{sec, nsec}`` become protobuf-like timestamps."""
+    if isinstance(value, dict):
+        if set(value) <= {"sec", "nsec"} and value:
+            return _JsonStamp(value)
+        return _Obj(value)
+    if isinstance(value, list):
+        return [wrap_json(v) for v in value]
+    return value

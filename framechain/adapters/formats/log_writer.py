@@ -36,7 +36,7 @@ from framechain.adapters.formats.mcap.writer import write_mcap_ros1, write_mcap_
 from framechain.adapters.formats.msgdefs import OutMessage, typestore
 from framechain.adapters.formats.rosbag.writer import write_rosbag1, write_rosbag2
 from framechain.config.chain import ChainConfig
-from framechain.timeline import Timeline
+from framechain.timeline import PointTable, Timeline
 
 CONTAINERS = ("mcap-ros2", "mcap-ros1", "rosbag1", "rosbag2-sqlite", "rosbag2-mcap")
 DEFAULT_TOPICS = {
@@ -236,24 +236,8 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
         out.append(OutMessage(int(images.log_time_ns[i]), image_topic, kind,
                         b.camera_image(str(images.frame[i]), int(images.stamp_ns[i]), int(images.width[i]),
                                        int(images.height[i]), str(images.encoding[i]), images.load(i))))
-    pts = timeline.points
-    if len(pts):
-        by_role = {role: topic for topic, role in chain.evidence_topics().items()}
-        topics = np.array([by_role.get(str(r), "") for r in pts.role.tolist()], dtype=object)
-        missing = sorted({str(r) for r, t in zip(pts.role.tolist(), topics.tolist(), strict=True) if not t})
-        if missing:
-            raise AdapterError("write_log", f"points with roles {missing} have no evidence topic in the chain")
-        for topic in sorted(set(topics.tolist())):
-            sel = np.flatnonzero(topics == topic)
-            posed = bool(np.isfinite(pts.quat_xyzw[sel]).all())
-            for i in sel.tolist():
-                if posed:
-                    msg = b.pose_stamped(str(pts.frame[i]), int(pts.stamp_ns[i]), pts.xyz[i], pts.quat_xyzw[i])
-                    kind = "geometry_msgs/msg/PoseStamped"
-                else:
-                    msg = b.point_stamped(str(pts.frame[i]), int(pts.stamp_ns[i]), pts.xyz[i])
-                    kind = "geometry_msgs/msg/PointStamped"
-                out.append(OutMessage(int(pts.log_time_ns[i]), topic, kind, msg))
+    if len(timeline.points):
+        out.extend(_point_messages(timeline.points, chain, b))
     js = timeline.joint_states
     for g in _groups([js.stamp_ns, js.log_time_ns, js.source]):
         i0 = int(g[0])
@@ -266,6 +250,29 @@ def _messages(timeline: Timeline, chain: ChainConfig, b: _Builder, depth_encodin
         out.append(OutMessage(first, str(topic), "std_msgs/msg/String", b.string(str(text))))
     order = sorted(range(len(out)), key=lambda k: (out[k].log_time_ns, out[k].topic, k))
     return [out[k] for k in order]
+
+
+def _point_messages(pts: PointTable, chain: ChainConfig, b: _Builder) -> list[OutMessage]:
+    """The logged points on their evidence topics (by role): PoseStamped where a topic's points all have an
+    orientation, PointStamped otherwise."""
+    out: list[OutMessage] = []
+    by_role = {role: topic for topic, role in chain.evidence_topics().items()}
+    topics = np.array([by_role.get(str(r), "") for r in pts.role.tolist()], dtype=object)
+    missing = sorted({str(r) for r, t in zip(pts.role.tolist(), topics.tolist(), strict=True) if not t})
+    if missing:
+        raise AdapterError("write_log", f"points with roles {missing} have no evidence topic in the chain")
+    for topic in sorted(set(topics.tolist())):
+        sel = np.flatnonzero(topics == topic)
+        posed = bool(np.isfinite(pts.quat_xyzw[sel]).all())
+        for i in sel.tolist():
+            if posed:
+                msg = b.pose_stamped(str(pts.frame[i]), int(pts.stamp_ns[i]), pts.xyz[i], pts.quat_xyzw[i])
+                kind = "geometry_msgs/msg/PoseStamped"
+            else:
+                msg = b.point_stamped(str(pts.frame[i]), int(pts.stamp_ns[i]), pts.xyz[i])
+                kind = "geometry_msgs/msg/PointStamped"
+            out.append(OutMessage(int(pts.log_time_ns[i]), topic, kind, msg))
+    return out
 
 
 def write_log(

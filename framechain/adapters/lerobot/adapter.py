@@ -35,19 +35,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
-import pyarrow as pa
-import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.lerobot.clock import (
-    VIDEO_REFERENCE_NUDGE_NS,
-    VideoClock,
-    episode_frame_times_s,
-    video_clock,
-)
-from framechain.adapters.lerobot.markers import video_markers
+from framechain.adapters.lerobot.camera_frames import camera_frames, depth_frames, episode_clock
+from framechain.adapters.lerobot.clock import VideoClock
+from framechain.adapters.lerobot.detections import episode_observations, with_markers
 from framechain.adapters.lerobot.reader import (
     DatasetError,
     DatasetReader,
@@ -56,7 +48,7 @@ from framechain.adapters.lerobot.reader import (
     is_lerobot_dataset,
 )
 from framechain.adapters.lerobot.wall_clock import wall_clock_features, wall_clock_start_ns
-from framechain.adapters.model import LoadedLog, LogInfo, TopicInfo
+from framechain.adapters.model import LoadedLog
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import CameraCalibration
 from framechain.config.chain import ChainConfig
@@ -67,13 +59,12 @@ from framechain.robot.kinematics import RobotModel
 from framechain.timeline import (
     CameraTable,
     DepthFrameTable,
-    ImageFrameTable,
     JointStateTable,
-    ObservationTable,
+    LogInfo,
     Timeline,
+    TopicInfo,
     TransformTable,
 )
-from framechain.timeline.frames import VIDEO_ENCODING
 
 #: ``Timeline.metadata["format"]`` of a LeRobot episode.
 FORMAT = "lerobot"
@@ -108,12 +99,7 @@ def open_dataset(
     cfg.check_names(names)
     wall_features = wall_clock_features(reader)
     frames = reader.read(episode, list(dict.fromkeys([*_columns(cfg, reader, sources), *wall_features])))
-    state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
-    bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
-    if bad.any():
-        k = int(np.flatnonzero(bad.any(axis=1))[0])
-        raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
-    q = joint_positions(cfg, model, state, names)
+    q = joint_positions(cfg, model, _finite_state(cfg, frames, names), names)
     state_ns = frames.stamp_ns
     source_name = f"{Path(path).name}:{cfg.state_feature}"
 
@@ -124,50 +110,31 @@ def open_dataset(
     ])
     cameras = CameraTable.concat([c.camera_table() for c in cfg.cameras.values()])
     cam_ns = {name: camera_stamps_ns(frames, cam) for name, cam in cfg.cameras.items()}
-    observations = _observations(sources, cfg, frames, cam_ns, state_ns, episode, Path(path))
+    observations = episode_observations(sources, cfg, frames, cam_ns, state_ns, episode, Path(path))
     depth = DepthFrameTable.concat([
-        _depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
+        depth_frames(cam, frames, cam_ns[cam.name], state_ns) for cam in cfg.cameras.values() if cam.depth
     ])
     joint_states = _joint_states(cfg, q, state_ns, source_name)
-    clocks = {cam.name: _clock(cam.video_key, frames, reader.fps, cam.timing.pairing) for cam in cfg.cameras.values()
-              if cam.video_key is not None and cam.video_key in frames.episode.video_files}
-    videos = ImageFrameTable.concat([
-        *(_video_frames(cam, frames, cam_ns[cam.name], state_ns, clocks[cam.name]) for cam in cfg.cameras.values()
-          if cam.name in clocks),
-        *(_stored_frames(cam, frames, cam_ns[cam.name], state_ns, Path(path)) for cam in cfg.cameras.values()
-          if cam.video_key is not None and cam.video_key in frames.columns),
-    ])
+    videos, clocks = camera_frames(cfg, frames, cam_ns, state_ns, reader.fps, Path(path))
     metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
     wall = wall_clock_start_ns(frames, wall_features)
     if wall is not None:
         metadata["wall_clock_feature"], metadata["wall_clock_start_ns"] = wall
     spec = markers or (cfg.evidence.markers if cfg.evidence is not None else None)
     if spec is not None:
-        observations = _with_markers(observations, videos, cameras, cfg, spec, metadata)
+        observations = with_markers(observations, videos, cameras, cfg, spec, metadata)
     return Timeline(transforms=transforms, cameras=cameras, observations=observations,
                     joint_states=joint_states, depth_frames=depth, image_frames=videos, metadata=metadata)
 
 
-def _with_markers(observations: ObservationTable, images: ImageFrameTable, cameras: CameraTable, cfg: RobotConfig,
-                  spec: MarkerSpec, metadata: dict[str, Any]) -> ObservationTable:
-    """The markers in the chain camera's frames added as observations (their corners in the metadata)."""
-    name = cfg.chain_camera or next((n for n, c in cfg.cameras.items() if c.video_key is not None), None)
-    cam = cfg.cameras.get(name or "")
-    if cam is None or cam.video_key is None:
-        raise RobotConfigError(cfg.source, "evidence.markers are searched in the chain camera's frames: give it a "
-                               "video_key")
-    found = video_markers(images, cameras, cam.optical_frame, spec, source=cam.video_key)
-    metadata["notes"] = [*metadata["notes"], *found.notes]
-    r = found.resolved
-    first = len(observations)
-    table = ObservationTable(
-        obs_id=np.arange(first, first + r.stamp_ns.size, dtype=np.int64), stamp_ns=r.stamp_ns,
-        log_time_ns=r.log_time_ns, camera_frame=r.camera_frame, u=r.u, v=r.v, depth_m=r.depth_m, label=r.label,
-        score=r.score, source=r.source)
-    side = dict(r.side)
-    position = np.searchsorted(r.detection_index, np.asarray(side.pop("detection"), dtype=np.int64))
-    metadata["fiducials"] = {"counts": r.counts, "corners": {"obs_id": (first + position).tolist(), **side}}
-    return ObservationTable.concat([observations, table])
+def _finite_state(cfg: RobotConfig, frames: EpisodeFrames, names: Sequence[str]) -> FloatArray:
+    """The state feature's rows (frames, values); a mapped joint's value that is not finite is an error."""
+    state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
+    bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
+    if bad.any():
+        k = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
+    return state
 
 
 def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[DetectionSource]) -> list[str]:
@@ -315,217 +282,6 @@ def _joint_states(
     return JointStateTable.concat(parts)
 
 
-def _read_side_table(path: Path) -> pa.Table:
-    if not path.is_file():
-        raise DatasetError(path, "detections table not found")
-    try:
-        if path.suffix.lower() == ".csv":
-            return pacsv.read_csv(path)
-        return pq.read_table(path)
-    except (OSError, pa.ArrowInvalid) as err:
-        raise DatasetError(path, f"cannot read detections table ({err})") from err
-
-
-def _pick(table: pa.Table, names: Sequence[str]) -> str | None:
-    return next((n for n in names if n in table.column_names), None)
-
-
-def _observations(
-    sources: Sequence[DetectionSource], cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
-    state_ns: IntArray, episode: int, dataset: Path,
-) -> ObservationTable:
-    parts: list[dict[str, Any]] = []
-    n_frames = len(frames)
-    for src in sources:
-        if src.feature is not None:
-            assert src.camera is not None
-            arr = np.asarray(frames.columns[src.feature], dtype=float).reshape(n_frames, -1)
-            if arr.shape[1] not in (2, 3):
-                raise DatasetError(dataset, f"detection feature {src.feature!r} has {arr.shape[1]} values per "
-                                   "frame; expected [u, v] or [u, v, depth_m]")
-            rows = np.flatnonzero(np.isfinite(arr[:, 0]) & np.isfinite(arr[:, 1]))
-            parts.append({
-                "camera": np.full(rows.size, src.camera), "stamp": cam_ns[src.camera][rows],
-                "log": state_ns[rows], "u": arr[rows, 0], "v": arr[rows, 1],
-                "depth": arr[rows, 2] if arr.shape[1] == 3 else np.full(rows.size, np.nan),
-                "label": np.full(rows.size, src.camera), "score": np.full(rows.size, np.nan),
-                "source": f"{dataset.name}:{src.feature}",
-            })
-            continue
-        assert src.table is not None
-        parts.append(_table_observations(src, cfg, frames, cam_ns, state_ns, episode))
-    if not parts:
-        return ObservationTable.empty()
-    counts = [len(p["u"]) for p in parts]
-    total = sum(counts)
-    cam = np.concatenate([p["camera"] for p in parts]).astype(str)
-    frame = np.array([cfg.cameras[c].optical_frame for c in cam], dtype=str) if total else np.array([], dtype=str)
-    return ObservationTable(
-        obs_id=np.arange(total, dtype=np.int64),
-        stamp_ns=np.concatenate([p["stamp"] for p in parts]).astype(np.int64),
-        log_time_ns=np.concatenate([p["log"] for p in parts]).astype(np.int64),
-        camera_frame=frame,
-        u=np.concatenate([p["u"] for p in parts]),
-        v=np.concatenate([p["v"] for p in parts]),
-        depth_m=np.concatenate([p["depth"] for p in parts]),
-        label=np.concatenate([p["label"] for p in parts]).astype(str),
-        score=np.concatenate([p["score"] for p in parts]),
-        source=np.concatenate([np.full(c, p["source"]) for c, p in zip(counts, parts, strict=True)]).astype(str),
-    )
-
-
-def _table_observations(
-    src: DetectionSource, cfg: RobotConfig, frames: EpisodeFrames, cam_ns: Mapping[str, IntArray],
-    state_ns: IntArray, episode: int,
-) -> dict[str, Any]:
-    assert src.table is not None
-    path = src.table
-    table = _read_side_table(path)
-    for required in ("u", "v"):
-        if required not in table.column_names:
-            raise DatasetError(path, f"detections table has no {required!r} column; it has {table.column_names}")
-    ep_col = _pick(table, ("episode_index", "episode"))
-    if ep_col is not None:
-        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
-
-        table = table.filter(pc.equal(table.column(ep_col), episode))
-    n = table.num_rows
-    cam_col = _pick(table, ("camera", "camera_name"))
-    if cam_col is not None:
-        cams = np.asarray(table.column(cam_col).to_pylist(), dtype=str)
-    elif src.camera is not None or len(cfg.cameras) == 1:
-        cams = np.full(n, src.camera or next(iter(cfg.cameras)))
-    else:
-        raise DatasetError(path, f"detections table has no camera column and robot.yaml has several cameras "
-                           f"{sorted(cfg.cameras)}")
-    unknown = sorted(set(cams.tolist()) - set(cfg.cameras))
-    if unknown:
-        raise DatasetError(path, f"detections name cameras {unknown} that robot.yaml does not calibrate "
-                           f"(cameras: {sorted(cfg.cameras)})")
-    frame_col = _pick(table, ("frame_index",))
-    ts_col = _pick(table, ("timestamp", "timestamp_s"))
-    stamp = np.zeros(n, dtype=np.int64)
-    log = np.zeros(n, dtype=np.int64)
-    if frame_col is not None:
-        fi = np.asarray(table.column(frame_col).to_numpy(zero_copy_only=False))
-        if fi.size and (fi.dtype.kind not in "iu" or fi.min() < 0 or fi.max() >= len(frames)):
-            raise DatasetError(path, f"frame_index must be integers in 0..{len(frames) - 1} for episode {episode}")
-        fi = fi.astype(np.int64)
-        for name in np.unique(cams):
-            sel = cams == name
-            stamp[sel] = cam_ns[str(name)][fi[sel]]
-        log = state_ns[fi]
-    elif ts_col is not None:
-        ts = np.asarray(table.column(ts_col).to_numpy(zero_copy_only=False), dtype=float)
-        stamp = np.round(ts * 1e9).astype(np.int64)
-        nearest = np.clip(np.searchsorted(state_ns, stamp), 0, len(frames) - 1)
-        prev = np.clip(nearest - 1, 0, len(frames) - 1)
-        nearest = np.where(np.abs(state_ns[prev] - stamp) <= np.abs(state_ns[nearest] - stamp), prev, nearest)
-        log = state_ns[nearest]
-    else:
-        raise DatasetError(path, "detections table needs a frame_index or a timestamp column (seconds)")
-    depth_col = _pick(table, ("depth_m", "depth"))
-    depth = (np.asarray(table.column(depth_col).to_numpy(zero_copy_only=False), dtype=float)
-             if depth_col is not None else np.full(n, np.nan))
-    label = (np.asarray(table.column("label").to_pylist(), dtype=str) if "label" in table.column_names
-             else cams.copy())
-    score = (np.asarray(table.column("score").to_numpy(zero_copy_only=False), dtype=float)
-             if "score" in table.column_names else np.full(n, np.nan))
-    return {
-        "camera": cams, "stamp": stamp, "log": log,
-        "u": np.asarray(table.column("u").to_numpy(zero_copy_only=False), dtype=float),
-        "v": np.asarray(table.column("v").to_numpy(zero_copy_only=False), dtype=float),
-        "depth": depth, "label": label, "score": score, "source": str(path),
-    }
-
-
-def _depth_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray
-) -> DepthFrameTable:
-    assert cam.depth is not None
-    images = np.asarray(frames.columns[cam.depth.feature])
-    if images.ndim != 3:
-        raise DatasetError(frames.episode.data_file, f"depth feature {cam.depth.feature!r} has shape "
-                           f"{list(images.shape[1:])} per frame; expected (height, width)")
-    n, h, w = images.shape
-    scale = cam.depth.scale_m
-    encoding = "32FC1" if images.dtype.kind == "f" else f"{images.dtype.itemsize * 8}UC1"
-
-    def load(i: int) -> npt.NDArray[np.float32]:
-        out: npt.NDArray[np.float32] = (images[i].astype(np.float64) * scale).astype(np.float32)
-        return out
-
-    return DepthFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, w),
-        height=np.full(n, h), encoding=np.full(n, encoding), source=np.full(n, cam.depth.feature), loader=load,
-    )
-
-
-def _clock(key: str, frames: EpisodeFrames, fps: float, forced: str | None = None) -> VideoClock:
-    """How video ``key``'s frames pair with the episode's rows (:mod:`framechain.adapters.lerobot.clock`)."""
-    from_s = float(frames.episode.video_from_s.get(key, 0.0))
-    to_s = frames.episode.video_to_s.get(key)
-    if to_s is None and frames.episode.video_from_s:  # v3.0 without to_timestamp: the rows' nominal span
-        to_s = from_s + len(frames) / fps
-    times = episode_frame_times_s(frames.episode.video_files[key], from_s, to_s)
-    return video_clock(key, times, frames.timestamp_s, frames.frame_index, fps=fps, from_s=from_s, to_s=to_s,
-                       forced=forced)
-
-
-def _video_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, clock: VideoClock
-) -> ImageFrameTable:
-    """One row per row of the episode: the mp4 and the time in it of the frame the clock pairs with the row (not
-    decoded; -1: the row has no frame). v3.0 concatenates episodes in one file (from_timestamp is where the
-    episode starts in it), v2.1 has one file per episode."""
-    assert cam.video_key is not None
-    path = frames.episode.video_files[cam.video_key]
-    in_file = clock.file_times_ns(frames.timestamp_s)
-    n = len(frames)
-    size = cam.camera_table()
-    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
-    return ImageFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns,
-        width=np.full(n, width), height=np.full(n, height),
-        encoding=np.full(n, VIDEO_ENCODING), source=np.full(n, cam.video_key), video_path=np.full(n, str(path)),
-        video_time_ns=np.where(in_file >= 0, in_file + VIDEO_REFERENCE_NUDGE_NS, -1),
-    )
-
-
-_MAGIC = {b"\xff\xd8\xff": "jpeg", b"\x89PNG\r\n\x1a\n": "png"}
-
-
-def _stored_frames(
-    cam: CameraCalibration, frames: EpisodeFrames, cam_ns: IntArray, state_ns: IntArray, root: Path
-) -> ImageFrameTable:
-    """One row per frame of an image feature: the PNG/JPEG bytes stored in the Parquet (HF ``Image``: a struct
-    of ``bytes`` and ``path``; a path is read relative to the dataset when there are no bytes)."""
-    assert cam.video_key is not None
-    cells = frames.columns[cam.video_key].reshape(len(frames))
-    encoded: list[bytes] = []
-    for k, cell in enumerate(cells.tolist()):
-        data = cell.get("bytes") if isinstance(cell, dict) else cell if isinstance(cell, bytes) else None
-        if not data and isinstance(cell, dict) and cell.get("path"):
-            file = root / str(cell["path"])
-            data = file.read_bytes() if file.is_file() else None
-        if not data:
-            raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} has no bytes at frame {k}")
-        encoded.append(bytes(data))
-    kinds = [next((kind for magic, kind in _MAGIC.items() if data.startswith(magic)), "") for data in encoded]
-    if "" in kinds:
-        k = kinds.index("")
-        raise DatasetError(frames.episode.data_file, f"image feature {cam.video_key!r} holds neither PNG nor JPEG at "
-                           f"frame {k}")
-    n = len(frames)
-    size = cam.camera_table()
-    width, height = (int(size.width[0]), int(size.height[0])) if len(size) else (0, 0)
-    return ImageFrameTable(
-        frame=np.full(n, cam.optical_frame), stamp_ns=cam_ns, log_time_ns=state_ns, width=np.full(n, width),
-        height=np.full(n, height), encoding=np.array(kinds), source=np.full(n, cam.video_key),
-        video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64), loader=lambda i: encoded[i],
-    )
-
-
 def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     path = frames.episode.video_files.get(key) if key is not None else None
     return None if path is None else str(path)
@@ -572,7 +328,7 @@ def _clock_notes(reader: DatasetReader, episode: int | None) -> list[str]:
     for key in reader.video_keys:
         if key not in frames.episode.video_files:
             continue
-        line = _clock(key, frames, reader.fps).summary()
+        line = episode_clock(key, frames, reader.fps).summary()
         out.append(line if episode is not None else f"{line} (episode {index})")
     return out
 

@@ -28,23 +28,26 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
-from typing import Any, TypedDict
+from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from framechain.adapters.errors import AdapterError
-from framechain.arrays import FloatArray, IntArray
-
-#: lerobot's default tolerance between a frame's timestamp and frame_index / fps.
-TIMESTAMP_TOLERANCE_S = 1e-4
-#: The per-frame columns lerobot adds to every dataset.
-INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+from framechain.adapters.lerobot.dataset_info import (
+    INDEX_COLUMNS,
+    DatasetError,
+    EpisodeFrames,
+    EpisodeInfo,
+    FeatureInfo,
+    InfoJson,
+    Layout,
+    flatten_names,
+    is_lerobot_dataset,
+)
+from framechain.adapters.lerobot.frames import read_episode_frames
+from framechain.errors import one_line
 
 __all__ = [
     "INDEX_COLUMNS",
@@ -57,126 +60,6 @@ __all__ = [
     "flatten_names",
     "is_lerobot_dataset",
 ]
-
-
-class DatasetError(AdapterError):
-    """A LeRobot dataset cannot be read as its metadata says: names the file and the inconsistency (one line:
-    pyarrow's and FFmpeg's messages may span several)."""
-
-    def __init__(self, path: str | Path, what: str) -> None:
-        super().__init__(path, " ".join(what.split()))
-
-
-class Layout(StrEnum):
-    """On-disk layout family: v2 (one episode per file) or v3 (many episodes per file)."""
-
-    V2 = "v2"
-    V3 = "v3"
-
-
-class InfoJson(TypedDict, total=False):
-    """The keys of ``meta/info.json`` framechain reads."""
-
-    codebase_version: str
-    robot_type: str | None
-    fps: float
-    total_episodes: int
-    total_frames: int
-    total_chunks: int
-    chunks_size: int
-    data_path: str
-    video_path: str | None
-    features: dict[str, dict[str, Any]]
-    splits: dict[str, str]
-
-
-@dataclass(frozen=True)
-class FeatureInfo:
-    """One entry of ``info.json`` ``features``; ``names`` flattened (nested lists and dicts)."""
-
-    key: str
-    dtype: str
-    shape: tuple[int, ...]
-    names: tuple[str, ...] | None
-    info: Mapping[str, Any] = field(default_factory=dict)
-
-    @property
-    def is_video(self) -> bool:
-        return self.dtype == "video"
-
-    @property
-    def is_depth_map(self) -> bool:
-        return bool(self.info.get("video.is_depth_map", False))
-
-    @property
-    def size(self) -> int:
-        return int(np.prod(self.shape)) if self.shape else 1
-
-
-@dataclass(frozen=True)
-class EpisodeInfo:
-    """One episode's metadata: where its frames and videos live."""
-
-    index: int
-    length: int
-    tasks: tuple[str, ...]
-    data_file: Path
-    from_index: int | None = None  # v3: global index range [from, to)
-    to_index: int | None = None
-    video_files: Mapping[str, Path] = field(default_factory=dict)
-    #: v3: where the episode starts inside the shared mp4, per video key (s); v2: 0.
-    video_from_s: Mapping[str, float] = field(default_factory=dict)
-    #: v3: where it ends (s, exclusive), per video key; v2: absent (the file's end).
-    video_to_s: Mapping[str, float] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class EpisodeFrames:
-    """The frames of one episode, sorted by ``index``: timestamps, indices and requested columns."""
-
-    episode: EpisodeInfo
-    timestamp_s: FloatArray
-    frame_index: IntArray
-    index: IntArray
-    columns: Mapping[str, npt.NDArray[Any]]
-
-    def __len__(self) -> int:
-        return int(self.timestamp_s.shape[0])
-
-    @property
-    def stamp_ns(self) -> IntArray:
-        """Timestamps as integer nanoseconds (rounded)."""
-        out: IntArray = np.round(self.timestamp_s * 1e9).astype(np.int64)
-        return out
-
-
-def flatten_names(raw: Any) -> tuple[str, ...] | None:
-    """``names`` of a feature as one flat tuple: lists, nested lists (Unitree) and dicts of lists."""
-    if raw is None:
-        return None
-    out: list[str] = []
-
-    def walk(node: Any) -> None:
-        if isinstance(node, str):
-            out.append(node)
-        elif isinstance(node, Mapping):
-            for value in node.values():
-                walk(value)
-        elif isinstance(node, list | tuple):
-            for value in node:
-                walk(value)
-        else:
-            out.append(str(node))
-
-    walk(raw)
-    return tuple(out)
-
-
-def is_lerobot_dataset(path: str | Path) -> bool:
-    """True when ``path`` is a directory with ``meta/info.json``: a LeRobot dataset, perhaps a damaged one
-    (an info.json that cannot be read, or of another codebase version, is for :class:`DatasetReader` to
-    say in one line, not a reason to read the folder as something else)."""
-    return (Path(path) / "meta" / "info.json").is_file()
 
 
 class DatasetReader:
@@ -332,7 +215,7 @@ class DatasetReader:
             try:
                 table = pq.read_table(path)
             except (OSError, pa.ArrowException) as err:
-                self.note(path, f"cannot read ({_one_line(err)}); its episodes are left out")
+                self.note(path, f"cannot read ({one_line(err)}); its episodes are left out")
                 continue
             missing = [c for c in ("episode_index", "length", "data/chunk_index", "data/file_index")
                        if c not in table.column_names]
@@ -345,7 +228,7 @@ class DatasetReader:
         try:
             self._episodes_v3 = pa.concat_tables(tables, promote_options="permissive")
         except pa.ArrowException as err:
-            raise DatasetError(folder, f"the episodes parquet files disagree on their columns ({_one_line(err)})") \
+            raise DatasetError(folder, f"the episodes parquet files disagree on their columns ({one_line(err)})") \
                 from err
         return self._episodes_v3
 
@@ -540,92 +423,8 @@ class DatasetReader:
         Vector features come back as ``(T, *shape)``, scalars as ``(T,)``. Only the columns asked
         for (plus the index columns) are read from the Parquet file.
         """
-        ep = self.episode(index)
-        path = ep.data_file
-        if not path.is_file():
-            raise DatasetError(path, f"data file of episode {index} is missing")
-        try:
-            schema = pq.read_schema(path)
-        except (OSError, pa.ArrowException) as err:
-            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
-        present = set(schema.names)
-        for col in columns:
-            if col in self.features and self.features[col].is_video:
-                raise DatasetError(self._info_path, f"feature {col!r} is a video: it has no Parquet column")
-            if col not in present:
-                declared = "declared in info.json but " if col in self.features else ""
-                raise DatasetError(path, f"column {col!r} is {declared}not in this file; it has {sorted(present)}")
-        index_cols = [c for c in ("timestamp", "frame_index", "episode_index", "index") if c in present]
-        read_cols = list(dict.fromkeys([*index_cols, *columns]))
-        filters = [("episode_index", "=", index)] if self.layout is Layout.V3 and "episode_index" in present else None
-        try:
-            table = pq.read_table(path, columns=read_cols, filters=filters)
-        except (OSError, pa.ArrowException) as err:
-            raise DatasetError(path, f"cannot read Parquet ({_one_line(err)})") from err
-        if "index" in present:
-            table = table.sort_by("index")
-        n = table.num_rows
-        if n == 0:
-            raise DatasetError(path, f"holds no rows of episode {index}")
-        if "episode_index" in present:
-            eps = np.unique(table.column("episode_index").to_numpy())
-            if eps.tolist() != [index]:
-                raise DatasetError(path, f"expected rows of episode {index}, found episode_index {eps.tolist()}")
-        if n != ep.length:
-            raise DatasetError(path, f"episode {index} has {n} rows but its metadata declares length {ep.length}")
-        global_index = (table.column("index").to_numpy().astype(np.int64) if "index" in present
-                        else np.arange(n, dtype=np.int64))
-        if ep.from_index is not None and ep.to_index is not None and (
-            ep.to_index - ep.from_index != n or int(global_index[0]) != ep.from_index
-        ):
-            raise DatasetError(path, f"episode {index} rows have index {global_index[0]}..{global_index[-1]} but "
-                               f"the episodes parquet declares [{ep.from_index}, {ep.to_index})")
-        if "frame_index" in present:
-            frame_index = table.column("frame_index").to_numpy().astype(np.int64)
-            if not np.array_equal(frame_index, np.arange(n)):
-                self.note(path, f"frame_index of episode {index} is not 0..{n - 1}")
-        else:
-            frame_index = global_index - global_index[0]
-            self.note(path, "no frame_index column: frame indices derived from index")
-        ts = self._timestamps(table, path, index, frame_index)
-        out: dict[str, npt.NDArray[Any]] = {}
-        for col in columns:
-            arr = _column(table.column(col), path, col)
-            feat = self.features.get(col)
-            if feat is not None and feat.shape and feat.size > 1 and arr.ndim >= 2 and arr[0].size == feat.size:
-                arr = arr.reshape((n, *feat.shape))
-            out[col] = arr
-        return EpisodeFrames(episode=ep, timestamp_s=ts, frame_index=frame_index, index=global_index,
-                             columns=out)
-
-    def _timestamps(self, table: pa.Table, path: Path, index: int, frame_index: IntArray) -> FloatArray:
-        """The episode's timestamps (s), checked: finite, increasing, near ``frame_index / fps`` (else a note);
-        derived from ``frame_index / fps`` when the file has none."""
-        n = table.num_rows
-        if "timestamp" not in table.column_names:
-            self.note(path, "no timestamp column: timestamps derived from frame_index / fps")
-            derived: FloatArray = frame_index / self.fps
-            return derived
-        ts: FloatArray = _column(table.column("timestamp"), path, "timestamp").astype(np.float64).reshape(n)
-        if not np.isfinite(ts).all():
-            raise DatasetError(path, f"episode {index} has non-finite timestamps")
-        if n > 1 and not (np.diff(ts) > 0).all():
-            k = int(np.flatnonzero(np.diff(ts) <= 0)[0])
-            raise DatasetError(path, f"timestamps of episode {index} do not increase at frame {k + 1} "
-                               f"({ts[k]:.6f} s then {ts[k + 1]:.6f} s)")
-        dev = ts - frame_index / self.fps
-        if np.abs(dev).max() > TIMESTAMP_TOLERANCE_S:
-            if np.ptp(dev) <= TIMESTAMP_TOLERANCE_S:
-                self.note(path, f"timestamps start at {ts[0]:.6g} s, not 0: offset {dev[0]:+.6g} s "
-                          f"from frame_index / fps ({self.fps:g} fps)")
-            else:
-                self.note(path, f"timestamps depart from frame_index / fps by up to "
-                          f"{np.abs(dev).max():.6g} s (variable rate)")
-        return ts
-
-
-def _one_line(err: BaseException) -> str:
-    return " ".join(str(err).split()) or type(err).__name__
+        return read_episode_frames(self.episode(index), columns, features=self.features, layout=self.layout,
+                                   fps=self.fps, info_path=self._info_path, note=self.note)
 
 
 def _whole(value: Any) -> int | None:
@@ -656,28 +455,3 @@ def _jsonl(path: Path, note: Callable[[Path, str], None]) -> list[tuple[int, dic
             continue
         rows.append((lineno, row))
     return rows
-
-
-def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
-    """An Arrow column as NumPy: scalars (T,); lists and fixed-size lists (T, n) or (T, n, m)."""
-    arr = col.combine_chunks()
-    n = len(arr)
-    shape: list[int] = [n]
-    while pa.types.is_list(arr.type) or pa.types.is_fixed_size_list(arr.type) or pa.types.is_large_list(arr.type):
-        if arr.null_count:
-            raise DatasetError(path, f"column {name!r} has null rows")
-        import pyarrow.compute as pc
-
-        lengths = pc.list_value_length(arr).to_numpy(zero_copy_only=False)
-        width = int(lengths[0]) if lengths.size else 0
-        if lengths.size and not (lengths == width).all():
-            raise DatasetError(path, f"column {name!r} holds lists of different lengths "
-                               f"({int(lengths.min())}..{int(lengths.max())})")
-        shape.append(width)
-        arr = arr.flatten()
-    if pa.types.is_struct(arr.type) or pa.types.is_binary(arr.type) or pa.types.is_string(arr.type):
-        return np.asarray(arr.to_pylist(), dtype=object).reshape(shape)
-    if arr.null_count and (pa.types.is_floating(arr.type) or pa.types.is_integer(arr.type)):
-        arr = arr.cast(pa.float64()).fill_null(math.nan)
-    values = arr.to_numpy(zero_copy_only=False)
-    return np.asarray(values).reshape(shape)

@@ -11,15 +11,14 @@ the log's other sources (calibration files, URDFs, fiducials, librealsense extri
 from __future__ import annotations
 
 import math
-from collections import Counter, defaultdict
+from collections import Counter
 from collections.abc import Callable, Mapping
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from framechain.adapters.messages.depth import DepthWindowKeeper, depth_metadata, make_depth_loader, raw_depth_pixels
+from framechain.adapters.messages.depth import DepthWindowKeeper, depth_metadata, depth_table, raw_depth_pixels
 from framechain.adapters.messages.fiducials import (
     FiducialRows,
     ResolvedFiducials,
@@ -27,10 +26,11 @@ from framechain.adapters.messages.fiducials import (
     tag_size_lookup,
     with_unprojected,
 )
-from framechain.adapters.messages.images import image_metadata, make_image_loader
+from framechain.adapters.messages.images import image_metadata, image_table
 from framechain.adapters.messages.kinds import Kind
 from framechain.adapters.messages.locator import FrameFetch
-from framechain.adapters.messages.realsense import extrinsic_edges, stream_frame
+from framechain.adapters.messages.realsense import apply_realsense_layout
+from framechain.adapters.messages.rig_topics import TopicCameras
 from framechain.adapters.messages.rows import (
     CameraRows,
     FrameRows,
@@ -38,66 +38,17 @@ from framechain.adapters.messages.rows import (
     ObservationRows,
     PointRows,
     TransformRows,
-    log_order,
 )
+from framechain.adapters.messages.stamps import NS, fox_stamp_ns, ros_stamp_ns, stamp_notes
 from framechain.adapters.mounts import (
     FileCamera,
     log_urdf_edges,
     merge_file_cameras,
     merge_static_edges,
 )
-from framechain.arrays import distinct_names
 from framechain.config.chain import ChainConfig
 from framechain.config.mount import Mount
 from framechain.timeline import CameraTable, DepthFrameTable, ImageFrameTable, Timeline, TransformTable
-
-NS = 1_000_000_000
-#: Header stamps further than this from log time are pointed out (sim time, another clock).
-CLOCK_GAP_NOTE_S = 10.0
-
-
-def ros_stamp_ns(stamp: Any) -> int:
-    """``builtin_interfaces/Time`` (ROS 1 and ROS 2 as rosbags decodes both) in nanoseconds."""
-    return int(stamp.sec) * NS + int(stamp.nanosec)
-
-
-def fox_stamp_ns(stamp: Any) -> int:
-    """``google.protobuf.Timestamp`` (or Foxglove JSON ``{sec, nsec}`` wrapped) in nanoseconds."""
-    return int(stamp.seconds) * NS + int(stamp.nanos)
-
-
-class _Obj:
-    """Attribute access over a JSON object (Foxglove JSON encoding)."""
-
-    __slots__ = ("_d",)
-
-    def __init__(self, d: Mapping[str, Any]) -> None:
-        self._d = d
-
-    def __getattr__(self, name: str) -> Any:
-        try:
-            return wrap_json(self._d[name])
-        except KeyError:
-            raise AttributeError(name) from None
-
-
-class _JsonStamp:
-    __slots__ = ("nanos", "seconds")
-
-    def __init__(self, d: Mapping[str, Any]) -> None:
-        self.seconds = int(d.get("sec", 0))
-        self.nanos = int(d.get("nsec", 0))
-
-
-def wrap_json(value: Any) -> Any:
-    """JSON values with attribute access; ``{sec, nsec}`` become protobuf-like timestamps."""
-    if isinstance(value, dict):
-        if set(value) <= {"sec", "nsec"} and value:
-            return _JsonStamp(value)
-        return _Obj(value)
-    if isinstance(value, list):
-        return [wrap_json(v) for v in value]
-    return value
 
 #: Kinds whose messages become pixel observations (a depth frame's windows wait for them).
 OBSERVATION_KINDS = frozenset({Kind.DETECTIONS, Kind.DETECTION, Kind.PIXEL_POINT})
@@ -119,9 +70,7 @@ class Collector:
         # fiducials (tags, markers in images, camera-frame points): resolved once the cameras are known
         self.fiducials = _fiducial_rows(chain)
         self.marker_finders: dict[str, Any] = {}  # a markers.MarkerFinder per dictionary, made when an image is read
-        #: A rig's topics -> the camera they belong to: their messages' header.frame_id is not what decides.
-        self.topic_frames = chain.topic_frames() if chain else {}
-        self.relabelled: Counter[tuple[str, str, str]] = Counter()  # (topic, header frame, camera frame)
+        self.topic_cameras = TopicCameras(chain.topic_frames() if chain else {})
         self._relabelled_obs = 0  # observations relabelled so far
         self._fiducials_resolved: tuple[int, ResolvedFiducials] | None = None
         self._obs_ids: npt.NDArray[np.int64] = np.zeros(0, dtype=np.int64)  # in append order
@@ -216,18 +165,6 @@ class Collector:
         """librealsense ``.../<stream>/tf/<ref>``: geometry_msgs/Transform, reference -> stream."""
         tr, q = msg.translation, msg.rotation
         self.rs_extrinsics[topic] = (tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w, float(log_ns))
-
-    def _apply_realsense_layout(self) -> None:
-        """Rename frames after their streams and turn the recorded extrinsics into static edges."""
-        for rows in (self.depth_frames, self.cameras):
-            rows.frame = [stream_frame(topic) or frame for frame, topic in zip(rows.frame, rows.topic, strict=True)]
-        if not self.rs_extrinsics:
-            return
-        edges, note = extrinsic_edges(self.rs_extrinsics)
-        for edge in edges:
-            self.transforms.add_edge(edge.topic, edge.log_time_ns, edge.parent, edge.child, edge.log_time_ns,
-                                     edge.values, static=True)
-        self.notes.append(note)
 
     def rs_depth_units(self, topic: str, log_ns: int, msg: Any) -> None:
         sensor = topic.split("/option/", maxsplit=1)[0]
@@ -344,7 +281,7 @@ class Collector:
             return
         width, height, encoding = meta
         stamp = ros_stamp_ns(msg.header.stamp)
-        frame = self._camera_frame(topic, msg.header.frame_id)
+        frame = self.topic_cameras.frame(topic, msg.header.frame_id)
         self.depth_frames.append(topic, log_ns, frame, stamp, width, height, encoding)
         if encoding.startswith("compressedDepth"):
             return  # a PNG: only the whole frame decodes, so it is fetched when needed
@@ -378,18 +315,6 @@ class Collector:
         width, height, encoding = meta
         self.image_frames.append(topic, log_ns, msg.header.frame_id, ros_stamp_ns(msg.header.stamp), width, height,
                                  encoding)
-
-    def _images(self, fetch: FrameFetch | None) -> ImageFrameTable:
-        rows = self.image_frames
-        if not len(rows):
-            return ImageFrameTable.empty()
-        n = len(rows)
-        table = ImageFrameTable(**rows.columns(), video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64))
-        order = log_order(table.log_time_ns, table.source)
-        locators = [rows.locators[i] for i in order.tolist()]
-        encodings = [str(e) for e in table.encoding[order]]
-        loader = make_image_loader(fetch, locators, encodings) if fetch is not None else None
-        return replace(table.take(order), loader=loader)
 
     # -- dispatch -------------------------------------------------------------------------------
     def handler(self, kind: Kind, *, foxglove: bool = False) -> Callable[[str, int, Any], None] | None:
@@ -436,41 +361,31 @@ class Collector:
             self.fiducials.marker_size_of_topic[topic] = own.size_m
         return self.marker_finders[spec.dictionary]
 
-    def _camera_frame(self, topic: str, frame: str) -> str:
-        """The frame of a message: its rig camera's when the chain names its topic, else its header's."""
-        mine = self.topic_frames.get(topic)
-        if mine is None:
-            return frame
-        if frame.lstrip("/") != mine:
-            self.relabelled[(topic, frame, mine)] += 1
-        return mine
-
     def _relabel_observations(self) -> None:
         """Observations appended since the last call take their rig camera's frame (by topic)."""
-        if not self.topic_frames:
+        if not self.topic_cameras:
             return
         rows = self.observations
         for i in range(self._relabelled_obs, len(rows)):
-            rows.frame[i] = self._camera_frame(rows.topic[i], rows.frame[i])
+            rows.frame[i] = self.topic_cameras.frame(rows.topic[i], rows.frame[i])
         self._relabelled_obs = len(rows)
 
     def _relabel_read_tables(self) -> None:
         """Camera models, images and fiducials (not needed while reading) take their rig camera's frame."""
-        if not self.topic_frames:
+        if not self.topic_cameras:
             return
         for rows in (self.cameras, self.image_frames, self.fiducials):
-            rows.frame = [self._camera_frame(t, f) for f, t in zip(rows.frame, rows.topic, strict=True)]
+            rows.frame = [self.topic_cameras.frame(t, f) for f, t in zip(rows.frame, rows.topic, strict=True)]
         self._relabel_observations()
-        for (topic, frame, mine), n in sorted(self.relabelled.items()):
-            self.notes.append(f"topic {topic}: header.frame_id {frame!r} on {n} detections (or camera models, "
-                              f"images), but the chain gives this topic to camera {mine!r}: they are that camera's")
+        self.notes.extend(self.topic_cameras.notes())
 
     # -- build ------------------------------------------------------------------------------------
     def build(self, fetch: FrameFetch | None, metadata: Mapping[str, Any]) -> tuple[Timeline, list[str]]:
         """The Timeline (every table in log-time order, ties by topic then file order) and notes."""
         realsense = bool(self.rs_extrinsics) or any("/device_" in t for t in self.depth_frames.topic)
         if realsense:
-            self._apply_realsense_layout()
+            self.notes.extend(apply_realsense_layout(self.rs_extrinsics, self.transforms, self.depth_frames,
+                                                     self.cameras))
         for (topic, what), count in sorted(self.skipped.items()):
             self.notes.append(f"topic {topic}: {what} ({count} message{'s' if count != 1 else ''})")
         self._relabel_read_tables()
@@ -556,18 +471,14 @@ class Collector:
         ids = self._obs_ids[first + position] if self._obs_ids.size else np.zeros(0, dtype=np.int64)
         return {"counts": resolved.counts, "corners": {"obs_id": ids.tolist(), **side}}
 
+    def _images(self, fetch: FrameFetch | None) -> ImageFrameTable:
+        return image_table(self.image_frames, fetch) if len(self.image_frames) else ImageFrameTable.empty()
+
     def _depth(self, fetch: FrameFetch | None) -> DepthFrameTable:
-        rows = self.depth_frames
-        if not len(rows):
+        if not len(self.depth_frames):
             return DepthFrameTable.empty()
-        table = DepthFrameTable(**rows.columns())
-        order = log_order(table.log_time_ns, table.source)
-        locators = [rows.locators[i] for i in order.tolist()]
-        scales = [self._scale_for(loc.topic) for loc in locators]
-        loader = make_depth_loader(fetch, locators, scales) if fetch is not None else None
         self.settle_depth(final=True)
-        windows = self.depth_keeper.lookup(order.tolist(), scales) if fetch is not None else None
-        return replace(table.take(order), loader=loader, windows=windows)
+        return depth_table(self.depth_frames, fetch, self._scale_for, self.depth_keeper)
 
     def _scale_for(self, topic: str) -> float:
         for sensor, scale in self.depth_scale.items():
@@ -585,43 +496,3 @@ def _fiducial_rows(chain: ChainConfig | None) -> FiducialRows:
                         size_for_marker=tag_size_lookup(marker_size if marker_size is not None else tag_size))
 
 
-def stamp_notes(timeline: Timeline) -> list[str]:
-    """Point out topics whose header stamps are in another clock than their log times."""
-    notes: list[str] = []
-    per_topic: dict[str, list[npt.NDArray[np.int64]]] = defaultdict(list)
-    tables: list[tuple[Any, npt.NDArray[np.bool_] | None]] = [
-        (timeline.transforms, ~timeline.transforms.is_static), (timeline.cameras, None),
-        (timeline.observations, None), (timeline.joint_states, None), (timeline.points, None),
-        (timeline.depth_frames, None),
-    ]
-    for table, mask in tables:
-        if not len(table):
-            continue
-        sel = np.ones(len(table), dtype=bool) if mask is None else mask
-        for t in distinct_names(table.source[sel]):
-            rows = sel & (table.source == t)
-            per_topic[t].append(np.stack([table.stamp_ns[rows], table.log_time_ns[rows]]))
-    for topic, parts in sorted(per_topic.items()):
-        both = np.concatenate(parts, axis=1)
-        stamps, logs = both[0], both[1]
-        gap_s = float(np.median(logs - stamps)) * 1e-9
-        if abs(gap_s) <= CLOCK_GAP_NOTE_S or topic.endswith(".csv") or topic.endswith(".parquet"):
-            continue
-        stamp_s, log_s = float(np.median(stamps)) * 1e-9, float(np.median(logs)) * 1e-9
-        if stamp_s < 1e8 <= log_s:
-            notes.append(
-                f"topic {topic}: header stamps are simulation time (about {stamp_s:.1f} s) while log times are wall "
-                f"clock ({log_s:.0f} s since the epoch); lookups use the header stamps, never the log times"
-            )
-        elif log_s < 1e8 <= stamp_s:
-            notes.append(
-                f"topic {topic}: log times start near zero ({log_s:.3f} s) while header stamps are wall clock "
-                f"({stamp_s:.0f} s since the epoch); lookups use the header stamps"
-            )
-        else:
-            side = "behind" if gap_s > 0 else "ahead of"
-            notes.append(
-                f"topic {topic}: header stamps run {abs(gap_s):.1f} s {side} log time (another clock or a late "
-                "recorder); lookups use the header stamps"
-            )
-    return notes

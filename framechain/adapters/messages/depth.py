@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import struct
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -18,8 +19,9 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.messages.locator import FrameFetch, FrameLocator, cached_reader
+from framechain.adapters.messages.rows import FrameRows, log_order
 from framechain.arrays import IntArray
-from framechain.timeline import DepthWindows, TimelineError, normalize_frame
+from framechain.timeline import DepthFrameTable, DepthWindows, TimelineError, normalize_frame
 
 _U16 = frozenset({"16UC1", "mono16", "16SC1"})
 _F32 = frozenset({"32FC1"})
@@ -282,3 +284,16 @@ def parse_ros1_image(raw: bytes | memoryview) -> SimpleNamespace:
         header=SimpleNamespace(seq=seq, stamp=stamp, frame_id=frame_id), height=height, width=width,
         encoding=encoding, is_bigendian=is_bigendian, step=step, data=memoryview(buf)[o : o + n_data],
     )
+
+
+def depth_table(rows: FrameRows, fetch: FrameFetch | None, scale_of: Callable[[str], float],
+                keeper: DepthWindowKeeper) -> DepthFrameTable:
+    """The depth frames read (metadata) in log order, each topic's pixels scaled by ``scale_of(topic)`` when
+    fetched, with the windows ``keeper`` cut around the detections (it has seen them all)."""
+    table = DepthFrameTable(**rows.columns())
+    order = log_order(table.log_time_ns, table.source)
+    locators = [rows.locators[i] for i in order.tolist()]
+    scales = [scale_of(loc.topic) for loc in locators]
+    loader = make_depth_loader(fetch, locators, scales) if fetch is not None else None
+    windows = keeper.lookup(order.tolist(), scales) if fetch is not None else None
+    return replace(table.take(order), loader=loader, windows=windows)

@@ -291,24 +291,12 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
         models, which = camera_models_at(cameras, cam, stamp[in_cam])
         idx_cam = np.flatnonzero(in_cam)
         if not models:
-            # Bearing-only corners keep the detector's centre pixel; sized corners need intrinsics for PnP.
-            # A 3D point in the camera frame needs none: it is kept in normalised image coordinates (x/z, y/z)
-            # with its z, for the camera-less model the reader adds (intrinsics would only draw it).
-            need = idx_cam[sized[idx_cam] & finite[idx_cam]]
-            if need.size:
+            needed_model, kept_unprojected = _resolve_without_model(
+                idx_cam[finite[idx_cam]], sized, is_corners, point, centre_px, corners, u, v, depth, reason)
+            if needed_model:
                 no_model_frames.add(cam)
-            reason[need] = FiducialRejectReason.NO_INTRINSICS.value
-            points = idx_cam[~is_corners[idx_cam] & finite[idx_cam]]
-            front = points[point[points, 2] > 0]
-            reason[points[point[points, 2] <= 0]] = FiducialRejectReason.BEHIND_CAMERA.value
-            if front.size:
+            if kept_unprojected:
                 unprojected.add(cam)
-                z = point[front, 2]
-                u[front], v[front], depth[front] = point[front, 0] / z, point[front, 1] / z, z
-            bearing = idx_cam[~sized[idx_cam] & is_corners[idx_cam] & finite[idx_cam]]
-            given = np.isfinite(centre_px[bearing]).all(axis=1)
-            centre = np.where(given[:, None], centre_px[bearing], _diagonal_centre(corners[bearing]))
-            u[bearing], v[bearing] = centre[:, 0], centre[:, 1]
             continue
         for k, model in enumerate(models):
             idx = idx_cam[(which == k) & finite[idx_cam]]
@@ -325,14 +313,7 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
     counts, notes = _count(topic, frame, labels, reason, keep, is_corners, sized, reversed_order, no_model_frames,
                            calibration_hint)
     kept = np.flatnonzero(keep)
-    side_rows = kept[is_corners[kept]]
-    side: dict[str, list[Any]] = {
-        "detection": side_rows.tolist(),
-        "corners_px": [[float(x) for x in c] for c in corners[side_rows].reshape(-1, 8)],
-        "size_m": [_json_float(x) for x in size[side_rows]],
-        "reprojection_px": [_json_float(x) for x in reproj[side_rows]],
-        "detector_centre_px": [[_json_float(x) for x in c] for c in centre_px[side_rows]],
-    }
+    side = _side_table(kept[is_corners[kept]], corners, size, reproj, centre_px)
     return ResolvedFiducials(
         detection_index=kept.astype(np.int64), stamp_ns=stamp[kept],
         log_time_ns=np.asarray(rows.log_time_ns, dtype=np.int64)[kept], camera_frame=frame[kept], u=u[kept],
@@ -340,6 +321,44 @@ def resolve_fiducials(rows: FiducialRows, cameras: CameraTable, *, calibration_h
         score=np.asarray(rows.score, dtype=np.float64)[kept], source=topic[kept], side=side, counts=counts,
         notes=notes, unprojected=frozenset(unprojected),
     )
+
+
+def _resolve_without_model(
+    idx: IntArray, sized: BoolArray, is_corners: BoolArray, point: FloatArray, centre_px: FloatArray,
+    corners: FloatArray, u: FloatArray, v: FloatArray, depth: FloatArray, reason: npt.NDArray[Any],
+) -> tuple[bool, bool]:
+    """Detections ``idx`` (finite) of a camera with no model: whether sized corners needed one, and whether 3D
+    points were kept unprojected.
+
+    Bearing-only corners keep the detector's centre pixel; sized corners need intrinsics for PnP. A 3D point
+    in the camera frame needs none: it is kept in normalised image coordinates (x/z, y/z) with its z, for the
+    camera-less model the reader adds (intrinsics would only draw it)."""
+    need = idx[sized[idx]]
+    reason[need] = FiducialRejectReason.NO_INTRINSICS.value
+    points = idx[~is_corners[idx]]
+    front = points[point[points, 2] > 0]
+    reason[points[point[points, 2] <= 0]] = FiducialRejectReason.BEHIND_CAMERA.value
+    if front.size:
+        z = point[front, 2]
+        u[front], v[front], depth[front] = point[front, 0] / z, point[front, 1] / z, z
+    bearing = idx[~sized[idx] & is_corners[idx]]
+    given = np.isfinite(centre_px[bearing]).all(axis=1, keepdims=True)
+    centre = np.where(given, centre_px[bearing], _diagonal_centre(corners[bearing]))
+    u[bearing], v[bearing] = centre[:, 0], centre[:, 1]
+    return bool(need.size), bool(front.size)
+
+
+def _side_table(rows: IntArray, corners: FloatArray, size: FloatArray, reproj: FloatArray, centre_px: FloatArray
+                ) -> dict[str, list[Any]]:
+    """The side table of the kept corner detections ``rows``: their corners, size, reprojection error and the
+    detector's own centre pixel."""
+    return {
+        "detection": rows.tolist(),
+        "corners_px": [[float(x) for x in c] for c in corners[rows].reshape(-1, 8)],
+        "size_m": [_json_float(x) for x in size[rows]],
+        "reprojection_px": [_json_float(x) for x in reproj[rows]],
+        "detector_centre_px": [[_json_float(x) for x in c] for c in centre_px[rows]],
+    }
 
 
 #: The source of a camera-less model in the camera table (width and height 0: no image to bound or draw).

@@ -10,12 +10,14 @@ from __future__ import annotations
 import functools
 import io
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from framechain.adapters.messages.locator import FrameFetch, FrameLocator, cached_reader
-from framechain.timeline import TimelineError
+from framechain.adapters.messages.rows import FrameRows, log_order
+from framechain.timeline import ImageFrameTable, TimelineError
 from framechain.timeline.frames import RAW_IMAGE_ENCODINGS, ImageLoader
 
 #: Fetched images kept per loader (a sink visits a few frames, in time order).
@@ -117,3 +119,14 @@ def make_image_loader(fetch: FrameFetch, locators: Sequence[FrameLocator],
         return image_bytes(fetch(loc.topic, loc.log_time_ns, loc.ordinal), encodings[i])
 
     return cached_reader(read, CACHE_IMAGES)
+
+
+def image_table(rows: FrameRows, fetch: FrameFetch | None) -> ImageFrameTable:
+    """The camera images read (metadata) in log order; their pixels are fetched from the log when shown."""
+    n = len(rows)
+    table = ImageFrameTable(**rows.columns(), video_path=np.full(n, ""), video_time_ns=np.zeros(n, dtype=np.int64))
+    order = log_order(table.log_time_ns, table.source)
+    locators = [rows.locators[i] for i in order.tolist()]
+    encodings = [str(e) for e in table.encoding[order]]
+    loader = make_image_loader(fetch, locators, encodings) if fetch is not None else None
+    return replace(table.take(order), loader=loader)

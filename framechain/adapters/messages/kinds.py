@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import StrEnum
 
 from framechain.config.chain import ChainConfig
@@ -93,69 +94,80 @@ def select_topics(topics: dict[str, str], chain: ChainConfig | None) -> dict[str
     """
     norm = {name: normalize_msgtype(t) for name, t in topics.items()}
     realsense = is_realsense_layout(norm)
+    named = _named_kinds(chain, norm) if chain is not None else {}
     out: dict[str, Kind] = {}
+    for name, msgtype in norm.items():
+        kind = _as_named(named[name], msgtype) if name in named else _unnamed_kind(name, msgtype, chain, realsense)
+        if kind is not None:
+            out[name] = kind
+    return out
+
+
+def _named_kinds(chain: ChainConfig, norm: Mapping[str, str]) -> dict[str, Kind]:
+    """Topic -> kind for every topic ``chain`` names (``norm``: topic -> normalised message type)."""
     named: dict[str, Kind] = {}
-    if chain is not None:
-        t = chain.topics
-        for topic, kind in (
-            (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.pixel_points, Kind.PIXEL_POINT),
-        ):
+    t = chain.topics
+    for topic, kind in (
+        (t.camera_info, Kind.CAMERA_INFO), (t.depth, Kind.DEPTH), (t.pixel_points, Kind.PIXEL_POINT),
+    ):
+        if topic:
+            named[topic] = kind
+    for pose in chain.pose_topics():
+        msgtype = norm.get(pose.topic, "")
+        if msgtype in POSE_TYPES:  # other types: api notes that the topic is not a pose
+            named[pose.topic] = Kind.ODOMETRY if msgtype == "nav_msgs/Odometry" else Kind.POSE
+    if t.detections:
+        named[t.detections] = Kind.DETECTIONS
+    if t.image:  # markers are searched in it and it is shown; or only shown
+        named[t.image] = Kind.MARKER_IMAGE if chain.evidence.markers is not None else Kind.IMAGE
+    for cam in chain.cameras:  # a rig: every camera's own topics
+        named[cam.detections] = Kind.DETECTIONS
+        for topic, kind in ((cam.camera_info, Kind.CAMERA_INFO), (cam.depth, Kind.DEPTH)):
             if topic:
                 named[topic] = kind
-        for pose in chain.pose_topics():
-            msgtype = norm.get(pose.topic, "")
-            if msgtype in POSE_TYPES:  # other types: api notes that the topic is not a pose
-                named[pose.topic] = Kind.ODOMETRY if msgtype == "nav_msgs/Odometry" else Kind.POSE
-        if t.detections:
-            named[t.detections] = Kind.DETECTIONS
-        if t.image:  # markers are searched in it and it is shown; or only shown
-            named[t.image] = Kind.MARKER_IMAGE if chain.evidence.markers is not None else Kind.IMAGE
-        for cam in chain.cameras:  # a rig: every camera's own topics
-            named[cam.detections] = Kind.DETECTIONS
-            for topic, kind in ((cam.camera_info, Kind.CAMERA_INFO), (cam.depth, Kind.DEPTH)):
-                if topic:
-                    named[topic] = kind
-            if cam.image:
-                markers = cam.markers or chain.evidence.markers
-                named[cam.image] = Kind.MARKER_IMAGE if markers is not None else Kind.IMAGE
-        for topic in chain.evidence_topics():
-            named[topic] = Kind.POINT
-    for name, msgtype in norm.items():
-        if name in named:
-            kind = named[name]
-            if kind == Kind.DETECTIONS and msgtype == "vision_msgs/Detection2D":
-                kind = Kind.DETECTION
-            elif kind == Kind.DETECTIONS and msgtype in _FIDUCIAL_TYPES:
-                kind = _FIDUCIAL_TYPES[msgtype]
-            elif kind == Kind.DETECTIONS and msgtype == "geometry_msgs/PointStamped":
-                kind = Kind.CAMERA_POINT
-            out[name] = kind
-            continue
-        kind_or_none = _BY_TYPE.get(msgtype)
-        if realsense:
-            if msgtype == "geometry_msgs/Transform" and "/tf/" in name:
-                out[name] = Kind.RS_EXTRINSIC
-                continue
-            if name.endswith("/option/Depth_Units/value"):
-                out[name] = Kind.RS_DEPTH_UNITS
-                continue
-        if msgtype == "std_msgs/String" and name.rstrip("/").endswith("robot_description"):
-            out[name] = Kind.URDF
-            continue
-        if chain is not None:
-            # With a chain: the frame tree and joints always; other kinds only where named (or
-            # where the chain leaves the slot empty, so the tree stays complete).
-            if kind_or_none in (Kind.TF, Kind.TRANSFORM, Kind.JOINT_STATE) or (
-                (kind_or_none == Kind.ODOMETRY and not chain.topics.odometry)
-                or (kind_or_none == Kind.CAMERA_INFO and (realsense or not _names_camera_info(chain)))
-            ):
-                out[name] = kind_or_none
-            continue
-        if kind_or_none is not None:
-            out[name] = kind_or_none
-        elif msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
-            out[name] = Kind.DEPTH
-    return out
+        if cam.image:
+            markers = cam.markers or chain.evidence.markers
+            named[cam.image] = Kind.MARKER_IMAGE if markers is not None else Kind.IMAGE
+    for topic in chain.evidence_topics():
+        named[topic] = Kind.POINT
+    return named
+
+
+def _as_named(kind: Kind, msgtype: str) -> Kind:
+    """A named topic's kind, detections told apart by their message type."""
+    if kind == Kind.DETECTIONS and msgtype == "vision_msgs/Detection2D":
+        return Kind.DETECTION
+    if kind == Kind.DETECTIONS and msgtype in _FIDUCIAL_TYPES:
+        return _FIDUCIAL_TYPES[msgtype]
+    if kind == Kind.DETECTIONS and msgtype == "geometry_msgs/PointStamped":
+        return Kind.CAMERA_POINT
+    return kind
+
+
+def _unnamed_kind(name: str, msgtype: str, chain: ChainConfig | None, realsense: bool) -> Kind | None:
+    """The kind of a topic the chain does not name (None: skipped)."""
+    kind_or_none = _BY_TYPE.get(msgtype)
+    if realsense:
+        if msgtype == "geometry_msgs/Transform" and "/tf/" in name:
+            return Kind.RS_EXTRINSIC
+        if name.endswith("/option/Depth_Units/value"):
+            return Kind.RS_DEPTH_UNITS
+    if msgtype == "std_msgs/String" and name.rstrip("/").endswith("robot_description"):
+        return Kind.URDF
+    if chain is not None:
+        # With a chain: the frame tree and joints always; other kinds only where named (or
+        # where the chain leaves the slot empty, so the tree stays complete).
+        if kind_or_none in (Kind.TF, Kind.TRANSFORM, Kind.JOINT_STATE) or (
+            (kind_or_none == Kind.ODOMETRY and not chain.topics.odometry)
+            or (kind_or_none == Kind.CAMERA_INFO and (realsense or not _names_camera_info(chain)))
+        ):
+            return kind_or_none
+        return None
+    if kind_or_none is not None:
+        return kind_or_none
+    if msgtype in _IMAGE_TYPES and _looks_depth(name, msgtype):
+        return Kind.DEPTH
+    return None
 
 
 def _names_camera_info(chain: ChainConfig) -> bool:

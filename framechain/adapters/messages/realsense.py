@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from framechain.adapters.messages.rows import CameraRows, FrameRows, TransformRows
+
 _STREAM = re.compile(r"^(/device_\d+/sensor_\d+/[A-Za-z]+_\d+)/")
 
 
@@ -61,3 +63,18 @@ def extrinsic_edges(extrinsics: Mapping[str, tuple[float, ...]]) -> tuple[list[S
         edges.append(StreamEdge(topic, frame, reference, int(vals[7]), tuple(vals[:7])))
     return edges, (f"librealsense layout: frames named after their streams; extrinsics on <stream>/tf/<ref> read "
                    f"as static edges stream -> {reference}")
+
+
+def apply_realsense_layout(extrinsics: Mapping[str, tuple[float, ...]], transforms: TransformRows,
+                           *frame_rows: FrameRows | CameraRows) -> list[str]:
+    """Rename the frames of ``frame_rows`` after their streams and add the recorded ``extrinsics`` to
+    ``transforms`` as static edges; the note saying what was done (none without extrinsics)."""
+    for rows in frame_rows:
+        rows.frame = [stream_frame(topic) or frame for frame, topic in zip(rows.frame, rows.topic, strict=True)]
+    if not extrinsics:
+        return []
+    edges, note = extrinsic_edges(extrinsics)
+    for edge in edges:
+        transforms.add_edge(edge.topic, edge.log_time_ns, edge.parent, edge.child, edge.log_time_ns, edge.values,
+                            static=True)
+    return [note]

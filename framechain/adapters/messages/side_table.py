@@ -8,12 +8,15 @@ metres; empty/0 = sample the depth image), ``label``, ``score``, ``obs_id``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.errors import AdapterError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
 
 
 def resolve_side_table(name: str, log_path: Path) -> Path:
@@ -28,21 +31,7 @@ def resolve_side_table(name: str, log_path: Path) -> Path:
 
 def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
     """Columns stamp_ns, frame, u, v, depth_m, label, score, obs_id (strings for ids)."""
-    import pyarrow as pa
-
-    if not path.is_file():
-        raise AdapterError(path, "detections side table not found")
-    try:
-        if path.suffix.lower() in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
-            table = pq.read_table(path)
-        else:
-            import pyarrow.csv as pcsv
-
-            table = pcsv.read_csv(path)
-    except (pa.ArrowInvalid, OSError) as err:
-        raise AdapterError(path, f"detections side table cannot be read ({err})") from err
+    table = _read_table(path)
     cols = {c.lower(): c for c in table.column_names}
 
     def col(*names: str) -> npt.NDArray[Any] | None:
@@ -87,3 +76,21 @@ def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
         "score": np.full(n, np.nan) if score is None else np.asarray(score, dtype=np.float64),
         "obs_id": np.full(n, "") if obs_id is None else np.asarray(obs_id).astype(str),
     }
+
+
+def _read_table(path: Path) -> pa.Table:
+    """The side table as Arrow: Parquet by its suffix, else CSV."""
+    import pyarrow as pa
+
+    if not path.is_file():
+        raise AdapterError(path, "detections side table not found")
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            return pq.read_table(path)
+        import pyarrow.csv as pcsv
+
+        return pcsv.read_csv(path)
+    except (pa.ArrowInvalid, OSError) as err:
+        raise AdapterError(path, f"detections side table cannot be read ({err})") from err

@@ -172,35 +172,13 @@ def select(
         candidates = [m for m in models if m.family not in used]
         if not candidates:
             break
-        base = current.perturbation()
-        quick: list[tuple[Fit, FaultModel]] = []
-        stage = f"fitting {len(candidates)} fault models" + (" on top of those found" if current.models else "")
-        for k, candidate in enumerate(candidates):  # each candidate alone on top of the faults already found
-            say(stage, k, len(candidates), "models")
-            model = (
-                replace(candidate, starts=rotation_starts(inputs, mode))
-                if candidate.name.startswith("rotation")
-                else candidate
-            )
-            quick.append((fit_models([model], objective, inputs, base=base), model))
-        # A fit that runs to the edge of its range explains by degenerating, not by a fault.
-        quick = [(fit, model) for fit, model in quick if not _explains_nothing(model, fit.params[-1])]
+        quick = _alone_on_top(candidates, current, objective, inputs, mode, say)
         if not quick:
             break
-        quick.sort(key=lambda item: item[0].bic)
-        quick = _prefer_edge_swaps(quick, inputs)
         if current.models:  # refit the best few jointly with what was found before
-            x_prev = np.concatenate(current.params)
-            joint = []
-            for fit, model in quick[:3]:
-                x_start = np.concatenate([x_prev, fit.params[0]])
-                if _hopeless_jointly(current, model, objective, inputs, x_start):
-                    continue
-                joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
-            joint = [(fit, model) for fit, model in joint if not _explains_nothing(model, fit.params[-1])]
+            joint = _refit_jointly(quick[:3], current, objective, inputs)
             if not joint:
                 break
-            joint.sort(key=lambda item: item[0].bic)
             best_fit, best_model = joint[0]
         else:
             best_fit, best_model = quick[0][0], quick[0][1]
@@ -216,6 +194,42 @@ def select(
         fit=current, confidences=tuple(confidences), alternatives=tuple(alternatives), objective=objective, mode=mode,
         inputs=inputs,
     )
+
+
+def _alone_on_top(candidates: Sequence[FaultModel], current: Fit, objective: Objective, inputs: ChainInputs,
+                  mode: Mode, say: Progress) -> list[tuple[Fit, FaultModel]]:
+    """Each candidate fitted alone on top of the faults already found, best (lowest BIC) first; a fit that runs
+    to the edge of its range explains by degenerating, not by a fault, and is left out."""
+    base = current.perturbation()
+    quick: list[tuple[Fit, FaultModel]] = []
+    stage = f"fitting {len(candidates)} fault models" + (" on top of those found" if current.models else "")
+    for k, candidate in enumerate(candidates):
+        say(stage, k, len(candidates), "models")
+        model = (
+            replace(candidate, starts=rotation_starts(inputs, mode))
+            if candidate.name.startswith("rotation")
+            else candidate
+        )
+        quick.append((fit_models([model], objective, inputs, base=base), model))
+    quick = [(fit, model) for fit, model in quick if not _explains_nothing(model, fit.params[-1])]
+    quick.sort(key=lambda item: item[0].bic)
+    return _prefer_edge_swaps(quick, inputs)
+
+
+def _refit_jointly(best: Sequence[tuple[Fit, FaultModel]], current: Fit, objective: Objective, inputs: ChainInputs,
+                   ) -> list[tuple[Fit, FaultModel]]:
+    """The ``best`` candidates refitted jointly with the faults found (those hopeless jointly skipped), best
+    first; a fit that runs to the edge of its range is left out."""
+    x_prev = np.concatenate(current.params)
+    joint = []
+    for fit, model in best:
+        x_start = np.concatenate([x_prev, fit.params[0]])
+        if _hopeless_jointly(current, model, objective, inputs, x_start):
+            continue
+        joint.append((fit_models([*current.models, model], objective, inputs, x_start=x_start), model))
+    joint = [(fit, model) for fit, model in joint if not _explains_nothing(model, fit.params[-1])]
+    joint.sort(key=lambda item: item[0].bic)
+    return joint
 
 
 def _hopeless_jointly(current: Fit, model: FaultModel, objective: Objective, inputs: ChainInputs,

@@ -1,7 +1,9 @@
 """Attribution: which hop, which fault, how big, and the fix.
 
-``attribute(timeline, chain)`` is a pure function of its inputs. It replays the log, picks the
-best evidence present (DESIGN.md "Evidence") and explains the error with the fault catalogue:
+:func:`attribute_replayed` attributes a replay already made
+(:func:`~framechain.analysis.evidence.replayed.replay_chain`): a pure function of its inputs, the step
+:func:`framechain.pipeline.run` (the one way in) takes after it has replayed and aligned a log once.
+It picks the best evidence present (DESIGN.md "Evidence") and explains the error with the fault catalogue:
 
 1. logged hops: the first hop whose logged output departs from the recomputed one (fed with the
    robot's own logged input) is classified; later hops are checked the same way;
@@ -15,10 +17,6 @@ Models are chosen by forward selection on BIC (the simplest explanation wins, se
 combined faults are fitted jointly, shares of the error are Shapley values over the faults found,
 confidence is the BIC posterior weight of the chosen explanation against the alternatives, and
 intervals come from a bootstrap over observations (shares.py).
-
-:func:`attribute_replayed` attributes a replay already made
-(:func:`~framechain.analysis.evidence.replayed.replay_chain`),
-so that a run replays and aligns once and hands both to attribution and to the sinks.
 """
 
 from __future__ import annotations
@@ -29,7 +27,7 @@ import numpy as np
 
 from framechain.analysis.evidence.alignment import AlignedEvidence
 from framechain.analysis.evidence.label_sizes import label_size_fits
-from framechain.analysis.evidence.replayed import Replayed, replay_chain
+from framechain.analysis.evidence.replayed import Replayed
 from framechain.analysis.evidence.rig import rig_inputs, rig_level, unchecked_bounds
 from framechain.analysis.evidence.rig_layout import RigLayout
 from framechain.analysis.evidence.static import (
@@ -85,20 +83,6 @@ from framechain.replay import ReplayResult
 from framechain.timeline import PointRole, Timeline
 
 Say = Progress  # a stage's name, and for counted stages how far into it
-
-
-def attribute(
-    timeline: Timeline,
-    chain: ChainConfig,
-    *,
-    seed: int = 0,
-    bootstrap: int = 30,
-    progress: Say | None = None,
-) -> Attribution:
-    """Replay ``timeline`` through ``chain`` and attribute its error (a pure function)."""
-    if progress is not None:
-        progress("replaying observations")
-    return attribute_replayed(replay_chain(timeline, chain), chain, seed=seed, bootstrap=bootstrap, progress=progress)
 
 
 def attribute_replayed(
@@ -394,4 +378,4 @@ def _fix_context(timeline: Timeline, chain: ChainConfig, result: ReplayResult, r
     )
 
 
-__all__ = ["AnalysisError", "Attribution", "Finding", "Unattributed", "attribute", "attribute_replayed"]
+__all__ = ["AnalysisError", "Attribution", "Finding", "Unattributed", "attribute_replayed"]

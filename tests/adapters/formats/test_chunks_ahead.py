@@ -13,8 +13,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from framechain.adapters.formats.mcap import chunks as chunks_module
-from framechain.adapters.formats.mcap.chunks import AHEAD_CHUNKS, decompressed_ahead
-from framechain.adapters.formats.mcap.reader import _chunk_messages
+from framechain.adapters.formats.mcap.chunks import AHEAD_CHUNKS, chunk_messages, decompressed_ahead
 
 
 def _write(path: Path, compression: CompressionType) -> None:
@@ -56,7 +55,7 @@ def test_chunks_decompressed_ahead_hold_mcap_s_messages_in_order(tmp_path: Path,
         order.append(ci.chunk_start_offset)
         assert err is None
         assert data is not None
-        ours += [(m.channel_id, m.log_time, bytes(m.data)) for m in _chunk_messages(data, wanted)]
+        ours += [(m.channel_id, m.log_time, bytes(m.data)) for m in chunk_messages(data, wanted)]
     with path.open("rb") as f:
         theirs = [(c.id, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages(log_time_order=False)
                   if c.topic in ("/topic0", "/topic1")]

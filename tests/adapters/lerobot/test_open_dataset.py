@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from framechain import pipeline
 from framechain.adapters.lerobot.adapter import open_dataset
 from framechain.adapters.lerobot.reader import DatasetError
 from framechain.analysis.model.estimates import estimate_to_json
@@ -168,7 +169,6 @@ def test_variable_rate_state_and_camera_times(tmp_path: Path) -> None:
 
 
 def test_unrecorded_camera_latency_is_attributed(tmp_path: Path) -> None:
-    attribute = pytest.importorskip("framechain.analysis.verdict.attribute").attribute
     delay = 0.04
     ds = write_arm_dataset(tmp_path / "ds", version="v2.1", lengths=(90,), camera_delay_s=delay)
     # Detections away from the episode's ends: the latency fit looks the camera up at +-0.25 s.
@@ -179,7 +179,7 @@ def test_unrecorded_camera_latency_is_attributed(tmp_path: Path) -> None:
     assert np.linalg.norm(naive.p_world - target_world(), axis=1).max() > 5e-3
     chain = ChainConfig(frames=FRAMES, evidence=ChainEvidence(reference_point=tuple(target_world()),
                                                               static_target=True))
-    result = attribute(tl, chain, bootstrap=5)
+    result = pipeline.run(tl, chain, bootstrap=5).attributed()
     assert result.findings, "no fault found"
     top = result.findings[0]
     assert (top.fault.value, top.hop) == ("latency", HopName.CAMERA_TO_BODY)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from framechain.analysis.verdict.attribute import attribute
+from framechain import pipeline
 from framechain.catalogue import Fault
 from framechain.replay import replay
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
@@ -29,7 +29,7 @@ def _keep(scene: object, roles: list[PointRole]) -> object:
 ])
 def test_partially_logged_hops(fault: InjectedFault, roles: list[PointRole], stage: str) -> None:
     scene = generate(SceneSpec(seed=3, duration_s=6.0, evidence="hops", faults=(fault,)))
-    result = attribute(_keep(scene, roles), scene.chain, bootstrap=0)  # type: ignore[arg-type]
+    result = pipeline.run(_keep(scene, roles), scene.chain, bootstrap=0).attributed()  # type: ignore[arg-type]
     top = result.findings[0]
     assert (top.fault.value, top.hop.value) == (fault.kind.value, fault.hop)
     assert top.share > 0.95
@@ -48,7 +48,7 @@ def test_points_stamped_off_the_detection_are_named_in_the_notes() -> None:
     scene = generate(SceneSpec(seed=3, duration_s=6.0, evidence="hops", faults=(MISSING,)))
     points = scene.timeline.points
     shifted = dataclasses.replace(points, stamp_ns=points.stamp_ns + 5_000_000)  # stamped with now(), 5 ms late
-    result = attribute(scene.timeline.replace(points=shifted), scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline.replace(points=shifted), scene.chain, bootstrap=0).attributed()
     assert any("/debug/point_world" in n and "5.0 ms" in n for n in result.notes)
     assert result.metric == "static_spread"  # the fallback is said, not silent
 
@@ -66,7 +66,8 @@ def test_two_detections_per_image_match_their_own_points() -> None:
                          (PointRole.HOP_WORLD, clean.p_world)):
         base = timeline.points.with_role(role)
         extra.append(dataclasses.replace(base, xyz=values[n:]))
-    result = attribute(both.replace(points=PointTable.concat([timeline.points, *extra])), scene.chain, bootstrap=0)
+    both = both.replace(points=PointTable.concat([timeline.points, *extra]))
+    result = pipeline.run(both, scene.chain, bootstrap=0).attributed()
     assert result.findings == ()
     assert result.error_summary()["median"] < 1e-9
     assert any("share a stamp" in note for note in result.notes)

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from framechain.analysis.verdict.attribute import AnalysisError, attribute
+from framechain import pipeline
+from framechain.analysis.verdict.attribute import AnalysisError
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
-from framechain.pipeline import attribute_log, load_log
+from framechain.pipeline import attribute_log
 from tests.helpers.realdata import ARUCO_IMAGES_BAG, STAIRS_BAG
 from tests.helpers.stairs import recorded_attribution, stairs_chain
 
@@ -28,7 +29,7 @@ def test_bearing_only_agrees_with_the_sized_run_on_the_mount(realdata: Path) -> 
     inverted mount is a small part of the spread, with depth or without."""
     sized = recorded_attribution(realdata)
     rays_chain = _without_sizes(stairs_chain(realdata))
-    rays = attribute(load_log(realdata / STAIRS_BAG, rays_chain).timeline, rays_chain, bootstrap=0)
+    rays = pipeline.run(realdata / STAIRS_BAG, rays_chain, bootstrap=0).attributed()
     assert any(n.startswith("bearing only") for n in rays.notes)
     assert rays.counts()["replayed"] == 1274
     sized_inverted = [f for f in sized.findings if f.fault == Fault.INVERTED_TRANSFORM]
@@ -43,19 +44,18 @@ def test_bearing_only_agrees_with_the_sized_run_on_the_mount(realdata: Path) -> 
     assert "rays" in rays_inverted[0].evidence
     # With the mount as written the rays meet no better with it inverted.
     written = _without_sizes(stairs_chain(realdata, as_tagslam_applies_it=False))
-    other = attribute(load_log(realdata / STAIRS_BAG, written).timeline, written, bootstrap=0)
+    other = pipeline.run(realdata / STAIRS_BAG, written, bootstrap=0).attributed()
     assert not [f for f in other.findings if f.fault == Fault.INVERTED_TRANSFORM]
 
 
 def test_tags_without_a_size_beside_sized_ones_are_rejected_as_no_tag_size(realdata: Path) -> None:
     chain = _without_sizes(stairs_chain(realdata), {str(i): 0.16 for i in range(1, 11)})  # no default
-    run = load_log(realdata / STAIRS_BAG, chain)
-    result = attribute(run.timeline, chain, bootstrap=0)
-    counts = result.counts()
+    made = pipeline.run(realdata / STAIRS_BAG, chain, bootstrap=0)
+    counts = made.attributed().counts()
     assert counts["total"] == 1274
     assert counts["rejected"] == {"no_tag_size": 952}
     assert counts["replayed"] == 322
-    notes = " ".join(run.notes)
+    notes = " ".join(made.notes)
     assert "952 detections rejected: no size for tags" in notes
     assert "bearings only" not in notes
 

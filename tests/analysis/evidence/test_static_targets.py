@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.evidence.static import StaticTargetError, fit_static_points, intersect_rays, static_groups
-from framechain.analysis.verdict.attribute import AnalysisError, attribute
+from framechain import pipeline
+from framechain.analysis.evidence.static import fit_static_points, intersect_rays, static_groups
+from framechain.analysis.verdict.attribute import AnalysisError, Unattributed
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
@@ -178,7 +179,7 @@ def test_windows_split_labels_and_drop_sparse_objects() -> None:
 # -- attribution ----------------------------------------------------------------------------------
 def test_each_label_is_its_own_static_object() -> None:
     scene = make_scene()
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     world = result.replay.p_world[result.replay.replayed]
     global_spread = np.median(np.linalg.norm(world - world.mean(axis=0), axis=1))
     assert global_spread > 0.5  # all tags as one object: metres apart
@@ -195,7 +196,7 @@ def test_each_label_is_its_own_static_object() -> None:
 @pytest.mark.parametrize("offset_s", [0.5, -0.35])
 def test_stamp_offset_found_over_the_whole_range(offset_s: float, depth: bool) -> None:
     scene = make_scene(offset_s=offset_s, depth=depth, duration_s=30.0 if depth else 20.0)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     assert result.findings, result.notes
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.LATENCY, "body_to_world"), [f.model for f in result.findings]
@@ -219,7 +220,7 @@ def test_mount_rotation_seen_from_rays_alone() -> None:
         transforms.take(np.flatnonzero(~transforms.is_static)),
         TransformTable.from_rows("rig", "cam_optical", [0], MOUNT_XYZ, recorded.as_quat(), is_static=True),
     ])
-    result = attribute(scene.timeline.replace(transforms=wrong_mount), scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline.replace(transforms=wrong_mount), scene.chain, bootstrap=0).attributed()
     assert [f.fault for f in result.findings] == [Fault.ROTATION_ERROR]
     estimate = result.findings[0].estimate
     assert abs(estimate.angle_deg - 3.0) < 0.2  # type: ignore[union-attr]
@@ -231,7 +232,7 @@ def test_offset_near_the_ends_of_the_odometry() -> None:
     last detections out of it, so those are left out of the evidence (said in a note) instead of
     counting against the true offset."""
     scene = make_scene(offset_s=0.5, odom_margin_s=0.05)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     assert [f.fault for f in result.findings] == [Fault.LATENCY]
     assert abs(result.findings[0].estimate.offset_s - 0.5) < 0.01  # type: ignore[union-attr]
     stamps = scene.timeline.observations.stamp_ns
@@ -245,7 +246,7 @@ def test_offset_near_the_ends_of_the_odometry() -> None:
 @pytest.mark.parametrize("depth", [True, False], ids=["depth", "bearing_only"])
 def test_slow_odometry_drift_is_no_fault(depth: bool) -> None:
     scene = make_scene(drift_m_per_s=0.02, duration_s=40.0 if depth else 25.0, depth=depth)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     world = result.replay.p_world[result.replay.replayed]
     labels = _labels_of_replayed(result)
     assert [f.model for f in result.findings] == []
@@ -254,7 +255,7 @@ def test_slow_odometry_drift_is_no_fault(depth: bool) -> None:
         tag = world[labels == "1"]
         assert np.linalg.norm(np.ptp(tag, axis=0)) > 0.4
         whole = make_scene(drift_m_per_s=0.02, duration_s=40.0, evidence={"static_window_s": 1000})
-        assert attribute(whole.timeline, whole.chain, bootstrap=0).error_summary()["median"] > 0.02
+        assert pipeline.run(whole.timeline, whole.chain, bootstrap=0).attributed().error_summary()["median"] > 0.02
 
 
 def test_ignored_label_drops_a_moving_tag() -> None:
@@ -264,10 +265,10 @@ def test_ignored_label_drops_a_moving_tag() -> None:
         return {str(k): float(np.nanmedian(errors[labels == k])) for k in np.unique(labels)}
 
     moving = make_scene(moving_tag=True, duration_s=20.0)
-    spread = attribute(moving.timeline, moving.chain, bootstrap=0)
+    spread = pipeline.run(moving.timeline, moving.chain, bootstrap=0).attributed()
     assert per_label_error(spread)[MOVING_TAG] > 0.02  # it moves: its points spread
     ignored = make_scene(moving_tag=True, duration_s=20.0, evidence={"ignore_labels": [int(MOVING_TAG)]})
-    result = attribute(ignored.timeline, ignored.chain, bootstrap=0)
+    result = pipeline.run(ignored.timeline, ignored.chain, bootstrap=0).attributed()
     n_moving = int((ignored.timeline.observations.label == MOVING_TAG).sum())
     counts = result.counts()
     assert counts["rejected"] == {"ignored_label": n_moving}
@@ -301,7 +302,9 @@ def test_no_object_seen_often_enough_says_so() -> None:
     assert intersect_rays(np.zeros((0, 3)), np.zeros((0, 3)), groups.take(np.zeros(0, dtype=np.int64))).shape == (0, 3)
     scene = make_scene(duration_s=20.0)
     chain = replace(scene.chain, evidence=replace(scene.chain.evidence, static_window_s=1e-6))
+    made = pipeline.run(scene.timeline, chain, bootstrap=0)
+    assert made.not_attributed is not None
+    assert made.not_attributed.reason is Unattributed.STATIC_TARGET  # the static objective's error, said as it is
     with pytest.raises(AnalysisError, match=r"no object seen at least 3 times in one 1e-06 s window") as err:
-        attribute(scene.timeline, chain, bootstrap=0)
-    assert isinstance(err.value.__cause__, StaticTargetError)
+        made.attributed()
     assert "at most 1 sighting" in str(err.value)

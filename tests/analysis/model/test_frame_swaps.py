@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from framechain import pipeline
 from framechain.analysis.model.chain import ChainInputs, Perturbation, evaluate
 from framechain.analysis.model.estimates import estimate_to_json
 from framechain.analysis.model.frame_swaps import (
@@ -19,7 +20,6 @@ from framechain.analysis.model.frame_swaps import (
     camera_swap_fault,
     is_signed_permutation,
 )
-from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainFrames
 from framechain.geometry.camera import CameraModel
@@ -142,7 +142,7 @@ def _swap_scene(evidence: str, fault: InjectedFault, seed: int = 5) -> Scene:
 @pytest.mark.parametrize("evidence", ["hops", "target"])
 def test_the_skipped_optical_edge_is_an_axis_flip_naming_the_frame(evidence: str) -> None:
     scene = _swap_scene(evidence, InjectedFault(Fault.AXIS_FLIP, "robot", {"used": "camera_link"}))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.AXIS_FLIP, "camera_to_body")
     assert estimate_to_json(top.estimate)["used"] == "camera_link"
@@ -156,7 +156,7 @@ def test_the_skipped_optical_edge_is_an_axis_flip_naming_the_frame(evidence: str
 @pytest.mark.parametrize("evidence", ["hops", "target"])
 def test_the_footprint_looked_up_for_the_base(evidence: str) -> None:
     scene = _swap_scene(evidence, InjectedFault(Fault.WRONG_WORLD_FRAME, "robot", {"used": "base_footprint"}))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.WRONG_WORLD_FRAME, "body_to_world")
     assert estimate_to_json(top.estimate)["used"] == "base_footprint"
@@ -168,7 +168,7 @@ def test_detections_that_name_the_link_are_an_axis_flip_in_the_data(evidence: st
     # The recorded detections say camera_link; their pixels are optical: the data skips the optical edge.
     scene = _swap_scene(evidence, InjectedFault(Fault.AXIS_FLIP, "data", {"used": "camera_link"}))
     assert scene.chain.frames.camera == "camera_link"
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.AXIS_FLIP, "camera_to_body")
     estimate = estimate_to_json(top.estimate)

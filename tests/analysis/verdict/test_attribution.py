@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from framechain import pipeline
 from framechain.analysis.model.estimates import estimate_to_json
-from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
 
@@ -66,7 +66,7 @@ def test_robot_fault_found_from_logged_points(level: str, kind: Fault, params: d
                                               value: float) -> None:
     fault = InjectedFault(kind, "robot", params)
     scene = _scene(level, (fault,))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     _check_top(result, fault, key, value)
     assert result.metric == ("logged_hops" if level == "hops" else "target")
 
@@ -78,7 +78,7 @@ def test_data_fault_found_against_reference_or_spread(level: str, kind: Fault, p
                                                       key: str, value: float) -> None:
     fault = InjectedFault(kind, "data", params)
     scene = _scene(level, (fault,))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     _check_top(result, fault, key, value)
 
 
@@ -86,12 +86,12 @@ def test_data_fault_found_against_reference_or_spread(level: str, kind: Fault, p
 def test_recorded_axis_flip_and_inverted_mount(level: str) -> None:
     flip = InjectedFault(Fault.AXIS_FLIP, "data", {"permutation": [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]})
     scene = _scene(level, (flip,))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     assert (result.findings[0].fault, estimate_to_json(result.findings[0].estimate)["permutation"]) == (
         Fault.AXIS_FLIP, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]])
     inverted = InjectedFault(Fault.INVERTED_TRANSFORM, "data", {"hop": "camera_to_body"})
     scene = _scene(level, (inverted,))
-    top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
+    top = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed().findings[0]
     assert top.fault == Fault.INVERTED_TRANSFORM
     assert estimate_to_json(top.estimate)["edge"] == ["base_link", "camera_link"]
 
@@ -100,7 +100,7 @@ def test_recorded_axis_flip_and_inverted_mount(level: str) -> None:
 def test_clean_log_has_no_finding(level: str) -> None:
     for seed in (1, 2):
         scene = _scene(level, (), seed=seed)
-        result = attribute(scene.timeline, scene.chain, bootstrap=0)
+        result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
         assert [f for f in result.findings if f.share > 0.1] == []
         assert result.verdict.startswith("No fault beyond noise")
 
@@ -111,7 +111,7 @@ def test_combined_missing_rotation_and_latency(level: str) -> None:
     faults = (InjectedFault(Fault.MISSING_ROTATION, where),
               InjectedFault(Fault.LATENCY, where, {"offset_s": -0.03}))
     scene = _scene(level, faults)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     by_fault = {f.fault: f for f in result.findings}
     assert set(by_fault) == {Fault.MISSING_ROTATION, Fault.LATENCY}
     assert abs(estimate_to_json(by_fault[Fault.MISSING_ROTATION].estimate)["angle_deg"] - 30.0) < 0.5
@@ -126,7 +126,7 @@ def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
     faults = (InjectedFault(Fault.DEPTH_SCALE, "robot", {"factor": 0.9}),
               InjectedFault(Fault.LATENCY, "robot", {"offset_s": 0.02}))
     scene = _scene("target", faults)
-    findings = attribute(scene.timeline, scene.chain, bootstrap=0).findings
+    findings = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed().findings
     found = {f.fault: estimate_to_json(f.estimate) for f in findings}
     assert abs(found[Fault.DEPTH_SCALE]["factor"] - 0.9) < 0.009
     assert abs(found[Fault.LATENCY]["offset_s"] - 0.02) < 0.002
@@ -134,7 +134,7 @@ def test_latency_and_depth_scale_in_one_pass_from_target() -> None:
 
 def test_missing_rotation_fix_names_the_corrected_mount() -> None:
     scene = _scene("hops", (InjectedFault(Fault.MISSING_ROTATION, "robot"),))
-    top = attribute(scene.timeline, scene.chain, bootstrap=0).findings[0]
+    top = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed().findings[0]
     # The mount is pitched 30 deg about y: rpy = (0, 0.5236, 0) rad, independent of the code under test.
     rpy = Rotation.from_euler("y", 30, degrees=True).as_euler("xyz")
     assert f'rpy="{rpy[0]:.5f} {rpy[1]:.5f} {rpy[2]:.5f}"' in top.fix
@@ -145,7 +145,7 @@ def test_missing_rotation_fix_names_the_corrected_mount() -> None:
 def test_bootstrap_interval_covers_the_injected_latency() -> None:
     fault = InjectedFault(Fault.LATENCY, "data", {"offset_s": -0.03})
     scene = _scene("reference", (fault,))
-    top = attribute(scene.timeline, scene.chain, bootstrap=20, seed=5).findings[0]
+    top = pipeline.run(scene.timeline, scene.chain, bootstrap=20, seed=5).attributed().findings[0]
     lo, hi = top.interval["offset_s"]
     assert lo <= -0.03 <= hi
     assert hi - lo < 0.01
@@ -153,7 +153,7 @@ def test_bootstrap_interval_covers_the_injected_latency() -> None:
 
 def test_attribution_json_contract() -> None:
     scene = _scene("hops", (InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),))
-    doc = attribute(scene.timeline, scene.chain, bootstrap=0).to_json()
+    doc = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed().to_json()
     assert doc["schema"] == "framechain/attribution@1"
     assert set(doc["frames"]) == {"camera", "body", "world"}
     obs = doc["observations"]
@@ -172,7 +172,7 @@ def test_attribution_json_contract() -> None:
 
 def test_hop_summary_gaps_and_attribution() -> None:
     scene = _scene("reference", (InjectedFault(Fault.LATENCY, "data", {"offset_s": -0.03}),))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     rows = {r["hop"]: r for r in result.to_json()["hops"]}
     assert list(rows) == ["pixel_to_camera", "camera_to_body", "body_to_world"]
     # Independent: per observation, the largest distance to the nearest sample over the dynamic edges

@@ -17,14 +17,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from framechain import pipeline
 from framechain.analysis.evidence.replayed import replay_chain
 from framechain.analysis.model.chain import ChainInputs, Perturbation, evaluate
-from framechain.analysis.verdict.attribute import attribute
 from framechain.analysis.verdict.bounds import observations_for
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig, ChainEvidence
 from framechain.geometry.camera import CameraModel
-from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
 from tests.helpers.realdata import ARUCO_IMAGES_BAG
 from tests.helpers.stairs import recorded_attribution, restamped_bag, stairs_chain
@@ -72,7 +71,7 @@ def test_a_fixed_camera_over_a_static_target_cannot_show_latency_or_its_mount() 
     assert np.linalg.norm(poses[0][1] - poses[1][1]) < 1e-3
     assert (poses[0][0].inv() * poses[1][0]).magnitude() < 1e-3
 
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     bounds = _bounds(result)
     for key in (("latency", "body_to_world"), ("rotation_error", "camera_to_body"),
                 ("translation_error", "camera_to_body"), ("depth_scale", "pixel_to_camera"),
@@ -87,7 +86,8 @@ def test_a_fixed_camera_over_a_static_target_cannot_show_latency_or_its_mount() 
             "targets)") in result.verdict
     # The same turn seen from a moving robot is found, at its size.
     moving = generate(SceneSpec(seed=4, duration_s=6.0, evidence="static", faults=(turned,)))
-    found = _finding(attribute(moving.timeline, moving.chain, bootstrap=0), "rotation_error", "camera_to_body")
+    found = _finding(pipeline.run(moving.timeline, moving.chain, bootstrap=0).attributed(), "rotation_error",
+                     "camera_to_body")
     assert found is not None
     assert found["estimate"]["angle_deg"] == pytest.approx(5.0, abs=0.5)
 
@@ -95,7 +95,7 @@ def test_a_fixed_camera_over_a_static_target_cannot_show_latency_or_its_mount() 
 def test_without_evidence_nothing_could_be_checked() -> None:
     scene = generate(SceneSpec(seed=2, duration_s=4.0, evidence="static"))
     chain = replace(scene.chain, evidence=ChainEvidence())
-    doc = attribute(scene.timeline, chain, bootstrap=0).to_json()
+    doc = pipeline.run(scene.timeline, chain, bootstrap=0).attributed().to_json()
     assert doc["bounds"]
     assert all(b["observable"] is False and b["min_detectable"] is None for b in doc["bounds"])
     assert {b["fault"] for b in doc["bounds"]} == {"latency", "rotation_error", "translation_error", "depth_scale",
@@ -131,7 +131,7 @@ def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(le
     no finding at all."""
     spec = SceneSpec(seed=seed, duration_s=6.0, evidence=level)  # type: ignore[arg-type]
     clean = generate(spec)
-    bounds = _bounds(attribute(clean.timeline, clean.chain, bootstrap=0))
+    bounds = _bounds(pipeline.run(clean.timeline, clean.chain, bootstrap=0).attributed())
     observable = {k: b for k, b in bounds.items() if b["observable"]}
     assert {k[0] for k in observable} == {"latency", "rotation_error", "translation_error", "depth_scale",
                                           "intrinsics"}
@@ -146,7 +146,8 @@ def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(le
         for injected, sign, actionable in cases:
             fault = _scene_fault(family, where, injected, sign, bound.get("axis"), spec.mount_pitch_deg)
             scene = generate(replace(spec, faults=(fault,)))
-            finding = _finding(attribute(scene.timeline, scene.chain, bootstrap=0), family, hop, actionable=actionable)
+            result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
+            finding = _finding(result, family, hop, actionable=actionable)
             if injected > size:
                 assert finding is not None, (family, injected)
                 if family == "latency":  # the estimate within half the bound of the truth
@@ -179,7 +180,7 @@ def test_stairs_odometry_restamped_by_twice_the_bound_is_found_within_half_of_it
     shift_s = factor * stairs_bound
     bag = restamped_bag(realdata, tmp_path / "restamped.bag", round(shift_s * 1e9))
     chain = stairs_chain(realdata)
-    finding = _finding(attribute(load_log(bag, chain).timeline, chain, bootstrap=0), "latency", "body_to_world",
+    finding = _finding(pipeline.run(bag, chain, bootstrap=0).attributed(), "latency", "body_to_world",
                        actionable=True)
     if factor == 2.0:
         # Odometry stamped late by the shift: the pose that fits a detection at tau is the one stamped tau + shift.
@@ -221,7 +222,7 @@ def test_one_image_of_markers_cannot_show_a_latency(realdata: Path) -> None:
                    {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
         "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
     })
-    result = attribute(load_log(realdata / ARUCO_IMAGES_BAG, chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(realdata / ARUCO_IMAGES_BAG, chain, bootstrap=0).attributed()
     assert result.counts()["replayed"] == 7
     bounds = _bounds(result)
     assert bounds[("latency", "body_to_world")]["observable"] is False
@@ -276,7 +277,7 @@ def test_a_real_fixed_camera_over_static_markers_cannot_show_latency_or_its_moun
         "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "static_target": True},
     })
     bag = _held_bag(realdata, tmp_path / "held.bag", 12)
-    result = attribute(load_log(bag, chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(bag, chain, bootstrap=0).attributed()
     assert result.metric == "static_spread"
     assert result.counts()["replayed"] == 7 * 12  # seven markers in every frame
     bounds = _bounds(result)

@@ -10,9 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from framechain import pipeline
 from framechain.analysis.fit.shares import WEAK_CONFIDENCE, weakened
 from framechain.analysis.model.estimates import LatencyEstimate, RotationEstimate, ScaleEstimate
-from framechain.analysis.verdict.attribute import attribute
 from framechain.analysis.verdict.checks import Bound, bounds_sentence
 from framechain.analysis.verdict.curves import label_table
 from framechain.analysis.verdict.findings import Finding
@@ -115,7 +115,7 @@ def test_the_latency_curve_dips_at_the_truth_and_measures_what_the_finding_share
     offset, and the curve at no offset less the curve at the estimate is the finding's millimetres."""
     latency = InjectedFault(Fault.LATENCY, "data", {"offset_s": 0.030})
     scene = generate(SceneSpec(seed=6, duration_s=6.0, evidence="static", faults=(latency,)))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     (finding,) = result.findings
     assert finding.fault == Fault.LATENCY
     curve = next(c for c in result.curves if c.fault == Fault.LATENCY)
@@ -154,7 +154,7 @@ def test_a_long_log_s_curves_are_measured_on_evenly_spread_observations(monkeypa
         return out
 
     monkeypatch.setattr(curves, "subsample", spy)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     assert len(result.inputs) > 3 * 50  # the curve is measured on a third of the observations or fewer
     [(given, rows)] = measured  # one stage's curves, measured on 50 of its observations
     assert rows == 50 < given
@@ -192,11 +192,11 @@ def test_a_moving_tag_on_the_stairs_is_named_and_ignoring_it_clears_the_table(re
     swing = 1.0 + 0.05 * np.sin(2 * np.pi * (obs.stamp_ns - obs.stamp_ns.min()) * 1e-9 / 3.0)
     moved = timeline.replace(observations=replace(obs, depth_m=np.where(obs.label == "22", obs.depth_m * swing,
                                                                         obs.depth_m)))
-    table = attribute(moved, chain, bootstrap=0).labels
+    table = pipeline.run(moved, chain, bootstrap=0).attributed().labels
     assert table.suggest_ignore == ("22",)
     assert table.ignore_line() == "evidence.ignore_labels: [22]"
     assert next(r for r in table.rows if r.label == "22").spread_m > 5 * (table.overall_m or 0.0)
     ignoring = replace(chain, evidence=replace(chain.evidence, ignore_labels=("22",)))
-    again = attribute(moved, ignoring, bootstrap=0).labels
+    again = pipeline.run(moved, ignoring, bootstrap=0).attributed().labels
     assert "22" not in {r.label for r in again.rows}
     assert again.suggest_ignore == ()

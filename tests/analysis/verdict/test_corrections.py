@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from framechain.analysis.verdict.attribute import attribute
+from framechain import pipeline
 from framechain.analysis.verdict.corrections import NothingToCorrectError, apply_corrections
 from framechain.catalogue import Fault
 from framechain.sim.scene import InjectedFault, SceneSpec, generate
@@ -17,9 +17,9 @@ def test_three_recorded_faults_corrected_then_clean() -> None:
               InjectedFault(Fault.DEPTH_SCALE, "data", {"factor": 1.05}))
     scene = generate(SceneSpec(seed=4, duration_s=6.0, evidence="reference", depth_images=True, width=320,
                                height=240, focal_px=300.0, faults=faults))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     fixed = apply_corrections(scene.timeline, result)
-    again = attribute(fixed, scene.chain, bootstrap=0)
+    again = pipeline.run(fixed, scene.chain, bootstrap=0).attributed()
     assert again.findings == ()
     # The corrected chain puts the object where the generator did, within the scene's noise.
     replayed = again.replay.p_world[again.replay.replayed]
@@ -34,4 +34,4 @@ def test_robot_side_findings_are_not_applied_to_the_log() -> None:
     scene = generate(SceneSpec(seed=4, duration_s=4.0, evidence="target",
                                faults=(InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),)))
     with pytest.raises(NothingToCorrectError):
-        apply_corrections(scene.timeline, attribute(scene.timeline, scene.chain, bootstrap=0))
+        apply_corrections(scene.timeline, pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed())

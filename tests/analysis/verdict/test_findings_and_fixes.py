@@ -12,12 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from framechain import pipeline
 from framechain.analysis.model.estimates import ScaleEstimate
-from framechain.analysis.verdict.attribute import attribute
 from framechain.analysis.verdict.fixes import FixContext, fix_for
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
-from framechain.pipeline import load_log
 from framechain.sim.scene import TOPICS, InjectedFault, SceneSpec, generate
 from tests.helpers.realdata import ARUCO_IMAGES_BAG
 
@@ -25,7 +24,7 @@ from tests.helpers.realdata import ARUCO_IMAGES_BAG
 def _reference_run(fault: InjectedFault, *, depth_images: bool = False) -> object:
     spec = SceneSpec(seed=3, duration_s=4.0, evidence="reference", faults=(fault,), depth_images=depth_images)
     scene = generate(spec)
-    return attribute(scene.timeline, scene.chain, bootstrap=0)
+    return pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
 
 
 def test_intrinsics_fix_names_the_recorded_camera_info_topic() -> None:
@@ -93,7 +92,7 @@ def test_findings_that_explain_nothing_are_notes_on_a_real_log(realdata: Path) -
                    {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
         "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
     })
-    result = attribute(load_log(bag, chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(bag, chain, bootstrap=0).attributed()
     assert all(f.share > 0 and f.error_m > 0 for f in result.findings), [(f.model, f.share) for f in result.findings]
     dropped = [n for n in result.notes if "is no finding" in n]
     assert any(n.startswith("depth_scale x") for n in dropped), result.notes

@@ -7,8 +7,8 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from framechain import pipeline
 from framechain.analysis.model.estimates import estimate_to_json
-from framechain.analysis.verdict.attribute import attribute
 from framechain.catalogue import Fault
 from framechain.sim.scene import START_NS, InjectedFault, SceneSpec, generate
 from framechain.timeline import TransformTable
@@ -26,7 +26,7 @@ def test_mast_mount_fix_names_mast_to_camera_link() -> None:
     on_mast = TransformTable.from_rows("mast", "camera_link", [START_NS], [tf.translation[i] - [0.0, 0.0, 1.0]],
                                        [tf.quat_xyzw[i]], is_static=True, source="/tf_static")
     timeline = scene.timeline.replace(transforms=TransformTable.concat([tf.take(~mount), mast, on_mast]))
-    top = attribute(timeline, scene.chain, bootstrap=0).findings[0]
+    top = pipeline.run(timeline, scene.chain, bootstrap=0).attributed().findings[0]
     assert top.fault == Fault.ROTATION_ERROR
     assert abs(estimate_to_json(top.estimate)["angle_deg"] - 3.0) < 0.5
     assert "--frame-id mast --child-frame-id camera_link" in top.fix

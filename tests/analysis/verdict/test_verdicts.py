@@ -16,13 +16,12 @@ import numpy as np
 import pytest
 import yaml
 
+from framechain import pipeline
 from framechain.analysis.fit.selection import near_bound
 from framechain.analysis.fit.shares import undetermined_because
 from framechain.analysis.model.faults import models_for
-from framechain.analysis.verdict.attribute import attribute
 from framechain.analysis.verdict.checks import Undetermined
 from framechain.catalogue import Fault
-from framechain.pipeline import load_log
 from framechain.sim import InjectedFault, SceneSpec, generate
 from framechain.timeline import PointRole
 from tests.helpers.realdata import STAIRS, STAIRS_BAG
@@ -65,7 +64,7 @@ def test_the_demo_s_8_mm_latency_beside_a_1_3_m_rotation_stays_a_finding() -> No
               InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}))
     scene = generate(SceneSpec(seed=7, duration_s=8.0, evidence="hops", faults=faults))
     chain = scene.chain
-    result = attribute(scene.timeline, chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, chain, bootstrap=0).attributed()
     by_fault = {f.fault: f for f in result.findings}
     rotation, latency = by_fault[Fault.MISSING_ROTATION], by_fault[Fault.LATENCY]
     assert rotation.error_m > 1.0
@@ -75,7 +74,7 @@ def test_the_demo_s_8_mm_latency_beside_a_1_3_m_rotation_stays_a_finding() -> No
     assert latency.fix.startswith("Look up map <- base_link at the detection's header.stamp")
     assert not result.undetermined
     # With a 2 cm tolerance the latency is a note, and the pose latency bound is at least where its effect is 2 cm.
-    strict = attribute(scene.timeline, replace(chain, tolerance_m=0.02), bootstrap=0)
+    strict = pipeline.run(scene.timeline, replace(chain, tolerance_m=0.02), bootstrap=0).attributed()
     noted = next(f for f in strict.findings if f.fault == Fault.LATENCY)
     assert noted.strength == "note"
     assert "no action needed, under the 2 cm tolerance" in noted.fix
@@ -93,7 +92,7 @@ def test_an_error_no_fault_model_explains_is_inconclusive_not_clean() -> None:
     xyz = points.xyz.copy()
     xyz[world] += np.random.default_rng(5).normal(0.0, 0.03, (int(world.sum()), 3))
     timeline = replace(scene.timeline, points=replace(points, xyz=xyz))
-    result = attribute(timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(timeline, scene.chain, bootstrap=0).attributed()
     assert result.verdict.startswith("Inconclusive: the error is undetermined (")
     assert "no fault" not in result.verdict.lower()
     assert "against the robot's logged points is left unexplained" in result.verdict
@@ -149,7 +148,7 @@ def test_a_mount_moved_5_cm_is_a_translation_error_within_a_centimetre(evidence:
     moved = InjectedFault(Fault.TRANSLATION_ERROR, where, {"offset_m": MOVED_M.tolist()})  # type: ignore[arg-type]
     spec = SceneSpec(seed=3, duration_s=6.0, evidence=evidence, faults=(moved,))  # type: ignore[arg-type]
     scene = generate(spec)
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     top = result.findings[0]
     assert (top.fault, top.hop.value) == (Fault.TRANSLATION_ERROR, "camera_to_body"), result.verdict
     assert top.actionable
@@ -165,7 +164,7 @@ def test_a_mount_moved_5_cm_is_a_translation_error_within_a_centimetre(evidence:
 
 def test_a_fixed_camera_over_static_tags_lists_the_mount_s_translation_as_not_observable() -> None:
     scene = generate(SceneSpec(seed=4, duration_s=6.0, evidence="static", fixed_camera=True))
-    result = attribute(scene.timeline, scene.chain, bootstrap=0)
+    result = pipeline.run(scene.timeline, scene.chain, bootstrap=0).attributed()
     bound = next(b for b in result.bounds if b.fault == Fault.TRANSLATION_ERROR)
     assert not bound.observable
     assert "the camera does not move relative to the static targets" in bound.why
@@ -178,7 +177,7 @@ def test_stairs_tags_declared_at_the_default_size_are_named_wrongly_sized(realda
     camera. They are named wrongly sized (not moving, not to be ignored), each with the size that fits."""
     chain = stairs_chain(realdata)
     chain = replace(chain, evidence=replace(chain.evidence, tag_size_m=0.16))
-    result = attribute(load_log(realdata / STAIRS_BAG, chain).timeline, chain, bootstrap=0)
+    result = pipeline.run(realdata / STAIRS_BAG, chain, bootstrap=0).attributed()
     bodies = yaml.safe_load((realdata / STAIRS / "tagslam.yaml").read_text())["bodies"]
     sized = {str(t["id"]): float(t["size"]) for t in bodies[0]["house"]["tags"] if float(t["size"]) != 0.16}
     rows = {r.label: r for r in result.labels.rows}

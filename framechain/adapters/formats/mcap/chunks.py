@@ -19,7 +19,10 @@ import struct
 import threading
 from collections.abc import Generator, Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
 
 RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
 CHUNK_HEAD = struct.Struct("<QQQII")  # start, end, uncompressed size, uncompressed CRC, compression name length
@@ -169,3 +172,50 @@ def _spans(chunks: Sequence[Any]) -> Iterator[list[Any]]:
         span.append(ci)
     if span:
         yield span
+
+
+# -- message records in a decompressed chunk ---------------------------------------------------
+class RawMessage(NamedTuple):
+    """A message record inside a decompressed chunk (the fields a reader uses)."""
+
+    channel_id: int
+    log_time: int
+    data: memoryview
+
+
+MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+OPCODE_MESSAGE = 0x05
+
+
+def message_offsets(data: bytes, cids: set[int]) -> npt.NDArray[np.int64]:
+    """(log time, record offset) of the channels' messages in a decompressed chunk, shape (n, 2)."""
+    rows: list[tuple[int, int]] = []
+    pos, end = 0, len(data)
+    while pos + RECORD_HEAD.size <= end:
+        opcode, length = RECORD_HEAD.unpack_from(data, pos)
+        body = pos + RECORD_HEAD.size
+        if opcode == OPCODE_MESSAGE and body + MESSAGE_HEAD.size <= end:
+            cid, _, log_time, _ = MESSAGE_HEAD.unpack_from(data, body)
+            if cid in cids:
+                rows.append((log_time, pos))
+        pos = body + length
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 2)
+
+
+def chunk_messages(data: bytes, wanted: set[int]) -> Iterator[RawMessage]:
+    """The wanted channels' message records of a decompressed chunk, in order."""
+    view = memoryview(data)
+    unpack_record = RECORD_HEAD.unpack_from
+    unpack_message = MESSAGE_HEAD.unpack_from
+    head, msg_head = RECORD_HEAD.size, MESSAGE_HEAD.size
+    pos, end = 0, len(data)
+    while pos + head <= end:
+        opcode, length = unpack_record(data, pos)
+        body = pos + head
+        if body + length > end:
+            raise ValueError(f"a record of {length} bytes runs past the end of its chunk")
+        if opcode == OPCODE_MESSAGE:
+            cid, _, log_time, _ = unpack_message(data, body)
+            if cid in wanted:
+                yield RawMessage(cid, log_time, view[body + msg_head : body + length])
+        pos = body + length

@@ -22,45 +22,35 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaError
 from framechain.adapters.formats.decode_loop import Batched, DecodeLoop, ProgressFn, Route
-from framechain.adapters.formats.decoders import (
-    Decoder,
-    DecoderBuildError,
-    json_decoder,
-    protobuf_decoder,
-    ros_decoder,
-    ros_typename,
-    typestore_from_idl,
-    typestore_from_msg,
-)
+from framechain.adapters.formats.decoders import Decoder, DecoderBuildError
 from framechain.adapters.formats.fast_cdr import FEEDERS
+from framechain.adapters.formats.mcap.channels import Channel, RosType, channel_decoder, undecodable
+from framechain.adapters.formats.mcap.chunks import (
+    MESSAGE_HEAD,
+    OPCODE_MESSAGE,
+    ChunkDecompressor,
+    RawMessage,
+    chunk_messages,
+    decompressed_ahead,
+    message_offsets,
+)
 from framechain.adapters.formats.mcap.chunks import RECORD_HEAD as _RECORD_HEAD
-from framechain.adapters.formats.mcap.chunks import ChunkDecompressor, decompressed_ahead
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, SchemaRecord
 from framechain.adapters.formats.mcap.summary import read_summary
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
-from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.timeline import LogInfo, TopicInfo
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
-
-
-@dataclass
-class _Channel:
-    id: int
-    topic: str
-    encoding: str
-    schema_name: str
-    schema_encoding: str
-    schema_data: bytes
 
 
 class McapLog:
@@ -83,7 +73,7 @@ class McapLog:
         self._f.seek(0)
         self.summary: Any = None
         self.truncated = False
-        self.channels: dict[int, _Channel] = {}
+        self.channels: dict[int, Channel] = {}
         self._counts: Counter[int] = Counter()
         self._first: dict[int, int] = {}
         self._last: dict[int, int] = {}
@@ -101,7 +91,7 @@ class McapLog:
                 self._add_channel(ch, self.summary.schemas.get(ch.schema_id))
         self._decoders: dict[int, Decoder] = {}
         #: Per ROS channel: its typestore, type name (rosbags' spelling) and whether it is ROS 1.
-        self._stores: dict[int, tuple[Any, str, bool]] = {}
+        self._stores: dict[int, RosType] = {}
         self._scanned = False
         self._where: dict[str, _Locations] = {}
         #: The chunk indexes in file order, with their (first, last) log times (built on the first fetch).
@@ -123,11 +113,11 @@ class McapLog:
     def _add_channel(self, ch: Any, schema: Any) -> None:
         """Keep a channel, and say at once when its messages cannot be decoded whatever they hold."""
         if schema is None:
-            channel = _Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
+            channel = Channel(ch.id, ch.topic, ch.message_encoding, "", "", b"")
         else:
-            channel = _Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
+            channel = Channel(ch.id, ch.topic, ch.message_encoding, schema.name, schema.encoding, bytes(schema.data))
         self.channels[ch.id] = channel
-        problem = _undecodable(channel)
+        problem = undecodable(channel)
         if problem:
             note = f"topic {channel.topic}: {problem}; its messages are not read"
             if note not in self.notes:
@@ -170,7 +160,7 @@ class McapLog:
                        salvage=self.salvage.to_dict() if self.salvage is not None else None)
 
     @staticmethod
-    def _msgtype(ch: _Channel) -> str:
+    def _msgtype(ch: Channel) -> str:
         return ch.schema_name or "(no schema)"
 
     # -- decoding -----------------------------------------------------------------------------
@@ -179,31 +169,13 @@ class McapLog:
             return self._decoders[cid]
         ch = self.channels[cid]
         try:
-            dec = self._build_decoder(ch)
+            dec, ros = channel_decoder(ch)
         except DecoderBuildError as err:
             raise SchemaError(self.path, str(err), topic=ch.topic) from err
+        if ros is not None:
+            self._stores[ch.id] = ros
         self._decoders[cid] = dec
         return dec
-
-    def _build_decoder(self, ch: _Channel) -> Decoder:
-        problem = _undecodable(ch)
-        if problem:
-            raise DecoderBuildError(problem)
-        text = ch.schema_data.decode("utf-8", "replace")
-        ros: tuple[Any, bool] | None = None
-        if ch.encoding == "cdr" and ch.schema_encoding == "ros2msg":
-            ros = typestore_from_msg(ch.schema_name, text), False
-        elif ch.encoding == "cdr" and ch.schema_encoding == "ros2idl":
-            ros = typestore_from_idl(text), False
-        elif ch.encoding == "ros1" and ch.schema_encoding == "ros1msg":
-            ros = typestore_from_msg(ch.schema_name, text), True
-        if ros is not None:
-            store, ros1 = ros
-            self._stores[ch.id] = (store, ros_typename(ch.schema_name), ros1)
-            return ros_decoder(store, ch.schema_name, ros1=ros1)
-        if ch.encoding == "protobuf" and ch.schema_encoding == "protobuf":
-            return protobuf_decoder(ch.schema_name, ch.schema_data)
-        return json_decoder()  # the only encoding left that _undecodable lets through
 
     # -- reading ----------------------------------------------------------------------------------
     def read(self, selected: dict[str, Kind], col: Collector, progress: ProgressFn | None = None) -> None:
@@ -242,7 +214,7 @@ class McapLog:
             batched = Batched(store, typename, ros1, feeder)
         return Route(ch.topic, kind, decode, handle, batched)
 
-    def _indexed(self, wanted: set[int]) -> Iterator[_RawMessage]:
+    def _indexed(self, wanted: set[int]) -> Iterator[RawMessage]:
         """The wanted channels' messages, chunk by chunk in file order; each chunk decompressed once, on a
         thread ahead of the decoding (:mod:`.chunks`)."""
         chunks = [ci for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
@@ -251,7 +223,7 @@ class McapLog:
             if err is not None or data is None:
                 self._note_bad_chunk(ci.chunk_start_offset, err or ValueError(), self._index_counts(ci))
                 continue
-            yield from _chunk_messages(data, wanted)
+            yield from chunk_messages(data, wanted)
 
     def _chunk_data(self, ci: Any, *, check_crc: bool = True) -> bytes:
         """The decompressed records of a chunk, checked for damage (an exception when damaged)."""
@@ -352,14 +324,14 @@ class McapLog:
             # (zstd's streaming reader could stop at the frame, but measured 7x slower than one call.)
             self._fetch_chunk = (chunk_offset, self._chunk_data(chunk, check_crc=False))
         data = self._fetch_chunk[1]
-        body = start + _RECORD_HEAD.size + _MESSAGE_HEAD.size
+        body = start + _RECORD_HEAD.size + MESSAGE_HEAD.size
         if body > len(data):
             raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns is past its chunk's end",
                                   topic=topic)
         opcode, length = _RECORD_HEAD.unpack_from(data, start)
-        cid, _, log_time, _ = _MESSAGE_HEAD.unpack_from(data, start + _RECORD_HEAD.size)
+        cid, _, log_time, _ = MESSAGE_HEAD.unpack_from(data, start + _RECORD_HEAD.size)
         end = start + _RECORD_HEAD.size + length
-        if opcode != _OPCODE_MESSAGE or log_time != log_time_ns or end > len(data):
+        if opcode != OPCODE_MESSAGE or log_time != log_time_ns or end > len(data):
             raise CorruptLogError(self.path, f"message at log time {log_time_ns} ns not where its index says",
                                   topic=topic)
         return self.decoder(cid)(memoryview(data)[body:end])
@@ -394,7 +366,7 @@ class McapLog:
         """Offsets in chunk ``ci`` of the channels' messages logged at ``log_time_ns``."""
         if not ci.message_index_offsets:  # written without message indexes: find them in the chunk
             try:
-                found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
+                found = message_offsets(self._chunk_data(ci, check_crc=False), cids)
             except Exception:  # noted when the read met it
                 return np.zeros(0, dtype=np.int64)
             at_time: npt.NDArray[np.int64] = found[found[:, 0] == log_time_ns, 1]
@@ -432,7 +404,7 @@ class McapLog:
         for ci in sorted(self.summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             if not ci.message_index_offsets:  # written without message indexes: find them in the chunk once
                 try:
-                    found = _message_offsets(self._chunk_data(ci, check_crc=False), cids)
+                    found = message_offsets(self._chunk_data(ci, check_crc=False), cids)
                 except Exception:  # noted when the read met it
                     continue
                 times.append(found[:, 0])
@@ -474,65 +446,3 @@ class _Locations:
     log_time_ns: npt.NDArray[np.int64]
     chunk_offset: npt.NDArray[np.int64]
     record_offset: npt.NDArray[np.int64]
-
-
-class _RawMessage(NamedTuple):
-    """A message record inside a decompressed chunk (the fields :meth:`McapLog.read` uses)."""
-
-    channel_id: int
-    log_time: int
-    data: memoryview
-
-
-_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
-_OPCODE_MESSAGE = 0x05
-
-
-def _message_offsets(data: bytes, cids: set[int]) -> npt.NDArray[np.int64]:
-    """(log time, record offset) of the channels' messages in a decompressed chunk, shape (n, 2)."""
-    rows: list[tuple[int, int]] = []
-    pos, end = 0, len(data)
-    while pos + _RECORD_HEAD.size <= end:
-        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-        body = pos + _RECORD_HEAD.size
-        if opcode == _OPCODE_MESSAGE and body + _MESSAGE_HEAD.size <= end:
-            cid, _, log_time, _ = _MESSAGE_HEAD.unpack_from(data, body)
-            if cid in cids:
-                rows.append((log_time, pos))
-        pos = body + length
-    return np.asarray(rows, dtype=np.int64).reshape(-1, 2)
-
-
-def _chunk_messages(data: bytes, wanted: set[int]) -> Iterator[_RawMessage]:
-    """The wanted channels' message records of a decompressed chunk, in order."""
-    view = memoryview(data)
-    unpack_record = _RECORD_HEAD.unpack_from
-    unpack_message = _MESSAGE_HEAD.unpack_from
-    head, msg_head = _RECORD_HEAD.size, _MESSAGE_HEAD.size
-    pos, end = 0, len(data)
-    while pos + head <= end:
-        opcode, length = unpack_record(data, pos)
-        body = pos + head
-        if body + length > end:
-            raise ValueError(f"a record of {length} bytes runs past the end of its chunk")
-        if opcode == _OPCODE_MESSAGE:
-            cid, _, log_time, _ = unpack_message(data, body)
-            if cid in wanted:
-                yield _RawMessage(cid, log_time, view[body + msg_head : body + length])
-        pos = body + length
-
-
-#: (message encoding, schema encoding) pairs with a decoder; JSON needs no schema to be read.
-_DECODABLE = {("cdr", "ros2msg"), ("cdr", "ros2idl"), ("ros1", "ros1msg"), ("protobuf", "protobuf")}
-
-
-def _undecodable(ch: _Channel) -> str:
-    """Why a channel's messages cannot be decoded ('' when they can)."""
-    if ch.encoding == "json":
-        return ""
-    if not ch.schema_name:
-        return f"no schema for message encoding {ch.encoding!r}, so the message type is unknown"
-    if (ch.encoding, ch.schema_encoding) not in _DECODABLE:
-        return (f"message encoding {ch.encoding!r} with schema encoding {ch.schema_encoding!r} ({ch.schema_name}) "
-                "is not supported (cdr/ros2msg, cdr/ros2idl, ros1/ros1msg, protobuf or json)")
-    return ""

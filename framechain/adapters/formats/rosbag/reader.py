@@ -18,7 +18,7 @@ from framechain.adapters.formats.rosbag.salvage_ros2 import Rosbag2Salvage
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
-from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.timeline import LogInfo, TopicInfo
 
 
 def _default_typestore(ros1: bool) -> Any:

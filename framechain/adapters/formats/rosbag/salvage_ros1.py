@@ -25,7 +25,7 @@ from framechain.adapters.formats.decoders import Decoder, ros_decoder, ros_typen
 from framechain.adapters.formats.salvage_report import SalvageReport, StreamDecompressor
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind
-from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.timeline import LogInfo, TopicInfo
 
 MAGIC = b"#ROSBAG V2.0\n"
 OP_MESSAGE, OP_BAG_HEADER, OP_INDEX, OP_CHUNK, OP_CHUNK_INFO, OP_CONNECTION = 0x02, 0x03, 0x04, 0x05, 0x06, 0x07

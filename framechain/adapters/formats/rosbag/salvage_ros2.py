@@ -22,7 +22,7 @@ from framechain.adapters.formats.decoders import Decoder, ros_decoder, ros_typen
 from framechain.adapters.formats.salvage_report import SalvageReport
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind
-from framechain.adapters.model import LogInfo, TopicInfo
+from framechain.timeline import LogInfo, TopicInfo
 
 #: Rows fetched per query while the pages read cleanly.
 _BATCH = 512
