@@ -21,6 +21,7 @@ from framechain import adapters
 from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.egomotion.attribution import with_camera_motion
+from framechain.analysis.egomotion.curves import rotation_rate_curves
 from framechain.analysis.egomotion.run import measure_cameras
 from framechain.analysis.evidence.replayed import replay_chain
 from framechain.analysis.run import NotAttributed, Run
@@ -366,7 +367,7 @@ def run(
         replay=replayed.replay, aligned=replayed.aligned, attribution=attribution, not_attributed=why,
         nothing_replayed=nothing, chain_suggested=loaded.chain_suggested, suggestion=loaded.suggestion,
         info=loaded.info, notes=tuple(loaded.notes), warnings=tuple(loaded.warnings), camera_motion=motion,
-        generated_robot=loaded.generated_robot)
+        rotation_rates=rotation_rate_curves(motion), generated_robot=loaded.generated_robot)
 
 
 def _measures_camera_motion(loaded: LoadedRun, attribution: Attribution | None) -> bool:

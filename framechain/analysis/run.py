@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from framechain.analysis.egomotion.curves import RotationRateCurves
 from framechain.analysis.egomotion.run import CameraMotionEvidence
 from framechain.analysis.evidence.alignment import AlignedEvidence
 from framechain.analysis.verdict.findings import AnalysisError, Attribution, Finding, Unattributed
@@ -53,6 +54,9 @@ class Run:
     warnings: tuple[str, ...] = ()
     #: each camera's own motion against the frame tree (None: no camera has images, or not attributed)
     camera_motion: CameraMotionEvidence | None = None
+    #: each camera of ``camera_motion`` fitted to a link: its rotation rate from its images, as declared and as
+    #: fitted (what the report and Rerun draw; :func:`~framechain.analysis.egomotion.curves.rotation_rate_curves`)
+    rotation_rates: tuple[RotationRateCurves, ...] = ()
     #: the robot.yaml made for a known arm when a dataset came without one (text, the line saying what it
     #: assumed, the episode); None when robot.yaml was given
     generated_robot: Any = None

@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.egomotion import rotation_rates
 from framechain.analysis.run import Run
 from framechain.analysis.verdict.checks import nothing_observable, tolerance_text
 from framechain.analysis.verdict.findings import Attribution, Finding
@@ -365,36 +364,22 @@ def _drawn_points(y: FloatArray, columns: int) -> IntArray:
 def motion_figures(run: Run) -> list[Figure]:
     """Per measured camera: |rotation rate| over time from its images, from forward kinematics as declared and
     as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`)."""
-    if run.camera_motion is None:
-        return []
     out = []
-    for motion in run.camera_motion.cameras:
-        fit = motion.fit
-        if fit is None or not fit.link or not len(motion.table):
-            continue
-        table = motion.table
-        span = table.stamp1_ns - table.stamp0_ns
-        pairs = np.flatnonzero(span <= 1.5 * np.percentile(span, 10))
-        pairs = pairs[np.argsort(table.stamp0_ns[pairs], kind="stable")]
-        t = (table.stamp0_ns[pairs] + span[pairs] / 2) * 1e-9
-        declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
-        fitted = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                                focal_scale=fit.focal_scale / motion.measured_focal)
-        measured, predicted, corrected = (np.rad2deg(np.linalg.norm(r[pairs], axis=1))
-                                          for r in (declared.measured, declared.predicted, fitted.predicted))
+    for curves in run.rotation_rates:
+        t = curves.middle_ns * 1e-9
         fig, (ax,) = new_figure(6.4, 3.6, top="title")
-        ax.plot(t, measured, color="k", lw=1.6, label="from the images")
-        ax.plot(t, predicted, color=hex_color(AS_RUN_COLOR), lw=1.0,
-                label=f"forward kinematics of {motion.declared_link} as declared")
-        ax.plot(t, corrected, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--",
-                label=f"{fit.link} shifted {fit.offset_s * 1e3:+.1f} ms, fitted mount")
+        ax.plot(t, curves.measured.magnitude_deg_s, color="k", lw=1.6, label="from the images")
+        ax.plot(t, curves.declared.magnitude_deg_s, color=hex_color(AS_RUN_COLOR), lw=1.0,
+                label=f"forward kinematics of {curves.declared_link} as declared")
+        ax.plot(t, curves.fitted.magnitude_deg_s, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--",
+                label=f"{curves.link} shifted {curves.offset_s * 1e3:+.1f} ms, fitted mount")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("rotation rate (deg/s)")
-        ax.set_title(f"Camera {motion.camera}: its own motion against forward kinematics", fontsize=9)
+        ax.set_title(f"Camera {curves.camera}: its own motion against forward kinematics", fontsize=9)
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7)
-        name = "rotation_rate_" + "".join(c if c.isalnum() else "_" for c in motion.camera)
-        out.append(figure_png(fig, name, f"Rotation rate of {motion.camera}: images against forward kinematics"))
+        name = "rotation_rate_" + "".join(c if c.isalnum() else "_" for c in curves.camera)
+        out.append(figure_png(fig, name, f"Rotation rate of {curves.camera}: images against forward kinematics"))
     return out
 
 
