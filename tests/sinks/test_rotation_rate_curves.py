@@ -59,11 +59,11 @@ def test_rerun_draws_the_runs_numbers(run: Run, tmp_path: Path) -> None:
 
 
 def test_the_report_plots_the_runs_numbers(run: Run, monkeypatch: pytest.MonkeyPatch) -> None:
-    from framechain.sinks import report
+    from framechain.sinks import report_figures
 
     drawn: list[Any] = []
-    monkeypatch.setattr(report, "figure_png", lambda fig, name, caption: drawn.append((name, fig.sketch)))
-    report.motion_figures(run)
+    monkeypatch.setattr(report_figures, "figure_png", lambda fig, name, caption: drawn.append((name, fig.sketch)))
+    report_figures.motion_figures(run)
     curves = run.rotation_rates[0]
     ((name, sketch),) = drawn
     assert name == "rotation_rate_wrist_optical_frame"
