@@ -19,6 +19,7 @@ from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.analysis.model.estimates import format_interval
 from framechain.sinks.colors import FAULT_COLORS, RECORDED_ERROR_COLOR, UNEXPLAINED_COLOR, hex_color
 from framechain.sinks.document import (
+    Block,
     Bullets,
     Callout,
     Column,
@@ -309,9 +310,12 @@ def fleet_document(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
         table(SPREAD_COLUMNS, (_spread_cells(r) for r in spread)) if spread else Paragraph("No log has a finding."),
         *(FigureBlock(fig) for fig in figures)))
     found = _with_findings(logs)
-    which = Section(Heading("Which logs have which fault"), (
-        table(LOG_COLUMNS, ([log.unit, _fault_cell(log), mm(log.error_median_m), log.verdict or "", log.chain_text]
-                            for log in found[:MAX_LISTED])), *_more(len(found))) if found else (Paragraph("None."),))
+    listed: tuple[Block, ...] = (Paragraph("None."),)
+    if found:
+        rows = ([log.unit, _fault_cell(log), mm(log.error_median_m), log.verdict or "", log.chain_text]
+                for log in found[:MAX_LISTED])
+        listed = (table(LOG_COLUMNS, rows), *_more(len(found)))
+    which = Section(Heading("Which logs have which fault"), listed)
     query = "Every row of fleet.parquet is one log and finding; query it with DuckDB or pandas."
     footer = Section(None, (Paragraph(query, only="md"),
                             Paragraph(f"Written by framechain batch. {query}", muted=True, only="html")))
