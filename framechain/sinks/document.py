@@ -287,18 +287,12 @@ def _html_item(item: ListItem, *, wrap: bool) -> str:
 
 
 def _html_table(block: Table) -> Iterator[str]:
-    keep = [c for c in block.columns if c.only != "md"]
-    kept = [k for k, c in enumerate(block.columns) if c.only != "md"]
-    head = "".join(f"<th>{html.escape(c.name)}</th>" for c in keep)
-    yield f"<table><tr>{head}</tr>" if any(c.name for c in keep) else "<table>"
+    kept = [(k, c) for k, c in enumerate(block.columns) if c.only != "md"]
+    head = "".join(f"<th>{html.escape(c.name)}</th>" for _k, c in kept)
+    yield f"<table><tr>{head}</tr>" if any(c.name for _k, c in kept) else "<table>"
     for row in block.rows:
-        cells = "".join(_html_cell(c.cell, row.cells[k]) for c, k in zip(keep, kept, strict=True))
-        yield f"<tr{_TONE_ATTR[row.tone]}>{cells}</tr>"
+        yield f"<tr{_TONE_ATTR[row.tone]}>" + "".join(_CELLS[c.cell](row.cells[k]) for k, c in kept) + "</tr>"
     yield "</table>"
-
-
-def _html_cell(style: CellStyle, text: str) -> str:
-    return _CELLS[style](text)
 
 
 _CELLS: dict[CellStyle, Callable[[str], str]] = {
