@@ -21,6 +21,7 @@ from framechain import adapters
 from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.egomotion.attribution import with_camera_motion
+from framechain.analysis.egomotion.curves import rotation_rate_curves
 from framechain.analysis.egomotion.run import CameraMotionEvidence, measure_cameras
 from framechain.analysis.evidence.replayed import Replayed, replay_chain
 from framechain.analysis.run import LoadedRun, NotAttributed, Run
@@ -323,7 +324,7 @@ def run(
     attribution, why, motion = _attributed(loaded, replayed, nothing, seed=seed, bootstrap=bootstrap,
                                            progress=progress)
     return Run(loaded=loaded, replayed=replayed, attribution=attribution, not_attributed=why,
-               nothing_replayed=nothing, camera_motion=motion)
+               nothing_replayed=nothing, camera_motion=motion, rotation_rates=rotation_rate_curves(motion))
 
 
 def _attributed(

@@ -19,6 +19,7 @@ from dataclasses import astuple, dataclass
 from pathlib import Path
 from typing import Protocol
 
+from framechain.analysis.egomotion.curves import RotationRateCurves
 from framechain.analysis.egomotion.run import CameraMotionEvidence
 from framechain.analysis.evidence.alignment import AlignedEvidence
 from framechain.analysis.evidence.replayed import Replayed
@@ -100,6 +101,9 @@ class Run:
     nothing_replayed: str | None = None
     #: each camera's own motion against the frame tree (None: no camera has images, or not attributed)
     camera_motion: CameraMotionEvidence | None = None
+    #: each camera of ``camera_motion`` fitted to a link: its rotation rate from its images, as declared and as
+    #: fitted (what the report and Rerun draw; :func:`~framechain.analysis.egomotion.curves.rotation_rate_curves`)
+    rotation_rates: tuple[RotationRateCurves, ...] = ()
 
     @property
     def path(self) -> Path:

@@ -6,7 +6,6 @@ ignore. The CLI, both reports and Rerun take their rows and words from here.
 
 from __future__ import annotations
 
-import html
 from collections.abc import Sequence
 from typing import Any
 
@@ -14,9 +13,11 @@ import numpy as np
 
 from framechain.analysis.verdict.checks import Bound, Curve, family_name, size_text, tolerance_text
 from framechain.analysis.verdict.findings import Attribution
+from framechain.arrays import BoolArray, FloatArray
 from framechain.catalogue import Fault
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR, hex_color
-from framechain.sinks.plots import new_figure
+from framechain.sinks.document import Block, Figures, Heading, Paragraph, Section, table
+from framechain.sinks.plots import Figure, new_figure
 from framechain.sinks.text import mm
 
 ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
@@ -118,13 +119,29 @@ def curve_plots(result: Attribution) -> list[tuple[str, str, Any]]:
     return out
 
 
-def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
-    x = np.array([curve.display(v) for v in curve.x])
-    rms, median = np.array(curve.rms_error_m) * 1e3, np.array(curve.median_error_m) * 1e3
+def shown_x(curve: Curve) -> FloatArray:
+    """The sizes a curve was measured at, in its plot's unit (:meth:`Curve.display`)."""
+    return np.array([curve.display(v) for v in curve.x], dtype=float)
+
+
+#: A zoomed curve spans this many bounds either side of its estimate (or of no fault), and at least
+#: :data:`ZOOM_MIN_HALF` of its plot's unit: the whole range searched is too coarse to see the dip.
+ZOOM_BOUNDS = 4.0
+ZOOM_MIN_HALF = 20.0
+
+
+def zoomed(curve: Curve, x: FloatArray) -> BoolArray:
+    """Which of the sizes ``x`` (plot units, :func:`shown_x`) a zoomed view of the curve shows."""
     centre = curve.display(curve.estimate if curve.estimate is not None else curve.no_fault)
+    out: BoolArray = np.abs(x - centre) <= max(ZOOM_BOUNDS * curve.display(curve.bound or 0.0), ZOOM_MIN_HALF)
+    return out
+
+
+def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
+    x = shown_x(curve)
+    rms, median = np.array(curve.rms_error_m) * 1e3, np.array(curve.median_error_m) * 1e3
     if zoom:
-        half = max(4.0 * curve.display(curve.bound or 0.0), 20.0)
-        keep = np.abs(x - centre) <= half
+        keep = zoomed(curve, x)
         x, rms, median = x[keep], rms[keep], median[keep]
     ax.plot(x, rms, color=hex_color(RECORDED_ERROR_COLOR), lw=1.2, label="rms (fitted)")
     ax.plot(x, median, color=hex_color(RECORDED_ERROR_COLOR), lw=1.0, ls="-.", label="median (shared out)")
@@ -140,55 +157,25 @@ def _plot_curve(ax: Any, curve: Curve, *, zoom: bool) -> None:
     ax.legend(fontsize=6)
 
 
-# -- report sections --------------------------------------------------------------------------
-def checks_markdown(result: Attribution, figures: Sequence[Any]) -> str:
-    """The report's sections: what this log can show (bounds), the curves, the labels (Markdown)."""
-    lines = ["## What this log can show", "",
-             "The smallest fault of each family framechain's own thresholds would have made a finding here, "
-             "or why the evidence cannot show it.", "",
-             *(["| " + " | ".join(BOUND_COLUMNS) + " |", "| " + " | ".join("---" for _ in BOUND_COLUMNS) + " |",
-                *("| " + " | ".join(c.replace("|", "/") for c in row) + " |" for row in bound_rows(result))]
-               if result.bounds else [NOT_BOUNDED]), ""]
-    for fig in figures:
-        lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
-    if result.labels.rows:
-        what = "Spread" if result.metric == "static_spread" else "Error"
-        lines += ["## Per label", "", f"{what}: {_what_labels_measure(result)}. {label_summary(result)}.", "",
-                  "| " + " | ".join(label_columns(result)) + " |", "|" + " --- |" * len(LABEL_COLUMNS),
-                  *("| " + " | ".join(row) + " |" for row in label_rows(result)), ""]
-    return "\n".join(lines) + "\n"
-
-
-def checks_html(result: Attribution, figures: Sequence[Any], figure_html: Any) -> str:
-    """The same sections as HTML (``figure_html`` embeds a figure)."""
-    e = html.escape
-    parts = ["<h2>What this log can show</h2><p>The smallest fault of each family framechain's own thresholds "
-             "would have made a finding here, or why the evidence cannot show it.</p>"]
+# -- report section ---------------------------------------------------------------------------
+def checks_section(result: Attribution, figures: Sequence[Figure]) -> Section:
+    """The report's section on what this log can show (bounds), the curves and the labels (compact in HTML)."""
+    blocks: list[Block] = [Paragraph("The smallest fault of each family framechain's own thresholds would have made a "
+                                     "finding here, or why the evidence cannot show it.", raw=True)]
     if result.bounds:
-        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in BOUND_COLUMNS) + "</tr>")
-        for row in bound_rows(result):
-            style = "" if row[2] != "not observable" else " style='color:#777'"
-            parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>")
-        parts.append("</table>")
+        blocks.append(table(BOUND_COLUMNS, bound_rows(result),
+                            tone=lambda row: "muted" if row[2] == "not observable" else ""))
     else:
-        parts.append(f"<p>{e(NOT_BOUNDED)}</p>")
+        blocks.append(Paragraph(NOT_BOUNDED))
     if figures:
-        parts.append("<div class='plots'>" + "".join(figure_html(f) for f in figures) + "</div>")
+        blocks.append(Figures(tuple(figures), headed=True))
     if result.labels.rows:
         what = "Spread" if result.metric == "static_spread" else "Error"
-        parts.append(f"<h2>Per label</h2><p>{what}: {e(_what_labels_measure(result))}. "
-                     f"{_code(label_summary(result))}.</p><table><tr>"
-                     + "".join(f"<th>{e(c)}</th>" for c in label_columns(result)) + "</tr>")
-        for cells in label_rows(result):
-            style = "" if cells[-1] in ("static", "agrees") else " style='background:#fff0f0'"
-            parts.append(f"<tr{style}>" + "".join(f"<td>{e(c)}</td>" for c in cells) + "</tr>")
-        parts.append("</table>")
-    return "".join(parts)
-
-
-def _code(text: str) -> str:
-    pieces = html.escape(text).split("`")
-    return "".join(f"<code>{p}</code>" if i % 2 else p for i, p in enumerate(pieces))
+        blocks += [Heading("Per label"),
+                   Paragraph(f"{what}: {_what_labels_measure(result)}. {label_summary(result)}.", code=True),
+                   table(label_columns(result), label_rows(result),
+                         tone=lambda row: "" if row[-1] in ("static", "agrees") else "alert")]
+    return Section(Heading("What this log can show"), tuple(blocks), compact=True)
 
 
 __all__ = [
@@ -196,8 +183,7 @@ __all__ = [
     "LABEL_COLUMNS",
     "NOT_BOUNDED",
     "bound_rows",
-    "checks_html",
-    "checks_markdown",
+    "checks_section",
     "curve_plots",
     "label_columns",
     "label_rows",

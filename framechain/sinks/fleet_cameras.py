@@ -6,16 +6,16 @@ Drawn from the recording-level fits (:mod:`framechain.fleet.recordings`), which 
 
 from __future__ import annotations
 
-import html
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
+from framechain.sinks.document import Block, FigureBlock, Heading, Paragraph, Section, table
 from framechain.sinks.plots import Figure, figure_png, new_figure
 
-__all__ = ["camera_figures", "camera_summary", "cameras_html", "cameras_markdown"]
+__all__ = ["camera_figures", "camera_summary", "cameras_sections"]
 
 COLUMNS = ("episode", "link", "offset", "95% interval", "mount from the recording's", "departs")
 
@@ -51,34 +51,15 @@ def _rows(fit: CameraRecordingFit) -> list[list[str]]:
     return rows
 
 
-def cameras_markdown(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[str]:
+def cameras_sections(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[Section]:
+    """The fleet report's section on each recording's cameras (none without recordings)."""
     if not recordings:
         return []
-    lines = ["", "## Cameras across each recording's episodes", ""]
-    for fig in figures:
-        lines += [f"![{fig.caption}]({fig.name}.png)", ""]
+    blocks: list[Block] = [FigureBlock(f) for f in figures]
     for log, fits in recordings.items():
         for fit in fits:
-            lines += [camera_summary(log, fit), "", "| " + " | ".join(COLUMNS) + " |", "|" + " --- |" * len(COLUMNS)]
-            lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in _rows(fit)]
-            lines.append("")
-    return lines
-
-
-def cameras_html(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[str]:
-    if not recordings:
-        return []
-    from framechain.sinks.plots import figure_html
-
-    e = html.escape
-    parts = ["<h2>Cameras across each recording's episodes</h2>", *(figure_html(f) for f in figures)]
-    for log, fits in recordings.items():
-        for fit in fits:
-            head = "".join(f"<th>{e(c)}</th>" for c in COLUMNS)
-            parts.append(f"<p>{e(camera_summary(log, fit))}</p><table><tr>{head}</tr>")
-            parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in _rows(fit)]
-            parts.append("</table>")
-    return parts
+            blocks += [Paragraph(camera_summary(log, fit)), table(COLUMNS, _rows(fit))]
+    return [Section(Heading("Cameras across each recording's episodes"), tuple(blocks), compact=True)]
 
 
 def camera_figures(recordings: Recordings) -> list[Figure]:

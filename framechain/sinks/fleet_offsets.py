@@ -11,7 +11,6 @@ report from the fleet table's per-log columns ``video_camera``, ``video_offset_s
 
 from __future__ import annotations
 
-import html
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,8 +18,9 @@ import pyarrow as pa
 
 from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_OFFSET_S
 from framechain.analysis.egomotion.recording import DEPARTURE_BOUNDS
+from framechain.sinks.document import Heading, Paragraph, Section, table
 
-__all__ = ["OffsetRow", "OffsetSpread", "offset_html", "offset_markdown", "video_offsets"]
+__all__ = ["OffsetRow", "OffsetSpread", "offset_sections", "video_offsets"]
 
 OFFSET_COLUMNS = ("log", "camera", "offset", "95% interval", "within twice its bound of the median")
 
@@ -91,21 +91,10 @@ def video_offsets(table: pa.Table) -> OffsetSpread | None:
     return OffsetSpread(rows=rows, median_s=median, std_s=float(offsets.std(ddof=1)) if offsets.size > 1 else 0.0)
 
 
-def offset_markdown(spread: OffsetSpread | None) -> list[str]:
+def offset_sections(spread: OffsetSpread | None) -> list[Section]:
+    """The fleet report's section on the offsets (none when no log has one)."""
     if spread is None:
         return []
-    lines = ["", "## Video/state time offset per log", "", spread.summary(), "",
-             "| " + " | ".join(OFFSET_COLUMNS) + " |", "|" + " --- |" * len(OFFSET_COLUMNS)]
-    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in r.cells()) + " |" for r in spread.rows]
-    return lines
-
-
-def offset_html(spread: OffsetSpread | None) -> list[str]:
-    if spread is None:
-        return []
-    e = html.escape
-    parts = [f"<h2>Video/state time offset per log</h2><p>{e(spread.summary())}</p><table><tr>"
-             + "".join(f"<th>{e(c)}</th>" for c in OFFSET_COLUMNS) + "</tr>"]
-    parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in r.cells()) + "</tr>" for r in spread.rows]
-    parts.append("</table>")
-    return parts
+    return [Section(Heading("Video/state time offset per log"),
+                    (Paragraph(spread.summary()), table(OFFSET_COLUMNS, (r.cells() for r in spread.rows))),
+                    compact=True)]

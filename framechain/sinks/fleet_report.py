@@ -6,7 +6,6 @@ as one self-contained HTML page (plots embedded) and Markdown (plots beside it a
 
 from __future__ import annotations
 
-import html
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -19,10 +18,25 @@ import pyarrow as pa
 from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.analysis.model.estimates import format_interval
 from framechain.sinks.colors import FAULT_COLORS, RECORDED_ERROR_COLOR, UNEXPLAINED_COLOR, hex_color
-from framechain.sinks.fleet_cameras import camera_figures, cameras_html, cameras_markdown
-from framechain.sinks.fleet_offsets import offset_html, offset_markdown, video_offsets
-from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
-from framechain.sinks.text import CSS, mm
+from framechain.sinks.document import (
+    Block,
+    Bullets,
+    Callout,
+    Column,
+    Document,
+    FigureBlock,
+    Heading,
+    ListItem,
+    Paragraph,
+    Section,
+    html_page,
+    markdown,
+    table,
+)
+from framechain.sinks.fleet_cameras import camera_figures, cameras_sections
+from framechain.sinks.fleet_offsets import offset_sections, video_offsets
+from framechain.sinks.plots import Figure, figure_png, new_figure
+from framechain.sinks.text import mm
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
@@ -179,21 +193,17 @@ def render_fleet_report(
     offsets = video_offsets(table)
     cameras = recordings or {}
     camera_figs = camera_figures(cameras)
+    doc = fleet_document(logs, spread, figures, notes,
+                         [*cameras_sections(cameras, camera_figs), *offset_sections(offsets)])
     paths: dict[str, Path] = {}
-    marker = "\n\n## Which logs have which fault"
     if "md" in formats:
         for fig in (*figures, *camera_figs):
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["fleet_md"] = out / "fleet_report.md"
-        page = fleet_markdown(logs, spread, figures, notes)
-        inserted = [*cameras_markdown(cameras, camera_figs), *offset_markdown(offsets)]
-        paths["fleet_md"].write_text(page.replace(marker, "\n".join(inserted) + marker, 1))
+        paths["fleet_md"].write_text(markdown(doc))
     if "html" in formats:
         paths["fleet_html"] = out / "fleet_report.html"
-        page = fleet_html(logs, spread, figures, notes)
-        heading = "<h2>Which logs have which fault</h2>"
-        inserted_html = [*cameras_html(cameras, camera_figs), *offset_html(offsets)]
-        paths["fleet_html"].write_text(page.replace(heading, "".join(inserted_html) + heading, 1))
+        paths["fleet_html"].write_text(html_page(doc))
     return paths
 
 
@@ -269,7 +279,9 @@ def _spread_cells(row: SpreadRow) -> list[str]:
 
 
 SPREAD_COLUMNS = ("fault", "hop", "logs", "estimate (median log)", "p5 .. p95", "min .. max")
-LOG_COLUMNS = ("log", "faults (estimate, share)", "median error", "verdict", "chain")
+LOG_COLUMNS = (Column("log", "code"), Column("faults (estimate, share)"), Column("median error", "num"),
+               Column("verdict"), Column("chain", "code"))
+FAILED_COLUMNS = (Column("log", "code"), Column("status"), Column("error"), Column("chain", "code"))
 
 
 def _with_findings(logs: Sequence[FleetLog]) -> list[FleetLog]:
@@ -288,91 +300,45 @@ def _on_camera(finding: dict[str, Any]) -> str:
     return f" on camera {camera}" if camera else ""
 
 
-def fleet_markdown(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],
-                   notes: Sequence[str] = ()) -> str:
-    def cell(text: object) -> str:
-        return str(text).replace("|", "\\|").replace("\n", " ")
-
-    lines = ["# framechain fleet report", "", f"**{summary_line(logs)}**", "", chains_line(logs), ""]
-    lines += [f"- note: {n}" for n in notes] + ([""] if notes else [])
-    lines += ["## Faults across the fleet", ""]
-    if spread:
-        lines += ["| " + " | ".join(SPREAD_COLUMNS) + " |", "|" + " --- |" * len(SPREAD_COLUMNS)]
-        lines += ["| " + " | ".join(cell(c) for c in _spread_cells(r)) + " |" for r in spread]
-    else:
-        lines.append("No log has a finding.")
-    for fig in figures:
-        lines += ["", f"![{fig.caption}]({fig.name}.png)"]
+def fleet_document(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],
+                   notes: Sequence[str] = (), recordings: Sequence[Section] = ()) -> Document:
+    """The fleet report: the outcome, the faults across the fleet, the ``recordings`` sections (each recording's
+    cameras and offsets), which logs have which fault, and why logs were not analysed."""
+    overview = Section(None, (Callout(summary_line(logs), kind="summary"), Paragraph(chains_line(logs)),
+                              Bullets(tuple(ListItem(f"note: {n}") for n in notes), muted=True)))
+    faults = Section(Heading("Faults across the fleet"), (
+        table(SPREAD_COLUMNS, (_spread_cells(r) for r in spread)) if spread else Paragraph("No log has a finding."),
+        *(FigureBlock(fig) for fig in figures)))
     found = _with_findings(logs)
-    lines += ["", "## Which logs have which fault", ""]
+    listed: tuple[Block, ...] = (Paragraph("None."),)
     if found:
-        lines += ["| " + " | ".join(LOG_COLUMNS) + " |", "|" + " --- |" * len(LOG_COLUMNS)]
-        lines += [f"| {cell(log.unit)} | {cell(_fault_cell(log))} | {mm(log.error_median_m)} | {cell(log.verdict)} "
-                  f"| {cell(log.chain_text)} |" for log in found[:MAX_LISTED]]
-        lines += _more(len(found))
-    else:
-        lines.append("None.")
+        rows = ([log.unit, _fault_cell(log), mm(log.error_median_m), log.verdict or "", log.chain_text]
+                for log in found[:MAX_LISTED])
+        listed = (table(LOG_COLUMNS, rows), *_more(len(found)))
+    which = Section(Heading("Which logs have which fault"), listed)
+    query = "Every row of fleet.parquet is one log and finding; query it with DuckDB or pandas."
+    footer = Section(None, (Paragraph(query, only="md"),
+                            Paragraph(f"Written by framechain batch. {query}", muted=True, only="html")))
+    return Document("framechain fleet report", "framechain fleet report",
+                    (overview, faults, *recordings, which, *_not_analysed_sections(logs), footer), pipe="\\|")
+
+
+def _not_analysed_sections(logs: Sequence[FleetLog]) -> list[Section]:
     failed = [log for log in logs if log.status in _NOT_ANALYSED]
-    if failed:
-        lines += ["", "## Why logs were not analysed", "", "| " + " | ".join(REASON_COLUMNS) + " |",
-                  "|" + " --- |" * len(REASON_COLUMNS)]
-        lines += ["| " + " | ".join(cell(c) for c in r.cells()) + " |" for r in not_analysed_reasons(logs)]
-        lines += ["", "## Logs that could not be analysed", "", "| log | status | error | chain |",
-                  "| --- | --- | --- | --- |"]
-        lines += [f"| {cell(log.unit)} | {log.status} | {cell(log.error)} | {cell(log.chain_text)} |"
-                  for log in failed[:MAX_LISTED]]
-        lines += _more(len(failed))
-    lines += ["", "Every row of fleet.parquet is one log and finding; query it with DuckDB or pandas.", ""]
-    return "\n".join(lines)
+    if not failed:
+        return []
+    reasons = table(REASON_COLUMNS, (r.cells() for r in not_analysed_reasons(logs)), joined=True)
+    listed = table(FAILED_COLUMNS, ([log.unit, log.status, log.error or "", log.chain_text]
+                                    for log in failed[:MAX_LISTED]), joined=True)
+    return [Section(Heading("Why logs were not analysed"), (reasons,)),
+            Section(Heading("Logs that could not be analysed"), (listed, *_more(len(failed))))]
 
 
-def _more(n: int) -> list[str]:
-    return ["", f"... and {n - MAX_LISTED} more in fleet.parquet."] if n > MAX_LISTED else []
-
-
-def fleet_html(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figures: Sequence[Figure],
-               notes: Sequence[str] = ()) -> str:
-    e = html.escape
-    parts = [
-        "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain fleet report</title>",
-        f"<style>{CSS}</style></head><body>",
-        "<h1>framechain fleet report</h1>",
-        f"<div class='summary'>{e(summary_line(logs))}</div>",
-        f"<p>{e(chains_line(logs))}</p>",
-        *(f"<p class='muted'>note: {e(n)}</p>" for n in notes),
-        "<h2>Faults across the fleet</h2>",
-    ]
-    if spread:
-        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in SPREAD_COLUMNS) + "</tr>")
-        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in _spread_cells(r)) + "</tr>" for r in spread]
-        parts.append("</table>")
-    else:
-        parts.append("<p>No log has a finding.</p>")
-    parts += [figure_html(fig) for fig in figures]
-    found = _with_findings(logs)
-    parts.append("<h2>Which logs have which fault</h2>")
-    if found:
-        parts.append("<table><tr>" + "".join(f"<th>{e(c)}</th>" for c in LOG_COLUMNS) + "</tr>")
-        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(_fault_cell(log))}</td>"
-                  f"<td class='num'>{mm(log.error_median_m)}</td><td>{e(log.verdict or '')}</td>"
-                  f"<td><code>{e(log.chain_text)}</code></td></tr>" for log in found[:MAX_LISTED]]
-        parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(found)) if t))
-    else:
-        parts.append("<p>None.</p>")
-    failed = [log for log in logs if log.status in _NOT_ANALYSED]
-    if failed:
-        parts.append("<h2>Why logs were not analysed</h2><table><tr>"
-                     + "".join(f"<th>{e(c)}</th>" for c in REASON_COLUMNS) + "</tr>")
-        parts += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in r.cells()) + "</tr>" for r in not_analysed_reasons(logs)]
-        parts.append("</table>")
-        parts.append("<h2>Logs that could not be analysed</h2>"
-                     "<table><tr><th>log</th><th>status</th><th>error</th><th>chain</th></tr>")
-        parts += [f"<tr><td><code>{e(log.unit)}</code></td><td>{e(log.status)}</td><td>{e(log.error or '')}</td>"
-                  f"<td><code>{e(log.chain_text)}</code></td></tr>" for log in failed[:MAX_LISTED]]
-        parts.append("</table>" + "".join(f"<p class='muted'>{e(t)}</p>" for t in _more(len(failed)) if t))
-    parts.append("<p class='muted'>Written by framechain batch. Every row of fleet.parquet is one log and finding; "
-                 "query it with DuckDB or pandas.</p></body></html>")
-    return "\n".join(parts)
+def _more(n: int) -> list[Paragraph]:
+    """The line under a table cut at :data:`MAX_LISTED` rows."""
+    if n <= MAX_LISTED:
+        return []
+    return [Paragraph(f"... and {n - MAX_LISTED} more in fleet.parquet.", muted=True, joined=True)]
 
 
 __all__ = [
@@ -381,6 +347,7 @@ __all__ = [
     "SpreadRow",
     "chains_line",
     "estimate_spread",
+    "fleet_document",
     "fleet_logs",
     "not_analysed_reasons",
     "render_fleet_report",

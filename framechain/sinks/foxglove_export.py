@@ -139,7 +139,7 @@ def viewing_hints(run: Run, written: Collection[str]) -> list[str]:
     return out
 
 
-def _by_stamp(stamp: IntArray) -> Iterator[tuple[int, IntArray]]:
+def by_stamp(stamp: IntArray) -> Iterator[tuple[int, IntArray]]:
     """Each distinct stamp (ascending) with the rows that have it (ascending), in one sort."""
     if not stamp.size:
         return
@@ -157,7 +157,7 @@ def _transforms(result: ReplayResult) -> list[ProtobufMessage]:
     body = frames.body + REPLAY_FRAME_SUFFIX
     out: list[ProtobufMessage] = []
     ok = np.flatnonzero(result.replayed)
-    for when, in_ok in _by_stamp(obs.stamp_ns[ok]):  # one message per observation time
+    for when, in_ok in by_stamp(obs.stamp_ns[ok]):  # one message per observation time
         rows = ok[in_ok]
         _, per_camera = np.unique(obs.camera_frame[rows], return_index=True)  # each camera of a rig once
         msg = FrameTransforms()
@@ -226,7 +226,7 @@ def _annotations(result: ReplayResult, overlay: ImageOverlay, stamp: IntArray, m
     out: list[ProtobufMessage] = []
     drawn: BoolArray = np.asarray(np.isfinite(overlay.detection_uv).all(axis=1))  # 3D points w/o intrinsics: none
     used_colors = overlay.detection_colors
-    for when, in_mine in _by_stamp(stamp[mine]):
+    for when, in_mine in by_stamp(stamp[mine]):
         rows = mine[in_mine]
         rows = rows[drawn[rows]]
         if not rows.size:
@@ -341,7 +341,7 @@ def _scene(result: ReplayResult, evidence: AlignedEvidence, overlay: ImageOverla
         partner[row[row >= 0]] = lines.partner_point[row >= 0]
     out: list[ProtobufMessage] = []
     ok = np.flatnonzero(result.replayed & np.isfinite(result.p_world).all(axis=1))
-    for when, in_ok in _by_stamp(obs.stamp_ns[ok]):
+    for when, in_ok in by_stamp(obs.stamp_ns[ok]):
         rows = ok[in_ok]
         msg = SceneUpdate()
         entity = msg.entities.add()
@@ -401,6 +401,7 @@ __all__ = [
     "TF_TOPIC",
     "ProtobufMessage",
     "annotation_stamps",
+    "by_stamp",
     "calibration_message",
     "clip_to_image",
     "file_descriptor_set",

@@ -25,7 +25,7 @@ import numpy as np
 
 from framechain.analysis.run import Run
 from framechain.arrays import IntArray
-from framechain.sinks.foxglove_export import ProtobufMessage, calibration_message, file_descriptor_set
+from framechain.sinks.foxglove_export import ProtobufMessage, by_stamp, calibration_message, file_descriptor_set
 from framechain.timeline import CameraTable, ImageFrameTable, JointStateTable, Timeline, TransformTable
 
 __all__ = ["EncodedCamera", "FramesOf", "camera_topic", "timeline_messages"]
@@ -105,7 +105,7 @@ def _transforms(table: TransformTable, start: int) -> list[ProtobufMessage]:
         out.append(ProtobufMessage("/tf_static", "foxglove.FrameTransforms", schema, start, start,
                                    _transform_message(shown, range(len(shown)))))
     dynamic = np.flatnonzero(~table.is_static)
-    for stamp, rows in _by_stamp(table.stamp_ns[dynamic]):
+    for stamp, rows in by_stamp(table.stamp_ns[dynamic]):
         out.append(ProtobufMessage("/tf", "foxglove.FrameTransforms", schema, stamp, stamp,
                                    _transform_message(table, dynamic[rows].tolist())))
     return out
@@ -116,7 +116,7 @@ def _joints(table: JointStateTable) -> list[ProtobufMessage]:
 
     schema = file_descriptor_set(JointStates)
     out: list[ProtobufMessage] = []
-    for stamp, rows in _by_stamp(table.stamp_ns):
+    for stamp, rows in by_stamp(table.stamp_ns):
         msg = JointStates()
         msg.timestamp.FromNanoseconds(stamp)
         for i in rows.tolist():
@@ -164,12 +164,3 @@ def _frames(frame: str, encoded: EncodedCamera) -> list[ProtobufMessage]:
         out.append(ProtobufMessage(topic, f"foxglove.{kind.__name__}", schema, int(stamp), int(stamp),
                                    msg.SerializeToString()))
     return out
-
-
-def _by_stamp(stamp: IntArray) -> list[tuple[int, IntArray]]:
-    """Each distinct stamp (ascending) with the positions that have it."""
-    if not stamp.size:
-        return []
-    order = np.argsort(stamp, kind="stable")
-    stamps, starts = np.unique(stamp[order], return_index=True)
-    return list(zip(stamps.tolist(), np.split(order, starts[1:]), strict=True))

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -309,13 +310,7 @@ def render_crops(
     for i in rows.tolist():
         if overlay.image_row[i] < 0 or images.encoding[overlay.image_row[i]] == "video":
             continue
-        row = int(overlay.image_row[i])
-        enc = str(images.encoding[row])
-        if enc in ("jpeg", "png"):
-            with Image.open(io.BytesIO(images.load(row))) as src:
-                picture = src.convert("RGB")
-        else:
-            picture = Image.fromarray(as_uint8_rgb(images.pixels(row), enc), "RGB")
+        picture = _picture(timeline, int(overlay.image_row[i]))
         w, h = picture.size
         points = [p for p in (overlay.detection_uv[i], overlay.recomputed_uv[i], overlay.as_run_uv[i])
                   if np.isfinite(p).all()]
@@ -352,6 +347,20 @@ def render_crops(
         canvas.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
         out.append((i, buf.getvalue()))
     return out
+
+
+def _picture(timeline: Timeline, row: int) -> Any:
+    """Row ``row`` of the timeline's images as an RGB Pillow image (JPEG/PNG decoded, raw pixels converted)."""
+    import io
+
+    from PIL import Image
+
+    images = timeline.image_frames
+    enc = str(images.encoding[row])
+    if enc in ("jpeg", "png"):
+        with Image.open(io.BytesIO(images.load(row))) as src:
+            return src.convert("RGB")
+    return Image.fromarray(as_uint8_rgb(images.pixels(row), enc), "RGB")
 
 
 def _crop_window(points: FloatArray, w: int, h: int, zoom_px: float | None) -> tuple[int, int, int, int]:

@@ -2,8 +2,9 @@
 
 Order: the verdict in one sentence, the findings (estimates, intervals, fixes), the observation
 accounting, then the pictures people would rather look at than read (error per hop over time,
-error against robot speed, world points from above, the sensitivity of the fault found), then
-provenance (file, topics, frames, units, stamps, configuration).
+error against robot speed, world points from above, the sensitivity of the fault found), what this
+log can show, what the camera saw, then provenance (file, topics, frames, units, stamps,
+configuration). Each section is written once (:mod:`framechain.sinks.document`) and rendered as both.
 """
 
 from __future__ import annotations
@@ -17,34 +18,42 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.egomotion import rotation_rates
 from framechain.analysis.run import Run
-from framechain.analysis.verdict.checks import nothing_observable, tolerance_text
-from framechain.analysis.verdict.findings import Attribution, Finding
-from framechain.analysis.verdict.sensitivity import robot_speed, sensitivity
-from framechain.arrays import FloatArray, IntArray
-from framechain.catalogue import HopName
-from framechain.sinks.checks_view import checks_html, checks_markdown, curve_plots
+from framechain.analysis.verdict.checks import nothing_observable
+from framechain.analysis.verdict.findings import Attribution
+from framechain.arrays import FloatArray
+from framechain.sinks.checks_view import checks_section, curve_plots
 from framechain.sinks.colors import (
-    AS_RUN_COLOR,
-    BOUND_COLOR,
-    CORRECTED_COLOR,
     ERROR_LINE_LEGEND,
     FAULT_COLORS,
     HOP_COLORS,
     HOP_LEGEND,
     LEGEND,
-    RECOMPUTED_COLOR,
-    RECORDED_ERROR_COLOR,
-    REFERENCE_COLOR,
     UNEXPLAINED_COLOR,
     hex_color,
     legend_text,
 )
+from framechain.sinks.document import (
+    Block,
+    Bullets,
+    Callout,
+    Column,
+    Document,
+    Figures,
+    Heading,
+    Html,
+    ListItem,
+    Paragraph,
+    Section,
+    html_page,
+    markdown,
+    table,
+)
 from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
-from framechain.sinks.plots import Figure, figure_html, figure_png, new_figure
-from framechain.sinks.text import CSS, FindingView, breakable, mm
+from framechain.sinks.plots import Figure, figure_png
+from framechain.sinks.report_figures import after_label, make_figures, motion_figures
+from framechain.sinks.text import FindingView, mm
 from framechain.timeline import PointRole
 
 
@@ -86,24 +95,36 @@ def _write_report(run: Run, out: Path, formats: Sequence[str], plots: tuple[list
     result = run.attributed()
     out.mkdir(parents=True, exist_ok=True)
     pictures, checks = plots
-    sections = image_crops(run)
+    crops = image_crops(run)
+    doc = report_document(result, pictures, checks, crops)
     paths: dict[str, Path] = {}
     if "md" in formats:
-        for fig in [*pictures, *checks]:
+        for fig in [*pictures, *checks, *(crop for _, shown in crops for crop in shown)]:
             (out / f"{fig.name}.png").write_bytes(fig.png)
         paths["md"] = out / "report.md"
-        for _, crops in sections:
-            for crop in crops:
-                (out / f"{crop.name}.png").write_bytes(crop.png)
-        text = markdown(result, pictures).replace("## Provenance", checks_markdown(result, checks) + "## Provenance", 1)
-        paths["md"].write_text(text + _crops_markdown(result, sections))
+        paths["md"].write_text(markdown(doc))
     if "html" in formats:
         paths["html"] = out / "report.html"
-        page = html_page(result, pictures)
-        provenance = "<h2>Provenance</h2>"
-        inserted = checks_html(result, checks, figure_html) + _crops_html(result, sections) + provenance
-        paths["html"].write_text(page.replace(provenance, inserted, 1))
+        paths["html"].write_text(html_page(doc))
     return paths
+
+
+def report_document(result: Attribution, pictures: Sequence[Figure], checks: Sequence[Figure],
+                    crops: Sequence[tuple[str, list[Figure]]]) -> Document:
+    """The report of an attribution: its sections, written once for Markdown and HTML (what the camera saw comes
+    before the provenance in HTML, after it in Markdown)."""
+    title = Path(str(result.source.get("path", ""))).name or "episode"
+    sections = [Section(None, (Callout(result.verdict, kind="verdict clean" if _clean(result) else "verdict"),)),
+                _findings_section(result), _error_section(result)]
+    if result.notes:
+        sections.append(Section(Heading("Notes"), (Bullets(tuple(ListItem(n) for n in result.notes), joined=True),)))
+    sections += [Section(None, (Figures(tuple(pictures), headed=True),)), checks_section(result, checks)]
+    if crops:
+        sections.append(replace(_crops_section(result, crops), only="html"))
+    sections.append(_provenance_section(result))
+    if crops:
+        sections.append(replace(_crops_section(result, crops), only="md"))
+    return Document(f"framechain report: {title}", f"framechain: {title}", tuple(sections), pipe="/")
 
 
 # -- what the camera saw ----------------------------------------------------------------------
@@ -196,208 +217,14 @@ def _crops_intro(result: Attribution) -> str:
     return f"Per finding, at the observations where its hop departs most: {CROP_LEGEND}{colour}."
 
 
-def _crops_markdown(result: Attribution, sections: Sequence[tuple[str, list[Figure]]]) -> str:
-    if not sections:
-        return ""
-    lines = ["", "## What the camera saw", "", _crops_intro(result), ""]
-    for title, crops in sections:
-        lines += [f"### {title}", "", *[f"![{c.caption}]({c.name}.png)" for c in crops], ""]
-    return "\n".join(lines)
+def _crops_section(result: Attribution, crops: Sequence[tuple[str, list[Figure]]]) -> Section:
+    blocks: list[Block] = [Paragraph(_crops_intro(result))]
+    for title, shown in crops:
+        blocks += [Heading(title, level=3), Figures(tuple(shown))]
+    return Section(Heading("What the camera saw"), tuple(blocks), compact=True)
 
 
-def _crops_html(result: Attribution, sections: Sequence[tuple[str, list[Figure]]]) -> str:
-    if not sections:
-        return ""
-    e = html.escape
-    parts = [f"<h2>What the camera saw</h2><p>{e(_crops_intro(result))}</p>"]
-    for title, crops in sections:
-        parts.append(f"<h3>{e(title)}</h3><div class='plots'>")
-        parts += [figure_html(c) for c in crops]
-        parts.append("</div>")
-    return "".join(parts)
-
-
-# -- figures ----------------------------------------------------------------------------------
-def make_figures(result: Attribution) -> list[Figure]:
-    """The report's pictures of the error: each drawn only where it shows what its caption says."""
-    figures = [_error_over_time(result)]
-    speed = robot_speed(result)
-    if np.isfinite(speed).any() and float(np.nanmax(speed)) > STILL_SPEED_M_S:  # a body that never moves: no signature
-        figures.append(_error_against_speed(result, speed))
-    figures.append(_world_top_down(result))
-    top = next((f for f in result.findings if f.actionable), None)
-    if top is not None:
-        sensitivity_figure = _sensitivity(result, top)
-        if sensitivity_figure is not None:
-            figures.append(sensitivity_figure)
-    return figures
-
-
-#: A body whose speed stays under this (m/s) at every observation does not move: error against speed is not drawn.
-STILL_SPEED_M_S = 1e-3
-
-
-def _error_over_time(result: Attribution) -> Figure:
-    """The error against the evidence over time, as recorded and after the findings; each logged hop's own error
-    where the robot logged its hops (then it is "error per hop")."""
-    inputs = result.inputs
-    t = (inputs.stamp_ns - inputs.stamp_ns.min()) * 1e-9 if len(inputs) else np.zeros(0)
-    metric = result.metric.replace("_", " ")
-    fig, (ax,) = new_figure(6.4, 3.6)
-    # The error as recorded goes underneath, wide and pale, so a hop that carries all of it stays visible.
-    _line(ax, t, result.error_before * 1e3, lw=4, color=hex_color(RECORDED_ERROR_COLOR), alpha=0.35,
-          label=f"error against the {metric}, as recorded")
-    for (hop, errors), style in zip(result.hop_errors.items(), ("-", "--", ":"), strict=False):
-        _line(ax, t, errors * 1e3, lw=1.2, ls=style, color=hex_color(HOP_COLORS[HopName(hop)]),
-              label=f"{hop} (logged vs recomputed)")
-    if result.findings:
-        _line(ax, t, result.error_after * 1e3, lw=1, color=hex_color(CORRECTED_COLOR), ls="--",
-              label=_after_label(result))
-    ax.set_xlabel("time since first observation (s)")
-    ax.set_ylabel("error (mm)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    if result.hop_errors:
-        return figure_png(fig, "error_per_hop", "Error per hop over time: each logged hop's own departure, and the "
-                          f"error against the {metric}")
-    return figure_png(fig, "error_per_hop", f"Error against the {metric} over time (no hop logged: one error, as "
-                      "recorded and after the findings)")
-
-
-def _error_against_speed(result: Attribution, speed: FloatArray) -> Figure:
-    fig, (ax,) = new_figure(6.4, 3.6, top="title")
-    _dots(ax, speed, result.error_before * 1e3, alpha=0.6, color=hex_color(RECORDED_ERROR_COLOR), label="as recorded")
-    if result.findings:
-        _dots(ax, speed, result.error_after * 1e3, alpha=0.6, color=hex_color(CORRECTED_COLOR),
-              label=_after_label(result))
-    ax.set_xlabel("robot speed (m/s)")
-    ax.set_ylabel("error (mm)")
-    ax.set_title("A latency grows with speed", fontsize=9)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    return figure_png(fig, "error_vs_speed", "Error against robot speed (the latency signature)")
-
-
-def _sensitivity(result: Attribution, top: Finding) -> Figure | None:
-    """How far the top finding's fault moves the world points as it grows, against the chain's tolerance."""
-    x, err, label = sensitivity(result, top)
-    if not x.size:
-        return None
-    tolerance = result.config.tolerance_m
-    fig, (ax,) = new_figure(6.4, 3.6, top="title")
-    ax.plot(x, err * 1e3, color=hex_color(FAULT_COLORS.get(top.fault.value, UNEXPLAINED_COLOR)),
-            label=top.fault.value)
-    ax.axhline(tolerance * 1e3, color=hex_color(BOUND_COLOR), ls="--", lw=1,
-               label=f"the {tolerance_text(tolerance)} tolerance (tolerance_m)")
-    ax.axvline(x[-1] / 1.5, color=hex_color(CORRECTED_COLOR), ls="--", lw=1, label="the estimate")
-    ax.set_xlabel(label)
-    # How far the world points move, not the error against the evidence the findings share out
-    # (that is the curves' measure): a depth scale moves points far and static spreads little.
-    ax.set_ylabel("median displacement of the world points (mm)")
-    ax.set_title(f"Sensitivity: how far {top.fault.value} at {top.hop.value} moves the world points", fontsize=9)
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    return figure_png(fig, "sensitivity", f"How far {top.fault.value} moves the world points on this episode, up to "
-                      "1.5 times its estimate (a displacement, not the error the findings share out)")
-
-
-def _world_top_down(result: Attribution) -> Figure:
-    """The world points from above: recomputed, the evidence and (against a reference or static targets) corrected."""
-    recomputed = result.replay.p_world[result.replay.replayed]  # the replay's own, row for row the inputs'
-    fig, (ax,) = new_figure(6.4, 4.4)
-    _dots(ax, recomputed[:, 0], recomputed[:, 1], label="recomputed from the log", alpha=0.7,
-          color=hex_color(RECOMPUTED_COLOR))
-    ev = result.evidence_points
-    if np.isfinite(ev).any() and result.metric != "static_spread":
-        label = {"logged_hops": "as-run (robot's logged)", "target": "as-run target", "reference": "reference"}.get(
-            result.metric, "evidence"
-        )
-        color = REFERENCE_COLOR if result.metric == "reference" else AS_RUN_COLOR
-        _dots(ax, ev[:, 0], ev[:, 1], marker="x", label=label, alpha=0.7, color=hex_color(color))
-    if result.findings and result.metric in ("reference", "static_spread"):
-        _dots(ax, result.corrected_world[:, 0], result.corrected_world[:, 1], label="corrected", alpha=0.7,
-              color=hex_color(CORRECTED_COLOR))
-    ax.set_xlabel(f"x in {result.config.frames.world} (m)")
-    ax.set_ylabel(f"y in {result.config.frames.world} (m)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=7)
-    return figure_png(fig, "world_top_down", "World points from above")
-
-
-#: Marker of the scatter plots: scatter(s=8)'s size (the square root of its area in points^2) and edge.
-_DOT_PT = 8.0**0.5
-_DOT_EDGE_PT = 1.0
-#: A line of more points than this many per column of the plot is thinned to what draws the same.
-_LINE_COLUMNS = 1000
-
-
-def _dots(ax: Any, x: FloatArray, y: FloatArray, **style: Any) -> None:
-    """A scatter of one colour as a line of markers: drawn the same as ``ax.scatter(x, y, s=8)``, but
-    one path instead of a collection, which the legend places ("best") without a Python loop per point."""
-    ax.plot(x, y, ls="none", marker=style.pop("marker", "o"), ms=_DOT_PT, mew=_DOT_EDGE_PT, **style)
-
-
-def _line(ax: Any, t: FloatArray, y: FloatArray, **style: Any) -> None:
-    """``ax.plot(t, y)`` thinned to the points that draw it: per run of points narrower than a column
-    of the plot, its first, last, lowest and highest (and where a gap starts), in order."""
-    keep = _drawn_points(y, _LINE_COLUMNS)
-    ax.plot(t[keep], y[keep], **style)
-
-
-def _drawn_points(y: FloatArray, columns: int) -> IntArray:
-    """Indices of a series that draw the same line as all of it at ``columns`` runs (see :func:`_line`)."""
-    n = y.shape[0]
-    if n <= 4 * columns:
-        return np.arange(n)
-    run = np.arange(n) * columns // n  # runs of consecutive points
-    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
-    finite = np.isfinite(y)
-    low = np.where(finite, y, np.inf)
-    high = np.where(finite, y, -np.inf)
-    lowest = np.lexsort((low, run))[starts]  # sorted by run, then value: a run's first is its lowest
-    highest = np.lexsort((-high, run))[starts]
-    gaps = np.flatnonzero(~finite & np.r_[True, finite[:-1]])
-    out: IntArray = np.unique(np.concatenate([starts, np.r_[starts[1:], n] - 1, lowest, highest, gaps]))
-    return out
-
-
-def motion_figures(run: Run) -> list[Figure]:
-    """Per measured camera: |rotation rate| over time from its images, from forward kinematics as declared and
-    as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`)."""
-    if run.camera_motion is None:
-        return []
-    out = []
-    for motion in run.camera_motion.cameras:
-        fit = motion.fit
-        if fit is None or not fit.link or not len(motion.table):
-            continue
-        table = motion.table
-        span = table.stamp1_ns - table.stamp0_ns
-        pairs = np.flatnonzero(span <= 1.5 * np.percentile(span, 10))
-        pairs = pairs[np.argsort(table.stamp0_ns[pairs], kind="stable")]
-        t = (table.stamp0_ns[pairs] + span[pairs] / 2) * 1e-9
-        declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
-        fitted = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                                focal_scale=fit.focal_scale / motion.measured_focal)
-        measured, predicted, corrected = (np.rad2deg(np.linalg.norm(r[pairs], axis=1))
-                                          for r in (declared.measured, declared.predicted, fitted.predicted))
-        fig, (ax,) = new_figure(6.4, 3.6, top="title")
-        ax.plot(t, measured, color="k", lw=1.6, label="from the images")
-        ax.plot(t, predicted, color=hex_color(AS_RUN_COLOR), lw=1.0,
-                label=f"forward kinematics of {motion.declared_link} as declared")
-        ax.plot(t, corrected, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--",
-                label=f"{fit.link} shifted {fit.offset_s * 1e3:+.1f} ms, fitted mount")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("rotation rate (deg/s)")
-        ax.set_title(f"Camera {motion.camera}: its own motion against forward kinematics", fontsize=9)
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-        name = "rotation_rate_" + "".join(c if c.isalnum() else "_" for c in motion.camera)
-        out.append(figure_png(fig, name, f"Rotation rate of {motion.camera}: images against forward kinematics"))
-    return out
-
-
+# -- text -------------------------------------------------------------------------------------
 def _size(value: float | None, summary: dict[str, Any]) -> str:
     """An error summary's value in its unit: millimetres, or deg/s of a camera's rotation rate."""
     if summary.get("unit") == "deg/s":
@@ -411,18 +238,10 @@ def _error_sentence(result: Attribution) -> str:
     if result.metric == "none":
         return "No error measured: the log has no evidence to measure the chain against."
     return (f"Against the {s['metric'].replace('_', ' ')}: median {_size(s['median'], s)}, p95 {_size(s['p95'], s)}, "
-            f"max {_size(s['max'], s)}; {_after_label(result)}: "
+            f"max {_size(s['max'], s)}; {after_label(result)}: "
             f"median {_size(result.error_summary(result.error_after)['median'], s)}.")
 
 
-def _after_label(result: Attribution) -> str:
-    """What the second error curve is: corrected data, or what the findings leave unexplained."""
-    if result.metric in ("reference", "static_spread"):
-        return "after correcting the recorded data"
-    return "left unexplained by the findings"
-
-
-# -- text -------------------------------------------------------------------------------------
 HOP_COLUMNS = ("hop", "own departure med / p95 / max", "sample gap med / max", "stale", "attributed to it")
 
 
@@ -483,99 +302,44 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
     ]
 
 
-def markdown(result: Attribution, figures: Sequence[Figure]) -> str:
-    lines = [
-        f"# framechain report: {Path(str(result.source.get('path', ''))).name or 'episode'}",
-        "",
-        f"**{result.verdict}**",
-        "",
-        "## Findings",
-        "",
-    ]
-    if result.findings:
-        lines += [
-            "| fault | hop | camera | estimate | 95% interval | share | effect | confidence | strength | fix |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-        ]
-        for c in (FindingView.of(f).cells() for f in result.findings):
-            lines.append(f"| {c.fault} | {c.hop} | {c.camera or '-'} | {c.estimate} | {c.interval} | {c.share} | "
-                         f"{c.error} | {c.confidence} | {c.strength} | {c.fix.replace('|', '/')} |")
-        lines += [""] + [f"- **{f.fault.value}**{FindingView.of(f).on_camera()}: {f.evidence}"
-                         for f in result.findings]
-    else:
-        lines.append(_no_findings(result))
-    lines += [
-        "",
-        "## Error",
-        "",
-        _error_sentence(result),
-        "",
-        "### Per hop",
-        "",
-        "| " + " | ".join(HOP_COLUMNS) + " |",
-        "| " + " | ".join("---" for _ in HOP_COLUMNS) + " |",
-        *("| " + " | ".join(row) + " |" for row in hop_rows(result)),
-        "",
-        f"Colours, in every plot and picture here, in Rerun and in the Foxglove export: {legend_text()}",
-        "",
-    ]
-    if result.notes:
-        lines += ["## Notes", "", *(f"- {n.replace('|', '/')}" for n in result.notes), ""]
-    for fig in figures:
-        lines += [f"### {fig.caption}", "", f"![{fig.caption}]({fig.name}.png)", ""]
-    lines += ["## Provenance", "", "| | |", "| --- | --- |"]
-    lines += [f"| {k} | {v.replace('|', '/')} |" for k, v in _provenance(result)]
-    return "\n".join(lines) + "\n"
+#: The findings table: the evidence is a column in HTML, a list below the table in Markdown.
+FINDING_COLUMNS = (Column("fault", "strong"), Column("hop", "wrap"), Column("camera", "wrap"),
+                   Column("estimate", "wrap"), Column("95% interval", "wrap"), Column("share"), Column("effect"),
+                   Column("confidence"), Column("strength"), Column("evidence", "wrap", only="html"),
+                   Column("fix", "command"))
 
 
-def html_page(result: Attribution, figures: Sequence[Figure]) -> str:
-    e = html.escape
-    title = Path(str(result.source.get("path", ""))).name or "episode"
-    parts = [
-        f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>framechain: {e(title)}</title>",
-        f"<style>{CSS}</style></head><body>",
-        f"<h1>framechain report: {e(title)}</h1>",
-        f"<div class='verdict{' clean' if _clean(result) else ''}'>{e(result.verdict)}</div>",
-        "<h2>Findings</h2>",
-    ]
-    if result.findings:
-        parts.append(
-            "<table><tr><th>fault</th><th>hop</th><th>camera</th><th>estimate</th><th>95% interval</th><th>share</th>"
-            "<th>effect</th><th>confidence</th><th>strength</th><th>evidence</th><th>fix</th></tr>"
-        )
-        for c in (FindingView.of(f).cells() for f in result.findings):
-            weak = " style='color:#777'" if c.strength != "strong" else ""
-            b = breakable  # frame names wrap at their joints, so the table fits the page
-            parts.append(
-                f"<tr{weak}><td><b>{b(c.fault)}</b></td><td>{b(c.hop)}</td><td>{b(c.camera or '-')}</td>"
-                f"<td>{b(c.estimate)}</td><td>{b(c.interval)}</td><td>{c.share}</td><td>{c.error}</td>"
-                f"<td>{c.confidence}</td><td>{c.strength}</td><td>{b(c.evidence)}</td><td>{_code(c.fix)}</td></tr>"
-            )
-        parts.append("</table>")
-    else:
-        parts.append(f"<p>{_no_findings(result)}</p>")
+def _findings_section(result: Attribution) -> Section:
+    if not result.findings:
+        return Section(Heading("Findings"), (Paragraph(_no_findings(result)),))
+    rows = [(c.fault, c.hop, c.camera or "-", c.estimate, c.interval, c.share, c.error, c.confidence, c.strength,
+             c.evidence, c.fix) for c in (FindingView.of(f).cells() for f in result.findings)]
+    evidence = Bullets(tuple(ListItem(f"{FindingView.of(f).on_camera()}: {f.evidence}", lead=f.fault.value)
+                             for f in result.findings), only="md")
+    return Section(Heading("Findings"), (
+        table(FINDING_COLUMNS, rows, tone=lambda row: "" if row[8] == "strong" else "muted"), evidence))
+
+
+def _error_section(result: Attribution) -> Section:
+    """The error sentence (with the observation counts in HTML), the per-hop table and the colour legend."""
     counts = result.counts()
-    parts.append(
-        f"<h2>Error</h2><p>{e(_error_sentence(result))} Observations: {counts['total']} total, "
-        f"{counts['replayed']} replayed, rejected {e(str(counts['rejected'] or 'none'))}, {counts['stale']} stale.</p>"
-    )
-    parts.append("<h3>Per hop</h3><table><tr>" + "".join(f"<th>{e(c)}</th>" for c in HOP_COLUMNS) + "</tr>")
-    parts += ["<tr>" + "".join(f"<td>{breakable(c)}</td>" for c in row) + "</tr>" for row in hop_rows(result)]
-    parts.append("</table>")
-    parts.append(f"<p class='legend'>Colours, in every plot and picture here, in Rerun and in the Foxglove export: "
-                 f"{_legend_html()}</p>")
-    if result.notes:
-        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{breakable(n)}</li>" for n in result.notes) + "</ul>")
-    parts.append("<div class='plots'>")
-    parts += [figure_html(fig) for fig in figures]
-    parts.append("</div><h2>Provenance</h2><table>")
-    parts += [f"<tr><th>{e(k)}</th><td>{breakable(v)}</td></tr>" for k, v in _provenance(result)]
-    parts.append(
-        "</table><p class='muted'>Written by framechain. Shares are Shapley values of the median error; "
-        "confidence is the BIC weight of the finding against the next-best explanation; intervals are "
-        "bootstrap 95% intervals over observations.</p></body></html>"
-    )
-    return "\n".join(parts)
+    observed = (f" Observations: {counts['total']} total, {counts['replayed']} replayed, rejected "
+                f"{counts['rejected'] or 'none'}, {counts['stale']} stale.")
+    legend = "Colours, in every plot and picture here, in Rerun and in the Foxglove export: "
+    return Section(Heading("Error"), (
+        Paragraph(_error_sentence(result), only="md"), Paragraph(_error_sentence(result) + observed, only="html",
+                                                                 joined=True),
+        Heading("Per hop", level=3), table([Column(c, "wrap") for c in HOP_COLUMNS], hop_rows(result), joined=True),
+        Paragraph(legend + legend_text(), only="md"), Html(f"<p class='legend'>{legend}{_legend_html()}</p>")))
+
+
+def _provenance_section(result: Attribution) -> Section:
+    footer = ("Written by framechain. Shares are Shapley values of the median error; confidence is the BIC weight of "
+              "the finding against the next-best explanation; intervals are bootstrap 95% intervals over "
+              "observations.")
+    return Section(Heading("Provenance", joined=True), (
+        table([Column("", "key"), Column("", "wrap")], _provenance(result), joined=True),
+        Paragraph(footer, muted=True, only="html", joined=True)))
 
 
 def _legend_html() -> str:
@@ -601,9 +365,3 @@ def _clean(result: Attribution) -> bool:
     observable is not clean)."""
     return (not any(f.actionable for f in result.findings) and not result.undetermined
             and not nothing_observable(result.bounds))
-
-
-def _code(text: str) -> str:
-    """Escape, and show `backticked` commands as code (both wrapping between words, long ones at their joints)."""
-    pieces = text.split("`")
-    return "".join(f"<code>{breakable(p, code=True)}</code>" if i % 2 else breakable(p) for i, p in enumerate(pieces))

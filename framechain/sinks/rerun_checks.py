@@ -12,14 +12,26 @@ from framechain.analysis.verdict.checks import Curve, family_name
 from framechain.analysis.verdict.findings import Attribution
 from framechain.sinks.checks_view import (
     BOUND_COLUMNS,
-    LABEL_COLUMNS,
     NOT_BOUNDED,
     bound_rows,
     label_columns,
     label_rows,
     label_summary,
+    shown_x,
+    zoomed,
 )
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR
+from framechain.sinks.document import (
+    Block,
+    Bullets,
+    Document,
+    Heading,
+    ListItem,
+    Paragraph,
+    Section,
+    markdown,
+    table,
+)
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -59,15 +71,14 @@ def _log_curve(rec: rr.RecordingStream, curve: Curve, rows: dict[str, int]) -> N
     the latency curve's median also as a series on the ``pose_offset`` timeline."""
     import rerun as rr
 
-    x = np.array([curve.display(v) for v in curve.x])
+    x = shown_x(curve)
     y = np.array(curve.rms_error_m) * 1e3
     finite = np.isfinite(y)
     x, y = x[finite], y[finite]
     if x.size == 0:
         return
     if curve.key == "offset_s":  # the curve near zero and the estimate: the whole second searched is coarse
-        centre = curve.display(curve.estimate if curve.estimate is not None else 0.0)
-        keep = np.abs(x - centre) <= max(4.0 * curve.display(curve.bound or 0.0), 20.0)
+        keep = zoomed(curve, x)
         x, y = x[keep], y[keep]
     widths = np.gradient(x) * 0.9 if x.size > 1 else np.ones(1)
     entity = curve_entity(curve)
@@ -94,19 +105,20 @@ def _log_curve(rec: rr.RecordingStream, curve: Curve, rows: dict[str, int]) -> N
 def checks_markdown(result: Attribution) -> str:
     """The verdict, what this log can show and the per-label table, as Markdown."""
     rows = bound_rows(result)
-    lines = ["# What this log can show", "", result.verdict, "",
-             *(["| " + " | ".join(BOUND_COLUMNS[:3]) + " |", "| --- | --- | --- |",
-                *("| " + " | ".join(c.replace("|", "/") for c in row[:3]) + " |" for row in rows), "",
-                *(f"- **{family}** ({hop}): {why}" for family, hop, _, why in rows)] if rows else [NOT_BOUNDED])]
+    blocks: list[Block] = [Paragraph(result.verdict)]
+    if rows:
+        blocks += [table(BOUND_COLUMNS[:3], (row[:3] for row in rows)),
+                   Bullets(tuple(ListItem(f" ({hop}): {why}", lead=family) for family, hop, _, why in rows))]
+    else:
+        blocks.append(Paragraph(NOT_BOUNDED))
     if result.curves:
-        lines += ["", "The error against each family's size is in the bar charts (red: the rms error, what the fit "
-                  "minimises; purple: the estimate; grey: the bound either side of no fault, or of the estimate for a "
-                  "family found)."]
+        blocks.append(Paragraph("The error against each family's size is in the bar charts (red: the rms error, what "
+                                "the fit minimises; purple: the estimate; grey: the bound either side of no fault, or "
+                                "of the estimate for a family found)."))
     if result.labels.rows:
-        lines += ["", "## Per label", "", label_summary(result), "",
-                  "| " + " | ".join(label_columns(result)) + " |", "|" + " --- |" * len(LABEL_COLUMNS),
-                  *("| " + " | ".join(row) + " |" for row in label_rows(result))]
-    return "\n".join(lines) + "\n"
+        blocks += [Heading("Per label"), Paragraph(label_summary(result)),
+                   table(label_columns(result), label_rows(result))]
+    return markdown(Document("What this log can show", "", (Section(None, tuple(blocks)),)))
 
 
 __all__ = ["CHECKS_ENTITY", "CURVES_ROOT", "OFFSET_TIMELINE", "checks_markdown", "curve_entity", "curve_title",

@@ -22,10 +22,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from framechain.analysis.egomotion import rotation_rates
-from framechain.analysis.egomotion.run import CameraMotion
+from framechain.analysis.egomotion.curves import RotationRateCurves
 from framechain.analysis.run import Run
-from framechain.arrays import IntArray
 from framechain.sinks.colors import AS_RUN_COLOR, CORRECTED_COLOR
 from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, Clock, entity_part
 from framechain.timeline import Timeline
@@ -94,43 +92,23 @@ def _log_video(rec: rr.RecordingStream, timeline: Timeline, clock: Clock, frame:
 
 def log_camera_motion(rec: rr.RecordingStream, run: Run, clock: Clock, rows: dict[str, int]) -> None:
     """Each measured camera's rotation rate: from its images, as declared, as fitted (see the module docstring)."""
-    if run.camera_motion is None:
-        return
-    for motion in run.camera_motion.cameras:
-        if motion.fit is not None and motion.fit.link and len(motion.table):
-            _log_rates(rec, motion, clock, rows)
+    for curves in run.rotation_rates:
+        _log_rates(rec, curves, clock, rows)
 
 
-def _consecutive(stamp0_ns: IntArray, stamp1_ns: IntArray) -> IntArray:
-    """The pairs of neighbouring frames (the shortest spans), in time order."""
-    span = stamp1_ns - stamp0_ns
-    keep = np.flatnonzero(span <= 1.5 * np.percentile(span, 10))
-    out: IntArray = keep[np.argsort(stamp0_ns[keep], kind="stable")]
-    return out
-
-
-def _log_rates(rec: rr.RecordingStream, motion: CameraMotion, clock: Clock, rows: dict[str, int]) -> None:
+def _log_rates(rec: rr.RecordingStream, curves: RotationRateCurves, clock: Clock, rows: dict[str, int]) -> None:
     import rerun as rr
 
-    fit = motion.fit
-    assert fit is not None
-    table = motion.table
-    pairs = _consecutive(table.stamp0_ns, table.stamp1_ns)
-    declared = rotation_rates(table, motion.link_motion(motion.declared_link), motion.declared_q_link_cam, 0.0)
-    corrected = rotation_rates(table, motion.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                               focal_scale=fit.focal_scale / motion.measured_focal)
-    middle = (table.stamp0_ns[pairs] + (table.stamp1_ns[pairs] - table.stamp0_ns[pairs]) // 2).astype(np.int64)
-    base = f"{RATE_ENTITY}/{entity_part(camera_name(motion.camera))}"
-    series = {"measured": declared.measured, "declared": declared.predicted, "corrected": corrected.predicted}
+    base = f"{RATE_ENTITY}/{entity_part(camera_name(curves.camera))}"
+    series = {"measured": curves.measured, "declared": curves.declared, "corrected": curves.fitted}
     for name, rates in series.items():
-        values = np.rad2deg(rates[pairs])
-        entities = {f"{base}/{name}": np.linalg.norm(values, axis=1)}
+        entities = {f"{base}/{name}": rates.magnitude_deg_s}
         if name != "corrected":
-            entities.update({f"{base}/{axis}/{name}": values[:, k] for k, axis in enumerate("xyz")})
+            entities.update({f"{base}/{axis}/{name}": rates.components_deg_s[:, k] for k, axis in enumerate("xyz")})
         for entity, column in entities.items():
             ok = np.isfinite(column)
             label = _LEGEND[name]
             rec.log(entity, rr.SeriesLines(colors=[_COLOURS[name]], names=[label]), static=True)
-            rec.send_columns(entity, indexes=clock.columns(middle[ok]),
+            rec.send_columns(entity, indexes=clock.columns(curves.middle_ns[ok]),
                              columns=rr.Scalars.columns(scalars=column[ok]))
             rows[entity] = int(ok.sum())

@@ -23,6 +23,19 @@ from framechain.sinks.colors import (
     REFERENCE_COLOR,
     legend_text,
 )
+from framechain.sinks.document import (
+    Block,
+    Bullets,
+    Callout,
+    Column,
+    Document,
+    Heading,
+    ListItem,
+    Paragraph,
+    Section,
+    markdown,
+    table,
+)
 from framechain.sinks.rerun_common import (
     REPLAY_FRAME_SUFFIX,
     CameraView,
@@ -82,24 +95,32 @@ def log_points(
     for leaf in ("camera", "body", "world", "target") if not rig else ("body", "world", "target"):
         logged = as_run[leaf]
         send_points(f"/points/as_run/{leaf}", hop_frame[leaf], logged, AS_RUN_COLOR, f"as-run ({leaf})")
-        both = np.flatnonzero(np.isfinite(logged).all(axis=1) & np.isfinite(recomputed[leaf]).all(axis=1))
-        if both.size == 0:
-            continue
-        entity = f"/points/error/{leaf}"
-        rec.log(entity, rr.CoordinateFrame(hop_frame[leaf]), static=True)
-        delta = logged[both] - recomputed[leaf][both]
-        rec.send_columns(
-            entity, indexes=clock.obs_indexes(result, both),
-            columns=rr.Arrows3D.columns(
-                origins=recomputed[leaf][both], vectors=delta,
-                colors=np.tile(np.array(error_color, dtype=np.uint8), (both.size, 1)),
-                radii=np.full(both.size, radius / 4, dtype=np.float32),
-                labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
-                show_labels=[False] * both.size,  # on hover: the 3D view's labels name the chain's frames alone
-            ),
-        )
-        rows[entity] = int(both.size)
+        _send_arrows(rec, result, clock, f"/points/error/{leaf}", hop_frame[leaf], recomputed[leaf], logged,
+                     error_color, radius / 4, rows)
     send_points("/points/reference/matched", frames.world, as_run["reference"], REFERENCE_COLOR, "reference")
+
+
+def _send_arrows(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, entity: str, frame: str,
+                 start: FloatArray, end: FloatArray, color: tuple[int, int, int], radius: float,
+                 rows: dict[str, int]) -> None:
+    """Arrows ``start -> end`` (a hop's recomputed point to its as-run one) where both are, labelled in mm."""
+    import rerun as rr
+
+    both = np.flatnonzero(np.isfinite(end).all(axis=1) & np.isfinite(start).all(axis=1))
+    if both.size == 0:
+        return
+    rec.log(entity, rr.CoordinateFrame(frame), static=True)
+    delta = end[both] - start[both]
+    rec.send_columns(
+        entity, indexes=clock.obs_indexes(result, both),
+        columns=rr.Arrows3D.columns(
+            origins=start[both], vectors=delta, colors=np.tile(np.array(color, dtype=np.uint8), (both.size, 1)),
+            radii=np.full(both.size, radius, dtype=np.float32),
+            labels=[f"{np.linalg.norm(d) * 1e3:.1f} mm" for d in delta],
+            show_labels=[False] * both.size,  # on hover: the 3D view's labels name the chain's frames alone
+        ),
+    )
+    rows[entity] = int(both.size)
 
 
 def log_series(
@@ -267,21 +288,14 @@ def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (),
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
     frames = result.frames
-    lines = [
-        "# framechain replay",
-        "",
-        *([f"**{verdict}**", ""] if verdict else []),
-        f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
-        f"latency budget {result.latency_budget_ns / 1e6:g} ms.",
-        "",
-        "| observations | count |",
-        "| --- | ---: |",
-        f"| total | {counts['total']} |",
-        f"| replayed | {counts['replayed']} |",
-        *[f"| rejected: {reason} | {n} |" for reason, n in sorted(rejected.items())],
-        f"| stale (replayed) | {counts['stale']} |",
-    ]
+    rows = [("total", str(counts["total"])), ("replayed", str(counts["replayed"])),
+            *((f"rejected: {reason}", str(n)) for reason, n in sorted(rejected.items())),
+            ("stale (replayed)", str(counts["stale"]))]
+    blocks: list[Block] = [Callout(verdict, kind="verdict")] if verdict else []
+    blocks += [Paragraph(f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
+                         f"latency budget {result.latency_budget_ns / 1e6:g} ms."),
+               table([Column("observations"), Column("count", right=True)], rows)]
     if findings:
-        lines += ["", "## Findings", "", *[f"- {f.text()}" for f in findings]]
-    lines += ["", "## Colours", "", legend_text()]
-    return "\n".join(lines) + "\n"
+        blocks += [Heading("Findings"), Bullets(tuple(ListItem(f.text()) for f in findings))]
+    blocks += [Heading("Colours"), Paragraph(legend_text())]
+    return markdown(Document("framechain replay", "", (Section(None, tuple(blocks)),)))

@@ -16,7 +16,7 @@ from framechain import pipeline
 from framechain.catalogue import Fault
 from framechain.sim import InjectedFault, SceneSpec, generate
 from framechain.sim.rig import RigSpec, generate_rig
-from framechain.sinks import fleet_report, report
+from framechain.sinks import fleet_report, report_figures
 from framechain.sinks.colors import (
     BOUND_COLOR,
     ERROR_COLOR,
@@ -56,8 +56,8 @@ def test_a_static_target_draws_one_error_over_time_never_red(monkeypatch: pytest
     scene = generate(SceneSpec(seed=6, duration_s=5.0, evidence="static",
                                faults=(InjectedFault(Fault.LATENCY, "data", {"offset_s": 0.030}),)))
     run = pipeline.run(scene.timeline, replace(scene.chain, tolerance_m=0.002), bootstrap=0)
-    made = _capture(monkeypatch, report)
-    report.make_figures(run.attributed())
+    made = _capture(monkeypatch, report_figures)
+    report_figures.make_figures(run.attributed())
     caption, over_time = made["error_per_hop"]
     assert caption.startswith("Error against the static spread over time (no hop logged")
     assert hex_color(ERROR_COLOR) not in _colours(over_time)
@@ -79,8 +79,8 @@ def test_a_static_target_draws_one_error_over_time_never_red(monkeypatch: pytest
 def test_a_rig_with_no_pose_draws_no_error_against_speed(monkeypatch: pytest.MonkeyPatch) -> None:
     scene = generate_rig(RigSpec(cameras=3, duration_s=3.0, rate_hz=15.0, static_tags=12, seed=3, pose="none"))
     run = pipeline.run(scene.timeline, scene.chain, bootstrap=0)
-    made = _capture(monkeypatch, report)
-    report.make_figures(run.attributed())
+    made = _capture(monkeypatch, report_figures)
+    report_figures.make_figures(run.attributed())
     assert "error_vs_speed" not in made  # every point would sit at 0 m/s
     assert "error_per_hop" in made
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from framechain.sinks.report import _code
+from framechain.sinks.document import code_spans
 from framechain.sinks.text import CSS, LONG_WORD, breakable
 from tests.helpers.realdata import ARUCO_IMAGES_BAG
 
@@ -32,7 +32,7 @@ def test_long_words_break_at_their_joints() -> None:
 def test_commands_keep_their_flags_whole() -> None:
     fix = ("use the recorded base_link -> camera_link, i.e. `ros2 run tf2_ros static_transform_publisher --x 0.3000 "
            "--frame-id base_link --child-frame-id t265_fisheye1_optical_frame`.")
-    marked = _code(fix)
+    marked = code_spans(fix, wrap=True)
     code = re.search(r"<code>(.*)</code>", marked)
     assert code is not None
     assert "<span class='nw'>--child-frame-id</span>" in code.group(1)  # a browser would break after a hyphen
@@ -56,7 +56,7 @@ def test_a_table_of_long_frame_names_fits_the_page(tmp_path: Path) -> None:
              f"With rotation_error in the chain, the points of {frame} depart: inverted[{frame}->{frame}].",
              f"Use `ros2 run tf2_ros static_transform_publisher --x 0.3 --frame-id base_link --child-frame-id "
              f"{frame}`."]
-    row = "".join(f"<td>{_code(c) if '`' in c else breakable(c)}</td>" for c in cells)
+    row = "".join(f"<td>{code_spans(c, wrap=True) if '`' in c else breakable(c)}</td>" for c in cells)
     page = (f"<!doctype html><html><head><meta charset='utf-8'><style>{CSS}</style></head><body>"
             f"<table><tr>{'<th>column</th>' * len(cells)}</tr><tr>{row}</tr></table>"
             "<script>var t=document.querySelector('table');document.title='W'+document.documentElement.scrollWidth"
