@@ -9,7 +9,7 @@ resolution, the depth imager's frame looked up for the colour one), with random 
 motion and fault size; and N/2 clean scenes. Reports, per level and per fault form: the share
 whose top finding names the right fault and hop (and, for the frame swaps, the frame used), the
 share whose estimate is within the generator's tolerance, and the share of clean scenes with a
-finding above a 0.1 share (false positives). Targets (issue 9): top finding right in 100% of
+finding above a 0.1 share (false positives). Targets: top finding right in 100% of
 hops, target and reference scenes and 95% of static ones.
 
     python benchmarks/run.py attribution            # N = 200 per level

@@ -8,7 +8,7 @@ tolerance) names its family at its hop; at 2x the
 estimate is also checked to be within half the bound of the truth. Honest bounds: found at 2x
 nearly always, at 0.5x rarely.
 
-Logs: the shared tagslam_stairs bag with the README's chain (the faults written into the log as
+Logs: the shared tagslam_stairs bag with the tutorial's chain (the faults written into the log as
 read: the odometry re-stamped, the mount turned, the tag depths scaled, the focal length scaled;
 both signs, or away from no fault for a family found as recorded, its estimate then checked to move
 by the size injected), and generated scenes from :mod:`framechain.sim` (static targets and a reference with
@@ -45,7 +45,7 @@ LEVELS = {"static": "data", "reference": "data", "hops": "robot"}
 
 
 def stairs_chain() -> ChainConfig:
-    """The README's chain for tagslam_stairs."""
+    """The tutorial's chain for tagslam_stairs (docs/tutorial.md)."""
     sizes: dict[str, Any] = {"default": 0.16, **{str(i): 0.10 for i in range(100, 108)}}
     return ChainConfig.from_dict({
         "frames": {"camera": "t265_fisheye1_optical_frame", "body": "basalt_pose_frame", "world": "world"},

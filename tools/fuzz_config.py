@@ -2,7 +2,7 @@
 
 Three valid files are mutated, each read by the command a user would run:
 
-- ``chain``: the README's CHAIN.yaml for the tagslam_stairs bag, through ``info LOG --chain``, and
+- ``chain``: the tutorial's chain.yaml for the tagslam_stairs bag, through ``info LOG --chain``, and
   ``attribute LOG --chain`` for every ``--attribute-every``-th chain case;
 - ``calibration``: the Kalibr ``cameras.yaml`` beside that bag, or a ROS camera_info YAML made from
   its cam0, named by the same chain, through ``info LOG --chain``;
@@ -50,7 +50,7 @@ TARGETS = ("chain", "calibration", "robot")
 #: Cases of each target in a cycle: chains are the most varied, twice the share.
 DEFAULT_MIX = "chain=2,calibration=1,robot=1"
 
-#: The README's chain for the tagslam_stairs bag (README "A real recording").
+#: The tutorial's chain for the tagslam_stairs bag (docs/tutorial.md).
 STAIRS_CHAIN: dict[str, Any] = {
     "frames": {"camera": "t265_fisheye1_optical_frame", "body": "basalt_pose_frame", "world": "world"},
     "topics": {"detections": "/t265/fisheye1/tags", "odometry": "/vio_node/odom"},

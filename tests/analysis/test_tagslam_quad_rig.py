@@ -1,7 +1,7 @@
 """The shared tagslam_quad_rig: four fisheye cameras in two synced pairs, no pose. framechain's rig chain is
 checked against an independent computation: the bag read with rosbags, each tag's centre by OpenCV's
 fisheye undistortion and square-marker PnP, put in the rig frame with camera_poses.yaml (T_rig_cam, a position
-and a rotation vector) by scipy, and pairs of one tag at one stamp compared (README: 28 and 39 mm)."""
+and a rotation vector) by scipy, and pairs of one tag at one stamp compared (docs/rigs.md: 28 and 39 mm)."""
 
 from __future__ import annotations
 
@@ -173,7 +173,7 @@ def test_independent_pairs_agree_as_the_readme_says(rig: Path) -> None:
     assert np.median(top) == pytest.approx(0.039, abs=0.0015)
     assert _pair_distances(s, p, "cam0", "cam2").size == 0  # the pairs never see one tag at once
     inverted = {k: (np.linalg.inv(m) if k in ("cam2", "cam3") else m) for k, m in _poses(rig).items()}
-    assert np.median(_pair_distances(s, _in_rig(s, inverted), "cam2", "cam3")) > 0.3  # README: 479 mm
+    assert np.median(_pair_distances(s, _in_rig(s, inverted), "cam2", "cam3")) > 0.3  # inverted: ~0.48 m apart
 
 
 def test_each_camera_is_its_topics_and_replays_as_the_independent_points(rig: Path) -> None:

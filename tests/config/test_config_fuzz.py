@@ -1,5 +1,5 @@
 """A short fixed-seed run of the configuration fuzzer (``make fuzz`` runs 1,500 cases): mutated copies
-of the README's tagslam_stairs chain, of the Kalibr cameras.yaml beside it (and a ROS camera_info made
+of the tutorial's tagslam_stairs chain, of the Kalibr cameras.yaml beside it (and a ROS camera_info made
 from it), and of a robot.yaml for a real LeRobot dataset, through ``info`` and ``attribute``: exit 0
 (the mutation happened to be valid) or 1 with one line on stderr, never a traceback."""
 

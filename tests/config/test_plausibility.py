@@ -88,7 +88,7 @@ def test_angles_beyond_pi_are_notes_and_stay_the_rotation_given() -> None:
     assert chain.notes == ("c.yaml: mounts[0].rpy [0, 0, 4] has an angle of 4 rad, beyond pi (the same rotation as "
                            "-2.28319)",)
     assert chain.mounts[0].quat_xyzw[2] == pytest.approx(0.9092974268256817)  # sin(2)
-    # The README's stairs mount (a rotation vector of 3.139 rad) is neither.
+    # The tutorial's stairs mount (a rotation vector of 3.139 rad) is neither.
     readme = ChainConfig.from_dict(_mount(xyz=[0.010699, 0.000025, -0.000092],
                                           rotvec=[-0.0135696, 0.0062165, -3.1391944]))
     assert readme.notes == ()
@@ -248,7 +248,7 @@ def test_every_config_error_is_a_config_error() -> None:
         assert str(error("file.yaml", "key: what")) == "file.yaml: key: what"
 
 
-#: The README's chain for the tagslam_stairs bag.
+#: The tutorial's chain for the tagslam_stairs bag.
 STAIRS_CHAIN = """\
 frames: {camera: t265_fisheye1_optical_frame, body: basalt_pose_frame, world: world}
 topics: {detections: /t265/fisheye1/tags, odometry: /vio_node/odom}

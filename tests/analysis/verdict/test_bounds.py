@@ -157,7 +157,7 @@ def test_generated_faults_at_twice_the_bound_are_found_and_at_half_mostly_not(le
     assert found_at_half <= 1
 
 
-# -- the shared stairs bag with the README's chain: its bound, and a fault twice that size ----------
+# -- the shared stairs bag with the tutorial's chain: its bound, and a fault twice that size ----------
 @functools.cache
 def _stairs_bound(realdata: Path) -> float:
     """The pose latency bound of the stairs bag as recorded (seconds), computed once per process."""

@@ -32,7 +32,7 @@ MOVED_M = np.array([0.0, 0.05, 0.0])  # the mount moved 5 cm along base_link's y
 
 # -- size gates action ----------------------------------------------------------------------------------------
 def test_the_stairs_tutorial_offers_no_fix_for_an_effect_under_a_millimetre(realdata: Path) -> None:
-    """The README's chain on the stairs bag: the depth scale (0.2 mm of a 1.6 mm spread) and the inverted mount
+    """The tutorial's chain on the stairs bag: the depth scale (0.2 mm of a 1.6 mm spread) and the inverted mount
     (0.0 mm) are clear fits of sub-millimetre effects: notes with their size, no fix, and the verdict says so."""
     result = recorded_attribution(realdata)
     assert result.findings
