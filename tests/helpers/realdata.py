@@ -51,3 +51,18 @@ PANDA_URDF = "urdf/panda/panda.urdf"
 
 #: GoPro clips (karma.mp4, max-heromode.mp4) with their GPMF telemetry.
 GOPRO_CLIPS = "gopro_gpmf"
+
+
+def aruco_images_chain(
+    evidence: dict[str, object], mount_quat_xyzw: tuple[float, ...] = (-0.5, 0.5, -0.5, 0.5)
+) -> dict[str, object]:
+    """A chain for the fiducials bag's one JPEG of seven ArUco markers (a Raspberry Pi camera on a base), as a
+    ``ChainConfig.from_dict`` mapping with ``evidence`` as given and the camera's mount turned as given."""
+    return {
+        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
+        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
+        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
+                    "quat_xyzw": list(mount_quat_xyzw)},
+                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
+        "evidence": evidence,
+    }

@@ -87,3 +87,15 @@ class Ros1Bag:
                     conns[topic] = w.add_connection(topic, msgtype, typestore=self.ts)
                 w.write(conns[topic], t, self.ts.serialize_ros1(msg, msgtype))
         return path
+
+
+def tf_typestore(*, ros1: bool) -> Any:
+    """rosbags' own Humble or Noetic typestore, with tf2_msgs/TFMessage registered for Noetic (which lacks it):
+    the fixtures' writer side, built without framechain's message definitions."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if not ros1:
+        return get_typestore(Stores.ROS2_HUMBLE)
+    store = get_typestore(Stores.ROS1_NOETIC)
+    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
+    return store

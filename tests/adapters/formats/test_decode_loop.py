@@ -15,21 +15,12 @@ import numpy as np
 import pytest
 
 from framechain.adapters.api import TREE_KINDS, open_log
+from tests.helpers.ros1_bags import tf_typestore
 
 N = 60
 BAD = (5, 17, 40)  # messages written as three bytes: no type decodes from them
 T0 = 1_000_000_000
 STEP = 10_000_000
-
-
-def _store(ros1: bool) -> Any:
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    if not ros1:
-        return get_typestore(Stores.ROS2_HUMBLE)
-    store = get_typestore(Stores.ROS1_NOETIC)
-    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    return store
 
 
 def _payload(store: Any, i: int, ros1: bool) -> bytes:
@@ -51,7 +42,7 @@ def _payload(store: Any, i: int, ros1: bool) -> bytes:
 def _mcap(path: Path, *, indexed: bool = True) -> Path:
     from mcap.writer import IndexType, Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     text = store.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0]
     options: dict[str, Any] = {} if indexed else {"index_types": IndexType.NONE, "use_summary_offsets": False,
                                                   "use_statistics": False}
@@ -68,7 +59,7 @@ def _mcap(path: Path, *, indexed: bool = True) -> Path:
 def _bag(path: Path, *, index: bool = True) -> Path:
     from rosbags.rosbag1 import Writer
 
-    store = _store(ros1=True)
+    store = tf_typestore(ros1=True)
     with Writer(path) as w:
         conn = w.add_connection("/tf", "tf2_msgs/msg/TFMessage", typestore=store)
         for i in range(N):
@@ -83,7 +74,7 @@ def _bag(path: Path, *, index: bool = True) -> Path:
 def _ros2(path: Path, *, per_message: bool = False) -> Path:
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     w = Writer(path, version=8)
     if per_message:  # read row by row (one message failing to decompress must not end the read)
         w.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
@@ -140,7 +131,7 @@ def test_a_schema_that_does_not_parse_skips_its_topic_with_one_note(tmp_path: Pa
     """Two channels of /tf with a definition that does not parse: /tf is skipped (one note), /tf_static read."""
     from mcap.writer import Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     text = store.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0]
     path = tmp_path / "tf.mcap"
     with path.open("wb") as f:

@@ -17,21 +17,12 @@ from framechain.adapters.api import TREE_KINDS, open_log, scan_log
 from framechain.adapters.formats.mcap.salvage import ChannelRecord, McapScanner, MessageRecord
 from framechain.adapters.formats.rosbag.salvage_ros1 import Message, Rosbag1Scanner
 from tests.helpers.realdata import FRANKA_BAG, HUSKY_BAG, NAV2_MCAP
+from tests.helpers.ros1_bags import tf_typestore
 
 Msg = tuple[str, int, bytes]
 
 
 # -- writers ---------------------------------------------------------------------------------------
-def _store(ros1: bool) -> Any:
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
-    if not ros1:
-        return get_typestore(Stores.ROS2_HUMBLE)
-    store = get_typestore(Stores.ROS1_NOETIC)
-    store.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
-    return store
-
-
 def _tf(store: Any, i: int, ros1: bool) -> Any:
     t = store.types
     stamp = t["builtin_interfaces/msg/Time"](sec=100 + i // 10, nanosec=(i % 10) * 100_000_000)
@@ -48,7 +39,7 @@ def _tf(store: Any, i: int, ros1: bool) -> Any:
 def _write_mcap(path: Path, compression: str, n: int = 600) -> None:
     from mcap.writer import CompressionType, Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     text = store.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0]
     kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "": CompressionType.NONE}
     with path.open("wb") as f:
@@ -65,7 +56,7 @@ def _write_mcap(path: Path, compression: str, n: int = 600) -> None:
 def _write_bag(path: Path, compression: str, n: int = 600) -> None:
     from rosbags.rosbag1 import Writer
 
-    store = _store(ros1=True)
+    store = tf_typestore(ros1=True)
     w = Writer(path)
     if compression:
         w.set_compression(Writer.CompressionFormat[compression.upper()])
@@ -167,7 +158,7 @@ def test_cut_zstd_chunk_is_streamed(tmp_path: Path) -> None:
     """A single chunk cut in half: the complete records of its first half come back."""
     from mcap.writer import CompressionType, Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     path = tmp_path / "one_chunk.mcap"
     text = store.generate_msgdef("tf2_msgs/msg/TFMessage", ros_version=2)[0]
     with path.open("wb") as f:
@@ -317,7 +308,7 @@ def test_damaged_chunk_in_an_indexed_rosbag1_costs_only_that_chunk(tmp_path: Pat
 def _write_ros2(path: Path, *, per_message: bool, n: int = 300) -> None:
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, Writer
 
-    store = _store(ros1=False)
+    store = tf_typestore(ros1=False)
     w = Writer(path, version=8)
     if per_message:
         w.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)

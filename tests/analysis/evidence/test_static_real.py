@@ -15,7 +15,7 @@ from framechain.analysis.verdict.attribute import AnalysisError
 from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig
 from framechain.pipeline import attribute_log
-from tests.helpers.realdata import ARUCO_IMAGES_BAG, STAIRS_BAG
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, STAIRS_BAG, aruco_images_chain
 from tests.helpers.stairs import recorded_attribution, stairs_chain
 
 
@@ -65,14 +65,7 @@ def test_too_few_sightings_is_one_line(realdata: Path, sized: bool) -> None:
     markers: dict[str, object] = {"dictionary": "DICT_5X5_1000"}
     if sized:
         markers["size_m"] = 0.14
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
-        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
-        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
-                    "quat_xyzw": [-0.5, 0.5, -0.5, 0.5]},
-                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
-        "evidence": {"markers": markers, "static_target": True},
-    })
+    chain = ChainConfig.from_dict(aruco_images_chain({"markers": markers, "static_target": True}))
     with pytest.raises(AnalysisError) as err:
         attribute_log(realdata / ARUCO_IMAGES_BAG, chain, bootstrap=0)
     message = str(err.value)

@@ -25,7 +25,7 @@ from framechain.catalogue import Fault
 from framechain.config.chain import ChainConfig, ChainEvidence
 from framechain.geometry.camera import CameraModel
 from framechain.sim import InjectedFault, SceneSpec, generate
-from tests.helpers.realdata import ARUCO_IMAGES_BAG
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, aruco_images_chain
 from tests.helpers.stairs import recorded_attribution, restamped_bag, stairs_chain
 
 
@@ -214,14 +214,8 @@ def test_observations_for_turns_world_points_back_into_pixels_and_depths() -> No
 def test_one_image_of_markers_cannot_show_a_latency(realdata: Path) -> None:
     """The fiducials bag holds one JPEG (seven ArUco markers) against a declared reference point: no
     motion, so no latency; the other families only at sizes a single view allows."""
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
-        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
-        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
-                    "quat_xyzw": [-0.5, 0.5, -0.5, 0.5]},
-                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
-        "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
-    })
+    chain = ChainConfig.from_dict(aruco_images_chain(
+        {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]}))
     result = pipeline.run(realdata / ARUCO_IMAGES_BAG, chain, bootstrap=0).attributed()
     assert result.counts()["replayed"] == 7
     bounds = _bounds(result)
@@ -268,14 +262,9 @@ def test_a_real_fixed_camera_over_static_markers_cannot_show_latency_or_its_moun
     observable, and the verdict says nothing could be checked, not "no fault"."""
     mount = Rotation.from_quat([-0.5, 0.5, -0.5, 0.5]) * Rotation.from_rotvec(np.deg2rad(turned_deg) * np.array(
         [0.0, 1.0, 0.0]))
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
-        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
-        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
-                    "quat_xyzw": mount.as_quat().tolist()},
-                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
-        "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "static_target": True},
-    })
+    chain = ChainConfig.from_dict(aruco_images_chain(
+        {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "static_target": True},
+        tuple(mount.as_quat().tolist())))
     bag = _held_bag(realdata, tmp_path / "held.bag", 12)
     result = pipeline.run(bag, chain, bootstrap=0).attributed()
     assert result.metric == "static_spread"

@@ -18,7 +18,7 @@ from framechain.analysis.verdict.fixes import FixContext, fix_for
 from framechain.catalogue import Fault, HopName
 from framechain.config.chain import ChainConfig
 from framechain.sim.scene import TOPICS, InjectedFault, SceneSpec, generate
-from tests.helpers.realdata import ARUCO_IMAGES_BAG
+from tests.helpers.realdata import ARUCO_IMAGES_BAG, aruco_images_chain
 
 
 def _reference_run(fault: InjectedFault, *, depth_images: bool = False) -> object:
@@ -84,14 +84,8 @@ def test_findings_that_explain_nothing_are_notes_on_a_real_log(realdata: Path) -
     bag = realdata / ARUCO_IMAGES_BAG
     if not bag.is_file():
         pytest.skip(f"{bag} not present")
-    chain = ChainConfig.from_dict({
-        "frames": {"camera": "raspicam", "body": "base_link", "world": "map"},
-        "topics": {"image": "/raspicam_node/image/compressed", "camera_info": "/raspicam_node/camera_info"},
-        "mounts": [{"parent": "base_link", "child": "raspicam", "xyz": [0.1, 0, 0.3],
-                    "quat_xyzw": [-0.5, 0.5, -0.5, 0.5]},
-                   {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
-        "evidence": {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]},
-    })
+    chain = ChainConfig.from_dict(aruco_images_chain(
+        {"markers": {"dictionary": "DICT_5X5_1000", "size_m": 0.14}, "reference_point": [1.0, 0.0, 0.3]}))
     result = pipeline.run(bag, chain, bootstrap=0).attributed()
     assert all(f.share > 0 and f.error_m > 0 for f in result.findings), [(f.model, f.share) for f in result.findings]
     dropped = [n for n in result.notes if "is no finding" in n]
