@@ -14,6 +14,7 @@ from __future__ import annotations
 import html
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 from framechain.sinks.plots import Figure, figure_html
@@ -183,6 +184,22 @@ def table(columns: Sequence[str | Column], rows: Iterable[Sequence[str]], *,
 
 
 # -- Markdown ---------------------------------------------------------------------------------
+def write_document(doc: Document, figures: Iterable[Figure], out: Path, formats: Sequence[str], stem: str,
+                   key_prefix: str = "") -> dict[str, Path]:
+    """Write ``doc`` as ``out/STEM.md`` (with its figures as PNGs beside it, which the Markdown links to) and/or
+    ``out/STEM.html`` (figures inline); returns the paths written, keyed ``md``/``html`` after ``key_prefix``."""
+    paths: dict[str, Path] = {}
+    if "md" in formats:
+        for fig in figures:
+            (out / f"{fig.name}.png").write_bytes(fig.png)
+        paths[f"{key_prefix}md"] = out / f"{stem}.md"
+        paths[f"{key_prefix}md"].write_text(markdown(doc))
+    if "html" in formats:
+        paths[f"{key_prefix}html"] = out / f"{stem}.html"
+        paths[f"{key_prefix}html"].write_text(html_page(doc))
+    return paths
+
+
 def markdown(doc: Document) -> str:
     """The document as Markdown: the title, then every block of ``md`` or both formats, a blank line apart."""
     lines = [f"# {doc.title}"]

@@ -29,9 +29,8 @@ from framechain.sinks.document import (
     ListItem,
     Paragraph,
     Section,
-    html_page,
-    markdown,
     table,
+    write_document,
 )
 from framechain.sinks.fleet_cameras import camera_figures, cameras_sections
 from framechain.sinks.fleet_offsets import offset_sections, video_offsets
@@ -195,16 +194,7 @@ def render_fleet_report(
     camera_figs = camera_figures(cameras)
     doc = fleet_document(logs, spread, figures, notes,
                          [*cameras_sections(cameras, camera_figs), *offset_sections(offsets)])
-    paths: dict[str, Path] = {}
-    if "md" in formats:
-        for fig in (*figures, *camera_figs):
-            (out / f"{fig.name}.png").write_bytes(fig.png)
-        paths["fleet_md"] = out / "fleet_report.md"
-        paths["fleet_md"].write_text(markdown(doc))
-    if "html" in formats:
-        paths["fleet_html"] = out / "fleet_report.html"
-        paths["fleet_html"].write_text(html_page(doc))
-    return paths
+    return write_document(doc, (*figures, *camera_figs), out, formats, "fleet_report", key_prefix="fleet_")
 
 
 # -- figures ----------------------------------------------------------------------------------

@@ -45,9 +45,8 @@ from framechain.sinks.document import (
     ListItem,
     Paragraph,
     Section,
-    html_page,
-    markdown,
     table,
+    write_document,
 )
 from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
@@ -97,16 +96,8 @@ def _write_report(run: Run, out: Path, formats: Sequence[str], plots: tuple[list
     pictures, checks = plots
     crops = image_crops(run)
     doc = report_document(result, pictures, checks, crops)
-    paths: dict[str, Path] = {}
-    if "md" in formats:
-        for fig in [*pictures, *checks, *(crop for _, shown in crops for crop in shown)]:
-            (out / f"{fig.name}.png").write_bytes(fig.png)
-        paths["md"] = out / "report.md"
-        paths["md"].write_text(markdown(doc))
-    if "html" in formats:
-        paths["html"] = out / "report.html"
-        paths["html"].write_text(html_page(doc))
-    return paths
+    figures = [*pictures, *checks, *(crop for _, shown in crops for crop in shown)]
+    return write_document(doc, figures, out, formats, "report")
 
 
 def report_document(result: Attribution, pictures: Sequence[Figure], checks: Sequence[Figure],
