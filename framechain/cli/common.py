@@ -316,15 +316,11 @@ def print_findings(result: Any) -> None:
 
     from framechain.sinks.checks_view import BOUND_COLUMNS, bound_rows, label_columns, label_rows, label_summary
     from framechain.sinks.report import HOP_COLUMNS, hop_rows
-    from framechain.sinks.text import FindingView
+    from framechain.sinks.text import FindingView, observation_counts
 
     console = stdout_console(120)  # piped output keeps the table readable
     console.print(f"[bold]{result.verdict}[/bold]")
-    counts = result.counts()
-    console.print(
-        f"observations: {counts['total']} total, {counts['replayed']} replayed, "
-        f"rejected {counts['rejected'] or 'none'}, {counts['stale']} stale"
-    )
+    console.print(f"observations: {observation_counts(result)}", soft_wrap=True)  # one line, for grep
     if result.findings:
         table = Table()
         cameras = any(f.camera for f in result.findings)

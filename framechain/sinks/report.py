@@ -52,7 +52,7 @@ from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
 from framechain.sinks.plots import Figure, figure_png
 from framechain.sinks.report_figures import after_label, make_figures, motion_figures
-from framechain.sinks.text import FindingView, mm
+from framechain.sinks.text import FindingView, mm, observation_counts
 from framechain.timeline import PointRole
 
 
@@ -257,7 +257,6 @@ def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
 def _provenance(result: Attribution) -> list[tuple[str, str]]:
     record = inputs_record(result)
     src = record["source"]
-    counts = record["observations"]
     return [
         ("file", str(src.get("path", ""))),
         ("format", str(src.get("format", ""))),
@@ -282,11 +281,7 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
             f"{role}: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in fates.items())
             for role, fates in record["evidence_alignment"].items()) or "none"),
         ("latency budget", f"{record['latency_budget_s'] * 1e3:g} ms"),
-        (
-            "observations",
-            f"{counts['total']} total, {counts['replayed']} replayed, rejected "
-            f"{counts['rejected'] or 'none'}, {counts['stale']} stale",
-        ),
+        ("observations", observation_counts(result)),
         ("configuration", json.dumps(record["configuration"])),
         ("seed", str(record["seed"])),
         ("framechain", str(record["framechain_version"])),
@@ -313,9 +308,7 @@ def _findings_section(result: Attribution) -> Section:
 
 def _error_section(result: Attribution) -> Section:
     """The error sentence (with the observation counts in HTML), the per-hop table and the colour legend."""
-    counts = result.counts()
-    observed = (f" Observations: {counts['total']} total, {counts['replayed']} replayed, rejected "
-                f"{counts['rejected'] or 'none'}, {counts['stale']} stale.")
+    observed = f" Observations: {observation_counts(result)}."
     legend = "Colours, in every plot and picture here, in Rerun and in the Foxglove export: "
     return Section(Heading("Error"), (
         Paragraph(_error_sentence(result), only="md"), Paragraph(_error_sentence(result) + observed, only="html",

@@ -101,7 +101,7 @@ from framechain.sinks.rerun_series import (
     log_text,
     summary_markdown,
 )
-from framechain.sinks.text import FindingView
+from framechain.sinks.text import FindingView, observation_counts
 from framechain.timeline import Timeline
 
 if TYPE_CHECKING:
@@ -371,11 +371,20 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
         log_rig(rec, result, clock, run.attribution.rig, opts, rows)
     moving = run.timeline.transforms.stamp_ns[~run.timeline.transforms.is_static]
     log_text(rec, result, clock, [FindingView.of(f) for f in run.findings], rows,
-             start_ns=int(moving.min()) if moving.size else None, verdict=_verdict(run))
+             start_ns=int(moving.min()) if moving.size else None, verdict=_verdict(run),
+             measured_instead=_measured_instead(run))
     if run.attribution is not None:
         log_explained_error(rec, result, clock, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
     return rows
+
+
+def _measured_instead(run: Run) -> str:
+    """For a run measured against the cameras' own motion (no logged observation), what was measured."""
+    attribution = run.attribution
+    if attribution is None or attribution.metric != "camera_motion" or attribution.counts()["total"]:
+        return ""
+    return observation_counts(attribution)
 
 
 def _as_run_points(

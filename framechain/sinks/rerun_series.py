@@ -209,9 +209,11 @@ def _send_series(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, en
 
 
 def log_text(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, findings: Iterable[FindingView],
-             rows: dict[str, int], *, start_ns: int | None = None, verdict: str = "") -> None:
+             rows: dict[str, int], *, start_ns: int | None = None, verdict: str = "",
+             measured_instead: str = "") -> None:
     """Findings (at the first observation; without observations at ``start_ns``, the log's first moment;
-    without findings, ``/log/verdict``: why there are none), rejected and stale observations, and a summary."""
+    without findings, ``/log/verdict``: why there are none), rejected and stale observations, and a summary
+    (``measured_instead``: what a run without observations measured, in place of their counts)."""
     import rerun as rr
 
     obs = result.observations
@@ -257,7 +259,8 @@ def log_text(rec: rr.RecordingStream, result: ReplayResult, clock: Clock, findin
         rec.send_columns("/log/stale", indexes=clock.obs_indexes(result, stale),
                          columns=rr.TextLog.columns(text=texts, level=[rr.TextLogLevel.INFO] * stale.size))
         rows["/log/stale"] = int(stale.size)
-    rec.log("/summary", rr.TextDocument(summary_markdown(result, found, verdict), media_type=rr.MediaType.MARKDOWN),
+    summary = summary_markdown(result, found, verdict, measured_instead)
+    rec.log("/summary", rr.TextDocument(summary, media_type=rr.MediaType.MARKDOWN),
             static=True)
     rows["/summary"] = 1
 
@@ -281,9 +284,10 @@ def _rejection_text(result: ReplayResult, i: int) -> str:
     return f"obs {int(obs.obs_id[i])} {obs.label[i]} rejected: {reason}{detail}".replace("  ", " ")
 
 
-def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (), verdict: str = "") -> str:
-    """The verdict, counts (total, replayed, rejected per reason, stale), findings and the colour legend as
-    Markdown."""
+def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (), verdict: str = "",
+                     measured_instead: str = "") -> str:
+    """The verdict, counts (total, replayed, rejected per reason, stale; or, for a run without observations,
+    ``measured_instead``), findings and the colour legend as Markdown."""
     counts = result.counts()
     rejected = counts["rejected"]
     assert isinstance(rejected, dict)
@@ -294,6 +298,7 @@ def summary_markdown(result: ReplayResult, findings: Sequence[FindingView] = (),
     blocks: list[Block] = [Callout(verdict, kind="verdict")] if verdict else []
     blocks += [Paragraph(f"Chain: `{frames.camera}` -> `{frames.body}` -> `{frames.world}`; "
                          f"latency budget {result.latency_budget_ns / 1e6:g} ms."),
+               Paragraph(f"Observations: {measured_instead}.") if measured_instead else
                table([Column("observations"), Column("count", right=True)], rows)]
     if findings:
         blocks += [Heading("Findings"), Bullets(tuple(ListItem(f.text()) for f in findings))]

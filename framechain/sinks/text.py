@@ -13,7 +13,21 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from framechain.analysis.model.estimates import format_estimate, format_interval
-from framechain.analysis.verdict.findings import Finding
+from framechain.analysis.verdict.findings import Attribution, Finding
+
+
+def observation_counts(result: Attribution) -> str:
+    """``N total, N replayed, rejected ..., N stale``; for a run measured against the cameras' own motion,
+    which has no logged observation to replay, the frames and frame pairs each camera's motion was measured on
+    (a bare "0 total" there reads as nothing done)."""
+    counts = result.counts()
+    replayed = (f"{counts['total']} total, {counts['replayed']} replayed, rejected {counts['rejected'] or 'none'}, "
+                f"{counts['stale']} stale")
+    if result.metric != "camera_motion" or counts["total"]:
+        return replayed
+    measured = "; ".join(f"camera {c['camera']}: {c.get('frames', 0)} frames, {c.get('pairs', 0)} frame pairs"
+                         for c in result.camera_motion)
+    return f"none logged (no detections); the cameras' own motion measured instead: {measured}"
 
 
 def mm(value_m: float | None) -> str:

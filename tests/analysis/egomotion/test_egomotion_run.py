@@ -367,3 +367,26 @@ def test_a_camera_declared_on_the_wrist_that_rides_the_gripper_is_named(clean: t
     assert entry["link"] == "gripper_link"
     measured = Rotation.from_quat(entry["q_link_cam"])
     assert np.rad2deg((measured.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude()) < 3.0
+
+
+def test_an_episode_without_detections_says_what_it_measured(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """No detection is logged, so there is nothing to replay: the counts name the frames and frame pairs each
+    camera's motion was measured on (the episode's rows, as the generator wrote them), not "0 total"."""
+    truth, robot = clean
+    code = main(["attribute", str(truth.root), "--episode", "0", "--robot", str(robot), "--out", str(tmp_path),
+                 "--format", "md", "--bootstrap", "0", "-q"])
+    assert code == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("observations:")]
+    rows = truth.timestamps_s[0].size
+    measured = json.loads((tmp_path / "attribution.json").read_text())["camera_motion"]
+    (entry,) = [e for e in measured if e["camera"] == "wrist_optical_frame"]
+    assert entry["frames"] == rows
+    assert entry["pairs"] > 0
+    expected = f"camera wrist_optical_frame: {rows} frames, {entry['pairs']} frame pairs"
+    assert line.startswith("observations: none logged (no detections)")
+    assert expected in line
+    assert "0 total" not in line
+    report = (tmp_path / "report.md").read_text()
+    assert f"| observations | none logged (no detections); the cameras' own motion measured instead: {expected} |" in (
+        report)
