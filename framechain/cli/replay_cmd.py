@@ -165,7 +165,7 @@ def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, A
 
 
 def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
-    from framechain.sinks.text import FindingView
+    from framechain.sinks.text import FindingView, observation_counts
 
     findings = loaded.findings
     counts = loaded.replay.counts()
@@ -181,7 +181,12 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {sum(rejected.values())} rejected"
     if detail:
         line += f" ({detail})"
-    print(f"{line}, {counts['stale']} stale")
+    attribution = loaded.attribution
+    if attribution is not None and attribution.metric == "camera_motion" and not counts["total"]:
+        line = f"observations  {observation_counts(attribution)}"  # what was measured instead
+    else:
+        line = f"{line}, {counts['stale']} stale"
+    print(line)
     for note in notes:
         print(f"note          {note}")
     if loaded.attribution is not None:  # the findings and what the log could not show

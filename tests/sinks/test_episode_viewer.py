@@ -101,3 +101,15 @@ def test_a_unix_time_column_in_any_unit_is_the_wall_clock(first: np.generic, exp
                            np.arange(2), {"unix_time_ns": np.array([first, first], dtype=np.asarray(first).dtype)})
     found = wall_clock_start_ns(frames, ["unix_time_ns"])
     assert found == (None if expected_ns is None else ("unix_time_ns", expected_ns))
+
+
+def test_an_episodes_summary_says_what_its_cameras_measured(episode_rrd: Path) -> None:
+    """No detection to count: the summary names the frames the camera's motion was measured on (the episode's
+    2 s of rows at the generator's 30 fps), not a table of zeros."""
+    from tests.helpers.rrd_views import column_values, read_chunks
+
+    (summary,) = column_values(read_chunks(episode_rrd), "/summary", "TextDocument:text", static=True)
+    text = str(summary[0] if isinstance(summary, list) else summary)
+    assert "Observations: none logged (no detections); the cameras' own motion measured instead: " in text
+    assert "camera wrist_optical_frame: 60 frames, " in text
+    assert "| total |" not in text
