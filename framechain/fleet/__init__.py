@@ -27,7 +27,7 @@ import pyarrow.parquet as pq
 from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.config.chain import ChainConfig
 from framechain.fleet.engines import map_local, map_ray, usable_cpus
-from framechain.fleet.recordings import recording_fits, write_recordings
+from framechain.fleet.recordings import recording_fits, write_atomically, write_recordings
 from framechain.fleet.units import (
     FINAL_STATUSES,
     RESULTS_DIR,
@@ -277,9 +277,7 @@ def fleet_table(records: Sequence[dict[str, Any]]) -> pa.Table:
 def write_fleet_table(records: Sequence[dict[str, Any]], path: Path) -> Path:
     """Write the fleet table atomically (a reader never sees half a file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    pq.write_table(fleet_table(records), tmp)
-    os.replace(tmp, path)
+    write_atomically(path, lambda tmp: pq.write_table(fleet_table(records), tmp))
     return path
 
 

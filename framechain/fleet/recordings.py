@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -88,12 +88,13 @@ def write_recordings(fits: Mapping[str, Sequence[CameraRecordingFit]], out_dir: 
                 "recordings": [{"log": log, "cameras": [fit.to_json() for fit in cameras]}
                                for log, cameras in fits.items()]}
     paths = {"recording": out / RECORDING_JSON, "cameras": out / CAMERAS_TABLE}
-    _atomic(paths["recording"], lambda tmp: tmp.write_text(json.dumps(document, indent=1)))
-    _atomic(paths["cameras"], lambda tmp: pq.write_table(camera_table(fits), tmp))
+    write_atomically(paths["recording"], lambda tmp: tmp.write_text(json.dumps(document, indent=1)))
+    write_atomically(paths["cameras"], lambda tmp: pq.write_table(camera_table(fits), tmp))
     return paths
 
 
-def _atomic(path: Path, write: Any) -> None:
+def write_atomically(path: Path, write: Callable[[Path], object]) -> None:
+    """``write(tmp)`` a file beside ``path``, then rename it over ``path``: a reader never sees half a file."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     write(tmp)
     os.replace(tmp, path)

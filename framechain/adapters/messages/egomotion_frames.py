@@ -24,7 +24,7 @@ import numpy.typing as npt
 
 from framechain.adapters.lerobot.clock import alternative_stamps
 from framechain.adapters.lerobot.video import read_frames
-from framechain.arrays import BoolArray, FloatArray, IntArray
+from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.config.calibration import Intrinsics
 from framechain.timeline import EgoMotionTable, ImageFrameTable, Timeline, TranslationPrior, normalize_frame
 from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
@@ -128,12 +128,10 @@ class ImageMotion:
     def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
         """``table`` (measured with this camera's stamps) with its frames' stamps under another ``pairing``."""
         new = self.alternatives[pairing]
-        order = np.argsort(self.stamps_ns, kind="stable")
-        known = self.stamps_ns[order]
 
         def moved(stamps: IntArray) -> IntArray:
-            at = np.clip(np.searchsorted(known, stamps), 0, known.size - 1)
-            out: IntArray = np.where(known[at] == stamps, new[order][at], -1)
+            row = rows_of(self.stamps_ns, stamps)
+            out: IntArray = np.where(row >= 0, new[row], -1)
             return out
 
         s0, s1 = moved(table.stamp0_ns), moved(table.stamp1_ns)
@@ -241,12 +239,12 @@ def window_rows(count: int, *, max_frames: int, window: int) -> tuple[IntArray, 
 
 def camera_frames(images: ImageFrameTable, frame: str, *, max_frames: int = 600, window: int = 150) -> CameraFrames:
     """Decode camera ``frame``'s frames (grey), at most ``max_frames`` of them (windows of ``window``)."""
-    rows = camera_image_rows(images, frame)
-    picked, windows = window_rows(rows.size, max_frames=max_frames, window=window)
-    rows = rows[picked]
+    every = camera_image_rows(images, frame)
+    picked, windows = window_rows(every.size, max_frames=max_frames, window=window)
+    rows = every[picked]
     notes: list[str] = []
-    if picked.size < camera_image_rows(images, frame).size:
-        total = camera_image_rows(images, frame).size
+    if picked.size < every.size:
+        total = every.size
         notes.append(f"camera {frame}: {total} frames; its motion is measured on {picked.size} of them "
                      f"({windows.max() + 1} runs of {window} consecutive frames spread over the recording)")
     grey, missing, decoded = decode_grey(images, rows)

@@ -14,6 +14,7 @@ from framechain.analysis.egomotion.fit import (
     RotationRates,
     fit_camera_motion,
     fit_link,
+    rank_links,
     rotation_rates,
     translation_prior,
 )
@@ -38,6 +39,7 @@ __all__ = [
     "complete_mount",
     "fit_camera_motion",
     "fit_link",
+    "rank_links",
     "rotation_rates",
     "translation_prior",
 ]

@@ -22,12 +22,12 @@ camera's calibration file), in that file's own form.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from framechain.analysis.egomotion import EgoMotionFit, rotation_rates
+from framechain.analysis.egomotion import EgoMotionFit, RotationRates, rotation_rates
 from framechain.analysis.egomotion.bounds import (
     FOCAL_CLEAR,
     NO_DEPTH,
@@ -138,18 +138,26 @@ class _Misfit:
     fit: EgoMotionFit
     weights: FloatArray
     rows: np.ndarray
+    #: The rates of every pair under each subset asked for so far: Shapley values ask for each subset many times.
+    rates_by_kinds: dict[frozenset[str], RotationRates] = field(default_factory=dict, compare=False, repr=False)
+
+    def rates(self, kinds: frozenset[str]) -> RotationRates:
+        """Measured and predicted rates of every pair with the corrections ``kinds`` applied, the rest as declared."""
+        if kinds not in self.rates_by_kinds:
+            m, fit = self.motion, self.fit
+            moved = "link" in kinds and fit.link != m.declared_link
+            link = m.link_motion(fit.link if moved else m.declared_link)
+            mount = fit.q_link_cam if moved or "mount" in kinds else m.declared_q_link_cam
+            # The table was measured with the focal length scaled by measured_focal: undo it to see the declared one.
+            focal = fit.focal_scale if "focal" in kinds else 1.0
+            self.rates_by_kinds[kinds] = rotation_rates(m.table, link, mount,
+                                                        fit.offset_s if "latency" in kinds else 0.0,
+                                                        focal_scale=focal / m.measured_focal)
+        return self.rates_by_kinds[kinds]
 
     def residual(self, kinds: frozenset[str]) -> FloatArray:
         """Per pair (deg/s) with the corrections ``kinds`` applied and the rest as declared."""
-        m, fit = self.motion, self.fit
-        moved = "link" in kinds and fit.link != m.declared_link
-        link = m.link_motion(fit.link if moved else m.declared_link)
-        mount = fit.q_link_cam if moved or "mount" in kinds else m.declared_q_link_cam
-        # The table was measured with the focal length scaled by measured_focal: undo it to see the declared one.
-        focal = fit.focal_scale if "focal" in kinds else 1.0
-        rates = rotation_rates(m.table, link, mount, fit.offset_s if "latency" in kinds else 0.0,
-                               focal_scale=focal / m.measured_focal)
-        out: FloatArray = np.rad2deg(rates.residual[self.rows])
+        out: FloatArray = np.rad2deg(self.rates(kinds).residual[self.rows])
         return out
 
     def rms(self, kinds: frozenset[str]) -> float:
@@ -158,9 +166,7 @@ class _Misfit:
 
     def motion_rms(self) -> float:
         """The camera's rotation rate (deg/s, RMS over the pairs): the larger of measured and fitted."""
-        m, fit = self.motion, self.fit
-        rates = rotation_rates(m.table, m.link_motion(fit.link), fit.q_link_cam, fit.offset_s,
-                               focal_scale=fit.focal_scale / m.measured_focal)
+        rates = self.rates(_EVERY)  # every correction: the fitted link, mount, offset and focal length
         size = np.maximum(np.linalg.norm(rates.measured, axis=1), np.linalg.norm(rates.predicted, axis=1))[self.rows]
         return float(np.rad2deg(np.sqrt(np.nanmean(size**2)))) if size.size else 0.0
 
@@ -225,7 +231,7 @@ def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
     rows = np.flatnonzero(np.isfinite(corrected) & np.isfinite(plain))
     scale = max(1.4826 * float(np.median(corrected[rows])) if rows.size else 0.0, 0.05)
     weights = 1.0 / (1.0 + (corrected[rows] / (2.5 * scale)) ** 2)
-    return _Misfit(motion, fit, weights, rows)
+    return _Misfit(motion, fit, weights, rows, probe.rates_by_kinds)
 
 
 def _shares(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:

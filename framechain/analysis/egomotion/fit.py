@@ -23,7 +23,8 @@ What each candidate link explains tells which link (which arm) the camera moves 
 turns about one axis only leaves the mount's rotation about that axis unobservable; a camera that
 does not turn (a fixed camera, a still arm) shows neither offset nor mount.
 
-Intervals are 95% moving-block bootstrap intervals over the frame pairs (blocks of ``block_s``),
+Intervals are 95% block bootstrap intervals over the frame pairs (Bayesian: each block of ``block_s``
+weighed by an exponential draw),
 the mount's and offset's jointly (on synthetic rotations they hold the truth in about 85% of
 episodes: a little narrow). When the intrinsics are not known, the ratio of measured to
 predicted rotation across the optical axis is the ratio of true to assumed focal length.
@@ -168,6 +169,7 @@ def fit_camera_motion(
     declared_xyz_link_cam: FloatArray | None = None,
     refinements: int = 5,
     options: EgoMotionFitOptions | None = None,
+    measured: tuple[EgoMotionTable, list[LinkFit]] | None = None,
 ) -> EgoMotionFit:
     """Offset, mount and carrying link of a camera from its measured motion against the candidate links' FK.
 
@@ -179,17 +181,18 @@ def fit_camera_motion(
     and from their rotation-only mount, so a placeholder mount does no harm); the one whose own
     measurement fits best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
     (near scenery moves with the camera's translation, which a rotation-only measurement reads as
-    rotation, so only measurements made with each link's own prior are compared).
+    rotation, so only measurements made with each link's own prior are compared). ``measured``: ``measure(None)``
+    and its :func:`rank_links`, when the caller has them already.
     """
     opts = options or EgoMotionFitOptions()
-    table = measure(None)
+    table = measure(None) if measured is None else measured[0]
     notes: list[str] = []
     turning = _rms_deg(rotvec_of(table.quat_xyzw)) if len(table) else 0.0
     if turning < opts.min_rotation_deg:
         notes.append(f"camera {camera} does not turn ({turning:.3f} deg RMS per frame pair): a fixed camera or a "
                      "still arm; its time offset, mount and link are not observable from its images")
         return _unobservable(camera, declared_link, turning, notes)
-    ranked = _rank(table, links, opts)
+    ranked = rank_links(table, links, opts) if measured is None else measured[1]
     if not ranked:
         notes.append(f"camera {camera}: fewer than {opts.min_pairs} measured frame pairs inside the links' span")
         return _unobservable(camera, declared_link, turning, notes)
@@ -198,13 +201,15 @@ def fit_camera_motion(
     by_name = {link.link: link for link in links}
     first = (table, ranked)
     tried = {name: _refined(measure, by_name[name], [declared, _Start(f.q_link_cam, f.offset_s, declared.xyz)],
-                            first, links, refinements, opts)
+                            first, refinements, opts)
              for name in _to_refine(ranked, declared_link, by_name, opts) for f in ranked if f.link == name}
     misfit = {name: item[1].residual_deg for name, item in tried.items()}
     best = min(misfit, key=lambda name: misfit[name])
     if declared_link in misfit and misfit[declared_link] <= opts.same_fit_ratio * misfit[best]:
         best = declared_link
-    table, fit, ranked, joint = tried[best]
+    table, fit, joint = tried[best]
+    # Only the winner's measurement is ranked: with its own prior it differs from the rotation-only one.
+    ranked = ranked if joint is None else rank_links(table, links, opts)
     link = by_name[fit.link]
     similar = _similar(ranked, next((f for f in ranked if f.link == fit.link), fit), opts)
     return _final(table, link, fit, ranked, similar, declared_link, np.asarray(declared_q_link_cam, dtype=float),
@@ -251,26 +256,26 @@ class _Start:
 
 def _refined(
     measure: Measure, link: LinkMotion, starts: Sequence[_Start], first: tuple[EgoMotionTable, list[LinkFit]],
-    links: Sequence[LinkMotion], refinements: int, opts: EgoMotionFitOptions,
-) -> tuple[EgoMotionTable, LinkFit, list[LinkFit], Joint | None]:
+    refinements: int, opts: EgoMotionFitOptions,
+) -> tuple[EgoMotionTable, LinkFit, Joint | None]:
     """The link's fit on measurements made with its own translation prior (:mod:`.joint`: the offset used for the
-    prior and for the comparison at once), from each start's mount; every candidate ranked on the best one.
+    prior and for the comparison at once), from each start's mount.
 
     Without link positions (or refinements) the rotation-only fit stands.
     """
     own = next(f for f in first[1] if f.link == link.link)
     if link.xyz is None or refinements <= 0:
-        return first[0], own, first[1], None
+        return first[0], own, None
     best = joint_fit(measure, link, translation_prior, [s.q_link_cam for s in starts], starts[0].xyz,
                      [starts[0].offset_s, own.offset_s], opts)
     if best is None:
-        return first[0], own, first[1], None
+        return first[0], own, None
     orientations = Orientations(link, int(link.stamps_ns[0]))
     fit = replace(link_fit(link.link, best.pairs, best.solved, orientations), residual_deg=best.residual_deg)
-    return best.table, fit, _rank(best.table, links, opts), best
+    return best.table, fit, best
 
 
-def _rank(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:
+def rank_links(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:
     """Every candidate's best fit to the measured motion, best first (offsets on a grid of 20 ms at least: a ranking
     needs no finer)."""
     coarse = opts.for_ranking()

@@ -43,9 +43,6 @@ class EgoMotionFitOptions:
     block_s: float = 0.5
     #: Below this RMS rotation per frame pair (deg) the camera (or link) is taken as not turning.
     min_rotation_deg: float = 0.05
-    #: The mount is observable about every axis when the rotation axes spread this much (ratio of the
-    #: second to the first singular value of their scatter).
-    min_axis_spread: float = 0.02
     #: Links whose misfit is within this factor of the best fit explain the motion as well.
     same_fit_ratio: float = 1.25
     min_pairs: int = 20

@@ -6,8 +6,8 @@ each such camera :func:`measure_cameras` has its frames decoded and tracked once
 handed in as ``images``: only the frames needed, long recordings in windows) and fits its time
 offset, mount rotation and carrying link (:func:`~framechain.analysis.egomotion.fit_camera_motion`)
 against candidate frames of the tree: the
-declared link, its moving ancestors, and the same link of another arm (a frame named alike after a
-prefix, ``left_gripper_link`` / ``right_gripper_link``). Poses come from the run's transform buffer
+declared link first, then every link that moves, on every arm (its parent, its child, the same link of
+the other arm). Poses come from the run's transform buffer
 (forward kinematics of a LeRobot episode, a log's tf), so nothing here knows the format.
 
 A camera fixed in the world (a static chain up to the world frame) is said to be not observable,
@@ -23,7 +23,15 @@ from typing import Protocol
 
 import numpy as np
 
-from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, LinkMotion, fit_camera_motion, fit_link
+from framechain.analysis.egomotion import (
+    EgoMotionFit,
+    EgoMotionFitOptions,
+    LinkFit,
+    LinkMotion,
+    fit_camera_motion,
+    fit_link,
+    rank_links,
+)
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.config.chain import ChainConfig
@@ -156,8 +164,8 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
         return replace(empty, notes=(why,), seconds=time.perf_counter() - start)
     source = images(camera)
     declared = source.intrinsics
-    pairing = confirm_pairing(source, links, camera, options)
-    fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options)
+    pairing, measured = confirm_pairing(source, links, camera, options)
+    fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options, measured)
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
                         declared_xyz_link_cam=xyz_link_cam, fit=fit,
                         table=fit.table if len(fit.table) else source.last, links=links,
@@ -171,9 +179,10 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
 PAIRING_CONTRADICTED = 1.5
 
 
-def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: str,
-                    options: EgoMotionFitOptions) -> list[str]:
-    """What the camera's motion says of how its video frames were paired with the rows, as notes.
+def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: str, options: EgoMotionFitOptions
+                    ) -> tuple[list[str], tuple[EgoMotionTable, list[LinkFit]] | None]:
+    """What the camera's motion says of how its video frames were paired with the rows, as notes, and the
+    rotation-only measurement with its ranking when they stand for the pairing used (for the fit to start from).
 
     The rotation-only measurement is fitted (offset and mount, every candidate link) with the frames
     stamped as paired, and as every other pairing would stamp them: under a wrong pairing the misfit
@@ -181,39 +190,39 @@ def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: s
     files suggested is replaced by it, and a pairing forced in the configuration stays, with a note.
     """
     if not source.pairing or not source.alternatives:
-        return []
+        return [], None
     table = source.measure(None)
-    ranked = sorted((f for f in (fit_link(table, link, options.for_ranking()) for link in links) if f is not None),
-                    key=lambda f: f.residual_deg)
+    ranked = rank_links(table, links, options)
+    measured = (table, ranked)
     if not ranked:
-        return []
+        return [], measured
     # The other pairings on the link that fits best as paired: a wrong pairing is much worse on any link.
     link = next(m for m in links if m.link == ranked[0].link)
-    own = _best_misfit(table, [link], options)
+    own = _misfit_of(table, link, options)
     if own is None:
-        return []
-    others = {name: _best_misfit(source.restamp(table, name), [link], options) for name in source.alternatives}
+        return [], measured
+    others = {name: _misfit_of(source.restamp(table, name), link, options) for name in source.alternatives}
     scored = sorted((v, k) for k, v in others.items() if v is not None)
     said = "; ".join(f"{v:.3f} by {k}" for v, k in scored)
     if not scored or scored[0][0] * PAIRING_CONTRADICTED >= own:
         return [f"camera {camera}: its motion confirms its frames' pairing by {source.pairing} (misfit {own:.3f} deg "
-                f"per frame pair against forward kinematics; {said})"]
+                f"per frame pair against forward kinematics; {said})"], measured
     best, name = scored[0]
     if source.forced:
         return [f"camera {camera}: its frames are paired with the rows by {source.pairing}, as the configuration "
                 f"forces, but its motion contradicts it: the misfit against forward kinematics is {own:.3f} deg per "
-                f"frame pair, and {best:.3f} by {name}"]
+                f"frame pair, and {best:.3f} by {name}"], measured
     was = source.pairing
     source.use_pairing(name)
     return [f"camera {camera}: the files suggested pairing its frames with the rows by {was}, but its motion fits "
             f"forward kinematics much better by {name} ({best:.3f} against {own:.3f} deg misfit per frame pair): "
-            f"paired by {name}"]
+            f"paired by {name}"], None  # measured again under the new pairing
 
 
-def _best_misfit(table: EgoMotionTable, links: Sequence[LinkMotion], options: EgoMotionFitOptions) -> float | None:
-    """The smallest rotation-only misfit (deg per frame pair) of any candidate link, offset and mount fitted."""
-    fits = [f for f in (fit_link(table, link, options) for link in links) if f is not None]
-    return min((f.residual_deg for f in fits), default=None)
+def _misfit_of(table: EgoMotionTable, link: LinkMotion, options: EgoMotionFitOptions) -> float | None:
+    """The link's rotation-only misfit (deg per frame pair), offset and mount fitted (None: too few pairs)."""
+    fit = fit_link(table, link, options)
+    return None if fit is None else fit.residual_deg
 
 
 #: Rounds of measuring again with the focal length the motion implies, when it is clearly not the declared one.
@@ -221,7 +230,8 @@ FOCAL_ROUNDS = 3
 
 
 def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: str,
-                    declared: tuple[str, FloatArray, FloatArray], options: EgoMotionFitOptions
+                    declared: tuple[str, FloatArray, FloatArray], options: EgoMotionFitOptions,
+                    measured: tuple[EgoMotionTable, list[LinkFit]] | None = None,
                     ) -> tuple[EgoMotionFit, float, list[str]]:
     """The fit, measured again with the focal length it implies while that clearly differs from the one used.
 
@@ -235,7 +245,7 @@ def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: s
     notes: list[str] = []
     link, q_link_cam, xyz_link_cam = declared
     fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
-                            declared_xyz_link_cam=xyz_link_cam, options=options)
+                            declared_xyz_link_cam=xyz_link_cam, options=options, measured=measured)
     for _ in range(FOCAL_ROUNDS):
         low, high = fit.focal_scale_interval
         if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
