@@ -16,6 +16,7 @@ from framechain.adapters import write_log
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig, ChainFrames, ChainTopics
 from framechain.timeline import CameraTable, DepthFrameTable, ObservationTable, Timeline, TransformTable
+from tests.helpers.cli_needs import info_needs
 from tests.helpers.realdata import LEROBOT_DATASETS, ROS_LOGS, STAIRS
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,12 +79,6 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
             for name, kw in variants.items()}
 
 
-def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, dict[str, str]]:
-    assert main(["info", str(log), "--json", "-q", *extra]) == 0
-    info = json.loads(capsys.readouterr().out)
-    return {n["piece"]: n for n in info["needs"]}
-
-
 def _one_line(err: str) -> str:
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
@@ -93,7 +88,7 @@ def _one_line(err: str) -> str:
 
 def test_a_complete_log_is_ready_and_replays(logs: dict[str, Path], tmp_path: Path,
                                              capsys: pytest.CaptureFixture[str]) -> None:
-    needs = _needs(logs["complete"], capsys)
+    needs = info_needs(capsys, str(logs["complete"]))
     assert {p: n["status"] for p, n in needs.items()} == {
         "camera frame": "found", "intrinsics": "found", "detections": "found", "depth": "found",
         "mount": "found", "pose": "found", "evidence": "none"}
@@ -108,7 +103,7 @@ def test_a_complete_log_is_ready_and_replays(logs: dict[str, Path], tmp_path: Pa
 def test_no_detections_says_so_and_names_the_key(logs: dict[str, Path], tmp_path: Path,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     log = logs["no_detections"]
-    needs = _needs(log, capsys)
+    needs = info_needs(capsys, str(log))
     assert needs["detections"]["status"] == "missing"
     assert needs["detections"]["key"].startswith("topics.detections:")
     # replay still writes the frame tree (worth a look), and says why nothing was replayed.
@@ -127,7 +122,7 @@ def test_a_topic_the_log_lacks_is_named(logs: dict[str, Path], tmp_path: Path,
     raw = CHAIN.to_dict()
     raw["topics"]["detections"] = "/detectionz"
     chain.write_text(yaml.safe_dump(raw))
-    needs = _needs(logs["complete"], capsys, "--chain", str(chain))
+    needs = info_needs(capsys, str(logs["complete"]), "--chain", str(chain))
     assert needs["detections"]["status"] == "missing"
     assert "/detectionz" in needs["detections"]["detail"]
     assert needs["detections"]["key"] == "topics.detections: /detections"  # the one the log has
@@ -141,7 +136,7 @@ def test_a_topic_the_log_lacks_is_named(logs: dict[str, Path], tmp_path: Path,
 def test_all_rejected_gives_counts_by_reason_and_the_key(logs: dict[str, Path], tmp_path: Path,
                                                          capsys: pytest.CaptureFixture[str]) -> None:
     log = logs["no_camera_info"]
-    needs = _needs(log, capsys)
+    needs = info_needs(capsys, str(log))
     assert needs["intrinsics"]["status"] == "missing"
     assert needs["intrinsics"]["key"].startswith("calibration: {file:")
     # The rejected detections are still drawn: the recording is written, and one line says why.
@@ -173,7 +168,7 @@ def test_rejections_without_a_chain_key_still_say_what_to_do(
 def test_a_missing_mount_is_supplied_by_the_chain(logs: dict[str, Path], tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     log = logs["no_mount"]
-    needs = _needs(log, capsys)
+    needs = info_needs(capsys, str(log))
     assert needs["mount"]["status"] == "missing"
     assert needs["mount"]["key"].startswith("mounts: [{parent: base_link, child: camera_optical_frame")
     assert needs["pose"]["status"] == "found"
@@ -183,7 +178,7 @@ def test_a_missing_mount_is_supplied_by_the_chain(logs: dict[str, Path], tmp_pat
                       "quat_xyzw": [0.0, 0.0, 0.0, 1.0]}]
     chain = tmp_path / "chain.yaml"
     chain.write_text(yaml.safe_dump(raw))
-    needs = _needs(log, capsys, "--chain", str(chain))
+    needs = info_needs(capsys, str(log), "--chain", str(chain))
     assert needs["mount"]["status"] == "found"
     assert "chain.yaml mounts[0]" in needs["mount"]["detail"]
     assert main(["replay", str(log), "--chain", str(chain), "--save", str(tmp_path / "r.rrd"), "--no-attribute",
@@ -286,7 +281,7 @@ def test_tagslam_needs_name_the_keys_and_the_filled_chain_replays(realdata: Path
     if not folder.is_dir():
         pytest.skip(f"{folder} not present")
     log = folder / "tag_detections.bag"
-    needs = _needs(log, capsys)
+    needs = info_needs(capsys, str(log))
     assert needs["detections"]["status"] == "found"
     assert needs["detections"]["detail"].startswith("apriltag_msgs/ApriltagArrayStamped on /")
     topic = needs["detections"]["detail"].split(" on ", 1)[1].split(":", 1)[0]

@@ -5,7 +5,6 @@ world, and other files given as a chain named for what they are."""
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -20,12 +19,8 @@ from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.sim.logs import write_scene
 from framechain.sim.scene import SceneSpec, generate
+from tests.helpers.cli_needs import info_needs
 from tests.helpers.realdata import FRANKA_BAG, QUAD_RIG_BAG, STAIRS, STAIRS_BAG, TF_EXAMPLE_BAG
-
-
-def _needs(capsys: pytest.CaptureFixture[str], *args: str) -> dict[str, dict[str, str]]:
-    assert main(["info", *args, "--json", "-q"]) == 0
-    return {n["piece"]: n for n in json.loads(capsys.readouterr().out)["needs"]}
 
 
 def test_info_says_the_mount_is_the_gap_and_gives_tagslam_s_mount(tmp_path: Path,
@@ -39,7 +34,7 @@ def test_info_says_the_mount_is_the_gap_and_gives_tagslam_s_mount(tmp_path: Path
                      f"topics: {{detections: /t265/fisheye1/tags, odometry: /vio_node/odom}}\n"
                      f"calibration: {{file: {realdata / STAIRS / 'cameras.yaml'}, camera: cam0}}\n"
                      "evidence: {static_target: true, tag_size_m: 0.16}\n")
-    needs = _needs(capsys, str(bag), "--chain", str(chain))
+    needs = info_needs(capsys, str(bag), "--chain", str(chain))
     assert "no transform of the log names it: the mount must connect it" in needs["camera frame"]["detail"]
     key = needs["mount"]["key"]
     assert "T_body_odom in tagslam.yaml inverted, as TagSLAM applies it" in key
@@ -53,7 +48,7 @@ def test_info_says_the_mount_is_the_gap_and_gives_tagslam_s_mount(tmp_path: Path
     # The chain says 0.16 m for every tag; tagslam.yaml sizes 100-108 at 0.10 m.
     assert needs["depth"]["key"].startswith("evidence.tag_size_m: {default: 0.16, 100: 0.1")
     # The suggested camera (fisheye2) has no pose in camera_poses.yaml: said so, with the camera that has one.
-    alone = _needs(capsys, str(bag))["mount"]["key"]
+    alone = info_needs(capsys, str(bag))["mount"]["key"]
     assert "camera_poses.yaml gives no pose of cam1 (the camera of /t265/fisheye2/tags) in the rig" in alone
     assert "cam0: /t265/fisheye1/tags" in alone
 
@@ -115,7 +110,7 @@ def test_info_says_did_you_mean_for_the_body_and_the_world(tmp_path: Path,
         original = {"base_lnk": "base_link", "mapp": "map", "camera_optcal_frame": "camera_optical_frame"}[typo]
         wrong = tmp_path / f"{typo}.yaml"
         wrong.write_text(text.replace(f": {original}\n", f": {typo}\n", 1))
-        need = _needs(capsys, str(log), "--chain", str(wrong))[piece]
+        need = info_needs(capsys, str(log), "--chain", str(wrong))[piece]
         assert f"did you mean '{meant}'" in need["detail"], need
         assert meant in need["key"]
 
@@ -159,9 +154,10 @@ def test_a_tree_rooted_at_world_suggests_world(capsys: pytest.CaptureFixture[str
     ("camera_poses.yaml", "this is a file of camera poses in a rig (cam0), not a chain"),
 ])
 def test_another_file_given_as_a_chain_is_named(name: str, said: str, capsys: pytest.CaptureFixture[str],
-                                                realdata: Path) -> None:
+                                                realdata: Path, tmp_path: Path) -> None:
     bag = realdata / STAIRS_BAG
-    assert main(["attribute", str(bag), "--chain", str(realdata / STAIRS / name), "--out", "unused", "-q"]) == 1
+    chain = str(realdata / STAIRS / name)
+    assert main(["attribute", str(bag), "--chain", chain, "--out", str(tmp_path / "out"), "-q"]) == 1
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert said in line
     assert "unknown keys" not in line

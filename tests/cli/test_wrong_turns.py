@@ -17,6 +17,7 @@ from scipy.spatial.transform import Rotation
 from framechain import pipeline
 from framechain.cli.main import main
 from framechain.config.chain import ChainConfig
+from tests.helpers.cli_needs import info_needs
 from tests.helpers.realdata import QUAD_RIG, QUAD_RIG_BAG, ROS_LOGS, STAIRS, STAIRS_BAG, TF_EXAMPLE_BAG, TURTLESIM_BAG
 from tests.helpers.ros1_bags import Ros1Bag
 
@@ -83,15 +84,10 @@ def test_a_pose_topic_into_odom_does_not_make_odom_the_body_and_the_world(
 
 
 # -- a value taken from a file beside the log names the file -------------------------------------------
-def _needs(log: Path, capsys: pytest.CaptureFixture[str], *extra: str) -> dict[str, dict[str, str]]:
-    assert main(["info", str(log), "--json", "-q", *extra]) == 0
-    return {n["piece"]: n for n in json.loads(capsys.readouterr().out)["needs"]}
-
-
 def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                        realdata: Path) -> None:
     bag = realdata / STAIRS_BAG
-    needs = _needs(bag, capsys)
+    needs = info_needs(capsys, str(bag))
     # tagslam.yaml's default and the tags it sizes otherwise (100-108 are 0.10 m)
     assert needs["depth"]["key"] == ("evidence.tag_size_m: {default: 0.16, 100: 0.1, 101: 0.1, 102: 0.1, 103: 0.1, "
                                      "104: 0.1, 105: 0.1, 106: 0.1, 107: 0.1, 108: 0.1}  (default_tag_size and each "
@@ -103,14 +99,14 @@ def test_hints_from_files_beside_the_log_name_the_file(tmp_path: Path, capsys: p
     beside.mkdir()
     (beside / "tag_detections.bag").symlink_to(bag)
     (beside / "chain.yaml").write_text("evidence: {tag_size_m: 0.15}\n")
-    depth = _needs(beside / "tag_detections.bag", capsys)["depth"]
+    depth = info_needs(capsys, str(beside / "tag_detections.bag"))["depth"]
     assert depth["key"] == ("evidence.tag_size_m: 0.15  (tag_size_m in chain.yaml beside the log: `--chain chain.yaml` "
                             "uses that chain)")
     # Without a file, the placeholder says what it stands for.
     alone = tmp_path / "alone"
     alone.mkdir()
     (alone / "tag_detections.bag").symlink_to(bag)
-    needs = _needs(alone / "tag_detections.bag", capsys)
+    needs = info_needs(capsys, str(alone / "tag_detections.bag"))
     assert needs["depth"]["key"] == "evidence.tag_size_m: TAG_EDGE_M  (the printed tags' edge in metres)"
     assert needs["intrinsics"]["key"].startswith("calibration: {file: CAMERAS.yaml, camera: NAME}")
 
@@ -145,7 +141,7 @@ def test_a_misspelt_detections_topic_says_did_you_mean(tmp_path: Path, capsys: p
                                                        realdata: Path) -> None:
     bag = realdata / STAIRS_BAG
     chain = _stairs_chain(tmp_path, realdata, detections="/t265/fisheye1/tag")
-    needs = _needs(bag, capsys, "--chain", str(chain))
+    needs = info_needs(capsys, str(bag), "--chain", str(chain))
     assert needs["detections"]["status"] == "missing"
     assert "did you mean '/t265/fisheye1/tags'" in needs["detections"]["detail"]
     assert needs["detections"]["key"] == "topics.detections: /t265/fisheye1/tags"

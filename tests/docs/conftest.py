@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.helpers.realdata import SO101_URDF
+
 #: Inputs that are folders of ../shared/realdata, their files linked in ("fleet": the stairs bag without the
 #: tutorial's chain.yaml, which only files of the input "stairs" get).
 _REAL = {"stairs": "tagslam_stairs", "fleet": "tagslam_stairs", "quad_rig": "tagslam_quad_rig", "evo": "evo"}
-_SO101_URDF = Path("urdf") / "so101" / "so101_new_calib.urdf"
 _SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 
 
@@ -102,7 +103,7 @@ def doc_inputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPath
                 _demo(made["demo"])
             _link_all(made["demo"], folder)
         elif name in ("so101", "so101_urdf"):
-            urdf = realdata() / _SO101_URDF
+            urdf = realdata() / SO101_URDF
             if not urdf.is_file():
                 pytest.skip(f"{urdf} not present")
             (folder / urdf.name).symlink_to(urdf)

@@ -13,6 +13,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from framechain.cli.main import main
+from tests.helpers.realdata import SO101_URDF
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "lerobot.md"
 OPTICAL_Q = (-0.5, 0.5, -0.5, 0.5)  # camera_link (FLU) -> optical (RDF), REP-103
@@ -53,7 +54,7 @@ def _dataset(folder: Path, state: np.ndarray) -> Path:
 @pytest.fixture
 def example(realdata: Path, tmp_path: Path) -> tuple[str, Path, Path, np.ndarray]:
     """The example beside its URDF and a dataset it reads: (its text, the URDF, the dataset, the state)."""
-    urdf = realdata / "urdf" / "so101" / "so101_new_calib.urdf"
+    urdf = realdata / SO101_URDF
     if not urdf.is_file():
         pytest.skip(f"{urdf} not present")
     text = _robot_file_example()

@@ -66,3 +66,13 @@ def aruco_images_chain(
                    {"parent": "map", "child": "base_link", "xyz": [0, 0, 0], "rpy": [0, 0, 0]}],
         "evidence": evidence,
     }
+
+
+def gopro_clip(realdata: Path, name: str) -> Path:
+    """A GoPro clip of the shared folder (karma.mp4, max-heromode.mp4); the test is skipped when it is absent."""
+    import pytest
+
+    path = realdata / GOPRO_CLIPS / name
+    if not path.is_file():
+        pytest.skip(f"{path} not found")
+    return path

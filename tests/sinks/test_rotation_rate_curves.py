@@ -13,16 +13,12 @@ from framechain import pipeline
 from framechain.analysis.run import Run
 from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
 
-URDF = Path(__file__).resolve().parents[3] / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
-
-pytestmark = pytest.mark.skipif(not URDF.is_file(), reason=f"SO-101 URDF not found at {URDF}")
-
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory: pytest.TempPathFactory) -> Run:
+def run(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> Run:
     root = tmp_path_factory.mktemp("curves")
     truth = generate_video_dataset(root / "dataset", VideoDatasetSpec(
-        URDF, seed=91, duration_s=3.0, version="v3.0", video_delay_s=0.060))
+        so101_urdf, seed=91, duration_s=3.0, version="v3.0", video_delay_s=0.060))
     robot = write_robot_yaml(truth, root / "robot.yaml")
     return pipeline.run(truth.root, episode=0, robot=robot, bootstrap=0)
 

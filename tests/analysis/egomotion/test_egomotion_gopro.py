@@ -40,18 +40,11 @@ from tests.helpers.gopro_clip import (
     gyro_link,
 )
 from tests.helpers.gpmf import read_stream
-from tests.helpers.realdata import GOPRO_CLIPS
+from tests.helpers.realdata import gopro_clip
 
 #: karma.mp4 pans right at up to 45 deg/s from about 11.4 s; its gimbal holds the camera still before.
 STILL_UNTIL_S = 6.04
 OPTIONS = EgoMotionFitOptions(max_offset_s=0.1, rate_bias=True)
-
-
-def _clip(realdata: Path, name: str) -> Path:
-    path = realdata / GOPRO_CLIPS / name
-    if not path.is_file():
-        pytest.skip(f"{path} not found")
-    return path
 
 
 def _measured(path: Path) -> tuple[EgoMotionTable, Any]:
@@ -63,13 +56,13 @@ def _measured(path: Path) -> tuple[EgoMotionTable, Any]:
 
 @pytest.fixture(scope="module")
 def karma(realdata: Path) -> tuple[Path, EgoMotionTable, Any]:
-    path = _clip(realdata, "karma.mp4")
+    path = gopro_clip(realdata, "karma.mp4")
     return (path, *_measured(path))
 
 
 @pytest.fixture(scope="module")
 def max_clip(realdata: Path) -> tuple[Path, EgoMotionTable, Any]:
-    path = _clip(realdata, "max-heromode.mp4")
+    path = gopro_clip(realdata, "max-heromode.mp4")
     return (path, *_measured(path))
 
 

@@ -19,28 +19,21 @@ from scipy.spatial.transform import Rotation, Slerp
 from framechain.adapters.lerobot.video import probe_video
 from tests.helpers.gopro_clip import ClipFrames, decode_clip, documented_mount, gyro_link, integrate_rates
 from tests.helpers.gpmf import Packet, SensorStream, axes_matrix, camera_orientation, read_packets, read_stream
-from tests.helpers.realdata import GOPRO_CLIPS
+from tests.helpers.realdata import gopro_clip
 
 GRAVITY = 9.80665
 #: karma.mp4's final pan (the camera turns right at up to 45 deg/s) starts at about 11.5 s.
 PAN_FROM_S = 11.2
 
 
-def _clip(realdata: Path, name: str) -> Path:
-    path = realdata / GOPRO_CLIPS / name
-    if not path.is_file():
-        pytest.skip(f"{path} not found")
-    return path
-
-
 @pytest.fixture(scope="module")
 def karma(realdata: Path) -> Path:
-    return _clip(realdata, "karma.mp4")
+    return gopro_clip(realdata, "karma.mp4")
 
 
 @pytest.fixture(scope="module")
 def max_clip(realdata: Path) -> Path:
-    return _clip(realdata, "max-heromode.mp4")
+    return gopro_clip(realdata, "max-heromode.mp4")
 
 
 @pytest.fixture(scope="module")
