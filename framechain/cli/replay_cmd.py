@@ -165,7 +165,7 @@ def _report(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> dict[str, A
 
 
 def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
-    from framechain.sinks.text import FindingView, observation_counts
+    from framechain.sinks.text import FindingView, measured_instead
 
     findings = loaded.findings
     counts = loaded.replay.counts()
@@ -181,12 +181,8 @@ def _print_text(loaded: Run, outcome: RerunOutcome, notes: list[str]) -> None:
     line = f"observations  {counts['total']} total, {counts['replayed']} replayed, {sum(rejected.values())} rejected"
     if detail:
         line += f" ({detail})"
-    attribution = loaded.attribution
-    if attribution is not None and attribution.metric == "camera_motion" and not counts["total"]:
-        line = f"observations  {observation_counts(attribution)}"  # what was measured instead
-    else:
-        line = f"{line}, {counts['stale']} stale"
-    print(line)
+    instead = measured_instead(loaded.attribution)
+    print(f"observations  {instead}" if instead else f"{line}, {counts['stale']} stale")
     for note in notes:
         print(f"note          {note}")
     if loaded.attribution is not None:  # the findings and what the log could not show

@@ -12,7 +12,7 @@ from framechain.arrays import FloatArray
 from framechain.config.schema import finite_number
 from framechain.geometry.rotations import quat_from_matrix, quat_from_rotvec
 
-__all__ = ["rig_camera_poses"]
+__all__ = ["rig_camera_poses", "tagslam_pose"]
 
 
 def rig_camera_poses(raw: Any) -> dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]]:
@@ -29,17 +29,10 @@ def rig_camera_poses(raw: Any) -> dict[str, tuple[tuple[float, float, float], tu
     entries = [(str(k), v) for k, v in raw.items() if isinstance(v, Mapping)]
     out: dict[str, tuple[tuple[float, float, float], tuple[float, float, float, float]]] = {}
     for name, entry in entries:
-        pose = entry.get("pose")
-        if not isinstance(pose, Mapping):
-            continue
-        position, rotation = pose.get("position"), pose.get("rotation")
-        if not (isinstance(position, Mapping) and isinstance(rotation, Mapping)):
-            continue
-        values = [position.get(a) for a in "xyz"] + [rotation.get(a) for a in "xyz"]
-        if all(finite_number(v) for v in values):
-            numbers = np.asarray(values, dtype=float)
-            x, y, z = (float(v) for v in numbers[:3])
-            out[name] = ((x, y, z), _quat_of_rotvec(numbers[3:]))
+        pose = tagslam_pose(entry.get("pose"))
+        if pose is not None:
+            (x, y, z), rotvec = pose
+            out[name] = ((x, y, z), _quat_of_rotvec(np.asarray(rotvec, dtype=float)))
     if out:
         return out
     chained = [(name, e.get("T_cn_cnm1")) for name, e in entries if isinstance(e.get("intrinsics"), list)]
@@ -52,6 +45,21 @@ def rig_camera_poses(raw: Any) -> dict[str, tuple[tuple[float, float, float], tu
         t = rig_from_cam[:3, 3]
         out[name] = ((float(t[0]), float(t[1]), float(t[2])), _quat_of_matrix(rig_from_cam[:3, :3]))
     return out
+
+
+def tagslam_pose(value: Any) -> tuple[list[float], list[float]] | None:
+    """TagSLAM's ``{position: {x, y, z}, rotation: {x, y, z}}`` (metres, a rotation vector in radians) as
+    (xyz, rotvec); None when it is not one, or a value is not a finite number."""
+    if not isinstance(value, Mapping):
+        return None
+    position, rotation = value.get("position"), value.get("rotation")
+    if not (isinstance(position, Mapping) and isinstance(rotation, Mapping)):
+        return None
+    values = [position.get(a) for a in "xyz"] + [rotation.get(a) for a in "xyz"]
+    if not all(finite_number(v) for v in values):
+        return None
+    numbers: list[float] = np.asarray(values, dtype=float).tolist()
+    return numbers[:3], numbers[3:]
 
 
 def _is_matrix(value: Any) -> bool:

@@ -11,16 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.verdict.checks import Bound, Curve, family_name, size_text, tolerance_text
+from framechain.analysis.verdict.checks import Bound, Curve, bound_family, family_name, size_text, tolerance_text
 from framechain.analysis.verdict.findings import Attribution
 from framechain.arrays import BoolArray, FloatArray
-from framechain.catalogue import Fault
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, RECORDED_ERROR_COLOR, hex_color
 from framechain.sinks.document import Block, Figures, Heading, Paragraph, Section, table
 from framechain.sinks.plots import Figure, new_figure
 from framechain.sinks.text import mm
 
-ROTATION_FAMILY = {Fault.MISSING_ROTATION: Fault.ROTATION_ERROR}
 BOUND_COLUMNS = ("fault family", "hop", "smallest fault it would find", "why")
 LABEL_COLUMNS = ("label", "observations", "used", "spread (median)", "spread (p90)", "verdict")
 
@@ -40,7 +38,7 @@ LABEL_NOTE = {
 def bound_rows(result: Attribution) -> list[tuple[str, str, str, str]]:
     """One row per fault family and hop: its bound (beyond the finding, for a family found), or "not
     observable", and why."""
-    found = {(ROTATION_FAMILY.get(f.fault, f.fault), f.hop, f.camera or "") for f in result.findings}
+    found = {(bound_family(f.fault), f.hop, f.camera or "") for f in result.findings}
     return [(b.family + (f" on camera {b.camera}" if b.camera else ""), b.hop.value,
              _bound_cell(b, (b.fault, b.hop, b.camera) in found), b.why) for b in result.bounds]
 

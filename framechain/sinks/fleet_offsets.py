@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
-from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_OFFSET_S
+from framechain.analysis.egomotion.bounds import offset_bound_s
 from framechain.analysis.egomotion.recording import DEPARTURE_BOUNDS
 from framechain.sinks.document import Heading, Paragraph, Section, table
 
@@ -65,12 +65,6 @@ class OffsetSpread:
                 f"{names}.")
 
 
-def _bound(low_s: float, high_s: float) -> float:
-    """How far from the median an episode's offset may lie (s): twice the smallest offset its fit would have made a
-    finding of (the median has an error of its own)."""
-    return DEPARTURE_BOUNDS * max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high_s - low_s))
-
-
 def video_offsets(table: pa.Table) -> OffsetSpread | None:
     """The offsets of the fleet table's logs (one per log; None when no log has one)."""
     if "video_offset_s" not in table.column_names:
@@ -86,7 +80,9 @@ def video_offsets(table: pa.Table) -> OffsetSpread | None:
         return None
     offsets = np.array([v[2] for v in seen.values()])
     median = float(np.median(offsets))
-    rows = tuple(OffsetRow(unit, camera, offset, low, high, bool(abs(offset - median) <= _bound(low, high)))
+    # An episode may lie twice its own bound from the median (the median has an error of its own).
+    rows = tuple(OffsetRow(unit, camera, offset, low, high,
+                           bool(abs(offset - median) <= DEPARTURE_BOUNDS * offset_bound_s((low, high))))
                  for unit, camera, offset, low, high in seen.values())
     return OffsetSpread(rows=rows, median_s=median, std_s=float(offsets.std(ddof=1)) if offsets.size > 1 else 0.0)
 

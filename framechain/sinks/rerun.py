@@ -101,7 +101,7 @@ from framechain.sinks.rerun_series import (
     log_text,
     summary_markdown,
 )
-from framechain.sinks.text import FindingView, observation_counts
+from framechain.sinks.text import FindingView, measured_instead
 from framechain.timeline import Timeline
 
 if TYPE_CHECKING:
@@ -303,8 +303,8 @@ def _release_dropped_recordings() -> None:
 
 def log_replay(rec: rr.RecordingStream, run: Run, *, options: RerunOptions | None = None,
                clock: Clock | None = None) -> dict[str, int]:
-    """Log everything of one run to an open recording; returns rows logged per entity path (what
-    :func:`recording_blueprint` lays out). ``clock``: how stamps become timelines (default: the run's own, an
+    """Log everything of one run to an open recording; returns rows logged per entity path (what the run's
+    default layout shows). ``clock``: how stamps become timelines (default: the run's own, an
     episode's durations from its first row).
 
     The caller owns ``rec`` (its sink, flush and disconnect), so this also serves notebooks
@@ -314,15 +314,9 @@ def log_replay(rec: rr.RecordingStream, run: Run, *, options: RerunOptions | Non
                     options or RerunOptions(), clock or Clock.of(run.timeline))
 
 
-def recording_blueprint(run: Run, logged: Mapping[str, int], *, collapse_panels: bool = False) -> rrb.Blueprint:
-    """The default layout of a run's recording: the views that have data in it (``logged``: rows per entity path,
-    as :func:`log_replay` returns them) for this kind of run (a robot log, a rig, an episode)."""
-    return _blueprint(run, logged, image_overlay(run.timeline, run.replay, run.aligned, run.findings),
-                      Clock.of(run.timeline), collapse_panels=collapse_panels)
-
-
-def _blueprint(run: Run, logged: Mapping[str, int], overlay: ImageOverlay, clock: Clock, *,
-               collapse_panels: bool = False) -> rrb.Blueprint:
+def _blueprint(run: Run, logged: Mapping[str, int], overlay: ImageOverlay, clock: Clock) -> rrb.Blueprint:
+    """The default layout of a run's recording: the views that have data in it (``logged``: rows per entity path)
+    for this kind of run (a robot log, a rig, an episode)."""
     views = camera_views(run.replay, run.chain.camera_frames() if run.chain.is_rig else ())
     cameras = [(v.frame, v.root, _image_box(run.timeline, v.frame) if v.rig else image_view_bounds(overlay))
                for v in views]
@@ -333,7 +327,7 @@ def _blueprint(run: Run, logged: Mapping[str, int], overlay: ImageOverlay, clock
     stamps = run.replay.observations.stamp_ns
     # A log of one moment (one image): the series' time axes would span months around it.
     moment = stamps.size > 0 and int(stamps.max() - stamps.min()) < SHORT_LOG_NS
-    return default_blueprint(run.replay.frames, logged, cameras=cameras, collapse_panels=collapse_panels,
+    return default_blueprint(run.replay.frames, logged, cameras=cameras,
                              curves=curves, window_s=SHORT_LOG_NS / 1e9 if moment else None, timelines=clock.timelines)
 
 
@@ -372,19 +366,11 @@ def _log_run(rec: rr.RecordingStream, run: Run, overlay: ImageOverlay, opts: Rer
     moving = run.timeline.transforms.stamp_ns[~run.timeline.transforms.is_static]
     log_text(rec, result, clock, [FindingView.of(f) for f in run.findings], rows,
              start_ns=int(moving.min()) if moving.size else None, verdict=_verdict(run),
-             measured_instead=_measured_instead(run))
+             measured_instead=measured_instead(run.attribution))
     if run.attribution is not None:
         log_explained_error(rec, result, clock, run.attribution, rows)
         log_checks(rec, run.attribution, rows)
     return rows
-
-
-def _measured_instead(run: Run) -> str:
-    """For a run measured against the cameras' own motion (no logged observation), what was measured."""
-    attribution = run.attribution
-    if attribution is None or attribution.metric != "camera_motion" or attribution.counts()["total"]:
-        return ""
-    return observation_counts(attribution)
 
 
 def _as_run_points(
@@ -437,7 +423,6 @@ __all__ = [
     "default_blueprint",
     "display_available",
     "log_replay",
-    "recording_blueprint",
     "resolve_target",
     "stream_replay",
     "summary_markdown",

@@ -13,6 +13,7 @@ from framechain.sinks.overlay import (
     ImageOverlay,
 )
 from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, LOG_TIME, OBS_INDEX, SENSOR_TIME, rerun_pixels
+from framechain.sinks.rerun_egomotion import RATE_ENTITY
 
 if TYPE_CHECKING:
     import rerun.blueprint as rrb
@@ -38,8 +39,6 @@ def image_view_bounds(overlay: ImageOverlay) -> tuple[float, float, float, float
 
 
 Bounds = tuple[float, float, float, float]
-#: Where the cameras' rotation rates are logged, one entity root per camera (see :mod:`rerun_egomotion`).
-RATE_ROOT = "/series/rotation_rate_deg_s"
 
 
 def has_data(logged: Mapping[str, int], *roots: str) -> bool:
@@ -150,7 +149,7 @@ def _rate_views(logged: Mapping[str, int], axis: rrb.TimeAxis | None) -> rrb.Vie
     import rerun.blueprint as rrb
 
     bases = sorted({e[: -len("/measured")] for e, n in logged.items()
-                    if n > 0 and e.startswith(RATE_ROOT + "/") and e.endswith("/measured") and e.count("/") == 4})
+                    if n > 0 and e.startswith(RATE_ENTITY + "/") and e.endswith("/measured") and e.count("/") == 4})
     plots = [rrb.TimeSeriesView(name=f"Rotation rate of {base.rsplit('/', 1)[-1]} (deg/s): measured, as declared, "
                                 "as fitted", origin=base,
                                 contents=["+ $origin/measured", "+ $origin/declared", "+ $origin/corrected"],

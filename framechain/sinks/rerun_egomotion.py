@@ -27,7 +27,6 @@ from framechain.analysis.run import Run
 from framechain.sinks.colors import AS_RUN_COLOR, CORRECTED_COLOR
 from framechain.sinks.rerun_common import IMAGE_PLANE_SUFFIX, Clock, entity_part
 from framechain.timeline import Timeline
-from framechain.timeline.frames import VIDEO_ENCODING
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -78,7 +77,7 @@ def _log_video(rec: rr.RecordingStream, timeline: Timeline, clock: Clock, frame:
     import rerun as rr
 
     images = timeline.image_frames
-    mine = np.flatnonzero((images.frame == frame) & (images.encoding == VIDEO_ENCODING) & (images.video_time_ns >= 0))
+    mine = np.flatnonzero((images.frame == frame) & images.video_frames)
     if mine.size == 0:
         return
     path = str(images.video_path[mine[0]])

@@ -33,7 +33,7 @@ from framechain.sinks.rerun_common import (
     send_per_stamp,
 )
 from framechain.timeline import ImageFrameTable, Timeline, normalize_frame
-from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
+from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -285,7 +285,7 @@ def log_images(
         )
     if raw.size or compressed.size:
         rows[image_entity] = int(raw.size + compressed.size)
-    video = chosen[(enc == VIDEO_ENCODING) & (images.video_time_ns[chosen] >= 0)]  # -1: a row without a frame
+    video = chosen[images.video_frames[chosen]]
     for k, path in enumerate(np.unique(images.video_path[video]).tolist()):
         entity = f"{view.root}/video" if k == 0 else f"{view.root}/video/{k}"
         frames = video[images.video_path[video] == path]

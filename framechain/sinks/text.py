@@ -21,10 +21,16 @@ def observation_counts(result: Attribution) -> str:
     which has no logged observation to replay, the frames and frame pairs each camera's motion was measured on
     (a bare "0 total" there reads as nothing done)."""
     counts = result.counts()
-    replayed = (f"{counts['total']} total, {counts['replayed']} replayed, rejected {counts['rejected'] or 'none'}, "
-                f"{counts['stale']} stale")
-    if result.metric != "camera_motion" or counts["total"]:
-        return replayed
+    return measured_instead(result) or (
+        f"{counts['total']} total, {counts['replayed']} replayed, rejected {counts['rejected'] or 'none'}, "
+        f"{counts['stale']} stale")
+
+
+def measured_instead(result: Attribution | None) -> str:
+    """For a run measured against the cameras' own motion, with no logged observation, what was measured (the
+    frames and frame pairs per camera); "" for any other run."""
+    if result is None or result.metric != "camera_motion" or result.counts()["total"]:
+        return ""
     measured = "; ".join(f"camera {c['camera']}: {c.get('frames', 0)} frames, {c.get('pairs', 0)} frame pairs"
                          for c in result.camera_motion)
     return f"none logged (no detections); the cameras' own motion measured instead: {measured}"

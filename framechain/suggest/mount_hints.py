@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.config.rig_poses import rig_camera_poses
-from framechain.config.schema import finite_number
+from framechain.config.rig_poses import rig_camera_poses, tagslam_pose
 from framechain.geometry.rotations import quat_from_rotvec, quat_to_rotvec
 from framechain.geometry.transforms import compose_rows, invert_rows
 from framechain.suggest.facts import BesideHint
@@ -61,13 +60,9 @@ def _odometry_body(beside: list[tuple[str, Any]], body: str) -> tuple[str, list[
             for props in entry.values() if isinstance(entry, Mapping) else []:
                 if not isinstance(props, Mapping) or props.get("odom_frame_id") != body:
                     continue
-                transform = props.get("T_body_odom")
-                position = transform.get("position") if isinstance(transform, Mapping) else None
-                rotation = transform.get("rotation") if isinstance(transform, Mapping) else None
-                if isinstance(position, Mapping) and isinstance(rotation, Mapping):
-                    values: list[Any] = [position.get(a) for a in "xyz"] + [rotation.get(a) for a in "xyz"]
-                    if all(finite_number(v) for v in values):
-                        return name, [float(v) for v in values[:3]], [float(v) for v in values[3:]]
+                pose = tagslam_pose(props.get("T_body_odom"))
+                if pose is not None:
+                    return name, *pose
     return None
 
 

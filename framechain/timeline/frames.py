@@ -231,6 +231,12 @@ class ImageFrameTable(ColumnTable):
         super().__post_init__()
         object.__setattr__(self, "frame", normalize_frames(self.frame))
 
+    @property
+    def video_frames(self) -> npt.NDArray[np.bool_]:
+        """Per row: a frame of a video file (``video_time_ns`` -1 is a row its video has no frame for)."""
+        out: npt.NDArray[np.bool_] = (self.encoding == VIDEO_ENCODING) & (self.video_time_ns >= 0)
+        return out
+
     def load(self, index: int) -> bytes:
         """The bytes of image ``index`` (packed pixels, or the compressed file as logged)."""
         if str(self.encoding[index]) == VIDEO_ENCODING:

@@ -22,7 +22,7 @@ import numpy as np
 from framechain.adapters.lerobot.video import VideoError, read_frames
 from framechain.arrays import IntArray
 from framechain.timeline import ImageFrameTable, normalize_frame
-from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, VIDEO_ENCODING
+from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS
 
 __all__ = ["EncodedFrames", "encoded_frames"]
 
@@ -56,7 +56,7 @@ def encoded_frames(images: ImageFrameTable, camera: str) -> EncodedFrames:
         same = stored[images.encoding[stored] == codec]
         return EncodedFrames(name, codec, images.stamp_ns[same].astype(np.int64),
                              tuple(images.load(int(i)) for i in same))
-    video = rows[(images.encoding[rows] == VIDEO_ENCODING) & (images.video_time_ns[rows] >= 0)]  # -1: no frame
+    video = rows[images.video_frames[rows]]
     if video.size == 0:
         return EncodedFrames(name, "", np.zeros(0, dtype=np.int64), ())
     path = str(images.video_path[video[0]])

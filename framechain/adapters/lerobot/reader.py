@@ -110,6 +110,7 @@ class DatasetReader:
         video_path = raw.get("video_path")
         self.video_path = video_path if isinstance(video_path, str) else None
         self._episodes_v3: pa.Table | None = None
+        self._episode_positions_v3: dict[int, int] | None = None
         if self.layout is Layout.V2:
             self._episodes_v2 = self._read_episodes_v2()
             self._episode_ids = sorted(self._episodes_v2)
@@ -365,9 +366,15 @@ class DatasetReader:
             wanted += [f"videos/{key}/chunk_index", f"videos/{key}/file_index", f"videos/{key}/from_timestamp",
                        f"videos/{key}/to_timestamp"]
         where = self.root / "meta" / "episodes"
-        import pyarrow.compute as pc  # here: its import costs a command reading a log 40 ms
-
-        table = episodes.select([c for c in wanted if c in names]).filter(pc.equal(episodes["episode_index"], index))
+        if self._episode_positions_v3 is None:  # one pass, not one filter of the whole table per episode
+            indexes = episodes["episode_index"].to_pylist()
+            self._episode_positions_v3 = {}
+            for at, value in enumerate(indexes):
+                if value is not None:
+                    self._episode_positions_v3.setdefault(int(value), at)
+        position = self._episode_positions_v3.get(index)
+        table = episodes.select([c for c in wanted if c in names])
+        table = table.slice(position, 1) if position is not None else table.slice(0, 0)
         if table.num_rows == 0:
             raise DatasetError(where, f"episode {index} has no row in the episodes parquet files that could be read")
         row = {k: v[0] for k, v in table.to_pydict().items()}

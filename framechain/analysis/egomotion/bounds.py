@@ -178,16 +178,27 @@ def _latency_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
 
 def latency_bound_s(fit: EgoMotionFit) -> float:
     """The smallest offset the fit would make a finding of (s)."""
-    low, high = fit.offset_interval_s
-    return max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high - low))
+    return offset_bound_s(fit.offset_interval_s)
+
+
+def offset_bound_s(interval_s: tuple[float, float]) -> float:
+    """The smallest offset a fit with this 95% interval would make a finding of (s): MIN_OFFSET_S, or
+    :data:`BOUND_HALF_WIDTHS` half-widths of the interval when that is larger."""
+    low, high = interval_s
+    return max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * (0.5 * (high - low)))
 
 
 def mount_bound_deg(fit: EgoMotionFit) -> float:
-    """The smallest mount rotation the fit would make a finding of (deg): MIN_ANGLE_DEG beyond
-    :data:`BOUND_HALF_WIDTHS` half-widths of its interval."""
+    """The smallest mount rotation the fit would make a finding of (deg)."""
     assert fit.mount_error is not None
     spread = fit.mount_error.interval_deg
-    return MIN_ANGLE_DEG + BOUND_HALF_WIDTHS * 0.5 * (spread[1] - spread[0])
+    return angle_bound_deg(0.5 * (spread[1] - spread[0]))
+
+
+def angle_bound_deg(half_width_deg: float) -> float:
+    """The smallest mount rotation a fit with this half-width of interval would make a finding of (deg):
+    MIN_ANGLE_DEG beyond :data:`BOUND_HALF_WIDTHS` half-widths."""
+    return MIN_ANGLE_DEG + BOUND_HALF_WIDTHS * half_width_deg
 
 
 def _mount_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:

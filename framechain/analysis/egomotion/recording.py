@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.egomotion.bounds import BOUND_HALF_WIDTHS, MIN_ANGLE_DEG, MIN_OFFSET_S
+from framechain.analysis.egomotion.bounds import angle_bound_deg, offset_bound_s
 from framechain.analysis.egomotion.solve import OBSERVABLE_RATIO, complete_mount
 from framechain.arrays import FloatArray
 from framechain.geometry.rotations import angle_of, kabsch, matrix_of, quat_of
@@ -83,8 +83,7 @@ class EpisodeCamera:
     @property
     def offset_bound_s(self) -> float:
         """How far from the recording's median its offset may lie (s)."""
-        low, high = self.offset_interval_s
-        return DEPARTURE_BOUNDS * max(MIN_OFFSET_S, BOUND_HALF_WIDTHS * 0.5 * (high - low))
+        return DEPARTURE_BOUNDS * offset_bound_s(self.offset_interval_s)
 
 
 @dataclass(frozen=True)
@@ -234,7 +233,7 @@ def _departures(episodes: list[EpisodeCamera], link: str, median: float,
                                  f"the recording's median ({median * 1e3:+.1f} ms) by "
                                  f"{abs(e.offset_s - median) * 1e3:.1f} ms, more than the "
                                  f"{e.offset_bound_s * 1e3:.1f} ms it may (twice its bound)"))
-        bound = DEPARTURE_BOUNDS * (MIN_ANGLE_DEG + BOUND_HALF_WIDTHS * e.mount_half_width_deg)
+        bound = DEPARTURE_BOUNDS * angle_bound_deg(e.mount_half_width_deg)
         if e.episode in angles and angles[e.episode] > bound:
             out.append(Departure(e.episode, e.camera, "mount", f"its mount is {angles[e.episode]:.1f} deg from the "
                                  f"recording's, more than the {bound:.1f} deg it may (twice its bound)"))

@@ -16,7 +16,7 @@ from framechain.analysis.model.chain import ChainInputs
 from framechain.analysis.model.estimates import Estimate, estimate_scalars, format_estimate, format_interval
 from framechain.analysis.model.fault import FaultModel, Mode
 from framechain.analysis.model.faults import LATENCY_BOUND_S, TRANSLATION_BOUND_M
-from framechain.analysis.verdict.checks import Bound, size_text
+from framechain.analysis.verdict.checks import Bound, bound_family, size_text
 from framechain.analysis.verdict.findings import Finding, Metric
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault
@@ -246,7 +246,7 @@ def _weak_because(finding: Finding, bounds: Sequence[Bound]) -> tuple[str, ...]:
             why.append(f"its 95% interval {format_interval({key: [lo, hi]})} holds no fault")
     if finding.confidence < WEAK_CONFIDENCE:
         why.append(f"confidence {finding.confidence:.2f} under {WEAK_CONFIDENCE:g}")
-    family = Fault.ROTATION_ERROR if finding.fault == Fault.MISSING_ROTATION else finding.fault
+    family = bound_family(finding.fault)
     bound = next((b for b in bounds if b.fault == family and b.hop == finding.hop and b.camera == (finding.camera or "")
                   and b.statistical_size is not None), None)
     if bound is not None and bound.statistical_size is not None and scalars:

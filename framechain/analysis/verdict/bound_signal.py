@@ -22,7 +22,7 @@ from framechain.analysis.fit.selection import MIN_BIC_GAIN, Objective, PointObje
 from framechain.analysis.fit.shares import MIN_SHARE
 from framechain.analysis.model.chain import CameraDelta, ChainInputs, Perturbation, hop2, hop3
 from framechain.analysis.model.fault import FaultModel, Mode
-from framechain.analysis.model.faults import LATENCY_BOUND_S
+from framechain.analysis.model.faults import LATENCY_BOUND_S, TRANSLATION_BOUND_M
 from framechain.analysis.verdict.checks import family_name, size_text
 from framechain.arrays import BoolArray, FloatArray
 from framechain.catalogue import Fault, HopName
@@ -32,8 +32,8 @@ from framechain.geometry.camera import CameraModel
 SIZED = (Fault.LATENCY, Fault.ROTATION_ERROR, Fault.TRANSLATION_ERROR, Fault.DEPTH_SCALE, Fault.INTRINSICS)
 #: The largest size searched per family (in parameter units: s, rad, a scale's deviation from 1): past
 #: these a fault is another family (a frame swap), or a scale a static target cannot tell from collapse.
-MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2, Fault.TRANSLATION_ERROR: 0.5,
-            Fault.DEPTH_SCALE: 0.8, Fault.INTRINSICS: 0.8}
+MAX_SIZE = {Fault.LATENCY: LATENCY_BOUND_S, Fault.ROTATION_ERROR: np.pi / 2,
+            Fault.TRANSLATION_ERROR: TRANSLATION_BOUND_M, Fault.DEPTH_SCALE: 0.8, Fault.INTRINSICS: 0.8}
 #: Central-difference steps of the linearised search (s, rad, m, scale).
 STEP = {Fault.LATENCY: 2e-3, Fault.ROTATION_ERROR: 1e-3, Fault.TRANSLATION_ERROR: 1e-3, Fault.DEPTH_SCALE: 1e-3,
         Fault.INTRINSICS: 1e-3}

@@ -117,13 +117,6 @@ class Bound:
         about = "along" if self.fault == Fault.TRANSLATION_ERROR else "about"
         return f" (not {about} {', '.join(axis_text(a) for a in self.unobservable_axes)})"
 
-    def limit_text(self) -> str:
-        """What sets the bound, in words: ``the noise``, or ``the 1 mm tolerance`` (with the noise's own)."""
-        if self.limited_by != "tolerance" or self.statistical_size is None:
-            return LIMIT_WORDS[self.limited_by]
-        return (f"the {tolerance_text(self.tolerance_m)} tolerance (the noise alone: "
-                f"{size_text(self.fault, self.statistical_size)})")
-
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"hop": self.hop.value, "fault": self.fault.value,
                                "observable": self.observable,
@@ -160,8 +153,8 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = (), *, det
     inconclusive verdict): the sizes are what the log could show, never "no fault". Empty when there are no
     bounds.
     """
-    families_found = {(_family(f[0]), f[1], (f[2] if len(f) > 2 else "") or "") for f in found}
-    rest = [b for b in bounds if (_family(b.fault), b.hop, b.camera) not in families_found]
+    families_found = {(bound_family(f[0]), f[1], (f[2] if len(f) > 2 else "") or "") for f in found}
+    rest = [b for b in bounds if (bound_family(b.fault), b.hop, b.camera) not in families_found]
     # A camera's families are named together, the camera once.
     by_camera: dict[str, list[Bound]] = {}
     for b in rest:
@@ -202,7 +195,7 @@ def _and(names: Sequence[str]) -> str:
     return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
-def _family(fault: Fault) -> Fault:
+def bound_family(fault: Fault) -> Fault:
     """A rotation finding (missing or wrong) is of the mount-rotation family."""
     return Fault.ROTATION_ERROR if fault == Fault.MISSING_ROTATION else fault
 
@@ -378,6 +371,7 @@ __all__ = [
     "LabelVerdict",
     "Limit",
     "Undetermined",
+    "bound_family",
     "bounds_sentence",
     "family_name",
     "inconclusive_sentence",

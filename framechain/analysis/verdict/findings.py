@@ -332,10 +332,6 @@ class Attribution:
                     f"from the {words}, so no finding does not mean no fault.")
         return bounds_sentence(self.bounds, [(f.fault, f.hop, f.camera or "") for f in self.findings])
 
-    def _then_bounds(self) -> str:
-        bounds = self._bounds_sentence()
-        return f" {bounds}" if bounds else ""
-
     def _motion_verdict(self, summary: dict[str, Any]) -> str:
         return motion_verdict(self.findings, self.bounds, self.camera_motion, summary["median"])
 
