@@ -7,11 +7,10 @@ import weakref
 from collections.abc import Callable, Collection, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from framechain.adapters.errors import AdapterError, EmptyLogError, UnsupportedLogError
-from framechain.adapters.formats.mcap.reader import MCAP_MAGIC, McapLog
-from framechain.adapters.formats.rosbag.reader import RosbagsLog
+from framechain.adapters.formats.mcap import MCAP_MAGIC
 from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import POSE_TYPES, Kind, normalize_msgtype, select_topics
 from framechain.adapters.model import LoadedLog
@@ -19,6 +18,10 @@ from framechain.adapters.mounts import chain_additions
 from framechain.config.chain import ChainConfig
 from framechain.progress import Progress
 from framechain.timeline import LogInfo, Timeline
+
+if TYPE_CHECKING:
+    from framechain.adapters.formats.mcap.reader import McapLog
+    from framechain.adapters.formats.rosbag.reader import RosbagsLog
 
 ROSBAG1_MAGIC = b"#ROSBAG V2.0\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -97,11 +100,22 @@ def detect(path: str | Path) -> tuple[str, Path, list[str]]:
 
 @contextmanager
 def _source(fmt: str, target: Path) -> Iterator[McapLog | RosbagsLog]:
-    src: McapLog | RosbagsLog = McapLog(target) if fmt == "mcap" else RosbagsLog(target)
+    src = _reader(fmt, target)
     try:
         yield src
     finally:
         src.close()
+
+
+def _reader(fmt: str, target: Path, summary: Any = None) -> McapLog | RosbagsLog:
+    """The log's reader, imported only for the format at hand (a LeRobot run needs neither)."""
+    if fmt == "mcap":
+        from framechain.adapters.formats.mcap.reader import McapLog
+
+        return McapLog(target, summary)
+    from framechain.adapters.formats.rosbag.reader import RosbagsLog
+
+    return RosbagsLog(target)
 
 
 class _KeptOpenFetcher:
@@ -121,7 +135,7 @@ class _KeptOpenFetcher:
 
     def __call__(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         if self._log is None:
-            self._log = McapLog(self._target, self._summary) if self._fmt == "mcap" else RosbagsLog(self._target)
+            self._log = _reader(self._fmt, self._target, self._summary)
             self._finalizer = weakref.finalize(self, self._log.close)
         return self._log.fetch(topic, log_time_ns, ordinal)
 
@@ -183,7 +197,7 @@ def open_log(
             with _progress(progress and total >= PROGRESS_MIN_MESSAGES, total, p.name) as advance:
                 src.read(selected, col, advance)
         info = info.with_notes(src.notes)
-        summary = src.summary if isinstance(src, McapLog) else None
+        summary = getattr(src, "summary", None)
     col.notes[:0] = notes
     if chain is not None and chain.topics.detections_table:
         from framechain.adapters.messages.side_table import read_side_table, resolve_side_table

@@ -174,16 +174,20 @@ def measure_egomotion(
     norm = np.linalg.norm(prior, axis=1, keepdims=True)
     known = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0)
     threshold = opts.inlier_threshold_px / focal
+    # Each match's residual across the flow of the translation used: the prior's where known, else the measured one.
+    residual = np.full(inliers.shape, np.nan)
     if known.any():
         sub = PairBatch(batch.b0[known], batch.b1[known], batch.valid[known])
         direction = prior[known] / norm[known]
         rotation[known] = rotations_along_translation(sub, rotation[known], direction, sub.valid.astype(float),
                                                       threshold, opts.refine_iterations)
-        residual = np.linalg.norm(off_flow_residuals(sub, rotation[known], direction), axis=-1)
-        inliers[known] = (residual < threshold) & sub.valid
+        residual[known] = np.linalg.norm(off_flow_residuals(sub, rotation[known], direction), axis=-1)
+        inliers[known] = (residual[known] < threshold) & sub.valid
     measured = translation_directions(batch, rotation, inliers.astype(float))
-    used = np.where(known[:, None], np.where(norm > 0, prior / np.where(norm > 0, norm, 1.0), 0.0), measured)
-    residual = np.where(inliers, np.linalg.norm(off_flow_residuals(batch, rotation, used), axis=-1), np.nan)
+    if not known.all():
+        sub = PairBatch(batch.b0[~known], batch.b1[~known], batch.valid[~known])
+        residual[~known] = np.linalg.norm(off_flow_residuals(sub, rotation[~known], measured[~known]), axis=-1)
+    residual = np.where(inliers, residual, np.nan)
     u = batch.b1 @ np.swapaxes(rotation, 1, 2)
     flow = np.linalg.norm(u - (u * batch.b0).sum(-1, keepdims=True) * batch.b0, axis=-1)
     count = inliers.sum(axis=1)

@@ -119,34 +119,76 @@ def rotations_along_translation(
     that is not along the translation's flow at ``b0`` (all of it where that would need a negative
     depth). Gauss-Newton on the rotation from ``rotation``, with Cauchy weights whose scale anneals
     from eight times ``threshold_rad`` down to it (halving per step); ``weights`` (P, M) zero the
-    matches left out. Stops when no pair's step exceeds 1e-7 rad.
+    matches left out. A pair stops once the weights have annealed and its step is under 1e-7 rad.
     """
     # Vectors are held component first, (3, P, M): a product summed over three contiguous planes is about three
     # times faster than over a trailing axis of three, and this loop is most of what a camera's motion costs.
     b0, b1 = np.moveaxis(batch.b0, -1, 0).copy(), np.moveaxis(batch.b1, -1, 0).copy()
+    # The tangent plane at b0 in a basis fixed by the translation: ``along`` its flow, ``across`` normal to it. A
+    # match's residual is (across . u, along . u) for u = R b1, its along part dropped when negative (a positive
+    # depth explains it: "ahead"). Where b0 is the epipole the flow has no direction and any basis serves.
     t = direction.T[:, :, None]
-    across_t = t - _dot(t, b0) * b0
-    along = across_t / np.maximum(np.sqrt(_dot(across_t, across_t)), 1e-12)
-    rot = rotation
+    flow = t - _dot(t, b0) * b0
+    size = np.sqrt(_dot(flow, flow))
+    spare = _spare_tangent(b0)
+    along = np.where(size > 1e-12, flow / np.maximum(size, 1e-12), spare)
+    across = _cross(b0, along)
+    rot = np.array(rotation, dtype=float, copy=True)
+    # Only the pairs still moving are iterated: after the annealing most settle in a step or two, a few take all.
+    index = np.arange(rot.shape[0])
+    moving = (rot, b1, across, along, weights)
     for it in range(iterations):
-        scale = threshold_rad * max(1.0, 8.0 * 0.5**it)
-        u = np.einsum("pij,jpm->ipm", rot, b1)
-        err = u - _dot(u, b0) * b0
-        ahead = _dot(err, across_t) < 0  # a positive depth explains part of it
-        err = np.where(ahead, err - _dot(err, along) * along, err)
-        w = weights / (1.0 + _dot(err, err)[0] / scale**2)
-        # err = Proj u with Proj = I - b0 b0^T (- along along^T when ahead), d(u) = omega x u, so
-        # J^T J = |u|^2 I - u u^T - (u x b0)(u x b0)^T (- (u x along)(u x along)^T), J^T err = u x err.
-        cross_along = np.where(ahead, _cross(u, along), 0.0)
-        normal = (np.eye(3) * (w * _dot(u, u)[0]).sum(1)[:, None, None]
-                  - _planes_gram(w, u) - _planes_gram(w, _cross(u, b0)) - _planes_gram(w, cross_along)
-                  + 1e-15 * np.eye(3))
-        rhs = -(w * _cross(u, err)).sum(2).T
-        step = np.linalg.solve(normal, rhs[..., None])[..., 0]
-        rot = rotation_matrices(step) @ rot
-        if float(np.abs(step).max(initial=0.0)) < 1e-7:
+        if index.size == 0:
             break
+        step = _gauss_newton_step(*moving, threshold_rad * max(1.0, 8.0 * 0.5**it))
+        moving = (rotation_matrices(step) @ moving[0], *moving[1:])
+        rot[index] = moving[0]
+        if it >= _ANNEALED:
+            keep = np.abs(step).max(axis=1) >= 1e-7
+            if not keep.all():
+                index = index[keep]
+                moving = (moving[0][keep], *(a[:, keep] for a in moving[1:4]), moving[4][keep])
     return rot
+
+
+def _spare_tangent(b0: FloatArray) -> FloatArray:
+    """A unit vector across each unit bearing ``b0`` (3, P, M)."""
+    helper = np.zeros_like(b0)
+    x_ok = np.abs(b0[0]) < 0.9
+    helper[0][x_ok] = 1.0
+    helper[1][~x_ok] = 1.0
+    v = _cross(b0, helper)
+    out: FloatArray = v / np.sqrt(_dot(v, v))
+    return out
+
+
+#: The step from which the Cauchy scale of :func:`rotations_along_translation` is the threshold itself.
+_ANNEALED = 3
+
+
+def _gauss_newton_step(rot: FloatArray, b1: FloatArray, across: FloatArray, along: FloatArray, weights: FloatArray,
+                       scale: float) -> FloatArray:
+    """One Cauchy-weighted Gauss-Newton step of :func:`rotations_along_translation` (rotation vectors, (P, 3)).
+
+    With ``d(u) = omega x u`` each residual component ``e . u`` has the gradient ``u x e``, so the normal
+    matrix is the weighted sum of ``(u x e)(u x e)^T`` over the components kept."""
+    u = np.einsum("pij,jpm->ipm", rot, b1)
+    r_across = _dot(across, u)[0]
+    r_along = _dot(along, u)[0]
+    kept = r_along >= 0  # not ahead: no positive depth explains it
+    r_along = np.where(kept, r_along, 0.0)
+    w = weights / (1.0 + (r_across**2 + r_along**2) / scale**2)
+    w_along = np.where(kept, w, 0.0)
+    g_across, g_along = _cross(u, across), _cross(u, along)
+    normal = np.empty((rot.shape[0], 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            normal[:, i, j] = normal[:, j, i] = ((w * g_across[i]) * g_across[j] + (w_along * g_along[i]) * g_along[j]
+                                                 ).sum(axis=1)
+    normal += 1e-15 * np.eye(3)
+    rhs = -((w * r_across) * g_across + (w_along * r_along) * g_along).sum(axis=2).T
+    out: FloatArray = np.linalg.solve(normal, rhs[..., None])[..., 0]
+    return out
 
 
 def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -158,12 +200,6 @@ def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
     """Cross products of component-first vectors (3, ...)."""
     return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _planes_gram(weights: FloatArray, v: FloatArray) -> FloatArray:
-    """``sum_m w v v^T`` per pair (P, 3, 3), for ``weights`` (P, M) and component-first ``v`` (3, P, M)."""
-    out: FloatArray = np.einsum("ipm,jpm->pij", weights * v, v)
-    return out
 
 
 def _gram(weights: FloatArray, v: FloatArray) -> FloatArray:

@@ -34,7 +34,7 @@ from framechain.vision.egomotion import (
     measure_egomotion,
     track_features,
 )
-from framechain.vision.opencv import require_cv2
+from framechain.vision.opencv import mean_abs_differences, require_cv2
 
 __all__ = [
     "CameraFrames",
@@ -340,11 +340,8 @@ def _repeats_and_black(grey: npt.NDArray[np.uint8], missing: BoolArray) -> tuple
     n = grey.shape[0]
     duplicate = np.zeros(n, dtype=bool)
     present = np.flatnonzero(~missing)
-    for lo in range(0, max(present.size - 1, 0), 64):  # in blocks: int16 copies of a whole episode are large
-        a = grey[present[lo:lo + 64]].astype(np.int16)
-        b = grey[present[lo + 1:lo + 65]].astype(np.int16)
-        gap = np.abs(a[: b.shape[0]] - b).reshape(b.shape[0], -1).mean(axis=1)
-        duplicate[present[lo + 1:lo + 1 + b.shape[0]]] = gap <= REPEAT_LEVEL
+    if present.size > 1:
+        duplicate[present[1:]] = mean_abs_differences(grey, present[:-1], present[1:]) <= REPEAT_LEVEL
     flat = grey.reshape(n, -1)
     black = ~missing & ((flat > BLACK_LEVEL).mean(axis=1) < 0.01) if n else np.zeros(0, dtype=bool)
     return duplicate, black

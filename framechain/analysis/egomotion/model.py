@@ -53,9 +53,9 @@ class EgoMotionFitOptions:
     seed: int = 0
 
     def for_ranking(self) -> EgoMotionFitOptions:
-        """The options candidate links are ranked with: offsets on a grid of 20 ms at least (a ranking needs no
-        finer, nor the continuous minimum past its parabola, and it fits every link)."""
-        return replace(self, step_s=max(self.step_s, 0.02), continuous=False)
+        """The options candidate links are ranked with: offsets on a grid of 20 ms, refined on one of 2 ms at least
+        (a ranking needs no finer, nor the continuous minimum past its parabola, and it fits every link)."""
+        return replace(self, step_s=max(self.step_s, 0.02), fine_step_s=max(self.fine_step_s, 0.002), continuous=False)
 
 
 @dataclass(frozen=True)

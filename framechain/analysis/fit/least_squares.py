@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from framechain.analysis.model.chain import ChainInputs, Perturbation
 from framechain.analysis.model.fault import FaultModel
@@ -129,6 +128,8 @@ def fit_models(
     def fun(x: FloatArray) -> FloatArray:
         residual = _residual_vector(objective, inputs, perturbation_of(models, x, base))
         return np.concatenate([residual, ridge * (x - origin)]) if pulled else residual
+
+    from scipy.optimize import least_squares  # here: a run measured only on camera motion never fits a fault model
 
     best: tuple[float, FloatArray] | None = None
     for start in starts:

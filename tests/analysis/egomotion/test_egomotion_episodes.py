@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from framechain.analysis.egomotion import EgoMotionFit, fit_camera_motion
+from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, fit_camera_motion, translation_prior
+from framechain.analysis.egomotion.joint import MOUNT_STEP_DEG, _rotvecs_of, _Trials
 from framechain.config.calibration import Intrinsics
+from framechain.geometry.rotations import RotationVector, quat_of
 from framechain.sim.lerobot_video import (
     ARM_JOINTS,
     VideoDatasetSpec,
@@ -25,6 +27,7 @@ from framechain.sim.lerobot_video import (
     gripper_pads,
 )
 from framechain.sim.urdf_chain import UrdfChain
+from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.egomotion import measure_egomotion, track_features
 from tests.helpers.egomotion_scene import EpisodeEvidence, episode_evidence, fit_episode, shifted_copy
 
@@ -109,6 +112,44 @@ def test_a_clean_episode_shows_no_offset_and_no_mount_error(clean: tuple[VideoDa
     assert fit.mount_error.angle_deg < 1.0
     assert fit.mount_error.interval_deg[0] < 1.0
     assert mount_error_deg(fit, truth) < 1.0
+
+
+def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
+        faulted: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]) -> None:
+    """The joint fit measures at three offsets of a grid and interpolates the rest, and measures one mount step about
+    each axis and takes the measurement as linear in the mount (joint.py): both against measuring again with the
+    prior of that offset or mount, on real tracks."""
+    truth, evidence, fit = faulted
+    link = next(m for m in evidence.links if m.link == fit.link)
+
+    def measure(prior: TranslationPrior | None) -> EgoMotionTable:
+        return measure_egomotion(evidence.tracks, evidence.stamps_ns, evidence.intrinsics, frame="wrist_optical_frame",
+                                 translation=prior)
+
+    trials = _Trials(measure, link, translation_prior, fit.q_link_cam, truth.xyz_link_cam, EgoMotionFitOptions())
+    centre = fit.offset_s
+    middle = trials.pairs(trials.table(centre))
+
+    def rms_deg(a: np.ndarray, b: np.ndarray) -> float:
+        ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+        return float(np.rad2deg(np.sqrt(((a[ok] - b[ok]) ** 2).sum(axis=1).mean())))
+
+    for shift in (-0.008, -0.004, 0.004, 0.008):
+        interpolated = trials.interpolated(centre + shift, centre)[0]
+        measured = _rotvecs_of(trials.pairs(trials.table(centre + shift)), interpolated)
+        moved = rms_deg(measured, _rotvecs_of(middle, interpolated))
+        assert moved > 0.005  # the prior of another offset does move the measurement
+        assert rms_deg(interpolated.rotvec, measured) < 0.1 * moved  # 2-4% measured
+    turned = trials.turned(centre)
+    for axis in np.eye(3):
+        turn = -np.deg2rad(MOUNT_STEP_DEG) * axis  # the other side of the step measured
+        predicted = turned(turn)
+        mount = quat_of((trials.q_link_cam, RotationVector(turn)))
+        measured = _rotvecs_of(trials.pairs(measure(translation_prior(link, mount, truth.xyz_link_cam, centre))),
+                               predicted)
+        moved = rms_deg(measured, _rotvecs_of(middle, predicted))
+        assert moved > 0.002
+        assert rms_deg(predicted.rotvec, measured) < 0.25 * moved  # 5-17% measured
 
 
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],

@@ -31,6 +31,7 @@ from framechain.adapters.errors import CorruptLogError, EmptyLogError, SchemaErr
 from framechain.adapters.formats.decode_loop import Batched, DecodeLoop, ProgressFn, Route
 from framechain.adapters.formats.decoders import Decoder, DecoderBuildError
 from framechain.adapters.formats.fast_cdr import FEEDERS
+from framechain.adapters.formats.mcap import MCAP_MAGIC
 from framechain.adapters.formats.mcap.channels import Channel, RosType, channel_decoder, undecodable
 from framechain.adapters.formats.mcap.chunks import (
     MESSAGE_HEAD,
@@ -49,7 +50,6 @@ from framechain.adapters.messages.collect import Collector
 from framechain.adapters.messages.kinds import Kind, normalize_msgtype
 from framechain.timeline import LogInfo, TopicInfo
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 _FOXGLOVE_KINDS = frozenset({Kind.TF, Kind.TRANSFORM, Kind.CAMERA_INFO})
 
 

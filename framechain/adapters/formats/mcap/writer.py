@@ -23,7 +23,7 @@ import numpy as np
 from framechain import __version__
 from framechain.adapters.api import detect
 from framechain.adapters.errors import AdapterError
-from framechain.adapters.formats.mcap.reader import MCAP_MAGIC
+from framechain.adapters.formats.mcap import MCAP_MAGIC
 from framechain.adapters.formats.msgdefs import OutMessage
 
 #: The name of the MCAP metadata record that marks a file framechain wrote (not a recording to analyse).
