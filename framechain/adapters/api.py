@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import threading
 import weakref
 from collections.abc import Callable, Collection, Iterator, Mapping
 from contextlib import contextmanager
@@ -132,12 +133,14 @@ class _KeptOpenFetcher:
         self._summary = summary
         self._log: McapLog | RosbagsLog | None = None
         self._finalizer: weakref.finalize[Any, Any] | None = None
+        self._lock = threading.Lock()
 
     def __call__(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
-        if self._log is None:
-            self._log = _reader(self._fmt, self._target, self._summary)
-            self._finalizer = weakref.finalize(self, self._log.close)
-        return self._log.fetch(topic, log_time_ns, ordinal)
+        with self._lock:  # one reader, one file position: cameras measured in threads fetch in turn
+            if self._log is None:
+                self._log = _reader(self._fmt, self._target, self._summary)
+                self._finalizer = weakref.finalize(self, self._log.close)
+            return self._log.fetch(topic, log_time_ns, ordinal)
 
 
 def _fetcher(fmt: str, target: Path, summary: Any = None) -> Callable[[str, int, int], Any]:

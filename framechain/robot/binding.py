@@ -27,8 +27,11 @@ def robot_model(config: RobotConfig) -> RobotModel:
         model = RobotModel.from_urdf(config.urdf)
     else:
         joints: list[Joint] = []
+        parsed: dict[str, RobotModel] = {}  # two arms of one kind share their URDF: parsed once
         for arm in config.arms:
-            joints.extend(_arm_joints(config.world_frame, arm, RobotModel.from_urdf(arm.urdf)))
+            if str(arm.urdf) not in parsed:
+                parsed[str(arm.urdf)] = RobotModel.from_urdf(arm.urdf)
+            joints.extend(_arm_joints(config.world_frame, arm, parsed[str(arm.urdf)]))
         model = RobotModel(joints, source=config.source, name="+".join(a.name for a in config.arms))
     check_robot(config, model)
     return model

@@ -16,8 +16,10 @@ without decoding anything.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Protocol
 
@@ -139,11 +141,16 @@ def measure_cameras(
     if not cameras:
         return None
     order = sorted(cameras, key=lambda f: f != chain.frames.camera)  # the chain's camera first
-    out = []
-    for camera in order:
-        if progress is not None:
-            progress(f"measuring the motion of camera {camera} from its images")
-        out.append(_measure_camera(chain, buffer, camera, images, options or EgoMotionFitOptions()))
+    if progress is not None:
+        many = len(order) > 1
+        progress(f"measuring the motion of {'cameras' if many else 'camera'} {', '.join(order)} from "
+                 f"{'their' if many else 'its'} images")
+    opts = options or EgoMotionFitOptions()
+    # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
+    # most of the work (a log's reader fetches for one thread at a time).
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    with ThreadPoolExecutor(max_workers=max(1, min(len(order), cores))) as pool:
+        out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts), order))
     return CameraMotionEvidence(cameras=tuple(out))
 
 
@@ -220,8 +227,9 @@ def confirm_pairing(source: CameraImages, links: Sequence[LinkMotion], camera: s
 
 
 def _misfit_of(table: EgoMotionTable, link: LinkMotion, options: EgoMotionFitOptions) -> float | None:
-    """The link's rotation-only misfit (deg per frame pair), offset and mount fitted (None: too few pairs)."""
-    fit = fit_link(table, link, options)
+    """The link's rotation-only misfit (deg per frame pair), offset and mount fitted as for a ranking (None: too few
+    pairs): a wrong pairing is off by far more than the offset's last millisecond."""
+    fit = fit_link(table, link, options.for_ranking())
     return None if fit is None else fit.residual_deg
 
 
