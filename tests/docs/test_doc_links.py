@@ -4,6 +4,7 @@ the front door: under 250 lines, with the two commands a fresh machine needs, th
 
 from __future__ import annotations
 
+import argparse
 import re
 import shlex
 from collections.abc import Iterator
@@ -100,3 +101,33 @@ def test_the_batch_section_names_the_fleet_table_columns() -> None:
     assert named, "the batch section lists the fleet table's columns"
     assert set(named) <= set(FLEET_SCHEMA.names), set(named) - set(FLEET_SCHEMA.names)
     assert {"log", "chain"} <= set(named)
+
+
+def _commands(parser: argparse.ArgumentParser, prefix: str = "") -> Iterator[tuple[str, argparse.ArgumentParser]]:
+    """Every command of the CLI with its parser, nested ones as ``lab tilt``."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, command in action.choices.items():
+                full = f"{prefix}{name}"
+                nested = any(isinstance(a, argparse._SubParsersAction) for a in command._actions)
+                yield from _commands(command, f"{full} ") if nested else [(full, command)]
+
+
+def test_the_commands_page_names_every_option_of_every_command() -> None:
+    """docs/cli.md is the manual: each command's section (or the options every command takes, above them)
+    names each of its long options."""
+    from framechain.cli.main import build_parser
+
+    page = (DOCS / "cli.md").read_text()
+    shared = page[: page.index("\n## ")]
+    missing: dict[str, list[str]] = {}
+    commands = dict(_commands(build_parser()))
+    assert {"info", "tf", "replay", "attribute", "report", "export", "batch", "demo", "lab tilt"} <= set(commands)
+    for name, command in commands.items():
+        start = page.index(f"\n## {name}\n")
+        section = page[start: page.find("\n## ", start + 1)]
+        options = {o for a in command._actions for o in a.option_strings if o.startswith("--") and o != "--help"}
+        absent = sorted(o for o in options if o not in section and o not in shared)
+        if absent:
+            missing[name] = absent
+    assert not missing, missing

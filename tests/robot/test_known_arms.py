@@ -22,7 +22,7 @@ from framechain.cli.main import main
 from framechain.config.robot import RobotConfig
 from framechain.replay import TransformBuffer
 from framechain.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, match_state_names
-from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
+from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.suggest.lerobot import guess_arm_units
 from tests.helpers.realdata import KOCH_URDF, SO101_URDF
@@ -198,10 +198,25 @@ def test_attribute_without_robot_or_episode_runs_on_the_bundled_urdf(
     assert guessed * motion["focal_scale"] == pytest.approx(truth.intrinsics[0], rel=0.08)
 
 
-def test_tf_without_robot_gives_the_bundled_arm_frames(wrist_episode: VideoDatasetTruth,
+def test_tf_without_robot_gives_the_bundled_arm_frames(wrist_episode: VideoDatasetTruth, so101_urdf: Path,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["tf", str(wrist_episode.root), "base_link", "gripper_link", "--episode", "0", "--json"]) == 0
-    assert "translation" in capsys.readouterr().out
+    """tf on the bundled URDF: the row's joint values (degrees, as the generator recorded them) through the
+    generator's own URDF maths on the official file."""
+    import pyarrow.parquet as pq
+
+    truth = wrist_episode
+    assert main(["tf", str(truth.root), "base_link", "gripper_link", "--episode", "0", "--json"]) == 0
+    got = json.loads(capsys.readouterr().out)
+    rows = pq.read_table(next((truth.root / "data").rglob("*.parquet")))
+    k = int(np.argmin(np.abs(rows.column("timestamp").to_numpy() - got["t_rel_s"])))
+    state = np.asarray(rows.column("observation.state")[k].as_py())
+    q = {j: np.radians(state[[truth.state_names.index(f"{j}.pos")]]) for j in ARM_JOINTS}
+    expected = UrdfChain(so101_urdf).root_from_link(q, "gripper_link")[0]
+    np.testing.assert_allclose(got["translation"], expected[:3, 3], atol=1e-6)
+    turned = Rotation.from_quat(got["quat_xyzw"]).inv() * Rotation.from_matrix(expected[:3, :3])
+    assert turned.magnitude() < 1e-6
+    assert got["path"] == ["gripper_link", "wrist_link", "lower_arm_link", "upper_arm_link", "shoulder_link",
+                           "base_link"]
 
 
 def test_a_dataset_of_an_unknown_arm_asks_for_all_it_lacks_at_once(tmp_path: Path,

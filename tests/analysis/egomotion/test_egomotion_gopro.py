@@ -107,13 +107,14 @@ def test_karma_whole_clip_gives_an_offset_with_a_narrow_interval(karma: tuple[Pa
 def test_karma_gyro_to_camera_rotation_is_the_documented_axis_permutation(
         karma: tuple[Path, EgoMotionTable, Any]) -> None:
     """The pan turns the camera about one axis, so the mount about it is kept as declared; about the two other
-    axes it is measured, and it lands within 10 deg of the signed axis permutation gpmf-parser documents."""
+    axes it is measured, and it lands within 3 deg of the signed axis permutation gpmf-parser documents (the gyro
+    sits on the camera's board, aligned to a degree or so)."""
     path = karma[0]
     documented = documented_mount(read_stream(path, "GYRO").axis_order)
     motion, _found = judged(karma)
     assert motion.fit is not None
     fitted = Rotation.from_quat(motion.fit.q_link_cam).as_matrix()
-    assert np.rad2deg(Rotation.from_matrix(documented.T @ fitted).magnitude()) < 10.0
+    assert np.rad2deg(Rotation.from_matrix(documented.T @ fitted).magnitude()) < 3.0  # 0.97 deg measured
     # Declared as no rotation at all, the measured part alone still sends the pan's axis where the documented
     # permutation sends it.
     motion, _found = judged(karma, declared=np.eye(3))
@@ -121,7 +122,7 @@ def test_karma_gyro_to_camera_rotation_is_the_documented_axis_permutation(
     (axis,) = motion.fit.mount_unobservable_axes
     fitted = Rotation.from_quat(motion.fit.q_link_cam).as_matrix()
     cosine = float(np.clip((fitted.T @ np.asarray(axis)) @ (documented.T @ np.asarray(axis)), -1.0, 1.0))
-    assert np.rad2deg(np.arccos(cosine)) < 10.0
+    assert np.rad2deg(np.arccos(cosine)) < 3.0  # 0.97 deg measured
 
 
 def test_karma_still_first_half_is_not_observable(karma: tuple[Path, EgoMotionTable, Any]) -> None:
