@@ -24,7 +24,22 @@ import numpy.typing as npt
 from framechain.arrays import FloatArray, IntArray, StrArray, names_and_codes
 from framechain.errors import FramechainError
 
-__all__ = ["CameraModel", "CameraModelError", "CameraRows", "distinct_models"]
+__all__ = ["ASSUMED_FOV_DEG", "CameraModel", "CameraModelError", "CameraRows", "distinct_models", "focal_of_fov",
+           "fov_of_focal"]
+
+#: The horizontal field of view (deg) taken for a camera without intrinsics: a typical wrist camera or webcam.
+ASSUMED_FOV_DEG = 70.0
+
+
+def focal_of_fov(width_px: float, fov_deg: float) -> float:
+    """The focal length (px) of a pinhole ``width_px`` wide whose horizontal field of view is ``fov_deg``."""
+    return float(0.5 * width_px / np.tan(np.deg2rad(fov_deg) / 2.0))
+
+
+def fov_of_focal(width_px: float, focal_px: float) -> float:
+    """The horizontal field of view (deg) of a pinhole ``width_px`` wide with focal length ``focal_px``."""
+    return float(np.rad2deg(2.0 * np.arctan(0.5 * width_px / focal_px)))
+
 
 #: Coefficients of each distortion model (ROS names), in OpenCV's order.
 _N_COEFFS = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4, "none": 0}

@@ -27,13 +27,12 @@ import numpy as np
 
 from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, FeatureInfo
 from framechain.config.robot import GeneratedRobot
+from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
 from framechain.robot.kinematics import RobotModel
 from framechain.robot.known_arms import ArmJoints, KnownArm, known_arm, match_state_names
 
 __all__ = ["dataset_needs", "generated_robot", "guess_arm_units", "guess_unit", "robot_yaml_skeleton"]
 
-#: Field of view assumed for a focal length guess.
-GUESSED_FOV_DEG = 70.0
 #: URDFs of LeRobot's robot types framechain does not bundle.
 URDF_HINTS = {"aloha": "aloha (vx300s arms)"}
 #: Words of a camera name that put it on an arm's wrist.
@@ -304,7 +303,7 @@ def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, kno
     for feature in features:
         name = feature.key.split(".")[-1]
         width, height = _size(feature)
-        focal = 0.5 * width / math.tan(math.radians(GUESSED_FOV_DEG / 2))
+        focal = focal_of_fov(width, ASSUMED_FOV_DEG)
         arm = _camera_arm(name, arms)
         parent = "world" if arm is None else f"{arm.prefix if prefixed else ''}{link}"
         mount = ("GUESSED: a placeholder; the link and mount are measured from the camera's motion" if known
@@ -314,7 +313,7 @@ def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, kno
                   f"    video_key: {feature.key}",
                   f"    intrinsics: {{fx: {focal:.1f}, fy: {focal:.1f}, cx: {(width - 1) / 2:g}, "
                   f"cy: {(height - 1) / 2:g}, width: {width}, height: {height}}}  "
-                  f"# GUESSED ({GUESSED_FOV_DEG:.0f} deg field of view): calibrate",
+                  f"# GUESSED ({ASSUMED_FOV_DEG:.0f} deg field of view): calibrate",
                   f"    mount: {{parent: {parent}, xyz: [0.0, 0.0, 0.0], rpy: [0.0, 0.0, 0.0], "
                   f"optical: true}}  # {mount}"]
     return lines

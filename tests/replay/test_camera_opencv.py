@@ -7,7 +7,7 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
-from framechain.geometry.camera import CameraModel, CameraModelError
+from framechain.geometry.camera import CameraModel, CameraModelError, focal_of_fov, fov_of_focal
 from framechain.timeline import CameraTable
 
 K = np.array([[612.5, 0.0, 318.2], [0.0, 609.8, 243.7], [0.0, 0.0, 1.0]])
@@ -192,3 +192,11 @@ def test_numpy_and_opencv_paths_of_one_model_agree(rng: np.random.Generator, mod
     assert ray_angle(x, y, xy[:, 0], xy[:, 1]).max() < 1e-6
     np.testing.assert_allclose(project(camera, np.stack([x, y, np.ones_like(x)], axis=1)), np.stack([u, v], axis=1),
                                atol=1e-6)
+
+
+def test_focal_length_and_field_of_view_worked_by_hand() -> None:
+    # 90 deg across 640 px: the image's half-width subtends 45 deg, so f = 320 px.
+    assert focal_of_fov(640, 90.0) == pytest.approx(320.0, rel=1e-12)
+    # 60 deg: f = 320 / tan(30 deg) = 320 * sqrt(3).
+    assert focal_of_fov(640, 60.0) == pytest.approx(320.0 * 3**0.5, rel=1e-12)
+    assert fov_of_focal(640, 320.0 * 3**0.5) == pytest.approx(60.0, rel=1e-12)

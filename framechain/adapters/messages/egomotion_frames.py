@@ -26,6 +26,7 @@ from framechain.adapters.lerobot.clock import alternative_stamps
 from framechain.adapters.lerobot.video import read_frames
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.config.calibration import Intrinsics
+from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
 from framechain.timeline import EgoMotionTable, ImageFrameTable, Timeline, TranslationPrior, normalize_frame
 from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENCODINGS, VIDEO_ENCODING
 from framechain.vision.egomotion import (
@@ -55,8 +56,6 @@ BLACK_LEVEL = 32
 #: are found by their tracks instead (``EgoMotionOptions.repeat_motion_px``): a slow camera over a
 #: low-texture scene changes its image by less than that.
 REPEAT_LEVEL = 0.25
-#: Assumed horizontal field of view when a camera has no intrinsics (the focal length is then implied).
-ASSUMED_FOV_DEG = 70.0
 
 
 @dataclass(frozen=True)
@@ -212,7 +211,7 @@ def _intrinsics(timeline: Timeline, camera: str, shape: tuple[int, ...]) -> tupl
                           distortion_model=str(cams.distortion_model[i]) if n else "none",
                           distortion=tuple(float(d) for d in cams.distortion[i, :n])), True
     height, width = int(shape[1]), int(shape[2])
-    focal = 0.5 * width / np.tan(np.deg2rad(ASSUMED_FOV_DEG / 2))
+    focal = focal_of_fov(width, ASSUMED_FOV_DEG)
     return Intrinsics(fx=focal, fy=focal, cx=(width - 1) / 2, cy=(height - 1) / 2, width=width, height=height,
                       distortion_model="none"), False
 

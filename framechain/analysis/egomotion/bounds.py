@@ -35,6 +35,7 @@ from framechain.analysis.egomotion import EgoMotionFit
 from framechain.analysis.egomotion.run import CameraMotion
 from framechain.analysis.verdict.checks import Bound
 from framechain.catalogue import Fault, HopName
+from framechain.geometry.camera import focal_of_fov, fov_of_focal
 
 __all__ = [
     "FOCAL_CLEAR",
@@ -96,9 +97,9 @@ def focal_limits(motion: CameraMotion) -> tuple[float, float]:
     :data:`FOV_RANGE_DEG` across the image width (NaN when the width or the focal length is unknown)."""
     if motion.width_px <= 0 or not np.isfinite(motion.focal_px) or motion.focal_px <= 0:
         return float("nan"), float("nan")
-    wide, narrow = (np.deg2rad(fov) / 2.0 for fov in (FOV_RANGE_DEG[1], FOV_RANGE_DEG[0]))
-    half = 0.5 * motion.width_px
-    return float(half / np.tan(wide) / motion.focal_px), float(half / np.tan(narrow) / motion.focal_px)
+    wide, narrow = FOV_RANGE_DEG[1], FOV_RANGE_DEG[0]
+    return (focal_of_fov(motion.width_px, wide) / motion.focal_px,
+            focal_of_fov(motion.width_px, narrow) / motion.focal_px)
 
 
 def judge(motion: CameraMotion, fit: EgoMotionFit, declared_deg_s: float, fitted_deg_s: float,
@@ -124,7 +125,7 @@ def _undetermined(motion: CameraMotion, fit: EgoMotionFit) -> dict[str, str]:
     if not np.isfinite(scale):
         out[Fault.INTRINSICS.value] = "the focal length its motion implies could not be measured"
     elif np.isfinite(lens_low) and not lens_low <= scale <= lens_high:
-        fov = np.rad2deg(2 * np.arctan(0.5 * motion.width_px / (scale * motion.focal_px)))
+        fov = fov_of_focal(motion.width_px, scale * motion.focal_px)
         out[Fault.INTRINSICS.value] = (f"the focal length its motion implies ({scale:.3f} times the declared one, a "
                                        f"{fov:.0f} deg field of view) is no lens's: undetermined")
     elif low > 0 and high / low > FOCAL_SPREAD:
