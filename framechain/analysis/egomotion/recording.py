@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.egomotion.bounds import angle_bound_deg, offset_bound_s
-from framechain.analysis.egomotion.solve import OBSERVABLE_RATIO, complete_mount
+from framechain.analysis.egomotion.solve import complete_mount, principal_axes, weak_axes
 from framechain.arrays import FloatArray
 from framechain.geometry.rotations import angle_of, kabsch, matrix_of, quat_of
 
@@ -185,18 +185,16 @@ def _mount(episodes: list[EpisodeCamera], declared: FloatArray
 
 
 def _weak_axes(episodes: list[EpisodeCamera]) -> tuple[tuple[float, float, float], ...]:
-    """Link-frame axes the recording's link turned across by less than OBSERVABLE_RATIO times its misfit."""
-    scatter = np.sum(np.stack([e.scatter for e in episodes]), axis=0)
+    """Link-frame axes the recording's link turned across too little for its misfit (:func:`weak_axes`)."""
     weight = sum(e.weight for e in episodes)
-    sigma = np.sqrt(sum(e.weight * e.sigma_deg**2 for e in episodes) / max(weight, 1e-12))
-    values, vectors = np.linalg.eigh(scatter)
-    across = np.rad2deg(np.sqrt(np.maximum(values.sum() - values, 0.0) / max(weight, 1e-12)))
-    weak = [vectors[:, j] for j in range(3) if across[j] < OBSERVABLE_RATIO * sigma]
-    return tuple((float(a[0]), float(a[1]), float(a[2])) for a in weak)
+    sigma = float(np.sqrt(sum(e.weight * e.sigma_deg**2 for e in episodes) / max(weight, 1e-12)))
+    axes, across_deg, _turning = principal_axes(np.sum(np.stack([e.scatter for e in episodes]), axis=0), weight)
+    return weak_axes(axes, across_deg, sigma)
 
 
 def _completed(mount: FloatArray, reference: FloatArray, axes: tuple[tuple[float, float, float], ...]) -> FloatArray:
-    """``mount`` turned about one unobservable axis to lie nearest ``reference`` (the reference itself for more)."""
+    """``mount`` (..., 3, 3) turned about one unobservable axis to lie nearest ``reference`` (the reference itself for
+    more)."""
     if not axes:
         return mount
     if len(axes) > 1:
@@ -213,8 +211,9 @@ def _mount_interval(episodes: list[EpisodeCamera], declared: FloatArray, mount: 
     rng = np.random.default_rng(seed)
     weights = rng.exponential(1.0, size=(resamples, len(episodes)))
     crosses = np.stack([e.cross for e in episodes])
-    drawn = kabsch(np.einsum("be,eij->bij", weights, crosses))
-    angles = np.array([_angle_deg(_completed(m, declared, axes), mount) for m in drawn])
+    drawn = np.broadcast_to(_completed(kabsch(np.einsum("be,eij->bij", weights, crosses)), declared, axes),
+                            (resamples, 3, 3))
+    angles = np.rad2deg(angle_of(np.swapaxes(drawn, -1, -2) @ mount))
     low, high = np.percentile(angles, [2.5, 97.5])
     return float(low), float(high)
 

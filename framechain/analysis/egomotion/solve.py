@@ -324,14 +324,28 @@ def information(orientations: Orientations, pairs: Pairs, solved: Solved, link_r
     around = link_rotvecs(orientations, pairs, np.array([solved.offset_s - step, solved.offset_s + step]))
     slope = (around[1] - around[0]) / (2 * step)
     offset_info = float((w * (slope**2).sum(axis=1)).sum())
-    values, axes = np.linalg.eigh(np.einsum("n,ni,nj->ij", w, link_rv, link_rv))
-    across = np.maximum(values.sum() - values, 1e-18)
     total = max(float(w.sum()), 1e-12)
+    axes, across_deg, turning_deg = principal_axes(np.einsum("n,ni,nj->ij", w, link_rv, link_rv), total)
     return Information(sigma_deg=float(np.rad2deg(sigma)),
                         offset_se_s=sigma / np.sqrt(offset_info) if offset_info > 0 else float("inf"),
-                        axes=axes, axis_se_deg=np.rad2deg(sigma / np.sqrt(across)),
-                        across_deg=np.rad2deg(np.sqrt(across / total)),
-                        turning_deg=float(np.rad2deg(np.sqrt(max(values.sum(), 0.0) / total))))
+                        axes=axes, axis_se_deg=np.rad2deg(sigma / (np.deg2rad(across_deg) * np.sqrt(total))),
+                        across_deg=across_deg, turning_deg=turning_deg)
+
+
+def principal_axes(scatter: FloatArray, weight: float) -> tuple[FloatArray, FloatArray, float]:
+    """From the weighted scatter ``sum w a a^T`` of a link's rotation vectors (and ``sum w``): its principal rotation
+    axes (columns, link frame, most turned last), its rotation across each and in all (deg RMS per pair)."""
+    values, axes = np.linalg.eigh(scatter)
+    across = np.maximum(values.sum() - values, 1e-18)
+    total = max(weight, 1e-12)
+    return axes, np.rad2deg(np.sqrt(across / total)), float(np.rad2deg(np.sqrt(max(values.sum(), 0.0) / total)))
+
+
+def weak_axes(axes: FloatArray, across_deg: FloatArray, sigma_deg: float) -> tuple[tuple[float, float, float], ...]:
+    """The axes (columns of ``axes``) the link turned across by less than :data:`OBSERVABLE_RATIO` times the misfit:
+    the mount about them is not observable."""
+    floor = OBSERVABLE_RATIO * sigma_deg
+    return tuple((float(axes[0, j]), float(axes[1, j]), float(axes[2, j])) for j in range(3) if across_deg[j] < floor)
 
 
 def complete_mount(mounts: FloatArray, declared: FloatArray, axis: FloatArray) -> FloatArray:
@@ -371,8 +385,7 @@ def observed(info: Information) -> Observed:
     if info.turning_deg < floor:
         return Observed(f"its link turns {info.turning_deg:.3f} deg per frame pair, under {OBSERVABLE_RATIO:g} times "
                          f"the {info.sigma_deg:.3f} deg its images and forward kinematics disagree by", ())
-    weak = [info.axes[:, j] for j in range(3) if info.across_deg[j] < floor]
-    return Observed("", tuple((float(a[0]), float(a[1]), float(a[2])) for a in weak))
+    return Observed("", weak_axes(info.axes, info.across_deg, info.sigma_deg))
 
 
 def focal_scale(pairs: Pairs, solved: Solved, link_rv: FloatArray, boot: BlockBootstrap) -> tuple[float, FloatArray]:
