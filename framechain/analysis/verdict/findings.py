@@ -79,14 +79,17 @@ class Finding:
     camera: str | None = None
     #: The unit of ``error_m``: metres, or deg/s for a camera's rotation rate (evidence from its own motion).
     error_unit: str = "m"
-    #: Whether its effect (``error_m``, the error it removes) passes the practical threshold: a fix to make.
-    #: False: a note ("statistically clear, 0.2 mm: no action needed"), or an undetermined fit.
-    actionable: bool = True
     #: Why its fit cannot be trusted (at the edge of its search window, an interval over orders of magnitude).
     undetermined_because: tuple[str, ...] = ()
     #: A rig camera's finding: the error it removes from that camera's own observations (a share of the whole rig's
     #: median undersells a fault of one camera among many); None: the finding's effect is ``error_m``.
     own_effect_m: float | None = None
+
+    @property
+    def actionable(self) -> bool:
+        """A fix to make: its effect passes the practical threshold and its fit can be trusted (not a "note",
+        "statistically clear, 0.2 mm: no action needed", nor an undetermined fit)."""
+        return self.strength in ("strong", "weak")
 
     @property
     def effect_m(self) -> float:
@@ -142,13 +145,13 @@ def as_note(finding: Finding, threshold: float, threshold_text: str) -> Finding:
     ``threshold_text``, e.g. ``the 1 mm tolerance (tolerance_m)``), so no fix is offered, however certain its fit."""
     clear = ("statistically clear" if finding.strength == "strong" else
              f"weak ({'; '.join(finding.weak_because)})")
-    return replace(finding, strength="note", actionable=False,
+    return replace(finding, strength="note",
                    fix=f"{clear}, {finding.effect_text()}: no action needed, under {threshold_text}.")
 
 
 def as_undetermined(finding: Finding, why: Sequence[str]) -> Finding:
     """The finding as an undetermined fit: no fix, and the verdict that rests on it is inconclusive."""
-    return replace(finding, strength="undetermined", actionable=False, undetermined_because=tuple(why),
+    return replace(finding, strength="undetermined", undetermined_because=tuple(why),
                    fix=f"undetermined ({'; '.join(why)}): no fix from this fit; get evidence that pins it down "
                        "before changing anything.")
 
