@@ -289,7 +289,8 @@ class _Grey:
         if self.fast is False or frame.format.name not in _LUMA_FIRST:
             return np.asarray(frame.to_ndarray(format="gray"), dtype=np.uint8)
         plane = frame.planes[0]
-        luma = np.frombuffer(plane, dtype=np.uint8).reshape(-1, plane.line_size)[: frame.height, : frame.width]
+        rows = np.frombuffer(plane, dtype=np.uint8, count=plane.line_size * frame.height)
+        luma = rows.reshape(frame.height, plane.line_size)[:, : frame.width]  # each row padded to line_size
         grey = luma.copy() if frame.format.name.startswith("yuvj") else _LIMITED_TO_FULL[luma]
         if self.fast is None:
             reference = np.asarray(frame.to_ndarray(format="gray"), dtype=np.uint8)

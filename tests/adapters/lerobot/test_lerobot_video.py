@@ -190,3 +190,29 @@ def test_unreadable_video_is_one_clear_error(tmp_path: Path) -> None:
     assert isinstance(err.value, DatasetError)
     with pytest.raises(VideoError, match="cannot open video"):
         probe_video(tmp_path / "absent.mp4")
+
+
+@pytest.mark.parametrize(("codec", "pixel_format", "width"), [
+    ("libx264", "yuv420p", 226),  # rows padded past the width
+    ("mpeg4", "yuv420p", 224),
+    ("mjpeg", "yuvj420p", 160),  # full range: the luma as it is
+    ("libx264", "yuv444p", 96),
+    ("libx264rgb", "rgb24", 64),  # no luma plane: libswscale's conversion
+])
+def test_grey_frames_are_libswscales_pixel_for_pixel(tmp_path: Path, codec: str, pixel_format: str,
+                                                     width: int) -> None:
+    """read_frames takes grey from the luma plane where it can: every frame as PyAV's own conversion gives it."""
+    import av
+
+    rng = np.random.default_rng(3)
+    frames = rng.integers(0, 256, (6, 48, width, 3), dtype=np.uint8)
+    path = encode_video(tmp_path / f"{codec}.mp4" if codec != "mjpeg" else tmp_path / "m.mkv", frames, fps=10,
+                        codec=codec, pixel_format=pixel_format)
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        decoded = [(round(float(f.pts * stream.time_base) * 1e9), f.to_ndarray(format="gray"))
+                   for f in container.decode(stream)]
+    got = read_frames(path, np.array([t for t, _ in decoded], dtype=np.int64))
+    assert got.images.shape[0] == len(decoded)
+    for k, (_time, expected) in enumerate(decoded):
+        np.testing.assert_array_equal(got.image(k), expected)
