@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     pass
 
 
+from framechain.analysis.egomotion.run import CAMERA_THREADS_ENV
 from framechain.errors import one_line
 from framechain.fleet.units import BatchError, UnitTask, crashed_record, run_unit
 
@@ -117,6 +118,7 @@ class _Worker:
 
 def _worker_main(conn: Connection) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
+    os.environ.setdefault(CAMERA_THREADS_ENV, "1")  # one episode per worker per core: its cameras in turn
     while True:
         try:
             task = conn.recv()
@@ -128,6 +130,12 @@ def _worker_main(conn: Connection) -> None:
             conn.send(run_unit(task))
         except (BrokenPipeError, OSError):
             return
+
+
+def run_unit_alone(task: UnitTask) -> dict[str, Any]:
+    """:func:`run_unit` in a worker that has one core (a Ray task): its cameras measured in turn."""
+    os.environ.setdefault(CAMERA_THREADS_ENV, "1")
+    return run_unit(task)
 
 
 def map_ray(tasks: Sequence[UnitTask], *, address: str | None = None, max_in_flight: int | None = None,
@@ -153,7 +161,7 @@ def map_ray(tasks: Sequence[UnitTask], *, address: str | None = None, max_in_fli
             where = f"the cluster at {address}" if address else "a local Ray instance"
             raise BatchError(f"--engine ray: cannot start or join {where}: {one_line(err)}") from err
     try:
-        remote = ray.remote(max_retries=2)(run_unit)  # retries are for lost nodes; run_unit itself never raises
+        remote = ray.remote(max_retries=2)(run_unit_alone)  # retries are for lost nodes; run_unit never raises
         limit = max_in_flight or max(2 * int(ray.cluster_resources().get("CPU", 1)), 1)
         pending = deque(tasks)
         in_flight: dict[Any, UnitTask] = {}

@@ -126,7 +126,8 @@ def rotations_along_translation(
     b0, b1 = np.moveaxis(batch.b0, -1, 0).copy(), np.moveaxis(batch.b1, -1, 0).copy()
     # The tangent plane at b0 in a basis fixed by the translation: ``along`` its flow, ``across`` normal to it. A
     # match's residual is (across . u, along . u) for u = R b1, its along part dropped when negative (a positive
-    # depth explains it: "ahead"). Where b0 is the epipole the flow has no direction and any basis serves.
+    # depth explains it: "ahead"). Where b0 is the epipole the flow has no direction and a spare tangent basis
+    # stands in (in practice only the padding, whose weight is zero).
     t = direction.T[:, :, None]
     flow = t - _dot(t, b0) * b0
     size = np.sqrt(_dot(flow, flow))

@@ -278,9 +278,17 @@ _LUMA_FIRST = frozenset({"yuv420p", "yuv422p", "yuv444p", "yuvj420p", "yuvj422p"
 _LIMITED_TO_FULL = np.clip(np.round((np.arange(256) - 16) * 255.0 / 219.0), 0, 255).astype(np.uint8)
 
 
+#: libswscale's colour range of a frame said to be JPEG (full) range.
+_FULL_RANGE = 2
+#: A frame is compared with libswscale's conversion only when its luma takes this many levels: a black or flat
+#: frame looks the same rescaled or not.
+_LEVELS_TO_COMPARE = 64
+
+
 class _Grey:
-    """A frame's grey pixels: its luma plane rescaled by a lookup table (a third of libswscale's cost at 224 px),
-    once the first frame showed the two agree pixel for pixel; libswscale's own conversion otherwise."""
+    """A frame's grey pixels: its luma plane, rescaled by a lookup table from limited range (a third of libswscale's
+    cost at 224 px), once a frame with enough grey levels showed it agrees with libswscale's conversion pixel for
+    pixel; libswscale's own conversion until then, for other formats, and for good after a disagreement."""
 
     def __init__(self) -> None:
         self.fast: bool | None = None  # None: not yet compared
@@ -291,10 +299,12 @@ class _Grey:
         plane = frame.planes[0]
         rows = np.frombuffer(plane, dtype=np.uint8, count=plane.line_size * frame.height)
         luma = rows.reshape(frame.height, plane.line_size)[:, : frame.width]  # each row padded to line_size
-        grey = luma.copy() if frame.format.name.startswith("yuvj") else _LIMITED_TO_FULL[luma]
+        full = frame.format.name.startswith("yuvj") or int(frame.color_range) == _FULL_RANGE
+        grey = luma.copy() if full else _LIMITED_TO_FULL[luma]
         if self.fast is None:
             reference = np.asarray(frame.to_ndarray(format="gray"), dtype=np.uint8)
-            self.fast = bool(np.array_equal(grey, reference))
+            if np.count_nonzero(np.bincount(luma.ravel(), minlength=256)) >= _LEVELS_TO_COMPARE:
+                self.fast = bool(np.array_equal(grey, reference))
             return reference
         return grey
 

@@ -3,6 +3,7 @@ fetches frames back on demand: lazy tables re-read a frame from the log only whe
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,16 +26,21 @@ class FrameLocator:
 
 def cached_reader(read: Callable[[int], T], size: int) -> Callable[[int], T]:
     """``read(i)`` behind a small LRU cache: lazy tables re-read a frame from the log on demand, and
-    replay and the sinks ask for the same few frames in a row."""
+    replay and the sinks ask for the same few frames in a row. Safe from several threads (cameras measured at
+    once): the cache is changed under a lock, and ``read`` guards its own reader."""
     cache: OrderedDict[int, T] = OrderedDict()
+    lock = threading.Lock()
 
     def load(i: int) -> T:
-        if i in cache:
-            cache.move_to_end(i)
-            return cache[i]
-        out = cache[i] = read(i)
-        if len(cache) > size:
-            cache.popitem(last=False)
+        with lock:
+            if i in cache:
+                cache.move_to_end(i)
+                return cache[i]
+        out = read(i)
+        with lock:
+            cache[i] = out
+            if len(cache) > size:
+                cache.popitem(last=False)
         return out
 
     return load

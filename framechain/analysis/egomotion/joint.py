@@ -57,7 +57,7 @@ PriorOf = Callable[[LinkMotion, FloatArray, FloatArray, float], TranslationPrior
 class Joint:
     """The offset and mount that fit best with the measurement made at that offset, and what they rest on."""
 
-    solved: Solved  # its ``fine`` grid is the trial offsets around the optimum, each with its own measurement
+    solved: Solved  # its ``fine`` grid: trial offsets around the optimum, each with its own (interpolated) measurement
     pairs: Pairs  # the pairs measured at the optimum (rotation vectors of that measurement)
     table: EgoMotionTable  # the measurement at the optimum
     residual_deg: float  # robust RMS misfit per pair at the optimum
@@ -75,7 +75,7 @@ class _Trials:
         self.orientations = Orientations(link, self.origin)
         self.tables: dict[float, EgoMotionTable] = {}
         self.costs: dict[float, float] = {}
-        self.between: dict[tuple[float, float], tuple[Pairs, float]] = {}  # (offset, centre): interpolated
+        self.between: dict[tuple[float, float, float], tuple[Pairs, float]] = {}  # (offset, span): interpolated
 
     def table(self, offset: float) -> EgoMotionTable:
         key = round(offset, 6)
@@ -94,19 +94,24 @@ class _Trials:
             self.costs[key] = _fixed_offset_fit(self.pairs(self.table(key)), self.orientations, key)[0]
         return self.costs[key]
 
-    def interpolated(self, offset: float, centre: float) -> tuple[Pairs, float]:
-        """The measurement at ``offset`` (within ANCHOR_S of ``centre``) and its cost: interpolated, quadratic in the
-        offset, between the measurements at ``centre`` and ANCHOR_S either side (the pairs all three measured)."""
-        key = (round(offset, 6), round(centre, 6))
+    def interpolated(self, offset: float, span: tuple[float, float]) -> tuple[Pairs, float]:
+        """The measurement at ``offset`` (inside ``span``, a grid's first and last offsets) and its cost: interpolated,
+        quadratic in the offset, between the measurements at the span's ends and middle (the pairs all three
+        measured); measured when the span is one offset (a grid clipped to the search window's end)."""
+        low, high = span
+        key = (round(offset, 6), round(low, 6), round(high, 6))
         if key not in self.between:
-            anchors = centre + ANCHOR_S * np.array([-1.0, 0.0, 1.0])
-            middle = self.pairs(self.table(centre))
-            rotvecs = np.stack([_rotvecs_of(self.pairs(self.table(float(a))), middle) for a in anchors])  # (3, N, 3)
-            t = (offset - anchors) / ANCHOR_S
-            lagrange = np.array([t[1] * t[2] / 2.0, -t[0] * t[2], t[0] * t[1] / 2.0])
-            rotvec = np.tensordot(lagrange, rotvecs, axes=1)
-            ok = np.flatnonzero(np.isfinite(rotvec).all(axis=1))
-            pairs = replace(_take(middle, ok), rotvec=rotvec[ok])
+            if high - low < 1e-9:
+                pairs = self.pairs(self.table(low))
+            else:
+                anchors = np.array([low, 0.5 * (low + high), high])
+                middle = self.pairs(self.table(float(anchors[1])))
+                rotvecs = np.stack([_rotvecs_of(self.pairs(self.table(float(a))), middle) for a in anchors])  # (3,N,3)
+                lagrange = np.array([np.prod([(offset - anchors[j]) / (anchors[i] - anchors[j])
+                                              for j in range(3) if j != i]) for i in range(3)])
+                rotvec = np.tensordot(lagrange, rotvecs, axes=1)
+                ok = np.flatnonzero(np.isfinite(rotvec).all(axis=1))
+                pairs = replace(_take(middle, ok), rotvec=rotvec[ok])
             self.between[key] = (pairs, _fixed_offset_fit(pairs, self.orientations, offset)[0])
         return self.between[key]
 
@@ -203,25 +208,21 @@ def _search(trials: _Trials, starts: list[float], limit: float) -> float:
     return float(np.clip(parabola_min(grid, costs[None])[0], -limit, limit))
 
 
-#: The grid's measurements are interpolated from those at its centre and this far either side (its half-width).
-ANCHOR_S = GRID_STEP_S * GRID_HALF
-
-
-def _grid(trials: _Trials, centre: float, limit: float) -> tuple[FloatArray, float, float]:
+def _grid(trials: _Trials, centre: float, limit: float) -> tuple[FloatArray, float]:
     """Trial offsets GRID_STEP_S apart around ``centre`` with the least cost inside them (moved out to three times
-    when it lies at an end), the parabola's vertex there, and the grid's centre (the measurements are interpolated
-    around it)."""
+    when it lies at an end), and the parabola's vertex there. Each offset's measurement is interpolated across the
+    grid (:meth:`_Trials.interpolated`)."""
     grid: FloatArray = centre + GRID_STEP_S * np.arange(-GRID_HALF, GRID_HALF + 1, dtype=np.float64)
     for _ in range(3):
         grid = np.clip(grid, -limit, limit)
-        costs = np.array([trials.interpolated(float(x), centre)[1] for x in grid])
+        costs = np.array([trials.interpolated(float(x), (grid[0], grid[-1]))[1] for x in grid])
         k = int(np.argmin(costs))
         if 0 < k < grid.size - 1 or abs(grid[k]) >= limit:
             break
-        centre += (k - GRID_HALF) * GRID_STEP_S
         grid = grid + (k - GRID_HALF) * GRID_STEP_S
-    costs = np.array([trials.interpolated(float(x), centre)[1] for x in grid])
-    return grid, float(parabola_min(grid, costs[None])[0]), centre
+    grid = np.clip(grid, -limit, limit)
+    costs = np.array([trials.interpolated(float(x), (grid[0], grid[-1]))[1] for x in grid])
+    return grid, float(parabola_min(grid, costs[None])[0])
 
 
 #: The mount is measured again (and the offset searched near where it was) at most this many times, until it
@@ -300,19 +301,20 @@ def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: lis
     _remount(trials, best)
     best = _grid(trials, best, limit)[1]
     _mount_search(trials, best)
-    grid, best, centre = _grid(trials, best, limit)
+    grid, best = _grid(trials, best, limit)
     cost, mount, weights, pairs = _fixed_offset_fit(trials.pairs(trials.table(best)), trials.orientations, best)
     if pairs.t0.size < opts.min_pairs:
         return None
-    solved = _grid_solved(trials, grid, centre, pairs, weights, best, mount)
+    solved = _grid_solved(trials, grid, pairs, weights, best, mount)
     return Joint(solved=solved, pairs=pairs, table=trials.table(best), residual_deg=float(np.rad2deg(cost)))
 
 
-def _grid_solved(trials: _Trials, grid: FloatArray, centre: float, pairs: Pairs, weights: FloatArray, best: float,
+def _grid_solved(trials: _Trials, grid: FloatArray, pairs: Pairs, weights: FloatArray, best: float,
                  mount: FloatArray) -> Solved:
     """The optimum as the bootstrap takes it: the grid's offsets, each with its own (interpolated) measurement of
     the same pairs."""
-    rotvecs = np.stack([_rotvecs_of(trials.interpolated(float(x), centre)[0], pairs) for x in grid])  # (G, N, 3)
+    rotvecs = np.stack([_rotvecs_of(trials.interpolated(float(x), (grid[0], grid[-1]))[0], pairs)
+                        for x in grid])  # (G, N, 3)
     usable: BoolArray = np.asarray(np.isfinite(rotvecs).all(axis=(0, 2)), dtype=bool)
     rotvecs = np.where(usable[None, :, None], rotvecs, 0.0)
     link_rv = link_rotvecs(trials.orientations, pairs, grid)

@@ -41,7 +41,8 @@ from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_b
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
-__all__ = ["CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "measure_cameras"]
+__all__ = ["CAMERA_THREADS_ENV", "CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "camera_threads",
+           "measure_cameras"]
 
 #: At most this many candidate frames are ranked per camera (two six-joint arms have a dozen moving links).
 MAX_CANDIDATES = 24
@@ -133,6 +134,19 @@ class CameraMotionEvidence:
         return tuple(c for c in self.cameras if c.observable)
 
 
+#: Cameras measured at once: FRAMECHAIN_CAMERA_THREADS, else one per core (a batch's worker processes set 1: they
+#: run an episode per core already).
+CAMERA_THREADS_ENV = "FRAMECHAIN_CAMERA_THREADS"
+
+
+def camera_threads() -> int:
+    """How many cameras are measured at once (:data:`CAMERA_THREADS_ENV`, else the cores this process may use)."""
+    given = os.environ.get(CAMERA_THREADS_ENV, "")
+    if given.isdigit() and int(given) > 0:
+        return int(given)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def measure_cameras(
     chain: ChainConfig, buffer: TransformBuffer, cameras: Sequence[str], images: ImagesOf, *,
     options: EgoMotionFitOptions | None = None, progress: Callable[[str], None] | None = None,
@@ -148,8 +162,7 @@ def measure_cameras(
     opts = options or EgoMotionFitOptions()
     # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
     # most of the work (a log's reader fetches for one thread at a time).
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    with ThreadPoolExecutor(max_workers=max(1, min(len(order), cores))) as pool:
+    with ThreadPoolExecutor(max_workers=max(1, min(len(order), camera_threads()))) as pool:
         out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts), order))
     return CameraMotionEvidence(cameras=tuple(out))
 

@@ -81,9 +81,9 @@ class Scatter:
     """The products ``a b^T`` and ``|a|^2 + |b|^2`` of every pair at every trial offset, built once.
 
     ``link_rv`` (G, N, 3) are the link's rotation vectors at G offsets, ``cam_rv`` (N, 3) the measured
-    ones, or (G, N, 3) when each offset has a measurement of its own (measured with the translation
-    prior of that offset); :meth:`fit` then weighs the pairs with one matrix product (BLAS), for one
-    weight vector or a whole bootstrap at once. With ``dt`` (N,) the pairs' durations, a constant rate
+    ones, or (G, N, 3) when each offset has a measurement of its own (made with the translation prior of
+    that offset, or interpolated between such); :meth:`fit` then weighs the pairs with one matrix product
+    (BLAS), for one weight vector or a whole bootstrap at once. With ``dt`` (N,) the pairs' durations, a constant rate
     bias ``beta`` of the link's rotation is fitted too: ``a`` becomes ``a - beta dt``, alternating with
     the mount (one measurement only).
     """

@@ -216,3 +216,31 @@ def test_grey_frames_are_libswscales_pixel_for_pixel(tmp_path: Path, codec: str,
     assert got.images.shape[0] == len(decoded)
     for k, (_time, expected) in enumerate(decoded):
         np.testing.assert_array_equal(got.image(k), expected)
+
+
+def test_full_range_av1_opening_on_a_black_frame_is_grey_as_libswscale_reads_it(tmp_path: Path) -> None:
+    """dav1d returns full-range AV1 as yuv420p marked JPEG range, whose luma is already grey; a black first frame
+    reads the same rescaled or not, so it cannot be what decides (it once did: 20 grey levels off after it)."""
+    import av
+
+    path = tmp_path / "full.mp4"
+    frames = np.random.default_rng(0).integers(0, 256, (6, 64, 64, 3), dtype=np.uint8)
+    frames[0] = 0
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libsvtav1", rate=10)
+        stream.width, stream.height, stream.pix_fmt = 64, 64, "yuv420p"
+        stream.codec_context.color_range = 2  # JPEG: full range
+        stream.options = {"svtav1-params": "log-level=0"}
+        for i, pixels in enumerate(frames):
+            frame = av.VideoFrame.from_ndarray(pixels, format="rgb24").reformat(format="yuv420p", dst_color_range=2)
+            frame.pts = i
+            container.mux(stream.encode(frame))
+        container.mux(stream.encode())
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        decoded = [(round(float(f.pts * stream.time_base) * 1e9), f.to_ndarray(format="gray"), int(f.color_range))
+                   for f in container.decode(stream)]
+    assert {range_ for _t, _g, range_ in decoded} == {2}
+    got = read_frames(path, np.array([t for t, _g, _r in decoded], dtype=np.int64))
+    for k, (_time, expected, _range) in enumerate(decoded):
+        np.testing.assert_array_equal(got.image(k), expected)

@@ -16,7 +16,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, fit_camera_motion, translation_prior
-from framechain.analysis.egomotion.joint import MOUNT_STEP_DEG, _rotvecs_of, _Trials
+from framechain.analysis.egomotion.joint import (
+    GRID_HALF,
+    GRID_STEP_S,
+    MOUNT_STEP_DEG,
+    _grid,
+    _rotvecs_of,
+    _Trials,
+)
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.rotations import RotationVector, quat_of
 from framechain.sim.lerobot_video import (
@@ -128,6 +135,7 @@ def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
 
     trials = _Trials(measure, link, translation_prior, fit.q_link_cam, truth.xyz_link_cam, EgoMotionFitOptions())
     centre = fit.offset_s
+    half = GRID_STEP_S * GRID_HALF  # a grid's half-width: its measurements are made at its ends and centre
     middle = trials.pairs(trials.table(centre))
 
     def rms_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -135,7 +143,7 @@ def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
         return float(np.rad2deg(np.sqrt(((a[ok] - b[ok]) ** 2).sum(axis=1).mean())))
 
     for shift in (-0.008, -0.004, 0.004, 0.008):
-        interpolated = trials.interpolated(centre + shift, centre)[0]
+        interpolated = trials.interpolated(centre + shift, (centre - half, centre + half))[0]
         measured = _rotvecs_of(trials.pairs(trials.table(centre + shift)), interpolated)
         moved = rms_deg(measured, _rotvecs_of(middle, interpolated))
         assert moved > 0.005  # the prior of another offset does move the measurement
@@ -150,6 +158,28 @@ def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
         moved = rms_deg(measured, _rotvecs_of(middle, predicted))
         assert moved > 0.002
         assert rms_deg(predicted.rotvec, measured) < 0.25 * moved  # 5-17% measured
+
+
+def test_a_grid_at_the_window_edge_measures_nothing_beyond_it(
+        faulted: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]) -> None:
+    """Past the +-max_offset_s window the translation prior runs off the episode's ends: a grid clipped to the window
+    interpolates between measurements inside it."""
+    truth, evidence, fit = faulted
+    link = next(m for m in evidence.links if m.link == fit.link)
+
+    def measure(prior: TranslationPrior | None) -> EgoMotionTable:
+        return measure_egomotion(evidence.tracks, evidence.stamps_ns, evidence.intrinsics, frame="wrist_optical_frame",
+                                 translation=prior)
+
+    limit = 0.1
+    trials = _Trials(measure, link, translation_prior, fit.q_link_cam, truth.xyz_link_cam,
+                     EgoMotionFitOptions(max_offset_s=limit))
+    grid, vertex = _grid(trials, -limit + 0.002, limit)
+    assert grid.min() >= -limit
+    assert grid.max() <= limit
+    assert -limit <= vertex <= limit
+    assert trials.tables
+    assert all(abs(offset) <= limit for offset in trials.tables)
 
 
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],
