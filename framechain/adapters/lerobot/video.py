@@ -37,7 +37,7 @@ import numpy.typing as npt
 
 from framechain.adapters.lerobot.reader import DatasetError
 from framechain.arrays import BoolArray, IntArray
-from framechain.vision.opencv import mean_abs_differences
+from framechain.vision.opencv import bright_shares, mean_abs_differences, require_cv2
 
 __all__ = [
     "VideoError",
@@ -51,8 +51,9 @@ __all__ = [
     "video_health",
 ]
 
-#: A frame is black when fewer than this share of its pixels exceed ``black_level``.
+#: A frame is black when fewer than this share of its pixels exceed ``BLACK_LEVEL`` (a camera that delivered nothing).
 BLACK_SHARE = 0.01
+BLACK_LEVEL = 32
 
 PixelFormat = Literal["gray", "rgb24"]
 
@@ -180,7 +181,7 @@ def read_frames(
     *,
     tolerance_s: float | None = None,
     pixel_format: PixelFormat = "gray",
-    black_level: int = 32,
+    black_level: int = BLACK_LEVEL,
     repeat_level: float = 0.0,
     reseek_s: float = 2.0,
 ) -> VideoFrames:
@@ -300,7 +301,7 @@ class _Grey:
         rows = np.frombuffer(plane, dtype=np.uint8, count=plane.line_size * frame.height)
         luma = rows.reshape(frame.height, plane.line_size)[:, : frame.width]  # each row padded to line_size
         full = frame.format.name.startswith("yuvj") or int(frame.color_range) == _FULL_RANGE
-        grey = luma.copy() if full else _LIMITED_TO_FULL[luma]
+        grey = luma.copy() if full else np.asarray(require_cv2().LUT(luma, _LIMITED_TO_FULL), dtype=np.uint8)
         if self.fast is None:
             reference = np.asarray(frame.to_ndarray(format="gray"), dtype=np.uint8)
             if np.count_nonzero(np.bincount(luma.ravel(), minlength=256)) >= _LEVELS_TO_COMPARE:
@@ -346,8 +347,7 @@ def _duplicates(picked: IntArray, images: npt.NDArray[np.uint8], level: float) -
 def _black(picked: IntArray, images: npt.NDArray[np.uint8], level: int) -> BoolArray:
     if images.size == 0:
         return np.zeros(picked.size, dtype=bool)
-    flat = images.reshape(images.shape[0], -1)
-    dark = (flat > level).mean(axis=1) < BLACK_SHARE
+    dark = bright_shares(images, level) < BLACK_SHARE
     out: BoolArray = (picked >= 0) & dark[np.maximum(picked, 0)]
     return out
 

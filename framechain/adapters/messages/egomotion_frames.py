@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.lerobot.clock import alternative_stamps
-from framechain.adapters.lerobot.video import read_frames
+from framechain.adapters.lerobot.video import BLACK_LEVEL, BLACK_SHARE, read_frames
 from framechain.arrays import BoolArray, FloatArray, IntArray, rows_of
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
@@ -35,7 +35,7 @@ from framechain.vision.egomotion import (
     measure_egomotion,
     track_features,
 )
-from framechain.vision.opencv import mean_abs_differences, require_cv2
+from framechain.vision.opencv import bright_shares, mean_abs_differences, require_cv2
 
 __all__ = [
     "CameraFrames",
@@ -49,8 +49,6 @@ __all__ = [
     "window_rows",
 ]
 
-#: A frame with hardly a pixel above this grey level is black (a camera that delivered nothing).
-BLACK_LEVEL = 32
 #: Mean absolute difference (grey levels) under which a frame repeats the previous one pixel for pixel: H.264,
 #: HEVC and AV1 return a frame sent twice exactly. Re-encoded repeats (MPEG-4 Part 2: a grey level or more off)
 #: are found by their tracks instead (``EgoMotionOptions.repeat_motion_px``): a slow camera over a
@@ -341,6 +339,5 @@ def _repeats_and_black(grey: npt.NDArray[np.uint8], missing: BoolArray) -> tuple
     present = np.flatnonzero(~missing)
     if present.size > 1:
         duplicate[present[1:]] = mean_abs_differences(grey, present[:-1], present[1:]) <= REPEAT_LEVEL
-    flat = grey.reshape(n, -1)
-    black = ~missing & ((flat > BLACK_LEVEL).mean(axis=1) < 0.01) if n else np.zeros(0, dtype=bool)
+    black = ~missing & (bright_shares(grey, BLACK_LEVEL) < BLACK_SHARE) if n else np.zeros(0, dtype=bool)
     return duplicate, black
