@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -25,8 +26,10 @@ from framechain.adapters.messages.rows import CameraRows, FrameRows, TransformRo
 _STREAM = re.compile(r"^(/device_\d+/sensor_\d+/[A-Za-z]+_\d+)/")
 
 
+@functools.lru_cache(maxsize=256)
 def stream_frame(topic: str) -> str | None:
-    """``/device_0/sensor_1/Color_0/info/camera_info`` -> ``device_0/sensor_1/Color_0``."""
+    """``/device_0/sensor_1/Color_0/info/camera_info`` -> ``device_0/sensor_1/Color_0`` (matched once per topic: it
+    is asked for every message's row)."""
     m = _STREAM.match(topic)
     return m.group(1).lstrip("/") if m else None
 
