@@ -93,9 +93,10 @@ def fit_episode(
 ) -> EgoMotionFit:
     """The camera-motion fit of one episode against its candidate links, with the declared mount."""
 
-    def measure(prior: TranslationPrior | None) -> EgoMotionTable:
+    def measure(prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable:
         return measure_egomotion(evidence.tracks, evidence.stamps_ns, intrinsics or evidence.intrinsics,
-                                 frame="wrist_optical_frame", translation=prior, options=options)
+                                 frame="wrist_optical_frame", translation=prior, options=options,
+                                 rotations_only=rotations_only)
 
     return fit_camera_motion(measure, evidence.links, camera="wrist", declared_link=truth.declared_link,
                              declared_q_link_cam=truth.declared_q_link_cam,

@@ -85,7 +85,7 @@ class CameraFrames:
 class ImageMotion:
     """One camera's frames decoded and tracked once; :meth:`measure` measures its motion against a prior.
 
-    ``last`` is the most recent measurement (the one a fit ends on). ``pairing`` names how a video's
+    ``last`` is the most recent complete measurement (the one a fit ends on). ``pairing`` names how a video's
     frames were paired with the rows ("" for images with stamps of their own), ``alternatives`` the
     frames' capture stamps under the other pairings (-1: no row), for the motion to confirm the pairing.
     """
@@ -117,10 +117,12 @@ class ImageMotion:
         i = self.intrinsics
         self.intrinsics = replace(i, fx=i.fx * factor, fy=i.fy * factor)
 
-    def measure(self, prior: TranslationPrior | None) -> EgoMotionTable:
-        self.last = measure_egomotion(self.tracks, self.stamps_ns, self.intrinsics, frame=self.camera,
-                                      translation=prior, options=self.options)
-        return self.last
+    def measure(self, prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable:
+        table = measure_egomotion(self.tracks, self.stamps_ns, self.intrinsics, frame=self.camera, translation=prior,
+                                  options=self.options, rotations_only=rotations_only)
+        if not rotations_only:
+            self.last = table
+        return table
 
     def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
         """``table`` (measured with this camera's stamps) with its frames' stamps under another ``pairing``."""

@@ -78,9 +78,18 @@ class _Trials:
         self.between: dict[tuple[float, float, float], tuple[Pairs, float]] = {}  # (offset, span): interpolated
 
     def table(self, offset: float) -> EgoMotionTable:
+        """The rotations measured with the prior at ``offset`` (rows and rotations alone: what trials compare)."""
         key = round(offset, 6)
         if key not in self.tables:
-            self.tables[key] = self.measure(self.prior_of(self.link, self.q_link_cam, self.xyz, key))
+            self.tables[key] = self.measure(self.prior_of(self.link, self.q_link_cam, self.xyz, key),
+                                            rotations_only=True)
+        return self.tables[key]
+
+    def complete(self, offset: float) -> EgoMotionTable:
+        """The whole measurement with the prior at ``offset`` (translation directions, residuals and parallax too),
+        its rotations those of :meth:`table` (which it stands in for from now on)."""
+        key = round(offset, 6)
+        self.tables[key] = self.measure(self.prior_of(self.link, self.q_link_cam, self.xyz, key))
         return self.tables[key]
 
     def pairs(self, table: EgoMotionTable) -> Pairs:
@@ -122,7 +131,8 @@ class _Trials:
         h = np.deg2rad(MOUNT_STEP_DEG)
         middle = self.pairs(self.table(offset))
         steps = [self.pairs(self.measure(self.prior_of(self.link, quat_of((base, RotationVector(h * axis))),
-                                                       self.xyz, round(offset, 6)))) for axis in np.eye(3)]
+                                                       self.xyz, round(offset, 6)), rotations_only=True))
+                 for axis in np.eye(3)]
         slopes = np.stack([(_rotvecs_of(step, middle) - middle.rotvec) / h for step in steps])  # (3, N, 3) per rad
         ok = np.isfinite(slopes).all(axis=(0, 2))
         kept, slopes = _take(middle, np.flatnonzero(ok)), slopes[:, ok]
@@ -302,11 +312,12 @@ def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: lis
     best = _grid(trials, best, limit)[1]
     _mount_search(trials, best)
     grid, best = _grid(trials, best, limit)
-    cost, mount, weights, pairs = _fixed_offset_fit(trials.pairs(trials.table(best)), trials.orientations, best)
+    table = trials.complete(best)
+    cost, mount, weights, pairs = _fixed_offset_fit(trials.pairs(table), trials.orientations, best)
     if pairs.t0.size < opts.min_pairs:
         return None
     solved = _grid_solved(trials, grid, pairs, weights, best, mount)
-    return Joint(solved=solved, pairs=pairs, table=trials.table(best), residual_deg=float(np.rad2deg(cost)))
+    return Joint(solved=solved, pairs=pairs, table=table, residual_deg=float(np.rad2deg(cost)))
 
 
 def _grid_solved(trials: _Trials, grid: FloatArray, pairs: Pairs, weights: FloatArray, best: float,

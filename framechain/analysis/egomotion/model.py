@@ -5,17 +5,20 @@ See :mod:`framechain.analysis.egomotion` for what the fit does.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Protocol
 
 from framechain.arrays import FloatArray, IntArray
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
 __all__ = ["EgoMotionFit", "EgoMotionFitOptions", "LinkFit", "LinkMotion", "Measure", "MountError", "MountEvidence"]
 
-#: Measures the camera's motion from its images, given a translation prior (None: rotation only).
-Measure = Callable[[TranslationPrior | None], EgoMotionTable]
+class Measure(Protocol):
+    """Measures the camera's motion from its images, given a translation prior (None: rotation only); with
+    ``rotations_only`` the rows and rotations alone (:func:`framechain.vision.egomotion.measure_egomotion`): what a
+    fit's trials compare."""
+
+    def __call__(self, prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable: ...
 
 
 @dataclass(frozen=True)

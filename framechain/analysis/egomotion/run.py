@@ -57,12 +57,13 @@ class CameraImages(Protocol):
     intrinsics: Intrinsics  # as measured with (declared, or assumed from the image size)
     intrinsics_known: bool
     notes: tuple[str, ...]
-    last: EgoMotionTable  # the latest measurement
+    last: EgoMotionTable  # the latest complete measurement
     pairing: str  # how a video's frames pair with the rows ("" for images stamped on their own)
     forced: bool  # the pairing was forced in the configuration
     alternatives: dict[str, IntArray]  # the frames' stamps under the other pairings
 
-    def measure(self, prior: TranslationPrior | None) -> EgoMotionTable: ...
+    def measure(self, prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable:
+        """The camera's motion given a translation prior (a :class:`~framechain.analysis.egomotion.model.Measure`)."""
 
     def rescale_focal(self, factor: float) -> None:
         """Measure from now on with the focal length scaled by ``factor``."""

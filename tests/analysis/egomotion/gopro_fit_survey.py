@@ -72,7 +72,7 @@ def plain_residual_deg(table: EgoMotionTable, link: LinkMotion, mount: FloatArra
 
 
 def survey_case(table: EgoMotionTable, link: LinkMotion, documented: FloatArray, max_offset_s: float) -> str:
-    fit = fit_camera_motion(lambda _prior: table, [link], camera="gopro", declared_link=link.link,
+    fit = fit_camera_motion(lambda _prior, **_options: table, [link], camera="gopro", declared_link=link.link,
                             declared_q_link_cam=np.array([0.0, 0.0, 0.0, 1.0]),
                             options=EgoMotionFitOptions(max_offset_s=max_offset_s))
     if not fit.links:

@@ -129,9 +129,9 @@ def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
     truth, evidence, fit = faulted
     link = next(m for m in evidence.links if m.link == fit.link)
 
-    def measure(prior: TranslationPrior | None) -> EgoMotionTable:
+    def measure(prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable:
         return measure_egomotion(evidence.tracks, evidence.stamps_ns, evidence.intrinsics, frame="wrist_optical_frame",
-                                 translation=prior)
+                                 translation=prior, rotations_only=rotations_only)
 
     trials = _Trials(measure, link, translation_prior, fit.q_link_cam, truth.xyz_link_cam, EgoMotionFitOptions())
     centre = fit.offset_s
@@ -160,6 +160,25 @@ def test_what_the_joint_fit_interpolates_is_what_measuring_gives(
         assert rms_deg(predicted.rotvec, measured) < 0.25 * moved  # 5-17% measured
 
 
+def test_a_trial_measurement_has_the_complete_ones_rows_and_rotations(
+        faulted: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]) -> None:
+    """A fit's trials measure rotations only: the same rows, rotations and inlier counts as the complete measurement
+    with that prior, which alone carries the translation directions, residuals and parallax."""
+    truth, evidence, fit = faulted
+    link = next(m for m in evidence.links if m.link == fit.link)
+    prior = translation_prior(link, fit.q_link_cam, truth.xyz_link_cam, fit.offset_s)
+    complete, trial = (measure_egomotion(evidence.tracks, evidence.stamps_ns, evidence.intrinsics, frame="wrist",
+                                         translation=prior, rotations_only=only) for only in (False, True))
+    assert len(trial) == len(complete) > 100
+    for column in ("stamp0_ns", "stamp1_ns", "quat_xyzw", "tracks", "inliers"):
+        np.testing.assert_array_equal(getattr(trial, column), getattr(complete, column))
+    for column in ("residual_px", "parallax_px"):
+        assert np.isfinite(getattr(complete, column)).all()
+        assert np.isnan(getattr(trial, column)).all()
+    assert np.isfinite(complete.direction).all(axis=1).mean() > 0.5  # most pairs show enough parallax here
+    assert np.isnan(trial.direction).all()
+
+
 def test_a_grid_at_the_window_edge_measures_nothing_beyond_it(
         faulted: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit]) -> None:
     """Past the +-max_offset_s window the translation prior runs off the episode's ends: a grid clipped to the window
@@ -167,9 +186,9 @@ def test_a_grid_at_the_window_edge_measures_nothing_beyond_it(
     truth, evidence, fit = faulted
     link = next(m for m in evidence.links if m.link == fit.link)
 
-    def measure(prior: TranslationPrior | None) -> EgoMotionTable:
+    def measure(prior: TranslationPrior | None, /, *, rotations_only: bool = False) -> EgoMotionTable:
         return measure_egomotion(evidence.tracks, evidence.stamps_ns, evidence.intrinsics, frame="wrist_optical_frame",
-                                 translation=prior)
+                                 translation=prior, rotations_only=rotations_only)
 
     limit = 0.1
     trials = _Trials(measure, link, translation_prior, fit.q_link_cam, truth.xyz_link_cam,
@@ -244,7 +263,8 @@ def test_a_still_camera_says_its_motion_is_not_observable(clean: tuple[VideoData
     tracks = track_features(still)
     stamps = evidence.stamps_ns[:60]
     fit = fit_camera_motion(
-        lambda prior: measure_egomotion(tracks, stamps, evidence.intrinsics, frame="front", translation=prior),
+        lambda prior, **options: measure_egomotion(tracks, stamps, evidence.intrinsics, frame="front",
+                                                   translation=prior, **options),
         evidence.links, camera="front", declared_link="gripper_link", declared_q_link_cam=truth.q_link_cam)
     assert fit.link == ""
     assert not fit.offset_observable

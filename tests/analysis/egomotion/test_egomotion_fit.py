@@ -7,8 +7,6 @@ fit must return ``offset_s = -d``, ``X``, and intervals that hold the truth.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -16,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from framechain.analysis.egomotion import (
     EgoMotionFitOptions,
     LinkMotion,
+    Measure,
     fit_camera_motion,
     fit_link,
     translation_prior,
@@ -68,8 +67,8 @@ def measured(
     )
 
 
-def constant(table: EgoMotionTable) -> Callable[[object], EgoMotionTable]:
-    return lambda _prior: table
+def constant(table: EgoMotionTable) -> Measure:
+    return lambda _prior, **_options: table
 
 
 MOUNT = Rotation.from_euler("xyz", [100.0, -20.0, 35.0], degrees=True)

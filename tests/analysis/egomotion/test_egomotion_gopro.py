@@ -18,7 +18,6 @@ clock (GPMF packets are stamped within 0.1 s of the frames they ride with).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -75,9 +74,9 @@ def judged(clip: tuple[Path, EgoMotionTable, Any], *, until_s: float = np.inf,
     part = table.take(np.flatnonzero(table.stamp1_ns * 1e-9 <= until_s))
     mount = documented_mount(gyro.axis_order) if declared is None else declared
     q = Rotation.from_matrix(mount).as_quat()
-    measure: Callable[[Any], EgoMotionTable] = lambda _prior: part  # noqa: E731 - no translation prior: rotation only
-    fit = fit_camera_motion(measure, [link], camera="gopro", declared_link=link.link, declared_q_link_cam=q,
-                            options=OPTIONS)
+    # No translation prior: the gyro's link has no positions, so every measurement is this rotation-only one.
+    fit = fit_camera_motion(lambda _prior, **_options: part, [link], camera="gopro", declared_link=link.link,
+                            declared_q_link_cam=q, options=OPTIONS)
     motion = CameraMotion(camera="gopro", declared_link=link.link, declared_q_link_cam=q,
                           declared_xyz_link_cam=np.zeros(3), fit=fit, table=part, links=(link,),
                           focal_px=intrinsics.fx, width_px=intrinsics.width)
