@@ -294,25 +294,35 @@ def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTrac
 
 def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:
     """Grey pixels of each row (black where missing), the missing rows, and how many frames were decoded."""
-    grey: list[npt.NDArray[np.uint8] | None] = [None] * rows.size
     decoded = 0
     encoding = images.encoding[rows]
     video = np.flatnonzero(encoding == VIDEO_ENCODING)
+    parts: list[tuple[IntArray, npt.NDArray[np.uint8]]] = []  # positions among ``rows``, their frames
     for path in np.unique(images.video_path[rows[video]]).tolist():
         mine = video[images.video_path[rows[video]] == path]
         got = read_frames(path, images.video_time_ns[rows[mine]], repeat_level=REPEAT_LEVEL)
         decoded += got.decoded
-        for k, i in enumerate(mine.tolist()):
-            if got.image_index[k] >= 0:
-                grey[i] = got.image(k)
+        found = np.flatnonzero(got.image_index >= 0)
+        picked = got.image_index[found]
+        if found.size:  # the decoded frames themselves when each row has its own, in order (no copy)
+            in_order = picked.size == got.images.shape[0] and np.array_equal(picked, np.arange(picked.size))
+            parts.append((mine[found], got.images if in_order else got.images.take(picked, axis=0)))
     for i in np.flatnonzero(encoding != VIDEO_ENCODING).tolist():
-        grey[i] = _still(images, int(rows[i]))
+        still = _still(images, int(rows[i]))
         decoded += 1
-    shape = next((g.shape for g in grey if g is not None), (1, 1))
-    missing = np.array([g is None or g.shape != shape for g in grey], dtype=bool)
+        if still is not None:
+            parts.append((np.array([i]), still[None]))
+    if not parts:
+        return np.zeros((rows.size, 1, 1), dtype=np.uint8), np.ones(rows.size, dtype=bool), decoded
+    shape = min(parts, key=lambda part: int(part[0][0]))[1].shape[1:]  # the first row's with pixels
+    kept = [(where, frames) for where, frames in parts if frames.shape[1:] == shape]
+    if len(kept) == 1 and kept[0][0].size == rows.size:  # one video, a frame for every row: the usual case
+        return kept[0][1], np.zeros(rows.size, dtype=bool), decoded
     stack = np.zeros((rows.size, *shape), dtype=np.uint8)
-    for i in np.flatnonzero(~missing).tolist():
-        stack[i] = grey[i]
+    missing = np.ones(rows.size, dtype=bool)
+    for where, frames in kept:
+        stack[where] = frames
+        missing[where] = False
     return stack, missing, decoded
 
 
