@@ -70,9 +70,15 @@ class Orientations:
 
 
 def link_rotvecs(orientations: Orientations, pairs: Pairs, offsets: FloatArray) -> FloatArray:
-    """The link's predicted rotation vectors ``rotvec(R(t0+d)^T R(t1+d))``, ``(G, N, 3)`` for G offsets."""
-    first = orientations.at((pairs.t0[None, :] + offsets[:, None]).ravel())
-    second = orientations.at((pairs.t1[None, :] + offsets[:, None]).ravel())
+    """The link's predicted rotation vectors ``rotvec(R(t0+d)^T R(t1+d))``, ``(G, N, 3)`` for G offsets.
+
+    The link is interpolated once per frame time and offset: pairs share their frames (consecutive and chained
+    pairs of a few hundred frames), so a frame's orientation serves every pair it is in.
+    """
+    n = pairs.t0.size
+    times, where = np.unique(np.concatenate([pairs.t0, pairs.t1]), return_inverse=True)
+    at = orientations.at((times[None, :] + offsets[:, None]).ravel()).reshape(4, offsets.size, times.size)
+    first, second = at[:, :, where[:n]].reshape(4, -1), at[:, :, where[n:]].reshape(4, -1)
     out: FloatArray = quat_to_rotvec(quat_multiply(quat_conjugate(first), second)).T.reshape(offsets.size, -1, 3)
     return out
 

@@ -203,3 +203,25 @@ def test_too_few_pairs_is_said() -> None:
                             declared_link="gripper_link", declared_q_link_cam=MOUNT.as_quat())
     assert fit.link == ""
     assert "fewer than 20 measured frame pairs" in fit.notes[0]
+
+
+def test_the_links_rotation_between_shifted_frame_times_is_scipys_slerp() -> None:
+    """Pairs that share frames (consecutive and chained) get the link's rotation between their stamps shifted by each
+    offset, as scipy's Slerp interpolates it; times past the link's span take its end."""
+    from scipy.spatial.transform import Slerp
+
+    from framechain.analysis.egomotion.solve import Orientations, Pairs, link_rotvecs
+
+    link = link_motion("gripper_link", seed=5)
+    t = (link.stamps_ns - link.stamps_ns[0]) * 1e-9
+    frames = np.arange(0.013, 4.9, 1 / 18.6)  # a camera's frames between the link's samples
+    first = np.concatenate([np.arange(frames.size - s) for s in (1, 3)])
+    second = np.concatenate([np.arange(frames.size - s) + s for s in (1, 3)])
+    pairs = Pairs(t0=frames[first], t1=frames[second], rotvec=np.zeros((first.size, 3)), weight=np.ones(first.size))
+    offsets = np.array([-0.2, -0.0137, 0.0, 0.05])
+    got = link_rotvecs(Orientations(link, int(link.stamps_ns[0])), pairs, offsets)
+    slerp = Slerp(t, Rotation.from_quat(link.quat_xyzw))
+    for k, offset in enumerate(offsets):
+        a = slerp(np.clip(pairs.t0 + offset, t[0], t[-1]))
+        b = slerp(np.clip(pairs.t1 + offset, t[0], t[-1]))
+        np.testing.assert_allclose(got[k], (a.inv() * b).as_rotvec(), atol=1e-9)
