@@ -181,9 +181,8 @@ def measure_egomotion(
     if known.any():
         sub = PairBatch(batch.b0[known], batch.b1[known], batch.valid[known])
         direction = prior[known] / norm[known]
-        rotation[known] = rotations_along_translation(sub, rotation[known], direction, sub.valid.astype(float),
-                                                      threshold, opts.refine_iterations)
-        residual[known] = np.linalg.norm(off_flow_residuals(sub, rotation[known], direction), axis=-1)
+        rotation[known], residual[known] = rotations_along_translation(
+            sub, rotation[known], direction, sub.valid.astype(float), threshold, opts.refine_iterations)
         inliers[known] = (residual[known] < threshold) & sub.valid
     if rotations_only:
         return _rotations_table(frame, s0, s1, rotation, inliers, matched, opts)

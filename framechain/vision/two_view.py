@@ -112,8 +112,9 @@ def off_flow_residuals(batch: PairBatch, rotation: FloatArray, direction: FloatA
 def rotations_along_translation(
     batch: PairBatch, rotation: FloatArray, direction: FloatArray, weights: FloatArray, threshold_rad: float,
     iterations: int,
-) -> FloatArray:
-    """``R`` (P, 3, 3) with ``b0 ~ R b1 + rho t`` for known translation directions ``t`` (P, 3), ``rho >= 0``.
+) -> tuple[FloatArray, FloatArray]:
+    """``R`` (P, 3, 3) with ``b0 ~ R b1 + rho t`` for known translation directions ``t`` (P, 3), ``rho >= 0``, and
+    each match's off-flow residual there (P, M): the norm of :func:`off_flow_residuals`.
 
     The inverse depths are projected out: a match's residual is the part of ``R b1`` across ``b0``
     that is not along the translation's flow at ``b0`` (all of it where that would need a negative
@@ -149,7 +150,10 @@ def rotations_along_translation(
             if not keep.all():
                 index = index[keep]
                 moving = (moving[0][keep], *(a[:, keep] for a in moving[1:4]), moving[4][keep])
-    return rot
+    # In the basis built above the residual is (across . u, along . u), the along part only where it is not ahead.
+    u = np.einsum("pij,jpm->ipm", rot, b1)
+    residual: FloatArray = np.hypot(_dot(across, u)[0], np.maximum(_dot(along, u)[0], 0.0))
+    return rot, residual
 
 
 def _spare_tangent(b0: FloatArray) -> FloatArray:

@@ -92,12 +92,19 @@ def test_near_points_bias_a_rotation_only_fit_but_not_one_along_the_translation(
     biased = [angle_deg(rotation_only[i], r) for i, r in enumerate(rotations)]
     assert np.median(biased) > 0.3  # the translation is read as rotation (unless it is along the optical axis)
     direction = np.array([t / np.linalg.norm(t) for t in translations])
-    refined = rotations_along_translation(batch, rotation_only, direction, batch.valid.astype(float),
-                                          1.0 / FOCAL, iterations=30)
+    refined, at_refined = rotations_along_translation(batch, rotation_only, direction, batch.valid.astype(float),
+                                                      1.0 / FOCAL, iterations=30)
     for i, rot in enumerate(rotations):
         assert angle_deg(refined[i], rot) < 1e-6
     residual = np.linalg.norm(off_flow_residuals(batch, refined, direction), axis=-1)
     assert residual[batch.valid].max() < 1e-8
+    # The residuals the refinement returns are those, at its rotations and at the rotation-only ones alike.
+    np.testing.assert_allclose(at_refined[batch.valid], residual[batch.valid], rtol=0, atol=1e-12)
+    _same, at_start = rotations_along_translation(batch, rotation_only, direction, batch.valid.astype(float),
+                                                  1.0 / FOCAL, iterations=0)
+    start = np.linalg.norm(off_flow_residuals(batch, rotation_only, direction), axis=-1)
+    assert start[batch.valid].max() > 1e-4  # far from zero: a real comparison, not of two zeros
+    np.testing.assert_allclose(at_start[batch.valid], start[batch.valid], rtol=1e-9, atol=1e-15)
     # Given the right rotation, the translation direction is measured back, sign included.
     measured = translation_directions(batch, refined, batch.valid.astype(float))
     assert np.allclose(measured, direction, atol=1e-6)
