@@ -184,8 +184,24 @@ def measure_egomotion(
         rotation[known], residual[known] = rotations_along_translation(
             sub, rotation[known], direction, sub.valid.astype(float), threshold, opts.refine_iterations)
         inliers[known] = (residual[known] < threshold) & sub.valid
-    if rotations_only:
-        return _rotations_table(frame, s0, s1, rotation, inliers, matched, opts)
+    count = inliers.sum(axis=1)
+    keep = count >= opts.min_inliers
+    n = int(keep.sum())
+    direction_out, rms, parallax = (np.full((n, 3), np.nan), np.full(n, np.nan), np.full(n, np.nan)) if rotations_only \
+        else _translations(batch, rotation, inliers, residual, known, keep, focal, opts)
+    table = EgoMotionTable(
+        frame=np.full(n, frame), stamp0_ns=s0[keep], stamp1_ns=s1[keep],
+        quat_xyzw=quat_of(rotation[keep]) if n else np.zeros((0, 4)), direction=direction_out, tracks=matched[keep],
+        inliers=count[keep].astype(np.int64), residual_px=rms, parallax_px=parallax,
+    )
+    return table.take(np.lexsort((table.stamp1_ns, table.stamp0_ns)))
+
+
+def _translations(batch: PairBatch, rotation: FloatArray, inliers: BoolArray, residual: FloatArray, known: BoolArray,
+                  keep: BoolArray, focal: float, opts: EgoMotionOptions) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Of the pairs kept: the translation direction measured given the rotation (NaN under ``min_parallax_px``), the
+    RMS residual of the inliers (px; across the measured translation's flow where the prior was unknown) and the
+    median parallax of the inliers (px)."""
     measured = translation_directions(batch, rotation, inliers.astype(float))
     if not known.all():
         sub = PairBatch(batch.b0[~known], batch.b1[~known], batch.valid[~known])
@@ -193,34 +209,11 @@ def measure_egomotion(
     residual = np.where(inliers, residual, np.nan)
     u = batch.b1 @ np.swapaxes(rotation, 1, 2)
     flow = np.linalg.norm(u - (u * batch.b0).sum(-1, keepdims=True) * batch.b0, axis=-1)
-    count = inliers.sum(axis=1)
-    keep = count >= opts.min_inliers
     with np.errstate(invalid="ignore"):
         parallax = np.nanmedian(np.where(inliers[keep], flow[keep], np.nan), axis=1) * focal
         rms = np.sqrt(np.nanmean(residual[keep] ** 2, axis=1)) * focal
-    direction_out = np.where((parallax >= opts.min_parallax_px)[:, None], measured[keep], np.nan)
-    table = EgoMotionTable(
-        frame=np.full(int(keep.sum()), frame), stamp0_ns=s0[keep], stamp1_ns=s1[keep],
-        quat_xyzw=quat_of(rotation[keep]) if keep.any() else np.zeros((0, 4)),
-        direction=direction_out, tracks=matched[keep], inliers=count[keep].astype(np.int64), residual_px=rms,
-        parallax_px=parallax,
-    )
-    return table.take(np.lexsort((table.stamp1_ns, table.stamp0_ns)))
-
-
-def _rotations_table(frame: str, s0: IntArray, s1: IntArray, rotation: FloatArray, inliers: BoolArray,
-                     matched: IntArray, opts: EgoMotionOptions) -> EgoMotionTable:
-    """The rows :func:`measure_egomotion` keeps, with their rotations and counts alone (the rest NaN)."""
-    count = inliers.sum(axis=1)
-    keep = count >= opts.min_inliers
-    n = int(keep.sum())
-    nan = np.full(n, np.nan)
-    table = EgoMotionTable(
-        frame=np.full(n, frame), stamp0_ns=s0[keep], stamp1_ns=s1[keep],
-        quat_xyzw=quat_of(rotation[keep]) if n else np.zeros((0, 4)), direction=np.full((n, 3), np.nan),
-        tracks=matched[keep], inliers=count[keep].astype(np.int64), residual_px=nan, parallax_px=nan.copy(),
-    )
-    return table.take(np.lexsort((table.stamp1_ns, table.stamp0_ns)))
+    direction: FloatArray = np.where((parallax >= opts.min_parallax_px)[:, None], measured[keep], np.nan)
+    return direction, rms, parallax
 
 
 def _first_rotations(
