@@ -42,7 +42,7 @@ from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.geometry.rotations import Inverse, Rotations, RotationVector, matrix_of, quat_of, rotvec_of
 from framechain.timeline import EgoMotionTable, TranslationPrior
 
-__all__ = ["Joint", "joint_fit"]
+__all__ = ["Joint", "Searched", "finish_fit", "search_offset"]
 
 #: Steps (s) of the bracketing search, of the grid the intervals are measured on, and its half-width in steps.
 BRACKET_STEP_S = 0.02
@@ -297,17 +297,35 @@ def anderson(inputs: list[FloatArray], outputs: list[FloatArray]) -> FloatArray:
     return out
 
 
-def joint_fit(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: list[FloatArray], xyz: FloatArray,
-              starts: list[float], opts: EgoMotionFitOptions) -> Joint | None:
-    """The offset and mount of ``link`` measured jointly (module text): the better of ``mounts`` (xyzw) at the
-    first of ``starts`` (s), searched from the best start. None when too few pairs stay inside the link's span.
-    """
+@dataclass(frozen=True)
+class Searched:
+    """A link's offset search (:func:`search_offset`), for :func:`finish_fit` to finish: its trials, the offset found
+    and the misfit there (deg per pair, with the mount it started from)."""
+
+    trials: _Trials
+    offset_s: float
+    misfit_deg: float
+
+
+def search_offset(measure: Measure, link: LinkMotion, prior_of: PriorOf, mounts: list[FloatArray], xyz: FloatArray,
+                  starts: list[float], opts: EgoMotionFitOptions) -> Searched | None:
+    """The offset and mount of ``link`` measured jointly (module text), first part: the better of ``mounts`` (xyzw)
+    at the first of ``starts`` (s), and the offset searched from the best start (a third of the measurements). Its
+    misfit already tells a link that cannot fit from one that may. None when no pair stays inside the link's span."""
     candidates = [_Trials(measure, link, prior_of, q, xyz, opts) for q in mounts]
     trials = min(candidates, key=lambda t: t.cost(starts[0]))
+    best = _search(trials, starts, opts.max_offset_s)
+    cost = trials.cost(best)
+    return Searched(trials, best, float(np.rad2deg(cost))) if np.isfinite(cost) else None
+
+
+def finish_fit(searched: Searched) -> Joint | None:
+    """The joint fit from its offset search (:func:`search_offset`): the mount's fixed point, the grid, the mount
+    search, the grid again and the optimum with its interval grid. None when too few pairs stay inside the link's
+    span."""
+    trials, best = searched.trials, searched.offset_s
+    opts = trials.opts
     limit = opts.max_offset_s
-    best = _search(trials, starts, limit)
-    if not np.isfinite(trials.cost(best)):
-        return None
     _remount(trials, best)
     best = _grid(trials, best, limit)[1]
     _mount_search(trials, best)

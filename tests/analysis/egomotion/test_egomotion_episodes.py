@@ -16,13 +16,17 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion import EgoMotionFit, EgoMotionFitOptions, fit_camera_motion, translation_prior
+from framechain.analysis.egomotion import fit as fit_module
 from framechain.analysis.egomotion.joint import (
     GRID_HALF,
     GRID_STEP_S,
     MOUNT_STEP_DEG,
+    Joint,
+    Searched,
     _grid,
     _rotvecs_of,
     _Trials,
+    finish_fit,
 )
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.rotations import RotationVector, quat_of
@@ -213,13 +217,28 @@ def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth
 
 
 def test_the_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.TempPathFactory,
-                                                       so101_urdf: Path) -> None:
+                                                       so101_urdf: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     spec = VideoDatasetSpec(so101_urdf, seed=13, duration_s=DURATION_S, bimanual=True, camera_arm="right_",
                             declared_arm="left_")
     truth = generate_video_dataset(tmp_path_factory.mktemp("bimanual") / "dataset", spec)
     evidence = episode_evidence(truth, so101_urdf)
     assert {link.link for link in evidence.links} >= {"left_gripper_link", "right_gripper_link"}
+    finished: list[str] = []
+
+    def finish(searched: Searched) -> Joint | None:
+        finished.append(searched.trials.link.link)
+        return finish_fit(searched)
+
+    monkeypatch.setattr(fit_module, "finish_fit", finish)
     fit = fit_episode(evidence, truth)
+    # The declared link is searched but, misfitting far more than the right one, not fitted further ...
+    assert finished == ["right_gripper_link"]
+    # ... and the fit is the one fitting every candidate through gives.
+    monkeypatch.setattr(fit_module, "SEARCH_SCREEN", np.inf)
+    unscreened = fit_episode(evidence, truth)
+    assert finished[1:] == ["left_gripper_link", "right_gripper_link"]
+    assert (unscreened.link, unscreened.offset_s) == (fit.link, fit.offset_s)
+    np.testing.assert_array_equal(unscreened.q_link_cam, fit.q_link_cam)
     assert fit.link == "right_gripper_link"
     assert fit.wrong_link
     assert fit.declared_link == "left_gripper_link"
