@@ -30,10 +30,8 @@ test: lint
 	$(PY) -m pytest -q -p no:xdist --nbmake notebooks
 	site=$$(mktemp -d) && $(VENV)/bin/mkdocs build --strict --quiet --site-dir "$$site"; status=$$?; rm -rf "$$site"; exit $$status
 
-# MALLOC_PERTURB_ as for the tests: the generated videos are the same bytes every run (a benchmark that times a
-# command in a process of its own leaves it out there).
 bench: $(STAMP)
-	MALLOC_PERTURB_=165 $(PY) benchmarks/run.py
+	$(PY) benchmarks/run.py
 
 # Damaged copies of the real logs (../shared/realdata) through info, tf, replay and attribute,
 # then mutated chain, calibration and robot.yaml files (tools/fuzz_config.py) through info and

@@ -24,9 +24,9 @@ URDF = HERE.parent.parent / "shared" / "realdata" / "urdf" / "so101" / "so101_ne
 ROUNDS = 3
 EPISODES = int(os.environ.get("FRAMECHAIN_BENCH_EPISODES", "25"))
 FRAMECHAIN = str(Path(sys.executable).with_name("framechain"))
-#: The timed commands run as a user's would: without the MALLOC_PERTURB_ that `make bench` sets so that the
-#: generated videos are the same bytes every run (see the Makefile). glibc then fills every allocation and every
-#: free, which costs framechain's NumPy temporaries about 10% of an episode's time.
+#: The timed commands run as a user's would, without MALLOC_PERTURB_ (glibc filling every allocation and every free
+#: costs framechain's NumPy temporaries about 10% of an episode); the episodes are generated in a process with it,
+#: so that libx264 writes the same videos every run (see the Makefile).
 ENV = {name: value for name, value in os.environ.items() if name != "MALLOC_PERTURB_"}
 
 DECODE = """
@@ -42,6 +42,13 @@ for path in sorted(Path(sys.argv[1]).rglob("*.mp4")):
 
 
 def _generate(root: Path, kind: str, episodes: int = 1) -> tuple[Path, Path]:
+    """The dataset and its robot.yaml under ``root``, written by a process of their own with MALLOC_PERTURB_."""
+    subprocess.run([sys.executable, __file__, "--generate", str(root), kind, str(episodes)], check=True,
+                   env={**os.environ, "MALLOC_PERTURB_": "165"})
+    return root / "dataset", root / "robot.yaml"
+
+
+def _generate_here(root: Path, kind: str, episodes: int) -> None:
     from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
 
     spec = (VideoDatasetSpec(URDF, seed=3, episodes=episodes, duration_s=15.0, fps=20, codec="mpeg4", bimanual=True,
@@ -50,8 +57,7 @@ def _generate(root: Path, kind: str, episodes: int = 1) -> tuple[Path, Path]:
             if kind == "mpeg4" else
             VideoDatasetSpec(URDF, seed=3, episodes=episodes, duration_s=15.0, fps=30, codec="libsvtav1", width=640,
                              height=480, focal_px=500.0, video_delay_s=0.05))
-    truth = generate_video_dataset(root / "dataset", spec)
-    return truth.root, write_robot_yaml(truth, root / "robot.yaml")
+    write_robot_yaml(generate_video_dataset(root / "dataset", spec), root / "robot.yaml")
 
 
 def _seconds(argv: list[str]) -> float:
@@ -87,4 +93,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:2] == ["--generate"]:
+        _generate_here(Path(sys.argv[2]), sys.argv[3], int(sys.argv[4]))
+    else:
+        main()

@@ -114,7 +114,8 @@ def rotations_along_translation(
     iterations: int,
 ) -> tuple[FloatArray, FloatArray]:
     """``R`` (P, 3, 3) with ``b0 ~ R b1 + rho t`` for known translation directions ``t`` (P, 3), ``rho >= 0``, and
-    each match's off-flow residual there (P, M): the norm of :func:`off_flow_residuals`.
+    each match's off-flow residual there (P, M): the norm of :func:`off_flow_residuals` (to a few ULPs; within 1e-9
+    rad of the epipole that one scales by a clamped flow, this one takes the whole residual).
 
     The inverse depths are projected out: a match's residual is the part of ``R b1`` across ``b0``
     that is not along the translation's flow at ``b0`` (all of it where that would need a negative
@@ -150,9 +151,11 @@ def rotations_along_translation(
             if not keep.all():
                 index = index[keep]
                 moving = (moving[0][keep], *(a[:, keep] for a in moving[1:4]), moving[4][keep])
-    # In the basis built above the residual is (across . u, along . u), the along part only where it is not ahead.
+    # In the basis built above the residual is (across . u, along . u), the along part only where it is not ahead;
+    # at the epipole no depth moves the point, and all of it is residual.
     u = np.einsum("pij,jpm->ipm", rot, b1)
-    residual: FloatArray = np.hypot(_dot(across, u)[0], np.maximum(_dot(along, u)[0], 0.0))
+    r_along = _dot(along, u)[0]
+    residual: FloatArray = np.hypot(_dot(across, u)[0], np.where(size[0] > 1e-12, np.maximum(r_along, 0.0), r_along))
     return rot, residual
 
 

@@ -118,3 +118,20 @@ def test_a_wrong_translation_direction_leaves_points_unexplained() -> None:
     wrong = np.cross(t, [0.0, 0.0, 1.0])
     residual = off_flow_residuals(batch, rot[None], (wrong / np.linalg.norm(wrong))[None])
     assert np.median(np.linalg.norm(residual[0], axis=1)) * FOCAL > 1.0
+
+
+def test_a_match_at_the_epipole_keeps_its_whole_residual() -> None:
+    """A point straight along the translation shows no flow, so no depth explains any of its residual: the
+    refinement's residual there is the whole of ``R b1`` across ``b0``, as :func:`off_flow_residuals` gives it."""
+    rng = np.random.default_rng(7)
+    b0, b1, rot, t = scene_pair(rng, 30, rotation_deg=3.0, translation_m=0.02, depth_m=(0.3, 1.0))
+    direction = t / np.linalg.norm(t)
+    b0[0] = direction  # a match at the epipole ...
+    tilt = Rotation.from_rotvec([0.002, -0.001, 0.0]).as_matrix()
+    b1[0] = tilt @ rot.T @ direction  # ... 2.2 mrad off what the motion predicts
+    batch = PairBatch(b0[None], b1[None], np.ones((1, 30), dtype=bool))
+    _refined, residual = rotations_along_translation(batch, rot[None], direction[None], batch.valid.astype(float),
+                                                     1.0 / FOCAL, iterations=0)
+    expected = np.linalg.norm(off_flow_residuals(batch, rot[None], direction[None]), axis=-1)
+    assert expected[0, 0] > 2e-3
+    np.testing.assert_allclose(residual[0], expected[0], rtol=1e-9, atol=1e-15)

@@ -85,7 +85,7 @@ class CameraFrames:
 class ImageMotion:
     """One camera's frames decoded and tracked once; :meth:`measure` measures its motion against a prior.
 
-    ``last`` is the most recent complete measurement (the one a fit ends on). ``pairing`` names how a video's
+    ``last`` is the most recent complete measurement (a fit's last). ``pairing`` names how a video's
     frames were paired with the rows ("" for images with stamps of their own), ``alternatives`` the
     frames' capture stamps under the other pairings (-1: no row), for the motion to confirm the pairing.
     """
@@ -316,7 +316,7 @@ def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np
         return np.zeros((rows.size, 1, 1), dtype=np.uint8), np.ones(rows.size, dtype=bool), decoded
     shape = min(parts, key=lambda part: int(part[0][0]))[1].shape[1:]  # the first row's with pixels
     kept = [(where, frames) for where, frames in parts if frames.shape[1:] == shape]
-    if len(kept) == 1 and kept[0][0].size == rows.size:  # one video, a frame for every row: the usual case
+    if len(kept) == 1 and kept[0][0].size == rows.size and kept[0][1].flags.writeable:  # one video for every row
         return kept[0][1], np.zeros(rows.size, dtype=bool), decoded
     stack = np.zeros((rows.size, *shape), dtype=np.uint8)
     missing = np.ones(rows.size, dtype=bool)

@@ -253,10 +253,12 @@ class _Start:
     xyz: FloatArray
 
 
-#: A candidate whose misfit after the offset search is this many times the least one's is not fitted further: the
-#: rest of the fit lowers a misfit by a factor of four at most (the mount's fixed point, on generated recordings
-#: with a placeholder mount), while the links that lose are ten to a hundred times worse there.
-SEARCH_SCREEN = 8.0
+#: A candidate whose misfit after its offset search and mount fixed point is this many times that of a candidate
+#: finished already is not fitted further. The rest of a fit lowers a misfit by at most a factor of two (2.05 for the
+#: right link with the video 0.3 s late and the mount 30 deg off; 1.0 to 1.1 for the others), and the declared link
+#: is kept within ``same_fit_ratio`` (1.25) of the best: 4 leaves a margin of 1.6. The links that lose were 5 to 50
+#: times the right one there (generated single- and two-arm episodes, every link fitted through).
+SEARCH_SCREEN = 4.0
 
 
 def _refined(
@@ -264,8 +266,8 @@ def _refined(
     refinements: int, opts: EgoMotionFitOptions,
 ) -> dict[str, tuple[EgoMotionTable, LinkFit, Joint | None]]:
     """Each link's fit on measurements made with its own translation prior (:mod:`.joint`: the offset used for the
-    prior and for the comparison at once), from the declared mount and from its rotation-only one; the links whose
-    offset search already misfits :data:`SEARCH_SCREEN` times the best are left out.
+    prior and for the comparison at once), from the declared mount and from its rotation-only one. The links are
+    finished best searched first; one whose search misfits :data:`SEARCH_SCREEN` times a finished one's is left out.
 
     Without link positions (or refinements, or pairs) a link's rotation-only fit stands.
     """
@@ -275,20 +277,25 @@ def _refined(
             measure, link, translation_prior, [declared.q_link_cam, own[link.link].q_link_cam], declared.xyz,
             [declared.offset_s, own[link.link].offset_s], opts)
         for link in links}
-    least = min((s.misfit_deg for s in searched.values() if s is not None), default=np.inf)
-    out: dict[str, tuple[EgoMotionTable, LinkFit, Joint | None]] = {}
-    for link in links:
+    finished: dict[str, tuple[EgoMotionTable, LinkFit, Joint | None]] = {}
+    least = np.inf  # the search misfit of the best link finished so far
+    for link in sorted(links, key=lambda m: _searched_misfit(searched[m.link])):
         found = searched[link.link]
         if found is not None and found.misfit_deg > SEARCH_SCREEN * least:
             continue
         best = None if found is None else finish_fit(found)
-        if best is None:
-            out[link.link] = (first[0], own[link.link], None)
+        if found is None or best is None:
+            finished[link.link] = (first[0], own[link.link], None)
             continue
+        least = min(least, found.misfit_deg)
         orientations = Orientations(link, int(link.stamps_ns[0]))
         fit = replace(link_fit(link.link, best.pairs, best.solved, orientations), residual_deg=best.residual_deg)
-        out[link.link] = (best.table, fit, best)
-    return out
+        finished[link.link] = (best.table, fit, best)
+    return {link.link: finished[link.link] for link in links if link.link in finished}  # in the candidates' order
+
+
+def _searched_misfit(searched: Searched | None) -> float:
+    return np.inf if searched is None else searched.misfit_deg
 
 
 def rank_links(table: EgoMotionTable, links: Sequence[LinkMotion], opts: EgoMotionFitOptions) -> list[LinkFit]:

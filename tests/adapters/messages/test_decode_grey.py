@@ -62,3 +62,26 @@ def test_rows_in_another_order_rows_without_a_frame_and_raw_images(tmp_path: Pat
     assert not grey[2].any()
     assert not grey[3].any()
     assert _level(grey[4]) == 222
+
+
+def test_every_row_from_one_video_in_another_order_and_rows_of_two_videos(tmp_path: Path) -> None:
+    video = encode_video(tmp_path / "a.mp4", _levelled(4, 32, 40), fps=FPS, codec="mpeg4")
+    other = encode_video(tmp_path / "b.mp4", _levelled(2, 32, 150), fps=FPS, codec="mpeg4")  # the same size
+    reordered = _video_rows(video, [0.2, 0.0, 0.3, 0.1])
+    grey, missing, _decoded = decode_grey(reordered, np.arange(4))
+    assert not missing.any()
+    assert [round(_level(g)) for g in grey] == pytest.approx([60, 40, 70, 50], abs=2)
+    both = ImageFrameTable.concat([_video_rows(video, [0.1, 0.2]), _video_rows(other, [0.1, 0.0])])
+    grey, missing, decoded = decode_grey(both, np.array([2, 0, 3, 1]))
+    assert not missing.any()
+    assert decoded >= 4
+    assert [round(_level(g)) for g in grey] == pytest.approx([160, 50, 150, 60], abs=2)
+    assert grey.flags.writeable
+
+
+def test_one_raw_row_comes_back_writeable(tmp_path: Path) -> None:
+    raw = ImageFrameTable.from_arrays("cam", [0], np.full((1, 8, 8), 90, np.uint8), encoding="mono8")
+    grey, missing, _decoded = decode_grey(raw, np.arange(1))
+    assert not missing.any()
+    assert grey.flags.writeable  # a copy, not a view of the table's bytes
+    assert (grey[0] == 90).all()

@@ -236,7 +236,7 @@ def test_the_camera_declared_on_the_other_arm_is_named(tmp_path_factory: pytest.
     # ... and the fit is the one fitting every candidate through gives.
     monkeypatch.setattr(fit_module, "SEARCH_SCREEN", np.inf)
     unscreened = fit_episode(evidence, truth)
-    assert finished[1:] == ["left_gripper_link", "right_gripper_link"]
+    assert finished[1:] == ["right_gripper_link", "left_gripper_link"]  # the best searched first
     assert (unscreened.link, unscreened.offset_s) == (fit.link, fit.offset_s)
     np.testing.assert_array_equal(unscreened.q_link_cam, fit.q_link_cam)
     assert fit.link == "right_gripper_link"
