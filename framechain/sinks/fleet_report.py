@@ -204,7 +204,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     statuses = [s for s in STATUS_ORDER if any(log.status == s for log in logs)]
     faults: dict[str, int] = {}
     for log in logs:
-        for fault in {f["fault"] for f in log.findings}:
+        for fault in sorted({f["fault"] for f in log.findings}):  # ties in the bars below keep this order: by name
             faults[fault] = faults.get(fault, 0) + 1
     fig, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
     ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses],

@@ -223,17 +223,26 @@ def _grid(trials: _Trials, centre: float, limit: float) -> tuple[FloatArray, flo
     """Trial offsets GRID_STEP_S apart around ``centre`` with the least cost inside them (moved out to three times
     when it lies at an end), and the parabola's vertex there. Each offset's measurement is interpolated across the
     grid (:meth:`_Trials.interpolated`)."""
-    grid: FloatArray = centre + GRID_STEP_S * np.arange(-GRID_HALF, GRID_HALF + 1, dtype=np.float64)
+    grid = _grid_at(centre, limit)
     for _ in range(3):
-        grid = np.clip(grid, -limit, limit)
         costs = np.array([trials.interpolated(float(x), (grid[0], grid[-1]))[1] for x in grid])
         k = int(np.argmin(costs))
-        if 0 < k < grid.size - 1 or abs(grid[k]) >= limit:
+        if 0 < k < grid.size - 1 or abs(grid[k]) >= limit - 1e-9:
             break
-        grid = grid + (k - GRID_HALF) * GRID_STEP_S
-    grid = np.clip(grid, -limit, limit)
+        grid = _grid_at(float(grid[GRID_HALF]) + (k - GRID_HALF) * GRID_STEP_S, limit)
     costs = np.array([trials.interpolated(float(x), (grid[0], grid[-1]))[1] for x in grid])
     return grid, float(parabola_min(grid, costs[None])[0])
+
+
+def _grid_at(centre: float, limit: float) -> FloatArray:
+    """Offsets GRID_STEP_S apart around ``centre``, the whole grid moved inside the +-``limit`` window where it would
+    cross it (not clipped: offsets piled on the window's edge leave the grid no spacing to fit a parabola or a
+    resample's offset on)."""
+    steps = GRID_STEP_S * np.arange(-GRID_HALF, GRID_HALF + 1, dtype=np.float64)
+    if steps[-1] - steps[0] >= 2.0 * limit:
+        return np.linspace(-limit, limit, steps.size)
+    out: FloatArray = np.clip(np.clip(centre, -limit - steps[0], limit - steps[-1]) + steps, -limit, limit)
+    return out
 
 
 #: The mount is measured again (and the offset searched near where it was) at most this many times, until it

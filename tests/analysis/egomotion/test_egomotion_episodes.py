@@ -205,6 +205,18 @@ def test_a_grid_at_the_window_edge_measures_nothing_beyond_it(
     assert all(abs(offset) <= limit for offset in trials.tables)
 
 
+def test_video_later_than_the_search_window_is_said_not_crashed(tmp_path_factory: pytest.TempPathFactory,
+                                                                 so101_urdf: Path) -> None:
+    """Video 0.6 s late, past the +-0.5 s window: the offset lies at the window's edge and is said to be undetermined
+    (a grid piled on the edge once left the interval's resampling no spacing: an IndexError)."""
+    spec = VideoDatasetSpec(so101_urdf, seed=31, duration_s=DURATION_S, video_delay_s=0.6)
+    truth = generate_video_dataset(tmp_path_factory.mktemp("too_late") / "dataset", spec)
+    evidence = episode_evidence(truth, so101_urdf)
+    fit = fit_episode(evidence, truth)
+    assert fit.offset_s == pytest.approx(-0.5, abs=0.005)
+    assert "edge of the +-0.50 s search window" in fit.offset_undetermined
+
+
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],
                                                   tmp_path: Path, so101_urdf: Path) -> None:
     truth, _evidence, fit = clean
