@@ -16,6 +16,7 @@ names them::
       static_target: true          # every label (tag id) is one static object
       ignore_labels: [7]           # labels known to move (rejected as ignored_label)
       static_window_s: 5           # each tag fitted per 5 s window: odometry drift does not pose as a fault
+      camera_offset_window_s: 1    # each camera's offset searched within +-1 s from its own motion (0.5)
       tag_size_m: {default: 0.16, 100: 0.10}   # or one number: tag corners -> depth by PnP
       markers: {dictionary: DICT_5X5_1000, size_m: 0.14}  # markers searched in topics.image
     latency_budget_s: 0.02
@@ -134,6 +135,8 @@ class ChainEvidence:
     moving_labels: tuple[str, ...] = ()
     #: Length of the windows a static target's spread is measured over (None: the default, 5 s).
     static_window_s: float | None = None
+    #: How far (s, either way) each camera's time offset is searched from its own motion (None: the default, 0.5 s).
+    camera_offset_window_s: float | None = None
     #: Side length of square tags in metres: one number, or tag id -> size with an optional ``default``.
     tag_size_m: float | dict[str, float] | None = None
     markers: MarkerSpec | None = None
@@ -335,6 +338,8 @@ def parse_evidence(parent: Section) -> ChainEvidence | None:
         ignore_labels=_labels(section, "ignore_labels"),
         moving_labels=_labels(section, "moving_labels"),
         static_window_s=section.number("static_window_s", positive=True, unit="s", check=plausible.static_window),
+        camera_offset_window_s=section.number("camera_offset_window_s", positive=True, unit="s",
+                                              check=plausible.offset_window),
         tag_size_m=_tag_size(section),
         markers=marker_spec(section),
     )

@@ -174,17 +174,26 @@ def test_unusual_depth_units_and_camera_clocks_are_notes() -> None:
     ({"evidence": {"static_window_s": 5000}}, "evidence.static_window_s is 5000 s, too long for a static-target "
                                                "window (over 3600 s): it looks like milliseconds (5000 ms is 5 s)"),
     ({"evidence": {"static_window_s": 0.001}}, "evidence.static_window_s is 0.001 s, shorter than one camera frame"),
+    ({"evidence": {"camera_offset_window_s": 500}}, "evidence.camera_offset_window_s is 500 s, too long for a camera "
+                                                     "offset search (over 60 s): it looks like milliseconds"),
+    ({"evidence": {"camera_offset_window_s": 0.002}}, "evidence.camera_offset_window_s is 0.002 s, shorter than one "
+                                                       "camera frame"),
+    ({"evidence": {"camera_offset_window_s": -1}}, "evidence.camera_offset_window_s must be a positive number"),
 ])
 def test_absurd_budgets_and_windows_are_errors(raw: dict[str, Any], expected: str) -> None:
     assert expected in _error(raw)
 
 
 def test_long_budgets_and_windows_are_notes() -> None:
-    chain = ChainConfig.from_dict({"latency_budget_s": 1.5, "evidence": {"static_window_s": 900}}, where="c.yaml")
+    chain = ChainConfig.from_dict({"latency_budget_s": 1.5, "evidence": {"static_window_s": 900,
+                                                                         "camera_offset_window_s": 8}}, where="c.yaml")
     assert chain.latency_budget_s == 1.5
     assert chain.evidence.static_window_s == 900.0
+    assert chain.evidence.camera_offset_window_s == 8.0
     assert chain.notes == (
         "c.yaml: evidence.static_window_s is 900 s: windows over 10 minutes let odometry drift pose as a fault",
+        "c.yaml: evidence.camera_offset_window_s is 8 s: only the frame pairs this far from both ends of an episode "
+        "are compared, and the search takes longer",
         "c.yaml: latency_budget_s is 1.5 s: a budget over 1 s lets poses that old through",
     )
 

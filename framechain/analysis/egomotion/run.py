@@ -161,6 +161,8 @@ def measure_cameras(
         progress(f"measuring the motion of {'cameras' if many else 'camera'} {', '.join(order)} from "
                  f"{'their' if many else 'its'} images")
     opts = options or EgoMotionFitOptions()
+    if chain.evidence.camera_offset_window_s is not None:
+        opts = replace(opts, max_offset_s=chain.evidence.camera_offset_window_s)
     # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
     # most of the work (a log's reader fetches for one thread at a time).
     with ThreadPoolExecutor(max_workers=max(1, min(len(order), camera_threads()))) as pool:

@@ -261,7 +261,7 @@ def offset_undetermined(solved: Solved, boot: BlockBootstrap, opts: EgoMotionFit
     or many-valleyed misfit)."""
     if solved.at_window_edge:
         return (f"its best value ({solved.offset_s * 1e3:+.0f} ms) lies at the edge of the +-{opts.max_offset_s:.2f} s "
-                "search window, and the true offset may lie beyond it")
+                "search window, and the true offset may lie beyond it (evidence.camera_offset_window_s widens it)")
     if boot.at_edge > EDGE_SHARE:
         return f"{boot.at_edge:.0%} of the bootstrap minima lie at the edge of the search around it (a flat misfit)"
     return ""

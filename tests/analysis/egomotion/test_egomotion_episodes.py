@@ -8,6 +8,7 @@ Every expectation is the generator's truth: the injected video delay, mount rota
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -28,6 +29,7 @@ from framechain.analysis.egomotion.joint import (
     _Trials,
     finish_fit,
 )
+from framechain.cli.main import main
 from framechain.config.calibration import Intrinsics
 from framechain.geometry.rotations import RotationVector, quat_of
 from framechain.sim.lerobot_video import (
@@ -36,6 +38,7 @@ from framechain.sim.lerobot_video import (
     VideoDatasetTruth,
     generate_video_dataset,
     gripper_pads,
+    write_robot_yaml,
 )
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.timeline import EgoMotionTable, TranslationPrior
@@ -205,16 +208,33 @@ def test_a_grid_at_the_window_edge_measures_nothing_beyond_it(
     assert all(abs(offset) <= limit for offset in trials.tables)
 
 
-def test_video_later_than_the_search_window_is_said_not_crashed(tmp_path_factory: pytest.TempPathFactory,
-                                                                 so101_urdf: Path) -> None:
-    """Video 0.6 s late, past the +-0.5 s window: the offset lies at the window's edge and is said to be undetermined
-    (a grid piled on the edge once left the interval's resampling no spacing: an IndexError)."""
+@pytest.fixture(scope="session")
+def too_late(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> VideoDatasetTruth:
+    """Video 0.6 s late, past the default +-0.5 s search window."""
     spec = VideoDatasetSpec(so101_urdf, seed=31, duration_s=DURATION_S, video_delay_s=0.6)
-    truth = generate_video_dataset(tmp_path_factory.mktemp("too_late") / "dataset", spec)
-    evidence = episode_evidence(truth, so101_urdf)
-    fit = fit_episode(evidence, truth)
+    return generate_video_dataset(tmp_path_factory.mktemp("too_late") / "dataset", spec)
+
+
+def test_video_later_than_the_search_window_is_said_not_crashed(too_late: VideoDatasetTruth,
+                                                                 so101_urdf: Path) -> None:
+    """The offset lies at the window's edge and is said to be undetermined, with the key that widens the window (a
+    grid piled on the edge once left the interval's resampling no spacing: an IndexError)."""
+    fit = fit_episode(episode_evidence(too_late, so101_urdf), too_late)
     assert fit.offset_s == pytest.approx(-0.5, abs=0.005)
     assert "edge of the +-0.50 s search window" in fit.offset_undetermined
+    assert "evidence.camera_offset_window_s widens it" in fit.offset_undetermined
+
+
+def test_a_wider_search_window_from_robot_yaml_finds_it(too_late: VideoDatasetTruth, tmp_path: Path) -> None:
+    """``chain: {evidence: {camera_offset_window_s: 1}}`` in robot.yaml: the command finds the 0.6 s."""
+    robot = write_robot_yaml(too_late, tmp_path / "robot.yaml",
+                             extra={"chain": {"evidence": {"camera_offset_window_s": 1.0}}})
+    out = tmp_path / "out"
+    assert main(["attribute", str(too_late.root), "--episode", "0", "--robot", str(robot), "--out", str(out),
+                 "-q"]) == 0
+    camera = json.loads((out / "attribution.json").read_text())["camera_motion"][0]
+    assert camera["offset_s"] == pytest.approx(-0.6, abs=0.010)
+    assert not camera["undetermined"]
 
 
 def test_shifted_video_timestamps_move_the_offset(clean: tuple[VideoDatasetTruth, EpisodeEvidence, EgoMotionFit],
