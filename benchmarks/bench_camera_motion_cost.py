@@ -26,7 +26,7 @@ EPISODES = int(os.environ.get("FRAMECHAIN_BENCH_EPISODES", "25"))
 FRAMECHAIN = str(Path(sys.executable).with_name("framechain"))
 #: The timed commands run as a user's would, without MALLOC_PERTURB_ (glibc filling every allocation and every free
 #: costs framechain's NumPy temporaries about 10% of an episode); the episodes are generated in a process with it,
-#: so that libx264 writes the same videos every run (see the Makefile).
+#: as the tests generate theirs, so that the encoders write the same videos every run (see the Makefile).
 ENV = {name: value for name, value in os.environ.items() if name != "MALLOC_PERTURB_"}
 
 DECODE = """

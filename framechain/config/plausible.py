@@ -13,8 +13,8 @@ continue a key path: ``evidence.tag_size_m`` + ``" is 160 m, ..."``. The thresho
 - latency_budget_s: over 5 s (milliseconds as seconds); over 1 s;
 - tolerance_m (the error worth acting on): over 1 m (millimetres as metres); over 10 cm;
 - static_window_s: under 10 ms, over an hour (milliseconds as seconds); over 10 minutes;
-- camera_offset_window_s (how far a camera's offset is searched from its motion): under 10 ms, over 60 s
-  (milliseconds as seconds); over 5 s;
+- camera_offset_window_s (how far a camera's offset is searched from its motion): under 50 ms (a few of
+  its 10 ms steps), over 60 s (milliseconds as seconds); over 5 s;
 - intrinsics: cx or cy outside the image; fx or fy under width / 20 (a field of view over 170
   degrees, or K normalised by the image size) or over width x 50; fx and fy 10 % apart;
 - depth scale_m (metres per unit): over 10 (units per metre), under 1e-6; not 1 and outside
@@ -49,7 +49,7 @@ DEPTH_SCALE_MIN, DEPTH_SCALE_MAX = 1e-6, 10.0
 #: A camera's clock offset (s).
 CAMERA_OFFSET_MAX_S, CAMERA_OFFSET_NOTE_S = 3600.0, 1.0
 #: The window a camera's offset is searched over from its motion (s, either way).
-OFFSET_WINDOW_MIN_S, OFFSET_WINDOW_NOTE_S, OFFSET_WINDOW_MAX_S = 0.01, 5.0, 60.0
+OFFSET_WINDOW_MIN_S, OFFSET_WINDOW_NOTE_S, OFFSET_WINDOW_MAX_S = 0.05, 5.0, 60.0
 
 
 class Implausible(ValueError):  # noqa: N818 - a verdict, raised where a value is read
@@ -153,7 +153,8 @@ def _too_long(seconds: float, limit: float, what: str) -> str:
 
 def offset_window(seconds: float) -> str | None:
     if seconds < OFFSET_WINDOW_MIN_S:
-        raise Implausible(f"is {_g(seconds)} s, shorter than one camera frame: give seconds (1 is one second)")
+        raise Implausible(f"is {_g(seconds)} s: the search needs {_g(OFFSET_WINDOW_MIN_S)} s at least, a few of its "
+                          "10 ms steps either way (give seconds: 1 is one second)")
     if seconds > OFFSET_WINDOW_MAX_S:
         raise Implausible(_too_long(seconds, OFFSET_WINDOW_MAX_S, "a camera offset search"))
     if seconds > OFFSET_WINDOW_NOTE_S:

@@ -204,7 +204,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     statuses = [s for s in STATUS_ORDER if any(log.status == s for log in logs)]
     faults: dict[str, int] = {}
     for log in logs:
-        for fault in sorted({f["fault"] for f in log.findings}):  # ties in the bars below keep this order: by name
+        for fault in {f["fault"] for f in log.findings}:
             faults[fault] = faults.get(fault, 0) + 1
     fig, (ax_status, ax_fault) = new_figure(9.6, 3.4, columns=2, top="title")
     ax_status.barh(statuses, [sum(log.status == s for log in logs) for s in statuses],
@@ -213,7 +213,7 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
     ax_status.locator_params(axis="x", integer=True)  # log counts: whole numbers
     ax_status.set_title("Logs by outcome", fontsize=9)
     ax_status.invert_yaxis()
-    names = sorted(faults, key=lambda k: -faults[k])
+    names = sorted(faults, key=lambda k: (-faults[k], k))  # ties by name: a set's order changes from run to run
     ax_fault.barh(names or ["(none)"], [faults[n] for n in names] or [0],
                   color=[hex_color(FAULT_COLORS.get(n, UNEXPLAINED_COLOR)) for n in names] or None)
     ax_fault.set_xlabel("logs with the fault")

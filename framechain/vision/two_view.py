@@ -114,8 +114,9 @@ def rotations_along_translation(
     iterations: int,
 ) -> tuple[FloatArray, FloatArray]:
     """``R`` (P, 3, 3) with ``b0 ~ R b1 + rho t`` for known translation directions ``t`` (P, 3), ``rho >= 0``, and
-    each match's off-flow residual there (P, M): the norm of :func:`off_flow_residuals` (to a few ULPs; within 1e-9
-    rad of the epipole that one scales by a clamped flow, this one takes the whole residual).
+    each match's off-flow residual there (P, M): the norm of :func:`off_flow_residuals` to a few ULPs, the whole
+    residual at the epipole (a flow under 1e-12) for both; between 1e-12 and 1e-9 that one clamps the flow it
+    scales by, and the two differ.
 
     The inverse depths are projected out: a match's residual is the part of ``R b1`` across ``b0``
     that is not along the translation's flow at ``b0`` (all of it where that would need a negative

@@ -176,8 +176,8 @@ def test_unusual_depth_units_and_camera_clocks_are_notes() -> None:
     ({"evidence": {"static_window_s": 0.001}}, "evidence.static_window_s is 0.001 s, shorter than one camera frame"),
     ({"evidence": {"camera_offset_window_s": 500}}, "evidence.camera_offset_window_s is 500 s, too long for a camera "
                                                      "offset search (over 60 s): it looks like milliseconds"),
-    ({"evidence": {"camera_offset_window_s": 0.002}}, "evidence.camera_offset_window_s is 0.002 s, shorter than one "
-                                                       "camera frame"),
+    ({"evidence": {"camera_offset_window_s": 0.02}}, "evidence.camera_offset_window_s is 0.02 s: the search needs "
+                                                      "0.05 s at least"),
     ({"evidence": {"camera_offset_window_s": -1}}, "evidence.camera_offset_window_s must be a positive number"),
 ])
 def test_absurd_budgets_and_windows_are_errors(raw: dict[str, Any], expected: str) -> None:

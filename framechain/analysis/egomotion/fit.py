@@ -178,8 +178,9 @@ def fit_camera_motion(
     turns at all and to rank every candidate link. The declared link, and the links that fit about as
     well as the best without moving rigidly with the declared one (at most :data:`_MAX_CANDIDATES`),
     are then each fitted with their own translation prior (:mod:`.joint`, from the declared mount
-    and from their rotation-only mount, so a placeholder mount does no harm; one whose offset search already
-    misfits :data:`SEARCH_SCREEN` times the best is not fitted further); the one whose own measurement fits
+    and from their rotation-only mount, so a placeholder mount does no harm; one whose offset search and mount
+    fixed point already misfit :data:`SEARCH_SCREEN` times a finished one's is not fitted further); the one whose
+    own measurement fits
     best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
     (near scenery moves with the camera's translation, which a rotation-only measurement reads as
     rotation, so only measurements made with each link's own prior are compared). ``measured``: ``measure(None)``
@@ -254,10 +255,11 @@ class _Start:
 
 
 #: A candidate whose misfit after its offset search and mount fixed point is this many times that of a candidate
-#: finished already is not fitted further. The rest of a fit lowers a misfit by at most a factor of two (2.05 for the
-#: right link with the video 0.3 s late and the mount 30 deg off; 1.0 to 1.1 for the others), and the declared link
-#: is kept within ``same_fit_ratio`` (1.25) of the best: 4 leaves a margin of 1.6. The links that lose were 5 to 50
-#: times the right one there (generated single- and two-arm episodes, every link fitted through).
+#: finished already is not fitted further. On generated single- and two-arm episodes with every link fitted through,
+#: the rest of a fit lowered a misfit by a factor of 2.05 at most (the right link, video 0.3 s late and mount 30 deg
+#: off; 1.0 to 1.1 for the others), and the declared link is kept within ``same_fit_ratio`` (1.25) of the best: 4
+#: leaves a margin of about 1.56 over what was seen (an observed bound, not a proven one). The links that lose were 5
+#: to 50 times the right one there.
 SEARCH_SCREEN = 4.0
 
 

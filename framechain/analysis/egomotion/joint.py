@@ -206,8 +206,9 @@ def _fixed_offset_fit(pairs: Pairs, orientations: Orientations, offset: float
 
 def _search(trials: _Trials, starts: list[float], limit: float) -> float:
     """Near the offset of least cost: the best start, then a bracket walked in steps of BRACKET_STEP_S and one
-    parabola through it (the grid of :func:`_grid` finishes it)."""
-    best = min(starts, key=trials.cost)
+    parabola through it (the grid of :func:`_grid` finishes it). Starts beyond the +-``limit`` window are taken at its
+    edge (a rotation-only offset can lie up to the ranking's fine grid past it)."""
+    best = min((float(np.clip(s, -limit, limit)) for s in starts), key=trials.cost)
     step = BRACKET_STEP_S
     left, right = max(best - step, -limit), min(best + step, limit)
     while trials.cost(left) < trials.cost(best) and left > -limit:

@@ -215,11 +215,22 @@ def too_late(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> Vide
     return generate_video_dataset(tmp_path_factory.mktemp("too_late") / "dataset", spec)
 
 
-def test_video_later_than_the_search_window_is_said_not_crashed(too_late: VideoDatasetTruth,
-                                                                 so101_urdf: Path) -> None:
+def test_video_later_than_the_search_window_is_said_not_crashed(too_late: VideoDatasetTruth, so101_urdf: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     """The offset lies at the window's edge and is said to be undetermined, with the key that widens the window (a
-    grid piled on the edge once left the interval's resampling no spacing: an IndexError)."""
+    grid piled on the edge once left the interval's resampling no spacing: an IndexError); no trial is measured
+    beyond the window, though the rotation-only offset a search starts from lies past it."""
+    offsets: list[float] = []
+    measured = _Trials._measured
+
+    def spy(self: _Trials, q_link_cam: np.ndarray, offset: float, *, rotations_only: bool) -> EgoMotionTable:
+        offsets.append(offset)
+        return measured(self, q_link_cam, offset, rotations_only=rotations_only)
+
+    monkeypatch.setattr(_Trials, "_measured", spy)
     fit = fit_episode(episode_evidence(too_late, so101_urdf), too_late)
+    assert len(offsets) > 10
+    assert max(abs(offset) for offset in offsets) <= 0.5
     assert fit.offset_s == pytest.approx(-0.5, abs=0.005)
     assert "edge of the +-0.50 s search window" in fit.offset_undetermined
     assert "evidence.camera_offset_window_s widens it" in fit.offset_undetermined
