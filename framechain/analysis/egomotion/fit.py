@@ -179,9 +179,8 @@ def fit_camera_motion(
     well as the best without moving rigidly with the declared one (at most :data:`_MAX_CANDIDATES`),
     are then each fitted with their own translation prior (:mod:`.joint`, from the declared mount
     and from their rotation-only mount, so a placeholder mount does no harm; one whose offset search and mount
-    fixed point already misfit :data:`SEARCH_SCREEN` times a finished one's is not fitted further); the one whose
-    own measurement fits
-    best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
+    fixed point already misfit :data:`SEARCH_SCREEN` times a finished one's is not fitted further); the one
+    whose own measurement fits best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
     (near scenery moves with the camera's translation, which a rotation-only measurement reads as
     rotation, so only measurements made with each link's own prior are compared). ``measured``: ``measure(None)``
     and its :func:`rank_links`, when the caller has them already.
