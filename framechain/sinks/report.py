@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import html
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -257,25 +257,18 @@ def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
 def _provenance(result: Attribution) -> list[tuple[str, str]]:
     record = inputs_record(result)
     src = record["source"]
+    frames, stamps = record["frames"], record["stamps"]
+    cameras = [str(e["camera"]) for e in result.camera_motion] or [c["frame"] for c in record.get("cameras", ())]
+    first, last = stamps["observations_first_ns"], stamps["observations_last_ns"]
     return [
         ("file", str(src.get("path", ""))),
         ("format", str(src.get("format", ""))),
-        (
-            "frames",
-            f"camera {record['frames']['camera']}, body {record['frames']['body']}, world {record['frames']['world']}",
-        ),
+        ("frames", f"{_camera_frames(cameras or [frames['camera']])}, body {frames['body']}, world {frames['world']}"),
         ("topics", json.dumps(record["topics"])),
-        (
-            "camera",
-            f"{record['camera']['width']}x{record['camera']['height']}, K {record['camera']['K']}, "
-            f"distortion {record['camera']['distortion_model']}",
-        ),
+        _cameras_row(result, record),
         ("units", "; ".join(f"{k}: {v}" for k, v in record["units"].items())),
-        (
-            "stamps",
-            f"observations from {record['stamps']['observations_first_ns']} to "
-            f"{record['stamps']['observations_last_ns']} ns, {record['stamps']['keyed_on']}",
-        ),
+        ("stamps", ("no observations logged" if first is None else f"observations from {first} to {last} ns")
+         + f", {stamps['keyed_on']}"),
         ("metric", f"{record['metric']['name']}: {record['metric']['definition']}"),
         ("logged points", "; ".join(
             f"{role}: " + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in fates.items())
@@ -286,6 +279,26 @@ def _provenance(result: Attribution) -> list[tuple[str, str]]:
         ("seed", str(record["seed"])),
         ("framechain", str(record["framechain_version"])),
     ]
+
+
+def _camera_frames(cameras: Sequence[str]) -> str:
+    return f"camera {cameras[0]}" if len(cameras) == 1 else f"cameras {', '.join(cameras)}"
+
+
+def _lens(camera: Mapping[str, Any]) -> str:
+    return f"{camera['width']}x{camera['height']}, K {camera['K']}, distortion {camera['distortion_model']}"
+
+
+def _cameras_row(result: Attribution, record: Mapping[str, Any]) -> tuple[str, str]:
+    """Every camera's lens: as each camera's own motion was measured through, a rig's cameras, or the one camera."""
+    if result.camera_motion:
+        return ("cameras" if len(result.camera_motion) > 1 else "camera", "; ".join(
+            f"{e['camera']}: declared on {e['declared_link'] or 'the world'}, {e['width_px']} px wide, focal "
+            + (f"{e['focal_px']:g} px" if e.get("focal_px") else "unknown")
+            + ("" if e.get("intrinsics_known", True) else " (guessed)") for e in result.camera_motion))
+    if len(record.get("cameras", ())) > 1:
+        return "cameras", "; ".join(f"{c['frame']}: {_lens(c)}" for c in record["cameras"])
+    return "camera", _lens(record["camera"])
 
 
 #: The findings table: the evidence is a column in HTML, a list below the table in Markdown.

@@ -179,25 +179,50 @@ def _drawn_points(y: FloatArray, columns: int) -> IntArray:
 
 
 def motion_figures(run: Run) -> list[Figure]:
-    """Per measured camera: |rotation rate| over time from its images, from forward kinematics as declared and
-    as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`)."""
+    """Per measured camera, two figures: |rotation rate| over time from its images, from forward kinematics as
+    declared and as fitted (a time offset shows as a shift, the picture of :mod:`framechain.sinks.rerun_egomotion`);
+    and the misfit of the rate's components, as declared and as fitted (where a mount error shows too)."""
     out = []
     for curves in run.rotation_rates:
         t = curves.middle_ns * 1e-9
+        name = "".join(c if c.isalnum() else "_" for c in curves.camera)
+        fitted = f"{curves.link} shifted {curves.offset_s * 1e3:+.1f} ms, fitted mount"
+        declared = f"forward kinematics of {curves.declared_link} as declared"
         fig, (ax,) = new_figure(6.4, 3.6, top="title")
         ax.plot(t, curves.measured.magnitude_deg_s, color="k", lw=1.6, label="from the images")
-        ax.plot(t, curves.declared.magnitude_deg_s, color=hex_color(AS_RUN_COLOR), lw=1.0,
-                label=f"forward kinematics of {curves.declared_link} as declared")
-        ax.plot(t, curves.fitted.magnitude_deg_s, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--",
-                label=f"{curves.link} shifted {curves.offset_s * 1e3:+.1f} ms, fitted mount")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("rotation rate (deg/s)")
-        ax.set_title(f"Camera {curves.camera}: its own motion against forward kinematics", fontsize=9)
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7)
-        name = "rotation_rate_" + "".join(c if c.isalnum() else "_" for c in curves.camera)
-        out.append(figure_png(fig, name, f"Rotation rate of {curves.camera}: images against forward kinematics"))
+        ax.plot(t, curves.declared.magnitude_deg_s, color=hex_color(AS_RUN_COLOR), lw=1.0, label=declared)
+        ax.plot(t, curves.fitted.magnitude_deg_s, color=hex_color(CORRECTED_COLOR), lw=1.0, ls="--", label=fitted)
+        _legend_above(ax, curves.measured.magnitude_deg_s, curves.declared.magnitude_deg_s,
+                      curves.fitted.magnitude_deg_s)
+        _motion_axes(ax, "rotation rate (deg/s)", f"Camera {curves.camera}: its own motion against forward kinematics")
+        out.append(figure_png(fig, f"rotation_rate_{name}",
+                              f"Rotation rate of {curves.camera}: images against forward kinematics"))
+        fig, (ax,) = new_figure(6.4, 3.6, top="title")
+        before = np.linalg.norm(curves.measured.components_deg_s - curves.declared.components_deg_s, axis=1)
+        after = np.linalg.norm(curves.measured.components_deg_s - curves.fitted.components_deg_s, axis=1)
+        ax.plot(t, before, color=hex_color(AS_RUN_COLOR), lw=1.0, label=declared)
+        ax.plot(t, after, color=hex_color(CORRECTED_COLOR), lw=1.0, label=fitted)
+        _legend_above(ax, before, after)
+        _motion_axes(ax, "misfit of the rate (deg/s)", f"Camera {curves.camera}: images minus forward kinematics")
+        out.append(figure_png(fig, f"rotation_misfit_{name}",
+                              f"Misfit of {curves.camera}'s rotation rate (every component: a mount error shows "
+                              "here, not in the rate's size)"))
     return out
+
+
+def _motion_axes(ax: Any, ylabel: str, title: str) -> None:
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, alpha=0.3)
+
+
+def _legend_above(ax: Any, *series: FloatArray) -> None:
+    """The legend in room made above the curves (none of them drawn under it), the y axis from zero."""
+    values = np.concatenate([s[np.isfinite(s)] for s in series])
+    top = float(values.max()) if values.size else 1.0
+    ax.set_ylim(0.0, 1.45 * top if top > 0 else 1.0)
+    ax.legend(fontsize=7, loc="upper left")
 
 
 def after_label(result: Attribution) -> str:

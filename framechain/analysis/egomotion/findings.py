@@ -393,6 +393,8 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
         "camera": motion.camera, "name": declaration.name if declaration else None,
         "declared_link": motion.declared_link, "frames": motion.frames, "pairs": len(motion.table),
         "seconds": round(motion.seconds, 3), "pairing": motion.pairing or None,
+        # The lens the motion was measured through: declared, or guessed (intrinsics_known false).
+        "focal_px": _num(motion.focal_px), "width_px": motion.width_px, "intrinsics_known": motion.intrinsics_known,
         "observable": observability(motion, judgement),
     }
     if fit is None or not fit.link:

@@ -37,20 +37,26 @@ def recording(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tup
     return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
 
-_RUNS: dict[tuple[str, str, int], dict[str, Any]] = {}
+_RUNS: dict[tuple[str, str, int], tuple[dict[str, Any], Path]] = {}
 
 
 def attribute(root: Path, robot: Path, capsys: pytest.CaptureFixture[str], factory: pytest.TempPathFactory,
               episode: int = 1) -> dict[str, Any]:
     """attribution.json of a run (run once per process for the same inputs)."""
+    return copy.deepcopy(attributed(root, robot, capsys, factory, episode)[0])
+
+
+def attributed(root: Path, robot: Path, capsys: pytest.CaptureFixture[str], factory: pytest.TempPathFactory,
+               episode: int = 1) -> tuple[dict[str, Any], Path]:
+    """attribution.json of a run and the folder of its outputs (report.md beside it)."""
     key = (str(root), str(robot), episode)
     if key not in _RUNS:
         out = factory.mktemp("out")
         code = main(["attribute", str(root), "--episode", str(episode), "--robot", str(robot), "--out", str(out),
-                     "--format", "json", "--json", "-q"])
+                     "--format", "json,md", "--json", "-q"])
         assert code == 0
-        _RUNS[key] = json.loads(capsys.readouterr().out)
-    return copy.deepcopy(_RUNS[key])
+        _RUNS[key] = json.loads(capsys.readouterr().out), out
+    return _RUNS[key]
 
 
 def entries(result: dict[str, Any]) -> dict[str, dict[str, Any]]:
@@ -92,6 +98,23 @@ def test_each_cameras_offset_is_found_within_10_ms(recording: tuple[VideoDataset
         assert entry["offset_s"] == pytest.approx(-camera.delays_s[1], abs=0.010)
         assert f"{camera.name}_optical_frame" in found
     assert_no_bound_below_its_estimate(result)
+
+
+def test_the_reports_provenance_names_every_camera_and_its_lens(recording: tuple[VideoDatasetTruth, Path],
+                                                                capsys: pytest.CaptureFixture[str],
+                                                                tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Both wrist cameras, each with the link it is declared on and the focal length the generator declared; the
+    episode logs no detection, which the stamps say instead of a span of nothing."""
+    truth, robot = recording
+    _result, out = attributed(truth.root, robot, capsys, tmp_path_factory)
+    rows = {line.split(" | ")[0].strip("| "): line for line in (out / "report.md").read_text().splitlines()
+            if line.startswith("| ")}
+    frames = [f"{camera.name}_optical_frame" for camera in truth.cameras]
+    assert f"cameras {', '.join(frames)}, body " in rows["frames"]
+    assert rows["cameras"] == "| cameras | " + "; ".join(
+        f"{frame}: declared on {camera.declared_link}, {truth.spec.width} px wide, focal {truth.declared_focal_px:g} px"
+        for frame, camera in zip(frames, truth.cameras, strict=True)) + " |"
+    assert rows["stamps"].startswith("| stamps | no observations logged, ")
 
 
 def _state_later(dataset: Path, destination: Path, shift_s: float) -> Path:
