@@ -189,8 +189,8 @@ def render_fleet_report(
     logs = fleet_logs(table)
     spread = estimate_spread(logs)
     figures = make_fleet_figures(logs)
-    offsets = video_offsets(table)
     cameras = recordings or {}
+    offsets = video_offsets(table, cameras)
     camera_figs = camera_figures(cameras)
     doc = fleet_document(logs, spread, figures, notes,
                          [*cameras_sections(cameras, camera_figs), *offset_sections(offsets)])
@@ -229,9 +229,11 @@ def make_fleet_figures(logs: Sequence[FleetLog]) -> list[Figure]:
             name = f["estimate_name"]
             if f["estimate_value"] is not None and name in _DISPLAY:
                 scale, unit = _DISPLAY[name]
-                groups.setdefault((f"{f['fault']} at {f['hop']}", f"{name.split('_')[0]} ({unit})"), []).append(
+                # Per camera, as the table above: two cameras' offsets are two faults, not one spread.
+                where = f"on {f['camera']}" if f.get("camera") else f"at {f['hop']}"
+                groups.setdefault((f"{f['fault']} {where}", f"{name.split('_')[0]} ({unit})"), []).append(
                     f["estimate_value"] * scale)
-                colours[f"{f['fault']} at {f['hop']}"] = FAULT_COLORS.get(f["fault"], UNEXPLAINED_COLOR)
+                colours[f"{f['fault']} {where}"] = FAULT_COLORS.get(f["fault"], UNEXPLAINED_COLOR)
     if groups:
         rng = np.random.default_rng(0)  # jitter only: the same report for the same table
         n = len(groups)

@@ -81,6 +81,33 @@ def test_every_episodes_offset_is_in_the_camera_table_and_the_late_one_departs(
         assert row.rstrip().endswith("| no |") != late, row
 
 
+def test_the_fleets_offsets_are_judged_per_camera(swapped: tuple[VideoDatasetTruth, Path, BatchResult],
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both cameras' offsets in every episode (60 and 90 ms late, one episode 100 ms more): each camera against its
+    own median, the late episode disagreeing for both, and the fleet's plot of estimates one box per camera."""
+    from framechain.sinks import fleet_report
+
+    truth, _robot, result = swapped
+    report = (result.table_path.parent / "fleet_report.md").read_text()
+    section = report.split("## Video/state time offset per log", 1)[1].split("\n## ", 1)[0]
+    for camera in truth.cameras:
+        frame = f"{camera.name}_optical_frame"
+        median = np.median([-d for d in camera.delays_s]) * 1e3
+        (summary,) = [line for line in section.splitlines() if line.startswith(f"Camera {frame}, ")]
+        assert f"Camera {frame}, {EPISODES} logs: median " in summary
+        assert float(summary.split("median ")[1].split(" ms")[0]) == pytest.approx(median, abs=3.0)
+        assert summary.endswith(f"disagree: {truth.root.resolve()} episode {LATE_EPISODE}.")
+        rows = [line for line in section.splitlines() if f"| {frame} |" in line]
+        assert len(rows) == EPISODES
+        assert [r.rstrip(" |").endswith("no") for r in rows] == [e == LATE_EPISODE for e in range(EPISODES)]
+    drawn: list[str] = []
+    monkeypatch.setattr(fleet_report, "figure_png", lambda fig, name, caption: drawn.extend(
+        args[0] for _t, method, args, _k in fig.sketch.calls if method == "set_title" and name == "fleet_estimates"))
+    fleet_report.make_fleet_figures(fleet_report.fleet_logs(pq.read_table(result.table_path)))
+    boxes = sorted(title.split(" (")[0] for title in drawn)
+    assert boxes == sorted(f"latency on {c.name}_optical_frame" for c in truth.cameras)
+
+
 def test_attribute_episodes_prints_the_recording(swapped: tuple[VideoDatasetTruth, Path, BatchResult],
                                                  tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """attribute DATASET --episodes reuses the batch's results (resumed: nothing measured again) and says per camera
