@@ -296,7 +296,9 @@ def _record_head(task: UnitTask) -> dict[str, Any]:
     return {
         "schema": SCHEMA, "key": task.key, "log": str(unit.path), "episode": unit.episode, "unit": unit.label,
         "status": "crashed", "error": None, "error_type": None, "verdict": None, "metric": None,
-        "chain": task.chain, "chain_suggested": task.chain is None, "start_ns": None, "end_ns": None,
+        # A LeRobot dataset's robot.yaml is its chain file (its cameras, and its chain: section).
+        "chain": task.chain or task.robot, "chain_suggested": task.chain is None and task.robot is None,
+        "start_ns": None, "end_ns": None,
         "observations": None, "replayed": None, "error_median_m": None, "error_p95_m": None, "residual_median_m": None,
         "findings": [], "notes": [], "framechain": __version__, "pid": os.getpid(),
     }

@@ -65,7 +65,7 @@ class FleetLog:
     verdict: str | None
     error_median_m: float | None
     findings: list[dict[str, Any]]
-    chain: str | None = None  # the chain file it was analysed with (None: the suggested chain)
+    chain: str | None = None  # the chain file (or robot.yaml) it was analysed with (None: the suggested chain)
 
     @property
     def chain_text(self) -> str:

@@ -87,8 +87,11 @@ def test_the_fleets_offsets_are_judged_per_camera(swapped: tuple[VideoDatasetTru
     own median, the late episode disagreeing for both, and the fleet's plot of estimates one box per camera."""
     from framechain.sinks import fleet_report
 
-    truth, _robot, result = swapped
+    truth, robot, result = swapped
     report = (result.table_path.parent / "fleet_report.md").read_text()
+    # Analysed with the robot.yaml given (not a "suggested" chain), as the table's chain column says.
+    assert f"Chains: {robot} ({EPISODES} logs)." in report
+    assert {row["chain"] for row in pq.read_table(result.table_path).to_pylist()} == {str(robot)}
     section = report.split("## Video/state time offset per log", 1)[1].split("\n## ", 1)[0]
     for camera in truth.cameras:
         frame = f"{camera.name}_optical_frame"
