@@ -247,7 +247,7 @@ def _outcome(made: Run) -> dict[str, Any]:
     findings = [_finding_row(f) for f in result.findings]
     # Findings under the tolerance are notes: a log with only those is clean; one whose deciding fits are undetermined
     # is inconclusive, whatever else it found.
-    status: Status = ("no_evidence" if result.metric == "none" else "inconclusive" if result.undetermined
+    status: Status = ("no_evidence" if result.nothing_checked else "inconclusive" if result.undetermined
                       else "findings" if any(f.actionable for f in result.findings) else "clean")
     counts = result.counts()
     return {

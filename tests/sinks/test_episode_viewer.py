@@ -25,9 +25,9 @@ WALL_S = 1_760_000_000.125  # the first row's Unix time, stored per frame in obs
 
 @pytest.fixture(scope="module")
 def episode_rrd(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> Path:
-    """A 2 s SO-101 episode as recorded (joint states and a wrist video, no detections), replayed to an .rrd."""
+    """A 3 s SO-101 episode as recorded (joint states and a wrist video, no detections), replayed to an .rrd."""
     folder = tmp_path_factory.mktemp("episode_viewer")
-    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(so101_urdf, seed=3, duration_s=2.0,
+    truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(so101_urdf, seed=3, duration_s=3.0,
                                                                          video_delay_s=0.06))
     robot = write_video_robot_yaml(truth, folder / "robot.yaml")
     rrd = folder / "episode.rrd"
@@ -105,11 +105,11 @@ def test_a_unix_time_column_in_any_unit_is_the_wall_clock(first: np.generic, exp
 
 def test_an_episodes_summary_says_what_its_cameras_measured(episode_rrd: Path) -> None:
     """No detection to count: the summary names the frames the camera's motion was measured on (the episode's
-    2 s of rows at the generator's 30 fps), not a table of zeros."""
+    3 s of rows at the generator's 30 fps), not a table of zeros."""
     from tests.helpers.rrd_views import column_values, read_chunks
 
     (summary,) = column_values(read_chunks(episode_rrd), "/summary", "TextDocument:text", static=True)
     text = str(summary[0] if isinstance(summary, list) else summary)
     assert "Observations: none logged (no detections); the cameras' own motion measured instead: " in text
-    assert "camera wrist_optical_frame: 60 frames, " in text
+    assert "camera wrist_optical_frame: 90 frames, " in text
     assert "| total |" not in text

@@ -47,6 +47,7 @@ from framechain.analysis.model.estimates import (
     PermutationEstimate,
     RotationEstimate,
     ScaleEstimate,
+    format_estimate,
 )
 from framechain.analysis.verdict.checks import Bound
 from framechain.analysis.verdict.findings import Finding
@@ -192,13 +193,14 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
             continue
         fit = misfit.fit
         judgement = judge(motion, fit, misfit.rms(frozenset()), misfit.rms(_EVERY), misfit.motion_rms())
-        proposals = _proposals(motion, fit, declaration, judgement)
+        proposals, dropped = _contributing(misfit, _proposals(motion, fit, declaration, judgement), motion.camera)
         values = _shares(misfit, [p.kind for p in proposals])
         totals += misfit.rms(frozenset())
         before.append(misfit.residual(frozenset()))
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
         found.extend((proposal, value, motion.camera) for proposal, value in zip(proposals, values, strict=True))
-        said = (*motion.notes, *fit.notes, *_judged_notes(judgement), *_focal_notes(motion, fit, proposals, judgement))
+        said = (*motion.notes, *fit.notes, *_judged_notes(judgement), *_focal_notes(motion, fit, proposals, judgement),
+                *dropped)
         notes.extend(n for n in said if n not in notes)
         entries.append(_entry(motion, declaration, misfit, proposals, judgement))
         bounds.extend(motion_bounds(motion, judgement))
@@ -232,6 +234,23 @@ def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
     scale = max(1.4826 * float(np.median(corrected[rows])) if rows.size else 0.0, 0.05)
     weights = 1.0 / (1.0 + (corrected[rows] / (2.5 * scale)) ** 2)
     return _Misfit(motion, fit, weights, rows, probe.rates_by_kinds)
+
+
+def _contributing(misfit: _Misfit, proposals: Sequence[_Proposal], camera: str) -> tuple[list[_Proposal], list[str]]:
+    """The corrections that lower the misfit given the others (a Shapley share above zero), and a note for each
+    one dropped: the least contributing first, the shares recomputed without it (as the chain fit's findings)."""
+    kept = list(proposals)
+    notes = []
+    while kept:
+        values = _shares(misfit, [p.kind for p in kept])
+        worst = int(np.argmin(values))
+        if values[worst] > 0:
+            break
+        dropped = kept.pop(worst)
+        notes.append(f"camera {camera}: {dropped.fault.value} at {dropped.hop} ({format_estimate(dropped.estimate)}) "
+                     "is no finding: with the other corrections it does not lower the rotation-rate misfit (Shapley "
+                     f"share {values[worst]:+.2f} deg/s)")
+    return kept, notes
 
 
 def _shares(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:

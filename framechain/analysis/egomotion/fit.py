@@ -47,6 +47,7 @@ from framechain.analysis.egomotion.model import (
     MountError,
 )
 from framechain.analysis.egomotion.solve import (
+    Observed,
     Orientations,
     Pairs,
     Solved,
@@ -62,6 +63,7 @@ from framechain.analysis.egomotion.solve import (
     observed,
     offset_undetermined,
     solve,
+    too_short,
 )
 from framechain.arrays import FloatArray, IntArray
 from framechain.geometry.rotations import Inverse, angle_of, matrix_of, quat_of, rotate_by, rotvec_of
@@ -346,7 +348,8 @@ def _final(
     mount = solved.mount
     link_rv = link_rotvecs(orientations, pairs, np.array([solved.offset_s]))[0] - solved.bias * pairs.dt[:, None]
     info = information(orientations, pairs, solved, link_rv)
-    seen = observed(info)
+    short = too_short(pairs, opts)
+    seen = Observed(short, ()) if short else observed(info)
     if seen.unobservable:
         notes.append(f"camera {camera}: {seen.unobservable}: its time offset and mount are not observable")
     elif seen.axes:

@@ -384,6 +384,21 @@ class Observed:
     axes: tuple[tuple[float, float, float], ...]  # link-frame axes the mount is not observable about
 
 
+#: Blocks of :attr:`EgoMotionFitOptions.block_s` the compared frame pairs must span: fewer leave the block bootstrap
+#: next to nothing to resample (one block gives every resample the same offset and mount: an interval of width 0).
+MIN_BLOCKS = 4
+
+
+def too_short(pairs: Pairs, opts: EgoMotionFitOptions) -> str:
+    """Why the compared frame pairs are too short a stretch for intervals ("" when they are not)."""
+    span = float(pairs.t0.max() - pairs.t0.min()) if pairs.t0.size else 0.0
+    if span >= (MIN_BLOCKS - 1) * opts.block_s:
+        return ""
+    return (f"the frame pairs it compares span {span:.2f} s (the episode less the offset search window "
+            f"+-{opts.max_offset_s:.2f} s at each end), under the {(MIN_BLOCKS - 1) * opts.block_s:.1f} s its "
+            "intervals need")
+
+
 def observed(info: Information) -> Observed:
     """What the link's rotation lets the images show: nothing when it turns by less than
     :data:`OBSERVABLE_RATIO` times the misfit, else the mount about every axis it turns across that much."""

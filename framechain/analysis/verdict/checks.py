@@ -161,11 +161,13 @@ def bounds_sentence(bounds: Sequence[Bound], found: Sequence[Found] = (), *, det
         if b.observable:
             by_camera.setdefault(b.camera, []).append(b)
     seen = [f"{_limited(mine)} on camera {camera}" if camera else _limited(mine) for camera, mine in by_camera.items()]
-    # Families not observable for one cause are named together, with the cause (the why up to its colon).
+    # Families not observable for one cause are named together, with the cause (the why up to its colon, after the
+    # camera a camera's why starts with: the camera is named once already).
     causes: dict[tuple[str, str], list[str]] = {}
     for b in rest:
         if not b.observable:
-            causes.setdefault((b.why.split(":")[0].rstrip("."), b.camera), []).append(b.text(camera=False))
+            why = b.why.removeprefix(f"camera {b.camera}: ") if b.camera else b.why
+            causes.setdefault((why.split(":")[0].rstrip("."), b.camera), []).append(b.text(camera=False))
     blind = [f"{_and(names)}{f' on camera {camera}' if camera else ''} ({cause})"
              for (cause, camera), names in causes.items()]
     parts = []

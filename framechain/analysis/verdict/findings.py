@@ -205,6 +205,15 @@ class Attribution:
     #: own effect; empty where findings do not come from a chain fit (a camera's own motion).
     others_shift: tuple[FloatArray, ...] = ()
 
+    @property
+    def nothing_checked(self) -> bool:
+        """No evidence measured the chain: none in the log, or only cameras whose own motion shows nothing (an arm
+        that does not turn, an episode too short), with no finding and nothing undetermined."""
+        if self.metric == "none":
+            return True
+        observable = any(o["observable"] for entry in self.camera_motion for o in entry.get("observable", ()))
+        return self.metric == "camera_motion" and not (observable or self.findings or self.undetermined)
+
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
 
@@ -261,10 +270,10 @@ class Attribution:
         if self.metric == "none":
             return ("No evidence in this log to measure the chain against (no logged points, reference or static "
                     "target): nothing could be checked.")
+        if self.metric == "camera_motion":  # its own "Inconclusive: ..." for the undetermined, camera by camera
+            return self._motion_verdict(summary)
         if self.undetermined:
             return self._inconclusive(summary)
-        if self.metric == "camera_motion":
-            return self._motion_verdict(summary)
         bounds = self._bounds_sentence()
         unseen = self._rig_unobservable()
         against = (f"median error {summary['median'] * 1e3:.1f} mm against the "

@@ -39,7 +39,7 @@ class HubCache:
 
 @pytest.fixture(scope="module")
 def hub_cache(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> HubCache:
-    """Two 1.5 s SO-101 episodes whose wrist video is 50 ms late, as ``lerobot/tiny_v3`` (v3.0, whole) and
+    """Two 3 s SO-101 episodes whose wrist video is 50 ms late, as ``lerobot/tiny_v3`` (v3.0, whole) and
     ``lerobot/tiny_v21`` (v2.1, only meta/ and episode 0 in the cache)."""
     from huggingface_hub import scan_cache_dir
 
@@ -47,7 +47,7 @@ def hub_cache(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> Hub
     datasets = {}
     for version in ("v3.0", "v2.1"):
         truth = generate_video_dataset(folder / version, VideoDatasetSpec(
-            so101_urdf, seed=5, episodes=2, duration_s=1.5, version=version, video_delay_s=DELAY_S))
+            so101_urdf, seed=5, episodes=2, duration_s=3.0, version=version, video_delay_s=DELAY_S))
         datasets[version] = truth
     robot = write_robot_yaml(datasets["v3.0"], folder / "robot.yaml")
     home = folder / "hf"
@@ -84,7 +84,7 @@ def test_info_and_attribute_read_an_episode_from_the_cache_offline(hub_cache: Hu
     assert info.returncode == 0, info.stderr
     summary = json.loads(info.stdout)
     assert Path(summary["path"]).resolve() == hub_cache.v3_snapshot.resolve()
-    assert summary["message_count"] == 45  # 1.5 s at 30 fps
+    assert summary["message_count"] == 90  # 3 s at 30 fps
     done = framechain("attribute", "lerobot/tiny_v3", "--episode", "0", "--robot", str(hub_cache.robot),
                       "--out", str(tmp_path), "--bootstrap", "0", "--format", "json", "-q", **offline(hub_cache))
     assert done.returncode == 0, done.stderr

@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 from framechain import pipeline
 from framechain.analysis.model.estimates import LatencyEstimate
 from framechain.cli.main import main
+from framechain.fleet import run_batch
 from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
 from tests.helpers.egomotion_scene import shifted_copy
 from tests.helpers.realdata import PANDA_URDF
@@ -348,6 +349,45 @@ def test_motors_mapped_onto_another_robot_are_inconclusive(clean: tuple[VideoDat
                                         "wrist_optical_frame")
     assert "No fault" not in result["verdict"]
     assert camera_entry(result)["explained"] is False
+    # The flags say what the verdict says (a fleet counts the episode inconclusive, not clean).
+    assert result["inconclusive"] is True
+    (undecided,) = result["undetermined"]
+    assert undecided["camera"] == "wrist_optical_frame"
+    assert undecided["why"] == camera_entry(result)["unexplained_why"]
+
+
+def test_a_quarter_turned_mount_brings_no_latency_that_does_not_lower_the_misfit(
+        tmp_path_factory: pytest.TempPathFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        so101_urdf: Path) -> None:
+    """On time, mounted 90 degrees off what robot.yaml says: the mount is the finding. A latency fitted beside it
+    that does not lower the misfit given the mount (a Shapley share at or below zero) is a note, never a finding
+    with a fix (its fix would put 10 ms of error into a robot.yaml that had none)."""
+    truth, robot = generated(tmp_path_factory, "run_quarter_turn", VideoDatasetSpec(
+        so101_urdf, seed=3, duration_s=6.0, mount_error_deg=90.0))
+    result = attribute(truth.root, robot, tmp_path, capsys)
+    assert [f["fault"] for f in result["findings"]] == ["rotation_error"]
+    assert result["findings"][0]["estimate"]["angle_deg"] == pytest.approx(90.0, abs=3.0)
+    assert all(f["share"] > 0 for f in result["findings"])
+    dropped = [n for n in result["notes"] if "is no finding: with the other corrections it does not lower" in n]
+    assert all("Shapley share -" in n or "Shapley share +0.00" in n for n in dropped)
+
+
+def test_an_episode_too_short_to_resample_says_so(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str], so101_urdf: Path) -> None:
+    """1 s, its video 50 ms late, the offset searched +-0.2 s: the frame pairs compared span 0.5 s, one block of the
+    bootstrap (every resample the same: intervals of width 0). No estimate, and the reason, not a strong finding."""
+    truth, robot = generated(tmp_path_factory, "run_one_second", VideoDatasetSpec(
+        so101_urdf, seed=3, duration_s=1.0, video_delay_s=0.05))
+    robot.write_text(robot.read_text() + "chain: {evidence: {camera_offset_window_s: 0.2}}\n")
+    result = attribute(truth.root, robot, tmp_path, capsys)
+    assert result["findings"] == []
+    assert result["verdict"].startswith("Nothing could be checked")
+    assert "the frame pairs it compares span 0.5" in result["verdict"]
+    assert "under the 1.5 s its intervals need" in result["verdict"]
+    assert result["inconclusive"] is False
+    # A fleet counts it as checking nothing, not as clean.
+    batch = run_batch([truth.root], tmp_path / "fleet", robot=robot, jobs=1, bootstrap=0, report_formats=())
+    assert [r["status"] for r in batch.records] == ["no_evidence"]
 
 
 def test_a_camera_declared_on_the_wrist_that_rides_the_gripper_is_named(clean: tuple[VideoDatasetTruth, Path],
