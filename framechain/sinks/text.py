@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import html
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from framechain.analysis.model.estimates import format_estimate, format_interval
 from framechain.analysis.verdict.findings import Attribution, Finding
@@ -28,12 +29,30 @@ def observation_counts(result: Attribution) -> str:
 
 def measured_instead(result: Attribution | None) -> str:
     """For a run measured against the cameras' own motion, with no logged observation, what was measured (the
-    frames and frame pairs per camera); "" for any other run."""
+    frames, and the frame pairs measured of those possible with why the rest were left out, per camera); "" for any
+    other run."""
     if result is None or result.metric != "camera_motion" or result.counts()["total"]:
         return ""
     measured = "; ".join(f"camera {c['camera']}: {c.get('frames', 0)} frames, {c.get('pairs', 0)} frame pairs"
-                         for c in result.camera_motion)
+                         f"{_pairs_left_out(c)}" for c in result.camera_motion)
     return f"none logged (no detections); the cameras' own motion measured instead: {measured}"
+
+
+#: The reasons a frame pair is left out (``camera_motion`` entries' ``pairs_left_out``), as words.
+_LEFT_OUT_WHY = {"too_few_matched_features": "too few matched features", "stamps_out_of_order": "stamps out of order",
+                 "too_few_inliers": "too few inliers"}
+
+
+def _pairs_left_out(entry: Mapping[str, Any]) -> str:
+    """`` of P possible (L left out: N why, ...)``: the pairs measured reconcile with those the frames gave."""
+    possible = entry.get("pairs_possible")
+    if possible is None:
+        return ""
+    left = {why: int(n) for why, n in (entry.get("pairs_left_out") or {}).items() if n}
+    if not left:
+        return f" of {possible} possible (none left out)"
+    reasons = ", ".join(f"{n} {_LEFT_OUT_WHY.get(why, why)}" for why, n in left.items())
+    return f" of {possible} possible ({sum(left.values())} left out: {reasons})"
 
 
 def mm(value_m: float | None) -> str:

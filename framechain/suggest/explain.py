@@ -7,7 +7,7 @@ from __future__ import annotations
 from framechain.adapters.model import LoadedLog
 from framechain.catalogue import NothingReplayed, RejectReason
 from framechain.config.chain import ChainConfig
-from framechain.suggest.needs import chain_needs, quote_key
+from framechain.suggest.needs import NeedStatus, chain_needs, lost_videos, quote_key
 
 #: What to add for a reason of the replay's, when what the chain needs does not say it more precisely.
 _ADD: dict[RejectReason, str] = {
@@ -41,6 +41,9 @@ def why_nothing_replayed(loaded: LoadedLog, chain: ChainConfig, nothing: Nothing
         det = needs["detections"]
         if det.found:
             return f"0 observations: {det.detail}, but none reached the replay"
+        if det.status is NeedStatus.MISSING and lost_videos(loaded.timeline.metadata):
+            # The video is what was meant to be measured: restoring it comes before adding detections.
+            return f"0 observations: {det.detail}: restore it, or {det.fix()}"
         return f"0 observations: {det.detail}: {det.fix()}"
     ranked = nothing.ranked()
     listed = ", ".join(f"{reason} {n}" for reason, n in ranked)

@@ -333,9 +333,7 @@ def _camera_arm(name: str, arms: Sequence[_Arm]) -> _Arm | None:
 
 def _size(feature: FeatureInfo) -> tuple[int, int]:
     """(width, height) from the feature's shape and names (channels last or first)."""
-    names = list(feature.names or ())
-    shape = list(feature.shape)
-    if "height" in names and "width" in names and len(shape) == len(names):
-        return shape[names.index("width")], shape[names.index("height")]
-    dims = [d for d in shape if d > 4]
+    if feature.image_size is not None:
+        return feature.image_size
+    dims = [d for d in feature.shape if d > 4]
     return (dims[1], dims[0]) if len(dims) >= 2 else (640, 480)

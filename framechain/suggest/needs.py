@@ -135,6 +135,8 @@ def _dataset_needs(loaded: LoadedLog, chain: ChainConfig) -> list[ChainNeed]:
             shown = ", ".join(f"{n} ({k})" for n, k in videos.items())
             needs.append(ChainNeed("detections", none, f"no detections; the motion of cameras {shown} in their video "
                                    "is evidence of its own (offset, mount, link)", key))
+        elif lost := lost_videos(meta):
+            needs.append(ChainNeed("detections", missing, f"no detections, and {lost}", key))
         else:
             needs.append(ChainNeed("detections", missing, "no detections and no camera video", key))
     depth = bool(np.isfinite(obs.depth_m[mine]).any()) or bool((tl.depth_frames.frame == chain.frames.camera).any())
@@ -153,6 +155,14 @@ def _dataset_needs(loaded: LoadedLog, chain: ChainConfig) -> list[ChainNeed]:
                                "target or a reference", "chain.evidence.static_target: true  (in robot.yaml; the "
                                f"detected object does not move); or chain.evidence.reference_point: [X, Y, Z]{where}"))
     return needs
+
+
+def lost_videos(metadata: Mapping[str, Any]) -> str:
+    """The cameras of a LeRobot episode whose video info.json points to is not on disk, as a clause ("" for none)."""
+    cameras: Mapping[str, Any] = metadata.get("cameras") or {}
+    lost = [(name, c) for name, c in cameras.items() if isinstance(c, Mapping) and c.get("video_missing")]
+    return "; ".join(f"camera {name}'s video is missing: {c['video_missing']} (where info.json's video_path and "
+                     f"video_key {c.get('video_key')} point)" for name, c in lost)
 
 
 def _camera_need(camera: str, holes: Mapping[str, str], facts: LogFacts, loaded: LoadedLog) -> ChainNeed:

@@ -54,6 +54,8 @@ from framechain.vision.two_view import (
 __all__ = [
     "EgoMotionOptions",
     "FeatureTracks",
+    "FramePairCounts",
+    "frame_pair_counts",
     "measure_egomotion",
     "track_features",
 ]
@@ -105,6 +107,27 @@ class EgoMotionOptions:
 
 #: Frame pairs: padded bearings, the stamps of both frames, the match count of each.
 _Pairs = tuple[PairBatch, IntArray, IntArray, IntArray]
+#: Pairs with enough matched moving features: the positions (among the usable frames) of both frames and the
+#: indices of the matched tracks in each.
+_Matched = list[tuple[int, int, IntArray, IntArray]]
+
+
+@dataclass(frozen=True)
+class FramePairCounts:
+    """What became of the frame pairs ``spans`` apart the usable frames give (within a run of consecutive frames),
+    before their motion is measured: the rest are measured, and a measurement leaves out those with too few inliers.
+    """
+
+    possible: int
+    #: Fewer than ``min_inliers`` moving features tracked into both frames.
+    few_matches: int
+    #: The later frame not stamped after the earlier one (the pairing gave both one stamp).
+    unordered: int
+
+    @property
+    def gathered(self) -> int:
+        """The pairs whose motion is measured (each measurement keeps those with ``min_inliers`` inliers)."""
+        return self.possible - self.few_matches - self.unordered
 
 
 @dataclass(frozen=True)
@@ -122,6 +145,11 @@ class FeatureTracks:
     pixels: tuple[FloatArray, ...]
     fixed: IntArray
     repeats: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: Per usable frame, the run of consecutive frames (window) it belongs to: no pair spans two (empty: one run).
+    segment: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    #: Per spans and ``min_inliers``: the pairs with enough matched moving features, and how many pairs were possible.
+    _matched: dict[tuple[object, ...], tuple[_Matched, int]] = field(
+        default_factory=dict, init=False, repr=False, compare=False)
     #: Per intrinsics, stamps and options: the frame pairs and their rotation-only RANSAC, which do not
     #: depend on the translation prior (a fit measures the same tracks against many priors).
     _first: dict[tuple[object, ...], tuple[_Pairs | None, tuple[FloatArray, BoolArray] | None]] = field(
@@ -232,23 +260,50 @@ def _first_rotations(
     return tracks._first[key]
 
 
+def frame_pair_counts(tracks: FeatureTracks, stamps_ns: npt.ArrayLike,
+                      options: EgoMotionOptions | None = None) -> FramePairCounts:
+    """How many frame pairs the usable frames of ``tracks`` give, and how many are left out before measuring
+    (the same for every intrinsics and translation prior: :func:`measure_egomotion` measures the rest)."""
+    opts = options or EgoMotionOptions()
+    matched, possible = _matched_pairs(tracks, opts)
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    unordered = sum(1 for k0, k1, _a, _b in matched if stamps[tracks.rows[k1]] <= stamps[tracks.rows[k0]])
+    return FramePairCounts(possible=possible, few_matches=possible - len(matched), unordered=unordered)
+
+
+def _matched_pairs(tracks: FeatureTracks, opts: EgoMotionOptions) -> tuple[_Matched, int]:
+    """The pairs of usable frames ``spans`` apart (within a run) with at least ``min_inliers`` moving features
+    tracked into both, and how many pairs there were (cached on ``tracks``)."""
+    key = (opts.spans, opts.min_inliers)
+    if key not in tracks._matched:
+        n = len(tracks.ids)
+        segment = tracks.segment if tracks.segment.size == n else np.zeros(n, dtype=np.int64)
+        chosen: _Matched = []
+        possible = 0
+        for span in opts.spans:
+            for k in range(n - span):
+                if segment[k] != segment[k + span]:  # tracks never cross a window's edge: not a pair
+                    continue
+                possible += 1
+                ids, a, b = np.intersect1d(tracks.ids[k], tracks.ids[k + span], assume_unique=True,
+                                           return_indices=True)
+                moving = ~np.isin(ids, tracks.fixed)
+                if moving.sum() >= opts.min_inliers:
+                    chosen.append((k, k + span, a[moving], b[moving]))
+        tracks._matched[key] = (chosen, possible)
+    return tracks._matched[key]
+
+
 def _gather(tracks: FeatureTracks, stamps: IntArray, intrinsics: Intrinsics, opts: EgoMotionOptions) -> _Pairs | None:
     """The frame pairs ``spans`` apart with enough matches: padded bearings, stamps, match counts."""
+    chosen, _possible = _matched_pairs(tracks, opts)
+    if not chosen:
+        return None
     model = intrinsics.camera_model()
     # One OpenCV call for every frame's pixels (each point is undistorted on its own: the same bearings).
     counts = [len(px) for px in tracks.pixels]
     flat = _bearings(model, np.concatenate(tracks.pixels).reshape(-1, 2) if counts else np.zeros((0, 2)))
     bearings = np.split(flat, np.cumsum(counts)[:-1]) if counts else []
-    n = len(tracks.ids)
-    chosen: list[tuple[int, int, IntArray, IntArray]] = []
-    for span in opts.spans:
-        for k in range(n - span):
-            ids, a, b = np.intersect1d(tracks.ids[k], tracks.ids[k + span], assume_unique=True, return_indices=True)
-            moving = ~np.isin(ids, tracks.fixed)
-            if moving.sum() >= opts.min_inliers:
-                chosen.append((k, k + span, a[moving], b[moving]))
-    if not chosen:
-        return None
     width = max(len(a) for _k0, _k1, a, _b in chosen)
     b0 = np.zeros((len(chosen), width, 3))
     b1 = np.zeros((len(chosen), width, 3))

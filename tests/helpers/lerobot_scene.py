@@ -262,6 +262,8 @@ def write_robot_yaml(
         calib["intrinsics"] = {"fx": FX * scale, "fy": FY * scale, "cx": CX * scale, "cy": CY * scale,
                                "width": DEPTH_W, "height": DEPTH_H}
         calib["depth"] = {"feature": "observation.depth.wrist", "scale_m": 0.001}
+        # The intrinsics are the depth image's, not the 640x480 video's (intrinsics for another size are an error).
+        del calib["video_key"]
     if timing is not None:
         calib["timing"] = timing
     (folder / "calib").mkdir(parents=True, exist_ok=True)

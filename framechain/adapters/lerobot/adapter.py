@@ -44,6 +44,7 @@ from framechain.adapters.lerobot.reader import (
     DatasetError,
     DatasetReader,
     EpisodeFrames,
+    FeatureInfo,
     Layout,
     is_lerobot_dataset,
 )
@@ -117,6 +118,9 @@ def open_dataset(
     joint_states = _joint_states(cfg, q, state_ns, source_name)
     videos, clocks = camera_frames(cfg, frames, cam_ns, state_ns, reader.fps, Path(path))
     metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
+    lost = frames.episode.missing_videos
+    metadata["notes"].extend(missing_video_note(reader, lost[cam.video_key], cam.video_key, episode, cam.name)
+                             for cam in cfg.cameras.values() if cam.video_key is not None and cam.video_key in lost)
     wall = wall_clock_start_ns(frames, wall_features)
     if wall is not None:
         metadata["wall_clock_feature"], metadata["wall_clock_start_ns"] = wall
@@ -145,6 +149,7 @@ def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[Detectio
             if not feat.is_video and feat.dtype != "image":
                 raise RobotConfigError(cfg.source, f"camera {cam.name!r}: video_key {cam.video_key!r} is a "
                                        f"{feat.dtype} feature, not video or image")
+            _check_image_size(cfg, cam, feat)
     columns = [cfg.state_feature]
     columns += [c.timing.timestamp_column for c in cfg.cameras.values() if c.timing.timestamp_column]
     # Frames stored in the Parquet (image features: PNG/JPEG bytes) rather than in an mp4.
@@ -160,6 +165,27 @@ def _columns(cfg: RobotConfig, reader: DatasetReader, sources: Sequence[Detectio
                                    "decode images; store depth as an array feature (height, width)")
             columns.append(cam.depth.feature)
     return list(dict.fromkeys(columns))
+
+
+def _check_image_size(cfg: RobotConfig, cam: CameraCalibration, feature: FeatureInfo) -> None:
+    """The camera's intrinsics are for the size of its images (info.json's feature): intrinsics calibrated at
+    another size put every ray elsewhere, and the cameras' motion reads that as other faults."""
+    size = feature.image_size
+    i = cam.intrinsics
+    if size is None or (i.width, i.height) == size:
+        return
+    width, height = size
+    inline = cam.source == cfg.source  # declared under robot.yaml's cameras (else in its own calibration file)
+    leaf = "intrinsics" if not i.source or i.source == cam.source else f"intrinsics_file ({i.source})"
+    key = f"cameras.{cam.name}.{leaf}" if inline else leaf
+    if i.width * height == i.height * width:  # the same aspect: the image was scaled
+        scale = width / i.width
+        fix = (f"the same aspect, scaled by {scale:.4g}: multiply fx, fy, cx, cy by {scale:.4g} "
+               f"({width}/{i.width}) for this video")
+    else:
+        fix = f"give the intrinsics of the {width}x{height} images (calibrated at that size)"
+    raise RobotConfigError(cam.source, f"{key} are for a {i.width}x{i.height} image, but {feature.key} is "
+                           f"{width}x{height} (info.json features): {fix}")
 
 
 def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, reader: DatasetReader,
@@ -200,6 +226,8 @@ def _metadata(path: Path, episode: int, cfg: RobotConfig, model: RobotModel, rea
                 "video_key": cam.video_key, "timing": {"offset_s": cam.timing.offset_s,
                                                        "timestamp_column": cam.timing.timestamp_column},
                 "video_file": _video_file(frames, cam.video_key),
+                # the file info.json's video_path points to for the camera's video_key, when it is not on disk
+                "video_missing": _missing_video(frames, cam.video_key),
                 "video_from_s": frames.episode.video_from_s.get(cam.video_key or "", 0.0),
                 "clock": clocks[name].to_json() if name in clocks else None,
             }
@@ -287,6 +315,19 @@ def _video_file(frames: EpisodeFrames, key: str | None) -> str | None:
     return None if path is None else str(path)
 
 
+def _missing_video(frames: EpisodeFrames, key: str | None) -> str | None:
+    path = frames.episode.missing_videos.get(key) if key is not None else None
+    return None if path is None else str(path)
+
+
+def missing_video_note(reader: DatasetReader, path: Path, key: str, episode: int, camera: str | None = None) -> str:
+    """One line: the video info.json's ``video_path`` points to for ``key`` in ``episode`` is not on disk (whose frames
+    are then left out: ``camera``'s, or the video's)."""
+    whose = f"camera {camera}'s frames" if camera is not None else "its frames"
+    return (f"{path}: missing: info.json's video_path {reader.video_path!r} with video_key {key} points here for "
+            f"episode {episode}; {whose} are left out")
+
+
 def scan_dataset(path: str | Path, episode: int | None = None, *, clocks: bool = False) -> LogInfo:
     """What a LeRobot dataset holds, from its metadata: features as topics, frames, fps, notes.
 
@@ -326,6 +367,8 @@ def _clock_notes(reader: DatasetReader, episode: int | None) -> list[str]:
     frames = reader.read(index)
     out = []
     for key in reader.video_keys:
+        if key in frames.episode.missing_videos:
+            out.append(missing_video_note(reader, frames.episode.missing_videos[key], key, index))
         if key not in frames.episode.video_files:
             continue
         line = episode_clock(key, frames, reader.fps).summary()

@@ -90,6 +90,23 @@ class FeatureInfo:
     def size(self) -> int:
         return int(np.prod(self.shape)) if self.shape else 1
 
+    @property
+    def image_size(self) -> tuple[int, int] | None:
+        """(width, height) of an image or video feature: from its shape by its names, else ``video.width`` and
+        ``video.height`` in its info, else a (height, width, channels) or (channels, height, width) shape; None when
+        none of them says."""
+        names = list(self.names or ())
+        if "height" in names and "width" in names and len(self.shape) == len(names):
+            return self.shape[names.index("width")], self.shape[names.index("height")]
+        width, height = self.info.get("video.width"), self.info.get("video.height")
+        if isinstance(width, int) and isinstance(height, int):
+            return width, height
+        if len(self.shape) == 3 and self.shape[-1] in (1, 3, 4):
+            return self.shape[1], self.shape[0]
+        if len(self.shape) == 3 and self.shape[0] in (1, 3, 4):
+            return self.shape[2], self.shape[1]
+        return None
+
 
 @dataclass(frozen=True)
 class EpisodeInfo:
@@ -106,6 +123,9 @@ class EpisodeInfo:
     video_from_s: Mapping[str, float] = field(default_factory=dict)
     #: v3: where it ends (s, exclusive), per video key; v2: absent (the file's end).
     video_to_s: Mapping[str, float] = field(default_factory=dict)
+    #: The videos info.json's ``video_path`` points to (filled with the video key and the episode's chunk and file)
+    #: that are not on disk, per video key: a glob pattern where the template has a variable LeRobot does not define.
+    missing_videos: Mapping[str, Path] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

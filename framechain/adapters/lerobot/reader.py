@@ -320,14 +320,18 @@ class DatasetReader:
         fields = {"episode_chunk": chunk, "chunk_index": chunk, "episode_index": index}
         data_file = self._fill("data_path", self.data_path, fields)
         videos: dict[str, Path] = {}
+        missing: dict[str, Path] = {}
         if self.video_path is not None:
             for key in self.video_keys:
-                vf = self._fill_if_found("video_path", self.video_path, {**fields, "video_key": key})
-                if vf is not None and vf.is_file():
+                vf = self._video_file({**fields, "video_key": key})
+                if vf.is_file():
                     videos[key] = vf
+                else:
+                    missing[key] = vf
         tasks = row.get("tasks") or []
         return EpisodeInfo(index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks),
-                           data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0))
+                           data_file=data_file, video_files=videos, video_from_s=dict.fromkeys(videos, 0.0),
+                           missing_videos=missing)
 
     def _episode_v3(self, index: int) -> EpisodeInfo:
         row = self._episode_row_v3(index)
@@ -337,13 +341,16 @@ class DatasetReader:
         videos: dict[str, Path] = {}
         video_from: dict[str, float] = {}
         video_to: dict[str, float] = {}
+        missing: dict[str, Path] = {}
         for key in self.video_keys:
             c, f = row.get(f"videos/{key}/chunk_index"), row.get(f"videos/{key}/file_index")
             if c is None or f is None or self.video_path is None:
                 continue
-            vf = self._fill_if_found("video_path", self.video_path, {"video_key": key, "chunk_index": int(c),
-                                                                      "file_index": int(f), "episode_index": index})
-            if vf is not None and vf.is_file():
+            vf = self._video_file({"video_key": key, "chunk_index": int(c), "file_index": int(f),
+                                   "episode_index": index})
+            if not vf.is_file():
+                missing[key] = vf
+            else:
                 videos[key] = vf
                 video_from[key] = float(row.get(f"videos/{key}/from_timestamp") or 0.0)
                 if row.get(f"videos/{key}/to_timestamp") is not None:
@@ -353,8 +360,15 @@ class DatasetReader:
             index=index, length=int(row["length"]), tasks=tuple(str(t) for t in tasks), data_file=data_file,
             from_index=None if row.get("dataset_from_index") is None else int(row["dataset_from_index"]),
             to_index=None if row.get("dataset_to_index") is None else int(row["dataset_to_index"]),
-            video_files=videos, video_from_s=video_from, video_to_s=video_to,
+            video_files=videos, video_from_s=video_from, video_to_s=video_to, missing_videos=missing,
         )
+
+    def _video_file(self, fields: Mapping[str, Any]) -> Path:
+        """Where ``video_path`` filled with ``fields`` points: the file, or (a template with a variable LeRobot does not
+        define that matches no single file) the glob pattern it was matched with."""
+        assert self.video_path is not None
+        found = self._fill_if_found("video_path", self.video_path, fields)
+        return found if found is not None else self.root / self._pattern("video_path", self.video_path, fields)[0]
 
     def _episode_row_v3(self, index: int) -> dict[str, Any]:
         """Episode ``index``'s row of the episodes parquet files: its length, tasks, data file and videos."""

@@ -32,6 +32,8 @@ from framechain.timeline.frames import COMPRESSED_IMAGE_ENCODINGS, RAW_IMAGE_ENC
 from framechain.vision.egomotion import (
     EgoMotionOptions,
     FeatureTracks,
+    FramePairCounts,
+    frame_pair_counts,
     measure_egomotion,
     track_features,
 )
@@ -124,6 +126,10 @@ class ImageMotion:
             self.last = table
         return table
 
+    def pair_counts(self) -> FramePairCounts:
+        """The frame pairs the usable frames give and those left out before measuring, under the pairing used."""
+        return frame_pair_counts(self.tracks, self.stamps_ns, self.options)
+
     def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
         """``table`` (measured with this camera's stamps) with its frames' stamps under another ``pairing``."""
         new = self.alternatives[pairing]
@@ -148,8 +154,10 @@ class ImageMotion:
 def _without_rows(tracks: FeatureTracks, stamps: IntArray) -> FeatureTracks:
     """The tracks of frames whose stamp is known (>= 0), in their stamps' order (a pairing may reorder none)."""
     keep = np.flatnonzero(stamps[tracks.rows] >= 0)
+    segment = tracks.segment[keep] if tracks.segment.size == len(tracks.ids) else tracks.segment
     return FeatureTracks(rows=tracks.rows[keep], ids=tuple(tracks.ids[k] for k in keep),
-                         pixels=tuple(tracks.pixels[k] for k in keep), fixed=tracks.fixed, repeats=tracks.repeats)
+                         pixels=tuple(tracks.pixels[k] for k in keep), fixed=tracks.fixed, repeats=tracks.repeats,
+                         segment=segment)
 
 
 def _repeat_notes(frames: CameraFrames, tracks: FeatureTracks) -> list[str]:
@@ -275,9 +283,11 @@ def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTrac
     pixels: list[FloatArray] = []
     fixed: list[IntArray] = []
     repeats: list[IntArray] = []
+    segment: list[IntArray] = []
     base = 0
-    for part, start in zip(parts, starts, strict=True):
+    for number, (part, start) in enumerate(zip(parts, starts, strict=True)):
         rows.append(part.rows + start)
+        segment.append(np.full(part.rows.size, number, dtype=np.int64))
         repeats.append(part.repeats + start)
         ids.extend(i + base for i in part.ids)
         pixels.extend(part.pixels)
@@ -289,7 +299,7 @@ def _merge(parts: Sequence[FeatureTracks], starts: Sequence[int]) -> FeatureTrac
         return np.concatenate(arrays).astype(np.int64) if arrays else np.zeros(0, dtype=np.int64)
 
     return FeatureTracks(rows=joined(rows), ids=tuple(ids), pixels=tuple(pixels), fixed=joined(fixed),
-                         repeats=joined(repeats))
+                         repeats=joined(repeats), segment=joined(segment))
 
 
 def decode_grey(images: ImageFrameTable, rows: IntArray) -> tuple[npt.NDArray[np.uint8], BoolArray, int]:

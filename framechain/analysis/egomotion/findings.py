@@ -411,6 +411,9 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
     entry: dict[str, Any] = {
         "camera": motion.camera, "name": declaration.name if declaration else None,
         "declared_link": motion.declared_link, "frames": motion.frames, "pairs": len(motion.table),
+        # pairs + the left-out counts = pairs_possible (the usable frames' pairs ``spans`` apart)
+        "pairs_possible": None if motion.pair_counts is None else motion.pair_counts.possible,
+        "pairs_left_out": motion.pairs_left_out(),
         "seconds": round(motion.seconds, 3), "pairing": motion.pairing or None,
         # The lens the motion was measured through: declared, or guessed (intrinsics_known false).
         "focal_px": _num(motion.focal_px), "width_px": motion.width_px, "intrinsics_known": motion.intrinsics_known,

@@ -40,6 +40,7 @@ from framechain.config.chain import ChainConfig
 from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_by
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
+from framechain.vision.egomotion import FramePairCounts
 
 __all__ = ["CAMERA_THREADS_ENV", "CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "camera_threads",
            "measure_cameras"]
@@ -67,6 +68,9 @@ class CameraImages(Protocol):
 
     def rescale_focal(self, factor: float) -> None:
         """Measure from now on with the focal length scaled by ``factor``."""
+
+    def pair_counts(self) -> FramePairCounts:
+        """The frame pairs the usable frames give and those left out before measuring (under the pairing used)."""
 
     def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
         """A measurement with its frames stamped under another pairing."""
@@ -102,6 +106,17 @@ class CameraMotion:
     width_px: int = 0
     #: How the camera's video frames pair with the rows, and what the motion says of it ("" when not a video).
     pairing: str = ""
+    #: The frame pairs the usable frames gave, and those left out before measuring (None: not measured).
+    pair_counts: FramePairCounts | None = None
+
+    def pairs_left_out(self) -> dict[str, int]:
+        """The frame pairs possible but not in ``table``, by why (empty when not measured): with fewer than
+        ``min_inliers`` matched moving features, stamped out of order, or with fewer inliers after measuring."""
+        counts = self.pair_counts
+        if counts is None:
+            return {}
+        return {"too_few_matched_features": counts.few_matches, "stamps_out_of_order": counts.unordered,
+                "too_few_inliers": counts.gathered - len(self.table)}
 
     @property
     def observable(self) -> bool:
@@ -195,7 +210,7 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
                         intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *notes),
                         measured_focal=focal, focal_px=0.5 * (declared.fx + declared.fy), width_px=declared.width,
-                        pairing=source.pairing)
+                        pairing=source.pairing, pair_counts=source.pair_counts())
 
 
 #: Another pairing whose misfit is this many times smaller contradicts the one the files gave.

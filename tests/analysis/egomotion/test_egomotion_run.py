@@ -428,8 +428,8 @@ def test_an_episode_without_detections_says_what_it_measured(clean: tuple[VideoD
     assert expected in line
     assert "0 total" not in line
     report = (tmp_path / "report.md").read_text()
-    assert f"| observations | none logged (no detections); the cameras' own motion measured instead: {expected} |" in (
-        report)
+    assert (f"| observations | none logged (no detections); the cameras' own motion measured instead: {expected} of "
+            f"{entry['pairs_possible']} possible (") in report
     assert (f"| camera | wrist_optical_frame: declared on gripper_link, {truth.spec.width} px wide, focal "
             f"{truth.declared_focal_px:g} px |") in report
     assert "| stamps | no observations logged, " in report
