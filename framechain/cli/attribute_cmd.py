@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Any
 
 from framechain.cli.common import (
     add_log_arguments,
-    episodes_or_all,
     imports_set_aside,
     make_out_dir,
     non_negative_int,
+    positive_int,
     print_findings,
     print_suggested_chain,
     progress_reporter,
@@ -35,19 +35,17 @@ def register(sub: Any) -> None:
         "fit the fault catalogue and write DIR/attribution.json, evidence.parquet, inputs.json and reports. "
         "Exit 0 when the log could be analysed, whatever was found.",
     )
-    add_log_arguments(parser)
+    add_log_arguments(parser, episodes_help="LeRobot datasets: attribute these episodes (all, or e.g. 0-9,20) and fit "
+                      "each camera's link and mount across them; writes DIR/recording.json, fleet_cameras.parquet, "
+                      "the fleet table and report, one result per episode in DIR/results")
     parser.add_argument("--out", required=True, metavar="DIR", help="output directory")
     parser.add_argument("--format", default="json,md,html", help="comma-separated: json, md, html (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
     parser.add_argument("--bootstrap", type=non_negative_int, default=30,
                         help="bootstrap resamples for intervals, 0 for none (default 30)")
     parser.add_argument("--json", action="store_true", help="print attribution.json to stdout")
-    parser.add_argument("--episodes", type=episodes_or_all, default=False, metavar="all|SPEC",
-                        help="LeRobot datasets: attribute these episodes (all, or e.g. 0-9,20) and fit each camera's "
-                        "link and mount across them; writes DIR/recording.json, fleet_cameras.parquet, the fleet "
-                        "table and report, one result per episode in DIR/results")
-    parser.add_argument("--jobs", "-j", type=int, metavar="N", help="with --episodes: worker processes (default: the "
-                        "CPU count)")
+    parser.add_argument("--jobs", "-j", type=positive_int, metavar="N",
+                        help="with --episodes: worker processes (default: the CPU count)")
     parser.set_defaults(run=run)
 
 

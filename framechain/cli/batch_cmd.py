@@ -9,11 +9,19 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from framechain.cli.common import PlainProgress, add_revision_argument, episode_set, make_out_dir, non_negative_int
+from framechain.cli.common import (
+    PlainProgress,
+    add_revision_argument,
+    episode_set,
+    make_out_dir,
+    non_negative_int,
+    positive_int,
+)
 
 EPILOG = """exit codes:
   0    the batch ran: every log has its row in DIR/fleet.parquet (a log that failed is a row with its error)
-  1    bad input: no logs among the inputs, the chain configuration, --robot or an option could not be used
+  1    bad input: no logs among the inputs (or none of --episodes in a dataset), the chain configuration,
+       --robot or an option could not be used
   2    usage error: unknown command or option
   130  interrupted (a rerun resumes: finished logs are kept in DIR/results)
 """
@@ -66,14 +74,6 @@ class _WrapProseKeepTables(argparse.HelpFormatter):
         if "\n" in text.strip("\n"):
             return "".join(indent + line for line in text.splitlines(keepends=True))
         return super()._fill_text(text, width, indent)
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    value = non_negative_int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be 1 or more, got {value}")
-    return value
 
 
 def parse_report_formats(text: str) -> list[str]:
@@ -156,22 +156,15 @@ def _print_summary(result: Any) -> None:
     import pyarrow.parquet as pq
     from rich.table import Table
 
-    from framechain.cli.common import stdout_console
-    from framechain.sinks.fleet_report import (
-        chains_line,
-        estimate_spread,
-        fleet_logs,
-        not_analysed_reasons,
-        summary_line,
-    )
+    from framechain.cli.common import print_not_analysed, print_notes, stdout_console
+    from framechain.sinks.fleet_report import chains_line, estimate_spread, fleet_logs, summary_line
 
     console = stdout_console(120)
     logs = fleet_logs(pq.read_table(result.table_path))
     console.print(f"[bold]{summary_line(logs)}[/bold]", highlight=False)
     console.print(f"computed {result.computed}, kept from an earlier run {result.skipped}", highlight=False)
     console.print(chains_line(logs), markup=False, highlight=False, soft_wrap=True)
-    for note in result.notes:
-        console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
+    print_notes(console, result.notes)
     spread = estimate_spread(logs)
     if spread:
         table = Table()
@@ -180,13 +173,7 @@ def _print_summary(result: Any) -> None:
         for row in spread:  # the texts of format_estimate and format_interval, as attribute prints them
             table.add_row(row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text)
         console.print(table)
-    reasons = not_analysed_reasons(logs)
-    for reason in reasons[:3]:  # each names the log that failed (the first, and how many more)
-        which = reason.example + (f" and {reason.logs - 1} more" if reason.logs > 1 else "")
-        console.print(f"{reason.logs} {reason.status} ({which}): {reason.reason}", markup=False, highlight=False,
-                      soft_wrap=True)
-    if len(reasons) > 3:
-        console.print(f"... {len(reasons) - 3} other reasons in the fleet report", highlight=False)
+    print_not_analysed(console, logs)
     print(f"table: {result.table_path}")
     for name, path in result.report_paths.items():
         print(f"{name.removeprefix('fleet_')}: {path}")

@@ -17,10 +17,12 @@ if TYPE_CHECKING:
     from framechain.analysis.run import ChainSuggestion, Run
     from framechain.config.chain import ChainConfig
     from framechain.progress import Progress
+    from framechain.sinks.fleet_report import FleetLog
 
 
-def add_log_arguments(parser: argparse.ArgumentParser) -> None:
-    """LOG, --chain, and the LeRobot options, the same for every command that reads a log."""
+def add_log_arguments(parser: argparse.ArgumentParser, *, episodes_help: str | None = None) -> None:
+    """LOG, --chain, and the LeRobot options, the same for every command that reads a log (with
+    ``episodes_help``: --episodes too, see :func:`add_dataset_arguments`)."""
     parser.add_argument(
         "log",
         metavar="LOG",
@@ -33,20 +35,27 @@ def add_log_arguments(parser: argparse.ArgumentParser) -> None:
         help="chain configuration (frames, topics, evidence, calibration, mounts); default: the one "
         "`framechain info LOG --chain` suggests, printed (`framechain info LOG` lists what the log lacks)",
     )
-    add_dataset_arguments(parser)
+    add_dataset_arguments(parser, episodes_help=episodes_help)
     parser.add_argument("-q", "--quiet", action="store_true",
                         help="no progress output and no suggested chain (results are still printed)")
 
 
-def add_dataset_arguments(parser: argparse.ArgumentParser) -> None:
-    """--episode, --robot and --revision: what a command reading one LeRobot episode takes."""
-    parser.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+def add_dataset_arguments(parser: argparse.ArgumentParser, *, episodes_help: str | None = None) -> None:
+    """--episode, --robot and --revision: what a command reading one LeRobot episode takes; with ``episodes_help``
+    also --episodes (all|SPEC), which argparse refuses beside --episode (one episode or many, not both)."""
+    episode_options: argparse._ActionsContainer = parser
+    if episodes_help is not None:
+        episode_options = parser.add_mutually_exclusive_group()
+    episode_options.add_argument("--episode", type=int, metavar="N", help="LeRobot datasets: the episode index")
+    if episodes_help is not None:
+        episode_options.add_argument("--episodes", type=episodes_or_all, default=False, metavar="all|SPEC",
+                                     help=episodes_help)
     parser.add_argument("--robot", metavar="ROBOT.yaml", help="LeRobot datasets: URDF, joint mapping and cameras")
     add_revision_argument(parser)
 
 
 def episode_set(text: str) -> frozenset[int]:
-    """argparse type: ``0-9,20`` -> {0, ..., 9, 20}."""
+    """argparse type: ``0-9,20`` -> {0, ..., 9, 20}. A bad spec is named whole, with the part that is wrong."""
     out: set[int] = set()
     for part in (p.strip() for p in text.split(",")):
         try:
@@ -61,7 +70,8 @@ def episode_set(text: str) -> frozenset[int]:
                     raise ValueError
                 out.add(value)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected episode numbers like 0-9,20, got {part!r}") from None
+            wrong = f"{part!r} is no episode number or range" if part else "an empty part between commas"
+            raise argparse.ArgumentTypeError(f"expected episode numbers like 0-9,20, got {text!r} ({wrong})") from None
     return frozenset(out)
 
 
@@ -123,6 +133,14 @@ def non_negative_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (a count of workers)."""
+    value = non_negative_int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, got {value}")
     return value
 
 
@@ -295,6 +313,29 @@ def say_unattributed(run: Run, command: str) -> list[str]:
     if run.nothing_replayed is not None:
         print(f"framechain {command}: {run.nothing_replayed}", file=sys.stderr)
     return notes
+
+
+def print_notes(console: Any, notes: Sequence[str]) -> None:
+    """What a batch left out and why (``note: ...``, one line each): files framechain wrote, episodes asked for
+    that a dataset lacks. ``batch`` and ``attribute --episodes`` alike."""
+    for note in notes:
+        console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
+
+
+def print_not_analysed(console: Any, logs: Sequence[FleetLog], *, most: int = 3) -> None:
+    """Why the logs (or episodes) of a batch that were not analysed were not: one line per reason, naming the
+    first log that failed for it and how many more (``1 error (ds episode 1): ...mp4: cannot open video``), the
+    ``most`` commonest reasons, then how many others the fleet report holds. ``batch`` and ``attribute
+    --episodes`` alike."""
+    from framechain.sinks.fleet_report import not_analysed_reasons
+
+    reasons = not_analysed_reasons(logs)
+    for reason in reasons[:most]:
+        which = reason.example + (f" and {reason.logs - 1} more" if reason.logs > 1 else "")
+        console.print(f"{reason.logs} {reason.status} ({which}): {reason.reason}", markup=False, highlight=False,
+                      soft_wrap=True)
+    if len(reasons) > most:
+        console.print(f"... {len(reasons) - most} other reasons in the fleet report", highlight=False)
 
 
 def _print_table(console: Any, columns: Sequence[str], rows: Sequence[Sequence[str]]) -> None:

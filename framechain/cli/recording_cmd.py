@@ -9,22 +9,40 @@ offset, the episodes that depart and why) is printed and written as ``OUT/record
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+if TYPE_CHECKING:
+    from framechain.sinks.fleet_report import FleetLog
 
 __all__ = ["attribute_recording"]
 
 
 def attribute_recording(args: argparse.Namespace, out: Path, report_formats: list[str]) -> int:
-    from rich.console import Console
+    """Run the episodes, then say what was found: how many episodes came to what, why each that failed did,
+    the episodes asked for that the dataset lacks, and each camera's fit across the episodes. A dataset that
+    cannot run at all (no robot.yaml for an arm framechain does not know) is one error before any work; so is a
+    run in which no episode could be analysed (exit 1); one in which some could exits 0, its failures said."""
+    import pyarrow.parquet as pq
 
+    from framechain.cli.common import print_not_analysed, print_notes, stdout_console
     from framechain.fleet import run_batch
     from framechain.sinks.fleet_cameras import camera_summary
+    from framechain.sinks.fleet_report import NOT_ANALYSED, fleet_logs
 
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
-                       jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats)
-    console = Console(width=None if console_is_terminal() else 120)
+                       jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats,
+                       raise_input_problems=True)
+    logs = fleet_logs(pq.read_table(result.table_path))
+    if all(log.status in NOT_ANALYSED for log in logs):
+        _fail_with_every_reason(args.log, logs, result.notes)
+    console = stdout_console(120)
     counts = ", ".join(f"{n} {status}" for status, n in sorted(result.status_counts().items()))
-    console.print(f"[bold]{len(result.records)} episodes: {counts}.[/bold]")
+    episodes = len(result.records)
+    console.print(f"[bold]{episodes} episode{'s' if episodes != 1 else ''}: {counts}.[/bold]")
+    print_notes(console, result.notes)
+    print_not_analysed(console, logs)
     if not result.recordings:
         console.print("No camera's own motion was measured in any episode: no recording-level fit.")
     for log, fits in result.recordings.items():
@@ -39,7 +57,21 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     return 0
 
 
-def console_is_terminal() -> bool:
-    import sys
+def _fail_with_every_reason(dataset: str, logs: list[FleetLog], notes: list[str]) -> NoReturn:
+    """No episode was analysed: the error. One reason shared by every episode is the error line itself (as
+    attribute of one episode says it); several are said first (on stderr, as batch says them), then the error."""
+    from rich.console import Console
 
-    return sys.stdout.isatty()
+    from framechain.cli.common import print_not_analysed, print_notes
+    from framechain.errors import FramechainError
+    from framechain.sinks.fleet_report import not_analysed_reasons
+
+    reasons = not_analysed_reasons(logs)
+    stderr = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
+    print_notes(stderr, notes)
+    if len(reasons) == 1:
+        (reason,) = reasons
+        which = reason.example + (f" and {reason.logs - 1} more" if reason.logs > 1 else "")
+        raise FramechainError(f"{which}: {reason.reason}")
+    print_not_analysed(stderr, logs, most=len(reasons))
+    raise FramechainError(f"{dataset}: no episode could be analysed ({len(logs)} run; each one's reason above)")

@@ -101,7 +101,8 @@ class BatchResult:
     computed: int
     table_path: Path
     report_paths: dict[str, Path] = field(default_factory=dict)
-    #: What the batch left out and why (files framechain wrote among the inputs).
+    #: What the batch left out and why (files framechain wrote among the inputs, episodes asked for that a dataset
+    #: lacks).
     notes: list[str] = field(default_factory=list)
     #: Per LeRobot dataset, each camera fitted across its episodes (:mod:`framechain.fleet.recordings`).
     recordings: dict[str, tuple[CameraRecordingFit, ...]] = field(default_factory=dict)
@@ -129,6 +130,7 @@ def run_batch(
     on_start: Callable[[int, int], None] | None = None,
     on_record: Callable[[dict[str, Any]], None] | None = None,
     rrd: str | Path | None = None,
+    raise_input_problems: bool = False,
 ) -> BatchResult:
     """Attribute every unit of ``inputs`` not already in ``OUT/results``; write the fleet table and report.
 
@@ -140,6 +142,9 @@ def run_batch(
     unit computed now, as it finishes. ``rrd``: a Rerun recording of each dataset's cameras across its
     episodes, and each unit's own recording in ``<rrd>.episodes/``. Each log is analysed with the chain file beside it
     (``<log name>.chain.yaml``, else ``chain.yaml`` or ``CHAIN.yaml`` in its folder), else ``chain``.
+    ``raise_input_problems``: an input that cannot run at all (a LeRobot dataset without robot.yaml, one whose
+    metadata cannot be read) raises :class:`BatchError` with its problem before any work, rather than being a
+    row of the table (``attribute DATASET --episodes``: one dataset, nothing else to run).
     """
     chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
     robot_given = robot is not None or bool(chain_config and chain_config.robot and (
@@ -148,7 +153,11 @@ def run_batch(
         raise BatchError(f"--robot {robot}: no such file")
     found = find_units(inputs, episodes=episodes, robot_given=robot_given)
     if not found.units:
-        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.skipped)})" if found.skipped else ""))
+        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.notes)})" if found.notes else ""))
+    if raise_input_problems:
+        problems = [unit.problem for unit in found.units if unit.problem is not None]
+        if problems:
+            raise BatchError("; ".join(problems))
     store = ResultStore(out_dir)
     rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
     tasks = _unit_tasks(found.units, chain=chain, robot=robot, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir)
@@ -168,9 +177,9 @@ def run_batch(
     gathered = [store.load(t.key) or crashed_record(t, "no record was written") for t in tasks]
     table_path = write_fleet_table(gathered, Path(out_dir) / TABLE_NAME)
     fits = recording_fits(gathered, seed=seed)
-    paths = _write_views(table_path, fits, out_dir, rrd=rrd, report_formats=report_formats, notes=found.skipped)
+    paths = _write_views(table_path, fits, out_dir, rrd=rrd, report_formats=report_formats, notes=found.notes)
     return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
-                       table_path=table_path, report_paths=paths, notes=found.skipped, recordings=fits)
+                       table_path=table_path, report_paths=paths, notes=found.notes, recordings=fits)
 
 
 def _unit_tasks(units: Sequence[LogUnit], *, chain: str | Path | None, robot: str | Path | None, seed: int,

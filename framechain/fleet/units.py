@@ -69,10 +69,22 @@ class UnitTask:
 # -- finding the units ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class FoundUnits:
-    """The units of work among the inputs, and a note for each file skipped as framechain's own output."""
+    """The units of work among the inputs, and a note for what the inputs hold that is no unit: each file
+    skipped as framechain's own output, the episodes asked for that a dataset lacks."""
 
     units: list[LogUnit]
-    skipped: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def episode_ranges(episodes: Iterable[int]) -> str:
+    """``[0, 1, 2, 3, 7, 9, 10]`` -> ``0-3,7,9-10``: episode numbers as the --episodes spec that names them."""
+    runs: list[list[int]] = []
+    for episode in sorted(set(episodes)):
+        if runs and episode == runs[-1][1] + 1:
+            runs[-1][1] = episode
+        else:
+            runs.append([episode, episode])
+    return ",".join(str(lo) if lo == hi else f"{lo}-{hi}" for lo, hi in runs)
 
 
 def find_units(
@@ -80,24 +92,30 @@ def find_units(
 ) -> FoundUnits:
     """Every log among ``inputs``: files, ROS 2 bag directories, LeRobot datasets (one unit per episode,
     only ``episodes`` when given), saved timelines, and directories walked for any of these. Files framechain
-    wrote (an exported MCAP holds a copy of a log) are skipped with a note. Paths stay as the user gave them
-    (made absolute, symlinks kept): the table names the logs the way the user does."""
+    wrote (an exported MCAP holds a copy of a log) are skipped with a note, as are episodes asked for that a
+    dataset lacks; an input that yields no unit is an error (for a dataset holding none of ``episodes``, one
+    that names it, the episodes asked for and those it has). Paths stay as the user gave them (made absolute,
+    symlinks kept): the table names the logs the way the user does."""
     from framechain.pipeline import LOG_SUFFIXES
 
     wanted = None if episodes is None else frozenset(episodes)
     units: list[LogUnit] = []
-    skipped: list[str] = []
+    notes: list[str] = []
     for item in inputs:
         path = Path(os.path.abspath(item))
         if not path.exists():
             raise BatchError(f"{item}: no such file or directory")
         if path.is_file():
-            units.extend(_log_file(path, skipped))
+            units.extend(_log_file(path, notes))
         else:
-            found = list(_walk(path, wanted, robot_given, skipped))
+            lacking: list[str] = []  # datasets under this input that hold none of the episodes asked for
+            found = list(_walk(path, wanted, robot_given, notes, lacking))
+            if not found and lacking:
+                raise BatchError("; ".join(lacking))
             if not found:
                 raise BatchError(f"{item}: no logs in this directory (looked for {', '.join(LOG_SUFFIXES)} files, "
                                  "ROS 2 bag directories, LeRobot datasets and saved timelines)")
+            notes.extend(lacking)  # other logs under this input were found: the empty dataset is a note
             units.extend(found)
     seen: set[tuple[Path, int | None]] = set()
     unique = []
@@ -105,16 +123,16 @@ def find_units(
         if (unit.path.resolve(), unit.episode) not in seen:
             seen.add((unit.path.resolve(), unit.episode))
             unique.append(unit)
-    return FoundUnits(unique, skipped)
+    return FoundUnits(unique, notes)
 
 
-def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool, skipped: list[str],
-          ) -> Iterator[LogUnit]:
+def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool, notes: list[str],
+          lacking: list[str]) -> Iterator[LogUnit]:
     from framechain import adapters
     from framechain.pipeline import LOG_SUFFIXES
 
     if adapters.LeRobotAdapter().probe(directory):
-        yield from _dataset_units(directory, episodes, robot_given)
+        yield from _dataset_units(directory, episodes, robot_given, notes, lacking)
         return
     if (directory / "timeline.json").is_file() or (directory / "metadata.yaml").is_file():
         yield _dir_unit(directory)
@@ -123,18 +141,18 @@ def _walk(directory: Path, episodes: frozenset[int] | None, robot_given: bool, s
         if child.name.startswith("."):
             continue
         if child.is_dir():
-            yield from _walk(child, episodes, robot_given, skipped)
+            yield from _walk(child, episodes, robot_given, notes, lacking)
         elif child.suffix.lower() in LOG_SUFFIXES and not _inside_bag(child):
-            yield from _log_file(child, skipped)
+            yield from _log_file(child, notes)
 
 
-def _log_file(path: Path, skipped: list[str]) -> list[LogUnit]:
-    """A log file's unit; none, with a note in ``skipped``, for a file framechain wrote."""
+def _log_file(path: Path, notes: list[str]) -> list[LogUnit]:
+    """A log file's unit; none, with a note in ``notes``, for a file framechain wrote."""
     from framechain import adapters
 
     wrote = adapters.framechain_output(path)
     if wrote is not None:
-        skipped.append(f"{path} skipped: written by {wrote}, not a recording")
+        notes.append(f"{path} skipped: written by {wrote}, not a recording")
         return []
     st = path.stat()
     return [LogUnit(path=path, size_bytes=st.st_size, mtime_ns=st.st_mtime_ns)]
@@ -160,9 +178,12 @@ def _tree_fingerprint(directory: Path) -> tuple[int, int]:
     return size, mtime
 
 
-def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given: bool) -> Iterator[LogUnit]:
-    """One unit per episode; without robot.yaml, only for an arm framechain bundles a URDF for (each episode's
-    robot.yaml is then generated), else one unit whose problem says what to give."""
+def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given: bool, notes: list[str],
+                   lacking: list[str]) -> Iterator[LogUnit]:
+    """One unit per episode asked for; without robot.yaml, only for an arm framechain bundles a URDF for (each
+    episode's robot.yaml is then generated), else one unit whose problem says what to give. Episodes asked for
+    that the dataset lacks are a note in ``notes``; a dataset holding none of them is no unit, its line in
+    ``lacking``."""
     from framechain.adapters.lerobot.reader import DatasetReader
     from framechain.robot.known_arms import known_arm
     from framechain.suggest import dataset_needs
@@ -171,6 +192,15 @@ def _dataset_units(directory: Path, episodes: frozenset[int] | None, robot_given
     try:
         reader = DatasetReader(directory)
         found = reader.episodes()
+        if episodes is not None and not episodes <= set(found):
+            spec, missing = episode_ranges(episodes), sorted(episodes - set(found))
+            has = (f"it has {len(found)} episode{'s' if len(found) != 1 else ''}: {episode_ranges(found)}" if found
+                   else "it has no episodes")
+            if episodes.isdisjoint(found):
+                lacking.append(f"{directory}: --episodes {spec}: the dataset has no such episode ({has})")
+                return
+            lacks = f"episode {missing[0]} is" if len(missing) == 1 else f"episodes {episode_ranges(missing)} are"
+            notes.append(f"{directory}: --episodes {spec}: {lacks} not in the dataset ({has})")
         problem = None if robot_given or known_arm(reader.robot_type) else dataset_needs(
             directory, episode=found[0] if found else 0, robot_given=False)
     except FramechainError as err:

@@ -73,7 +73,9 @@ def camera_figures(recordings: Recordings) -> list[Figure]:
             for e in fit.episodes:
                 low, high = e.offset_interval_s
                 colour = hex_color(ERROR_COLOR if e.episode in departing else CORRECTED_COLOR)
-                spread = [[(e.offset_s - low) * 1e3], [(high - e.offset_s) * 1e3]]
+                # An estimate a hair outside its interval (the interval's coarser search: 6 us seen) draws no bar
+                # on that side; matplotlib refuses a negative one.
+                spread = [[max(e.offset_s - low, 0.0) * 1e3], [max(high - e.offset_s, 0.0) * 1e3]]
                 ax.errorbar([e.episode], [e.offset_s * 1e3], yerr=spread, fmt="o", color=colour, ms=4, capsize=2)
             ax.axhline(fit.median_offset_s * 1e3, color=hex_color(BOUND_COLOR), ls="--", lw=1)
             ax.set_xlabel("episode")

@@ -49,7 +49,8 @@ STATUS_TEXT = {
     "error": "could not be analysed",
     "crashed": "crashed (computed again on a rerun)",
 }
-_NOT_ANALYSED = ("nothing_replayed", "error", "crashed")
+#: The statuses of a log that was not analysed (its error says why).
+NOT_ANALYSED = ("nothing_replayed", "error", "crashed")
 #: How an estimate is shown: (scale, unit) by estimate_name (offsets in ms, angles in deg, ratios as x).
 _DISPLAY = {"offset_s": (1e3, "ms"), "angle_deg": (1.0, "deg"), "factor": (1.0, "x"), "scale": (1.0, "x"),
             "distance_m": (1e3, "mm")}
@@ -127,7 +128,7 @@ def not_analysed_reasons(logs: Sequence[FleetLog]) -> list[ReasonRow]:
     """The errors of the logs that were not analysed, grouped by message (the log's path taken out), most first."""
     groups: dict[tuple[str, str], list[FleetLog]] = {}
     for log in logs:
-        if log.status in _NOT_ANALYSED:
+        if log.status in NOT_ANALYSED:
             reason = (log.error or "").removeprefix(f"{log.log}: ")
             groups.setdefault((log.status, reason), []).append(log)
     ordered = sorted(groups.items(), key=lambda item: (-len(item[1]), item[0]))
@@ -316,7 +317,7 @@ def fleet_document(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
 
 
 def _not_analysed_sections(logs: Sequence[FleetLog]) -> list[Section]:
-    failed = [log for log in logs if log.status in _NOT_ANALYSED]
+    failed = [log for log in logs if log.status in NOT_ANALYSED]
     if not failed:
         return []
     reasons = table(REASON_COLUMNS, (r.cells() for r in not_analysed_reasons(logs)), joined=True)
