@@ -35,6 +35,7 @@ from framechain.fleet.units import (
     TABLE_NAME,
     BatchError,
     Engine,
+    FoundUnits,
     LogUnit,
     UnitTask,
     crashed_record,
@@ -146,18 +147,7 @@ def run_batch(
     metadata cannot be read) raises :class:`BatchError` with its problem before any work, rather than being a
     row of the table (``attribute DATASET --episodes``: one dataset, nothing else to run).
     """
-    chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
-    robot_given = robot is not None or bool(chain_config and chain_config.robot and (
-        "config" in chain_config.robot or "urdf" in chain_config.robot))
-    if robot is not None and not Path(robot).is_file():
-        raise BatchError(f"--robot {robot}: no such file")
-    found = find_units(inputs, episodes=episodes, robot_given=robot_given)
-    if not found.units:
-        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.notes)})" if found.notes else ""))
-    if raise_input_problems:
-        problems = [unit.problem for unit in found.units if unit.problem is not None]
-        if problems:
-            raise BatchError("; ".join(problems))
+    found = _units(inputs, chain, robot, episodes, raise_input_problems)
     store = ResultStore(out_dir)
     rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
     tasks = _unit_tasks(found.units, chain=chain, robot=robot, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir)
@@ -180,6 +170,24 @@ def run_batch(
     paths = _write_views(table_path, fits, out_dir, rrd=rrd, report_formats=report_formats, notes=found.notes)
     return BatchResult(records=gathered, skipped=len(tasks) - len(todo), computed=len(todo),
                        table_path=table_path, report_paths=paths, notes=found.notes, recordings=fits)
+
+
+def _units(inputs: Sequence[str | Path], chain: str | Path | None, robot: str | Path | None,
+           episodes: Iterable[int] | None, raise_input_problems: bool) -> FoundUnits:
+    """The units among ``inputs`` (:func:`run_batch`); a bad chain or robot file, or no log at all, raises."""
+    chain_config = ChainConfig.from_yaml(chain) if chain is not None else None  # a bad chain is one line, now
+    robot_given = robot is not None or bool(chain_config and chain_config.robot and (
+        "config" in chain_config.robot or "urdf" in chain_config.robot))
+    if robot is not None and not Path(robot).is_file():
+        raise BatchError(f"--robot {robot}: no such file")
+    found = find_units(inputs, episodes=episodes, robot_given=robot_given)
+    if not found.units:
+        raise BatchError("no logs among the inputs" + (f" ({'; '.join(found.notes)})" if found.notes else ""))
+    if raise_input_problems:
+        problems = [unit.problem for unit in found.units if unit.problem is not None]
+        if problems:
+            raise BatchError("; ".join(problems))
+    return found
 
 
 def _unit_tasks(units: Sequence[LogUnit], *, chain: str | Path | None, robot: str | Path | None, seed: int,
