@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -48,15 +49,35 @@ CAMERA_SCHEMA = pa.schema([
 def recording_fits(records: Sequence[Mapping[str, Any]], *, seed: int = 0) -> dict[str, tuple[CameraRecordingFit, ...]]:
     """Per dataset (its path) with measured cameras in at least one episode, each camera's recording-level fit."""
     by_log: dict[str, list[EpisodeCamera]] = {}
+    episodes: dict[str, list[Mapping[str, Any]]] = {}
     for record in records:
         episode = record.get("episode")
         if episode is None:
             continue
+        episodes.setdefault(str(record["log"]), []).append(record)
         for entry in record.get("cameras") or ():
             camera = EpisodeCamera.from_entry(int(episode), entry)
             if camera is not None:
                 by_log.setdefault(str(record["log"]), []).append(camera)
-    return {log: fit_recording(cameras, seed=seed) for log, cameras in by_log.items()}
+    return {log: tuple(replace(fit, left_out=_left_out(fit, episodes[log]))
+                       for fit in fit_recording(cameras, seed=seed)) for log, cameras in by_log.items()}
+
+
+def _left_out(fit: CameraRecordingFit, records: Sequence[Mapping[str, Any]]) -> tuple[tuple[int, str], ...]:
+    """The episodes of the recording that gave ``fit``'s camera no measurement, each with why: the episode's own
+    reason for the camera, its error, or a note of its naming the camera (a video missing)."""
+    measured = {e.episode for e in fit.episodes}
+    out = []
+    for record in sorted(records, key=lambda r: int(r["episode"])):
+        episode = int(record["episode"])
+        if episode in measured:
+            continue
+        said = [c["why"] for c in record.get("cameras_left_out") or () if c.get("camera") == fit.camera]
+        named = [n for n in record.get("notes") or () if fit.camera in n or (fit.name and f"camera {fit.name}" in n)]
+        failed = [str(record["error"])] if record.get("error") else []
+        out.append((episode, next(iter([*said, *failed, *named]),
+                                  f"no measurement of it in this episode (status {record.get('status')})")))
+    return tuple(out)
 
 
 def camera_table(fits: Mapping[str, Sequence[CameraRecordingFit]]) -> pa.Table:
@@ -75,6 +96,11 @@ def camera_table(fits: Mapping[str, Sequence[CameraRecordingFit]]) -> pa.Table:
                     "mount_from_recording_deg": fit.episode_mount_deg.get(e.episode), "explained": e.explained,
                     "departs": e.episode in why, "why": "; ".join(why.get(e.episode, [])) or None,
                 })
+            # An episode that measured nothing of the camera is a row too, with why (the counts reconcile).
+            rows.extend({"log": log, "episode": episode, "camera": fit.camera, "name": fit.name, "link": None,
+                         "recording_link": fit.link, "offset_s": None, "offset_low_s": None, "offset_high_s": None,
+                         "mount_from_recording_deg": None, "explained": None, "departs": False,
+                         "why": f"left out: {reason}"} for episode, reason in fit.left_out)
     return pa.Table.from_pylist(rows, schema=CAMERA_SCHEMA)
 
 

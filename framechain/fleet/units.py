@@ -287,7 +287,15 @@ def _outcome(made: Run) -> dict[str, Any]:
         "residual_median_m": result.error_summary(result.error_after)["median"],
         "findings": findings, "notes": list(result.notes), **_video_offset(result.camera_motion),
         "cameras": [_camera_record(entry) for entry in result.camera_motion if entry.get("link")],
+        "cameras_left_out": [{"camera": entry["camera"], "why": _why_unmeasured(entry)}
+                             for entry in result.camera_motion if not entry.get("link")],
     }
+
+
+def _why_unmeasured(entry: dict[str, Any]) -> str:
+    """Why a camera's ``camera_motion`` entry carries no fit: its first reason not to observe, else its first note."""
+    reasons = [o["why"] for o in entry.get("observable") or () if o.get("why")]
+    return next(iter([*reasons, *(entry.get("notes") or ())]), "its motion was not measured")
 
 
 #: What a recording-level fit needs of each camera's ``camera_motion`` entry (framechain.fleet.recordings).

@@ -23,7 +23,13 @@ Recordings = Mapping[str, Sequence[CameraRecordingFit]]
 
 
 def camera_summary(log: str, fit: CameraRecordingFit) -> str:
-    """One camera's recording-level fit in one sentence."""
+    """One camera's recording-level fit in one sentence: what it rests on, and every episode left out and why."""
+    fitted = len(fit.episodes)
+    left = "" if not fit.left_out else "; left out: " + "; ".join(
+        f"episode {episode} ({why})" for episode, why in fit.left_out)
+    if not fit.explained:
+        return (f"{log}, camera {fit.camera}: the model explains its motion in none of the {fitted} episode(s) "
+                f"measured: no link, mount or offset for the recording{left}.")
     high = fit.mount_interval_deg[1]
     mount = (f"mount within {high:.1f} deg (95%) across episodes" if np.isfinite(high) else "mount from one episode")
     declared = ("" if not np.isfinite(fit.mount_from_declared_deg)
@@ -33,9 +39,9 @@ def camera_summary(log: str, fit: CameraRecordingFit) -> str:
         "; about " + ", ".join("[" + ", ".join(f"{v:.2f}" for v in a) + "]" for a in fit.unobservable_axes)
         + f" in {fit.link} the mount is not observable (kept as declared)")
     departs = len({d.episode for d in fit.departures})
-    return (f"{log}, camera {fit.camera}: rides {fit.link}{moved} in all {len(fit.episodes)} episodes' fit; "
+    return (f"{log}, camera {fit.camera}: rides {fit.link}{moved} in the fit of {fitted} episode(s); "
             f"{mount}{declared}{axes}; median offset {fit.median_offset_s * 1e3:+.1f} ms; "
-            f"{departs} episode(s) depart.")
+            f"{departs} episode(s) depart{left}.")
 
 
 def _rows(fit: CameraRecordingFit) -> list[list[str]]:
@@ -48,7 +54,8 @@ def _rows(fit: CameraRecordingFit) -> list[list[str]]:
         low, high = e.offset_interval_s
         rows.append([str(e.episode), e.link, f"{e.offset_s * 1e3:+.1f} ms", f"{low * 1e3:+.1f} .. {high * 1e3:+.1f} ms",
                      "" if angle is None else f"{angle:.1f} deg", "; ".join(why.get(e.episode, [])) or "no"])
-    return rows
+    rows += [[str(episode), "-", "-", "-", "", f"left out: {reason}"] for episode, reason in fit.left_out]
+    return sorted(rows, key=lambda row: int(row[0]))
 
 
 def cameras_sections(recordings: Recordings, figures: Sequence[Figure] = ()) -> list[Section]:

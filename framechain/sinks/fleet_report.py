@@ -67,6 +67,14 @@ class FleetLog:
     error_median_m: float | None
     findings: list[dict[str, Any]]
     chain: str | None = None  # the chain file (or robot.yaml) it was analysed with (None: the suggested chain)
+    metric: str | None = None  # what error_median_m measures (camera_motion: deg/s of rotation rate, else metres)
+
+    @property
+    def error_text(self) -> str:
+        """The median error in its own unit: deg/s of a camera's rotation rate, or mm."""
+        if self.metric == "camera_motion":
+            return "-" if self.error_median_m is None else f"{self.error_median_m:.2f} deg/s"
+        return mm(self.error_median_m)
 
     @property
     def chain_text(self) -> str:
@@ -102,7 +110,7 @@ def fleet_logs(table: pa.Table) -> list[FleetLog]:
         if log is None:
             log = logs[row["key"]] = FleetLog(
                 unit=row["unit"], log=row["log"], status=row["status"], error=row["error"], verdict=row["verdict"],
-                error_median_m=row["error_median_m"], findings=[], chain=row.get("chain"))
+                error_median_m=row["error_median_m"], findings=[], chain=row.get("chain"), metric=row.get("metric"))
         if row["fault"] is not None and row.get("actionable") is not False:  # a note is no fault to act on
             log.findings.append(row)
     return list(logs.values())
@@ -305,7 +313,7 @@ def fleet_document(logs: Sequence[FleetLog], spread: Sequence[SpreadRow], figure
     found = _with_findings(logs)
     listed: tuple[Block, ...] = (Paragraph("None."),)
     if found:
-        rows = ([log.unit, _fault_cell(log), mm(log.error_median_m), log.verdict or "", log.chain_text]
+        rows = ([log.unit, _fault_cell(log), log.error_text, log.verdict or "", log.chain_text]
                 for log in found[:MAX_LISTED])
         listed = (table(LOG_COLUMNS, rows), *_more(len(found)))
     which = Section(Heading("Which logs have which fault"), listed)

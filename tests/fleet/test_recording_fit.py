@@ -91,7 +91,14 @@ def test_the_fleets_offsets_are_judged_per_camera(swapped: tuple[VideoDatasetTru
     report = (result.table_path.parent / "fleet_report.md").read_text()
     # Analysed with the robot.yaml given (not a "suggested" chain), as the table's chain column says.
     assert f"Chains: {robot} ({EPISODES} logs)." in report
-    assert {row["chain"] for row in pq.read_table(result.table_path).to_pylist()} == {str(robot)}
+    table = pq.read_table(result.table_path).to_pylist()
+    assert {row["chain"] for row in table} == {str(robot)}
+    # Each log's median error in its unit: deg/s of rotation rate (it read as metres, "97049.2 mm").
+    which = report.split("## Which logs have which fault", 1)[1].split("\n## ", 1)[0]
+    for row in table:
+        (line,) = [ln for ln in which.splitlines() if ln.startswith(f"| {row['unit']} |")]
+        assert f"| {row['error_median_m']:.2f} deg/s |" in line
+        assert " mm |" not in line
     section = report.split("## Video/state time offset per log", 1)[1].split("\n## ", 1)[0]
     for camera in truth.cameras:
         frame = f"{camera.name}_optical_frame"
@@ -164,3 +171,52 @@ def test_the_recording_view_shows_each_cameras_offsets_and_reaches_every_episode
     assert len(episodes) == EPISODES
     ids = {str(r) for e in episodes for r in RrdReader(e).recordings()}
     assert len(ids) == EPISODES
+
+
+def test_an_episode_that_measured_nothing_of_a_camera_is_left_out_with_why(tmp_path: Path, so101_urdf: Path) -> None:
+    """Three episodes, one file per episode and camera (v2.1); the left camera's video of episode 1 is gone. The
+    recording's fit of that camera rests on episodes 0 and 2 and says episode 1 is left out, naming the file, in its
+    sentence, its table rows (one per episode and camera: 6) and recording.json; the right camera keeps all three."""
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
+        so101_urdf, seed=7, episodes=3, duration_s=4.0, version="v2.1", bimanual=True, camera_per_arm=True))
+    robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
+    (gone,) = list((truth.root / "videos").rglob("observation.images.left_wrist/episode_000001.mp4"))
+    gone.unlink()
+    result = run_batch([truth.root], tmp_path / "out", robot=robot, jobs=1, bootstrap=0, report_formats=("md",))
+    fits = {fit.name: fit for fit in result.recordings[str(truth.root.resolve())]}
+    assert [e.episode for e in fits["left_wrist"].episodes] == [0, 2]
+    ((episode, why),) = fits["left_wrist"].left_out
+    assert episode == 1
+    assert "episode_000001.mp4" in why
+    assert [e.episode for e in fits["right_wrist"].episodes] == [0, 1, 2]
+    assert fits["right_wrist"].left_out == ()
+    rows = pq.read_table(result.report_paths["cameras"]).to_pylist()
+    assert sorted((r["name"], r["episode"]) for r in rows) == [(n, e) for n in ("left_wrist", "right_wrist")
+                                                              for e in range(3)]
+    (left_row,) = [r for r in rows if r["name"] == "left_wrist" and r["episode"] == 1]
+    assert left_row["offset_s"] is None
+    assert left_row["why"].startswith("left out: ")
+    assert not left_row["departs"]
+    report = (result.table_path.parent / "fleet_report.md").read_text()
+    (sentence,) = [line for line in report.splitlines() if "camera left_wrist_optical_frame: rides" in line]
+    assert "in the fit of 2 episode(s)" in sentence
+    assert "; left out: episode 1 (" in sentence
+    assert "episode_000001.mp4" in sentence
+    document = json.loads(result.report_paths["recording"].read_text())
+    (left,) = [c for c in document["recordings"][0]["cameras"] if c["name"] == "left_wrist"]
+    assert [item["episode"] for item in left["left_out"]] == [1]
+
+
+def test_a_camera_the_model_explains_in_no_episode_claims_nothing(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult]) -> None:
+    """No explained episode: the sentence claims no link, mount or offset (no "median offset +nan ms")."""
+    from dataclasses import replace
+
+    from framechain.sinks.fleet_cameras import camera_summary
+
+    _truth, _robot, result = swapped
+    ((log, fits),) = result.recordings.items()
+    unexplained = replace(fits[0], episodes=tuple(replace(e, explained=False) for e in fits[0].episodes))
+    sentence = camera_summary(log, unexplained)
+    assert sentence == (f"{log}, camera {fits[0].camera}: the model explains its motion in none of the {EPISODES} "
+                        "episode(s) measured: no link, mount or offset for the recording.")

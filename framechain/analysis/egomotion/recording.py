@@ -115,6 +115,13 @@ class CameraRecordingFit:
     episodes: tuple[EpisodeCamera, ...]
     episode_mount_deg: Mapping[int, float]  # each episode's mount's angle from the recording's
     departures: tuple[Departure, ...]
+    #: The recording's episodes that gave this camera no measurement, each with why (not in ``episodes``).
+    left_out: tuple[tuple[int, str], ...] = ()
+
+    @property
+    def explained(self) -> tuple[EpisodeCamera, ...]:
+        """The episodes whose motion the model explains: the recording's link, mount and offset rest on them."""
+        return tuple(e for e in self.episodes if e.explained)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -130,6 +137,7 @@ class CameraRecordingFit:
                           "mount_from_recording_deg": _round(self.episode_mount_deg.get(e.episode)),
                           "explained": e.explained} for e in self.episodes],
             "departures": [d.to_json() for d in self.departures],
+            "left_out": [{"episode": episode, "why": why} for episode, why in self.left_out],
         }
 
 
