@@ -17,7 +17,7 @@ from framechain.config.robot import ArmConfig, JointMapping, JointUnit, RobotCon
 from framechain.geometry.rotations import homogeneous
 from framechain.robot.kinematics import Joint, JointType, Mimic, RobotModel
 
-__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "robot_model"]
+__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "out_of_limits", "robot_model"]
 
 
 def robot_model(config: RobotConfig) -> RobotModel:
@@ -149,3 +149,24 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
     body = config.chain_body
     if body is not None and body != config.world_frame and not model.has_link(body):
         raise RobotConfigError(fail, f"chain.body {body!r} is not a URDF link")
+
+
+def out_of_limits(config: RobotConfig, model: RobotModel, positions: dict[str, FloatArray]) -> list[str]:
+    """A note naming the mapped revolute joints the state puts far outside their URDF limits (by more than half their
+    range and 0.5 rad): a unit read wrongly (degrees read as radians reach tens of radians) or another robot's URDF."""
+    far = []
+    for m in config.joints:
+        lower, upper = model.limits(m.joint)
+        joint = model.joints[m.joint]
+        values = positions[m.joint]
+        if joint.type is not JointType.REVOLUTE or lower is None or upper is None or not values.size:
+            continue
+        margin = max(0.5 * (upper - lower), 0.5)
+        low, high = float(np.nanmin(values)), float(np.nanmax(values))
+        if low < lower - margin or high > upper + margin:
+            far.append(f"{m.state} ({m.unit.value}) puts {m.joint} at {low:.2f}..{high:.2f} rad, its limits "
+                       f"{lower:.2f}..{upper:.2f}")
+    if not far:
+        return []
+    return [f"{config.source}: the state puts joints far outside their URDF limits: {'; '.join(far)}: is the unit "
+            "right (joints.NAME.unit, default_unit), and the URDF this robot's?"]

@@ -22,7 +22,13 @@ from framechain.cli.main import main
 from framechain.config.robot import RobotConfig
 from framechain.replay import TransformBuffer
 from framechain.robot.known_arms import KNOWN_ARMS, LEROBOT_MOTORS, known_arm, match_state_names
-from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset
+from framechain.sim.lerobot_video import (
+    ARM_JOINTS,
+    VideoDatasetSpec,
+    VideoDatasetTruth,
+    generate_video_dataset,
+    write_robot_yaml,
+)
 from framechain.sim.urdf_chain import UrdfChain
 from framechain.suggest.lerobot import guess_arm_units
 from tests.helpers.realdata import KOCH_URDF, SO101_URDF
@@ -296,3 +302,21 @@ def test_a_placeholder_mount_that_leaves_the_motion_unexplained_says_to_measure_
     fitted = Rotation.from_quat(motion["q_link_cam"])
     assert (fitted.inv() * Rotation.from_quat(truth.q_link_cam)).magnitude() < np.radians(5.0)
     assert not [n for n in again["notes"] if "placeholder" in n]
+
+
+def test_degrees_read_as_radians_are_named_by_the_joint_limits(wrist_episode: VideoDatasetTruth, so101_urdf: Path,
+                                                               tmp_path: Path) -> None:
+    """The generator records degrees; robot.yaml saying radians puts the joints tens of radians out, far past the
+    URDF's limits (about +-1.9 rad): a note names each such joint and asks for the unit. Read as degrees, none."""
+    right = write_robot_yaml(wrist_episode, tmp_path / "robot.yaml")
+    config = yaml.safe_load(right.read_text())
+    assert config["default_unit"] == "deg"
+    assert not [n for n in open_dataset(wrist_episode.root, episode=0, robot=right).metadata["notes"]
+                if "outside their URDF limits" in n]
+    config["default_unit"] = "rad"
+    (tmp_path / "rad.yaml").write_text(yaml.safe_dump(config))
+    notes = open_dataset(wrist_episode.root, episode=0, robot=tmp_path / "rad.yaml").metadata["notes"]
+    (said,) = [n for n in notes if "outside their URDF limits" in n]
+    assert "shoulder_pan.pos (rad) puts shoulder_pan at" in said
+    assert "gripper" not in said  # its range_0_100 is its own unit, within its limits
+    assert "is the unit right" in said
