@@ -31,7 +31,8 @@ def camera_summary(log: str, fit: CameraRecordingFit) -> str:
         return (f"{log}, camera {fit.camera}: the model explains its motion in none of the {fitted} episode(s) "
                 f"measured: no link, mount or offset for the recording{left}.")
     high = fit.mount_interval_deg[1]
-    mount = (f"mount within {high:.1f} deg (95%) across episodes" if np.isfinite(high) else "mount from one episode")
+    mount = (f"its mount known to {high:.1f} deg (95%, resampling episodes)" if np.isfinite(high)
+             else "mount from one episode")
     declared = ("" if not np.isfinite(fit.mount_from_declared_deg)
                 else f", {fit.mount_from_declared_deg:.1f} deg from the declared one")
     moved = "" if fit.link == fit.declared_link else f" (declared on {fit.declared_link})"

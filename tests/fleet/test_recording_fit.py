@@ -220,3 +220,23 @@ def test_a_camera_the_model_explains_in_no_episode_claims_nothing(
     sentence = camera_summary(log, unexplained)
     assert sentence == (f"{log}, camera {fits[0].camera}: the model explains its motion in none of the {EPISODES} "
                         "episode(s) measured: no link, mount or offset for the recording.")
+
+
+@pytest.mark.parametrize(("recording_misfit", "departs"), [(1.0, False), (2.0, True)])
+def test_an_episode_whose_best_link_fits_as_well_as_the_recordings_does_not_depart(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult], recording_misfit: float, departs: bool) -> None:
+    """An episode whose own best link is another, by a misfit within the noise (0.9 against 1.0 deg per pair on the
+    recording's link: within 1.25 times) is no link departure; by twice its best it is."""
+    from dataclasses import replace
+
+    from framechain.analysis.egomotion.recording import fit_recording
+
+    _truth, _robot, result = swapped
+    ((_log, fits),) = result.recordings.items()
+    first, *rest = fits[0].episodes
+    other = next(name for name in first.link_misfits if name != fits[0].link)
+    moved = replace(first, link=other, link_misfits={fits[0].link: recording_misfit, other: 0.9})
+    (refit,) = fit_recording([moved, *rest])
+    assert refit.link == fits[0].link
+    linked = [d for d in refit.departures if d.episode == first.episode and d.what == "link"]
+    assert bool(linked) is departs

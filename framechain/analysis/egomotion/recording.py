@@ -232,7 +232,7 @@ def _departures(episodes: list[EpisodeCamera], link: str, median: float,
     for e in episodes:
         if not e.explained:
             out.append(Departure(e.episode, e.camera, "unexplained", "the model does not explain its camera's motion"))
-        elif e.link != link:
+        elif e.link != link and not _fits_as_well(e, link):
             out.append(Departure(e.episode, e.camera, "link", f"its camera moves with {e.link}, in the recording with "
                                  f"{link}"))
         elif abs(e.offset_s - median) > e.offset_bound_s:
@@ -245,6 +245,13 @@ def _departures(episodes: list[EpisodeCamera], link: str, median: float,
             out.append(Departure(e.episode, e.camera, "mount", f"its mount is {angles[e.episode]:.1f} deg from the "
                                  f"recording's, more than the {bound:.1f} deg it may (twice its bound)"))
     return out
+
+
+def _fits_as_well(episode: EpisodeCamera, link: str) -> bool:
+    """The episode's camera fits ``link`` within SAME_FIT_RATIO of its own best link (the noise's choice between
+    links that move alike, such as a gripper's jaw and its body, is no departure)."""
+    misfits = episode.link_misfits
+    return link in misfits and episode.link in misfits and misfits[link] <= SAME_FIT_RATIO * misfits[episode.link]
 
 
 def _angle_deg(a: FloatArray, b: FloatArray) -> float:
