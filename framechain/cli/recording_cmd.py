@@ -34,6 +34,7 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
                        jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats,
                        raise_input_problems=True)
+    _say_generated_robot(args, out)
     logs = fleet_logs(pq.read_table(result.table_path))
     if all(log.status in NOT_ANALYSED for log in logs):
         _fail_with_every_reason(args.log, logs, result.notes)
@@ -55,6 +56,23 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
         print(f"{name}: {path}")
     print(f"fleet table: {result.table_path}")
     return 0
+
+
+def _say_generated_robot(args: argparse.Namespace, out: Path) -> None:
+    """A known arm run without robot.yaml: the robot.yaml made from its first episode, written to ``out`` and said
+    in one line on stderr (even with --quiet), as attribute of one episode does (each episode guessed its own)."""
+    from framechain.suggest.lerobot import generated_robot
+
+    if args.robot is not None or args.chain is not None or not Path(args.log).is_dir():
+        return
+    generated = generated_robot(args.log)
+    if generated is None:
+        return
+    path = out / "robot.yaml"
+    path.write_text(generated.text, encoding="utf-8")
+    line = generated.line.removeprefix(f"episode {generated.episode} (no --episode given); ")
+    print(f"framechain attribute: no --robot given: made from episode {generated.episode}: {line}; wrote {path}: edit "
+          f"it and pass --robot {path}", file=sys.stderr)
 
 
 def _fail_with_every_reason(dataset: str, logs: list[FleetLog], notes: list[str]) -> NoReturn:

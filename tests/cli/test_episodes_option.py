@@ -177,3 +177,20 @@ def test_batch_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
 ])
 def test_episode_ranges(episodes: list[int], text: str) -> None:
     assert episode_ranges(episodes) == text
+
+
+def test_attribute_episodes_without_robot_writes_the_robot_yaml_it_made(
+        dataset: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A known arm without --robot: as attribute of one episode, the robot.yaml made (from the first episode) is
+    written beside the outputs and said in one line, to edit and pass back."""
+    from framechain.config.robot import RobotConfig
+
+    root, _robot = dataset
+    out = tmp_path / "out"
+    code, _said, err = _run(["attribute", str(root), "--episodes", "0,2", "--out", str(out), "--format", "json",
+                             "--bootstrap", "0", "-j", "1", "-q"], capsys)
+    assert code == 0
+    (line,) = [ln for ln in err.splitlines() if "no --robot given" in ln]
+    assert "made from episode 0: " in line
+    assert f"wrote {out / 'robot.yaml'}: edit it and pass --robot {out / 'robot.yaml'}" in line
+    assert RobotConfig.load(out / "robot.yaml").cameras["wrist"].mount.parent == "gripper_link"
