@@ -335,7 +335,7 @@ def _placeholder_mounts(attribution: Attribution) -> list[str]:
     centimetres off moves along another direction (generated SO-101 episodes, the camera 6 cm from gripper_link:
     17 deg/s of misfit left where its true position leaves 2), so the position must be measured."""
     return [f"camera {e['camera']}: its mount in the generated robot.yaml is a placeholder at the origin of "
-            f"{e.get('link') or e['declared_link']}; a camera a few centimetres from there moves along another "
+            f"{e['declared_link']}; a camera a few centimetres from there moves along another "
             "direction than forward kinematics gives, and its motion is then not explained: measure the camera's "
             f"position on its link (cameras.{e.get('name') or 'NAME'}.mount.xyz, metres) and pass --robot"
             for e in attribution.camera_motion if e.get("explained") is False]

@@ -34,7 +34,7 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
                        jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats,
                        raise_input_problems=True)
-    _say_generated_robot(args, out)
+    _say_generated_robot(args, out, [int(r["episode"]) for r in result.records if r.get("episode") is not None])
     logs = fleet_logs(pq.read_table(result.table_path))
     if all(log.status in NOT_ANALYSED for log in logs):
         _fail_with_every_reason(args.log, logs, result.notes)
@@ -58,21 +58,26 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     return 0
 
 
-def _say_generated_robot(args: argparse.Namespace, out: Path) -> None:
-    """A known arm run without robot.yaml: the robot.yaml made from its first episode, written to ``out`` and said
-    in one line on stderr (even with --quiet), as attribute of one episode does (each episode guessed its own)."""
+def _say_generated_robot(args: argparse.Namespace, out: Path, episodes: list[int]) -> None:
+    """A known arm run without robot.yaml: the robot.yaml made from the first episode run, written to ``out`` and
+    said in one line on stderr (even with --quiet), as attribute of one episode does (each episode guessed its own).
+    Nothing for a folder that is not one dataset, or one whose first episode cannot be read (its error is said)."""
+    from framechain.adapters import LeRobotAdapter
+    from framechain.errors import FramechainError
     from framechain.suggest.lerobot import generated_robot
 
-    if args.robot is not None or args.chain is not None or not Path(args.log).is_dir():
+    if args.robot is not None or args.chain is not None or not episodes or not LeRobotAdapter().probe(Path(args.log)):
         return
-    generated = generated_robot(args.log)
+    try:
+        generated = generated_robot(args.log, episode=min(episodes))
+    except FramechainError:
+        return
     if generated is None:
         return
     path = out / "robot.yaml"
     path.write_text(generated.text, encoding="utf-8")
-    line = generated.line.removeprefix(f"episode {generated.episode} (no --episode given); ")
-    print(f"framechain attribute: no --robot given: made from episode {generated.episode}: {line}; wrote {path}: edit "
-          f"it and pass --robot {path}", file=sys.stderr)
+    print(f"framechain attribute: no --robot given: made from episode {generated.episode}: {generated.line}; wrote "
+          f"{path}: edit it and pass --robot {path}", file=sys.stderr)
 
 
 def _fail_with_every_reason(dataset: str, logs: list[FleetLog], notes: list[str]) -> NoReturn:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -73,11 +74,16 @@ def _left_out(fit: CameraRecordingFit, records: Sequence[Mapping[str, Any]]) -> 
         if episode in measured:
             continue
         said = [c["why"] for c in record.get("cameras_left_out") or () if c.get("camera") == fit.camera]
-        named = [n for n in record.get("notes") or () if fit.camera in n or (fit.name and f"camera {fit.name}" in n)]
+        named = [n for n in record.get("notes") or () if _names(n, fit.camera) or (fit.name and _names(n, fit.name))]
         failed = [str(record["error"])] if record.get("error") else []
         out.append((episode, next(iter([*said, *failed, *named]),
                                   f"no measurement of it in this episode (status {record.get('status')})")))
     return tuple(out)
+
+
+def _names(note: str, camera: str) -> bool:
+    """``note`` is about ``camera``: "camera NAME" not followed by more of a name (``wrist`` is not ``wrist2``)."""
+    return re.search(rf"\bcamera {re.escape(camera)}(?![\w-])", note) is not None
 
 
 def camera_table(fits: Mapping[str, Sequence[CameraRecordingFit]]) -> pa.Table:
@@ -85,20 +91,22 @@ def camera_table(fits: Mapping[str, Sequence[CameraRecordingFit]]) -> pa.Table:
     rows = []
     for log, cameras in fits.items():
         for fit in cameras:
+            recording_link = fit.link if fit.explained else None  # no episode explained: no link for the recording
             why: dict[int, list[str]] = {}
             for departure in fit.departures:
                 why.setdefault(departure.episode, []).append(departure.why)
             for e in fit.episodes:
                 rows.append({
                     "log": log, "episode": e.episode, "camera": e.camera, "name": e.name, "link": e.link,
-                    "recording_link": fit.link, "offset_s": e.offset_s, "offset_low_s": e.offset_interval_s[0],
-                    "offset_high_s": e.offset_interval_s[1],
+                    "recording_link": recording_link, "offset_s": e.offset_s,
+                    "offset_low_s": e.offset_interval_s[0], "offset_high_s": e.offset_interval_s[1],
                     "mount_from_recording_deg": fit.episode_mount_deg.get(e.episode), "explained": e.explained,
                     "departs": e.episode in why, "why": "; ".join(why.get(e.episode, [])) or None,
                 })
             # An episode that measured nothing of the camera is a row too, with why (the counts reconcile).
             rows.extend({"log": log, "episode": episode, "camera": fit.camera, "name": fit.name, "link": None,
-                         "recording_link": fit.link, "offset_s": None, "offset_low_s": None, "offset_high_s": None,
+                         "recording_link": recording_link, "offset_s": None, "offset_low_s": None,
+                         "offset_high_s": None,
                          "mount_from_recording_deg": None, "explained": None, "departs": False,
                          "why": f"left out: {reason}"} for episode, reason in fit.left_out)
     return pa.Table.from_pylist(rows, schema=CAMERA_SCHEMA)

@@ -285,11 +285,18 @@ def _outcome(made: Run) -> dict[str, Any]:
         **span, "observations": int(counts["total"]), "replayed": int(counts["replayed"]),
         "error_median_m": result.error_summary()["median"], "error_p95_m": result.error_summary()["p95"],
         "residual_median_m": result.error_summary(result.error_after)["median"],
-        "findings": findings, "notes": list(result.notes), **_video_offset(result.camera_motion),
-        "cameras": [_camera_record(entry) for entry in result.camera_motion if entry.get("link")],
+        "findings": findings, "notes": list(result.notes),
+        **_video_offset([entry for entry in result.camera_motion if _measured(entry)]),
+        "cameras": [_camera_record(entry) for entry in result.camera_motion if _measured(entry)],
         "cameras_left_out": [{"camera": entry["camera"], "why": _why_unmeasured(entry)}
-                             for entry in result.camera_motion if not entry.get("link")],
+                             for entry in result.camera_motion if not _measured(entry)],
     }
+
+
+def _measured(entry: dict[str, Any]) -> bool:
+    """A camera's motion measured something: fitted to a link, and something observable (not an episode too short
+    or an arm too still, whose fit carries a link and an offset that show nothing)."""
+    return bool(entry.get("link")) and any(o.get("observable") for o in entry.get("observable") or ())
 
 
 def _why_unmeasured(entry: dict[str, Any]) -> str:

@@ -90,7 +90,7 @@ def video_offsets(table: pa.Table, recordings: Mapping[str, Sequence[CameraRecor
             str(row["unit"]), row["video_offset_s"], low, high))
     for log, cameras in recordings.items():
         for fit in cameras:
-            for e in fit.episodes:
+            for e in fit.explained:  # as the recording's median: an unexplained episode's offset is no measurement
                 unit = units.get((log, e.episode), f"{log} episode {e.episode}")
                 found.setdefault(e.camera, {})[unit] = (unit, e.offset_s, *e.offset_interval_s)
     return tuple(_spread(camera, list(logs.values())) for camera, logs in sorted(found.items()))

@@ -220,6 +220,23 @@ def test_a_camera_the_model_explains_in_no_episode_claims_nothing(
     sentence = camera_summary(log, unexplained)
     assert sentence == (f"{log}, camera {fits[0].camera}: the model explains its motion in none of the {EPISODES} "
                         "episode(s) measured: no link, mount or offset for the recording.")
+    document = json.loads(json.dumps(unexplained.to_json(), allow_nan=False))  # valid JSON: no NaN
+    assert (document["link"], document["q_link_cam"], document["median_offset_s"]) == (None, None, None)
+
+
+def test_an_episode_too_short_to_show_anything_is_left_out_of_the_recording(tmp_path: Path, so101_urdf: Path) -> None:
+    """Two 3 s episodes, the offset searched +-0.8 s: each compares 1.3 s of frame pairs, too short to show anything.
+    Their fits still carry a link and an offset; the recording takes neither, and says why each is left out."""
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
+        so101_urdf, seed=5, episodes=2, duration_s=3.0, version="v2.1"))
+    robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
+    robot.write_text(robot.read_text() + "chain: {evidence: {camera_offset_window_s: 0.8}}\n")
+    result = run_batch([truth.root], tmp_path / "out", robot=robot, jobs=1, bootstrap=0, report_formats=("md",))
+    assert [r["status"] for r in result.records] == ["no_evidence", "no_evidence"]
+    assert result.recordings == {}  # no camera measured anything in any episode: no recording-level fit
+    assert all(r["cameras"] == [] for r in result.records)
+    assert all("too short" not in c["why"] and "span" in c["why"] for r in result.records
+               for c in r["cameras_left_out"])
 
 
 @pytest.mark.parametrize(("recording_misfit", "departs"), [(1.0, False), (2.0, True)])

@@ -22,7 +22,7 @@ camera's calibration file), in that file's own form.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,7 @@ from framechain.analysis.model.estimates import (
     ScaleEstimate,
     format_estimate,
 )
-from framechain.analysis.verdict.checks import Bound
+from framechain.analysis.verdict.checks import Bound, bound_family
 from framechain.analysis.verdict.findings import Finding
 from framechain.arrays import FloatArray
 from framechain.catalogue import Fault, HopName
@@ -193,17 +193,17 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
             continue
         fit = misfit.fit
         judgement = judge(motion, fit, misfit.rms(frozenset()), misfit.rms(_EVERY), misfit.motion_rms())
-        proposals, dropped = _contributing(misfit, _proposals(motion, fit, declaration, judgement), motion.camera)
+        proposals, dropped = _contributing(misfit, _proposals(motion, fit, declaration, judgement))
         values = _shares(misfit, [p.kind for p in proposals])
         totals += misfit.rms(frozenset())
         before.append(misfit.residual(frozenset()))
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
         found.extend((proposal, value, motion.camera) for proposal, value in zip(proposals, values, strict=True))
         said = (*motion.notes, *fit.notes, *_judged_notes(judgement), *_focal_notes(motion, fit, proposals, judgement),
-                *dropped)
+                *(_dropped_note(motion.camera, proposal, share) for proposal, share in dropped))
         notes.extend(n for n in said if n not in notes)
         entries.append(_entry(motion, declaration, misfit, proposals, judgement))
-        bounds.extend(motion_bounds(motion, judgement))
+        bounds.extend(_not_told_apart(bound, dropped) for bound in motion_bounds(motion, judgement))
     findings = sorted((_finding(proposal, value, camera, totals) for proposal, value, camera in found),
                       key=lambda f: f.share, reverse=True)
     empty = np.zeros(0)
@@ -236,21 +236,36 @@ def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
     return _Misfit(motion, fit, weights, rows, probe.rates_by_kinds)
 
 
-def _contributing(misfit: _Misfit, proposals: Sequence[_Proposal], camera: str) -> tuple[list[_Proposal], list[str]]:
-    """The corrections that lower the misfit given the others (a Shapley share above zero), and a note for each
-    one dropped: the least contributing first, the shares recomputed without it (as the chain fit's findings)."""
+def _contributing(misfit: _Misfit, proposals: Sequence[_Proposal]
+                  ) -> tuple[list[_Proposal], list[tuple[_Proposal, float]]]:
+    """The corrections that lower the misfit given the others (a Shapley share above zero), and each one dropped with
+    its share: the least contributing first, the shares recomputed without it (as the chain fit's findings)."""
     kept = list(proposals)
-    notes = []
+    dropped = []
     while kept:
         values = _shares(misfit, [p.kind for p in kept])
         worst = int(np.argmin(values))
         if values[worst] > 0:
             break
-        dropped = kept.pop(worst)
-        notes.append(f"camera {camera}: {dropped.fault.value} at {dropped.hop} ({format_estimate(dropped.estimate)}) "
-                     "is no finding: with the other corrections it does not lower the rotation-rate misfit (Shapley "
-                     f"share {values[worst]:+.2f} deg/s)")
-    return kept, notes
+        dropped.append((kept.pop(worst), float(values[worst])))
+    return kept, dropped
+
+
+def _dropped_note(camera: str, proposal: _Proposal, share: float) -> str:
+    return (f"camera {camera}: {proposal.fault.value} at {proposal.hop} ({format_estimate(proposal.estimate)}) is no "
+            f"finding: with the other corrections it does not lower the rotation-rate misfit (Shapley share "
+            f"{share:+.2f} deg/s)")
+
+
+def _not_told_apart(bound: Bound, dropped: Sequence[tuple[_Proposal, float]]) -> Bound:
+    """A family whose correction was dropped bounds nothing: its fit is not told apart from the others (never "no
+    fault above B" beside an estimate larger than B)."""
+    for proposal, _share in dropped:
+        if bound_family(proposal.fault) == bound_family(bound.fault):
+            return replace(bound, observable=False, min_detectable=None, statistical=None,
+                           why=f"camera {bound.camera or 'its'}: its fit ({format_estimate(proposal.estimate)}) is not "
+                               "told apart from the other corrections")
+    return bound
 
 
 def _shares(misfit: _Misfit, kinds: Sequence[str]) -> list[float]:

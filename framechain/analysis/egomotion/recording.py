@@ -125,13 +125,14 @@ class CameraRecordingFit:
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "camera": self.camera, "name": self.name, "link": self.link, "declared_link": self.declared_link,
-            "q_link_cam": [round(float(v), 6) for v in self.q_link_cam],
-            "mount_interval_deg": [round(v, 3) for v in self.mount_interval_deg],
+            "camera": self.camera, "name": self.name, "link": self.link if self.explained else None,
+            "declared_link": self.declared_link,
+            "q_link_cam": [round(float(v), 6) for v in self.q_link_cam] if self.explained else None,
+            "mount_interval_deg": [_round(v) for v in self.mount_interval_deg] if self.explained else None,
             "mount_from_declared_deg": None if not np.isfinite(self.mount_from_declared_deg) else round(
                 self.mount_from_declared_deg, 3),
             "unobservable_axes": [list(a) for a in self.unobservable_axes],
-            "median_offset_s": round(self.median_offset_s, 6),
+            "median_offset_s": _round(self.median_offset_s, 6) if self.explained else None,
             "episodes": [{"episode": e.episode, "link": e.link, "offset_s": round(e.offset_s, 6),
                           "offset_interval_s": [round(v, 6) for v in e.offset_interval_s],
                           "mount_from_recording_deg": _round(self.episode_mount_deg.get(e.episode)),
@@ -258,5 +259,5 @@ def _angle_deg(a: FloatArray, b: FloatArray) -> float:
     return float(np.rad2deg(angle_of(a.T @ b)))
 
 
-def _round(value: float | None) -> float | None:
-    return None if value is None or not np.isfinite(value) else round(float(value), 3)
+def _round(value: float | None, digits: int = 3) -> float | None:
+    return None if value is None or not np.isfinite(value) else round(float(value), digits)

@@ -405,9 +405,12 @@ def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_
     top = findings[0]
     more = f", plus {len(findings) - 1} more" if len(findings) > 1 else ""
     on = f" on camera {top.camera}" if top.camera else ""
-    also = "".join(f" {why[0].upper()}{why[1:]}: no fix is offered for it." for why in unexplained)
-    return (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
-            f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}.{also}{then}")
+    found = (f"{top.fault.value} at {top.hop.value}{on} ({format_estimate(top.estimate)}) explains {top.share:.0%} "
+             f"of the camera's rotation-rate misfit against forward kinematics{rate}{more}")
+    if unexplained or undetermined:  # as the chain fit's: what is undecided first, then the fits that hold
+        return (f"Inconclusive: {'; '.join([*unexplained, *undetermined])}; no fix is offered for it; of the fits "
+                f"that hold, {found}.{then}")
+    return f"{found}.{then}"
 
 
 __all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed", "as_note", "as_undetermined",

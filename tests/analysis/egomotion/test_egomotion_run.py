@@ -368,8 +368,13 @@ def test_a_quarter_turned_mount_brings_no_latency_that_does_not_lower_the_misfit
     assert [f["fault"] for f in result["findings"]] == ["rotation_error"]
     assert result["findings"][0]["estimate"]["angle_deg"] == pytest.approx(90.0, abs=3.0)
     assert all(f["share"] > 0 for f in result["findings"])
-    dropped = [n for n in result["notes"] if "is no finding: with the other corrections it does not lower" in n]
-    assert all("Shapley share -" in n or "Shapley share +0.00" in n for n in dropped)
+    (dropped,) = [n for n in result["notes"] if "is no finding: with the other corrections it does not lower" in n]
+    assert dropped.startswith("camera wrist_optical_frame: latency at camera_to_body (+")
+    assert "Shapley share -" in dropped or "Shapley share +0.00" in dropped
+    # Its family bounds nothing: never "no fault above B" beside the +10 ms its fit gave.
+    assert "camera latency on camera wrist_optical_frame (its fit (+" in result["verdict"]
+    (latency,) = [b for b in result["bounds"] if b["fault"] == "latency"]
+    assert latency["observable"] is False
 
 
 def test_an_episode_too_short_to_resample_says_so(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path,
