@@ -16,6 +16,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from framechain.adapters.lerobot.reader import DatasetReader
@@ -35,7 +36,13 @@ from framechain.analysis.egomotion import (
 from framechain.arrays import IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.robot.kinematics import RobotModel
-from framechain.sim.lerobot_video import ARM_JOINTS, VideoDatasetTruth
+from framechain.sim.lerobot_video import (
+    ARM_JOINTS,
+    VideoDatasetSpec,
+    VideoDatasetTruth,
+    generate_video_dataset,
+    write_robot_yaml,
+)
 from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.egomotion import EgoMotionOptions, FeatureTracks, measure_egomotion, track_features
 
@@ -53,6 +60,13 @@ class EpisodeEvidence:
     tracks: FeatureTracks
     intrinsics: Intrinsics
     links: tuple[LinkMotion, ...]
+
+
+def generated(factory: pytest.TempPathFactory, name: str, spec: VideoDatasetSpec) -> tuple[VideoDatasetTruth, Path]:
+    """A dataset generated in a folder of its own under ``factory``, and its robot.yaml beside it."""
+    folder = factory.mktemp(name)
+    truth = generate_video_dataset(folder / "dataset", spec)
+    return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
 
 def episode_evidence(

@@ -16,17 +16,12 @@ import pytest
 import yaml
 
 from framechain.cli.main import main
-from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
+from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth
+from tests.helpers.egomotion_scene import generated
 
 pytest.importorskip("av")
 
 DURATION_S = 2.0
-
-
-def generated(factory: pytest.TempPathFactory, name: str, spec: VideoDatasetSpec) -> tuple[VideoDatasetTruth, Path]:
-    folder = factory.mktemp(name)
-    truth = generate_video_dataset(folder / "dataset", spec)
-    return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
 
 @pytest.fixture(scope="module")

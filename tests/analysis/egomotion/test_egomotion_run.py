@@ -22,8 +22,8 @@ from framechain import pipeline
 from framechain.analysis.model.estimates import LatencyEstimate
 from framechain.cli.main import main
 from framechain.fleet import run_batch
-from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth, generate_video_dataset, write_robot_yaml
-from tests.helpers.egomotion_scene import shifted_copy
+from framechain.sim.lerobot_video import VideoDatasetSpec, VideoDatasetTruth
+from tests.helpers.egomotion_scene import generated, shifted_copy
 from tests.helpers.realdata import PANDA_URDF
 
 DURATION_S = 5.0
@@ -51,12 +51,6 @@ def attributed_once(root: Path, robot: Path, factory: pytest.TempPathFactory, ca
         _ATTRIBUTED[key] = attribute(root, robot, out, capsys, episode), out
     result, out = _ATTRIBUTED[key]
     return copy.deepcopy(result), out
-
-
-def generated(factory: pytest.TempPathFactory, name: str, spec: VideoDatasetSpec) -> tuple[VideoDatasetTruth, Path]:
-    folder = factory.mktemp(name)
-    truth = generate_video_dataset(folder / "dataset", spec)
-    return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
 
 @pytest.fixture(scope="session")
