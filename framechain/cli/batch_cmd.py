@@ -156,7 +156,7 @@ def _print_summary(result: Any) -> None:
     import pyarrow.parquet as pq
     from rich.table import Table
 
-    from framechain.cli.common import print_not_analysed, print_notes, stdout_console
+    from framechain.cli.common import print_not_analysed, print_notes, print_recordings, stdout_console
     from framechain.sinks.fleet_report import chains_line, estimate_spread, fleet_logs, summary_line
 
     console = stdout_console(120)
@@ -174,6 +174,7 @@ def _print_summary(result: Any) -> None:
             table.add_row(row.fault, row.hop, str(row.logs), row.median_text, row.p5_p95_text)
         console.print(table)
     print_not_analysed(console, logs)
+    print_recordings(console, result.recordings)
     print(f"table: {result.table_path}")
     for name, path in result.report_paths.items():
         print(f"{name.removeprefix('fleet_')}: {path}")

@@ -8,12 +8,13 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from framechain.analysis.egomotion.recording import CameraRecordingFit
     from framechain.analysis.run import ChainSuggestion, Run
     from framechain.config.chain import ChainConfig
     from framechain.progress import Progress
@@ -320,6 +321,19 @@ def print_notes(console: Any, notes: Sequence[str]) -> None:
     that a dataset lacks. ``batch`` and ``attribute --episodes`` alike."""
     for note in notes:
         console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
+
+
+def print_recordings(console: Any, recordings: Mapping[str, Sequence[CameraRecordingFit]]) -> None:
+    """Each recording's cameras fitted across its episodes: one sentence per camera, then each departing episode and
+    why. ``batch`` and ``attribute --episodes`` alike."""
+    from framechain.sinks.fleet_cameras import camera_summary
+
+    for log, fits in recordings.items():
+        for fit in fits:
+            console.print(camera_summary(log, fit), markup=False, highlight=False, soft_wrap=True)
+            for departure in fit.departures:
+                console.print(f"  episode {departure.episode}: {departure.why}", markup=False, highlight=False,
+                              soft_wrap=True)
 
 
 def print_not_analysed(console: Any, logs: Sequence[FleetLog], *, most: int = 3) -> None:

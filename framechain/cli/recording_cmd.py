@@ -26,9 +26,8 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     run in which no episode could be analysed (exit 1); one in which some could exits 0, its failures said."""
     import pyarrow.parquet as pq
 
-    from framechain.cli.common import print_not_analysed, print_notes, stdout_console
+    from framechain.cli.common import print_not_analysed, print_notes, print_recordings, stdout_console
     from framechain.fleet import run_batch
-    from framechain.sinks.fleet_cameras import camera_summary
     from framechain.sinks.fleet_report import NOT_ANALYSED, fleet_logs
 
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
@@ -46,12 +45,7 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     print_not_analysed(console, logs)
     if not result.recordings:
         console.print("No camera's own motion was measured in any episode: no recording-level fit.")
-    for log, fits in result.recordings.items():
-        for fit in fits:
-            console.print(camera_summary(log, fit), markup=False, highlight=False, soft_wrap=True)
-            for departure in fit.departures:
-                console.print(f"  episode {departure.episode}: {departure.why}", markup=False, highlight=False,
-                              soft_wrap=True)
+    print_recordings(console, result.recordings)
     for name, path in result.report_paths.items():
         print(f"{name}: {path}")
     print(f"fleet table: {result.table_path}")

@@ -257,3 +257,19 @@ def test_an_episode_whose_best_link_fits_as_well_as_the_recordings_does_not_depa
     assert refit.link == fits[0].link
     linked = [d for d in refit.departures if d.episode == first.episode and d.what == "link"]
     assert bool(linked) is departs
+
+
+def test_batch_prints_each_cameras_recording_fit_as_attribute_episodes_does(
+        swapped: tuple[VideoDatasetTruth, Path, BatchResult], capsys: pytest.CaptureFixture[str]) -> None:
+    """batch's summary names each camera's link across the episodes and the late episode that departs."""
+    from framechain.cli.batch_cmd import _print_summary
+
+    truth, _robot, result = swapped
+    capsys.readouterr()
+    _print_summary(result)
+    printed = capsys.readouterr().out.splitlines()
+    for camera in truth.cameras:
+        (sentence,) = [ln for ln in printed if f"camera {camera.name}_optical_frame: rides {camera.camera_link}" in ln]
+        assert f"in the fit of {EPISODES} episode(s)" in sentence
+    late = [ln for ln in printed if ln.startswith(f"  episode {LATE_EPISODE}: its offset")]
+    assert len(late) == len(truth.cameras)
