@@ -50,8 +50,9 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
     found = motion_findings(evidence, metadata)
     notes = tuple(n for n in base.notes if not n.startswith("no evidence:"))
     if not evidence.observable:
-        notes += ("no evidence: no camera turned in its images (see camera_motion) and the log has no points to "
-                  "measure the chain against",)
+        why = "; ".join(dict.fromkeys(c.why_not for c in evidence.cameras if c.why_not))
+        notes += ("no evidence: no camera's own motion could be measured against forward kinematics "
+                  f"({why or 'see camera_motion'}) and the log has no points to measure the chain against",)
     return replace(base, metric="camera_motion", stage="camera_rotation_rate", findings=found.findings,
                    others_shift=(), camera_motion=found.entries, undetermined=motion_undetermined(found.entries),
                    rate_residual=(found.residual_before, found.residual_after), bounds=found.bounds, curves=(),

@@ -197,7 +197,9 @@ def fit_camera_motion(
         return _unobservable(camera, declared_link, turning, notes)
     ranked = rank_links(table, links, opts) if measured is None else measured[1]
     if not ranked:
-        notes.append(f"camera {camera}: fewer than {opts.min_pairs} measured frame pairs inside the links' span")
+        notes.append(f"camera {camera}: fewer than {opts.min_pairs} measured frame pairs lie the offset search window "
+                     f"(+-{opts.max_offset_s:g} s, evidence.camera_offset_window_s) inside both ends of the links' "
+                     "span")
         return _unobservable(camera, declared_link, turning, notes)
     declared = _Start(np.asarray(declared_q_link_cam, dtype=float), 0.0,
                       np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam, dtype=float))

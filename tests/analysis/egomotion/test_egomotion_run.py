@@ -432,3 +432,15 @@ def test_an_episode_without_detections_says_what_it_measured(clean: tuple[VideoD
     assert (f"| camera | wrist_optical_frame: declared on gripper_link, {truth.spec.width} px wide, focal "
             f"{truth.declared_focal_px:g} px |") in report
     assert "| stamps | no observations logged, " in report
+
+
+def test_an_offset_window_longer_than_the_episode_is_named(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A 10 s offset window on a 5 s episode leaves no frame pair to compare: the
+    verdict and the note name the window and its key, never "no camera turned" (the arm turns about 50 deg/s)."""
+    truth, robot = clean
+    (tmp_path / "robot.yaml").write_text(robot.read_text() + "chain: {evidence: {camera_offset_window_s: 10}}\n")
+    result = attribute(truth.root, tmp_path / "robot.yaml", tmp_path / "out", capsys)
+    assert result["findings"] == []
+    assert "(+-10 s, evidence.camera_offset_window_s) inside both ends" in result["verdict"]
+    assert not [n for n in result["notes"] if "turned" in n]
