@@ -244,12 +244,14 @@ def hop_rows(result: Attribution) -> list[tuple[str, ...]]:
         gap = r["gap_ms"]
         faults = f" ({', '.join(r['faults'])})" if r["faults"] else ""
         rate = sum(f.error_m for f in result.findings if f.hop.value == r["hop"] and f.error_unit == "deg/s")
+        # A camera's own motion measures rotation rates: nothing attributed is 0 deg/s there, not 0 mm.
+        in_rates = rate or result.metric == "camera_motion"
         rows.append((
             r["hop"],
             "not logged" if dep is None else f"{mm(dep['median'])} / {mm(dep['p95'])} / {mm(dep['max'])}",
             "-" if gap is None else f"{gap['median']:.1f} / {gap['max']:.1f} ms",
             str(r["stale"]),
-            f"{rate:.2f} deg/s{faults}" if rate else f"{mm(r['attributed_m'])}{faults}",
+            f"{rate:.2f} deg/s{faults}" if in_rates else f"{mm(r['attributed_m'])}{faults}",
         ))
     return rows
 

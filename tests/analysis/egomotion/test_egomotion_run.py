@@ -432,6 +432,8 @@ def test_an_episode_without_detections_says_what_it_measured(clean: tuple[VideoD
     assert (f"| camera | wrist_optical_frame: declared on gripper_link, {truth.spec.width} px wide, focal "
             f"{truth.declared_focal_px:g} px |") in report
     assert "| stamps | no observations logged, " in report
+    # What each hop is attributed is in the rotation rate's unit, as the findings' effects are (it said "0.0 mm").
+    assert "| pixel_to_camera | not logged | - | 0 | 0.00 deg/s |" in report
 
 
 def test_an_offset_window_longer_than_the_episode_is_named(clean: tuple[VideoDatasetTruth, Path], tmp_path: Path,
