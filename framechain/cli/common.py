@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from framechain.analysis.egomotion.recording import CameraRecordingFit
     from framechain.analysis.run import ChainSuggestion, Run
     from framechain.config.chain import ChainConfig
+    from framechain.config.robot import GeneratedRobot
     from framechain.progress import Progress
     from framechain.sinks.fleet_report import FleetLog
 
@@ -264,15 +265,20 @@ def print_suggested_chain(chain: ChainSuggestion | ChainConfig, quiet: bool, log
 def say_generated_robot(run: Run, command: str, path: Path | None) -> None:
     """A dataset run without --robot on a known arm: write the robot.yaml it used to ``path`` (None: nowhere) and
     say, in one line on stderr (even with --quiet: it is what the results rest on), what it assumed."""
-    generated = run.generated_robot
-    if generated is None:
-        return
+    if run.generated_robot is not None:
+        tell_generated_robot(run.generated_robot, command, path, run.path)
+
+
+def tell_generated_robot(generated: GeneratedRobot, command: str, path: Path | None, dataset: str | Path,
+                         lead: str = "") -> None:
+    """Write ``generated`` to ``path`` (None: nowhere) and say on stderr, in one line, what it assumed (``lead``
+    first) and where it is to edit (or how ``info`` writes it)."""
     if path is not None:
         path.write_text(generated.text, encoding="utf-8")
         where = f"; wrote {path}: edit it and pass --robot {path}"
     else:
-        where = f"; `framechain info {run.path} --episode {generated.episode} --chain > robot.yaml` writes it to edit"
-    print(f"framechain {command}: no --robot given: {generated.line}{where}", file=sys.stderr)
+        where = f"; `framechain info {dataset} --episode {generated.episode} --chain > robot.yaml` writes it to edit"
+    print(f"framechain {command}: no --robot given: {lead}{generated.line}{where}", file=sys.stderr)
 
 
 def chain_text(run: Run) -> str:

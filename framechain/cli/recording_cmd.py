@@ -57,6 +57,7 @@ def _say_generated_robot(args: argparse.Namespace, out: Path, episodes: list[int
     said in one line on stderr (even with --quiet), as attribute of one episode does (each episode guessed its own).
     Nothing for a folder that is not one dataset, or one whose first episode cannot be read (its error is said)."""
     from framechain.adapters import LeRobotAdapter
+    from framechain.cli.common import tell_generated_robot
     from framechain.errors import FramechainError
     from framechain.suggest.lerobot import generated_robot
 
@@ -68,10 +69,8 @@ def _say_generated_robot(args: argparse.Namespace, out: Path, episodes: list[int
         return
     if generated is None:
         return
-    path = out / "robot.yaml"
-    path.write_text(generated.text, encoding="utf-8")
-    print(f"framechain attribute: no --robot given: made from episode {generated.episode}: {generated.line}; wrote "
-          f"{path}: edit it and pass --robot {path}", file=sys.stderr)
+    tell_generated_robot(generated, "attribute", out / "robot.yaml", args.log,
+                         lead=f"made from episode {generated.episode}: ")
 
 
 def _fail_with_every_reason(dataset: str, logs: list[FleetLog], notes: list[str]) -> NoReturn:

@@ -35,7 +35,7 @@ from framechain.sinks.document import (
 from framechain.sinks.fleet_cameras import camera_figures, cameras_sections
 from framechain.sinks.fleet_offsets import offset_sections, video_offsets
 from framechain.sinks.plots import Figure, figure_png, new_figure
-from framechain.sinks.text import mm
+from framechain.sinks.text import error_size
 
 #: Rows listed per table before the report points to the Parquet table instead.
 MAX_LISTED = 200
@@ -72,9 +72,7 @@ class FleetLog:
     @property
     def error_text(self) -> str:
         """The median error in its own unit: deg/s of a camera's rotation rate, or mm."""
-        if self.metric == "camera_motion":
-            return "-" if self.error_median_m is None else f"{self.error_median_m:.2f} deg/s"
-        return mm(self.error_median_m)
+        return error_size(self.error_median_m, "deg/s" if self.metric == "camera_motion" else "m")
 
     @property
     def chain_text(self) -> str:

@@ -52,7 +52,7 @@ from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
 from framechain.sinks.plots import Figure, figure_png
 from framechain.sinks.report_figures import after_label, make_figures, motion_figures
-from framechain.sinks.text import FindingView, mm, observation_counts
+from framechain.sinks.text import FindingView, error_size, mm, observation_counts
 from framechain.timeline import PointRole
 
 
@@ -218,9 +218,7 @@ def _crops_section(result: Attribution, crops: Sequence[tuple[str, list[Figure]]
 # -- text -------------------------------------------------------------------------------------
 def _size(value: float | None, summary: dict[str, Any]) -> str:
     """An error summary's value in its unit: millimetres, or deg/s of a camera's rotation rate."""
-    if summary.get("unit") == "deg/s":
-        return "n/a" if value is None else f"{value:.2f} deg/s"
-    return mm(value)
+    return error_size(value, str(summary.get("unit", "m")))
 
 
 def _error_sentence(result: Attribution) -> str:

@@ -60,6 +60,13 @@ def mm(value_m: float | None) -> str:
     return "n/a" if value_m is None else f"{value_m * 1e3:.1f} mm"
 
 
+def error_size(value: float | None, unit: str) -> str:
+    """An error in its unit: deg/s of a camera's rotation rate (``unit`` "deg/s"), else metres as millimetres."""
+    if unit == "deg/s":
+        return "n/a" if value is None else f"{value:.2f} deg/s"
+    return mm(value)
+
+
 class FindingCells(NamedTuple):
     """A finding as table cells (each output picks its columns)."""
 

@@ -11,9 +11,7 @@ motion alone when some camera moves (a camera fixed in the world cannot stand in
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 
@@ -22,13 +20,12 @@ from framechain.analysis.egomotion.run import CameraMotionEvidence
 from framechain.analysis.evidence.replayed import Replayed
 from framechain.analysis.model.chain import ChainInputs
 from framechain.analysis.model.estimates import format_estimate
-from framechain.analysis.verdict.checks import Undetermined
-from framechain.analysis.verdict.findings import Attribution
+from framechain.analysis.verdict.findings import Attribution, motion_undetermined
 from framechain.config.chain import ChainConfig
 from framechain.geometry.camera import CameraModel
 from framechain.timeline import CameraTable, Timeline
 
-__all__ = ["motion_undetermined", "with_camera_motion"]
+__all__ = ["with_camera_motion"]
 
 
 def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attribution | None,
@@ -57,20 +54,6 @@ def with_camera_motion(replayed: Replayed, chain: ChainConfig, attribution: Attr
                    others_shift=(), camera_motion=found.entries, undetermined=motion_undetermined(found.entries),
                    rate_residual=(found.residual_before, found.residual_after), bounds=found.bounds, curves=(),
                    notes=(*notes, *(n for n in found.notes if n not in notes)))
-
-
-def motion_undetermined(entries: Sequence[Mapping[str, Any]]) -> tuple[Undetermined, ...]:
-    """What the cameras' motion leaves undecided (the verdict is "Inconclusive: ..." with any): each camera whose
-    motion the model does not explain, and each undetermined estimate of a camera it does explain."""
-    out = []
-    for entry in entries:
-        camera = str(entry["camera"])
-        if entry.get("explained") is False:
-            out.append(Undetermined("its motion against forward kinematics", str(entry["unexplained_why"]), camera))
-            continue
-        out.extend(Undetermined(f"its {fault}", str(why), camera) for fault, why in (entry.get("undetermined") or
-                                                                                    {}).items())
-    return tuple(out)
 
 
 def _unmeasured(replayed: Replayed, chain: ChainConfig, seed: int) -> Attribution:

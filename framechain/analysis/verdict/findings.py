@@ -211,8 +211,8 @@ class Attribution:
         that does not turn, an episode too short), with no finding and nothing undetermined."""
         if self.metric == "none":
             return True
-        observable = any(o["observable"] for entry in self.camera_motion for o in entry.get("observable", ()))
-        return self.metric == "camera_motion" and not (observable or self.findings or self.undetermined)
+        return self.metric == "camera_motion" and not (any_observable(self.camera_motion) or self.findings
+                                                       or self.undetermined)
 
     def counts(self) -> dict[str, Any]:
         return self.replay.counts()
@@ -380,6 +380,29 @@ class Attribution:
         }
 
 
+#: What an unexplained camera leaves undetermined (:func:`motion_undetermined`).
+UNEXPLAINED_MOTION = "its motion against forward kinematics"
+
+
+def motion_undetermined(entries: Sequence[Mapping[str, Any]]) -> tuple[Undetermined, ...]:
+    """What the cameras' motion leaves undecided (the verdict is "Inconclusive: ..." with any): each camera whose
+    motion the model does not explain, and each undetermined estimate of a camera it does explain."""
+    out = []
+    for entry in entries:
+        camera = str(entry["camera"])
+        if entry.get("explained") is False:
+            out.append(Undetermined(UNEXPLAINED_MOTION, str(entry["unexplained_why"]), camera))
+            continue
+        out.extend(Undetermined(f"its {fault}", str(why), camera) for fault, why in (entry.get("undetermined") or
+                                                                                    {}).items())
+    return tuple(out)
+
+
+def any_observable(entries: Sequence[Mapping[str, Any]]) -> bool:
+    """Some camera's own motion shows some fault family (its ``camera_motion`` entry's ``observable`` flags)."""
+    return any(o["observable"] for entry in entries for o in entry.get("observable", ()))
+
+
 def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_motion: Sequence[Mapping[str, Any]],
                    median_deg_s: float | None) -> str:
     """The verdict of a run measured by the cameras' own motion against forward kinematics: the findings, or
@@ -388,11 +411,10 @@ def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_
     rate = "" if median_deg_s is None else f" (median {median_deg_s:.2f} deg/s)"
     sentence = bounds_sentence(bounds, [(f.fault, f.hop, f.camera or "") for f in findings]) if bounds else ""
     then = f" {sentence}" if sentence else ""
-    observable = [o for entry in camera_motion for o in entry.get("observable", ()) if o["observable"]]
-    unexplained = [str(e["unexplained_why"]) for e in camera_motion if e.get("explained") is False]
-    undetermined = [f"camera {e['camera']}: {why}" for e in camera_motion if e.get("explained") is not False
-                    for why in (e.get("undetermined") or {}).values()]
-    if not findings and not observable and not unexplained and not undetermined:
+    undecided = motion_undetermined(camera_motion)
+    unexplained = [u.why for u in undecided if u.what == UNEXPLAINED_MOTION]
+    undetermined = [f"camera {u.camera}: {u.why}" for u in undecided if u.what != UNEXPLAINED_MOTION]
+    if not findings and not any_observable(camera_motion) and not undecided:
         if sentence:
             return ("Nothing could be checked: no camera's own motion can be measured against forward kinematics; "
                     f"{sentence[0].lower()}{sentence[1:]}")
@@ -413,5 +435,5 @@ def motion_verdict(findings: Sequence[Finding], bounds: Sequence[Bound], camera_
     return f"{found}.{then}"
 
 
-__all__ = ["SCHEMA", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed", "as_note", "as_undetermined",
-           "gate_by_effect", "motion_verdict"]
+__all__ = ["SCHEMA", "UNEXPLAINED_MOTION", "AnalysisError", "Attribution", "Finding", "Metric", "Unattributed",
+           "any_observable", "as_note", "as_undetermined", "gate_by_effect", "motion_undetermined", "motion_verdict"]
