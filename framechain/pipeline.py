@@ -22,6 +22,7 @@ from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.egomotion.attribution import with_camera_motion
 from framechain.analysis.egomotion.curves import rotation_rate_curves
+from framechain.analysis.egomotion.findings import position_said
 from framechain.analysis.egomotion.run import CameraMotionEvidence, measure_cameras
 from framechain.analysis.evidence.replayed import Replayed, replay_chain
 from framechain.analysis.run import LoadedRun, NotAttributed, Run
@@ -336,9 +337,18 @@ def _placeholder_mounts(attribution: Attribution) -> list[str]:
     17 deg/s of misfit left where its true position leaves 2), so the position must be measured."""
     return [f"camera {e['camera']}: its mount in the generated robot.yaml is a placeholder at the origin of "
             f"{e['declared_link']}; a camera a few centimetres from there moves along another "
-            "direction than forward kinematics gives, and its motion is then not explained: measure the camera's "
-            f"position on its link (cameras.{e.get('name') or 'NAME'}.mount.xyz, metres) and pass --robot"
+            f"direction than forward kinematics gives, and its motion is then not explained{_position_said(e)}: "
+            f"measure the camera's position on its link (cameras.{e.get('name') or 'NAME'}.mount.xyz, metres) and "
+            "pass --robot"
             for e in attribution.camera_motion if e.get("explained") is False]
+
+
+def _position_said(entry: Mapping[str, Any]) -> str:
+    """What became of a camera's position fitted from its images, for a note on why it is still unexplained."""
+    said = position_said(entry)
+    if not said:
+        return " (its images did not fit a position)"
+    return f" (the position fitted from its images, {said}, did not explain it either)"
 
 
 def _attributed(
@@ -355,8 +365,10 @@ def _attributed(
         why = NotAttributed(err.reason, _unattributed_line(loaded, err, nothing))
     motion = None
     if _measures_camera_motion(loaded, attribution):
-        motion = measure_cameras(loaded.chain, replayed.buffer, image_cameras(loaded.timeline),
-                                 partial(camera_motion_source, loaded.timeline), progress=progress)
+        cameras = image_cameras(loaded.timeline)
+        # A robot.yaml framechain generated puts each camera at its link's origin: where it is, is measured.
+        motion = measure_cameras(loaded.chain, replayed.buffer, cameras, partial(camera_motion_source, loaded.timeline),
+                                 progress=progress, unknown_positions=cameras if loaded.generated_robot else ())
     if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
         # A camera that moves is measured: evidence whatever else the log lacks.
         unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from framechain.analysis.egomotion.findings import position_said
 from framechain.analysis.run import Run
 from framechain.analysis.verdict.checks import nothing_observable
 from framechain.analysis.verdict.findings import Attribution
@@ -295,10 +296,17 @@ def _cameras_row(result: Attribution, record: Mapping[str, Any]) -> tuple[str, s
         return ("cameras" if len(result.camera_motion) > 1 else "camera", "; ".join(
             f"{e['camera']}: declared on {e['declared_link'] or 'the world'}, {e['width_px']} px wide, focal "
             + (f"{e['focal_px']:g} px" if e.get("focal_px") else "unknown")
-            + ("" if e.get("intrinsics_known", True) else " (guessed)") for e in result.camera_motion))
+            + ("" if e.get("intrinsics_known", True) else " (guessed)") + _position_row(e)
+            for e in result.camera_motion))
     if len(record.get("cameras", ())) > 1:
         return "cameras", "; ".join(f"{c['frame']}: {_lens(c)}" for c in record["cameras"])
     return "camera", _lens(record["camera"])
+
+
+def _position_row(entry: Mapping[str, Any]) -> str:
+    """A camera's position on its link, when it was not known and was fitted from its images."""
+    said = position_said(entry)
+    return f", position on {entry['position']['link']} not known: fitted from its images at {said}" if said else ""
 
 
 #: The findings table: the evidence is a column in HTML, a list below the table in Markdown.

@@ -55,6 +55,7 @@ __all__ = [
     "EgoMotionOptions",
     "FeatureTracks",
     "FramePairCounts",
+    "frame_pair_bearings",
     "frame_pair_counts",
     "measure_egomotion",
     "track_features",
@@ -258,6 +259,15 @@ def _first_rotations(
             pairs[0], threshold, hypotheses=opts.ransac_hypotheses, rng=np.random.default_rng(opts.seed))
         tracks._first[key] = (pairs, first)
     return tracks._first[key]
+
+
+def frame_pair_bearings(tracks: FeatureTracks, stamps_ns: npt.ArrayLike, intrinsics: Intrinsics,
+                        options: EgoMotionOptions | None = None) -> tuple[PairBatch, IntArray, IntArray] | None:
+    """The matched bearings of the frame pairs :func:`measure_egomotion` measures, with both frames' stamps (None:
+    no pair has enough matches); gathered once per intrinsics and stamps."""
+    pairs, _first = _first_rotations(tracks, np.asarray(stamps_ns, dtype=np.int64), intrinsics,
+                                     options or EgoMotionOptions())
+    return None if pairs is None else pairs[:3]
 
 
 def frame_pair_counts(tracks: FeatureTracks, stamps_ns: npt.ArrayLike,

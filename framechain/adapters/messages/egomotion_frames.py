@@ -33,11 +33,13 @@ from framechain.vision.egomotion import (
     EgoMotionOptions,
     FeatureTracks,
     FramePairCounts,
+    frame_pair_bearings,
     frame_pair_counts,
     measure_egomotion,
     track_features,
 )
 from framechain.vision.opencv import bright_shares, mean_abs_differences, require_cv2
+from framechain.vision.two_view import PairBatch
 
 __all__ = [
     "CameraFrames",
@@ -125,6 +127,10 @@ class ImageMotion:
         if not rotations_only:
             self.last = table
         return table
+
+    def pair_bearings(self) -> tuple[PairBatch, IntArray, IntArray] | None:
+        """The measured frame pairs' matched bearings (at the focal length measured with) and their frames' stamps."""
+        return frame_pair_bearings(self.tracks, self.stamps_ns, self.intrinsics, self.options)
 
     def pair_counts(self) -> FramePairCounts:
         """The frame pairs the usable frames give and those left out before measuring, under the pairing used."""

@@ -340,7 +340,7 @@ def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaratio
     evidence = (f"the images of {motion.camera} turn as {fit.link} does "
                 f"({best.residual_deg:.3f} deg misfit per frame pair), not as the declared {motion.declared_link}"
                 + (f" ({declared.residual_deg:.3f} deg)" if declared is not None else ""))
-    mount = _yaml_mount(fit.link, fit.q_link_cam, motion.declared_xyz_link_cam, declaration)
+    mount = _yaml_mount(fit.link, fit.q_link_cam, _position(motion, declaration), declaration)
     if declaration is not None:
         fix = (f"In {declaration.source}, mount camera {declaration.name} on {fit.link}: "
                f"{declaration.key('mount')}: {mount}.")
@@ -357,7 +357,7 @@ def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclarati
     fault, estimate = _mount_fault(motion, fit, declaration)
     evidence = (f"the images of {motion.camera} turn about axes {error.angle_deg:.2f} deg away from those "
                 f"{motion.declared_link}'s turns give through the declared mount")
-    mount = _yaml_mount(motion.declared_link, fit.q_link_cam, motion.declared_xyz_link_cam, declaration)
+    mount = _yaml_mount(motion.declared_link, fit.q_link_cam, _position(motion, declaration), declaration)
     if declaration is not None:
         fix = f"In {declaration.source}, set {declaration.key('mount')}: {mount} (the mount the images show)."
     else:
@@ -406,14 +406,22 @@ def _focal(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclarati
                      0.95, evidence, fix)
 
 
-def _yaml_mount(link: str, q_link_cam: FloatArray, xyz: FloatArray, declaration: CameraDeclaration | None) -> str:
+def _position(motion: CameraMotion, declaration: CameraDeclaration | None) -> tuple[float, ...]:
+    """The camera's position on its link as the fix writes it: fitted when it was not known, else as the file has
+    it."""
+    if declaration is not None and motion.position is None:
+        return declaration.xyz
+    return tuple(float(v) for v in motion.xyz_link_cam)
+
+
+def _yaml_mount(link: str, q_link_cam: FloatArray, position: tuple[float, ...],
+                declaration: CameraDeclaration | None) -> str:
     """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}``."""
     optical = declaration.optical if declaration is not None else True
     rotation: Rotations = q_link_cam
     if not optical:  # the file gives camera_link; the optical rotation hangs below it
         rotation = (q_link_cam, Inverse(_OPTICAL_FROM_LINK))
     rpy = rpy_of(rotation)
-    position = declaration.xyz if declaration is not None else tuple(float(v) for v in xyz)
     return (f"{{parent: {link}, xyz: [{', '.join(f'{v:.4f}' for v in position)}], "
             f"rpy: [{', '.join(f'{v:.5f}' for v in rpy)}], optical: {str(optical).lower()}}}")
 
@@ -450,6 +458,13 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
         "notes": list(dict.fromkeys((*motion.notes, *fit.notes))),
         "link_misfits": {name: _num(value) for name, value in fit.link_misfits},
     })
+    if motion.position is not None:  # not known: fitted from the camera's matches (:mod:`.position`)
+        position = motion.position
+        entry["position"] = {"link": position.link, "xyz_link_cam": [_num(v) for v in position.xyz_link_cam],
+                             "focal_px": _num(position.focal_factor * motion.focal_px),
+                             "residual_px": {"at_link_origin": _num(position.residual_px[0]),
+                                             "fitted": _num(position.residual_px[1])},
+                             "pairs": position.pairs, "matches": position.matches}
     if fit.evidence is not None:
         entry["mount_evidence"] = {**fit.evidence.to_json(),
                                    "declared_q_link_cam": [_num(v) for v in motion.declared_q_link_cam]}
@@ -463,6 +478,14 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
         entry["motion_deg_s"] = _num(judgement.motion_deg_s)
         entry["undetermined"] = dict(judgement.undetermined)
     return entry
+
+
+def position_said(entry: Mapping[str, Any]) -> str:
+    """A ``camera_motion`` entry's fitted position, ``[x, y, z] m`` ("" when the position was known)."""
+    position = entry.get("position")
+    if not isinstance(position, Mapping):
+        return ""
+    return "[" + ", ".join("nan" if v is None else f"{v:.3f}" for v in position["xyz_link_cam"]) + "] m"
 
 
 def _num(value: float) -> float | None:

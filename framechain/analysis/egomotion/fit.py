@@ -172,6 +172,7 @@ def fit_camera_motion(
     refinements: int = 5,
     options: EgoMotionFitOptions | None = None,
     measured: tuple[EgoMotionTable, list[LinkFit]] | None = None,
+    mount_prior: FloatArray | None = None,
 ) -> EgoMotionFit:
     """Offset, mount and carrying link of a camera from its measured motion against the candidate links' FK.
 
@@ -185,7 +186,9 @@ def fit_camera_motion(
     whose own measurement fits best wins, the declared link kept when it fits within ``same_fit_ratio`` of it
     (near scenery moves with the camera's translation, which a rotation-only measurement reads as
     rotation, so only measurements made with each link's own prior are compared). ``measured``: ``measure(None)``
-    and its :func:`rank_links`, when the caller has them already.
+    and its :func:`rank_links`, when the caller has them already. ``mount_prior``: a mount measured otherwise (by
+    :mod:`.position`, with the camera's translation): the search starts from it rather than the declared one, and
+    a mount axis the link never turned about keeps it; the mount error is still against the declared mount.
     """
     opts = options or EgoMotionFitOptions()
     table = measure(None) if measured is None else measured[0]
@@ -201,8 +204,8 @@ def fit_camera_motion(
                      f"(+-{opts.max_offset_s:g} s, evidence.camera_offset_window_s) inside both ends of the links' "
                      "span")
         return _unobservable(camera, declared_link, turning, notes)
-    declared = _Start(np.asarray(declared_q_link_cam, dtype=float), 0.0,
-                      np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam, dtype=float))
+    prior = np.asarray(declared_q_link_cam if mount_prior is None else mount_prior, dtype=float)
+    declared = _Start(prior, 0.0, np.zeros(3) if declared_xyz_link_cam is None else np.asarray(declared_xyz_link_cam))
     by_name = {link.link: link for link in links}
     tried = _refined(measure, [by_name[name] for name in _to_refine(ranked, declared_link, by_name, opts)], declared,
                      (table, ranked), refinements, opts)
@@ -215,8 +218,9 @@ def fit_camera_motion(
     ranked = ranked if joint is None else rank_links(table, links, opts)
     link = by_name[fit.link]
     similar = _similar(ranked, next((f for f in ranked if f.link == fit.link), fit), opts)
-    return _final(table, link, fit, ranked, similar, declared_link, np.asarray(declared_q_link_cam, dtype=float),
-                  camera, turning, notes, opts, joint)
+    return _final(table, link, fit, ranked, similar, declared_link,
+                  (np.asarray(declared_q_link_cam, dtype=float), None if mount_prior is None else prior), camera,
+                  turning, notes, opts, joint)
 
 
 def _to_refine(ranked: list[LinkFit], declared_link: str, by_name: dict[str, LinkMotion],
@@ -333,11 +337,13 @@ def _unobservable(camera: str, declared_link: str, turning: float, notes: list[s
 
 def _final(
     table: EgoMotionTable, link: LinkMotion, fit: LinkFit, ranked: list[LinkFit], similar: tuple[str, ...],
-    declared_link: str, declared_q: FloatArray, camera: str, turning: float, notes: list[str],
-    opts: EgoMotionFitOptions, joint: Joint | None = None,
+    declared_link: str, mounts: tuple[FloatArray, FloatArray | None], camera: str, turning: float,
+    notes: list[str], opts: EgoMotionFitOptions, joint: Joint | None = None,
 ) -> EgoMotionFit:
     """Intervals by bootstrap on the final measurement (or on the joint fit's grid of measurements), observability,
-    the mount against the declared one."""
+    the mount against the declared one. ``mounts``: the declared mount, and the prior an unobservable axis keeps
+    (None: the declared one)."""
+    declared_q, prior = mounts
     origin = int(link.stamps_ns[0])
     span = (0.0, (int(link.stamps_ns[-1]) - origin) * 1e-9)
     orientations = Orientations(link, origin)
@@ -355,13 +361,10 @@ def _final(
     if seen.unobservable:
         notes.append(f"camera {camera}: {seen.unobservable}: its time offset and mount are not observable")
     elif seen.axes:
-        shown = ", ".join(f"{v:.2f}" for v in seen.axes[0])
-        notes.append(f"link {link.link} turned about one axis only ([{shown}] in {link.link}) against the misfit: the "
-                     "camera's mount rotation about that axis is not observable (it is kept as declared)")
-        axis_link = np.asarray(seen.axes[0])
-        declared_m = matrix_of(declared_q)
-        mount = complete_mount(solved.mount, declared_m, axis_link)
-        boot = replace(boot, mounts=complete_mount(boot.mounts, declared_m, axis_link))
+        notes.append(_one_axis_note(link.link, seen.axes[0], prior is None))
+        kept, axis_link = matrix_of(declared_q if prior is None else prior), np.asarray(seen.axes[0])
+        mount = complete_mount(solved.mount, kept, axis_link)
+        boot = replace(boot, mounts=complete_mount(boot.mounts, kept, axis_link))
     mount_observable = not seen.unobservable
     undetermined = "" if seen.unobservable else offset_undetermined(solved, boot, opts)
     if undetermined:
@@ -390,6 +393,13 @@ def _final(
         evidence=mount_evidence(solved.weights, link_rv, pairs.rotvec, info.sigma_deg),
         link_misfits=tuple((f.link, f.residual_deg) for f in ranked),
     )
+
+
+def _one_axis_note(link: str, axis: tuple[float, float, float], declared: bool) -> str:
+    shown = ", ".join(f"{v:.2f}" for v in axis)
+    kept = "as declared" if declared else "as fitted with the camera's position"
+    return (f"link {link} turned about one axis only ([{shown}] in {link}) against the misfit: the camera's mount "
+            f"rotation about that axis is not observable (it is kept {kept})")
 
 
 def _chosen_fit(fit: LinkFit, solved: Solved, pairs: Pairs, orientations: Orientations) -> LinkFit:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Protocol
@@ -34,6 +34,7 @@ from framechain.analysis.egomotion import (
     fit_link,
     rank_links,
 )
+from framechain.analysis.egomotion.position import PositionFit, fit_position
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.config.chain import ChainConfig
@@ -41,6 +42,7 @@ from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_b
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.egomotion import FramePairCounts
+from framechain.vision.two_view import PairBatch
 
 __all__ = ["CAMERA_THREADS_ENV", "CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "camera_threads",
            "measure_cameras"]
@@ -71,6 +73,9 @@ class CameraImages(Protocol):
 
     def pair_counts(self) -> FramePairCounts:
         """The frame pairs the usable frames give and those left out before measuring (under the pairing used)."""
+
+    def pair_bearings(self) -> tuple[PairBatch, IntArray, IntArray] | None:
+        """The measured frame pairs' matched bearings and their frames' stamps (None: no pair)."""
 
     def restamp(self, table: EgoMotionTable, pairing: str) -> EgoMotionTable:
         """A measurement with its frames stamped under another pairing."""
@@ -108,6 +113,13 @@ class CameraMotion:
     pairing: str = ""
     #: The frame pairs the usable frames gave, and those left out before measuring (None: not measured).
     pair_counts: FramePairCounts | None = None
+    #: The camera's position on its link fitted from its matches, when it was not known (None: not fitted).
+    position: PositionFit | None = None
+
+    @property
+    def xyz_link_cam(self) -> FloatArray:
+        """The camera's position on its link the fit used: fitted when it was not known, else declared."""
+        return self.declared_xyz_link_cam if self.position is None else self.position.xyz_link_cam
 
     def pairs_left_out(self) -> dict[str, int]:
         """The frame pairs possible but not in ``table``, by why (empty when not measured): with fewer than
@@ -166,8 +178,10 @@ def camera_threads() -> int:
 def measure_cameras(
     chain: ChainConfig, buffer: TransformBuffer, cameras: Sequence[str], images: ImagesOf, *,
     options: EgoMotionFitOptions | None = None, progress: Callable[[str], None] | None = None,
+    unknown_positions: Collection[str] = (),
 ) -> CameraMotionEvidence | None:
-    """Each of ``cameras`` (frames with images; ``images`` decodes them) measured (None: no camera)."""
+    """Each of ``cameras`` (frames with images; ``images`` decodes them) measured (None: no camera); the position
+    on its link of each of ``unknown_positions`` is fitted from its images (:mod:`.position`)."""
     if not cameras:
         return None
     order = sorted(cameras, key=lambda f: f != chain.frames.camera)  # the chain's camera first
@@ -181,12 +195,13 @@ def measure_cameras(
     # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
     # most of the work (a log's reader fetches for one thread at a time).
     with ThreadPoolExecutor(max_workers=max(1, min(len(order), camera_threads()))) as pool:
-        out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts), order))
+        out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts,
+                                                           position_unknown=camera in unknown_positions), order))
     return CameraMotionEvidence(cameras=tuple(out))
 
 
 def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, images: ImagesOf,
-                    options: EgoMotionFitOptions) -> CameraMotion:
+                    options: EgoMotionFitOptions, *, position_unknown: bool = False) -> CameraMotion:
     start = time.perf_counter()
     link, q_link_cam, xyz_link_cam = _declared_mount(buffer, camera)
     empty = CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
@@ -203,14 +218,17 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
     source = images(camera)
     declared = source.intrinsics
     pairing, measured = confirm_pairing(source, links, camera, options)
-    fit, focal, notes = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options, measured)
+    fitted = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options, measured,
+                             position_unknown=position_unknown)
+    fit = fitted.fit
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
                         declared_xyz_link_cam=xyz_link_cam, fit=fit,
                         table=fit.table if len(fit.table) else source.last, links=links,
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
-                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *notes),
-                        measured_focal=focal, focal_px=0.5 * (declared.fx + declared.fy), width_px=declared.width,
-                        pairing=source.pairing, pair_counts=source.pair_counts())
+                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *fitted.notes),
+                        measured_focal=fitted.focal, focal_px=0.5 * (declared.fx + declared.fy),
+                        width_px=declared.width, pairing=source.pairing, pair_counts=source.pair_counts(),
+                        position=fitted.position)
 
 
 #: Another pairing whose misfit is this many times smaller contradicts the one the files gave.
@@ -268,23 +286,50 @@ def _misfit_of(table: EgoMotionTable, link: LinkMotion, options: EgoMotionFitOpt
 FOCAL_ROUNDS = 3
 
 
+@dataclass(frozen=True)
+class _Fitted:
+    """A camera's fit, the focal length its final measurement used (over the declared one), what it says of both,
+    and its position on its link when that was fitted."""
+
+    fit: EgoMotionFit
+    focal: float
+    notes: list[str]
+    position: PositionFit | None = None
+
+
 def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: str,
                     declared: tuple[str, FloatArray, FloatArray], options: EgoMotionFitOptions,
-                    measured: tuple[EgoMotionTable, list[LinkFit]] | None = None,
-                    ) -> tuple[EgoMotionFit, float, list[str]]:
+                    measured: tuple[EgoMotionTable, list[LinkFit]] | None = None, *,
+                    position_unknown: bool = False) -> _Fitted:
     """The fit, measured again with the focal length it implies while that clearly differs from the one used.
 
     A wrong focal length scales the rotation seen across the optical axis; the mount and offset fits
     absorb part of it (a few degrees, ten milliseconds). Measuring again with the implied one takes
-    it out; the step is squared because each round recovers about half of what is left. Returns the
-    fit (its focal scale over the *declared* focal length), the factor the final measurement used,
-    and a note when it was measured again.
+    it out; the step is squared because each round recovers about half of what is left. The fit's focal
+    scale is over the *declared* focal length. When the camera's position on its link is not known
+    (``position_unknown``), it is fitted from the matches with the focal length (:mod:`.position`) after the
+    first fit, and the camera measured again from there.
     """
     used = 1.0
     notes: list[str] = []
     link, q_link_cam, xyz_link_cam = declared
-    fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
-                            declared_xyz_link_cam=xyz_link_cam, options=options, measured=measured)
+
+    def fitted() -> EgoMotionFit:
+        return fit_camera_motion(source.measure, links, camera=camera, declared_link=link,
+                                 declared_q_link_cam=q_link_cam, declared_xyz_link_cam=xyz_link_cam, options=options,
+                                 measured=measured if used == 1.0 and position is None else None,
+                                 mount_prior=None if position is None else position.q_link_cam)
+
+    position = None
+    fit = fitted()
+    if position_unknown and fit.link:
+        position, note = _fitted_position(source, links, camera, fit, options)
+        notes.append(note)
+        if position is not None:
+            source.rescale_focal(position.focal_factor)
+            used *= position.focal_factor
+            xyz_link_cam = position.xyz_link_cam
+            fit = fitted()
     for _ in range(FOCAL_ROUNDS):
         low, high = fit.focal_scale_interval
         if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
@@ -292,14 +337,40 @@ def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: s
         step = fit.focal_scale**2
         source.rescale_focal(step)
         used *= step
-        fit = fit_camera_motion(source.measure, links, camera=camera, declared_link=link,
-                                declared_q_link_cam=q_link_cam, declared_xyz_link_cam=xyz_link_cam, options=options)
+        fit = fitted()
     if used != 1.0:
         notes.append(f"camera {camera}: its motion implied another focal length; measured again with "
                      f"{used:.3f} times the declared one")
         low, high = fit.focal_scale_interval
         fit = replace(fit, focal_scale=fit.focal_scale * used, focal_scale_interval=(low * used, high * used))
-    return fit, used, notes
+    return _Fitted(fit, used, notes, position)
+
+
+def _fitted_position(source: CameraImages, links: Sequence[LinkMotion], camera: str, fit: EgoMotionFit,
+                     options: EgoMotionFitOptions) -> tuple[PositionFit | None, str]:
+    """The camera's position on the link it rides, fitted from its matches (None when it cannot be), and a note."""
+    gathered = source.pair_bearings()
+    link = next(m for m in links if m.link == fit.link)
+    focal = 0.5 * (source.intrinsics.fx + source.intrinsics.fy)
+    # From the rotation-only fit's mount and offset: measured with a translation from the wrong position, the fit's
+    # own mount can be anywhere (on generated SO-101 episodes 40 to 170 deg off; the rotation-only one 5 to 10).
+    start = fit_link(source.measure(None), link, options) or fit
+    position = None if gathered is None else fit_position(
+        *gathered, link, q_link_cam=start.q_link_cam, xyz_link_cam=np.zeros(3), offset_s=start.offset_s,
+        focal_px=focal, max_offset_s=options.max_offset_s)
+    if position is None:
+        return None, (f"camera {camera}: its position on {fit.link} is not known and could not be fitted from its "
+                      "images (no frame pair inside the link's span, or the link has no positions): measured at the "
+                      "link's origin")
+    before, after = position.residual_px
+    said = (f"its position on {fit.link} is not known; fitted from {position.matches:,} matched features in "
+            f"{position.pairs:,} frame pairs: xyz [{', '.join(f'{v:.3f}' for v in position.xyz_link_cam)}] m, "
+            f"focal length {position.focal_factor * focal:.1f} px (median residual {after:.2f} px, {before:.2f} at "
+            "the link's origin)")
+    if position.at_limit:
+        return None, (f"camera {camera}: {said}, but its {position.at_limit} reached the limit of the search: not "
+                      "used, measured at the link's origin")
+    return position, f"camera {camera}: {said}; measured there"
 
 
 # -- the frame tree ------------------------------------------------------------------------------------
