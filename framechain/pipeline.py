@@ -54,8 +54,11 @@ def load_log(
     episode: int | None = None,
     robot: str | Path | None = None,
     progress: bool | Progress = False,
+    generated_robot_at: Path | None = None,
 ) -> LoadedRun:
     """Read MCAP, ROS 1 bag, ROS 2 bag, a LeRobot dataset or a saved Timeline directory, once.
+
+    ``generated_robot_at``: where the command writes a robot.yaml made for a known arm (its fixes name that file).
 
     Without a chain the log is read with every topic framechain understands (and the point topics
     whose names say their evidence role), the chain is suggested from that read, and the read is
@@ -68,7 +71,7 @@ def load_log(
     if (target / "timeline.json").is_file():
         return _stored_chain(target, Timeline.load(target), config)
     if adapters.LeRobotAdapter().probe(target):
-        return _load_lerobot(target, config, chain, episode=episode, robot=robot)
+        return _load_lerobot(target, config, chain, episode=episode, robot=robot, generated_at=generated_robot_at)
     if episode is not None or robot is not None:
         raise FramechainError(f"{target}: --episode and --robot are for LeRobot datasets; this is not one")
     if config is not None:
@@ -230,7 +233,7 @@ def _check_frames(target: Path, timeline: Timeline, chain: ChainConfig, info: Lo
 
 def _load_lerobot(
     target: Path, config: ChainConfig | None, chain_arg: ChainConfig | str | Path | None, *,
-    episode: int | None, robot: str | Path | None,
+    episode: int | None, robot: str | Path | None, generated_at: Path | None = None,
 ) -> LoadedRun:
     """A LeRobot episode: the robot section comes from --episode/--robot or the chain's ``robot:``."""
     section: dict[str, Any] = dict(config.robot) if config is not None and config.robot else {}
@@ -251,7 +254,8 @@ def _load_lerobot(
             raise FramechainError(suggestions.dataset_needs(target, episode=section.get("episode"),
                                                          robot_given=bool(_ROBOT_KEYS & set(section))))
         section.update(generated.mapping(), episode=generated.episode)
-    given = {"episode": section["episode"], "config": generated.config()} if generated is not None else section
+    given = ({"episode": section["episode"], "config": generated.config(generated_at)} if generated is not None
+             else section)
     loaded = adapters.open_log(target, replace(config or ChainConfig(), robot=given))
     suggested = config is None
     if config is not None:
@@ -297,18 +301,20 @@ def run(
     progress: Progress | None = None,
     warn: Callable[[str], None] | None = None,
     when_read: Callable[[], None] | None = None,
+    generated_robot_at: Path | None = None,
 ) -> Run:
     """Read ``log`` once, replay it once through ``chain`` (suggested when None), align its evidence once
     and attribute its error (unless ``attribute`` is False): a :class:`Run`. ``warn`` hears, as soon as the
     log is read and before any fit, what disagrees (a calibration of another camera's topic);
     ``when_read`` is called then too (a command starts its report's renderers on the core the read
-    leaves idle).
+    leaves idle); ``generated_robot_at``: as for :func:`load_log`.
 
     A log that cannot be attributed is still a run: ``run.not_attributed`` says why, and when no
     observation replayed ``run.nothing_replayed`` says which chain key to add. A log that cannot be
     read, or a chain that does not fit it, raises :class:`FramechainError` (one line).
     """
-    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress or False)
+    loaded = load_log(log, chain, episode=episode, robot=robot, progress=progress or False,
+                      generated_robot_at=generated_robot_at)
     if warn is not None:
         for warning in loaded.warnings:
             warn(warning)

@@ -58,7 +58,8 @@ def _attribute(args: argparse.Namespace, out: Path, report_formats: list[str]
     with imports_set_aside(), progress_reporter(args.quiet or args.json, "attributing") as progress:
         made = pipeline.run(args.log, args.chain, episode=args.episode, robot=args.robot, seed=args.seed,
                             bootstrap=args.bootstrap, progress=progress,
-                            warn=warner(getattr(args, "command", None) or "attribute"), when_read=start_renderers)
+                            warn=warner(getattr(args, "command", None) or "attribute"), when_read=start_renderers,
+                            generated_robot_at=out / "robot.yaml")
         say_generated_robot(made, getattr(args, "command", None) or "attribute", out / "robot.yaml")
         result = made.attributed()  # none: one line saying why, exit 1
         if progress is not None:

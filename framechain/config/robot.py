@@ -297,9 +297,11 @@ class GeneratedRobot:
         raw: dict[str, Any] = yaml.safe_load(self.text)
         return raw
 
-    def config(self) -> RobotConfig:
-        """The parsed configuration; findings' fixes name it ``robot.yaml (generated)``."""
-        return RobotConfig.from_mapping(self.mapping(), source=GENERATED_SOURCE)
+    def config(self, written_to: Path | None = None) -> RobotConfig:
+        """The parsed configuration; findings' fixes name the file it is ``written_to``, else ``robot.yaml
+        (generated)``."""
+        return RobotConfig.from_mapping(self.mapping(), source=GENERATED_SOURCE if written_to is None
+                                        else str(written_to))
 
 
 def _resolve(value: str | None, base: Path) -> Path:

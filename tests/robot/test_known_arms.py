@@ -302,6 +302,7 @@ def test_a_camera_away_from_its_links_origin_is_placed_from_its_images(
     assert motion["offset_s"] == pytest.approx(truth.expected_offset_s, abs=0.012)
     assert 160.0 * motion["focal_scale"] == pytest.approx(truth.intrinsics[0], rel=0.04)
     (mount_fix,) = [f["fix"] for f in result["findings"] if "cameras.wrist.mount" in f["fix"]]
+    assert mount_fix.startswith(f"In {out / 'robot.yaml'}, set cameras.wrist.mount: ")  # the file written to edit
     written = yaml.safe_load(mount_fix.split("cameras.wrist.mount: ", 1)[1].split(" (the mount", 1)[0])
     assert written["xyz"] == pytest.approx(position["xyz_link_cam"], abs=1e-4)
     assert yaml.safe_load((out / "robot.yaml").read_text())["cameras"]["wrist"]["mount"]["xyz"] == [0.0, 0.0, 0.0]

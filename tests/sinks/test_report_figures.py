@@ -24,6 +24,7 @@ from framechain.sinks.colors import (
     RECORDED_ERROR_COLOR,
     hex_color,
 )
+from framechain.sinks.document import markdown
 from framechain.sinks.plots import Figure
 
 Sketches = dict[str, tuple[str, Any]]
@@ -99,3 +100,21 @@ def test_fleet_counts_are_whole_and_one_log_is_one_log(monkeypatch: pytest.Monke
     (title,) = _calls(estimates, "set_title")
     assert title[0][0] == "latency at body_to_world (1 log)"
     assert fleet_report.summary_line(logs).startswith("1 log: ")
+
+
+def test_which_logs_orders_by_error_within_each_unit() -> None:
+    """A camera-motion episode's 97 deg/s is not larger than a bag's 0.2 m: logs measured in metres are listed
+    first, largest first, then the camera-motion ones, largest first."""
+    def log(unit: str, error: float, metric: str | None) -> fleet_report.FleetLog:
+        finding = {"fault": "latency", "hop": "camera_to_body", "estimate_text": "30 ms", "share": 0.5}
+        return fleet_report.FleetLog(unit=unit, log=unit, status="findings", error=None, verdict="v",
+                                     error_median_m=error, findings=[finding], metric=metric)
+
+    logs = [log("episode_small", 3.0, "camera_motion"), log("a.bag", 0.05, None),
+            log("episode_large", 97.0, "camera_motion"), log("b.bag", 0.2, None)]
+    text = markdown(fleet_report.fleet_document(logs, [], []))
+    which = text.split("## Which logs have which fault", 1)[1]
+    rows = [line.split("|")[1].strip() for line in which.splitlines() if line.startswith("| ") and "bag" in line
+            or line.startswith("| episode")]
+    assert rows == ["b.bag", "a.bag", "episode_large", "episode_small"]
+    assert "200.0 mm" in which and "97.00 deg/s" in which

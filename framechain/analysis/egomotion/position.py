@@ -30,7 +30,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.model import LinkMotion
@@ -97,6 +96,8 @@ def fit_position(
     """
     if link.xyz is None:
         return None
+    from scipy.optimize import least_squares  # here: importing scipy.optimize costs every run 0.36 s
+
     origin = int(link.stamps_ns[0])
     orientations = Orientations(link, origin)
     matches = _sampled(batch, stamps0_ns, stamps1_ns, origin, orientations.times, max_offset_s, seed)
