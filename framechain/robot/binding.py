@@ -17,7 +17,8 @@ from framechain.config.robot import ArmConfig, JointMapping, JointUnit, RobotCon
 from framechain.geometry.rotations import homogeneous
 from framechain.robot.kinematics import Joint, JointType, Mimic, RobotModel
 
-__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "out_of_limits", "robot_model"]
+__all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "out_of_limits", "robot_model",
+           "unit_mismatches"]
 
 
 def robot_model(config: RobotConfig) -> RobotModel:
@@ -149,6 +150,44 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
     body = config.chain_body
     if body is not None and body != config.world_frame and not model.has_link(body):
         raise RobotConfigError(fail, f"chain.body {body!r} is not a URDF link")
+
+
+def unit_mismatches(config: RobotConfig, values: npt.ArrayLike, names: Sequence[str]) -> list[str]:
+    """A note naming the mapped states whose recorded values their declared unit cannot hold: servo ticks below 0,
+    above a turn or mostly fractional, or a percentage beyond 100 (degrees declared as ticks read as a joint
+    held near -180 deg that barely moves, within its limits)."""
+    arr = np.asarray(values, dtype=float)
+    index = {n: i for i, n in enumerate(names)}
+    odd = []
+    for m in config.joints:
+        column = arr[:, index[m.state]]
+        why = _impossible_in(m, column[np.isfinite(column)])
+        if why:
+            odd.append(f"{m.state} ({m.unit.value}) holds {why}")
+    if not odd:
+        return []
+    return [f"{config.source}: the state holds values its declared unit cannot: {'; '.join(odd)}: is the unit right "
+            "(joints.NAME.unit, default_unit)?"]
+
+
+def _impossible_in(mapping: JointMapping, values: FloatArray) -> str:
+    """Why ``values`` were not recorded in the mapping's unit ("" when they may have been)."""
+    unit, turn = mapping.unit, mapping.ticks_per_turn
+    if not values.size:
+        return ""
+    lo, hi = float(values.min()), float(values.max())
+    seen = f"{lo:.4g}..{hi:.4g}"
+    if unit is JointUnit.TICKS:
+        fractional = float(np.mean(np.abs(values - np.round(values)) > 1e-6))
+        if lo < 0.0 or hi > turn:
+            return f"{seen}, outside a servo's 0..{turn:.0f} counts"
+        if fractional > 0.5:
+            return f"{seen}, {fractional:.0%} of them fractional where servo counts are whole"
+    if unit is JointUnit.RANGE_M100_100 and (lo < -100.5 or hi > 100.5):
+        return f"{seen}, beyond -100..100"
+    if unit is JointUnit.RANGE_0_100 and (lo < -0.5 or hi > 100.5):
+        return f"{seen}, beyond 0..100"
+    return ""
 
 
 def out_of_limits(config: RobotConfig, model: RobotModel, positions: dict[str, FloatArray]) -> list[str]:

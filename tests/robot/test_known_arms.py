@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 import yaml
 from scipy.spatial.transform import Rotation
@@ -324,3 +325,24 @@ def test_degrees_read_as_radians_are_named_by_the_joint_limits(wrist_episode: Vi
     assert "shoulder_pan.pos (rad) puts shoulder_pan at" in said
     assert "gripper" not in said  # its range_0_100 is its own unit, within its limits
     assert "is the unit right" in said
+
+
+def test_degrees_declared_as_ticks_are_named_by_their_values(wrist_episode: VideoDatasetTruth, tmp_path: Path
+                                                             ) -> None:
+    """Degrees read as servo ticks put every joint near -180 deg, barely moving, within no limit's reach of a note:
+    the values themselves say it (negative, and fractional, where servo counts are whole from 0 to 4096)."""
+    right = write_robot_yaml(wrist_episode, tmp_path / "robot.yaml")
+    assert not [n for n in open_dataset(wrist_episode.root, episode=0, robot=right).metadata["notes"]
+                if "declared unit cannot" in n]
+    config = yaml.safe_load(right.read_text())
+    config["default_unit"] = "ticks"
+    (tmp_path / "ticks.yaml").write_text(yaml.safe_dump(config))
+    notes = open_dataset(wrist_episode.root, episode=0, robot=tmp_path / "ticks.yaml").metadata["notes"]
+    (said,) = [n for n in notes if "declared unit cannot" in n]
+    assert said.startswith(f"{tmp_path / 'ticks.yaml'}: the state holds values its declared unit cannot: ")
+    # The recorded shoulder_pan column, read here with pyarrow: the first of the state vector.
+    (table_path,) = sorted((wrist_episode.root / "data").rglob("*.parquet"))
+    pan = np.array([row[0] for row in pq.read_table(table_path, columns=["observation.state"]).column(0).to_pylist()])
+    assert f"shoulder_pan.pos (ticks) holds {pan.min():.4g}..{pan.max():.4g}, outside a servo's 0..4096" in said
+    assert "gripper" not in said  # range_0_100 as declared: its values fit it
+    assert "is the unit right (joints.NAME.unit, default_unit)?" in said

@@ -55,7 +55,7 @@ from framechain.config.calibration import CameraCalibration
 from framechain.config.chain import ChainConfig
 from framechain.config.chain_cameras import MarkerSpec
 from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
-from framechain.robot.binding import arm_root, joint_positions, out_of_limits, robot_model
+from framechain.robot.binding import arm_root, joint_positions, out_of_limits, robot_model, unit_mismatches
 from framechain.robot.kinematics import RobotModel
 from framechain.timeline import (
     CameraTable,
@@ -100,7 +100,8 @@ def open_dataset(
     cfg.check_names(names)
     wall_features = wall_clock_features(reader)
     frames = reader.read(episode, list(dict.fromkeys([*_columns(cfg, reader, sources), *wall_features])))
-    q = joint_positions(cfg, model, _finite_state(cfg, frames, names), names)
+    recorded = _finite_state(cfg, frames, names)
+    q = joint_positions(cfg, model, recorded, names)
     state_ns = frames.stamp_ns
     source_name = f"{Path(path).name}:{cfg.state_feature}"
 
@@ -118,7 +119,7 @@ def open_dataset(
     joint_states = _joint_states(cfg, q, state_ns, source_name)
     videos, clocks = camera_frames(cfg, frames, cam_ns, state_ns, reader.fps, Path(path))
     metadata = _metadata(Path(path), episode, cfg, model, reader, frames, clocks)
-    metadata["notes"].extend(out_of_limits(cfg, model, q))
+    metadata["notes"].extend([*unit_mismatches(cfg, recorded, names), *out_of_limits(cfg, model, q)])
     lost = frames.episode.missing_videos
     metadata["notes"].extend(missing_video_note(reader, lost[cam.video_key], cam.video_key, episode, cam.name)
                              for cam in cfg.cameras.values() if cam.video_key is not None and cam.video_key in lost)
