@@ -353,7 +353,7 @@ def _position_said(entry: Mapping[str, Any]) -> str:
     """What became of a camera's position fitted from its images, for a note on why it is still unexplained."""
     said = position_said(entry)
     if not said:
-        return " (its images did not fit a position)"
+        return " (its images did not determine its position: see its note)"
     return f" (the position fitted from its images, {said}, did not explain it either)"
 
 
@@ -372,9 +372,9 @@ def _attributed(
     motion = None
     if _measures_camera_motion(loaded, attribution):
         cameras = image_cameras(loaded.timeline)
-        # A robot.yaml framechain generated puts each camera at its link's origin: where it is, is measured.
+        # A robot.yaml framechain generated guesses each camera's lens and puts it at its link's origin.
         motion = measure_cameras(loaded.chain, replayed.buffer, cameras, partial(camera_motion_source, loaded.timeline),
-                                 progress=progress, unknown_positions=cameras if loaded.generated_robot else ())
+                                 progress=progress, guessed=cameras if loaded.generated_robot else ())
     if motion is not None and (why is None or any(c.fit is not None for c in motion.cameras)):
         # A camera that moves is measured: evidence whatever else the log lacks.
         unattributed = () if why is None or why.reason is Unattributed.NO_DETECTIONS else (why.detail,)

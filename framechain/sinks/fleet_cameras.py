@@ -40,8 +40,11 @@ def camera_summary(log: str, fit: CameraRecordingFit) -> str:
         "; about " + ", ".join("[" + ", ".join(f"{v:.2f}" for v in a) + "]" for a in fit.unobservable_axes)
         + f" in {fit.link} the mount is not observable (kept as declared)")
     departs = len({d.episode for d in fit.departures})
+    position = "" if fit.xyz_link_cam is None else (
+        f"; its position, not known, fitted at [{', '.join(f'{v:.3f}' for v in fit.xyz_link_cam)}] m (the median of "
+        f"{fit.position_episodes} episode(s), the farthest {fit.position_spread_m * 1e3:.1f} mm from it)")
     return (f"{log}, camera {fit.camera}: rides {fit.link}{moved} in the fit of {fitted} episode(s); "
-            f"{mount}{declared}{axes}; median offset {fit.median_offset_s * 1e3:+.1f} ms; "
+            f"{mount}{declared}{axes}{position}; median offset {fit.median_offset_s * 1e3:+.1f} ms; "
             f"{departs} episode(s) depart{left}.")
 
 

@@ -273,3 +273,25 @@ def test_batch_prints_each_cameras_recording_fit_as_attribute_episodes_does(
         assert f"in the fit of {EPISODES} episode(s)" in sentence
     late = [ln for ln in printed if ln.startswith(f"  episode {LATE_EPISODE}: its offset")]
     assert len(late) == len(truth.cameras)
+
+
+def test_a_camera_placed_from_its_images_gets_one_position_for_the_recording(tmp_path: Path, so101_urdf: Path) -> None:
+    """Without robot.yaml each episode fits the camera's position on its link from its images; the recording gives
+    one position, the median of its explained episodes', with how far the farthest lies, in its sentence and in
+    recording.json (the generator's camera sits 5.8 cm from gripper_link)."""
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
+        so101_urdf, seed=11, episodes=2, duration_s=5.0, video_delay_s=0.03))
+    result = run_batch([truth.root], tmp_path / "out", jobs=1, bootstrap=0, report_formats=("md",))
+    (fit,) = result.recordings[str(truth.root.resolve())]
+    assert fit.position_episodes == 2
+    placed = np.array([e.xyz_link_cam for e in fit.episodes])
+    assert fit.xyz_link_cam is not None
+    assert np.linalg.norm(fit.xyz_link_cam - truth.xyz_link_cam) < 0.01
+    assert fit.position_spread_m == pytest.approx(0.5 * np.linalg.norm(placed[0] - placed[1]), abs=1e-9)
+    report = (result.table_path.parent / "fleet_report.md").read_text()
+    (sentence,) = [line for line in report.splitlines() if "camera wrist_optical_frame: rides" in line]
+    shown = ", ".join(f"{v:.3f}" for v in fit.xyz_link_cam)
+    assert f"its position, not known, fitted at [{shown}] m (the median of 2 episode(s)" in sentence
+    document = json.loads(result.report_paths["recording"].read_text())
+    (camera,) = document["recordings"][0]["cameras"]
+    assert camera["position"]["xyz_link_cam"] == pytest.approx(fit.xyz_link_cam, abs=1e-6)

@@ -346,3 +346,19 @@ def test_degrees_declared_as_ticks_are_named_by_their_values(wrist_episode: Vide
     assert f"shoulder_pan.pos (ticks) holds {pan.min():.4g}..{pan.max():.4g}, outside a servo's 0..4096" in said
     assert "gripper" not in said  # range_0_100 as declared: its values fit it
     assert "is the unit right (joints.NAME.unit, default_unit)?" in said
+
+
+def test_a_guessed_lens_is_corrected_by_a_departure_a_calibration_would_keep(so101_urdf: Path, tmp_path: Path) -> None:
+    """The generated robot.yaml guesses a 70 deg field of view: 457 px on a 640 px image whose lens has 500. A
+    declared calibration 9% off would be within the 10% a focal finding needs; a guess is not a calibration, and its
+    fix is offered (3% suffices), with the lens said to be guessed."""
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
+        so101_urdf, seed=3, duration_s=6.0, width=640, height=480, focal_px=500.0))
+    out = tmp_path / "out"
+    assert main(["attribute", str(truth.root), "--out", str(out), "--format", "json", "-q"]) == 0
+    result = json.loads((out / "attribution.json").read_text())
+    (motion,) = result["camera_motion"]
+    assert motion["intrinsics_known"] is False
+    (focal,) = [f for f in result["findings"] if f["fault"] == "intrinsics"]
+    fx = float(focal["fix"].split("cameras.wrist.intrinsics.fx: ", 1)[1].split(" ", 1)[0])
+    assert fx == pytest.approx(truth.intrinsics[0], rel=0.02)

@@ -39,9 +39,11 @@ from framechain.geometry.camera import focal_of_fov, fov_of_focal
 
 __all__ = [
     "FOCAL_CLEAR",
+    "FOCAL_GUESSED",
     "MIN_ANGLE_DEG",
     "MIN_OFFSET_S",
     "Judgement",
+    "focal_clear",
     "focal_limits",
     "judge",
     "motion_bounds",
@@ -55,6 +57,10 @@ MIN_OFFSET_S = 0.005
 MIN_ANGLE_DEG = 2.5
 #: A focal length off by more than this (ratio), with an interval narrower than it, is a finding.
 FOCAL_CLEAR = 0.10
+#: A guessed focal length (from a field of view, or a robot.yaml framechain made) is corrected by a smaller departure:
+#: it claims no calibration, and the mount and position fitted with the implied one rest on it (the rotation measured
+#: from images of a scene at finite depth comes out up to about 1% off on clean generated episodes).
+FOCAL_GUESSED = 0.03
 #: The misfit left with every correction applied above which the model does not explain the motion (deg/s).
 UNEXPLAINED_DEG_S = 10.0
 #: ... or above this share of the camera's rotation rate (the larger of measured and predicted).
@@ -213,8 +219,15 @@ def _mount_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
                  unobservable_axes=fit.mount_unobservable_axes, camera=camera)
 
 
+def focal_clear(motion: CameraMotion) -> float:
+    """The departure of the focal length (ratio) that is a finding: :data:`FOCAL_CLEAR` for declared intrinsics,
+    :data:`FOCAL_GUESSED` for guessed ones."""
+    return FOCAL_CLEAR if motion.intrinsics_known else FOCAL_GUESSED
+
+
 def _focal_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
-    """An intrinsics finding needs a departure over FOCAL_CLEAR measured within an interval narrower than it."""
+    """An intrinsics finding needs a departure over :func:`focal_clear` measured within an interval narrower than
+    FOCAL_CLEAR."""
     low, high = fit.focal_scale_interval
     hop, camera = HopName.PIXEL_TO_CAMERA, motion.camera
     if fit.unobservable:
@@ -222,7 +235,7 @@ def _focal_bound(motion: CameraMotion, fit: EgoMotionFit) -> Bound:
     if not np.isfinite(fit.focal_scale) or not high - low < FOCAL_CLEAR:
         return Bound(hop, Fault.INTRINSICS, False, None, f"camera {camera}: the focal length its motion implies is "
                      f"uncertain by more than {FOCAL_CLEAR:.0%}", camera=camera)
-    return Bound(hop, Fault.INTRINSICS, True, {"scale": FOCAL_CLEAR}, "", camera=camera)
+    return Bound(hop, Fault.INTRINSICS, True, {"scale": focal_clear(motion)}, "", camera=camera)
 
 
 #: A rotation rate has no depth in it: the cameras' own motion cannot scale their depth.

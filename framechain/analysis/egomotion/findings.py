@@ -32,6 +32,7 @@ from framechain.analysis.egomotion.bounds import (
     FOCAL_CLEAR,
     NO_DEPTH,
     Judgement,
+    focal_clear,
     judge,
     latency_bound_s,
     motion_bounds,
@@ -199,7 +200,8 @@ def motion_findings(evidence: CameraMotionEvidence, metadata: Mapping[str, Any])
         before.append(misfit.residual(frozenset()))
         after.append(misfit.residual(frozenset(p.kind for p in proposals)))
         found.extend((proposal, value, motion.camera) for proposal, value in zip(proposals, values, strict=True))
-        said = (*motion.notes, *fit.notes, *_judged_notes(judgement), *_focal_notes(motion, fit, proposals, judgement),
+        said = (*motion.notes, *fit.notes, *_judged_notes(motion.camera, judgement, (*motion.notes, *fit.notes)),
+                *_focal_notes(motion, fit, proposals, judgement),
                 *(_dropped_note(motion.camera, proposal, share) for proposal, share in dropped))
         notes.extend(n for n in said if n not in notes)
         entries.append(_entry(motion, declaration, misfit, proposals, judgement))
@@ -219,10 +221,12 @@ def _finding(proposal: _Proposal, value: float, camera: str, total: float) -> Fi
                    error_unit="deg/s")
 
 
-def _judged_notes(judgement: Judgement) -> list[str]:
-    """A motion the model does not explain, and each undetermined estimate, as notes."""
+def _judged_notes(camera: str, judgement: Judgement, said: Sequence[str]) -> list[str]:
+    """A motion the model does not explain, and each undetermined estimate whose reason the fit's notes (``said``)
+    do not give already, as notes."""
     out = [f"{judgement.why_unexplained}: no fix is offered from it"] if not judgement.explained else []
-    return out + list(judgement.undetermined.values())
+    return out + [f"camera {camera}: {text}" for text in judgement.undetermined.values()
+                  if not any(text.split(": ", 1)[-1] in note for note in said)]
 
 
 def _misfit(motion: CameraMotion, fit: EgoMotionFit) -> _Misfit:
@@ -292,7 +296,7 @@ def _proposals(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDecla
           and fit.mount_error.angle_deg >= mount_bound_deg(fit)):
         out.append(_mount(motion, fit, declaration))
     scale_low, scale_high = fit.focal_scale_interval
-    if (Fault.INTRINSICS.value not in undetermined and abs(fit.focal_scale - 1.0) > FOCAL_CLEAR
+    if (Fault.INTRINSICS.value not in undetermined and abs(fit.focal_scale - 1.0) > focal_clear(motion)
             and scale_high - scale_low < FOCAL_CLEAR and not scale_low <= 1.0 <= scale_high):
         out.append(_focal(motion, fit, declaration))
     return out
@@ -464,7 +468,10 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
                              "focal_px": _num(position.focal_factor * motion.focal_px),
                              "residual_px": {"at_link_origin": _num(position.residual_px[0]),
                                              "fitted": _num(position.residual_px[1])},
-                             "pairs": position.pairs, "matches": position.matches}
+                             "pairs": position.pairs, "matches": position.matches,
+                             # 1 sd along the principal axis it is known least along (a unit vector of the link)
+                             "spread_m": _num(position.spread_m[0]),
+                             "spread_axis": [_num(v) for v in position.spread_axes[0]]}
     if fit.evidence is not None:
         entry["mount_evidence"] = {**fit.evidence.to_json(),
                                    "declared_q_link_cam": [_num(v) for v in motion.declared_q_link_cam]}

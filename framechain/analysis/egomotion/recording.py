@@ -60,6 +60,8 @@ class EpisodeCamera:
     sigma_deg: float  # robust RMS misfit per pair
     link_misfits: Mapping[str, float]
     explained: bool
+    #: Its position on ``link`` fitted from its images, when it was not known (None: known, or not determined).
+    xyz_link_cam: FloatArray | None = None
 
     @classmethod
     def from_entry(cls, episode: int, entry: Mapping[str, Any]) -> EpisodeCamera | None:
@@ -78,7 +80,7 @@ class EpisodeCamera:
             cross=np.asarray(evidence["cross"], dtype=float).reshape(3, 3),
             scatter=np.asarray(evidence["scatter"], dtype=float).reshape(3, 3), weight=float(evidence["weight"]),
             sigma_deg=float(evidence["sigma_deg"]), link_misfits=dict(entry.get("link_misfits") or {}),
-            explained=entry.get("explained") is not False)
+            explained=entry.get("explained") is not False, xyz_link_cam=_fitted_position(entry))
 
     @property
     def offset_bound_s(self) -> float:
@@ -117,6 +119,11 @@ class CameraRecordingFit:
     departures: tuple[Departure, ...]
     #: The recording's episodes that gave this camera no measurement, each with why (not in ``episodes``).
     left_out: tuple[tuple[int, str], ...] = ()
+    #: Its position on ``link``, not known: the median of the explained episodes' fits on it (None: none), how many
+    #: they are and how far the farthest lies from it (m).
+    xyz_link_cam: FloatArray | None = None
+    position_episodes: int = 0
+    position_spread_m: float = float("nan")
 
     @property
     def explained(self) -> tuple[EpisodeCamera, ...]:
@@ -139,6 +146,9 @@ class CameraRecordingFit:
                           "explained": e.explained} for e in self.episodes],
             "departures": [d.to_json() for d in self.departures],
             "left_out": [{"episode": episode, "why": why} for episode, why in self.left_out],
+            "position": None if self.xyz_link_cam is None else {
+                "xyz_link_cam": [round(float(v), 6) for v in self.xyz_link_cam], "episodes": self.position_episodes,
+                "farthest_episode_m": _round(self.position_spread_m, 6)},
         }
 
 
@@ -162,12 +172,24 @@ def _one_camera(episodes: list[EpisodeCamera], seed: int, resamples: int) -> Cam
     angles = {e.episode: _angle_deg(_completed(matrix_of(e.q_link_cam), mount, axes), mount)
               for e in on_link}
     from_declared = _angle_deg(mount, declared) if link == first.declared_link else float("nan")
+    placed = np.array([e.xyz_link_cam for e in on_link if e.xyz_link_cam is not None]).reshape(-1, 3)
+    position = np.median(placed, axis=0) if len(placed) else None
     return CameraRecordingFit(
         camera=first.camera, name=first.name, link=link, declared_link=first.declared_link,
         q_link_cam=quat_of(mount), mount_interval_deg=interval,
         mount_from_declared_deg=from_declared, unobservable_axes=axes, median_offset_s=median,
         episodes=tuple(episodes), episode_mount_deg=angles,
-        departures=tuple(_departures(episodes, link, median, angles)))
+        departures=tuple(_departures(episodes, link, median, angles)), xyz_link_cam=position,
+        position_episodes=len(placed),
+        position_spread_m=float(np.linalg.norm(placed - position, axis=1).max()) if position is not None else np.nan)
+
+
+def _fitted_position(entry: Mapping[str, Any]) -> FloatArray | None:
+    """The position a ``camera_motion`` entry fitted from the images (None: the position was known)."""
+    position = entry.get("position")
+    if not isinstance(position, Mapping) or None in position.get("xyz_link_cam", [None]):
+        return None
+    return np.asarray(position["xyz_link_cam"], dtype=float)
 
 
 def _recording_link(episodes: list[EpisodeCamera]) -> str:

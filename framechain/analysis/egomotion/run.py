@@ -178,10 +178,11 @@ def camera_threads() -> int:
 def measure_cameras(
     chain: ChainConfig, buffer: TransformBuffer, cameras: Sequence[str], images: ImagesOf, *,
     options: EgoMotionFitOptions | None = None, progress: Callable[[str], None] | None = None,
-    unknown_positions: Collection[str] = (),
+    guessed: Collection[str] = (),
 ) -> CameraMotionEvidence | None:
-    """Each of ``cameras`` (frames with images; ``images`` decodes them) measured (None: no camera); the position
-    on its link of each of ``unknown_positions`` is fitted from its images (:mod:`.position`)."""
+    """Each of ``cameras`` (frames with images; ``images`` decodes them) measured (None: no camera). The mounts and
+    intrinsics of ``guessed`` are guesses (a robot.yaml framechain made): each one's position on its link is fitted
+    from its images (:mod:`.position`), and its lens is reported as guessed."""
     if not cameras:
         return None
     order = sorted(cameras, key=lambda f: f != chain.frames.camera)  # the chain's camera first
@@ -196,12 +197,12 @@ def measure_cameras(
     # most of the work (a log's reader fetches for one thread at a time).
     with ThreadPoolExecutor(max_workers=max(1, min(len(order), camera_threads()))) as pool:
         out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts,
-                                                           position_unknown=camera in unknown_positions), order))
+                                                           guessed=camera in guessed), order))
     return CameraMotionEvidence(cameras=tuple(out))
 
 
 def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, images: ImagesOf,
-                    options: EgoMotionFitOptions, *, position_unknown: bool = False) -> CameraMotion:
+                    options: EgoMotionFitOptions, *, guessed: bool = False) -> CameraMotion:
     start = time.perf_counter()
     link, q_link_cam, xyz_link_cam = _declared_mount(buffer, camera)
     empty = CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
@@ -219,13 +220,14 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
     declared = source.intrinsics
     pairing, measured = confirm_pairing(source, links, camera, options)
     fitted = _fit_with_focal(source, links, camera, (link, q_link_cam, xyz_link_cam), options, measured,
-                             position_unknown=position_unknown)
+                             position_unknown=guessed)
     fit = fitted.fit
     return CameraMotion(camera=camera, declared_link=link, declared_q_link_cam=q_link_cam,
                         declared_xyz_link_cam=xyz_link_cam, fit=fit,
                         table=fit.table if len(fit.table) else source.last, links=links,
                         frames=source.frames, decoded=source.decoded, seconds=time.perf_counter() - start,
-                        intrinsics_known=source.intrinsics_known, notes=(*source.notes, *pairing, *fitted.notes),
+                        intrinsics_known=source.intrinsics_known and not guessed,
+                        notes=(*source.notes, *pairing, *fitted.notes),
                         measured_focal=fitted.focal, focal_px=0.5 * (declared.fx + declared.fy),
                         width_px=declared.width, pairing=source.pairing, pair_counts=source.pair_counts(),
                         position=fitted.position)
@@ -363,14 +365,24 @@ def _fitted_position(source: CameraImages, links: Sequence[LinkMotion], camera: 
                       "images (no frame pair inside the link's span, or the link has no positions): measured at the "
                       "link's origin")
     before, after = position.residual_px
+    axis = ", ".join(f"{v:.2f}" for v in position.spread_axes[0])
     said = (f"its position on {fit.link} is not known; fitted from {position.matches:,} matched features in "
-            f"{position.pairs:,} frame pairs: xyz [{', '.join(f'{v:.3f}' for v in position.xyz_link_cam)}] m, "
-            f"focal length {position.focal_factor * focal:.1f} px (median residual {after:.2f} px, {before:.2f} at "
-            "the link's origin)")
+            f"{position.pairs:,} frame pairs: xyz [{', '.join(f'{v:.3f}' for v in position.xyz_link_cam)}] m "
+            f"({_spread_said(float(position.spread_m[0]))} along [{axis}], 1 sd), focal length "
+            f"{position.focal_factor * focal:.1f} px (median residual {after:.2f} px, {before:.2f} at the link's "
+            "origin)")
     if position.at_limit:
         return None, (f"camera {camera}: {said}, but its {position.at_limit} reached the limit of the search: not "
                       "used, measured at the link's origin")
+    if not position.determined:
+        return None, (f"camera {camera}: {said}, but this motion does not determine it (the link turned about too "
+                      "few axes, or too little): not used, measured at the link's origin; measure the camera's "
+                      "position on its link")
     return position, f"camera {camera}: {said}; measured there"
+
+
+def _spread_said(metres: float) -> str:
+    return f"+-{metres * 1e3:.1f} mm" if metres < 1.0 else "over +-1 m"
 
 
 # -- the frame tree ------------------------------------------------------------------------------------

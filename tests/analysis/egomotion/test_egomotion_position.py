@@ -8,6 +8,8 @@ matches wrong (anywhere in the image).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -33,9 +35,13 @@ def _link_origin(t: np.ndarray) -> np.ndarray:
     return np.stack([0.3 + 0.1 * np.sin(1.6 * t), 0.1 * np.cos(1.2 * t), 0.2 + 0.05 * np.sin(2.6 * t)], axis=1)
 
 
-def _camera(t: np.ndarray) -> tuple[Rotation, np.ndarray]:
-    """The camera's orientation and centre in the world at times ``t``."""
-    link = _link_rotation(t)
+def _about_z(t: np.ndarray) -> Rotation:
+    return Rotation.from_rotvec(np.outer(0.8 * np.sin(1.8 * t), [0.0, 0.0, 1.0]))
+
+
+def _camera(t: np.ndarray, turn: Callable[[np.ndarray], Rotation]) -> tuple[Rotation, np.ndarray]:
+    """The camera's orientation and centre in the world at times ``t``, its link turned by ``turn``."""
+    link = turn(t)
     return link * TRUE_MOUNT, _link_origin(t) + link.apply(TRUE_XYZ)
 
 
@@ -45,18 +51,19 @@ def _pixels_to_bearings(pixels: np.ndarray, focal: float) -> np.ndarray:
     return out
 
 
-def _scene(seed: int, noise_px: float = 0.2, wrong_share: float = 0.03
+def _scene(seed: int, noise_px: float = 0.2, wrong_share: float = 0.03,
+           turn: Callable[[np.ndarray], Rotation] = _link_rotation
            ) -> tuple[PairBatch, np.ndarray, np.ndarray, LinkMotion]:
     rng = np.random.default_rng(seed)
     link_times = np.arange(0.0, 8.0, 0.01)
     link = LinkMotion(link="gripper_link", stamps_ns=(link_times * 1e9).round().astype(np.int64),
-                      quat_xyzw=_link_rotation(link_times).as_quat(), xyz=_link_origin(link_times))
+                      quat_xyzw=turn(link_times).as_quat(), xyz=_link_origin(link_times))
     stamps = np.arange(0.5, 7.5, 1.0 / 30.0)
     first = np.concatenate([np.arange(stamps.size - 1), np.arange(stamps.size - 3)])
     second = np.concatenate([first[: stamps.size - 1] + 1, first[stamps.size - 1:] + 3])
     shown0, shown1 = stamps[first] + TRUE_OFFSET_S, stamps[second] + TRUE_OFFSET_S
-    rot0, centre0 = _camera(shown0)
-    rot1, centre1 = _camera(shown1)
+    rot0, centre0 = _camera(shown0, turn)
+    rot1, centre1 = _camera(shown1, turn)
     matches = 60
     # Points in front of the earlier camera, 0.2 to 1 m away, within its 64 deg field of view.
     pixels0 = rng.uniform(10.0, 214.0, size=(first.size, matches, 2))
@@ -113,3 +120,19 @@ def test_a_camera_beyond_the_search_is_said_to_be_at_its_limit() -> None:
                        offset_s=0.0, focal_px=ASSUMED_FOCAL_PX, max_offset_s=0.3)
     assert fit is not None
     assert "x" in fit.at_limit.split(", ")
+
+
+def test_a_link_turning_about_one_axis_leaves_the_position_along_it_undetermined() -> None:
+    """A link that only turns about its z axis moves a camera the same wherever it sits along that axis: the fit
+    says so (its spread along the link's z is far over the limit), and the other two axes stay determined."""
+    batch, stamps0, stamps1, link = _scene(0, turn=_about_z)
+    fit = fit_position(batch, stamps0, stamps1, link, q_link_cam=TRUE_MOUNT.as_quat(), xyz_link_cam=np.zeros(3),
+                       offset_s=0.0, focal_px=ASSUMED_FOCAL_PX, max_offset_s=0.3)
+    assert fit is not None
+    assert not fit.determined
+    assert abs(fit.spread_axes[0] @ [0.0, 0.0, 1.0]) > 0.99
+    assert fit.spread_m[0] > 1.0
+    # Across the axis the position is still found: the spread's other axes are small, and so is the error there.
+    assert fit.spread_m[1] < 0.005
+    across = np.eye(3)[:2]
+    assert np.abs(across @ (fit.xyz_link_cam - TRUE_XYZ)).max() < 0.004
