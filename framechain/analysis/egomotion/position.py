@@ -30,11 +30,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from framechain.analysis.egomotion.model import LinkMotion
 from framechain.analysis.egomotion.solve import Orientations
 from framechain.arrays import BoolArray, FloatArray, IntArray
+from framechain.geometry.rotations import quat_conjugate, quat_from_rotvec, quat_multiply, quat_rotate, quat_to_matrix
 from framechain.vision.two_view import PairBatch, off_flow_residuals
 
 __all__ = ["POSITION_LIMIT_M", "PositionFit", "fit_position"]
@@ -123,13 +123,13 @@ def fit_position(
     if matches is None:
         return None
     centres = np.asarray(link.xyz, dtype=float)
-    mount = Rotation.from_quat(np.asarray(q_link_cam, dtype=float))
+    mount = np.asarray(q_link_cam, dtype=float) / np.linalg.norm(q_link_cam)
     kept = matches.valid  # the matches the fit rests on: all, then the inliers of the first fit
 
     def residuals(x: FloatArray) -> FloatArray:
         turn, xyz, log_focal, offset = x[:3], x[3:6], x[6], x[7]
-        rotation, direction = _predicted(orientations, centres, mount * Rotation.from_rotvec(turn), xyz, matches,
-                                         offset)
+        turned = quat_multiply(mount, quat_from_rotvec(turn))
+        rotation, direction = _predicted(orientations, centres, turned, xyz, matches, offset)
         factor = float(np.exp(log_focal))
         scaled = PairBatch(_refocused(matches.b0, factor), _refocused(matches.b1, factor), matches.valid)
         # In pixels of the lens fitted: in radians, a longer focal length would shrink every residual.
@@ -154,7 +154,7 @@ def fit_position(
     kept = matches.valid
     used = matches.valid
     return PositionFit(
-        link=link.link, xyz_link_cam=x[3:6].copy(), q_link_cam=(mount * Rotation.from_rotvec(x[:3])).as_quat(),
+        link=link.link, xyz_link_cam=x[3:6].copy(), q_link_cam=quat_multiply(mount, quat_from_rotvec(x[:3])),
         focal_factor=float(np.exp(x[6])), offset_s=float(x[7]),
         residual_px=(_median_px(residuals(start), used), _median_px(residuals(x), used)),
         pairs=int(matches.t0.size), matches=int(used.sum()), at_limit=_at_limit(x, lower, limit), spread_m=spread[0],
@@ -213,19 +213,18 @@ def _sampled(batch: PairBatch, stamps0_ns: IntArray, stamps1_ns: IntArray, origi
                     valid=batch.valid[rows, order], t0=t0[inside], t1=t1[inside])
 
 
-def _predicted(orientations: Orientations, centres: FloatArray, mount: Rotation, xyz: FloatArray, matches: _Matches,
+def _predicted(orientations: Orientations, centres: FloatArray, mount: FloatArray, xyz: FloatArray, matches: _Matches,
                offset: float) -> tuple[FloatArray, FloatArray]:
     """The camera's rotation ``R_cam0_cam1`` (P, 3, 3) and the unit direction its centre moved, in the earlier
-    optical frame (P, 3), as the link's motion gives them with the camera at ``xyz`` turned by ``mount``."""
+    optical frame (P, 3), as the link's motion gives them with the camera at ``xyz`` turned by ``mount`` (xyzw)."""
     t0, t1 = matches.t0 + offset, matches.t1 + offset
-    link0 = Rotation.from_quat(orientations.at(t0).T)
-    link1 = Rotation.from_quat(orientations.at(t1).T)
+    link0, link1 = orientations.at(t0), orientations.at(t1)  # (4, P), components first
     times = orientations.times
-    centre0 = np.stack([np.interp(t0, times, centres[:, i]) for i in range(3)], axis=1) + link0.apply(xyz)
-    centre1 = np.stack([np.interp(t1, times, centres[:, i]) for i in range(3)], axis=1) + link1.apply(xyz)
-    cam0 = link0 * mount
-    rotation = (cam0.inv() * link1 * mount).as_matrix()
-    move = cam0.inv().apply(centre1 - centre0)
+    centre0 = np.stack([np.interp(t0, times, centres[:, i]) for i in range(3)]) + quat_rotate(link0, xyz)
+    centre1 = np.stack([np.interp(t1, times, centres[:, i]) for i in range(3)]) + quat_rotate(link1, xyz)
+    from_cam0 = quat_conjugate(quat_multiply(link0, mount))
+    rotation = quat_to_matrix(quat_multiply(from_cam0, quat_multiply(link1, mount)))
+    move = quat_rotate(from_cam0, centre1 - centre0).T
     direction: FloatArray = move / np.maximum(np.linalg.norm(move, axis=1, keepdims=True), 1e-12)
     return rotation, direction
 
