@@ -95,6 +95,8 @@ class VideoDatasetSpec:
     pads: bool = True
     #: The arms hold still (a camera that shows nothing of its motion).
     still: bool = False
+    #: Only these of ARM_JOINTS move (an arm that only pans: ``("shoulder_pan",)``); None: all of them.
+    moving_joints: tuple[str, ...] | None = None
     #: "presentation": ``timestamp = frame_index / fps``; "realtime": real capture times at about ``realtime_hz``.
     clock: str = "presentation"
     realtime_hz: float = 18.6
@@ -187,9 +189,14 @@ def realtime_stamps(rng: np.random.Generator, duration_s: float, rate_hz: float)
     return out
 
 
-def _trajectory(rng: np.random.Generator, *, still: bool = False) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed)."""
-    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2)) * (0.0 if still else 1.0)
+def _trajectory(rng: np.random.Generator, *, still: bool = False, moving: tuple[str, ...] | None = None
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed); the joints not
+    ``moving`` (None: all move) hold their home angle."""
+    if moving is not None and not set(moving) <= set(ARM_JOINTS):
+        raise ValueError(f"moving_joints {sorted(set(moving) - set(ARM_JOINTS))} are not among {ARM_JOINTS}")
+    moves = np.array([moving is None or name in moving for name in ARM_JOINTS], dtype=float)
+    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2)) * (0.0 if still else 1.0) * moves[:, None]
     omega = rng.uniform(0.8, 2.2, (5, 2))
     phase = rng.uniform(0.0, 2 * np.pi, (5, 2))
     return amplitude, omega, phase
@@ -275,7 +282,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     for e in range(spec.episodes):
         t = _episode_stamps(rng, spec)
         n = t.size
-        motions = {arm: _trajectory(rng, still=spec.still) for arm in arms}
+        motions = {arm: _trajectory(rng, still=spec.still, moving=spec.moving_joints) for arm in arms}
         state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
