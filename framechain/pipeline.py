@@ -22,7 +22,6 @@ from framechain import suggest as suggestions
 from framechain.adapters.messages.egomotion_frames import camera_motion_source, image_cameras
 from framechain.analysis.egomotion.attribution import with_camera_motion
 from framechain.analysis.egomotion.curves import rotation_rate_curves
-from framechain.analysis.egomotion.findings import position_said
 from framechain.analysis.egomotion.run import CameraMotionEvidence, measure_cameras
 from framechain.analysis.evidence.replayed import Replayed, replay_chain
 from framechain.analysis.run import LoadedRun, NotAttributed, Run
@@ -32,6 +31,7 @@ from framechain.config.chain import ChainConfig, ChainFrames
 from framechain.errors import FramechainError
 from framechain.progress import Progress
 from framechain.replay import ReplayResult
+from framechain.sinks.text import position_said
 from framechain.timeline import LogInfo, Timeline
 
 #: The path of a run made from a Timeline in memory rather than a file.

@@ -32,7 +32,7 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
 
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
                        jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats,
-                       raise_input_problems=True)
+                       raise_input_problems=True, generated_robot_at=None if args.robot else out / "robot.yaml")
     _say_generated_robot(args, out, [int(r["episode"]) for r in result.records if r.get("episode") is not None])
     logs = fleet_logs(pq.read_table(result.table_path))
     if all(log.status in NOT_ANALYSED for log in logs):
@@ -44,7 +44,8 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     print_notes(console, result.notes)
     print_not_analysed(console, logs)
     if not result.recordings:
-        console.print("No camera's own motion was measured in any episode: no recording-level fit.")
+        console.print("No episode's cameras showed their link, mount or offset (not measured, or measured and not "
+                      "observable: each episode's verdict in the fleet report says which): no recording-level fit.")
     print_recordings(console, result.recordings)
     for name, path in result.report_paths.items():
         print(f"{name}: {path}")

@@ -132,6 +132,7 @@ def run_batch(
     on_record: Callable[[dict[str, Any]], None] | None = None,
     rrd: str | Path | None = None,
     raise_input_problems: bool = False,
+    generated_robot_at: str | Path | None = None,
 ) -> BatchResult:
     """Attribute every unit of ``inputs`` not already in ``OUT/results``; write the fleet table and report.
 
@@ -146,11 +147,14 @@ def run_batch(
     ``raise_input_problems``: an input that cannot run at all (a LeRobot dataset without robot.yaml, one whose
     metadata cannot be read) raises :class:`BatchError` with its problem before any work, rather than being a
     row of the table (``attribute DATASET --episodes``: one dataset, nothing else to run).
+    ``generated_robot_at``: where the caller writes the robot.yaml framechain makes for a known arm without one (the
+    episodes' fixes name it).
     """
     found = _units(inputs, chain, robot, episodes, raise_input_problems)
     store = ResultStore(out_dir)
     rrd_dir = None if rrd is None else str(_episode_recordings(rrd).resolve())
-    tasks = _unit_tasks(found.units, chain=chain, robot=robot, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir)
+    tasks = _unit_tasks(found.units, chain=chain, robot=robot, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir,
+                        generated_robot_at=None if generated_robot_at is None else str(generated_robot_at))
     # A unit done before without its recording, when one is asked for now, is done again.
     todo = [t for t in tasks if not store.is_done(t.key) or (rrd_dir is not None and not store.has_recording(t.key))]
     if on_start is not None:
@@ -191,7 +195,7 @@ def _units(inputs: Sequence[str | Path], chain: str | Path | None, robot: str | 
 
 
 def _unit_tasks(units: Sequence[LogUnit], *, chain: str | Path | None, robot: str | Path | None, seed: int,
-                bootstrap: int, rrd_dir: str | None) -> list[UnitTask]:
+                bootstrap: int, rrd_dir: str | None, generated_robot_at: str | None = None) -> list[UnitTask]:
     """Each unit's task, keyed by what its record depends on; the chain beside a log wins over ``chain``."""
     from framechain import suggest as suggestions
 
@@ -202,7 +206,8 @@ def _unit_tasks(units: Sequence[LogUnit], *, chain: str | Path | None, robot: st
         unit_chain = next((str(c) for c in suggestions.chain_files_beside(u.path)), chain_arg)
         tasks.append(UnitTask(unit=u, key=unit_key(u, chain=unit_chain, robot=robot_arg, seed=seed,
                                                    bootstrap=bootstrap),
-                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir))
+                              chain=unit_chain, robot=robot_arg, seed=seed, bootstrap=bootstrap, rrd_dir=rrd_dir,
+                              generated_robot_at=generated_robot_at))
     return tasks
 
 

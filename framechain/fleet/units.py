@@ -64,6 +64,8 @@ class UnitTask:
     bootstrap: int = 30
     #: Where the unit also saves its replay as a Rerun recording of its own (None: it does not).
     rrd_dir: str | None = None
+    #: Where the caller writes the robot.yaml made for a known arm without one (its fixes name it; None: nowhere).
+    generated_robot_at: str | None = None
 
 
 # -- finding the units ------------------------------------------------------------------------
@@ -246,8 +248,9 @@ def run_unit(task: UnitTask) -> dict[str, Any]:
     if unit.problem is not None:
         return {**record, "status": "error", "error": unit.problem, "error_type": "BatchError"}
     try:
+        written = None if task.generated_robot_at is None else Path(task.generated_robot_at)
         made = pipeline.run(unit.path, task.chain, seed=task.seed, bootstrap=task.bootstrap, episode=unit.episode,
-                            robot=task.robot if unit.episode is not None else None)
+                            robot=task.robot if unit.episode is not None else None, generated_robot_at=written)
     except FramechainError as err:  # unreadable log, chain that does not fit it
         record.update(status="error", error=one_line(err), error_type=type(err).__name__)
         record.update(_span_of(unit))

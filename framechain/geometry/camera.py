@@ -24,11 +24,20 @@ import numpy.typing as npt
 from framechain.arrays import FloatArray, IntArray, StrArray, names_and_codes
 from framechain.errors import FramechainError
 
-__all__ = ["ASSUMED_FOV_DEG", "CameraModel", "CameraModelError", "CameraRows", "distinct_models", "focal_of_fov",
-           "fov_of_focal"]
+__all__ = ["ASSUMED_FOV_DEG", "FOV_RANGE_DEG", "CameraModel", "CameraModelError", "CameraRows", "distinct_models",
+           "focal_of_fov", "fov_of_focal", "is_a_lens"]
 
 #: The horizontal field of view (deg) taken for a camera without intrinsics: a typical wrist camera or webcam.
 ASSUMED_FOV_DEG = 70.0
+
+
+#: What a lens can be: its horizontal field of view across the image width (deg).
+FOV_RANGE_DEG = (30.0, 175.0)
+
+
+def is_a_lens(width_px: float, focal_px: float) -> bool:
+    """A pinhole ``width_px`` wide with focal length ``focal_px`` has a field of view within :data:`FOV_RANGE_DEG`."""
+    return bool(focal_px > 0 and FOV_RANGE_DEG[0] <= fov_of_focal(width_px, focal_px) <= FOV_RANGE_DEG[1])
 
 
 def focal_of_fov(width_px: float, fov_deg: float) -> float:

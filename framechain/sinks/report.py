@@ -18,7 +18,6 @@ from typing import Any
 
 import numpy as np
 
-from framechain.analysis.egomotion.findings import position_said
 from framechain.analysis.run import Run
 from framechain.analysis.verdict.checks import nothing_observable
 from framechain.analysis.verdict.findings import Attribution
@@ -53,7 +52,7 @@ from framechain.sinks.evidence_files import inputs_record, write_attribution
 from framechain.sinks.overlay import ImageOverlay
 from framechain.sinks.plots import Figure, figure_png
 from framechain.sinks.report_figures import after_label, make_figures, motion_figures
-from framechain.sinks.text import FindingView, error_size, mm, observation_counts
+from framechain.sinks.text import FindingView, error_size, mm, observation_counts, position_said
 from framechain.timeline import PointRole
 
 

@@ -182,4 +182,12 @@ def _whole(escaped: str) -> str:
     return f"<span class='nw'>{escaped}</span>"
 
 
-__all__ = ["CSS", "FindingCells", "FindingView", "breakable", "mm"]
+__all__ = ["CSS", "FindingCells", "FindingView", "breakable", "mm", "position_said"]
+
+
+def position_said(entry: Mapping[str, Any]) -> str:
+    """A ``camera_motion`` entry's fitted position, ``[x, y, z] m`` ("" when the position was known)."""
+    position = entry.get("position")
+    if not isinstance(position, Mapping):
+        return ""
+    return "[" + ", ".join("nan" if v is None else f"{v:.3f}" for v in position["xyz_link_cam"]) + "] m"

@@ -281,9 +281,14 @@ def test_a_camera_placed_from_its_images_gets_one_position_for_the_recording(tmp
     recording.json (the generator's camera sits 5.8 cm from gripper_link)."""
     truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
         so101_urdf, seed=11, episodes=2, duration_s=5.0, video_delay_s=0.03))
-    result = run_batch([truth.root], tmp_path / "out", jobs=1, bootstrap=0, report_formats=("md",))
+    written = tmp_path / "out" / "robot.yaml"  # where attribute --episodes writes the robot.yaml it made
+    result = run_batch([truth.root], tmp_path / "out", jobs=1, bootstrap=0, report_formats=("md",),
+                       generated_robot_at=written)
     (fit,) = result.recordings[str(truth.root.resolve())]
     assert fit.position_episodes == 2
+    fixes = [f["fix"] for record in result.records for f in record["findings"]]
+    assert fixes
+    assert all(fix.startswith(f"In {written}, set ") for fix in fixes)
     placed = np.array([e.xyz_link_cam for e in fit.episodes])
     assert fit.xyz_link_cam is not None
     assert np.linalg.norm(fit.xyz_link_cam - truth.xyz_link_cam) < 0.01

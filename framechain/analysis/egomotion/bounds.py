@@ -35,7 +35,7 @@ from framechain.analysis.egomotion import EgoMotionFit
 from framechain.analysis.egomotion.run import CameraMotion
 from framechain.analysis.verdict.checks import Bound
 from framechain.catalogue import Fault, HopName
-from framechain.geometry.camera import focal_of_fov, fov_of_focal
+from framechain.geometry.camera import FOV_RANGE_DEG, focal_of_fov, fov_of_focal
 from framechain.geometry.rotations import rotvec_of
 from framechain.timeline import EgoMotionTable
 
@@ -73,8 +73,6 @@ UNEXPLAINED_SHARE = 0.5
 #: as +5.6 ms, a 10 ms delay as 4.7 ms, 15 ms as 7.7 ms, half-widths of 5 ms; without the pads, +3 ms). At two
 #: half-widths a fault twice its bound is found and a clean episode is not.
 BOUND_HALF_WIDTHS = 2.0
-#: What a lens can be: its horizontal field of view across the image width (deg).
-FOV_RANGE_DEG = (30.0, 175.0)
 #: A focal scale whose interval spans more than this factor is undetermined.
 FOCAL_SPREAD = 2.0
 #: A mount rotation whose interval spans more than this (deg) is undetermined.
@@ -154,7 +152,12 @@ def _undetermined(motion: CameraMotion, fit: EgoMotionFit) -> dict[str, str]:
             "its frame pairs the translation moves the image the way the rotation does, as when a camera turns about "
             "one axis at a distance from it): the focal length its motion implies is undetermined")
     error = fit.mount_error
-    if error is not None and error.interval_deg[1] - error.interval_deg[0] > MOUNT_SPREAD_DEG:
+    if motion.guessed and motion.position is None and fit.mount_unobservable_axes and error is not None:
+        axis = ", ".join(f"{v:.2f}" for v in fit.mount_unobservable_axes[0])
+        out[Fault.ROTATION_ERROR.value] = (
+            f"its mount about [{axis}] of {fit.link} is not observable here, and the mount it would be kept at is a "
+            "guess (robot.yaml was made by framechain): its mount rotation is undetermined")
+    elif error is not None and error.interval_deg[1] - error.interval_deg[0] > MOUNT_SPREAD_DEG:
         out[Fault.ROTATION_ERROR.value] = (f"its mount rotation is undetermined ({error.interval_deg[0]:.0f} .. "
                                            f"{error.interval_deg[1]:.0f} deg)")
     return out

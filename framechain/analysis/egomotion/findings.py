@@ -359,8 +359,10 @@ def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclarati
     error = fit.mount_error
     assert error is not None
     fault, estimate = _mount_fault(motion, fit, declaration)
+    declared = ("the placeholder mount of the robot.yaml framechain made (the mount measured, not a fault found)"
+                if motion.guessed else "the declared mount")
     evidence = (f"the images of {motion.camera} turn about axes {error.angle_deg:.2f} deg away from those "
-                f"{motion.declared_link}'s turns give through the declared mount")
+                f"{motion.declared_link}'s turns give through {declared}")
     mount = _yaml_mount(motion.declared_link, fit.q_link_cam, _position(motion, declaration), declaration)
     if declaration is not None:
         fix = f"In {declaration.source}, set {declaration.key('mount')}: {mount} (the mount the images show)."
@@ -485,14 +487,6 @@ def _entry(motion: CameraMotion, declaration: CameraDeclaration | None, misfit: 
         entry["motion_deg_s"] = _num(judgement.motion_deg_s)
         entry["undetermined"] = dict(judgement.undetermined)
     return entry
-
-
-def position_said(entry: Mapping[str, Any]) -> str:
-    """A ``camera_motion`` entry's fitted position, ``[x, y, z] m`` ("" when the position was known)."""
-    position = entry.get("position")
-    if not isinstance(position, Mapping):
-        return ""
-    return "[" + ", ".join("nan" if v is None else f"{v:.3f}" for v in position["xyz_link_cam"]) + "] m"
 
 
 def _num(value: float) -> float | None:

@@ -194,10 +194,8 @@ def fit_camera_motion(
     table = measure(None) if measured is None else measured[0]
     notes: list[str] = []
     turning = _rms_deg(rotvec_of(table.quat_xyzw)) if len(table) else 0.0
-    if turning < opts.min_rotation_deg:
-        notes.append(f"camera {camera} does not turn ({turning:.3f} deg RMS per frame pair): a fixed camera or a "
-                     "still arm; its time offset, mount and link are not observable from its images")
-        return _unobservable(camera, declared_link, turning, notes)
+    if still := _still(camera, len(table), turning, opts):
+        return _unobservable(camera, declared_link, turning, [still])
     ranked = rank_links(table, links, opts) if measured is None else measured[1]
     if not ranked:
         notes.append(f"camera {camera}: fewer than {opts.min_pairs} measured frame pairs lie the offset search window "
@@ -221,6 +219,19 @@ def fit_camera_motion(
     return _final(table, link, fit, ranked, similar, declared_link,
                   (np.asarray(declared_q_link_cam, dtype=float), None if mount_prior is None else prior), camera,
                   turning, notes, opts, joint)
+
+
+def _still(camera: str, pairs: int, turning: float, opts: EgoMotionFitOptions) -> str:
+    """Why the camera's measurement shows no motion ("" when it shows some): no frame pair measured, or too little
+    turn in them."""
+    if not pairs:
+        return (f"camera {camera}: none of its frame pairs could be measured (its frames repeat one another, as a "
+                "still arm's or a fixed camera's do, or too few features were tracked into both frames of a pair, or "
+                "too few agree on one motion): its time offset, mount and link are not observable from its images")
+    if turning < opts.min_rotation_deg:
+        return (f"camera {camera} does not turn ({turning:.3f} deg RMS per frame pair): a fixed camera or a still "
+                "arm; its time offset, mount and link are not observable from its images")
+    return ""
 
 
 def _to_refine(ranked: list[LinkFit], declared_link: str, by_name: dict[str, LinkMotion],

@@ -58,6 +58,10 @@ SPREAD_BLOCK_S = 0.5
 #: mm for motion a tenth as large and a 3 s episode (errors of 25 and 18 mm), and 0.87 and 11 m for an arm that only
 #: panned or only rolled its wrist (errors of 23 and 43 cm); the errors reached 6 times the spread.
 DETERMINED_M = 0.02
+#: A camera fitted where it moves this share of its link origin's travel, or less, sits at a point the link turns
+#: about (generated SO-101 episodes: 0.02 where only the wrist flexed and rolled, the fit 10 cm off along the line
+#: through the axes' crossing with a spread of 0.7 mm; 1.0 to 4.1 where every joint moved).
+STILL_TRAVEL = 0.25
 #: A fitted unknown within this share of its search range from a limit is taken to have reached it.
 AT_LIMIT_SHARE = 0.02
 
@@ -82,12 +86,23 @@ class PositionFit:
     #: link's frame).
     spread_m: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
     spread_axes: FloatArray = field(default_factory=lambda: np.eye(3))
+    #: How far the camera's centre moves between its frames where fitted, over how far the link's origin does (median).
+    travel_ratio: float = 1.0
 
     @property
-    def determined(self) -> bool:
-        """The motion determines the position: no unknown at its limit, and within :data:`DETERMINED_M` (1 sd) along
-        every axis."""
-        return not self.at_limit and bool(self.spread_m[0] <= DETERMINED_M)
+    def undetermined(self) -> str:
+        """Why the motion does not determine the position ("" when it does): an unknown at its limit, a spread over
+        :data:`DETERMINED_M` (1 sd) along an axis, or a point the link turns about (moving :data:`STILL_TRAVEL` times
+        as far as its origin, or less)."""
+        if self.at_limit:
+            return f"its {self.at_limit} reached the limit of the search"
+        if not self.spread_m[0] <= DETERMINED_M:
+            return ("this motion does not determine it (the link turned about too few axes, or too little, to tell "
+                    "where along that axis it is)")
+        if self.travel_ratio <= STILL_TRAVEL:
+            return (f"it lies where the link turns about (moving {self.travel_ratio:.2f} times as far as the link's "
+                    "origin): where along the line through that point the camera is, is not determined")
+        return ""
 
 
 @dataclass(frozen=True)
@@ -151,13 +166,13 @@ def fit_position(
             size = np.linalg.norm(residuals(x).reshape(*kept.shape, 3), axis=-1)
             kept = matches.valid & (size < min(INLIER_PX, INLIER_MEDIANS * float(np.median(size[kept]))))
     spread = _position_spread(np.asarray(solved.jac), residuals(x), matches.t0)
-    kept = matches.valid
-    used = matches.valid
+    kept = used = matches.valid
     return PositionFit(
         link=link.link, xyz_link_cam=x[3:6].copy(), q_link_cam=quat_multiply(mount, quat_from_rotvec(x[:3])),
         focal_factor=float(np.exp(x[6])), offset_s=float(x[7]),
         residual_px=(_median_px(residuals(start), used), _median_px(residuals(x), used)),
         pairs=int(matches.t0.size), matches=int(used.sum()), at_limit=_at_limit(x, lower, limit), spread_m=spread[0],
+        travel_ratio=_travel_ratio(orientations, centres, x[3:6], matches.t0 + x[7], matches.t1 + x[7]),
         spread_axes=spread[1])
 
 
@@ -217,16 +232,33 @@ def _predicted(orientations: Orientations, centres: FloatArray, mount: FloatArra
                offset: float) -> tuple[FloatArray, FloatArray]:
     """The camera's rotation ``R_cam0_cam1`` (P, 3, 3) and the unit direction its centre moved, in the earlier
     optical frame (P, 3), as the link's motion gives them with the camera at ``xyz`` turned by ``mount`` (xyzw)."""
-    t0, t1 = matches.t0 + offset, matches.t1 + offset
-    link0, link1 = orientations.at(t0), orientations.at(t1)  # (4, P), components first
+    link0, link1, travel = _travel(orientations, centres, xyz, matches.t0 + offset, matches.t1 + offset)
+    from_cam0 = quat_conjugate(quat_multiply(link0, mount))
+    rotation = quat_to_matrix(quat_multiply(from_cam0, quat_multiply(link1, mount)))
+    move = quat_rotate(from_cam0, travel).T
+    direction: FloatArray = move / np.maximum(np.linalg.norm(move, axis=1, keepdims=True), 1e-12)
+    return rotation, direction
+
+
+def _travel(orientations: Orientations, centres: FloatArray, xyz: FloatArray, t0: FloatArray, t1: FloatArray
+            ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The link's orientations at ``t0`` and ``t1`` (4, P) and how far a point at ``xyz`` on it moved between
+    them, in the link's base (3, P)."""
+    link0, link1 = orientations.at(t0), orientations.at(t1)  # components first
     times = orientations.times
     centre0 = np.stack([np.interp(t0, times, centres[:, i]) for i in range(3)]) + quat_rotate(link0, xyz)
     centre1 = np.stack([np.interp(t1, times, centres[:, i]) for i in range(3)]) + quat_rotate(link1, xyz)
-    from_cam0 = quat_conjugate(quat_multiply(link0, mount))
-    rotation = quat_to_matrix(quat_multiply(from_cam0, quat_multiply(link1, mount)))
-    move = quat_rotate(from_cam0, centre1 - centre0).T
-    direction: FloatArray = move / np.maximum(np.linalg.norm(move, axis=1, keepdims=True), 1e-12)
-    return rotation, direction
+    return link0, link1, centre1 - centre0
+
+
+def _travel_ratio(orientations: Orientations, centres: FloatArray, xyz: FloatArray, t0: FloatArray, t1: FloatArray
+                  ) -> float:
+    """How far a point at ``xyz`` on the link moves between the frames, over how far its origin does (medians): a
+    point the link turns about barely moves, and a camera placed there says nothing of where it is along the line
+    through it."""
+    moved = [float(np.median(np.linalg.norm(_travel(orientations, centres, at, t0, t1)[2], axis=0)))
+             for at in (xyz, np.zeros(3))]
+    return moved[0] / max(moved[1], 1e-12)
 
 
 def _refocused(bearings: FloatArray, factor: float) -> FloatArray:

@@ -38,6 +38,7 @@ from framechain.analysis.egomotion.position import PositionFit, fit_position
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
 from framechain.config.chain import ChainConfig
+from framechain.geometry.camera import is_a_lens
 from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_by
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
@@ -115,6 +116,8 @@ class CameraMotion:
     pair_counts: FramePairCounts | None = None
     #: The camera's position on its link fitted from its matches, when it was not known (None: not fitted).
     position: PositionFit | None = None
+    #: Its mount and lens are guesses (a robot.yaml framechain made): only what the motion shows of them is known.
+    guessed: bool = False
 
     @property
     def xyz_link_cam(self) -> FloatArray:
@@ -230,7 +233,7 @@ def _measure_camera(chain: ChainConfig, buffer: TransformBuffer, camera: str, im
                         notes=(*source.notes, *pairing, *fitted.notes),
                         measured_focal=fitted.focal, focal_px=0.5 * (declared.fx + declared.fy),
                         width_px=declared.width, pairing=source.pairing, pair_counts=source.pair_counts(),
-                        position=fitted.position)
+                        position=fitted.position, guessed=guessed)
 
 
 #: Another pairing whose misfit is this many times smaller contradicts the one the files gave.
@@ -337,6 +340,9 @@ def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: s
         if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
             break
         step = fit.focal_scale**2
+        lens = source.intrinsics
+        if not is_a_lens(lens.width, 0.5 * (lens.fx + lens.fy) * step):  # no lens's: measuring with it shows nothing
+            break
         source.rescale_focal(step)
         used *= step
         fit = fitted()
@@ -371,13 +377,9 @@ def _fitted_position(source: CameraImages, links: Sequence[LinkMotion], camera: 
             f"({_spread_said(float(position.spread_m[0]))} along [{axis}], 1 sd), focal length "
             f"{position.focal_factor * focal:.1f} px (median residual {after:.2f} px, {before:.2f} at the link's "
             "origin)")
-    if position.at_limit:
-        return None, (f"camera {camera}: {said}, but its {position.at_limit} reached the limit of the search: not "
-                      "used, measured at the link's origin")
-    if not position.determined:
-        return None, (f"camera {camera}: {said}, but this motion does not determine it (the link turned about too "
-                      "few axes, or too little): not used, measured at the link's origin; measure the camera's "
-                      "position on its link")
+    if position.undetermined:
+        return None, (f"camera {camera}: {said}, but {position.undetermined}: not used, measured at the link's origin; "
+                      "measure the camera's position on its link")
     return position, f"camera {camera}: {said}; measured there"
 
 

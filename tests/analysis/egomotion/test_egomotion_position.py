@@ -39,10 +39,16 @@ def _about_z(t: np.ndarray) -> Rotation:
     return Rotation.from_rotvec(np.outer(0.8 * np.sin(1.8 * t), [0.0, 0.0, 1.0]))
 
 
-def _camera(t: np.ndarray, turn: Callable[[np.ndarray], Rotation]) -> tuple[Rotation, np.ndarray]:
-    """The camera's orientation and centre in the world at times ``t``, its link turned by ``turn``."""
+def _fixed_origin(t: np.ndarray) -> np.ndarray:
+    return np.tile([0.3, 0.0, 0.2], (t.size, 1))
+
+
+def _camera(t: np.ndarray, turn: Callable[[np.ndarray], Rotation], origin: Callable[[np.ndarray], np.ndarray]
+            ) -> tuple[Rotation, np.ndarray]:
+    """The camera's orientation and centre in the world at times ``t``, its link turned by ``turn`` about its
+    ``origin``."""
     link = turn(t)
-    return link * TRUE_MOUNT, _link_origin(t) + link.apply(TRUE_XYZ)
+    return link * TRUE_MOUNT, origin(t) + link.apply(TRUE_XYZ)
 
 
 def _pixels_to_bearings(pixels: np.ndarray, focal: float) -> np.ndarray:
@@ -52,18 +58,19 @@ def _pixels_to_bearings(pixels: np.ndarray, focal: float) -> np.ndarray:
 
 
 def _scene(seed: int, noise_px: float = 0.2, wrong_share: float = 0.03,
-           turn: Callable[[np.ndarray], Rotation] = _link_rotation
+           turn: Callable[[np.ndarray], Rotation] = _link_rotation,
+           origin: Callable[[np.ndarray], np.ndarray] = _link_origin
            ) -> tuple[PairBatch, np.ndarray, np.ndarray, LinkMotion]:
     rng = np.random.default_rng(seed)
     link_times = np.arange(0.0, 8.0, 0.01)
     link = LinkMotion(link="gripper_link", stamps_ns=(link_times * 1e9).round().astype(np.int64),
-                      quat_xyzw=turn(link_times).as_quat(), xyz=_link_origin(link_times))
+                      quat_xyzw=turn(link_times).as_quat(), xyz=origin(link_times))
     stamps = np.arange(0.5, 7.5, 1.0 / 30.0)
     first = np.concatenate([np.arange(stamps.size - 1), np.arange(stamps.size - 3)])
     second = np.concatenate([first[: stamps.size - 1] + 1, first[stamps.size - 1:] + 3])
     shown0, shown1 = stamps[first] + TRUE_OFFSET_S, stamps[second] + TRUE_OFFSET_S
-    rot0, centre0 = _camera(shown0, turn)
-    rot1, centre1 = _camera(shown1, turn)
+    rot0, centre0 = _camera(shown0, turn, origin)
+    rot1, centre1 = _camera(shown1, turn, origin)
     matches = 60
     # Points in front of the earlier camera, 0.2 to 1 m away, within its 64 deg field of view.
     pixels0 = rng.uniform(10.0, 214.0, size=(first.size, matches, 2))
@@ -90,7 +97,7 @@ def test_the_position_mount_focal_length_and_offset_are_found_from_the_link_orig
     fit = fit_position(batch, stamps0, stamps1, link, q_link_cam=start_mount.as_quat(), xyz_link_cam=np.zeros(3),
                        offset_s=0.0, focal_px=ASSUMED_FOCAL_PX, max_offset_s=0.3)
     assert fit is not None
-    assert not fit.at_limit
+    assert not fit.undetermined
     assert np.linalg.norm(fit.xyz_link_cam - TRUE_XYZ) < 0.004
     assert np.degrees((Rotation.from_quat(fit.q_link_cam).inv() * TRUE_MOUNT).magnitude()) < 0.3
     assert fit.focal_factor * ASSUMED_FOCAL_PX == pytest.approx(TRUE_FOCAL_PX, rel=0.01)
@@ -129,10 +136,25 @@ def test_a_link_turning_about_one_axis_leaves_the_position_along_it_undetermined
     fit = fit_position(batch, stamps0, stamps1, link, q_link_cam=TRUE_MOUNT.as_quat(), xyz_link_cam=np.zeros(3),
                        offset_s=0.0, focal_px=ASSUMED_FOCAL_PX, max_offset_s=0.3)
     assert fit is not None
-    assert not fit.determined
+    assert fit.undetermined.startswith("this motion does not determine it")
     assert abs(fit.spread_axes[0] @ [0.0, 0.0, 1.0]) > 0.99
     assert fit.spread_m[0] > 1.0
     # Across the axis the position is still found: the spread's other axes are small, and so is the error there.
     assert fit.spread_m[1] < 0.005
     across = np.eye(3)[:2]
     assert np.abs(across @ (fit.xyz_link_cam - TRUE_XYZ)).max() < 0.004
+
+
+def test_a_link_turning_about_a_fixed_point_leaves_the_distance_from_it_undetermined() -> None:
+    """A link turning about its fixed origin moves a camera along the same directions wherever it sits on the line
+    from the origin through it: the fit says the position is not determined (the spread along that line, or a fit
+    at the point itself, which barely moves)."""
+    batch, stamps0, stamps1, link = _scene(0, origin=_fixed_origin)
+    fit = fit_position(batch, stamps0, stamps1, link, q_link_cam=TRUE_MOUNT.as_quat(), xyz_link_cam=np.zeros(3),
+                       offset_s=0.0, focal_px=ASSUMED_FOCAL_PX, max_offset_s=0.3)
+    assert fit is not None
+    assert fit.undetermined
+    # Whatever it says, the fitted point lies on that line: the directions are all the images give.
+    along = TRUE_XYZ / np.linalg.norm(TRUE_XYZ)
+    off_line = fit.xyz_link_cam - (fit.xyz_link_cam @ along) * along
+    assert np.linalg.norm(off_line) < 0.004

@@ -176,7 +176,9 @@ def test_a_still_arm_says_not_observable(still: tuple[VideoDatasetTruth, Path],
     assert result["findings"] == []
     entry = camera_entry(result)
     assert [o["observable"] for o in entry["observable"]] == [False, False, False, False]
-    assert "does not turn" in entry["observable"][0]["why"]
+    # A still arm's frames repeat one another: no frame pair is left to measure, and the reason says why that can be.
+    assert "none of its frame pairs could be measured (its frames repeat one another, as a still arm's" in entry[
+        "observable"][0]["why"]
     assert "not observable" in result["verdict"] or "no camera turned" in " ".join(result["notes"])
 
 
