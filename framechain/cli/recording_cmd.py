@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 if TYPE_CHECKING:
+    from framechain.analysis.egomotion.recording import CameraRecordingFit
     from framechain.sinks.fleet_report import FleetLog
 
 __all__ = ["attribute_recording"]
@@ -47,10 +49,25 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
         console.print("No episode's cameras showed their link, mount or offset (not measured, or measured and not "
                       "observable: each episode's verdict in the fleet report says which): no recording-level fit.")
     print_recordings(console, result.recordings)
+    if args.robot is None:
+        _print_recording_fixes(console, result.recordings, out / "robot.yaml")
     for name, path in result.report_paths.items():
         print(f"{name}: {path}")
     print(f"fleet table: {result.table_path}")
     return 0
+
+
+def _print_recording_fixes(console: Any, recordings: Mapping[str, Sequence[CameraRecordingFit]], robot_yaml: Path
+                           ) -> None:
+    """One fix per camera placed from its images: the recording's mount, position, focal length and offset, to set
+    in the robot.yaml made for it (each episode's own fixes differ a little)."""
+    from framechain.sinks.fleet_cameras import recording_fix
+
+    for fits in recordings.values():
+        for fit in fits:
+            if fix := recording_fix(fit, str(robot_yaml)):
+                console.print(f"fix (camera {fit.camera}, recording): {fix}", markup=False, highlight=False,
+                              soft_wrap=True)
 
 
 def _say_generated_robot(args: argparse.Namespace, out: Path, episodes: list[int]) -> None:

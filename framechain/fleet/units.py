@@ -311,7 +311,7 @@ def _why_unmeasured(entry: dict[str, Any]) -> str:
 #: What a recording-level fit needs of each camera's ``camera_motion`` entry (framechain.fleet.recordings).
 _CAMERA_KEYS = ("camera", "name", "link", "declared_link", "offset_s", "offset_interval_s", "q_link_cam",
                 "mount_error_deg", "mount_error_interval_deg", "focal_scale", "explained", "link_misfits",
-                "mount_evidence", "pairing", "position")
+                "mount_evidence", "pairing", "position", "focal_px")
 
 
 def _camera_record(entry: dict[str, Any]) -> dict[str, Any]:

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from framechain.analysis.egomotion.recording import CameraRecordingFit
+from framechain.geometry.rotations import rpy_of
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
 from framechain.sinks.document import Block, FigureBlock, Heading, Paragraph, Section, table
 from framechain.sinks.plots import Figure, figure_png, new_figure
@@ -46,6 +47,22 @@ def camera_summary(log: str, fit: CameraRecordingFit) -> str:
     return (f"{log}, camera {fit.camera}: rides {fit.link}{moved} in the fit of {fitted} episode(s); "
             f"{mount}{declared}{axes}{position}; median offset {fit.median_offset_s * 1e3:+.1f} ms; "
             f"{departs} episode(s) depart{left}.")
+
+
+def recording_fix(fit: CameraRecordingFit, robot_yaml: str) -> str:
+    """For a camera whose position was fitted from its images (a robot.yaml framechain made, the camera's mount on
+    an optical frame): its mount, position, focal length and offset over the recording, as the keys of
+    ``robot_yaml`` to set ("" for any other camera, or one the model explains in no episode)."""
+    if fit.xyz_link_cam is None or not fit.explained or not fit.name:
+        return ""
+    key = f"cameras.{fit.name}"
+    xyz = ", ".join(f"{v:.4f}" for v in fit.xyz_link_cam)
+    rpy = ", ".join(f"{v:.5f}" for v in rpy_of(fit.q_link_cam))
+    focal = "" if not np.isfinite(fit.focal_px) else (f", {key}.intrinsics.fx: {fit.focal_px:.1f} and "
+                                                        f"{key}.intrinsics.fy: {fit.focal_px:.1f}")
+    return (f"In {robot_yaml}, set {key}.mount: {{parent: {fit.link}, xyz: [{xyz}], rpy: [{rpy}], optical: true}}"
+            f"{focal}, {key}.timing.offset_s: {fit.median_offset_s:.3f} (the recording's fit of "
+            f"{len(fit.explained)} episode(s): its mount, the median position, focal length and offset).")
 
 
 def _rows(fit: CameraRecordingFit) -> list[list[str]]:

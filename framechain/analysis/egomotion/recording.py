@@ -62,6 +62,8 @@ class EpisodeCamera:
     explained: bool
     #: Its position on ``link`` fitted from its images, when it was not known (None: known, or not determined).
     xyz_link_cam: FloatArray | None = None
+    #: The focal length its motion implies (px; NaN: not measured).
+    focal_px: float = float("nan")
 
     @classmethod
     def from_entry(cls, episode: int, entry: Mapping[str, Any]) -> EpisodeCamera | None:
@@ -80,7 +82,8 @@ class EpisodeCamera:
             cross=np.asarray(evidence["cross"], dtype=float).reshape(3, 3),
             scatter=np.asarray(evidence["scatter"], dtype=float).reshape(3, 3), weight=float(evidence["weight"]),
             sigma_deg=float(evidence["sigma_deg"]), link_misfits=dict(entry.get("link_misfits") or {}),
-            explained=entry.get("explained") is not False, xyz_link_cam=_fitted_position(entry))
+            explained=entry.get("explained") is not False, xyz_link_cam=_fitted_position(entry),
+            focal_px=float(entry.get("focal_scale") or np.nan) * float(entry.get("focal_px") or np.nan))
 
     @property
     def offset_bound_s(self) -> float:
@@ -124,6 +127,8 @@ class CameraRecordingFit:
     xyz_link_cam: FloatArray | None = None
     position_episodes: int = 0
     position_spread_m: float = float("nan")
+    #: The median of the focal lengths its explained episodes on ``link`` imply (px; NaN: none).
+    focal_px: float = float("nan")
 
     @property
     def explained(self) -> tuple[EpisodeCamera, ...]:
@@ -173,6 +178,7 @@ def _one_camera(episodes: list[EpisodeCamera], seed: int, resamples: int) -> Cam
               for e in on_link}
     from_declared = _angle_deg(mount, declared) if link == first.declared_link else float("nan")
     placed = np.array([e.xyz_link_cam for e in on_link if e.xyz_link_cam is not None]).reshape(-1, 3)
+    focal = [e.focal_px for e in on_link if np.isfinite(e.focal_px)]
     position = np.median(placed, axis=0) if len(placed) else None
     return CameraRecordingFit(
         camera=first.camera, name=first.name, link=link, declared_link=first.declared_link,
@@ -180,6 +186,7 @@ def _one_camera(episodes: list[EpisodeCamera], seed: int, resamples: int) -> Cam
         mount_from_declared_deg=from_declared, unobservable_axes=axes, median_offset_s=median,
         episodes=tuple(episodes), episode_mount_deg=angles,
         departures=tuple(_departures(episodes, link, median, angles)), xyz_link_cam=position,
+        focal_px=float(np.median(focal)) if focal else float("nan"),
         position_episodes=len(placed),
         position_spread_m=float(np.linalg.norm(placed - position, axis=1).max()) if position is not None else np.nan)
 
