@@ -10,8 +10,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from framechain.analysis.egomotion.findings import yaml_mount
 from framechain.analysis.egomotion.recording import CameraRecordingFit
-from framechain.geometry.rotations import rpy_of
 from framechain.sinks.colors import BOUND_COLOR, CORRECTED_COLOR, ERROR_COLOR, hex_color
 from framechain.sinks.document import Block, FigureBlock, Heading, Paragraph, Section, table
 from framechain.sinks.plots import Figure, figure_png, new_figure
@@ -56,12 +56,11 @@ def recording_fix(fit: CameraRecordingFit, robot_yaml: str) -> str:
     if fit.xyz_link_cam is None or not fit.explained or not fit.name:
         return ""
     key = f"cameras.{fit.name}"
-    xyz = ", ".join(f"{v:.4f}" for v in fit.xyz_link_cam)
-    rpy = ", ".join(f"{v:.5f}" for v in rpy_of(fit.q_link_cam))
+    mount = yaml_mount(fit.link, fit.q_link_cam, tuple(float(v) for v in fit.xyz_link_cam), None)
     focal = "" if not np.isfinite(fit.focal_px) else (f", {key}.intrinsics.fx: {fit.focal_px:.1f} and "
                                                         f"{key}.intrinsics.fy: {fit.focal_px:.1f}")
-    return (f"In {robot_yaml}, set {key}.mount: {{parent: {fit.link}, xyz: [{xyz}], rpy: [{rpy}], optical: true}}"
-            f"{focal}, {key}.timing.offset_s: {fit.median_offset_s:.3f} (the recording's fit of "
+    return (f"In {robot_yaml}, set {key}.mount: {mount}{focal}, {key}.timing.offset_s: {fit.median_offset_s:.3f} "
+            "(the recording's fit of "
             f"{len(fit.explained)} episode(s): its mount, the median position, focal length and offset).")
 
 

@@ -57,7 +57,7 @@ from framechain.catalogue import Fault, HopName
 from framechain.geometry.conventions import OPTICAL_FROM_LINK_QUAT_XYZW
 from framechain.geometry.rotations import Inverse, Rotations, angle_of, matrix_of, rpy_of
 
-__all__ = ["CameraDeclaration", "MotionFindings", "motion_findings"]
+__all__ = ["CameraDeclaration", "MotionFindings", "motion_findings", "yaml_mount"]
 
 #: Every correction a camera's fit can propose.
 _EVERY = frozenset({"latency", "link", "mount", "focal"})
@@ -344,7 +344,7 @@ def _link(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclaratio
     evidence = (f"the images of {motion.camera} turn as {fit.link} does "
                 f"({best.residual_deg:.3f} deg misfit per frame pair), not as the declared {motion.declared_link}"
                 + (f" ({declared.residual_deg:.3f} deg)" if declared is not None else ""))
-    mount = _yaml_mount(fit.link, fit.q_link_cam, _position(motion, declaration), declaration)
+    mount = yaml_mount(fit.link, fit.q_link_cam, _position(motion, declaration), declaration)
     if declaration is not None:
         fix = (f"In {declaration.source}, mount camera {declaration.name} on {fit.link}: "
                f"{declaration.key('mount')}: {mount}.")
@@ -363,7 +363,7 @@ def _mount(motion: CameraMotion, fit: EgoMotionFit, declaration: CameraDeclarati
                 if motion.guessed else "the declared mount")
     evidence = (f"the images of {motion.camera} turn about axes {error.angle_deg:.2f} deg away from those "
                 f"{motion.declared_link}'s turns give through {declared}")
-    mount = _yaml_mount(motion.declared_link, fit.q_link_cam, _position(motion, declaration), declaration)
+    mount = yaml_mount(motion.declared_link, fit.q_link_cam, _position(motion, declaration), declaration)
     if declaration is not None:
         fix = f"In {declaration.source}, set {declaration.key('mount')}: {mount} (the mount the images show)."
     else:
@@ -420,9 +420,10 @@ def _position(motion: CameraMotion, declaration: CameraDeclaration | None) -> tu
     return tuple(float(v) for v in motion.xyz_link_cam)
 
 
-def _yaml_mount(link: str, q_link_cam: FloatArray, position: tuple[float, ...],
+def yaml_mount(link: str, q_link_cam: FloatArray, position: tuple[float, ...],
                 declaration: CameraDeclaration | None) -> str:
-    """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}``."""
+    """A mount as robot.yaml / a calibration file writes it: ``{parent, xyz, rpy, optical}`` (optical without a
+    declaration: the mount of the camera's optical frame)."""
     optical = declaration.optical if declaration is not None else True
     rotation: Rotations = q_link_cam
     if not optical:  # the file gives camera_link; the optical rotation hangs below it
