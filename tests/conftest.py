@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 
 # One BLAS thread per test process: `make test` runs two xdist workers on two cores, and OpenBLAS's own
 # threads (one per core in each worker) spin for the CPU without making a fit any faster. Set before numpy
@@ -12,6 +15,9 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # would double the processes on the two cores; tests/sinks/test_plots.py and tests/cli/test_commands.py
 # start them where they are what is tested.
 os.environ.setdefault("FRAMECHAIN_RENDERERS", "0")
+# framechain's cache (parsed URDFs) in a folder of this test process's own, never the user's: the CLI subprocesses
+# the tests start use it too, and tests/robot/test_urdf_cache.py sets its own.
+os.environ["FRAMECHAIN_CACHE_DIR"] = tempfile.mkdtemp(prefix="framechain-test-cache-")
 
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,6 +27,8 @@ import pytest
 
 from tests.helpers.realdata import GR00T, REALDATA, SO101_URDF, UNITREE
 from tests.helpers.rerun_server import GrpcServer, serving_grpc
+
+atexit.register(shutil.rmtree, os.environ["FRAMECHAIN_CACHE_DIR"], ignore_errors=True)
 
 # Tests reach the real logs through the ``realdata`` fixture, so each skips cleanly without them.
 

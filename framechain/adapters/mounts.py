@@ -27,7 +27,7 @@ from framechain.config.chain import ChainConfig
 from framechain.config.errors import ChainConfigError
 from framechain.config.mount import Mount
 from framechain.geometry.rotations import invert, quat_angle_between, quat_from_matrix
-from framechain.robot.kinematics import JointType, RobotModelError, UrdfJoints, read_urdf, read_urdf_text
+from framechain.robot.urdf import JointType, RobotModelError, UrdfJoints, read_urdf, read_urdf_text
 from framechain.timeline import CameraTable, TransformTable
 
 

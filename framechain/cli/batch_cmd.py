@@ -153,14 +153,14 @@ def _progress(quiet: bool) -> Iterator[tuple[Callable[[int, int], None], Callabl
 
 
 def _print_summary(result: Any) -> None:
-    import pyarrow.parquet as pq
     from rich.table import Table
 
     from framechain.cli.common import print_not_analysed, print_notes, print_recordings, stdout_console
     from framechain.sinks.fleet_report import chains_line, estimate_spread, fleet_logs, summary_line
+    from framechain.timeline import read_parquet
 
     console = stdout_console(120)
-    logs = fleet_logs(pq.read_table(result.table_path))
+    logs = fleet_logs(read_parquet(result.table_path))
     console.print(f"[bold]{summary_line(logs)}[/bold]", highlight=False)
     console.print(f"computed {result.computed}, kept from an earlier run {result.skipped}", highlight=False)
     console.print(chains_line(logs), markup=False, highlight=False, soft_wrap=True)

@@ -26,17 +26,16 @@ def attribute_recording(args: argparse.Namespace, out: Path, report_formats: lis
     the episodes asked for that the dataset lacks, and each camera's fit across the episodes. A dataset that
     cannot run at all (no robot.yaml for an arm framechain does not know) is one error before any work; so is a
     run in which no episode could be analysed (exit 1); one in which some could exits 0, its failures said."""
-    import pyarrow.parquet as pq
-
     from framechain.cli.common import print_not_analysed, print_notes, print_recordings, stdout_console
     from framechain.fleet import run_batch
     from framechain.sinks.fleet_report import NOT_ANALYSED, fleet_logs
+    from framechain.timeline import read_parquet
 
     result = run_batch([args.log], out, chain=args.chain, robot=args.robot, episodes=args.episodes,
                        jobs=args.jobs, seed=args.seed, bootstrap=args.bootstrap, report_formats=report_formats,
                        raise_input_problems=True, generated_robot_at=None if args.robot else out / "robot.yaml")
     _say_generated_robot(args, out, [int(r["episode"]) for r in result.records if r.get("episode") is not None])
-    logs = fleet_logs(pq.read_table(result.table_path))
+    logs = fleet_logs(read_parquet(result.table_path))
     if all(log.status in NOT_ANALYSED for log in logs):
         _fail_with_every_reason(args.log, logs, result.notes)
     console = stdout_console(120)

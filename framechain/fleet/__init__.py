@@ -43,6 +43,7 @@ from framechain.fleet.units import (
     run_unit,
     unit_key,
 )
+from framechain.timeline import read_parquet
 
 
 # -- the store --------------------------------------------------------------------------------
@@ -223,7 +224,7 @@ def _write_views(table_path: Path, fits: dict[str, tuple[CameraRecordingFit, ...
     if report_formats:
         from framechain.sinks.fleet_report import render_fleet_report
 
-        report_paths = render_fleet_report(pq.read_table(table_path), out_dir, formats=report_formats,
+        report_paths = render_fleet_report(read_parquet(table_path), out_dir, formats=report_formats,
                                            notes=notes, recordings=fits)
     return {**recording_paths, **report_paths}
 

@@ -17,9 +17,9 @@ if TYPE_CHECKING:
     pass
 
 
-from framechain.analysis.egomotion.run import CAMERA_THREADS_ENV
 from framechain.errors import one_line
 from framechain.fleet.units import BatchError, UnitTask, crashed_record, run_unit
+from framechain.vision.threads import THREADS_ENV
 
 
 # -- engines ----------------------------------------------------------------------------------
@@ -118,7 +118,7 @@ class _Worker:
 
 def _worker_main(conn: Connection) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the driver's to handle
-    os.environ.setdefault(CAMERA_THREADS_ENV, "1")  # one episode per worker per core: its cameras in turn
+    os.environ.setdefault(THREADS_ENV, "1")  # one episode per worker per core: its cameras in turn
     while True:
         try:
             task = conn.recv()
@@ -134,7 +134,7 @@ def _worker_main(conn: Connection) -> None:
 
 def run_unit_alone(task: UnitTask) -> dict[str, Any]:
     """:func:`run_unit` in a worker that has one core (a Ray task): its cameras measured in turn."""
-    os.environ.setdefault(CAMERA_THREADS_ENV, "1")
+    os.environ.setdefault(THREADS_ENV, "1")
     return run_unit(task)
 
 

@@ -15,7 +15,8 @@ from framechain.arrays import FloatArray
 from framechain.config.errors import RobotConfigError
 from framechain.config.robot import ArmConfig, JointMapping, JointUnit, RobotConfig
 from framechain.geometry.rotations import homogeneous
-from framechain.robot.kinematics import Joint, JointType, Mimic, RobotModel
+from framechain.robot.kinematics import RobotModel
+from framechain.robot.urdf import Joint, JointType, Mimic
 
 __all__ = ["arm_root", "check_robot", "convert_joint", "joint_positions", "out_of_limits", "robot_model",
            "unit_mismatches"]

@@ -27,84 +27,21 @@ revolute and continuous joints, metres for prismatic ones); a mimic joint follow
 
 from __future__ import annotations
 
-import io
-import logging
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 from pathlib import Path
-from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from framechain.arrays import FloatArray
-from framechain.errors import FramechainError
 from framechain.geometry.rotations import QuatLike, VecLike, compose, homogeneous, quat_from_matrix, quat_multiply
+from framechain.robot.urdf import Joint, JointType, RobotModelError, read_urdf
 
 #: Frames per block in :meth:`RobotModel.fk_path`.
 FK_BLOCK = 8192
 
-__all__ = [
-    "Joint",
-    "JointType",
-    "Mimic",
-    "RobotModel",
-    "RobotModelError",
-    "UrdfJoints",
-    "read_urdf",
-    "read_urdf_text",
-]
-
-
-class RobotModelError(FramechainError):
-    """The URDF cannot be used (unreadable, not a tree, unsupported joint) or a query is wrong."""
-
-    def __init__(self, source: str, what: str) -> None:
-        self.source = source
-        self.what = what
-        super().__init__(f"{source}: {what}" if source else what)
-
-
-class JointType(StrEnum):
-    """URDF joint types framechain can move (floating and planar are refused)."""
-
-    REVOLUTE = "revolute"
-    CONTINUOUS = "continuous"
-    PRISMATIC = "prismatic"
-    FIXED = "fixed"
-
-
-@dataclass(frozen=True)
-class Mimic:
-    """``q = multiplier * q[joint] + offset``."""
-
-    joint: str
-    multiplier: float = 1.0
-    offset: float = 0.0
-
-
-@dataclass(frozen=True)
-class Joint:
-    """One URDF joint: ``T_parent_child(q) = origin @ motion(axis, q)``.
-
-    ``origin`` is 4x4 (``T_parent_jointframe``); ``axis`` a unit 3-vector in the joint frame;
-    limits in radians or metres (None where the URDF gives none).
-    """
-
-    name: str
-    type: JointType
-    parent: str
-    child: str
-    origin: FloatArray
-    axis: FloatArray
-    lower: float | None = None
-    upper: float | None = None
-    mimic: Mimic | None = None
-
-    @property
-    def moves(self) -> bool:
-        return self.type is not JointType.FIXED
+__all__ = ["RobotModel"]
 
 
 @dataclass(frozen=True)
@@ -370,76 +307,6 @@ class RobotModel:
             trans[lo:lo + m] = _stack(acc[1], m)
             quat[lo:lo + m] = _stack(acc[0], m)
         return trans, quat
-
-
-class UrdfJoints(NamedTuple):
-    """The joints of a URDF as parsed (not yet checked to be a tree), and those of types framechain
-    cannot move (floating, planar) by name and type."""
-
-    source: str
-    name: str
-    joints: list[Joint]
-    unsupported: list[tuple[str, str]]
-
-
-def read_urdf(path: Path) -> UrdfJoints:
-    """The joints of a URDF file, parsed once by yourdfpy (meshes not loaded)."""
-    if not path.is_file():
-        raise RobotModelError(str(path), "URDF file not found")
-    return _parse_urdf(str(path), str(path))
-
-
-def read_urdf_text(text: str, source: str) -> UrdfJoints:
-    """The joints of URDF text (a log's ``/robot_description``); ``source`` names it in messages."""
-    return _parse_urdf(io.BytesIO(text.encode()), source)
-
-
-def _parse_urdf(file: str | io.BytesIO, source: str) -> UrdfJoints:
-    import yourdfpy
-
-    quiet = logging.getLogger("yourdfpy")
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL + 1)  # yourdfpy logs parse errors on stderr before raising: one line is ours
-    try:
-        urdf = yourdfpy.URDF.load(file, build_scene_graph=False, load_meshes=False, build_collision_scene_graph=False,
-                                  load_collision_meshes=False)
-    except Exception as err:  # yourdfpy raises lxml, ValueError, KeyError... on bad files
-        raise RobotModelError(source, f"cannot parse URDF ({type(err).__name__}: {' '.join(str(err).split())})"
-                              ) from err
-    finally:
-        quiet.setLevel(level)
-    joints: list[Joint] = []
-    unsupported: list[tuple[str, str]] = []
-    for raw in urdf.robot.joints:
-        origin = np.eye(4) if raw.origin is None else np.asarray(raw.origin, dtype=float)
-        if not np.isfinite(origin).all():
-            raise RobotModelError(source, f"joint {raw.name!r}: its origin is not finite")
-        try:
-            jtype = JointType(raw.type)
-        except ValueError:
-            unsupported.append((str(raw.name), str(raw.type)))
-            continue
-        joints.append(_joint(raw, jtype, origin, source))
-    return UrdfJoints(source, str(urdf.robot.name or ""), joints, unsupported)
-
-
-def _joint(raw: Any, jtype: JointType, origin: FloatArray, source: str) -> Joint:
-    """A yourdfpy joint as a :class:`Joint` (axis normalised, limits and mimic read)."""
-    axis = np.array([1.0, 0.0, 0.0]) if raw.axis is None else np.asarray(raw.axis, dtype=float)
-    if jtype is not JointType.FIXED:
-        norm = float(np.linalg.norm(axis))
-        if not np.isfinite(norm) or norm < 1e-12:
-            raise RobotModelError(source, f"joint {raw.name!r} has a zero axis")
-        axis = axis / norm
-    lower = upper = None
-    if raw.limit is not None and jtype is not JointType.CONTINUOUS:
-        lower = None if raw.limit.lower is None else float(raw.limit.lower)
-        upper = None if raw.limit.upper is None else float(raw.limit.upper)
-    mimic = None
-    if raw.mimic is not None:
-        mimic = Mimic(str(raw.mimic.joint), 1.0 if raw.mimic.multiplier is None else float(raw.mimic.multiplier),
-                      0.0 if raw.mimic.offset is None else float(raw.mimic.offset))
-    return Joint(str(raw.name), jtype, str(raw.parent), str(raw.child), origin, axis, lower, upper, mimic)
 
 
 def _step(joint: Joint) -> _Step:

@@ -1,6 +1,6 @@
 """The model room: columnar tables of one log, nothing format-specific; imports nothing of framechain's other rooms."""
 
-from framechain.timeline.columns import Column, ColumnTable, arrow_array
+from framechain.timeline.columns import Column, ColumnTable, arrow_array, numpy_of
 from framechain.timeline.errors import (
     InvalidCameraError,
     InvalidTransformError,
@@ -9,6 +9,7 @@ from framechain.timeline.errors import (
 from framechain.timeline.frames import DepthFrameTable, DepthLoader, DepthWindows, ImageFrameTable, pixel_windows
 from framechain.timeline.log_info import LogFormat, LogInfo, TopicInfo
 from framechain.timeline.model import Timeline
+from framechain.timeline.storage import read_parquet
 from framechain.timeline.tables import (
     CameraTable,
     EgoMotionTable,
@@ -49,5 +50,7 @@ __all__ = [
     "format_stamp",
     "normalize_frame",
     "normalize_frames",
+    "numpy_of",
     "pixel_windows",
+    "read_parquet",
 ]

@@ -16,7 +16,7 @@ import pyarrow as pa
 from framechain.arrays import IntArray
 from framechain.timeline.errors import TimelineError
 
-__all__ = ["Column", "ColumnTable", "arrow_array"]
+__all__ = ["Column", "ColumnTable", "arrow_array", "numpy_of"]
 
 
 @dataclass(frozen=True)
@@ -92,12 +92,11 @@ class ColumnTable:
         for name, spec in cls.COLUMNS.items():
             col = table.column(name).combine_chunks()
             if spec.shape:
-                flat = col.flatten().to_numpy(zero_copy_only=False)
-                values[name] = np.asarray(flat).reshape((len(table), *spec.shape))
+                values[name] = numpy_of(col.flatten()).reshape((len(table), *spec.shape))
             elif spec.dtype == "str":
                 values[name] = np.asarray(col.to_pylist(), dtype=str)
             else:
-                values[name] = col.to_numpy(zero_copy_only=False)
+                values[name] = numpy_of(col)
         return cls(**values)
 
     def equals(self, other: object) -> bool:
@@ -133,6 +132,44 @@ def arrow_array(values: npt.NDArray[Any]) -> pa.Array:
     if offsets[-1] > np.iinfo(np.int32).max:
         raise TimelineError(f"a string column of {offsets[-1]} bytes is beyond an Arrow string array")
     return pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(data)])
+
+
+def numpy_of(values: pa.Array | pa.ChunkedArray) -> npt.NDArray[Any]:
+    """An Arrow column as NumPy, the inverse of :func:`arrow_array`: numbers and booleans read from their buffers
+    (nulls as NaN, the column then float64), any other type through ``to_pylist``. ``to_numpy`` would first import
+    pandas (0.15 s of a command, and its teardown at exit), whatever the column holds."""
+    chunks = values.chunks if isinstance(values, pa.ChunkedArray) else [values]
+    parts = [_numpy_chunk(chunk) for chunk in chunks]
+    if not parts:
+        return np.zeros(0, dtype=_NUMPY_OF_ARROW.get(str(values.type), "float64"))
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+#: Arrow types read from their buffers by :func:`numpy_of`, and their NumPy dtypes.
+_NUMPY_OF_ARROW = {**{f"{sign}int{bits}": f"{sign}int{bits}" for sign in ("", "u") for bits in (8, 16, 32, 64)},
+                   "halffloat": "float16", "float": "float32", "double": "float64", "bool": "bool"}
+
+
+def _numpy_chunk(chunk: pa.Array) -> npt.NDArray[Any]:
+    dtype = _NUMPY_OF_ARROW.get(str(chunk.type))
+    if dtype is None:
+        return np.asarray(chunk.to_pylist())
+    n, offset = len(chunk), chunk.offset
+    validity, data = chunk.buffers()[:2]
+    if dtype == "bool":
+        out: npt.NDArray[Any] = _bits(data, offset, n)
+    else:
+        out = np.frombuffer(data, dtype=dtype, count=offset + n)[offset:] if n else np.zeros(0, dtype=dtype)
+    if chunk.null_count:
+        out = out.astype(np.float64)
+        out[~_bits(validity, offset, n)] = np.nan
+    return out
+
+
+def _bits(buffer: pa.Buffer, offset: int, n: int) -> npt.NDArray[np.bool_]:
+    """``n`` bits of an Arrow bitmap from bit ``offset`` (least significant bit first)."""
+    packed = np.frombuffer(buffer, dtype=np.uint8)
+    return np.unpackbits(packed, bitorder="little", count=offset + n)[offset:].astype(bool)
 
 
 def _utf8(values: npt.NDArray[np.str_]) -> tuple[bytes, IntArray]:

@@ -1,4 +1,5 @@
-"""A Timeline's tables as Parquet files in a directory, and back, losslessly.
+"""A Timeline's tables as Parquet files in a directory, and back, losslessly; and the one way framechain reads
+a Parquet file (:func:`read_parquet`).
 
 Depth pixels are stored as float32 bytes in ``depth_pixels.parquet`` and image bytes in
 ``image_bytes.parquet``; both are read back lazily, row by row.
@@ -17,7 +18,7 @@ import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from framechain.timeline.columns import ColumnTable
+from framechain.timeline.columns import ColumnTable, arrow_array, numpy_of
 from framechain.timeline.errors import TimelineError
 from framechain.timeline.frames import VIDEO_ENCODING, DepthFrameTable, ImageFrameTable
 
@@ -78,10 +79,10 @@ def read_tables(
     for name, cls in types.items():
         if name == "image_frames" and not (src / f"{name}.parquet").is_file():
             continue  # saved before images were collected
-        tables[name] = cls.from_arrow(pq.read_table(src / f"{name}.parquet"))
+        tables[name] = cls.from_arrow(read_parquet(src / f"{name}.parquet"))
     depth: DepthFrameTable = tables["depth_frames"]
     if len(depth):
-        pixels = pq.read_table(src / "depth_pixels.parquet").column("pixels_f32")
+        pixels = read_parquet(src / "depth_pixels.parquet").column("pixels_f32")
         heights, widths = depth.height.copy(), depth.width.copy()
 
         def load(i: int) -> npt.NDArray[np.float32]:
@@ -91,7 +92,7 @@ def read_tables(
         tables["depth_frames"] = dataclasses.replace(depth, loader=load)
     images: ImageFrameTable | None = tables.get("image_frames")
     if images is not None and len(images):
-        image_bytes = pq.read_table(src / "image_bytes.parquet").column("bytes")
+        image_bytes = read_parquet(src / "image_bytes.parquet").column("bytes")
 
         def load_image(i: int) -> bytes:
             raw: bytes = image_bytes[i].as_py()
@@ -99,3 +100,37 @@ def read_tables(
 
         tables["image_frames"] = dataclasses.replace(images, loader=load_image)
     return tables, dict(meta["metadata"])
+
+
+def read_parquet(path: str | Path, columns: list[str] | None = None, *, where_equal: tuple[str, int] | None = None
+                 ) -> pa.Table:
+    """A Parquet file's table (only ``columns``: None reads all), and with ``where_equal`` (a column and a value) only
+    its rows holding that value, from the row groups whose statistics allow it (a LeRobot v3 data file holds many
+    episodes). Read through :class:`pyarrow.parquet.ParquetFile`: ``pq.read_table`` goes through pyarrow.dataset,
+    whose import brings pandas (0.15 s of every command, and its teardown at exit). Raises what pyarrow raises
+    (OSError, ArrowException) for the caller to name the file."""
+    wanted = None if columns is None or where_equal is None or where_equal[0] in columns \
+        else [*columns, where_equal[0]]
+    with pq.ParquetFile(path) as file:
+        if where_equal is None:
+            return file.read(columns=columns)
+        name, value = where_equal
+        metadata = file.metadata
+        groups = [i for i in range(metadata.num_row_groups) if _may_hold(metadata.row_group(i), name, value)]
+        table = file.read_row_groups(groups, columns=wanted or columns)
+    if name not in table.column_names:
+        raise pa.ArrowInvalid(f"no column {name!r}")
+    table = table.filter(arrow_array(np.asarray(numpy_of(table.column(name)) == value)))
+    return table.drop_columns([name]) if wanted else table
+
+
+def _may_hold(group: pq.RowGroupMetaData, name: str, value: int) -> bool:
+    """Whether a row group's statistics of column ``name`` allow ``value`` (True when it keeps none)."""
+    for k in range(group.num_columns):
+        column = group.column(k)
+        if column.path_in_schema == name:
+            stats = column.statistics
+            if stats is None or not stats.has_min_max:
+                return True
+            return bool(stats.min <= value <= stats.max)
+    return True

@@ -11,12 +11,14 @@ point ``b0 = R b1``; a point at inverse distance ``rho`` when the camera centre 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
 from framechain.arrays import BoolArray, FloatArray
 from framechain.geometry.rotations import kabsch
+from framechain.vision.threads import split_over_threads, threads_here
 
 __all__ = [
     "PairBatch",
@@ -109,7 +111,35 @@ def off_flow_residuals(batch: PairBatch, rotation: FloatArray, direction: FloatA
     return out
 
 
+#: Frame pairs per block when :func:`rotations_along_translation` splits them over the run's threads: fewer would
+#: spend more on the blocks' own NumPy calls than the threads give back.
+SPLIT_PAIRS = 128
+
+
 def rotations_along_translation(
+    batch: PairBatch, rotation: FloatArray, direction: FloatArray, weights: FloatArray, threshold_rad: float,
+    iterations: int,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`_rotations_along_translation` of blocks of the pairs at once, one per thread this camera may use
+    (:func:`~framechain.vision.threads.threads_here`; each pair's measurement is its own: the same numbers as one
+    block, to the last bit). A generated 640x480 AV1 episode, one camera on 2 cores: attributed in 3.0 s against 3.9
+    s in one block; two cameras measured at once gain nothing (each has one core)."""
+    count = rotation.shape[0]
+    blocks = min(threads_here(), count // SPLIT_PAIRS)
+    if blocks < 2:
+        return _rotations_along_translation(batch, rotation, direction, weights, threshold_rad, iterations)
+    edges = np.linspace(0, count, blocks + 1).round().astype(int)
+
+    def block(part: slice) -> tuple[FloatArray, FloatArray]:
+        sub = PairBatch(batch.b0[part], batch.b1[part], batch.valid[part])
+        return _rotations_along_translation(sub, rotation[part], direction[part], weights[part], threshold_rad,
+                                            iterations)
+
+    done = split_over_threads(block, [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)])
+    return np.concatenate([r for r, _ in done]), np.concatenate([e for _, e in done])
+
+
+def _rotations_along_translation(
     batch: PairBatch, rotation: FloatArray, direction: FloatArray, weights: FloatArray, threshold_rad: float,
     iterations: int,
 ) -> tuple[FloatArray, FloatArray]:
@@ -189,13 +219,10 @@ def _gauss_newton_step(rot: FloatArray, b1: FloatArray, across: FloatArray, alon
     w = weights / (1.0 + (r_across**2 + r_along**2) / scale**2)
     w_along = np.where(kept, w, 0.0)
     g_across, g_along = _cross(u, across), _cross(u, along)
-    normal = np.empty((rot.shape[0], 3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            normal[:, i, j] = normal[:, j, i] = ((w * g_across[i]) * g_across[j] + (w_along * g_along[i]) * g_along[j]
-                                                 ).sum(axis=1)
-    normal += 1e-15 * np.eye(3)
-    rhs = -((w * r_across) * g_across + (w_along * r_along) * g_along).sum(axis=2).T
+    # einsum sums each pair's products in one pass (seven times faster than a sum per entry of the normal matrix).
+    normal = (np.einsum("ipm,jpm->pij", w * g_across, g_across) + np.einsum("ipm,jpm->pij", w_along * g_along, g_along)
+              + 1e-15 * np.eye(3))
+    rhs = -(np.einsum("ipm,pm->pi", g_across, w * r_across) + np.einsum("ipm,pm->pi", g_along, w_along * r_along))
     out: FloatArray = np.linalg.solve(normal, rhs[..., None])[..., 0]
     return out
 
@@ -207,8 +234,12 @@ def _dot(a: FloatArray, b: FloatArray) -> FloatArray:
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Cross products of component-first vectors (3, ...)."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    """Cross products of component-first vectors (3, ...), written in place (no stacked copy)."""
+    out: FloatArray = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(a[i], b[j], out=out[k])
+        out[k] -= a[j] * b[i]
+    return out
 
 
 def _gram(weights: FloatArray, v: FloatArray) -> FloatArray:

@@ -11,7 +11,8 @@ import yourdfpy
 
 from framechain.config.robot import JointMapping, JointUnit, RobotConfig, RobotConfigError
 from framechain.robot.binding import convert_joint, joint_positions, robot_model
-from framechain.robot.kinematics import JointType, RobotModel, RobotModelError
+from framechain.robot.kinematics import RobotModel
+from framechain.robot.urdf import JointType, RobotModelError
 from tests.helpers.lerobot_scene import ARM6
 
 SO101_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")

@@ -11,14 +11,13 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
-import pyarrow.parquet as pq
 
 from framechain.adapters.lerobot.dataset_info import DatasetError, EpisodeFrames
 from framechain.adapters.lerobot.markers import video_markers
 from framechain.arrays import IntArray, StrArray
 from framechain.config.chain_cameras import MarkerSpec
 from framechain.config.robot import DetectionSource, RobotConfig, RobotConfigError
-from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable
+from framechain.timeline import CameraTable, ImageFrameTable, ObservationTable, numpy_of, read_parquet
 
 __all__ = ["episode_observations", "with_markers"]
 
@@ -29,7 +28,7 @@ def _read_side_table(path: Path) -> pa.Table:
     try:
         if path.suffix.lower() == ".csv":
             return pacsv.read_csv(path)
-        return pq.read_table(path)
+        return read_parquet(path)
     except (OSError, pa.ArrowInvalid) as err:
         raise DatasetError(path, f"cannot read detections table ({err})") from err
 
@@ -102,16 +101,16 @@ def _table_observations(
     cams = _table_cameras(table, src, cfg, path)
     stamp, log = _table_stamps(table, cams, frames, cam_ns, state_ns, episode, path)
     depth_col = _pick(table, ("depth_m", "depth"))
-    depth = (np.asarray(table.column(depth_col).to_numpy(zero_copy_only=False), dtype=float)
+    depth = (np.asarray(numpy_of(table.column(depth_col)), dtype=float)
              if depth_col is not None else np.full(n, np.nan))
     label = (np.asarray(table.column("label").to_pylist(), dtype=str) if "label" in table.column_names
              else cams.copy())
-    score = (np.asarray(table.column("score").to_numpy(zero_copy_only=False), dtype=float)
+    score = (np.asarray(numpy_of(table.column("score")), dtype=float)
              if "score" in table.column_names else np.full(n, np.nan))
     return {
         "camera": cams, "stamp": stamp, "log": log,
-        "u": np.asarray(table.column("u").to_numpy(zero_copy_only=False), dtype=float),
-        "v": np.asarray(table.column("v").to_numpy(zero_copy_only=False), dtype=float),
+        "u": np.asarray(numpy_of(table.column("u")), dtype=float),
+        "v": np.asarray(numpy_of(table.column("v")), dtype=float),
         "depth": depth, "label": label, "score": score, "source": str(path),
     }
 
@@ -146,7 +145,7 @@ def _table_stamps(
     stamp = np.zeros(n, dtype=np.int64)
     log = np.zeros(n, dtype=np.int64)
     if frame_col is not None:
-        fi = np.asarray(table.column(frame_col).to_numpy(zero_copy_only=False))
+        fi = np.asarray(numpy_of(table.column(frame_col)))
         if fi.size and (fi.dtype.kind not in "iu" or fi.min() < 0 or fi.max() >= len(frames)):
             raise DatasetError(path, f"frame_index must be integers in 0..{len(frames) - 1} for episode {episode}")
         fi = fi.astype(np.int64)
@@ -155,7 +154,7 @@ def _table_stamps(
             stamp[sel] = cam_ns[str(name)][fi[sel]]
         log = state_ns[fi]
     elif ts_col is not None:
-        ts = np.asarray(table.column(ts_col).to_numpy(zero_copy_only=False), dtype=float)
+        ts = np.asarray(numpy_of(table.column(ts_col)), dtype=float)
         stamp = np.round(ts * 1e9).astype(np.int64)
         nearest = np.clip(np.searchsorted(state_ns, stamp), 0, len(frames) - 1)
         prev = np.clip(nearest - 1, 0, len(frames) - 1)

@@ -7,7 +7,6 @@ episode's metadata and the dataset's features.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -27,6 +26,7 @@ from framechain.adapters.lerobot.dataset_info import (
 )
 from framechain.arrays import FloatArray, IntArray
 from framechain.errors import one_line
+from framechain.timeline import numpy_of, read_parquet
 
 __all__ = ["read_episode_frames"]
 
@@ -46,7 +46,7 @@ def read_episode_frames(
     index, path = ep.index, ep.data_file
     table, present = _episode_table(ep, columns, features=features, layout=layout, info_path=info_path)
     n = table.num_rows
-    global_index = (table.column("index").to_numpy().astype(np.int64) if "index" in present
+    global_index = (numpy_of(table.column("index")).astype(np.int64) if "index" in present
                     else np.arange(n, dtype=np.int64))
     if ep.from_index is not None and ep.to_index is not None and (
         ep.to_index - ep.from_index != n or int(global_index[0]) != ep.from_index
@@ -54,7 +54,7 @@ def read_episode_frames(
         raise DatasetError(path, f"episode {index} rows have index {global_index[0]}..{global_index[-1]} but "
                            f"the episodes parquet declares [{ep.from_index}, {ep.to_index})")
     if "frame_index" in present:
-        frame_index = table.column("frame_index").to_numpy().astype(np.int64)
+        frame_index = numpy_of(table.column("frame_index")).astype(np.int64)
         if not np.array_equal(frame_index, np.arange(n)):
             note(path, f"frame_index of episode {index} is not 0..{n - 1}")
     else:
@@ -93,9 +93,9 @@ def _episode_table(
             raise DatasetError(path, f"column {col!r} is {declared}not in this file; it has {sorted(present)}")
     index_cols = [c for c in ("timestamp", "frame_index", "episode_index", "index") if c in present]
     read_cols = list(dict.fromkeys([*index_cols, *columns]))
-    filters = [("episode_index", "=", index)] if layout is Layout.V3 and "episode_index" in present else None
+    only = ("episode_index", index) if layout is Layout.V3 and "episode_index" in present else None
     try:
-        table = pq.read_table(path, columns=read_cols, filters=filters)
+        table = read_parquet(path, read_cols, where_equal=only)
     except (OSError, pa.ArrowException) as err:
         raise DatasetError(path, f"cannot read Parquet ({one_line(err)})") from err
     if "index" in present:
@@ -104,7 +104,7 @@ def _episode_table(
     if n == 0:
         raise DatasetError(path, f"holds no rows of episode {index}")
     if "episode_index" in present:
-        eps = np.unique(table.column("episode_index").to_numpy())
+        eps = np.unique(numpy_of(table.column("episode_index")))
         if eps.tolist() != [index]:
             raise DatasetError(path, f"expected rows of episode {index}, found episode_index {eps.tolist()}")
     if n != ep.length:
@@ -149,7 +149,7 @@ def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
             raise DatasetError(path, f"column {name!r} has null rows")
         import pyarrow.compute as pc
 
-        lengths = pc.list_value_length(arr).to_numpy(zero_copy_only=False)
+        lengths = numpy_of(pc.list_value_length(arr))
         width = int(lengths[0]) if lengths.size else 0
         if lengths.size and not (lengths == width).all():
             raise DatasetError(path, f"column {name!r} holds lists of different lengths "
@@ -158,7 +158,4 @@ def _column(col: pa.ChunkedArray, path: Path, name: str) -> npt.NDArray[Any]:
         arr = arr.flatten()
     if pa.types.is_struct(arr.type) or pa.types.is_binary(arr.type) or pa.types.is_string(arr.type):
         return np.asarray(arr.to_pylist(), dtype=object).reshape(shape)
-    if arr.null_count and (pa.types.is_floating(arr.type) or pa.types.is_integer(arr.type)):
-        arr = arr.cast(pa.float64()).fill_null(math.nan)
-    values = arr.to_numpy(zero_copy_only=False)
-    return np.asarray(values).reshape(shape)
+    return numpy_of(arr).reshape(shape)  # nulls as NaN

@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from framechain.adapters.lerobot.dataset_info import (
     INDEX_COLUMNS,
@@ -48,6 +47,7 @@ from framechain.adapters.lerobot.dataset_info import (
 )
 from framechain.adapters.lerobot.frames import read_episode_frames
 from framechain.errors import one_line
+from framechain.timeline import numpy_of, read_parquet
 
 __all__ = [
     "INDEX_COLUMNS",
@@ -214,7 +214,7 @@ class DatasetReader:
         tables = []
         for path in self._episodes_files_v3():
             try:
-                table = pq.read_table(path)
+                table = read_parquet(path)
             except (OSError, pa.ArrowException) as err:
                 self.note(path, f"cannot read ({one_line(err)}); its episodes are left out")
                 continue
@@ -235,7 +235,7 @@ class DatasetReader:
 
     def _read_episode_ids_v3(self) -> list[int]:
         table = self._episodes_table_v3()
-        ids = table.column("episode_index").to_numpy(zero_copy_only=False)
+        ids = numpy_of(table.column("episode_index"))
         if not np.isfinite(ids.astype(np.float64)).all():
             raise DatasetError(self.root / "meta" / "episodes", "an episode row has no episode_index")
         if np.unique(ids).size != ids.size:

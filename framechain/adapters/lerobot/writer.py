@@ -25,6 +25,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain.adapters.lerobot.reader import DatasetError
+from framechain.timeline import numpy_of
 
 __all__ = ["EpisodeData", "FeatureSpec", "write_lerobot_dataset"]
 
@@ -254,7 +255,7 @@ def _stats(table: pa.Table, features: Mapping[str, FeatureSpec]) -> dict[str, An
         n = len(col)
         while pa.types.is_fixed_size_list(col.type):
             col = col.flatten()
-        values = np.asarray(col.to_numpy(zero_copy_only=False), dtype=float).reshape(n, -1)
+        values = np.asarray(numpy_of(col), dtype=float).reshape(n, -1)
         out[key] = {"min": values.min(0).tolist(), "max": values.max(0).tolist(),
                     "mean": values.mean(0).tolist(), "std": values.std(0).tolist(), "count": [n]}
     return out

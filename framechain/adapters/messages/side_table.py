@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from framechain.adapters.errors import AdapterError
+from framechain.timeline import numpy_of
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -37,7 +38,7 @@ def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
     def col(*names: str) -> npt.NDArray[Any] | None:
         for n in names:
             if n in cols:
-                return np.asarray(table.column(cols[n]).to_numpy(zero_copy_only=False))
+                return np.asarray(numpy_of(table.column(cols[n])))
         return None
 
     n = table.num_rows
@@ -86,9 +87,9 @@ def _read_table(path: Path) -> pa.Table:
         raise AdapterError(path, "detections side table not found")
     try:
         if path.suffix.lower() in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
+            from framechain.timeline import read_parquet
 
-            return pq.read_table(path)
+            return read_parquet(path)
         import pyarrow.csv as pcsv
 
         return pcsv.read_csv(path)

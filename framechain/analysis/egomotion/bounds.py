@@ -32,12 +32,11 @@ from typing import Any
 import numpy as np
 
 from framechain.analysis.egomotion import EgoMotionFit
+from framechain.analysis.egomotion.fit import focal_hidden
 from framechain.analysis.egomotion.run import CameraMotion
 from framechain.analysis.verdict.checks import Bound
 from framechain.catalogue import Fault, HopName
 from framechain.geometry.camera import FOV_RANGE_DEG, focal_of_fov, fov_of_focal
-from framechain.geometry.rotations import rotvec_of
-from framechain.timeline import EgoMotionTable
 
 __all__ = [
     "FOCAL_CLEAR",
@@ -77,16 +76,6 @@ BOUND_HALF_WIDTHS = 2.0
 FOCAL_SPREAD = 2.0
 #: A mount rotation whose interval spans more than this (deg) is undetermined.
 MOUNT_SPREAD_DEG = 60.0
-#: A camera turned about one axis only whose translation moves the image the way its rotation across the optical axis
-#: does, in more than this share of its frame pairs (weighted by that rotation), cannot tell the two apart: each
-#: point's depth takes up part of the rotation, always in the same direction, and the focal length the rotation
-#: implies is not measured. Generated SO-101 episodes: 0.99 and 1.00 where the arm only panned (a focal length 1.63
-#: times the truth, "strong") or only rolled its wrist (right, by luck); where every joint moved, 0.04 to 0.85 (seed
-#: 21) with the focal length within 1%: their turns about many axes tell rotation from translation.
-SWUNG_SHARE = 0.8
-#: Pairs whose rotation across the optical axis (rad) is under this are left out of that share.
-SWUNG_MIN_ROTATION_RAD = 1e-4
-
 
 @dataclass(frozen=True)
 class Judgement:
@@ -146,7 +135,7 @@ def _undetermined(motion: CameraMotion, fit: EgoMotionFit) -> dict[str, str]:
     elif low > 0 and high / low > FOCAL_SPREAD:
         out[Fault.INTRINSICS.value] = (f"the focal length its motion implies is undetermined ({low:.3f} .. "
                                        f"{high:.3f} times the declared one)")
-    elif fit.mount_unobservable_axes and not fit.unobservable and (swung := swung_share(fit.table)) > SWUNG_SHARE:
+    elif (swung := focal_hidden(fit)) is not None:
         out[Fault.INTRINSICS.value] = (
             f"its images cannot tell its rotation across the optical axis from its translation (in {swung:.0%} of "
             "its frame pairs the translation moves the image the way the rotation does, as when a camera turns about "
@@ -161,27 +150,6 @@ def _undetermined(motion: CameraMotion, fit: EgoMotionFit) -> dict[str, str]:
         out[Fault.ROTATION_ERROR.value] = (f"its mount rotation is undetermined ({error.interval_deg[0]:.0f} .. "
                                            f"{error.interval_deg[1]:.0f} deg)")
     return out
-
-
-def swung_share(table: EgoMotionTable) -> float:
-    """The share of a camera's frame pairs, weighted by their rotation across the optical axis, whose measured
-    translation moves the image's centre along the rotation's flow there (within 25 deg; 0 with no such pair).
-
-    A rotation ``w`` (optical frame) moves the centre along ``(w_y, -w_x)``; a translation ``t`` along ``(t_x,
-    t_y)``. Only pairs whose translation was measured (parallax of a pixel or more) are counted.
-    """
-    if not len(table):
-        return 0.0
-    rotvec = rotvec_of(table.quat_xyzw)
-    flow = np.stack([rotvec[:, 1], -rotvec[:, 0]], axis=1)
-    weight = np.linalg.norm(flow, axis=1)
-    moved = table.direction[:, :2]
-    seen = np.isfinite(moved).all(axis=1) & (weight > SWUNG_MIN_ROTATION_RAD) & (np.linalg.norm(
-        np.nan_to_num(moved), axis=1) > 1e-9)
-    if not seen.any():
-        return 0.0
-    cosine = np.abs((flow[seen] * moved[seen]).sum(axis=1)) / (weight[seen] * np.linalg.norm(moved[seen], axis=1))
-    return float((weight[seen] * (cosine > np.cos(np.radians(25.0)))).sum() / weight[seen].sum())
 
 
 def motion_bounds(motion: CameraMotion, judgement: Judgement | None = None) -> tuple[Bound, ...]:

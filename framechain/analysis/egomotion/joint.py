@@ -29,14 +29,18 @@ import numpy as np
 
 from framechain.analysis.egomotion.model import EgoMotionFitOptions, LinkMotion, Measure
 from framechain.analysis.egomotion.solve import (
+    OBSERVABLE_RATIO,
     Orientations,
     Pairs,
     Scatter,
     Solved,
+    complete_mount,
     frame_pairs,
     link_rotvecs,
     parabola_min,
+    principal_axes,
     robust_weights,
+    weak_axes,
 )
 from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.geometry.rotations import Inverse, Rotations, RotationVector, matrix_of, quat_of, rotvec_of
@@ -175,8 +179,28 @@ class _Trials:
         return float(weights @ (predicted * pairs.rotvec[:, :2]).sum(axis=1)) / den if den > 0 else 1.0
 
     def fitted_mount(self, offset: float) -> FloatArray:
-        """The mount (matrix) fitted to the measurement at ``offset`` against forward kinematics at ``offset``."""
-        return _fixed_offset_fit(self.pairs(self.table(offset)), self.orientations, offset)[1]
+        """The mount (matrix) fitted to the measurement at ``offset`` against forward kinematics at ``offset``; about
+        an axis the link did not turn across (:meth:`weak_axis`), the mount in use (Kabsch would take that turn from
+        the last bits of the arithmetic, and the fixed point of :func:`_remount` with it: 170 deg apart between two
+        sums of the same products in another order, on an arm that only pans)."""
+        cost, mount, weights, pairs = _fixed_offset_fit(self.pairs(self.table(offset)), self.orientations, offset)
+        axis = self.weak_axis(offset, cost, weights, pairs)
+        return mount if axis is None else complete_mount(mount, matrix_of(self.q_link_cam), axis)
+
+    def weak_axis(self, offset: float, cost: float, weights: FloatArray, pairs: Pairs) -> FloatArray | None:
+        """The link-frame axis the link turned across by less than the misfit ``cost`` (rad) itself, None when there
+        is none, or more than one (a link that barely turns: nothing of the mount is seen). Not the final fit's test
+        (:func:`~framechain.analysis.egomotion.solve.weak_axes`, OBSERVABLE_RATIO times its misfit): at a trial
+        offset the misfit can be five times the final one (a generated episode with its mount 10 deg off: 0.64 against
+        0.13 deg, its link turned 2.3 deg across its least axis), while an arm that only pans turns 0.000 across its
+        axis, against 0.126."""
+        if pairs.t0.size == 0 or not np.isfinite(cost):
+            return None
+        link_rv = link_rotvecs(self.orientations, pairs, np.array([offset]))[0]
+        axes, across, _turning = principal_axes(np.einsum("n,ni,nj->ij", weights, link_rv, link_rv),
+                                                float(weights.sum()))
+        weak = weak_axes(axes, across, float(np.rad2deg(cost)) / OBSERVABLE_RATIO)
+        return np.asarray(weak[0]) if len(weak) == 1 else None
 
     def use_mount(self, mount: Rotations) -> None:
         """Measure from now on with the translation prior of ``mount``."""
@@ -293,6 +317,12 @@ def _mount_search(trials: _Trials, best: float) -> None:
         curvature = minus - 2.0 * centre + plus
         if curvature > 0:
             step[k] = float(np.clip(0.5 * (minus - plus) / curvature, -2.0, 2.0)) * h
+    # Nothing is learnt about an axis the link did not turn across: the step keeps the mount about it.
+    cost_now, _mount, weights, pairs = _fixed_offset_fit(trials.pairs(trials.table(best)), trials.orientations, best)
+    weak = trials.weak_axis(best, cost_now, weights, pairs)
+    if weak is not None:
+        axis = matrix_of(trials.q_link_cam).T @ weak  # the mount's turns are after it: about camera-frame axes
+        step = step - (step @ axis) * axis
     if cost(step) < centre:
         trials.use_mount((trials.q_link_cam, RotationVector(step)))
 

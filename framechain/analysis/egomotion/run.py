@@ -16,7 +16,7 @@ without decoding anything.
 
 from __future__ import annotations
 
-import os
+import contextlib
 import time
 from collections.abc import Callable, Collection, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -34,6 +34,7 @@ from framechain.analysis.egomotion import (
     fit_link,
     rank_links,
 )
+from framechain.analysis.egomotion.fit import focal_hidden
 from framechain.analysis.egomotion.position import PositionFit, fit_position
 from framechain.arrays import FloatArray, IntArray
 from framechain.config.calibration import Intrinsics
@@ -43,10 +44,11 @@ from framechain.geometry.rotations import IDENTITY, Rotations, quat_of, rotate_b
 from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.egomotion import FramePairCounts
+from framechain.vision.opencv import opencv_threads
+from framechain.vision.threads import run_threads, sharing_threads
 from framechain.vision.two_view import PairBatch
 
-__all__ = ["CAMERA_THREADS_ENV", "CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "camera_threads",
-           "measure_cameras"]
+__all__ = ["CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "measure_cameras"]
 
 #: At most this many candidate frames are ranked per camera (two six-joint arms have a dozen moving links).
 MAX_CANDIDATES = 24
@@ -165,19 +167,6 @@ class CameraMotionEvidence:
         return tuple(c for c in self.cameras if c.observable)
 
 
-#: Cameras measured at once: FRAMECHAIN_CAMERA_THREADS, else one per core (a batch's worker processes set 1: they
-#: run an episode per core already).
-CAMERA_THREADS_ENV = "FRAMECHAIN_CAMERA_THREADS"
-
-
-def camera_threads() -> int:
-    """How many cameras are measured at once (:data:`CAMERA_THREADS_ENV`, else the cores this process may use)."""
-    given = os.environ.get(CAMERA_THREADS_ENV, "")
-    if given.isdigit() and int(given) > 0:
-        return int(given)
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 def measure_cameras(
     chain: ChainConfig, buffer: TransformBuffer, cameras: Sequence[str], images: ImagesOf, *,
     options: EgoMotionFitOptions | None = None, progress: Callable[[str], None] | None = None,
@@ -198,9 +187,16 @@ def measure_cameras(
         opts = replace(opts, max_offset_s=chain.evidence.camera_offset_window_s)
     # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
     # most of the work (a log's reader fetches for one thread at a time).
-    with ThreadPoolExecutor(max_workers=max(1, min(len(order), camera_threads()))) as pool:
-        out = list(pool.map(lambda camera: _measure_camera(chain, buffer, camera, images, opts,
-                                                           guessed=camera in guessed), order))
+    workers = max(1, min(len(order), run_threads()))
+    share = max(1, run_threads() // workers)
+
+    def measured(camera: str) -> CameraMotion:
+        with sharing_threads(share):
+            return _measure_camera(chain, buffer, camera, images, opts, guessed=camera in guessed)
+
+    with ThreadPoolExecutor(max_workers=workers) as pool, \
+            opencv_threads(1) if workers > 1 else contextlib.nullcontext():
+        out = list(pool.map(measured, order))
     return CameraMotionEvidence(cameras=tuple(out))
 
 
@@ -338,6 +334,8 @@ def _fit_with_focal(source: CameraImages, links: Sequence[LinkMotion], camera: s
     for _ in range(FOCAL_ROUNDS):
         low, high = fit.focal_scale_interval
         if not fit.link or not np.isfinite(fit.focal_scale) or low <= 1.0 <= high or abs(fit.focal_scale - 1) < 0.02:
+            break
+        if focal_hidden(fit) is not None:  # the focal length it implies is not measured: nothing to measure again with
             break
         step = fit.focal_scale**2
         lens = source.intrinsics

@@ -1,0 +1,70 @@
+"""How many threads one run's image work may use, and the pool its measurements are split over.
+
+A command runs one episode on every core the process may use: its cameras are measured on threads of
+their own (:func:`framechain.analysis.egomotion.run.measure_cameras`), and one camera's frame pairs are
+split into blocks measured at once (:func:`framechain.vision.two_view.rotations_along_translation`:
+NumPy releases the interpreter's lock for each pass over a block). A batch's worker processes run an
+episode per core already, and set :data:`THREADS_ENV` to 1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import os
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+__all__ = ["THREADS_ENV", "run_threads", "sharing_threads", "split_over_threads", "threads_here"]
+
+#: Threads one run uses: FRAMECHAIN_CAMERA_THREADS, else one per core this process may use.
+THREADS_ENV = "FRAMECHAIN_CAMERA_THREADS"
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+def run_threads() -> int:
+    """How many threads one run uses (:data:`THREADS_ENV`, else the cores this process may use)."""
+    given = os.environ.get(THREADS_ENV, "")
+    if given.isdigit() and int(given) > 0:
+        return int(given)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+#: The threads the work of the calling thread may use (unset: the run's).
+_share = threading.local()
+
+
+@contextlib.contextmanager
+def sharing_threads(count: int) -> Iterator[None]:
+    """Within the block the calling thread's work is split over at most ``count`` threads: cameras measured at once
+    share the run's threads (two cameras on two cores: one each, or splitting one's measurement only waits for the
+    other's)."""
+    before = getattr(_share, "count", None)
+    _share.count = count
+    try:
+        yield
+    finally:
+        _share.count = before
+
+
+def threads_here() -> int:
+    """The threads the calling thread's work may be split over (:func:`sharing_threads`, else the run's)."""
+    count = getattr(_share, "count", None)
+    return run_threads() if count is None else int(count)
+
+
+def split_over_threads(work: Callable[[T], R], parts: Sequence[T]) -> list[R]:
+    """``work`` of each of ``parts``, at once on the process's pool of the run's threads, in their order (in turn in
+    this thread when it may use one thread)."""
+    if len(parts) < 2 or threads_here() < 2:
+        return [work(part) for part in parts]
+    return list(_shared_pool(run_threads()).map(work, parts))
+
+
+@functools.lru_cache(maxsize=1)
+def _shared_pool(threads: int) -> ThreadPoolExecutor:
+    """One pool for the process: cameras measured at once share it, their blocks waiting their turn."""
+    return ThreadPoolExecutor(max_workers=threads, thread_name_prefix="framechain-split")
