@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from framechain.arrays import BoolArray, FloatArray
+from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.geometry.rotations import kabsch
 from framechain.vision.threads import split_over_threads, threads_here
 
@@ -66,6 +66,22 @@ def rotations_ransac(
     # Valid matches come first in each row, so indices below the count are valid.
     first = (rng.random((p, hypotheses)) * count[:, None]).astype(np.int64)
     second = (first + 1 + (rng.random((p, hypotheses)) * (count[:, None] - 1)).astype(np.int64)) % count[:, None]
+    blocks = min(threads_here(), p // SPLIT_PAIRS)
+    if blocks < 2:
+        return _ransac(batch, first, second, threshold_rad)
+    edges = np.linspace(0, p, blocks + 1).round().astype(int)
+
+    def block(part: slice) -> tuple[FloatArray, BoolArray]:  # each pair's hypotheses drawn above: the same numbers
+        return _ransac(PairBatch(batch.b0[part], batch.b1[part], batch.valid[part]), first[part], second[part],
+                       threshold_rad)
+
+    done = split_over_threads(block, [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)])
+    return np.concatenate([r for r, _ in done]), np.concatenate([i for _, i in done])
+
+
+def _ransac(batch: PairBatch, first: IntArray, second: IntArray, threshold_rad: float) -> tuple[FloatArray, BoolArray]:
+    """:func:`rotations_ransac` of the pairs of ``batch`` from the matches each hypothesis draws (P, H)."""
+    p, hypotheses = first.shape
     rows = np.arange(p)[:, None]
     cross = (batch.b0[rows, first][..., :, None] * batch.b1[rows, first][..., None, :]
              + batch.b0[rows, second][..., :, None] * batch.b1[rows, second][..., None, :])

@@ -140,8 +140,9 @@ def test_a_match_at_the_epipole_keeps_its_whole_residual() -> None:
 
 
 def test_pairs_split_over_threads_measure_the_same_to_the_last_bit() -> None:
-    """Each pair's refinement is its own: split into blocks on two threads (as one camera on two cores is), the
-    rotations and residuals are those of one block, bit for bit, and right (scipy's rotations, the scene's own)."""
+    """Each pair's refinement and RANSAC are its own: split into blocks on two threads (as one camera on two cores
+    is), the rotations, residuals and inliers are those of one block, bit for bit, and right (scipy's rotations, the
+    scene's own)."""
     rng = np.random.default_rng(11)
     pairs, rotations, translations = [], [], []
     for _ in range(2 * SPLIT_PAIRS + 7):
@@ -156,9 +157,13 @@ def test_pairs_split_over_threads_measure_the_same_to_the_last_bit() -> None:
     direction = np.array(translations)
     with sharing_threads(1):
         one = rotations_along_translation(batch, start, direction, batch.valid.astype(float), 1.0 / FOCAL, 10)
+        ransac_one = rotations_ransac(batch, 3.0 / FOCAL, hypotheses=32, rng=np.random.default_rng(5))
     with sharing_threads(2):
         split = rotations_along_translation(batch, start, direction, batch.valid.astype(float), 1.0 / FOCAL, 10)
+        ransac_split = rotations_ransac(batch, 3.0 / FOCAL, hypotheses=32, rng=np.random.default_rng(5))
     assert np.array_equal(one[0], split[0])
     assert np.array_equal(one[1], split[1])
+    assert np.array_equal(ransac_one[0], ransac_split[0])
+    assert np.array_equal(ransac_one[1], ransac_split[1])
     errors = [angle_deg(split[0][i], rot) for i, rot in enumerate(rotations)]
     assert np.median(errors) < 0.25  # from the identity, 2 deg away; 0.3 px of noise on 20-60 points
