@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,8 +25,9 @@ import pyarrow.parquet as pq
 
 from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.config.chain import ChainConfig
+from framechain.files import write_atomically
 from framechain.fleet.engines import map_local, map_ray, usable_cpus
-from framechain.fleet.recordings import recording_fits, write_atomically, write_recordings
+from framechain.fleet.recordings import recording_fits, write_recordings
 from framechain.fleet.units import (
     FINAL_STATUSES,
     RESULTS_DIR,
@@ -80,16 +80,14 @@ class ResultStore:
     def write(self, record: dict[str, Any]) -> Path:
         """Write to a temporary file beside the target, then rename: a killed batch never leaves half a record."""
         target = self.path_for(str(record["key"]))
-        fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=f".{target.stem}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "w") as f:
+
+        def write(tmp: Path) -> None:
+            with tmp.open("w") as f:
                 json.dump(record, f, indent=1)
                 f.flush()
                 os.fsync(f.fileno())
-            os.replace(tmp, target)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+
+        write_atomically(target, write)
         return target
 
 

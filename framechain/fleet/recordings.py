@@ -13,9 +13,8 @@ and whether it departs).
 from __future__ import annotations
 
 import json
-import os
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from framechain.analysis.egomotion.recording import CameraRecordingFit, EpisodeCamera, fit_recording
+from framechain.files import write_atomically
 
 __all__ = ["CAMERAS_TABLE", "CAMERA_SCHEMA", "RECORDING_JSON", "camera_table", "recording_fits", "write_recordings"]
 
@@ -127,8 +127,3 @@ def write_recordings(fits: Mapping[str, Sequence[CameraRecordingFit]], out_dir: 
     return paths
 
 
-def write_atomically(path: Path, write: Callable[[Path], object]) -> None:
-    """``write(tmp)`` a file beside ``path``, then rename it over ``path``: a reader never sees half a file."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    write(tmp)
-    os.replace(tmp, path)

@@ -19,7 +19,6 @@ import io
 import json
 import logging
 import os
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -30,6 +29,7 @@ import numpy as np
 
 from framechain.arrays import FloatArray
 from framechain.errors import FramechainError
+from framechain.files import write_atomically
 
 __all__ = ["CACHE_ENV", "Joint", "JointType", "Mimic", "RobotModelError", "UrdfJoints", "cache_dir", "read_urdf",
            "read_urdf_text"]
@@ -197,9 +197,8 @@ def _cached(data: bytes, source: str, parse: Callable[[], UrdfJoints]) -> UrdfJo
     parsed = parse()
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as tmp:
-            json.dump(_json_of(parsed), tmp)
-        os.replace(tmp.name, path)  # atomic: a command reading it at the same time sees all of it or none
+        # Whole or not at all: a command reading it at the same time sees all of it or none.
+        write_atomically(path, lambda tmp: tmp.write_text(json.dumps(_json_of(parsed))))
     except OSError:
         pass  # a read-only home: nothing kept
     return parsed

@@ -11,19 +11,25 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import itertools
 import os
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import Any, TypeVar, cast
 
-__all__ = ["THREADS_ENV", "run_threads", "sharing_threads", "split_over_threads", "threads_here"]
+import numpy as np
+
+__all__ = ["THREADS_ENV", "by_row_blocks", "run_threads", "sharing_threads", "split_over_threads", "threads_here"]
 
 #: Threads one run uses: FRAMECHAIN_CAMERA_THREADS, else one per core this process may use.
 THREADS_ENV = "FRAMECHAIN_CAMERA_THREADS"
 
 T = TypeVar("T")
 R = TypeVar("R")
+A = TypeVar("A", bound="np.ndarray[Any, Any]")
+B = TypeVar("B", bound="np.ndarray[Any, Any]")
+
 
 def run_threads() -> int:
     """How many threads one run uses (:data:`THREADS_ENV`, else the cores this process may use)."""
@@ -62,6 +68,18 @@ def split_over_threads(work: Callable[[T], R], parts: Sequence[T]) -> list[R]:
     if len(parts) < 2 or threads_here() < 2:
         return [work(part) for part in parts]
     return list(_shared_pool(run_threads()).map(work, parts))
+
+
+def by_row_blocks(work: Callable[[slice], tuple[A, B]], rows: int, least: int) -> tuple[A, B]:
+    """``work`` of blocks of the ``rows`` rows (``least`` rows at least each), one per thread the calling thread may
+    use, at once, each of its two arrays joined back in the rows' order: ``work(slice(0, rows))`` with one thread or
+    too few rows. When each row's arithmetic is its own, the numbers are those of one block, to the last bit."""
+    blocks = min(threads_here(), rows // least)
+    if blocks < 2:
+        return work(slice(0, rows))
+    edges = np.linspace(0, rows, blocks + 1).round().astype(int)
+    done = split_over_threads(work, [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)])
+    return cast(A, np.concatenate([a for a, _ in done])), cast(B, np.concatenate([b for _, b in done]))
 
 
 @functools.lru_cache(maxsize=1)

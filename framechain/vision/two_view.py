@@ -11,14 +11,13 @@ point ``b0 = R b1``; a point at inverse distance ``rho`` when the camera centre 
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import numpy as np
 
 from framechain.arrays import BoolArray, FloatArray, IntArray
 from framechain.geometry.rotations import kabsch
-from framechain.vision.threads import split_over_threads, threads_here
+from framechain.vision.threads import by_row_blocks
 
 __all__ = [
     "PairBatch",
@@ -66,17 +65,12 @@ def rotations_ransac(
     # Valid matches come first in each row, so indices below the count are valid.
     first = (rng.random((p, hypotheses)) * count[:, None]).astype(np.int64)
     second = (first + 1 + (rng.random((p, hypotheses)) * (count[:, None] - 1)).astype(np.int64)) % count[:, None]
-    blocks = min(threads_here(), p // SPLIT_PAIRS)
-    if blocks < 2:
-        return _ransac(batch, first, second, threshold_rad)
-    edges = np.linspace(0, p, blocks + 1).round().astype(int)
 
     def block(part: slice) -> tuple[FloatArray, BoolArray]:  # each pair's hypotheses drawn above: the same numbers
         return _ransac(PairBatch(batch.b0[part], batch.b1[part], batch.valid[part]), first[part], second[part],
                        threshold_rad)
 
-    done = split_over_threads(block, [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)])
-    return np.concatenate([r for r, _ in done]), np.concatenate([i for _, i in done])
+    return by_row_blocks(block, p, SPLIT_PAIRS)
 
 
 def _ransac(batch: PairBatch, first: IntArray, second: IntArray, threshold_rad: float) -> tuple[FloatArray, BoolArray]:
@@ -140,19 +134,13 @@ def rotations_along_translation(
     (:func:`~framechain.vision.threads.threads_here`; each pair's measurement is its own: the same numbers as one
     block, to the last bit). A generated 640x480 AV1 episode, one camera on 2 cores: attributed in 3.0 s against 3.9
     s in one block; two cameras measured at once gain nothing (each has one core)."""
-    count = rotation.shape[0]
-    blocks = min(threads_here(), count // SPLIT_PAIRS)
-    if blocks < 2:
-        return _rotations_along_translation(batch, rotation, direction, weights, threshold_rad, iterations)
-    edges = np.linspace(0, count, blocks + 1).round().astype(int)
 
     def block(part: slice) -> tuple[FloatArray, FloatArray]:
         sub = PairBatch(batch.b0[part], batch.b1[part], batch.valid[part])
         return _rotations_along_translation(sub, rotation[part], direction[part], weights[part], threshold_rad,
                                             iterations)
 
-    done = split_over_threads(block, [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)])
-    return np.concatenate([r for r, _ in done]), np.concatenate([e for _, e in done])
+    return by_row_blocks(block, rotation.shape[0], SPLIT_PAIRS)
 
 
 def _rotations_along_translation(

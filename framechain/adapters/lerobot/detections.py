@@ -145,7 +145,7 @@ def _table_stamps(
     stamp = np.zeros(n, dtype=np.int64)
     log = np.zeros(n, dtype=np.int64)
     if frame_col is not None:
-        fi = np.asarray(numpy_of(table.column(frame_col)))
+        fi = numpy_of(table.column(frame_col))
         if fi.size and (fi.dtype.kind not in "iu" or fi.min() < 0 or fi.max() >= len(frames)):
             raise DatasetError(path, f"frame_index must be integers in 0..{len(frames) - 1} for episode {episode}")
         fi = fi.astype(np.int64)

@@ -38,7 +38,7 @@ def read_side_table(path: Path) -> dict[str, npt.NDArray[Any]]:
     def col(*names: str) -> npt.NDArray[Any] | None:
         for n in names:
             if n in cols:
-                return np.asarray(numpy_of(table.column(cols[n])))
+                return numpy_of(table.column(cols[n]))
         return None
 
     n = table.num_rows

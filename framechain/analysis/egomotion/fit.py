@@ -429,6 +429,7 @@ SWUNG_SHARE = 0.8
 #: Pairs whose rotation across the optical axis (rad) is under this are left out of that share.
 SWUNG_MIN_ROTATION_RAD = 1e-4
 
+
 def swung_share(table: EgoMotionTable) -> float:
     """The share of a camera's frame pairs, weighted by their rotation across the optical axis, whose measured
     translation moves the image's centre along the rotation's flow there (within 25 deg; 0 with no such pair).
