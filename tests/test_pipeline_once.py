@@ -178,6 +178,39 @@ def test_attribute_starts_its_renderers_once_the_log_is_read(log: tuple[Path, Pa
     assert len(started) == 1
 
 
+def test_attribute_of_a_lerobot_episode_starts_one_renderer_at_once(tmp_path: Path, so101_urdf: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its read is one thread and its cameras then take both cores: one renderer, started before the read, is
+    enough for its two figures per camera (the variable unset: the command's own choice)."""
+    from framechain.adapters.lerobot import adapter
+    from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
+    from framechain.sinks import plots
+
+    truth = generate_video_dataset(tmp_path / "dataset", VideoDatasetSpec(
+        so101_urdf, seed=3, episodes=1, duration_s=2.0, fps=15, codec="mpeg4", width=96, height=96, focal_px=60.0))
+    robot = write_robot_yaml(truth, tmp_path / "robot.yaml")
+    monkeypatch.delenv(plots.RENDERERS_VARIABLE, raising=False)
+    events: list[str] = []
+    start, open_dataset = plots._Pool.start, adapter.open_dataset
+
+    def noting_start(pool: Any) -> None:
+        if not pool.started:
+            events.append(f"{pool._workers} renderer(s)")
+        start(pool)
+
+    def noting_read(*args: Any, **kwargs: Any) -> Any:
+        events.append("read")
+        return open_dataset(*args, **kwargs)
+
+    monkeypatch.setattr(plots._Pool, "start", noting_start)
+    monkeypatch.setattr(adapter, "open_dataset", noting_read)
+    assert main(["attribute", str(truth.root), "--episode", "0", "--robot", str(robot), "--out", str(tmp_path / "out"),
+                 "--bootstrap", "0", "-q"]) == 0
+    assert plots.EPISODE_RENDERERS == 1
+    assert events == ["1 renderer(s)", "read"]
+    assert list((tmp_path / "out").glob("rotation_rate_*.png"))
+
+
 def test_attribute_hands_its_figures_to_the_renderers_before_writing_its_files(
         log: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from framechain.sinks import plots, report

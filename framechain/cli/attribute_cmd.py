@@ -85,7 +85,7 @@ def parse_formats(text: str) -> list[str]:
 
 def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -> int:
     from framechain.adapters.lerobot.dataset_info import is_lerobot_dataset
-    from framechain.sinks.plots import renderers
+    from framechain.sinks.plots import EPISODE_RENDERERS, RENDERERS, renderers
 
     formats = default_formats or parse_formats(args.format)
     out = Path(args.out)
@@ -98,9 +98,10 @@ def run(args: argparse.Namespace, *, default_formats: list[str] | None = None) -
     # Started once a log is read (start_renderers): they load matplotlib while this process replays and attributes on
     # one core; during the read they would compete with its two threads. A LeRobot episode's read is one thread
     # (Parquet rows, a URDF) and its cameras' measurement after it takes both cores: its renderers start at once, on
-    # the core the read leaves idle (a generated two-camera episode: 7% less wall time, a one-camera one 5%).
+    # the core the read leaves idle (a generated two-camera episode: 7% less wall time, a one-camera one 5%), and one
+    # is enough for its few figures (EPISODE_RENDERERS).
     early = is_lerobot_dataset(args.log)
-    with renderers(None if report_formats else 0, start_now=early):
+    with renderers(None if report_formats else 0, start_now=early, usual=EPISODE_RENDERERS if early else RENDERERS):
         made, result, paths = _attribute(args, out, report_formats)
     if made.chain_suggested:
         print_suggested_chain(made.suggestion or made.chain, args.quiet or args.json, args.log)

@@ -9,10 +9,10 @@ another axes, and only then lays the figure out tightly and draws it again.
 A figure is made as a :class:`Sketch`: the matplotlib calls made on it, recorded as plain data, so it
 can be drawn in another process. Drawing a report's figures is matplotlib's Python (about 1.0 s on
 the 10-minute benchmark log) after its import (0.5 s). A command that writes a report runs
-:data:`RENDERERS` renderer processes (:func:`renderers`), started once its log is read
-(:func:`start_renderers`): each imports matplotlib at a low priority while the command replays and
-attributes on one core, then draws the sketches it is sent (pickled over a pipe) while the command
-writes its files, and exits at the end of its input without the interpreter's teardown. Without
+:data:`RENDERERS` renderer processes (:data:`EPISODE_RENDERERS` for a LeRobot episode; :func:`renderers`),
+started once its log is read (:func:`start_renderers`): each imports matplotlib at a low priority while
+the command replays and attributes on one core, then draws the sketches it is sent (pickled over a pipe)
+while the command writes its files, and exits at the end of its input without the interpreter's teardown. Without
 renderers (a library call, most tests) a figure is drawn here when it is made; a renderer that fails
 or dies has its figures drawn here too, so a report never loses one.
 """
@@ -198,6 +198,11 @@ def figure_html(fig: Figure) -> str:
 #: the other drawing while the command waits for the last figures); FRAMECHAIN_RENDERERS sets it, 0
 #: draws in the command's own process.
 RENDERERS = 2
+#: Renderers for a LeRobot episode's report: its figures are two per camera, each drawn in about 0.05 s, while a
+#: renderer takes about 0.45 s of a core to start and load matplotlib, and the cameras' measurement wants both cores
+#: (a generated two-camera episode: 5% less wall time and 11% less CPU with one than with two, over 8 alternations;
+#: the 10-minute benchmark log's 13 figures, drawn while its analysis takes one core, are 4% faster with two).
+EPISODE_RENDERERS = 1
 RENDERERS_VARIABLE = "FRAMECHAIN_RENDERERS"
 #: How much lower a renderer's priority is than the command's (it only takes the time a core is idle).
 NICE = 10
@@ -278,12 +283,12 @@ _running: list[_Pool] = []
 
 
 @contextlib.contextmanager
-def renderers(workers: int | None = None, *, start_now: bool = True) -> Iterator[None]:
-    """Within this block, figures are drawn by ``workers`` renderer processes (None: RENDERERS, or
-    the FRAMECHAIN_RENDERERS variable), started now or, with ``start_now`` False, by
-    :func:`start_renderers` (or the first figure, whichever comes first)."""
+def renderers(workers: int | None = None, *, start_now: bool = True, usual: int = RENDERERS) -> Iterator[None]:
+    """Within this block, figures are drawn by ``workers`` renderer processes (None: the FRAMECHAIN_RENDERERS
+    variable, else ``usual``), started now or, with ``start_now`` False, by :func:`start_renderers` (or the first
+    figure, whichever comes first)."""
     if workers is None:
-        workers = _renderers_wanted()
+        workers = _renderers_wanted(usual)
     if _running or workers < 1:
         yield
         return
@@ -311,8 +316,8 @@ def start_renderers() -> None:
         _running[0].start()
 
 
-def _renderers_wanted() -> int:
-    text = os.environ.get(RENDERERS_VARIABLE, str(RENDERERS))
+def _renderers_wanted(usual: int) -> int:
+    text = os.environ.get(RENDERERS_VARIABLE, str(usual))
     if not text.strip().isdigit():
         from framechain.errors import FramechainError
 

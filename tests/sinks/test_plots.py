@@ -180,6 +180,20 @@ def test_the_number_of_renderers_is_checked(monkeypatch: pytest.MonkeyPatch) -> 
         pass
 
 
+def test_the_number_of_renderers_is_the_usual_one_unless_the_variable_says(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(plots.RENDERERS_VARIABLE, raising=False)
+    with plots.renderers(usual=1, start_now=False):
+        assert plots._running[0]._workers == 1
+    with plots.renderers(start_now=False):
+        assert plots._running[0]._workers == plots.RENDERERS == 2
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "3")
+    with plots.renderers(usual=1, start_now=False):
+        assert plots._running[0]._workers == 3
+    monkeypatch.setenv(plots.RENDERERS_VARIABLE, "0")
+    with plots.renderers(usual=1):
+        assert not plots._running  # none: figures drawn here
+
+
 def test_a_renderer_that_cannot_start_leaves_the_figures_to_this_process(monkeypatch: pytest.MonkeyPatch,
                                                                           capfd: pytest.CaptureFixture[str]) -> None:
     fig = _sketches()[0]
