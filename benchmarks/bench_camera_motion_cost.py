@@ -5,7 +5,9 @@
    method), taken in turn, the least of ``ROUNDS`` each: a 224x224 MPEG-4 two-camera episode recorded as
    real recorders do (15 s at ~18.6 Hz) and a 640x480 AV1 one-camera episode (15 s at 30 fps). The rounds
    find the URDF parsed already (framechain's cache, as every run after a robot's first does); the first
-   run, which parses it (yourdfpy and trimesh imported: about 0.4 s more), is printed beside them.
+   run, which parses it (yourdfpy and trimesh imported: about 0.4 s more), is printed beside them. Each command's
+   CPU time (its processes' user and system time, renderers included) is printed too, and what it implies: the
+   least wall time that work could take spread perfectly over this machine's cores, and the ratio that would give.
 2. ``framechain batch`` (2 workers) on a 25-episode two-camera recording of 15 s episodes, end to end.
 
 Generated with :mod:`framechain.sim.lerobot_video`; needs ../shared/realdata/urdf/so101. Prints figures and
@@ -67,9 +69,17 @@ def _generate_here(root: Path, kind: str, episodes: int) -> None:
 
 
 def _seconds(argv: list[str]) -> float:
+    return _timed(argv)[0]
+
+
+def _timed(argv: list[str]) -> tuple[float, float]:
+    """Wall time of the command, and the CPU time (user and system) of it and every process it waited for."""
+    before = os.times()
     start = time.perf_counter()
     subprocess.run(argv, check=True, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - start
+    wall = time.perf_counter() - start
+    after = os.times()
+    return wall, (after.children_user - before.children_user) + (after.children_system - before.children_system)
 
 
 def _compiled() -> None:
@@ -86,11 +96,17 @@ def _episode(root: Path, kind: str) -> None:
     decode = [sys.executable, "-c", DECODE, str(dataset)]
     ENV[CACHE_ENV] = str(root / kind / "cache")  # empty: the first run parses the URDF
     first = _seconds(attribute)
-    pairs = [(_seconds(attribute), _seconds(decode)) for _ in range(ROUNDS)]
+    runs = [(_timed(attribute), _timed(decode)) for _ in range(ROUNDS)]
+    pairs = [(a[0], d[0]) for a, d in runs]
     best_attribute, best_decode = min(a for a, _ in pairs), min(d for _, d in pairs)
+    cpu_attribute, cpu_decode = min(a[1] for a, _ in runs), min(d[1] for _, d in runs)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     print(f"   {kind:6s} episode: attribute {best_attribute:5.2f} s, decoding its videos {best_decode:4.2f} s: "
           f"{best_attribute / best_decode:4.1f}x (rounds: {', '.join(f'{a / d:.1f}x' for a, d in pairs)}; "
           f"the first run, parsing the URDF: {first:.2f} s, {first / best_decode:.1f}x)")
+    print(f"          CPU: attribute {cpu_attribute:5.2f} s, decoding {cpu_decode:4.2f} s; that work spread perfectly "
+          f"over {cores} cores takes {cpu_attribute / cores:.2f} s at least: "
+          f"{cpu_attribute / cores / best_decode:.1f}x")
 
 
 def main() -> None:
