@@ -3,7 +3,9 @@ names matched to its joints under any per-arm prefix.
 
 The URDFs under ``urdfs/`` are the published models with their visual and collision geometry removed
 (the meshes are not bundled), each with its licence beside it: SO-100 and SO-101 from
-TheRobotStudio/SO-ARM100 (Apache-2.0), Koch v1.0 from AlexanderKoch-Koch/low_cost_robot (MIT).
+TheRobotStudio/SO-ARM100 (Apache-2.0), Koch v1.0 from AlexanderKoch-Koch/low_cost_robot (MIT), and the
+ViperX 300 6DOF of ALOHA (``aloha``, ``mobile_aloha``, ``viperx``) from Interbotix/interbotix_ros_manipulators
+(BSD-3-Clause).
 
 State names are matched to an arm's motors (LeRobot's names, ``shoulder_pan`` ... ``gripper``) by
 suffix, so ``shoulder_pan.pos``, ``left_shoulder_pan.pos``, ``arm1_shoulder_pan.pos`` and
@@ -23,6 +25,9 @@ __all__ = ["KNOWN_ARMS", "ArmJoints", "KnownArm", "known_arm", "match_state_name
 _URDFS = Path(__file__).resolve().parent / "urdfs"
 #: LeRobot's motor names of its SO-100/SO-101 and Koch arms, from the base out (their ids 1..6).
 LEROBOT_MOTORS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
+#: ALOHA's (and Interbotix's) names of a ViperX 300 6DOF's joints, from the base out, as its datasets record them
+#: (``left_waist`` ... ``right_gripper``, radians; the gripper its fingers' opening, normalised).
+VIPERX_MOTORS = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate", "gripper")
 #: A numbered joint at the end of a state name: ``j1``, ``joint_3``, ``motor2``.
 _NUMBERED = re.compile(r"^(?P<prefix>.*?)(?:joint|motor|j)_?(?P<index>\d+)$", re.IGNORECASE)
 
@@ -40,6 +45,8 @@ class KnownArm:
     motors: tuple[str, ...] = LEROBOT_MOTORS
     #: motor -> URDF joint; a motor absent here has no joint in the URDF.
     joints: Mapping[str, str] = field(default_factory=lambda: {m: m for m in LEROBOT_MOTORS})
+    #: motor -> why it drives no joint of the URDF (absent: the URDF has no such joint).
+    unmapped: Mapping[str, str] = field(default_factory=dict)
 
 
 KNOWN_ARMS = {
@@ -55,8 +62,21 @@ KNOWN_ARMS = {
 }
 
 
+def _viperx(name: str, title: str) -> KnownArm:
+    """ALOHA's arm: its wrist cameras ride the gripper, past wrist_rotate. Its gripper state is the fingers' opening
+    normalised to 0..1 (closed..open), not the gripper servo's turn: it drives nothing (the fingers carry no
+    camera)."""
+    return KnownArm(name, title, _URDFS / "vx300s" / "vx300s.urdf", "Interbotix/interbotix_ros_manipulators, "
+                    "BSD-3-Clause", "gripper_link", VIPERX_MOTORS, {m: m for m in VIPERX_MOTORS[:-1]},
+                    {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"})
+
+
+KNOWN_ARMS |= {"aloha": _viperx("aloha", "ALOHA ViperX 300 6DOF"), "viperx": _viperx("viperx", "ViperX 300 6DOF")}
+
+
 def known_arm(robot_type: str | None) -> KnownArm | None:
-    """The arm a LeRobot ``robot_type`` names (``so101_follower``, ``bi_so100_follower``, ``koch``), or None."""
+    """The arm a LeRobot ``robot_type`` names (``so101_follower``, ``bi_so100_follower``, ``koch``, ``aloha``), or
+    None."""
     key = re.sub(r"[^a-z0-9]", "", (robot_type or "").lower())
     return next((arm for name, arm in KNOWN_ARMS.items() if name in key), None)
 

@@ -1,9 +1,9 @@
 """LeRobot episodes with wrist video, generated with known faults: the camera-motion evidence's truth.
 
-One or two SO-101 arms (bimanual: link and joint names prefixed ``left_``/``right_``) move along
-smooth joint trajectories; a wrist camera rides on a ``gripper_link``. Each frame is rendered by
-:class:`framechain.sim.video_scene.TexturedScene` from the camera's pose at the moment the frame
-was taken, computed with this package's own URDF maths (:mod:`framechain.sim.urdf_chain`; never
+One or two SO-101 arms, or ALOHA's ViperX 300 6DOF (``arm="aloha"``), (bimanual: link and joint names
+prefixed ``left_``/``right_``) move along smooth joint trajectories; a wrist camera rides on a ``gripper_link``.
+Each frame is rendered by :class:`framechain.sim.video_scene.TexturedScene` from the camera's pose at the
+moment the frame was taken, computed with this package's own URDF maths (:mod:`framechain.sim.urdf_chain`; never
 framechain's kinematics, replay or camera model), encoded with PyAV, and written as a LeRobot
 v3.0 or v2.1 dataset with :func:`framechain.adapters.lerobot.writer.write_lerobot_dataset`.
 
@@ -32,7 +32,8 @@ And the ways real recordings depart from LeRobot's own writer, each switched on 
 - ``codec="mpeg4"`` at 224x224 and a wide lens (``focal_px`` about 100 to 125) are spec values.
 
 State is LeRobot's SO-101 convention: joints in degrees (``shoulder_pan.pos``, ...), the gripper
-0-100; actions are the next frame's state.
+0-100; or ALOHA's: joints in radians (``left_waist``, ...), the gripper the fingers' opening 0..1. Actions are
+the next frame's state.
 """
 
 from __future__ import annotations
@@ -50,16 +51,44 @@ from framechain.arrays import FloatArray
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
 from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
 
-__all__ = ["ARM_JOINTS", "CameraTruth", "VideoDatasetSpec", "VideoDatasetTruth", "generate_video_dataset",
-           "gripper_pads", "realtime_stamps", "write_robot_yaml"]
+__all__ = ["ARMS", "ARM_JOINTS", "ArmKind", "CameraTruth", "VideoDatasetSpec", "VideoDatasetTruth",
+           "generate_video_dataset", "gripper_pads", "realtime_stamps", "write_robot_yaml"]
 
 ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
-#: A pose with the gripper reaching forward and down over the table.
-_Q_HOME = np.array([0.0, -0.6, 0.5, 0.6, 0.0])
-#: Amplitudes (rad) of each joint's motion; frequencies (rad/s) are drawn per episode.
-_AMPLITUDE = np.array([0.45, 0.2, 0.2, 0.3, 0.6])
-#: Optical axes in gripper_link: looking along the jaws (-z), image up +x, then tilted down 25 degrees.
-_OPTICAL_IN_GRIPPER = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]) @ rpy_matrix((-0.436, 0, 0))
+
+
+@dataclass(frozen=True)
+class ArmKind:
+    """One arm model as the generator moves and records it."""
+
+    #: The URDF joints that move, from the base out, and their state names (after the arm's prefix).
+    joints: tuple[str, ...]
+    #: A pose with the gripper reaching forward and down over the table (rad).
+    home: FloatArray
+    #: Amplitudes (rad) of each joint's motion; frequencies (rad/s) are drawn per episode.
+    amplitude: FloatArray
+    #: The camera's optical axes in the link it rides (columns).
+    optical_in_link: FloatArray
+    #: "deg" (LeRobot's SO-101: ``shoulder_pan.pos``, the gripper 0-100) or "rad" (ALOHA's: ``waist``, the gripper
+    #: 0..1).
+    unit: str
+    suffix: str
+    robot_types: tuple[str, str]  # one arm, two arms
+    camera_link: str = "gripper_link"
+
+
+#: The arms the generator knows. SO-101: its camera looks along the jaws (gripper_link's -z), image up +x, tilted
+#: down 25 deg. ALOHA's ViperX 300 6DOF: gripper_link's x runs along the jaws, z up; the camera on top of the gripper
+#: looks along them, tilted down 20 deg.
+ARMS = {
+    "so101": ArmKind(ARM_JOINTS, np.array([0.0, -0.6, 0.5, 0.6, 0.0]), np.array([0.45, 0.2, 0.2, 0.3, 0.6]),
+                     np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]) @ rpy_matrix((-0.436, 0, 0)),
+                     "deg", ".pos", ("so101_follower", "bi_so101_follower")),
+    "aloha": ArmKind(("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate"),
+                     np.array([0.0, 0.3, 0.3, 0.0, 0.5, 0.0]), np.array([0.4, 0.1, 0.1, 0.3, 0.25, 0.5]),
+                     np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]) @ rpy_matrix((-0.35, 0, 0)),
+                     "rad", "", ("viperx", "aloha")),
+}
 
 
 @dataclass(frozen=True)
@@ -68,6 +97,8 @@ class VideoDatasetSpec:
 
     urdf: Path
     seed: int = 0
+    #: The arm model (:data:`ARMS`): "so101" or "aloha" (``urdf`` its URDF).
+    arm: str = "so101"
     episodes: int = 1
     duration_s: float = 6.0
     fps: int = 30
@@ -95,7 +126,7 @@ class VideoDatasetSpec:
     pads: bool = True
     #: The arms hold still (a camera that shows nothing of its motion).
     still: bool = False
-    #: Only these of ARM_JOINTS move (an arm that only pans: ``("shoulder_pan",)``); None: all of them.
+    #: Only these of the arm's joints move (an arm that only pans: ``("shoulder_pan",)``); None: all of them.
     moving_joints: tuple[str, ...] | None = None
     #: "presentation": ``timestamp = frame_index / fps``; "realtime": real capture times at about ``realtime_hz``.
     clock: str = "presentation"
@@ -189,24 +220,25 @@ def realtime_stamps(rng: np.random.Generator, duration_s: float, rate_hz: float)
     return out
 
 
-def _trajectory(rng: np.random.Generator, *, still: bool = False, moving: tuple[str, ...] | None = None
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+def _trajectory(rng: np.random.Generator, kind: ArmKind, *, still: bool = False,
+                moving: tuple[str, ...] | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Per joint: amplitude (rad), frequency (rad/s) and phase of two summed sines (a varying speed); the joints not
     ``moving`` (None: all move) hold their home angle."""
-    if moving is not None and not set(moving) <= set(ARM_JOINTS):
-        raise ValueError(f"moving_joints {sorted(set(moving) - set(ARM_JOINTS))} are not among {ARM_JOINTS}")
-    moves = np.array([moving is None or name in moving for name in ARM_JOINTS], dtype=float)
-    amplitude = _AMPLITUDE[:, None] * rng.uniform(0.5, 0.8, (5, 2)) * (0.0 if still else 1.0) * moves[:, None]
-    omega = rng.uniform(0.8, 2.2, (5, 2))
-    phase = rng.uniform(0.0, 2 * np.pi, (5, 2))
+    if moving is not None and not set(moving) <= set(kind.joints):
+        raise ValueError(f"moving_joints {sorted(set(moving) - set(kind.joints))} are not among {kind.joints}")
+    n = len(kind.joints)
+    moves = np.array([moving is None or name in moving for name in kind.joints], dtype=float)
+    amplitude = kind.amplitude[:, None] * rng.uniform(0.5, 0.8, (n, 2)) * (0.0 if still else 1.0) * moves[:, None]
+    omega = rng.uniform(0.8, 2.2, (n, 2))
+    phase = rng.uniform(0.0, 2 * np.pi, (n, 2))
     return amplitude, omega, phase
 
 
-def _joints(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
-    """(T, 5) arm joint angles (rad) at times ``t_s``."""
+def _joints(kind: ArmKind, motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
+    """(T, joints) arm joint angles (rad) at times ``t_s``."""
     amplitude, omega, phase = motion
     waves = amplitude[None] * np.sin(omega[None] * t_s[:, None, None] + phase[None])
-    out: FloatArray = _Q_HOME + waves.sum(axis=2)
+    out: FloatArray = kind.home + waves.sum(axis=2)
     return out
 
 
@@ -223,7 +255,7 @@ def _base_poses(arms: Sequence[str]) -> dict[str, FloatArray]:
 def _mounts(spec: VideoDatasetSpec) -> tuple[FloatArray, FloatArray]:
     """True and declared ``T_link_cam`` (4x4, optical frame)."""
     true = np.eye(4)
-    true[:3, :3] = _OPTICAL_IN_GRIPPER
+    true[:3, :3] = ARMS[spec.arm].optical_in_link
     true[:3, 3] = spec.mount_xyz
     axis = np.asarray(spec.mount_error_axis, dtype=float)
     error = Rotation.from_rotvec(np.deg2rad(spec.mount_error_deg) * axis / np.linalg.norm(axis)).as_matrix()
@@ -263,6 +295,7 @@ def _episode_stamps(rng: np.random.Generator, spec: VideoDatasetSpec) -> FloatAr
 def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDatasetTruth:
     """Render, encode and write the dataset under ``root`` (created); return its truth."""
     rng = np.random.default_rng(spec.seed)
+    kind = ARMS[spec.arm]
     arms = ("left_", "right_") if spec.bimanual else ("",)
     if not spec.camera_per_arm and (spec.camera_arm not in arms or spec.declared_arm not in (None, *arms)):
         raise ValueError(f"camera arm {spec.camera_arm!r} / declared {spec.declared_arm!r}: arms are {arms}")
@@ -274,7 +307,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     mount, declared_mount = _mounts(spec)
     bases = _base_poses(arms)
     pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
-    names = tuple(f"{arm}{joint}.pos" for arm in arms for joint in (*ARM_JOINTS, "gripper"))
+    names = tuple(f"{arm}{joint}{kind.suffix}" for arm in arms for joint in (*kind.joints, "gripper"))
     keys = [f"observation.images.{name}" for name, _a, _d in layout]
     episodes, repeated, stamps = [], [], []
     videos: dict[str, list[np.ndarray]] = {key: [] for key in keys}
@@ -282,16 +315,16 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     for e in range(spec.episodes):
         t = _episode_stamps(rng, spec)
         n = t.size
-        motions = {arm: _trajectory(rng, still=spec.still, moving=spec.moving_joints) for arm in arms}
-        state = np.concatenate([_state(motions[arm], t) for arm in arms], axis=1)
+        motions = {arm: _trajectory(rng, kind, still=spec.still, moving=spec.moving_joints) for arm in arms}
+        state = np.concatenate([_state(kind, motions[arm], t) for arm in arms], axis=1)
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
         repeated.append(tuple(int(k) for k in repeats))
         columns: dict[str, np.ndarray] = {"observation.state": state, "action": np.concatenate([state[1:], state[-1:]])}
         for c, ((name, arm, _declared), key) in enumerate(zip(layout, keys, strict=True)):
-            captured = _joints(motions[arm], t - spec.delay_s(c, e))
+            captured = _joints(kind, motions[arm], t - spec.delay_s(c, e))
             world_from_cam = bases[arm] @ chains[arm].root_from_link(
-                dict(zip(ARM_JOINTS, captured.T, strict=True)), f"{arm}gripper_link") @ mount
+                dict(zip(kind.joints, captured.T, strict=True)), f"{arm}{kind.camera_link}") @ mount
             if e == 0 and c == 0 and spec.marker_size_m > 0:
                 marker = _place_marker(scene, world_from_cam, spec)
             frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
@@ -306,7 +339,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         stamps.append(t)
     out = Path(root)
     write_lerobot_dataset(out, episodes, features=_features(spec, names, keys), fps=spec.fps, version=spec.version,
-                          robot_type="bi_so101_follower" if spec.bimanual else "so101_follower")
+                          robot_type=kind.robot_types[1 if spec.bimanual else 0])
     if spec.storage == "video":
         for key in keys:
             _write_videos(out, key, videos[key], spec)
@@ -325,8 +358,8 @@ def _truth(
     q_true = Rotation.from_matrix(mount[:3, :3]).as_quat()
     q_declared = Rotation.from_matrix(declared_mount[:3, :3]).as_quat()
     cameras = tuple(CameraTruth(
-        name=name, video_key=key, arm=arm, declared_arm=declared, camera_link=f"{arm}gripper_link",
-        declared_link=f"{declared}gripper_link", q_link_cam=q_true, declared_q_link_cam=q_declared,
+        name=name, video_key=key, arm=arm, declared_arm=declared, camera_link=f"{arm}{ARMS[spec.arm].camera_link}",
+        declared_link=f"{declared}{ARMS[spec.arm].camera_link}", q_link_cam=q_true, declared_q_link_cam=q_declared,
         delays_s=tuple(spec.delay_s(c, e) for e in range(spec.episodes)),
         black_episodes=(0,) if name == spec.black_first_episode else ())
         for c, ((name, arm, declared), key) in enumerate(zip(layout, keys, strict=True)))
@@ -395,10 +428,14 @@ def _png(rgb: FloatArray) -> bytes:
     return bytes(data.tobytes())
 
 
-def _state(motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
-    """(T, 6) LeRobot SO-101 state: five joints in degrees, the gripper 0-100."""
-    gripper = 50.0 + 20.0 * np.sin(0.7 * t_s)
-    out: FloatArray = np.concatenate([np.rad2deg(_joints(motion, t_s)), gripper[:, None]], axis=1)
+def _state(kind: ArmKind, motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
+    """(T, joints + 1) state: SO-101's joints in degrees and the gripper 0-100, or ALOHA's in radians and 0..1."""
+    joints = _joints(kind, motion, t_s)
+    if kind.unit == "deg":
+        joints, gripper = np.rad2deg(joints), 50.0 + 20.0 * np.sin(0.7 * t_s)
+    else:
+        gripper = 0.5 + 0.3 * np.sin(0.7 * t_s)
+    out: FloatArray = np.concatenate([joints, gripper[:, None]], axis=1)
     return out
 
 
@@ -415,16 +452,19 @@ def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDat
 
 
 def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[str, object] | None = None) -> Path:
-    """robot.yaml as a user would write it for the dataset: the URDF, the joints (degrees, the gripper
-    0-100), each arm's base, and the wrist camera with its *declared* intrinsics, mount and arm."""
+    """robot.yaml as a user would write it for the dataset: the URDF, the joints (SO-101: degrees, the gripper
+    0-100; ALOHA: radians, its gripper's 0..1 driving nothing), each arm's base, and the wrist camera with its
+    *declared* intrinsics, mount and arm."""
     import yaml
 
     spec = truth.spec
+    kind = ARMS[spec.arm]
     _fx, _fy, cx, cy = truth.intrinsics
 
     def joints(arm: str) -> dict[str, object]:
-        out: dict[str, object] = {f"{arm}{j}.pos": j for j in ARM_JOINTS}
-        out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
+        out: dict[str, object] = {f"{arm}{j}{kind.suffix}": j for j in kind.joints}
+        if kind.unit == "deg":
+            out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
         return out
 
     def camera(cam: CameraTruth) -> dict[str, object]:
@@ -438,10 +478,10 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
 
     config: dict[str, object] = {"state_feature": "observation.state"}
     if truth.arms == ("",):
-        config.update(urdf=str(spec.urdf), default_unit="deg", joints=joints(""))
+        config.update(urdf=str(spec.urdf), default_unit=kind.unit, joints=joints(""))
     else:
         bases = _base_poses(truth.arms)
-        config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": "deg",
+        config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": kind.unit,
                                             "world_from_base": {"xyz": [float(v) for v in bases[arm][:3, 3]],
                                                                 "rpy": [0.0, 0.0, 0.0]},
                                             "joints": joints(arm)}

@@ -216,7 +216,7 @@ def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray) -> list
         for (state, motor), unit in zip(group.motors, units, strict=True):
             joint = arm.joints.get(motor)
             no_limits = joint is not None and unit.startswith("range") and None in model.limits(joint)
-            why_not = ("the bundled URDF has no such joint" if joint is None else
+            why_not = (arm.unmapped.get(motor, "the bundled URDF has no such joint") if joint is None else
                        f"its URDF joint {joint!r} has no limits for {unit}" if no_limits else "")
             joints.append(_Joint(state, None if why_not else joint, unit, why_not))
         driven = {j.joint for j in joints}

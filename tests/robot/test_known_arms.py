@@ -62,8 +62,59 @@ def test_the_so100_urdf_loads_without_meshes_and_names_lerobot_motors() -> None:
     assert KNOWN_ARMS["so100"].camera_link in urdf.link_map
 
 
+#: The ViperX 300 6DOF's joints from base_link to gripper_link, read off Interbotix's vx300s.urdf.xacro by hand: each
+#: joint's origin (its rpy all zero) and axis.
+VX300S_CHAIN = (("waist", (0.0, 0.0, 0.079), (0, 0, 1)), ("shoulder", (0.0, 0.0, 0.04805), (0, 1, 0)),
+                ("elbow", (0.05955, 0.0, 0.3), (0, 1, 0)), ("forearm_roll", (0.2, 0.0, 0.0), (1, 0, 0)),
+                ("wrist_angle", (0.1, 0.0, 0.0), (0, 1, 0)), ("wrist_rotate", (0.069744, 0.0, 0.0), (1, 0, 0)))
+ALOHA_NAMES = [f"{side}_{m}" for side in ("left", "right") for m in
+               ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate", "gripper")]
+
+
+def _vx300s_gripper(q: np.ndarray) -> np.ndarray:
+    """base_link -> gripper_link (T, 4, 4) at joint angles q (T, 6), by scipy's rotations along VX300S_CHAIN."""
+    out = np.tile(np.eye(4), (len(q), 1, 1))
+    for k, (_name, xyz, axis) in enumerate(VX300S_CHAIN):
+        step = np.tile(np.eye(4), (len(q), 1, 1))
+        step[:, :3, :3] = Rotation.from_rotvec(np.outer(q[:, k], axis)).as_matrix()
+        step[:, :3, 3] = xyz
+        out = out @ step
+    return out
+
+
+def test_the_bundled_viperx_keeps_the_published_kinematics() -> None:
+    """ALOHA's arm, expanded from Interbotix's xacro: its joints, limits and the chain to the wrist camera's link as
+    published (and as yourdfpy reads the bundled file), the published 0.75 m reach, its BSD-3 licence beside it."""
+    import yourdfpy
+
+    arm = KNOWN_ARMS["aloha"]
+    text = arm.urdf.read_text()
+    assert "<mesh" not in text
+    assert (arm.urdf.parent / "LICENSE").read_text().startswith("BSD 3-Clause License")
+    urdf = yourdfpy.URDF.load(str(arm.urdf), load_meshes=False, build_scene_graph=True)
+    assert urdf.actuated_joint_names == [name for name, _xyz, _axis in VX300S_CHAIN] + ["gripper", "left_finger"]
+    assert urdf.joint_map["shoulder"].limit.lower == pytest.approx(np.radians(-106))
+    assert urdf.joint_map["wrist_angle"].limit.upper == pytest.approx(np.radians(128))
+    assert urdf.joint_map["right_finger"].mimic.joint == "left_finger"
+    q = np.random.default_rng(6).uniform(-1.2, 1.2, (5, 6))
+    expected = _vx300s_gripper(q)
+    for i in range(len(q)):
+        urdf.update_cfg(np.concatenate([q[i], [0.0, 0.03]]))
+        np.testing.assert_allclose(urdf.get_transform("gripper_link", "base_link"), expected[i], atol=1e-12)
+    # Stretched out level (the upper arm turned forward onto the forearm's line): the fingers' tips 0.78 m ahead of
+    # the shoulder joint, worked by hand from the link lengths (Trossen publishes a 750 mm reach).
+    urdf.update_cfg(np.array([0.0, np.arctan2(0.3, 0.05955), -np.arctan2(0.3, 0.05955), 0, 0, 0, 0, 0.03]))
+    tip = urdf.get_transform("ee_gripper_link", "shoulder_link")[:3, 3]
+    reach = np.hypot(0.3, 0.05955) + 0.2 + 0.1 + 0.069744 + 0.042825 + 0.025875 + 0.0385
+    np.testing.assert_allclose(tip, [reach, 0.0, 0.04805], atol=1e-9)
+    assert reach == pytest.approx(0.783, abs=0.001)
+    assert arm.camera_link in urdf.link_map
+    assert KNOWN_ARMS["viperx"].urdf == arm.urdf
+
+
 @pytest.mark.parametrize(("robot_type", "arm"), [("so101_follower", "so101"), ("bi_so100_follower", "so100"),
-                                                 ("koch_follower", "koch"), ("SO-101", "so101"), ("aloha", None),
+                                                 ("koch_follower", "koch"), ("SO-101", "so101"), ("aloha", "aloha"),
+                                                 ("mobile_aloha", "aloha"), ("viperx", "viperx"), ("ur5e", None),
                                                  (None, None)])
 def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) -> None:
     found = known_arm(robot_type)
@@ -173,6 +224,67 @@ def test_a_koch_state_without_a_urdf_joint_is_left_out_and_said(realdata: Path, 
         official.update_cfg({"Revolute 2": np.radians(deg[i, 0]), "Revolute 3": np.radians(deg[i, 1]),
                              "Revolute 5": np.radians(deg[i, 2]), "Revolute 6": np.radians(deg[i, 4])})
         np.testing.assert_allclose(found[i], official.get_transform(link, "base_link"), atol=1e-6)
+
+
+def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """ALOHA as its datasets are written (robot_type aloha, left_waist .. right_gripper in radians, the grippers'
+    opening 0..1, a camera above, one below and one on each wrist): both arms on the bundled ViperX, the grippers
+    driving nothing (and saying why), each wrist camera on its arm's gripper_link; as printed it loads, and each
+    arm's gripper_link is where the xacro's own chain puts it, beside the other arm's."""
+    rng = np.random.default_rng(12)
+    state = rng.uniform(-0.8, 0.8, (6, 14)).astype(np.float32)
+    state[:, [6, 13]] = rng.uniform(0.0, 1.0, (6, 2))
+    image = FeatureSpec("video", (480, 640, 3), ["height", "width", "channels"], VIDEO)
+    features = {"observation.state": FeatureSpec("float32", (14,), ALOHA_NAMES),
+                **{f"observation.images.{cam}": image
+                   for cam in ("cam_high", "cam_low", "cam_left_wrist", "cam_right_wrist")}}
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": state})], features=features,
+                                 fps=50, robot_type="aloha")
+    assert main(["info", str(root), "--episode", "0", "--chain"]) == 0
+    text = capsys.readouterr().out
+    assert "FILL IN" not in text
+    for side in ("left", "right"):
+        assert f"# {side}_gripper: not mapped (ALOHA records the fingers' opening normalised to 0..1" in text
+    skeleton = yaml.safe_load(text)
+    for side in ("left", "right"):
+        arm = skeleton["arms"][side]
+        assert (arm["prefix"], arm["default_unit"], Path(arm["urdf"])) == (f"{side}_", "rad", KNOWN_ARMS["aloha"].urdf)
+        assert arm["joints"] == {f"{side}_{name}": name for name, _xyz, _axis in VX300S_CHAIN}
+    parents = {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()}
+    assert parents == {"cam_high": "world", "cam_low": "world", "cam_left_wrist": "left_gripper_link",
+                       "cam_right_wrist": "right_gripper_link"}
+    del skeleton["cameras"]
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(skeleton))
+    timeline = open_dataset(root, episode=0, robot=RobotConfig.load(tmp_path / "robot.yaml"))
+    stamps = np.unique(timeline.joint_states.stamp_ns)
+    for side, first, y in (("left", 0, 0.2), ("right", 7, -0.2)):
+        found = TransformBuffer(timeline.transforms).lookup("world", f"{side}_gripper_link", stamps).matrix()
+        base = np.eye(4)
+        base[1, 3] = y  # the skeleton's guess: side by side, 0.4 m apart
+        np.testing.assert_allclose(found, base @ _vx300s_gripper(state[:, first:first + 6].astype(np.float64)),
+                                   atol=1e-6)
+
+
+def test_attribute_without_robot_finds_both_aloha_wrist_cameras(tmp_path: Path) -> None:
+    """A generated two-arm ALOHA episode, its wrist cameras 40 and 70 ms late and 5 cm above their gripper_link:
+    without --robot each camera is found on its own arm's gripper_link, with its offset, mount and position."""
+    spec = VideoDatasetSpec(KNOWN_ARMS["aloha"].urdf, arm="aloha", seed=5, duration_s=6.0, bimanual=True,
+                            camera_per_arm=True, camera_delays_s=(0.04, 0.07), mount_xyz=(0.0, 0.0, 0.05))
+    truth = generate_video_dataset(tmp_path / "dataset", spec)
+    out = tmp_path / "out"
+    assert main(["attribute", str(truth.root), "--episode", "0", "--out", str(out), "--format", "json", "-q"]) == 0
+    result = json.loads((out / "attribution.json").read_text())
+    motions = {m["camera"]: m for m in result["camera_motion"]}
+    assert len(motions) == 2
+    for cam in truth.cameras:
+        motion = motions[f"{cam.name}_optical_frame"]
+        assert motion["link"] == cam.camera_link
+        assert motion["explained"] is True
+        assert motion["offset_s"] == pytest.approx(-cam.delays_s[0], abs=0.006)
+        turned = Rotation.from_quat(motion["q_link_cam"]).inv() * Rotation.from_quat(cam.q_link_cam)
+        assert turned.magnitude() < np.radians(3.0)
+        assert np.linalg.norm(np.subtract(motion["position"]["xyz_link_cam"], spec.mount_xyz)) < 0.01
 
 
 @pytest.fixture(scope="module")
