@@ -236,7 +236,7 @@ def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path
     state = rng.uniform(-0.8, 0.8, (6, 14)).astype(np.float32)
     state[:, [6, 13]] = rng.uniform(0.0, 1.0, (6, 2))
     image = FeatureSpec("video", (480, 640, 3), ["height", "width", "channels"], VIDEO)
-    features = {"observation.state": FeatureSpec("float32", (14,), ALOHA_NAMES),
+    features = {"observation.state": FeatureSpec("float32", (14,), {"motors": ALOHA_NAMES}),  # as ALOHA writes them
                 **{f"observation.images.{cam}": image
                    for cam in ("cam_high", "cam_low", "cam_left_wrist", "cam_right_wrist")}}
     root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": state})], features=features,
