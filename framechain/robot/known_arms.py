@@ -15,6 +15,7 @@ arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the moto
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -47,6 +48,9 @@ class KnownArm:
     joints: Mapping[str, str] = field(default_factory=lambda: {m: m for m in LEROBOT_MOTORS})
     #: motor -> why it drives no joint of the URDF (absent: the URDF has no such joint).
     unmapped: Mapping[str, str] = field(default_factory=dict)
+    #: Where a two-arm rig of this arm has each arm's base, by the arm's side ("left", "right"): world xyz (m) and
+    #: rpy (rad), a better guess than side by side (absent: side by side, 0.4 m apart).
+    bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
 
 
 KNOWN_ARMS = {
@@ -62,13 +66,18 @@ KNOWN_ARMS = {
 }
 
 
+#: ALOHA 2's arms face each other across the table (google-deepmind/mujoco_menagerie, aloha/aloha.xml).
+ALOHA_BASES = {"left": ((-0.469, -0.019, 0.02), (0.0, 0.0, 0.0)), "right": ((0.469, -0.019, 0.02), (0.0, 0.0, math.pi))}
+
+
 def _viperx(name: str, title: str) -> KnownArm:
     """ALOHA's arm: its wrist cameras ride the gripper, past wrist_rotate. Its gripper state is the fingers' opening
     normalised to 0..1 (closed..open), not the gripper servo's turn: it drives nothing (the fingers carry no
     camera)."""
     return KnownArm(name, title, _URDFS / "vx300s" / "vx300s.urdf", "Interbotix/interbotix_ros_manipulators, "
                     "BSD-3-Clause", "gripper_link", VIPERX_MOTORS, {m: m for m in VIPERX_MOTORS[:-1]},
-                    {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"})
+                    {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"},
+                    ALOHA_BASES)
 
 
 KNOWN_ARMS |= {"aloha": _viperx("aloha", "ALOHA ViperX 300 6DOF"), "viperx": _viperx("viperx", "ViperX 300 6DOF")}

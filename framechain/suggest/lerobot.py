@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -164,7 +164,7 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
     if note:
         lines.append(f"# note: {note}")
     lines.append(f"state_feature: {state or 'STATE_FEATURE'}")
-    lines += _arm_lines(arms, urdf)
+    lines += _arm_lines(arms, urdf, arm.bases if arm is not None else {})
     link = arm.camera_link if arm is not None and arms else "gripper_link"
     lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms))
     text = "\n".join(lines) + "\n"
@@ -247,15 +247,19 @@ def _generic_arms(names: Sequence[str], values: np.ndarray) -> list[_Arm]:
     return out
 
 
-def _arm_lines(arms: Sequence[_Arm], urdf: str) -> list[str]:
+def _arm_lines(arms: Sequence[_Arm], urdf: str, bases: Mapping[str, tuple[tuple[float, ...], tuple[float, ...]]]
+               ) -> list[str]:
+    """The arms' lines: each arm's base where its rig usually has it (``bases``, by side), else side by side."""
     if len(arms) == 1 and not arms[0].prefix:
         return [f"urdf: {urdf}", *_joint_lines(arms[0], "")]
     lines = ["arms:"]
+    sides = {"l": "left", "r": "right"}
     for i, arm in enumerate(arms):
-        y = _base_y(arm.name, i, len(arms))
+        xyz, rpy = bases.get(sides.get(arm.name.lower(), arm.name.lower()),
+                             ((0.0, _base_y(arm.name, i, len(arms)), 0.0), (0.0, 0.0, 0.0)))
         lines += [f"  {arm.name}:", f"    urdf: {urdf}", f"    prefix: {arm.prefix}",
-                  f"    world_from_base: {{xyz: [0.0, {y:.1f}, 0.0], rpy: [0.0, 0.0, 0.0]}}  "
-                  "# GUESSED: measure the bases",
+                  f"    world_from_base: {{xyz: [{', '.join(repr(round(v, 6)) for v in xyz)}], "
+                  f"rpy: [{', '.join(repr(float(v)) for v in rpy)}]}}  # GUESSED: measure the bases",
                   *_joint_lines(arm, "    ")]
     return lines
 

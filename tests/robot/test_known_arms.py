@@ -229,9 +229,10 @@ def test_a_koch_state_without_a_urdf_joint_is_left_out_and_said(realdata: Path, 
 def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """ALOHA as its datasets are written (robot_type aloha, left_waist .. right_gripper in radians, the grippers'
-    opening 0..1, a camera above, one below and one on each wrist): both arms on the bundled ViperX, the grippers
-    driving nothing (and saying why), each wrist camera on its arm's gripper_link; as printed it loads, and each
-    arm's gripper_link is where the xacro's own chain puts it, beside the other arm's."""
+    opening 0..1, a camera above, one below and one on each wrist): both arms on the bundled ViperX, facing each
+    other as in ALOHA 2's model (mujoco_menagerie's aloha.xml: bases at x = -+0.469 m, the right one turned
+    about z), the grippers driving nothing (and saying why), each wrist camera on its arm's gripper_link; as printed
+    it loads, and each arm's gripper_link is where the xacro's own chain puts it from its base."""
     rng = np.random.default_rng(12)
     state = rng.uniform(-0.8, 0.8, (6, 14)).astype(np.float32)
     state[:, [6, 13]] = rng.uniform(0.0, 1.0, (6, 2))
@@ -247,10 +248,13 @@ def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path
     for side in ("left", "right"):
         assert f"# {side}_gripper: not mapped (ALOHA records the fingers' opening normalised to 0..1" in text
     skeleton = yaml.safe_load(text)
+    bases = {"left": ([-0.469, -0.019, 0.02], 0.0), "right": ([0.469, -0.019, 0.02], np.pi)}
     for side in ("left", "right"):
         arm = skeleton["arms"][side]
         assert (arm["prefix"], arm["default_unit"], Path(arm["urdf"])) == (f"{side}_", "rad", KNOWN_ARMS["aloha"].urdf)
         assert arm["joints"] == {f"{side}_{name}": name for name, _xyz, _axis in VX300S_CHAIN}
+        assert arm["world_from_base"]["xyz"] == bases[side][0]
+        assert arm["world_from_base"]["rpy"] == pytest.approx([0.0, 0.0, bases[side][1]], abs=1e-6)
     parents = {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()}
     assert parents == {"cam_high": "world", "cam_low": "world", "cam_left_wrist": "left_gripper_link",
                        "cam_right_wrist": "right_gripper_link"}
@@ -258,10 +262,11 @@ def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path
     (tmp_path / "robot.yaml").write_text(yaml.safe_dump(skeleton))
     timeline = open_dataset(root, episode=0, robot=RobotConfig.load(tmp_path / "robot.yaml"))
     stamps = np.unique(timeline.joint_states.stamp_ns)
-    for side, first, y in (("left", 0, 0.2), ("right", 7, -0.2)):
+    for side, first in (("left", 0), ("right", 7)):
         found = TransformBuffer(timeline.transforms).lookup("world", f"{side}_gripper_link", stamps).matrix()
         base = np.eye(4)
-        base[1, 3] = y  # the skeleton's guess: side by side, 0.4 m apart
+        base[:3, :3] = Rotation.from_euler("z", bases[side][1]).as_matrix()
+        base[:3, 3] = bases[side][0]
         np.testing.assert_allclose(found, base @ _vx300s_gripper(state[:, first:first + 6].astype(np.float64)),
                                    atol=1e-6)
 
