@@ -109,12 +109,13 @@ def test_the_bundled_viperx_keeps_the_published_kinematics() -> None:
     np.testing.assert_allclose(tip, [reach, 0.0, 0.04805], atol=1e-9)
     assert reach == pytest.approx(0.783, abs=0.001)
     assert arm.camera_link in urdf.link_map
-    assert KNOWN_ARMS["viperx"].urdf == arm.urdf
+    assert KNOWN_ARMS["viperx"].urdf == KNOWN_ARMS["mobilealoha"].urdf == arm.urdf
+    assert (KNOWN_ARMS["mobilealoha"].bases, KNOWN_ARMS["aloha"].bases["right"][1]) == ({}, (0.0, 0.0, np.pi))
 
 
 @pytest.mark.parametrize(("robot_type", "arm"), [("so101_follower", "so101"), ("bi_so100_follower", "so100"),
                                                  ("koch_follower", "koch"), ("SO-101", "so101"), ("aloha", "aloha"),
-                                                 ("mobile_aloha", "aloha"), ("viperx", "viperx"), ("ur5e", None),
+                                                 ("mobile_aloha", "mobilealoha"), ("viperx", "viperx"), ("ur5e", None),
                                                  (None, None)])
 def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) -> None:
     found = known_arm(robot_type)
