@@ -10,7 +10,8 @@ ViperX 300 6DOF of ALOHA (``aloha``, ``mobile_aloha``, ``viperx``) from Interbot
 State names are matched to an arm's motors (LeRobot's names, ``shoulder_pan`` ... ``gripper``) by
 suffix, so ``shoulder_pan.pos``, ``left_shoulder_pan.pos``, ``arm1_shoulder_pan.pos`` and
 ``follower_shoulder_pan.pos`` all drive ``shoulder_pan``, and what comes before the motor is the
-arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the motors in order, per arm.
+arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the motors in order, per arm; a run as
+long as several arms' motors (``motor_0 .. motor_13``) is that many arms, the left first.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["KNOWN_ARMS", "ArmJoints", "KnownArm", "known_arm", "match_state_names"]
+__all__ = ["KNOWN_ARMS", "ArmJoints", "KnownArm", "arm_prefixes", "known_arm", "match_state_names"]
 
 _URDFS = Path(__file__).resolve().parent / "urdfs"
 #: LeRobot's motor names of its SO-100/SO-101 and Koch arms, from the base out (their ids 1..6).
@@ -106,11 +107,20 @@ class ArmJoints:
         return self.prefix.strip("_.- ") or "arm"
 
 
+def arm_prefixes(count: int) -> tuple[str, ...]:
+    """Prefixes for ``count`` arms whose names do not say which is which, in LeRobot's order (the left arm first)."""
+    if count == 1:
+        return ("",)
+    return ("left_", "right_") if count == 2 else tuple(f"arm{i + 1}_" for i in range(count))
+
+
 def match_state_names(names: Sequence[str], motors: Sequence[str]) -> tuple[list[ArmJoints], list[str]]:
     """The arms ``names`` hold (grouped by prefix, in order of appearance) and the names matched to no motor.
 
     A name matches the longest motor it ends with (``.pos`` aside; velocities and efforts match none);
-    numbered names (``arm1_j1``) take the motors in order per prefix, from 0 or 1 as the names start."""
+    numbered names (``arm1_j1``) take the motors in order per prefix, from 0 or 1 as the names start; a run of
+    numbered names as long as several arms' motors (``motor_0 .. motor_13`` of two ALOHA arms) is that many arms
+    in order (:func:`arm_prefixes`)."""
     by_prefix: dict[str, list[tuple[str, str]]] = {}
     numbered: dict[str, list[tuple[str, int]]] = {}
     unmatched: list[str] = []
@@ -128,9 +138,15 @@ def match_state_names(names: Sequence[str], motors: Sequence[str]) -> tuple[list
             unmatched.append(name)
     for prefix, items in numbered.items():
         first = min(i for _n, i in items)
+        count = len(items) // len(motors)
+        several = (count >= 2 and len(items) % len(motors) == 0
+                   and sorted(i for _n, i in items) == list(range(first, first + len(items))))
         for name, index in items:
             k = index - first
-            if 0 <= k < len(motors):
+            if several:
+                arm = prefix + arm_prefixes(count)[k // len(motors)]
+                by_prefix.setdefault(arm, []).append((name, motors[k % len(motors)]))
+            elif 0 <= k < len(motors):
                 by_prefix.setdefault(prefix, []).append((name, motors[k]))
             else:
                 unmatched.append(name)

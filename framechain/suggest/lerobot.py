@@ -29,7 +29,7 @@ from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, Feat
 from framechain.config.robot import GeneratedRobot
 from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
 from framechain.robot.kinematics import RobotModel
-from framechain.robot.known_arms import ArmJoints, KnownArm, known_arm, match_state_names
+from framechain.robot.known_arms import ArmJoints, KnownArm, arm_prefixes, known_arm, match_state_names
 
 __all__ = ["dataset_needs", "generated_robot", "guess_arm_units", "guess_unit", "robot_yaml_skeleton"]
 
@@ -203,7 +203,7 @@ def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray) -> list
     groups, _unmatched = match_state_names(names, arm.motors)
     if not groups and names and len(names) % len(arm.motors) == 0:  # unnamed columns: LeRobot's order
         n = len(names) // len(arm.motors)
-        prefixes = ("left_", "right_") if n == 2 else tuple(f"arm{i + 1}_" if n > 1 else "" for i in range(n))
+        prefixes = arm_prefixes(n)
         k = len(arm.motors)
         groups = [ArmJoints(p, tuple(zip(names[i * k:(i + 1) * k], arm.motors, strict=True)))
                   for i, p in enumerate(prefixes)]

@@ -134,12 +134,20 @@ def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) ->
      {"arm1_": [("arm1_j1", "shoulder_pan"), ("arm1_j2", "shoulder_lift"), ("arm1_j6", "gripper")],
       "arm2_": [("arm2_j1", "shoulder_pan"), ("arm2_j2", "shoulder_lift"), ("arm2_j6", "gripper")]}),
     (["joint_0", "joint_4"], {"": [("joint_0", "shoulder_pan"), ("joint_4", "wrist_roll")]}),
+    # Two arms' worth of numbered names (as GR00T's conversions write them): the left arm first, as LeRobot orders
+    # its two-arm robots.
+    ([f"motor_{k}" for k in range(12)],
+     {"left_": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)],
+      "right_": [(f"motor_{k + 6}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
+    # Not a whole number of arms: the first arm's, the rest matched to nothing.
+    ([f"motor_{k}" for k in range(8)], {"": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
 ])
 def test_state_names_are_matched_under_any_prefix(names: list[str], expected: dict[str, list[tuple[str, str]]]
                                                   ) -> None:
     arms, unmatched = match_state_names(names, LEROBOT_MOTORS)
     assert {a.prefix: list(a.motors) for a in arms} == expected
-    assert unmatched == [n for n in names if n.endswith(".vel")]
+    matched = {n for items in expected.values() for n, _m in items}
+    assert unmatched == [n for n in names if n not in matched]
 
 
 @pytest.mark.parametrize(("body", "unit", "said"), [
@@ -270,6 +278,26 @@ def test_info_prints_a_complete_robot_yaml_for_an_aloha_recording(tmp_path: Path
         base[:3, 3] = bases[side][0]
         np.testing.assert_allclose(found, base @ _vx300s_gripper(state[:, first:first + 6].astype(np.float64)),
                                    atol=1e-6)
+
+
+def test_an_aloha_recording_with_numbered_motors_is_two_arms_left_first(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """``motor_0 .. motor_13`` (a conversion that kept no names) of an ALOHA: the left arm's seven, then the right's,
+    each arm's seventh its gripper, mapped to nothing; the wrist cameras on their arms."""
+    names = [f"motor_{k}" for k in range(14)]
+    image = FeatureSpec("video", (480, 640, 3), ["height", "width", "channels"], VIDEO)
+    features = {"observation.state": FeatureSpec("float32", (14,), names),
+                "observation.images.cam_left_wrist": image, "observation.images.cam_right_wrist": image}
+    state = np.random.default_rng(13).uniform(-0.8, 0.8, (4, 14)).astype(np.float32)
+    root = write_lerobot_dataset(tmp_path / "ds", [EpisodeData({"observation.state": state})], features=features,
+                                 fps=50, robot_type="aloha")
+    skeleton = _info_yaml(root, capsys)
+    joints = [name for name, _xyz, _axis in VX300S_CHAIN]
+    assert {side: arm["joints"] for side, arm in skeleton["arms"].items()} == {
+        "left": {f"motor_{k}": j for k, j in enumerate(joints)},
+        "right": {f"motor_{k + 7}": j for k, j in enumerate(joints)}}
+    assert {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()} == {
+        "cam_left_wrist": "left_gripper_link", "cam_right_wrist": "right_gripper_link"}
 
 
 def test_attribute_without_robot_finds_both_aloha_wrist_cameras(tmp_path: Path) -> None:
