@@ -10,8 +10,9 @@ ViperX 300 6DOF of ALOHA (``aloha``, ``mobile_aloha``, ``viperx``) from Interbot
 State names are matched to an arm's motors (LeRobot's names, ``shoulder_pan`` ... ``gripper``) by
 suffix, so ``shoulder_pan.pos``, ``left_shoulder_pan.pos``, ``arm1_shoulder_pan.pos`` and
 ``follower_shoulder_pan.pos`` all drive ``shoulder_pan``, and what comes before the motor is the
-arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the motors in order, per arm; a run as
-long as several arms' motors (``motor_0 .. motor_13``) is that many arms, the left first.
+arm's prefix. Numbered names (``arm1_j1 .. arm2_j6``, ``joint_3``) take the motors in order, per arm; on a
+two-arm robot (``bi_...``, ALOHA) a run as long as both arms' motors (``motor_0 .. motor_13``) is both arms, the left
+first.
 """
 
 from __future__ import annotations
@@ -52,6 +53,12 @@ class KnownArm:
     #: Where a two-arm rig of this arm has each arm's base, by the arm's side ("left", "right"): world xyz (m) and
     #: rpy (rad), a better guess than side by side (absent: side by side, 0.4 m apart).
     bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
+    #: The robot always has two of these arms (ALOHA), whatever its ``robot_type`` says.
+    pair: bool = False
+
+    def arms_in(self, robot_type: str) -> int:
+        """How many of these arms a robot of ``robot_type`` has: two for LeRobot's ``bi_...`` robots and a pair's."""
+        return 2 if self.pair or re.match(r"bi[_-]", robot_type.lower()) else 1
 
 
 KNOWN_ARMS = {
@@ -78,7 +85,8 @@ def _viperx(name: str, title: str, bases: Mapping[str, tuple[tuple[float, float,
     camera)."""
     return KnownArm(name, title, _URDFS / "vx300s" / "vx300s.urdf", "Interbotix/interbotix_ros_manipulators, "
                     "BSD-3-Clause", "gripper_link", VIPERX_MOTORS, {m: m for m in VIPERX_MOTORS[:-1]},
-                    {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"}, bases)
+                    {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"}, bases,
+                    pair=name != "viperx")
 
 
 # Matched in this order: a mobile ALOHA's arms sit side by side on its base, facing forward.
@@ -114,13 +122,14 @@ def arm_prefixes(count: int) -> tuple[str, ...]:
     return ("left_", "right_") if count == 2 else tuple(f"arm{i + 1}_" for i in range(count))
 
 
-def match_state_names(names: Sequence[str], motors: Sequence[str]) -> tuple[list[ArmJoints], list[str]]:
+def match_state_names(names: Sequence[str], motors: Sequence[str], *, arms: int = 1
+                      ) -> tuple[list[ArmJoints], list[str]]:
     """The arms ``names`` hold (grouped by prefix, in order of appearance) and the names matched to no motor.
 
     A name matches the longest motor it ends with (``.pos`` aside; velocities and efforts match none);
-    numbered names (``arm1_j1``) take the motors in order per prefix, from 0 or 1 as the names start; a run of
-    numbered names as long as several arms' motors (``motor_0 .. motor_13`` of two ALOHA arms) is that many arms
-    in order (:func:`arm_prefixes`)."""
+    numbered names (``arm1_j1``) take the motors in order per prefix, from 0 or 1 as the names start; on a robot of
+    ``arms`` arms a run of numbered names as long as all their motors (``motor_0 .. motor_13`` of ALOHA's two) is
+    those arms in order (:func:`arm_prefixes`). One arm's positions and velocities, numbered alike, stay one arm."""
     by_prefix: dict[str, list[tuple[str, str]]] = {}
     numbered: dict[str, list[tuple[str, int]]] = {}
     unmatched: list[str] = []
@@ -138,17 +147,15 @@ def match_state_names(names: Sequence[str], motors: Sequence[str]) -> tuple[list
             unmatched.append(name)
     for prefix, items in numbered.items():
         first = min(i for _n, i in items)
-        count = len(items) // len(motors)
-        several = (count >= 2 and len(items) % len(motors) == 0
+        several = (arms >= 2 and len(items) == arms * len(motors)
                    and sorted(i for _n, i in items) == list(range(first, first + len(items))))
         for name, index in items:
             k = index - first
             if several:
-                arm = prefix + arm_prefixes(count)[k // len(motors)]
+                arm = prefix + arm_prefixes(arms)[k // len(motors)]
                 by_prefix.setdefault(arm, []).append((name, motors[k % len(motors)]))
             elif 0 <= k < len(motors):
                 by_prefix.setdefault(prefix, []).append((name, motors[k]))
             else:
                 unmatched.append(name)
-    arms = [ArmJoints(prefix, tuple(items)) for prefix, items in by_prefix.items()]
-    return arms, unmatched
+    return [ArmJoints(prefix, tuple(items)) for prefix, items in by_prefix.items()], unmatched

@@ -150,7 +150,7 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
     values, note = _values(reader, episode, state, len(names))
     robot_type = str(reader.robot_type or "")
     arm = known_arm(robot_type)
-    arms = _known_arms(arm, names, values) if arm is not None else []
+    arms = _known_arms(arm, names, values, arm.arms_in(robot_type)) if arm is not None else []
     lines = [f"# robot.yaml suggested by `framechain info` from {path} episode {episode}; edit before use",
              f"# robot_type {robot_type or 'not given'}, {reader.fps:g} fps, codebase {reader.version}"]
     if arm is None or not arms:
@@ -198,9 +198,10 @@ def _values(reader: DatasetReader, episode: int, state: str | None, width: int) 
     return np.asarray(frames.columns[state], dtype=np.float64).reshape(len(frames), -1), ""
 
 
-def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray) -> list[_Arm]:
-    """The dataset's arms matched to the known arm's joints (by name, by number, else by position)."""
-    groups, _unmatched = match_state_names(names, arm.motors)
+def _known_arms(arm: KnownArm, names: Sequence[str], values: np.ndarray, count: int) -> list[_Arm]:
+    """The dataset's arms matched to the known arm's joints (by name, by number, else by position); ``count``: how
+    many arms its robot has."""
+    groups, _unmatched = match_state_names(names, arm.motors, arms=count)
     if not groups and names and len(names) % len(arm.motors) == 0:  # unnamed columns: LeRobot's order
         n = len(names) // len(arm.motors)
         prefixes = arm_prefixes(n)

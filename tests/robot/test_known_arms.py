@@ -113,13 +113,14 @@ def test_the_bundled_viperx_keeps_the_published_kinematics() -> None:
     assert (KNOWN_ARMS["mobilealoha"].bases, KNOWN_ARMS["aloha"].bases["right"][1]) == ({}, (0.0, 0.0, np.pi))
 
 
-@pytest.mark.parametrize(("robot_type", "arm"), [("so101_follower", "so101"), ("bi_so100_follower", "so100"),
-                                                 ("koch_follower", "koch"), ("SO-101", "so101"), ("aloha", "aloha"),
-                                                 ("mobile_aloha", "mobilealoha"), ("viperx", "viperx"), ("ur5e", None),
-                                                 (None, None)])
-def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) -> None:
+@pytest.mark.parametrize(("robot_type", "arm", "arms"), [
+    ("so101_follower", "so101", 1), ("bi_so100_follower", "so100", 2), ("koch_follower", "koch", 1),
+    ("SO-101", "so101", 1), ("aloha", "aloha", 2), ("mobile_aloha", "mobilealoha", 2), ("viperx", "viperx", 1),
+    ("ur5e", None, 0), (None, None, 0)])
+def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None, arms: int) -> None:
     found = known_arm(robot_type)
     assert (found.name if found else None) == arm
+    assert (found.arms_in(robot_type or "") if found else 0) == arms
 
 
 @pytest.mark.parametrize(("names", "expected"), [
@@ -134,18 +135,30 @@ def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None) ->
      {"arm1_": [("arm1_j1", "shoulder_pan"), ("arm1_j2", "shoulder_lift"), ("arm1_j6", "gripper")],
       "arm2_": [("arm2_j1", "shoulder_pan"), ("arm2_j2", "shoulder_lift"), ("arm2_j6", "gripper")]}),
     (["joint_0", "joint_4"], {"": [("joint_0", "shoulder_pan"), ("joint_4", "wrist_roll")]}),
-    # Two arms' worth of numbered names (as GR00T's conversions write them): the left arm first, as LeRobot orders
-    # its two-arm robots.
-    ([f"motor_{k}" for k in range(12)],
-     {"left_": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)],
-      "right_": [(f"motor_{k + 6}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
-    # Not a whole number of arms: the first arm's, the rest matched to nothing.
-    ([f"motor_{k}" for k in range(8)], {"": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
 ])
 def test_state_names_are_matched_under_any_prefix(names: list[str], expected: dict[str, list[tuple[str, str]]]
                                                   ) -> None:
     arms, unmatched = match_state_names(names, LEROBOT_MOTORS)
     assert {a.prefix: list(a.motors) for a in arms} == expected
+    matched = {n for items in expected.values() for n, _m in items}
+    assert unmatched == [n for n in names if n not in matched]
+
+
+@pytest.mark.parametrize(("arms", "count", "expected"), [
+    # Both arms' worth of numbered names on a two-arm robot (as conversions that kept no names write them): the left
+    # arm first, as LeRobot orders its two-arm robots.
+    (2, 12, {"left_": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)],
+             "right_": [(f"motor_{k + 6}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
+    # One arm's positions then velocities, numbered alike: one arm, the rest matched to nothing.
+    (1, 12, {"": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
+    # Not both arms' worth: the first arm's.
+    (2, 8, {"": [(f"motor_{k}", m) for k, m in enumerate(LEROBOT_MOTORS)]}),
+])
+def test_numbered_names_are_split_into_the_robots_arms(arms: int, count: int,
+                                                       expected: dict[str, list[tuple[str, str]]]) -> None:
+    names = [f"motor_{k}" for k in range(count)]
+    found, unmatched = match_state_names(names, LEROBOT_MOTORS, arms=arms)
+    assert {a.prefix: list(a.motors) for a in found} == expected
     matched = {n for items in expected.values() for n, _m in items}
     assert unmatched == [n for n in names if n not in matched]
 
