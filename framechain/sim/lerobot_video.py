@@ -72,8 +72,10 @@ class ArmKind:
     #: "deg" (LeRobot's SO-101: ``shoulder_pan.pos``, the gripper 0-100) or "rad" (ALOHA's: ``waist``, the gripper
     #: 0..1).
     unit: str
+    #: What follows the joint in a state name: ".pos" (SO-101's ``shoulder_pan.pos``) or "" (ALOHA's ``waist``).
     suffix: str
-    robot_types: tuple[str, str]  # one arm, two arms
+    #: LeRobot's ``robot_type`` of one arm, of two.
+    robot_types: tuple[str, str]
     camera_link: str = "gripper_link"
 
 
