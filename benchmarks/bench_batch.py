@@ -20,8 +20,9 @@ from pathlib import Path
 from typing import Any
 
 from framechain.catalogue import Fault
-from framechain.fleet import run_batch, usable_cpus
+from framechain.fleet import run_batch
 from framechain.sim import InjectedFault, SceneSpec, generate, write_scene
+from framechain.vision.threads import usable_cpus
 
 FAULTS = (
     InjectedFault(Fault.LATENCY, "robot", {"offset_s": -0.03}),

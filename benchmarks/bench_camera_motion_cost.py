@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from framechain.robot.urdf import CACHE_ENV
+from framechain.vision.threads import usable_cpus
 
 HERE = Path(__file__).resolve().parent
 URDF = HERE.parent.parent / "shared" / "realdata" / "urdf" / "so101" / "so101_new_calib.urdf"
@@ -100,7 +101,7 @@ def _episode(root: Path, kind: str) -> None:
     pairs = [(a[0], d[0]) for a, d in runs]
     best_attribute, best_decode = min(a for a, _ in pairs), min(d for _, d in pairs)
     cpu_attribute, cpu_decode = min(a[1] for a, _ in runs), min(d[1] for _, d in runs)
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cores = usable_cpus()
     print(f"   {kind:6s} episode: attribute {best_attribute:5.2f} s, decoding its videos {best_decode:4.2f} s: "
           f"{best_attribute / best_decode:4.1f}x (rounds: {', '.join(f'{a / d:.1f}x' for a, d in pairs)}; "
           f"the first run, parsing the URDF: {first:.2f} s, {first / best_decode:.1f}x)")

@@ -26,7 +26,7 @@ import pyarrow.parquet as pq
 from framechain.analysis.egomotion.recording import CameraRecordingFit
 from framechain.config.chain import ChainConfig
 from framechain.files import write_atomically
-from framechain.fleet.engines import map_local, map_ray, usable_cpus
+from framechain.fleet.engines import map_local, map_ray
 from framechain.fleet.recordings import recording_fits, write_recordings
 from framechain.fleet.units import (
     FINAL_STATUSES,
@@ -44,6 +44,7 @@ from framechain.fleet.units import (
     unit_key,
 )
 from framechain.timeline import read_parquet
+from framechain.vision.threads import usable_cpus
 
 
 # -- the store --------------------------------------------------------------------------------

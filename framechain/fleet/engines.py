@@ -182,10 +182,3 @@ def map_ray(tasks: Sequence[UnitTask], *, address: str | None = None, max_in_fli
             ray.shutdown()
 
 
-def usable_cpus() -> int:
-    """The CPUs this process may run on (a container's or taskset's share, not the machine's)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-

@@ -78,21 +78,21 @@ KNOWN_ARMS = {
 ALOHA_BASES = {"left": ((-0.469, -0.019, 0.02), (0.0, 0.0, 0.0)), "right": ((0.469, -0.019, 0.02), (0.0, 0.0, math.pi))}
 
 
-def _viperx(name: str, title: str, bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]]
-            ) -> KnownArm:
+def _viperx(name: str, title: str, bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]],
+            *, pair: bool) -> KnownArm:
     """ALOHA's arm: its wrist cameras ride the gripper, past wrist_rotate. Its gripper state is the fingers' opening
     normalised to 0..1 (closed..open), not the gripper servo's turn: it drives nothing (the fingers carry no
-    camera)."""
+    camera). ``pair``: the robot always has two."""
     return KnownArm(name, title, _URDFS / "vx300s" / "vx300s.urdf", "Interbotix/interbotix_ros_manipulators, "
                     "BSD-3-Clause", "gripper_link", VIPERX_MOTORS, {m: m for m in VIPERX_MOTORS[:-1]},
                     {"gripper": "ALOHA records the fingers' opening normalised to 0..1, not a joint angle"}, bases,
-                    pair=name != "viperx")
+                    pair)
 
 
 # Matched in this order: a mobile ALOHA's arms sit side by side on its base, facing forward.
-KNOWN_ARMS |= {"mobilealoha": _viperx("mobilealoha", "Mobile ALOHA ViperX 300 6DOF", {}),
-               "aloha": _viperx("aloha", "ALOHA ViperX 300 6DOF", ALOHA_BASES),
-               "viperx": _viperx("viperx", "ViperX 300 6DOF", {})}
+KNOWN_ARMS |= {"mobilealoha": _viperx("mobilealoha", "Mobile ALOHA ViperX 300 6DOF", {}, pair=True),
+               "aloha": _viperx("aloha", "ALOHA ViperX 300 6DOF", ALOHA_BASES, pair=True),
+               "viperx": _viperx("viperx", "ViperX 300 6DOF", {}, pair=False)}
 
 
 def known_arm(robot_type: str | None) -> KnownArm | None:

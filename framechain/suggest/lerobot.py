@@ -254,9 +254,8 @@ def _arm_lines(arms: Sequence[_Arm], urdf: str, bases: Mapping[str, tuple[tuple[
     if len(arms) == 1 and not arms[0].prefix:
         return [f"urdf: {urdf}", *_joint_lines(arms[0], "")]
     lines = ["arms:"]
-    sides = {"l": "left", "r": "right"}
     for i, arm in enumerate(arms):
-        xyz, rpy = bases.get(sides.get(arm.name.lower(), arm.name.lower()),
+        xyz, rpy = bases.get(_SIDES.get(arm.name.lower(), ""),
                              ((0.0, _base_y(arm.name, i, len(arms)), 0.0), (0.0, 0.0, 0.0)))
         lines += [f"  {arm.name}:", f"    urdf: {urdf}", f"    prefix: {arm.prefix}",
                   f"    world_from_base: {{xyz: [{', '.join(repr(round(v, 6)) for v in xyz)}], "
@@ -265,9 +264,13 @@ def _arm_lines(arms: Sequence[_Arm], urdf: str, bases: Mapping[str, tuple[tuple[
     return lines
 
 
+#: The side an arm's name says (``left``, ``l``, ``right``, ``r``).
+_SIDES = {"left": "left", "l": "left", "right": "right", "r": "right"}
+
+
 def _base_y(name: str, i: int, n: int) -> float:
     """Arms side by side 0.4 m apart along y, the left one (or the first) at +y."""
-    side = {"left": 0, "l": 0, "right": n - 1, "r": n - 1}.get(name.lower(), i)
+    side = {"left": 0, "right": n - 1}.get(_SIDES.get(name.lower(), ""), i)
     return 0.2 * (n - 1) - 0.4 * side
 
 
@@ -328,7 +331,7 @@ def _camera_arm(name: str, arms: Sequence[_Arm]) -> _Arm | None:
     """The arm a camera rides, from its name: the arm it names (``left_wrist``, ``arm2``), else the first arm for a
     wrist camera; None: a camera fixed in the world (``top``, ``front``)."""
     words = set(re.split(r"[^a-z0-9]+", name.lower()))
-    words |= {{"left": "l", "right": "r", "l": "left", "r": "right"}.get(w, w) for w in words}
+    words |= {form for w in words if w in _SIDES for form in (_SIDES[w], _SIDES[w][0])}  # either spelling of a side
     named = [a for a in arms if a.prefix and (a.name.lower() in words or name.lower().startswith(a.prefix.lower()))]
     if named:
         return named[0]

@@ -20,7 +20,8 @@ from typing import Any, TypeVar, cast
 
 import numpy as np
 
-__all__ = ["THREADS_ENV", "by_row_blocks", "run_threads", "sharing_threads", "split_over_threads", "threads_here"]
+__all__ = ["THREADS_ENV", "by_row_blocks", "run_threads", "sharing_threads", "split_over_threads", "threads_here",
+           "usable_cpus"]
 
 #: Threads one run uses: FRAMECHAIN_CAMERA_THREADS, else one per core this process may use.
 THREADS_ENV = "FRAMECHAIN_CAMERA_THREADS"
@@ -31,12 +32,19 @@ A = TypeVar("A", bound="np.ndarray[Any, Any]")
 B = TypeVar("B", bound="np.ndarray[Any, Any]")
 
 
+def usable_cpus() -> int:
+    """The CPUs this process may run on (a container's or taskset's share, not the machine's)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
 def run_threads() -> int:
     """How many threads one run uses (:data:`THREADS_ENV`, else the cores this process may use)."""
     given = os.environ.get(THREADS_ENV, "")
     if given.isdigit() and int(given) > 0:
         return int(given)
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return usable_cpus()
 
 
 #: The threads the work of the calling thread may use (unset: the run's).
