@@ -5,7 +5,7 @@ The file (or the ``robot:`` section of CHAIN.yaml, whose paths resolve against C
     urdf: so101_new_calib.urdf        # relative to this file
     state_feature: observation.state  # dataset feature holding the joint-state vector
     world_frame: world                # default "world"
-    world_from_base:                  # static world -> URDF root; default identity
+    world_from_base:                  # static world -> URDF root (mobile_base: base -> root); default identity
       xyz: [0.0, 0.0, 0.0]
       rpy: [0.0, 0.0, 0.0]            # or quat_xyzw: [x, y, z, w], or rotvec: [x, y, z]
     default_unit: deg                 # optional; every joint must get a unit from here or its own
@@ -60,6 +60,10 @@ mode: ``(ticks - (range_min + range_max) / 2) * 360 / 4095``); ``range_m100_100`
 ``drive_mode`` is 1, as LeRobot inverts them) and turned into an angle the same way. A joint's own
 ``zero_ticks`` or ``ticks_per_turn`` wins.
 
+``mobile_base`` names the state's velocities of a base that drives around (LeKiwi's ``x.vel``, ``y.vel``,
+``theta.vel``): the arms then hang from the base's frame, moved per row as its velocities integrate
+(:mod:`framechain.config.mobile_base`).
+
 This module reads and checks the file only; binding it to the URDF's model (joints that exist
 and move, the conversion of joint values) is the robot adapter's job
 (:mod:`framechain.adapters.robot.config`).
@@ -84,6 +88,7 @@ from framechain.config.chain import (
 )
 from framechain.config.chain_cameras import latency_budget
 from framechain.config.errors import RobotConfigError
+from framechain.config.mobile_base import MobileBase, parse_mobile_base
 from framechain.config.schema import Section, read_yaml, show
 
 __all__ = [
@@ -168,7 +173,7 @@ class DetectionSource:
 
 
 _KEYS = {"urdf", "state_feature", "world_frame", "world_from_base", "default_unit", "joints", "hold", "cameras",
-         "detections", "chain", "arms", "calibration"}
+         "detections", "chain", "arms", "calibration", "mobile_base"}
 _ARM_KEYS = {"urdf", "prefix", "world_from_base", "default_unit", "joints", "hold", "calibration"}
 _JOINT_KEYS = {"joint", "unit", "sign", "offset", "zero_ticks", "ticks_per_turn"}
 
@@ -196,6 +201,13 @@ class RobotConfig:
     notes: tuple[str, ...] = field(default=(), compare=False)
     #: Several arms (``arms:``): joints and hold then name prefixed joints; empty for one URDF.
     arms: tuple[ArmConfig, ...] = ()
+    #: A base that drives around: the arms hang from its frame (None: they stand in the world).
+    mobile_base: MobileBase | None = None
+
+    @property
+    def arms_frame(self) -> str:
+        """The frame the arms' bases hang from: the mobile base's, else the world."""
+        return self.world_frame if self.mobile_base is None else self.mobile_base.frame
 
     @classmethod
     def load(cls, path: str | Path) -> RobotConfig:
@@ -222,6 +234,7 @@ class RobotConfig:
             pose = top.section("world_from_base", {"xyz", "rpy", "quat_xyzw", "rotvec"}).pose(
                 rotation_required=False, translation=plausible.position)
         cameras = _cameras(top, base)
+        world_frame = top.frame("world_frame", "world") or ""
         chain = top.section("chain", {"camera", "body", "latency_budget_s", "evidence"})
         chain_camera = chain.name("camera", what="a camera name")
         if chain_camera is not None and chain_camera not in cameras:
@@ -234,7 +247,7 @@ class RobotConfig:
         return cls(
             urdf=urdf, joints=joints, cameras=cameras,
             state_feature=top.name("state_feature", "observation.state", what="a feature name") or "",
-            world_frame=top.frame("world_frame", "world") or "",
+            world_frame=world_frame, mobile_base=parse_mobile_base(top, world_frame),
             world_from_base_translation=pose.xyz if pose else (0.0, 0.0, 0.0),
             world_from_base_quat_xyzw=pose.quat_xyzw if pose else (0.0, 0.0, 0.0, 1.0), hold=hold, arms=arms,
             detections=_detections(top, base, cameras), chain_camera=chain_camera,
@@ -246,7 +259,8 @@ class RobotConfig:
     def check_names(self, names: Sequence[str]) -> None:
         """Every mapped state name is one of the dataset's ``names`` (raises, listing them)."""
         known = set(names)
-        missing = [m.state for m in self.joints if m.state not in known]
+        base = self.mobile_base.states if self.mobile_base is not None else ()
+        missing = [s for s in (*(m.state for m in self.joints), *base) if s not in known]
         if missing:
             raise RobotConfigError(
                 self.source, f"state names {missing} are not in {self.state_feature}; it has {list(names)}"

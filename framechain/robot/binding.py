@@ -33,7 +33,7 @@ def robot_model(config: RobotConfig) -> RobotModel:
         for arm in config.arms:
             if str(arm.urdf) not in parsed:
                 parsed[str(arm.urdf)] = RobotModel.from_urdf(arm.urdf)
-            joints.extend(_arm_joints(config.world_frame, arm, parsed[str(arm.urdf)]))
+            joints.extend(_arm_joints(config.arms_frame, arm, parsed[str(arm.urdf)]))
         model = RobotModel(joints, source=config.source, name="+".join(a.name for a in config.arms))
     check_robot(config, model)
     return model
@@ -44,7 +44,7 @@ def arm_root(config: RobotConfig, model: RobotModel, link: str | None = None) ->
     if not config.arms:
         return model.root
     arms = [a for a in config.arms if link is not None and link.startswith(a.prefix)] or [config.arms[0]]
-    return next(j.child for j in model.joints.values() if j.name == _base_joint(config.world_frame, arms[0]))
+    return next(j.child for j in model.joints.values() if j.name == _base_joint(config.arms_frame, arms[0]))
 
 
 def _base_joint(world: str, arm: ArmConfig) -> str:
@@ -134,22 +134,23 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
     for cam in config.cameras.values():
         # A camera named "wrist" on an SO-101 would add a second parent to the URDF's wrist_link.
         frames = [cam.optical_frame] if cam.mount.optical else [cam.link_frame, cam.optical_frame]
-        taken = [f for f in frames if model.has_link(f) or f == config.world_frame]
+        taken = [f for f in frames if model.has_link(f) or f in (config.world_frame, config.arms_frame)]
         if taken:
             raise RobotConfigError(fail, f"camera {cam.name!r}: its frame {taken[0]!r} is already a link of the URDF; "
                                    f"give the camera another name (e.g. {cam.name}_cam)")
         parent = cam.mount.parent
-        if parent == config.world_frame:
+        if parent in (config.world_frame, config.arms_frame):
             continue
         if not model.has_link(parent):
+            base = f" nor the mobile base's frame {config.arms_frame!r}" if config.mobile_base is not None else ""
             raise RobotConfigError(fail, f"camera {cam.name!r} is mounted on {parent!r}, which is neither a URDF link "
-                                   f"nor the world frame {config.world_frame!r}")
+                                   f"nor the world frame {config.world_frame!r}{base}")
         free = [j.name for j in model.path_joints(parent) if j.moves and j.mimic is None and j.name not in driven]
         if free:
             raise RobotConfigError(fail, f"camera {cam.name!r} hangs below joints {free} that no dataset state drives: "
                                    "map them under joints or fix them under hold")
     body = config.chain_body
-    if body is not None and body != config.world_frame and not model.has_link(body):
+    if body is not None and body not in (config.world_frame, config.arms_frame) and not model.has_link(body):
         raise RobotConfigError(fail, f"chain.body {body!r} is not a URDF link")
 
 

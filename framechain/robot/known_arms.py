@@ -5,7 +5,8 @@ The URDFs under ``urdfs/`` are the published models with their visual and collis
 (the meshes are not bundled), each with its licence beside it: SO-100 and SO-101 from
 TheRobotStudio/SO-ARM100 (Apache-2.0), Koch v1.0 from AlexanderKoch-Koch/low_cost_robot (MIT), and the
 ViperX 300 6DOF of ALOHA (``aloha``, ``mobile_aloha``, ``viperx``) from Interbotix/interbotix_ros_manipulators
-(BSD-3-Clause).
+(BSD-3-Clause). LeKiwi (``lekiwi``) is an SO-101 on a mobile base: its base's recorded velocities
+(:data:`BASE_VELOCITIES`) move the arm in the world (robot.yaml's ``mobile_base``).
 
 State names are matched to an arm's motors (LeRobot's names, ``shoulder_pan`` ... ``gripper``) by
 suffix, so ``shoulder_pan.pos``, ``left_shoulder_pan.pos``, ``arm1_shoulder_pan.pos`` and
@@ -23,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["KNOWN_ARMS", "ArmJoints", "KnownArm", "arm_prefixes", "known_arm", "match_state_names"]
+__all__ = ["BASE_VELOCITIES", "KNOWN_ARMS", "ArmJoints", "KnownArm", "arm_prefixes", "known_arm", "match_state_names"]
 
 _URDFS = Path(__file__).resolve().parent / "urdfs"
 #: LeRobot's motor names of its SO-100/SO-101 and Koch arms, from the base out (their ids 1..6).
@@ -71,7 +72,13 @@ KNOWN_ARMS = {
                      "gripper-static-motor_v2_1",
                      joints={"shoulder_pan": "Revolute 2", "shoulder_lift": "Revolute 3", "elbow_flex": "Revolute 5",
                              "wrist_roll": "Revolute 6", "gripper": "Revolute 7"}),
+    # LeKiwi: an SO-101 (``arm_shoulder_pan.pos`` ...) on a three-wheeled base whose velocities it records too.
+    "lekiwi": KnownArm("lekiwi", "LeKiwi SO-101", _URDFS / "so101" / "so101_new_calib.urdf",
+                       "TheRobotStudio/SO-ARM100, Apache-2.0", "gripper_link"),
 }
+#: LeRobot's names of a mobile base's body-frame velocities (LeKiwi: m/s forward and to the left, deg/s
+#: counter-clockwise), as robot.yaml's ``mobile_base`` keys take them.
+BASE_VELOCITIES = {"x_vel": "x.vel", "y_vel": "y.vel", "yaw_rate": "theta.vel"}
 
 
 #: ALOHA 2's arms face each other across the table (google-deepmind/mujoco_menagerie, aloha/aloha.xml).

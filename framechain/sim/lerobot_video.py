@@ -48,8 +48,9 @@ from scipy.spatial.transform import Rotation
 from framechain.adapters.lerobot.video import encode_video
 from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 from framechain.arrays import FloatArray
+from framechain.sim.mobile_base import ARM_ON_BASE, BASE_STATE_NAMES, BaseMotion, base_motion
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
-from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays
+from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays, png_bytes
 
 __all__ = ["ARMS", "ARM_JOINTS", "ArmKind", "CameraTruth", "VideoDatasetSpec", "VideoDatasetTruth",
            "generate_video_dataset", "gripper_pads", "realtime_stamps", "write_robot_yaml"]
@@ -145,6 +146,14 @@ class VideoDatasetSpec:
     storage: str = "video"
     #: Encoder options beside the fast preset, e.g. (("bf", "0"), ("g", "2")): no B-frames, key frames every 2.
     codec_options: tuple[tuple[str, str], ...] = ()
+    #: A mobile base turning up to this many degrees either way (LeKiwi: ``arm_`` names, ``x.vel``, ``y.vel``,
+    #: ``theta.vel`` recorded too); 0: the arm stands in the world.
+    base_turn_deg: float = 0.0
+
+    @property
+    def prefix(self) -> str:
+        """What comes before a joint in a one-arm state name (LeKiwi's ``arm_``)."""
+        return "arm_" if self.base_turn_deg else ""
 
     def delay_s(self, camera: int, episode: int) -> float:
         """How late camera ``camera``'s frames of episode ``episode`` are (s)."""
@@ -197,6 +206,8 @@ class VideoDatasetTruth:
     cameras: tuple[CameraTruth, ...] = ()
     #: Per episode: the rows' timestamps as written (s from the episode's start).
     timestamps_s: tuple[FloatArray, ...] = ()
+    #: Per episode: the mobile base's motion (none without one).
+    base_motions: tuple[BaseMotion, ...] = ()
 
     @property
     def expected_offset_s(self) -> float:
@@ -309,26 +320,32 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     mount, declared_mount = _mounts(spec)
     bases = _base_poses(arms)
     pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
-    names = tuple(f"{arm}{joint}{kind.suffix}" for arm in arms for joint in (*kind.joints, "gripper"))
+    names = tuple(f"{arm or spec.prefix}{joint}{kind.suffix}" for arm in arms for joint in (*kind.joints, "gripper"))
+    names += BASE_STATE_NAMES if spec.base_turn_deg else ()
     keys = [f"observation.images.{name}" for name, _a, _d in layout]
-    episodes, repeated, stamps = [], [], []
+    episodes, repeated, stamps, base_motions = [], [], [], []
     videos: dict[str, list[np.ndarray]] = {key: [] for key in keys}
     marker = (float("nan"), float("nan"), float("nan"))
     for e in range(spec.episodes):
         t = _episode_stamps(rng, spec)
         n = t.size
         motions = {arm: _trajectory(rng, kind, still=spec.still, moving=spec.moving_joints) for arm in arms}
-        state = np.concatenate([_state(kind, motions[arm], t) for arm in arms], axis=1)
+        base = base_motion(rng, spec.base_turn_deg) if spec.base_turn_deg else None
+        base_motions += [] if base is None else [base]
+        state = np.concatenate([_state(kind, motions[arm], t) for arm in arms]
+                               + ([] if base is None else [base.recorded(t)]), axis=1)
         repeats = np.flatnonzero(rng.random(n) < spec.repeat_share)
         repeats = repeats[repeats > 0]
         repeated.append(tuple(int(k) for k in repeats))
         columns: dict[str, np.ndarray] = {"observation.state": state, "action": np.concatenate([state[1:], state[-1:]])}
         for c, ((name, arm, _declared), key) in enumerate(zip(layout, keys, strict=True)):
             captured = _joints(kind, motions[arm], t - spec.delay_s(c, e))
-            world_from_cam = bases[arm] @ chains[arm].root_from_link(
+            stands = bases[arm] if base is None else base.world_from_base(t - spec.delay_s(c, e)) @ ARM_ON_BASE
+            world_from_cam = stands @ chains[arm].root_from_link(
                 dict(zip(kind.joints, captured.T, strict=True)), f"{arm}{kind.camera_link}") @ mount
             if e == 0 and c == 0 and spec.marker_size_m > 0:
-                marker = _place_marker(scene, world_from_cam, spec)
+                marker = scene.place_marker(world_from_cam, spec.marker_dictionary, spec.marker_id,
+                                            spec.marker_size_m)
             frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
             for k in repeats:  # in order, so runs of repeats all show the frame before the run
                 frames[k] = frames[k - 1]
@@ -336,23 +353,24 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
                 frames = _black_frames(rng, frames.shape)
             videos[key].append(frames)
             if spec.storage == "image":
-                columns[key] = np.array([_png(f) for f in frames], dtype=object)
+                columns[key] = np.array([png_bytes(f) for f in frames], dtype=object)
         episodes.append(EpisodeData(frames=columns, timestamp_s=None if spec.clock == "presentation" else t))
         stamps.append(t)
     out = Path(root)
     write_lerobot_dataset(out, episodes, features=_features(spec, names, keys), fps=spec.fps, version=spec.version,
-                          robot_type=kind.robot_types[1 if spec.bimanual else 0])
+                          robot_type="lekiwi" if spec.base_turn_deg else kind.robot_types[1 if spec.bimanual else 0])
     if spec.storage == "video":
         for key in keys:
             _write_videos(out, key, videos[key], spec)
     return _truth(out, spec, layout, keys, arms=arms, names=names, mounts=(mount, declared_mount),
-                  repeated=tuple(repeated), marker=marker, stamps=tuple(stamps))
+                  repeated=tuple(repeated), marker=marker, stamps=tuple(stamps), base_motions=tuple(base_motions))
 
 
 def _truth(
     out: Path, spec: VideoDatasetSpec, layout: Sequence[tuple[str, str, str]], keys: Sequence[str], *,
     arms: tuple[str, ...], names: tuple[str, ...], mounts: tuple[FloatArray, FloatArray],
     repeated: tuple[tuple[int, ...], ...], marker: tuple[float, float, float], stamps: tuple[FloatArray, ...],
+    base_motions: tuple[BaseMotion, ...] = (),
 ) -> VideoDatasetTruth:
     """What the dataset written under ``out`` truly is: each camera's link, mount and delays, as declared and as
     rendered (``mounts``: the true and the declared link-from-camera transforms)."""
@@ -372,7 +390,7 @@ def _truth(
         camera_link=first.camera_link, declared_link=first.declared_link, q_link_cam=q_true,
         declared_q_link_cam=q_declared, xyz_link_cam=np.asarray(spec.mount_xyz, dtype=float),
         intrinsics=(spec.focal_px, spec.focal_px, cx, cy), declared_focal_px=spec.focal_px * spec.focal_scale,
-        repeated=repeated, marker_xyz=marker, cameras=cameras, timestamps_s=stamps,
+        repeated=repeated, marker_xyz=marker, cameras=cameras, timestamps_s=stamps, base_motions=base_motions,
     )
 
 
@@ -396,21 +414,6 @@ def _black_frames(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarra
     return out
 
 
-def _place_marker(scene: TexturedScene, world_from_cam: FloatArray,
-                  spec: VideoDatasetSpec) -> tuple[float, float, float]:
-    """Paint the marker where the optical axis meets the table, on median over the first episode."""
-    import cv2
-
-    axis = world_from_cam[:, :3, 2]
-    centre = world_from_cam[:, :3, 3]
-    down = axis[:, 2] < -0.1
-    depth = -centre[down, 2] / axis[down, 2]
-    hits = centre[down, :2] + depth[:, None] * axis[down, :2]
-    x, y = (float(v) for v in np.median(hits, axis=0))
-    scene.paint_marker(int(getattr(cv2.aruco, spec.marker_dictionary)), spec.marker_id, (x, y), spec.marker_size_m)
-    return (x, y, 0.0)
-
-
 _CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
 #: Fast encoder presets: generation time, not file size, matters here.
 #: One encoder thread: a threaded libx264 codes the same frames differently from run to run (a test would measure
@@ -419,15 +422,6 @@ _FAST = {"libx264": {"preset": "veryfast", "threads": "1"}, "libx265": {"preset"
          "libsvtav1": {"preset": "10"},
          # MPEG-4 Part 2 at the quality of a real recording (a frame sent twice decodes within about a grey level).
          "mpeg4": {"b": "2500000"}}
-
-
-def _png(rgb: FloatArray) -> bytes:
-    import cv2
-
-    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise ValueError("cannot encode a frame as PNG")
-    return bytes(data.tobytes())
 
 
 def _state(kind: ArmKind, motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
@@ -464,9 +458,10 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
     _fx, _fy, cx, cy = truth.intrinsics
 
     def joints(arm: str) -> dict[str, object]:
-        out: dict[str, object] = {f"{arm}{j}{kind.suffix}": j for j in kind.joints}
+        named = arm or spec.prefix
+        out: dict[str, object] = {f"{named}{j}{kind.suffix}": j for j in kind.joints}
         if kind.unit == "deg":
-            out[f"{arm}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
+            out[f"{named}gripper.pos"] = {"joint": "gripper", "unit": "range_0_100"}
         return out
 
     def camera(cam: CameraTruth) -> dict[str, object]:
@@ -481,6 +476,9 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
     config: dict[str, object] = {"state_feature": "observation.state"}
     if truth.arms == ("",):
         config.update(urdf=str(spec.urdf), default_unit=kind.unit, joints=joints(""))
+        if spec.base_turn_deg:
+            config["world_from_base"] = {"xyz": [float(v) for v in ARM_ON_BASE[:3, 3]], "rpy": [0.0, 0.0, 0.0]}
+            config["mobile_base"] = dict(zip(("x_vel", "y_vel", "yaw_rate"), BASE_STATE_NAMES, strict=True))
     else:
         bases = _base_poses(truth.arms)
         config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": kind.unit,

@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from framechain.arrays import FloatArray
 
-__all__ = ["PadRegion", "TexturedScene", "pixel_rays"]
+__all__ = ["PadRegion", "TexturedScene", "pixel_rays", "png_bytes"]
 
 Image = npt.NDArray[np.uint8]
 
@@ -122,6 +122,19 @@ class TexturedScene:
         y0 = round((centre_xy_m[1] + self.half_size_m) * scale - patch.shape[0] / 2)
         self.table[y0:y0 + patch.shape[0], x0:x0 + patch.shape[1]] = patch[::-1, :, None]
 
+    def place_marker(self, world_from_cam: FloatArray, dictionary: str, marker_id: int, size_m: float
+                     ) -> tuple[float, float, float]:
+        """Paint a marker where the camera's optical axis meets the table, on median over its poses
+        ``world_from_cam`` (T, 4, 4); its centre in the world."""
+        axis = world_from_cam[:, :3, 2]
+        centre = world_from_cam[:, :3, 3]
+        down = axis[:, 2] < -0.1
+        depth = -centre[down, 2] / axis[down, 2]
+        hits = centre[down, :2] + depth[:, None] * axis[down, :2]
+        x, y = (float(v) for v in np.median(hits, axis=0))
+        self.paint_marker(int(getattr(cv2.aruco, dictionary)), marker_id, (x, y), size_m)
+        return (x, y, 0.0)
+
     def render(self, world_from_cam: FloatArray, rays: FloatArray, pads: tuple[PadRegion, ...] = ()) -> Image:
         """One RGB frame: ``rays`` from :func:`pixel_rays`, ``world_from_cam`` a 4x4 pose."""
         rot, centre = world_from_cam[:3, :3], world_from_cam[:3, 3]
@@ -168,3 +181,11 @@ class TexturedScene:
             grey = cv2.resize(texture, (w, h), interpolation=cv2.INTER_NEAREST).astype(np.uint8)
             self._pad_cache[key] = (mask > 0, grey)
         return self._pad_cache[key]
+
+
+def png_bytes(rgb: FloatArray) -> bytes:
+    """An RGB frame encoded as PNG (an image feature's bytes)."""
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2BGR))
+    if not ok:
+        raise ValueError("cannot encode a frame as PNG")
+    return bytes(data.tobytes())

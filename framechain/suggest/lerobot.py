@@ -6,10 +6,11 @@ degrees, raw servo ticks, LeRobot's -100..100 and 0-100 ranges), one arm per pre
 per video or image feature with its size and a guessed focal length.
 
 When the dataset's ``robot_type`` names an arm framechain bundles a URDF for
-(:mod:`framechain.robot.known_arms`: SO-100, SO-101, Koch), the file is complete: that URDF,
+(:mod:`framechain.robot.known_arms`: SO-100, SO-101, Koch, ALOHA, LeKiwi), the file is complete: that URDF,
 the state names matched to its joints under any per-arm prefix (``left_``, ``arm1_``, ``follower_``,
 numbered ``arm1_j1``), and each camera on the gripper link of the arm its name mentions (a wrist
-camera of one arm, else the world), its mount a placeholder that the camera's motion measures.
+camera of one arm, else the world, or a mobile base: LeKiwi's ``x.vel``, ``y.vel``, ``theta.vel`` become
+``mobile_base``), its mount a placeholder that the camera's motion measures.
 :func:`generated_robot` gives it to a run without ``--robot``. Otherwise what cannot be known from
 the data is a placeholder in capitals (``URDF``, ``LINK``) with a comment, as in the chain suggestion.
 """
@@ -29,7 +30,14 @@ from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, Feat
 from framechain.config.robot import GeneratedRobot
 from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
 from framechain.robot.kinematics import RobotModel
-from framechain.robot.known_arms import ArmJoints, KnownArm, arm_prefixes, known_arm, match_state_names
+from framechain.robot.known_arms import (
+    BASE_VELOCITIES,
+    ArmJoints,
+    KnownArm,
+    arm_prefixes,
+    known_arm,
+    match_state_names,
+)
 
 __all__ = ["dataset_needs", "generated_robot", "guess_arm_units", "guess_unit", "robot_yaml_skeleton"]
 
@@ -165,8 +173,11 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
         lines.append(f"# note: {note}")
     lines.append(f"state_feature: {state or 'STATE_FEATURE'}")
     lines += _arm_lines(arms, urdf, arm.bases if arm is not None else {})
+    base = _mobile_base_lines(names, one_arm=len(arms) == 1 and not arms[0].prefix)
+    lines += base
     link = arm.camera_link if arm is not None and arms else "gripper_link"
-    lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms))
+    lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms),
+                           fixed="mobile_base" if base else "world")
     text = "\n".join(lines) + "\n"
     if arm is None or not arms:
         return text, ""
@@ -175,9 +186,10 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
     for a in arms:
         units.setdefault(a.default_unit, a.unit_note)
     on = f"{len(arms)} arms ({', '.join(a.prefix for a in arms)})" if len(arms) > 1 else "1 arm"
+    moved = f", {len(BASE_VELOCITIES)} the mobile base's velocities" if base else ""
     return text, (f"used the bundled {arm.title} URDF and a guessed mapping ({mapped} of {len(names)} state names "
-                  f"on {on}; units {'; '.join(f'{u}: {n}' for u, n in units.items())}; cameras' intrinsics and "
-                  "mounts guessed)")
+                  f"on {on}{moved}; units {'; '.join(f'{u}: {n}' for u, n in units.items())}; cameras' intrinsics "
+                  "and mounts guessed)")
 
 
 def _state_feature(reader: DatasetReader) -> str | None:
@@ -301,8 +313,24 @@ def _yaml_name(name: str) -> str:
     return name if re.fullmatch(r"[A-Za-z_][\w.-]*", name) else f"'{name}'"
 
 
-def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, known: bool) -> list[str]:
-    """One camera per video (or image) feature: its key, size and guessed intrinsics, and its mount."""
+def _mobile_base_lines(names: Sequence[str], *, one_arm: bool) -> list[str]:
+    """``mobile_base`` when the state holds LeRobot's base velocities (LeKiwi's ``x.vel``, ``y.vel``,
+    ``theta.vel``): the base's turns move every camera, and forward kinematics of the arm alone leaves them out.
+    One arm's place on the base is guessed at its centre (several arms': their ``world_from_base``)."""
+    if not set(BASE_VELOCITIES.values()) <= set(names):
+        return []
+    place = ["world_from_base: {xyz: [0.0, 0.0, 0.0], rpy: [0.0, 0.0, 0.0]}  # GUESSED: the arm's place on the "
+             "mobile base; measure it"] if one_arm else []
+    return [*place, "mobile_base:  # the base's recorded velocities move the arm in the world",
+            "  frame: mobile_base",
+            *(f"  {key}: {name}" for key, name in BASE_VELOCITIES.items()),
+            "  speed_unit: m/s", "  yaw_rate_unit: deg/s  # LeRobot's"]
+
+
+def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, known: bool, fixed: str = "world"
+                  ) -> list[str]:
+    """One camera per video (or image) feature: its key, size and guessed intrinsics, and its mount (a camera on no
+    arm's wrist on ``fixed``: the world, or a mobile base)."""
     features = [f for f in reader.features.values() if f.is_video or f.dtype == "image"]
     if not features:
         return ["cameras: {}  # the dataset has no video or image feature"]
@@ -313,7 +341,7 @@ def _camera_lines(reader: DatasetReader, arms: Sequence[_Arm], link: str, *, kno
         width, height = _size(feature)
         focal = focal_of_fov(width, ASSUMED_FOV_DEG)
         arm = _camera_arm(name, arms)
-        parent = "world" if arm is None else f"{arm.prefix if prefixed else ''}{link}"
+        parent = fixed if arm is None else f"{arm.prefix if prefixed else ''}{link}"
         mount = ("GUESSED: a placeholder; the link and mount are measured from the camera's motion" if known
                  else "FILL IN: the link (or world) and the measured mount")
         codec = feature.info.get("video.codec", "image" if feature.dtype == "image" else "?")

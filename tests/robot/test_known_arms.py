@@ -116,6 +116,7 @@ def test_the_bundled_viperx_keeps_the_published_kinematics() -> None:
 @pytest.mark.parametrize(("robot_type", "arm", "arms"), [
     ("so101_follower", "so101", 1), ("bi_so100_follower", "so100", 2), ("koch_follower", "koch", 1),
     ("SO-101", "so101", 1), ("aloha", "aloha", 2), ("mobile_aloha", "mobilealoha", 2), ("viperx", "viperx", 1),
+    ("lekiwi", "lekiwi", 1), ("lekiwi_client", "lekiwi", 1),
     ("ur5e", None, 0), (None, None, 0)])
 def test_robot_type_selects_the_urdf(robot_type: str | None, arm: str | None, arms: int) -> None:
     found = known_arm(robot_type)

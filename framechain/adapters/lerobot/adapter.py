@@ -40,6 +40,7 @@ from framechain.adapters.errors import AdapterError
 from framechain.adapters.lerobot.camera_frames import camera_frames, depth_frames, episode_clock
 from framechain.adapters.lerobot.clock import VideoClock
 from framechain.adapters.lerobot.detections import episode_observations, with_markers
+from framechain.adapters.lerobot.odometry import mobile_base_edge
 from framechain.adapters.lerobot.reader import (
     DatasetError,
     DatasetReader,
@@ -106,7 +107,7 @@ def open_dataset(
     source_name = f"{Path(path).name}:{cfg.state_feature}"
 
     transforms = TransformTable.concat([
-        _world_edge(cfg, model),
+        *_world_edges(cfg, model, recorded, names, state_ns, source_name),
         *_joint_edges(model, cfg, q, state_ns, source_name),
         *_mount_edges(cfg),
     ])
@@ -136,7 +137,9 @@ def open_dataset(
 def _finite_state(cfg: RobotConfig, frames: EpisodeFrames, names: Sequence[str]) -> FloatArray:
     """The state feature's rows (frames, values); a mapped joint's value that is not finite is an error."""
     state = np.asarray(frames.columns[cfg.state_feature], dtype=float).reshape(len(frames), -1)
-    bad = ~np.isfinite(state[:, [names.index(m.state) for m in cfg.joints if m.state in names]])
+    base = cfg.mobile_base.states if cfg.mobile_base is not None else ()
+    read = [names.index(s) for s in (*(m.state for m in cfg.joints), *base) if s in names]
+    bad = ~np.isfinite(state[:, read])
     if bad.any():
         k = int(np.flatnonzero(bad.any(axis=1))[0])
         raise DatasetError(frames.episode.data_file, f"{cfg.state_feature} is not finite at frame {k}")
@@ -257,13 +260,17 @@ def camera_stamps_ns(frames: EpisodeFrames, camera: CameraCalibration) -> IntArr
     return out
 
 
-def _world_edge(cfg: RobotConfig, model: RobotModel) -> TransformTable:
-    if model.root == cfg.world_frame:  # several arms: their bases hang from the world in the model
-        return TransformTable.empty()
-    return TransformTable.from_rows(
-        cfg.world_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
-        is_static=True, source=f"{cfg.source}:world_from_base",
-    )
+def _world_edges(cfg: RobotConfig, model: RobotModel, state: FloatArray, names: Sequence[str], stamps: IntArray,
+                 source: str) -> list[TransformTable]:
+    """``world -> `` the mobile base per row (when it has one), and the arm's base on what it stands on (several
+    arms: their bases hang from it in the model already)."""
+    out = [] if cfg.mobile_base is None else [mobile_base_edge(cfg.mobile_base, cfg.world_frame, state, names,
+                                                                 stamps, source)]
+    if model.root != cfg.arms_frame:
+        out.append(TransformTable.from_rows(
+            cfg.arms_frame, model.root, [0], [cfg.world_from_base_translation], [cfg.world_from_base_quat_xyzw],
+            is_static=True, source=f"{cfg.source}:world_from_base"))
+    return out
 
 
 def _joint_edges(
