@@ -56,6 +56,8 @@ class KnownArm:
     bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
     #: The robot always has two of these arms (ALOHA), whatever its ``robot_type`` says.
     pair: bool = False
+    #: Where the arm stands on its mobile base (LeKiwi): xyz (m) and rpy (rad) in the base's frame (x forward).
+    on_base: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
 
     def arms_in(self, robot_type: str) -> int:
         """How many of these arms a robot of ``robot_type`` has: two for LeRobot's ``bi_...`` robots and a pair's."""
@@ -72,9 +74,12 @@ KNOWN_ARMS = {
                      "gripper-static-motor_v2_1",
                      joints={"shoulder_pan": "Revolute 2", "shoulder_lift": "Revolute 3", "elbow_flex": "Revolute 5",
                              "wrist_roll": "Revolute 6", "gripper": "Revolute 7"}),
-    # LeKiwi: an SO-101 (``arm_shoulder_pan.pos`` ...) on a three-wheeled base whose velocities it records too.
+    # LeKiwi: an SO-101 (``arm_shoulder_pan.pos`` ...) on a three-wheeled base whose velocities it records too. In
+    # LeKiwi's design (SIGRobotics-UIUC/LeKiwi, URDF/LeKiwi.urdf, Apache-2.0) the arm faces forward with its pan axis
+    # 7.4 cm ahead of the wheels' centre: the SO-101's base_link (3.9 cm behind its pan axis) 3.5 cm ahead, 9 cm up.
     "lekiwi": KnownArm("lekiwi", "LeKiwi SO-101", _URDFS / "so101" / "so101_new_calib.urdf",
-                       "TheRobotStudio/SO-ARM100, Apache-2.0", "gripper_link"),
+                       "TheRobotStudio/SO-ARM100, Apache-2.0", "gripper_link", on_base=((0.035, 0.0, 0.09),
+                                                                                      (0.0, 0.0, 0.0))),
 }
 #: LeRobot's names of a mobile base's body-frame velocities (LeKiwi: m/s forward and to the left, deg/s
 #: counter-clockwise), as robot.yaml's ``mobile_base`` keys take them.

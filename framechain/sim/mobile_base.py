@@ -17,8 +17,10 @@ __all__ = ["ARM_ON_BASE", "BASE_STATE_NAMES", "BaseMotion", "base_motion"]
 
 #: LeRobot's names of LeKiwi's base velocities in its state.
 BASE_STATE_NAMES = ("x.vel", "y.vel", "theta.vel")
-#: Where the arm's base stands on the mobile base: 10 cm ahead of its centre, 12 cm up, facing forward.
-ARM_ON_BASE = np.array([[1.0, 0.0, 0.0, 0.10], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.12], [0.0, 0.0, 0.0, 1.0]])
+#: Where the arm's base_link stands on the mobile base, facing forward: LeKiwi's design puts it 3.5 cm ahead of the
+#: wheels' centre and 9 cm up (SIGRobotics-UIUC/LeKiwi's URDF); this one is built 1 cm further forward and 1 cm to the
+#: left, as a built robot departs from its drawing.
+ARM_ON_BASE = np.array([[1.0, 0.0, 0.0, 0.045], [0.0, 1.0, 0.0, 0.01], [0.0, 0.0, 1.0, 0.09], [0.0, 0.0, 0.0, 1.0]])
 
 
 @dataclass(frozen=True)

@@ -173,7 +173,8 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
         lines.append(f"# note: {note}")
     lines.append(f"state_feature: {state or 'STATE_FEATURE'}")
     lines += _arm_lines(arms, urdf, arm.bases if arm is not None else {})
-    base = _mobile_base_lines(names, one_arm=len(arms) == 1 and not arms[0].prefix)
+    one_arm = len(arms) == 1 and not arms[0].prefix
+    base = _mobile_base_lines(names, arm.on_base if arm is not None and one_arm else None)
     lines += base
     link = arm.camera_link if arm is not None and arms else "gripper_link"
     lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms),
@@ -313,14 +314,16 @@ def _yaml_name(name: str) -> str:
     return name if re.fullmatch(r"[A-Za-z_][\w.-]*", name) else f"'{name}'"
 
 
-def _mobile_base_lines(names: Sequence[str], *, one_arm: bool) -> list[str]:
+def _mobile_base_lines(names: Sequence[str], on_base: tuple[tuple[float, ...], tuple[float, ...]] | None
+                       ) -> list[str]:
     """``mobile_base`` when the state holds LeRobot's base velocities (LeKiwi's ``x.vel``, ``y.vel``,
     ``theta.vel``): the base's turns move every camera, and forward kinematics of the arm alone leaves them out.
-    One arm's place on the base is guessed at its centre (several arms': their ``world_from_base``)."""
+    One known arm's place on the base is its design's (``on_base``; several arms': their ``world_from_base``)."""
     if not set(BASE_VELOCITIES.values()) <= set(names):
         return []
-    place = ["world_from_base: {xyz: [0.0, 0.0, 0.0], rpy: [0.0, 0.0, 0.0]}  # GUESSED: the arm's place on the "
-             "mobile base; measure it"] if one_arm else []
+    place = [] if on_base is None else [
+        f"world_from_base: {{xyz: [{', '.join(repr(float(v)) for v in on_base[0])}], "
+        f"rpy: [{', '.join(repr(float(v)) for v in on_base[1])}]}}  # GUESSED (the design's): the arm on the base"]
     return [*place, "mobile_base:  # the base's recorded velocities move the arm in the world",
             "  frame: mobile_base",
             *(f"  {key}: {name}" for key, name in BASE_VELOCITIES.items()),

@@ -104,11 +104,28 @@ def test_the_wrist_cameras_offset_is_found_with_the_bases_turns_and_not_claimed_
     assert not blind["findings"]
 
 
+def test_attribute_without_robot_reads_lekiwis_base_and_finds_the_wrist_camera(
+        lekiwi: tuple[VideoDatasetTruth, Path], tmp_path: Path) -> None:
+    """No robot.yaml: robot_type lekiwi gives the bundled SO-101 on a mobile base, the arm where LeKiwi's drawing
+    puts it (this one built 1.4 cm off); the camera's link, offset and position come from its motion."""
+    truth, _robot = lekiwi
+    assert main(["attribute", str(truth.root), "--episode", "1", "--out", str(tmp_path), "--format", "json",
+                 "-q"]) == 0
+    assert "mobile_base:" in (tmp_path / "robot.yaml").read_text()
+    found = _camera(tmp_path / "attribution.json")
+    assert (found["explained"], found["link"]) == (True, "gripper_link")
+    assert found["offset_s"] == pytest.approx(truth.expected_offset_s, abs=0.006)
+    position = found["position"]
+    assert isinstance(position, dict)
+    assert np.linalg.norm(np.subtract(position["xyz_link_cam"], truth.xyz_link_cam)) < 0.015
+
+
 def test_info_puts_lekiwis_base_under_its_arm_and_its_front_camera(tmp_path: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """LeKiwi as lerobot records it (robot_type lekiwi, arm_shoulder_pan.pos .. arm_gripper.pos, x.vel, y.vel,
-    theta.vel; cameras front and wrist): the bundled SO-101 on a mobile base read from the three velocities, the
-    wrist camera on gripper_link and the front one on the base; as printed it loads."""
+    theta.vel; cameras front and wrist): the bundled SO-101 on a mobile base read from the three velocities, placed
+    where LeKiwi's drawing has it, the wrist camera on gripper_link and the front one on the base; as printed it
+    loads."""
     rng = np.random.default_rng(3)
     state = np.column_stack([rng.uniform(-40, 40, (6, 5)), rng.uniform(0, 100, 6), rng.uniform(-0.2, 0.2, (6, 2)),
                              rng.uniform(-60, 60, 6)]).astype(np.float32)
@@ -121,6 +138,8 @@ def test_info_puts_lekiwis_base_under_its_arm_and_its_front_camera(tmp_path: Pat
     skeleton = yaml.safe_load(capsys.readouterr().out)
     assert Path(skeleton["urdf"]) == KNOWN_ARMS["lekiwi"].urdf == KNOWN_ARMS["so101"].urdf
     assert skeleton["joints"]["arm_shoulder_pan.pos"] == "shoulder_pan"
+    # LeKiwi's drawing: the arm's pan axis 7.4 cm ahead of the wheels' centre, base_link 3.9 cm behind the axis.
+    assert skeleton["world_from_base"] == {"xyz": [0.035, 0.0, 0.09], "rpy": [0.0, 0.0, 0.0]}
     assert skeleton["mobile_base"] == {"frame": "mobile_base", "x_vel": "x.vel", "y_vel": "y.vel",
                                        "yaw_rate": "theta.vel", "speed_unit": "m/s", "yaw_rate_unit": "deg/s"}
     parents = {name: cam["mount"]["parent"] for name, cam in skeleton["cameras"].items()}
