@@ -130,6 +130,9 @@ def check_robot(config: RobotConfig, model: RobotModel) -> None:
     for name in config.hold:
         if name not in model.actuated:
             raise RobotConfigError(fail, f"hold.{name}: not a moving, non-mimic URDF joint")
+    if config.mobile_base is not None and model.has_link(config.arms_frame):
+        raise RobotConfigError(fail, f"mobile_base.frame {config.arms_frame!r} is a link of the URDF already; name the "
+                               "base's frame another way")
     driven = {m.joint for m in config.joints} | set(config.hold)
     for cam in config.cameras.values():
         # A camera named "wrist" on an SO-101 would add a second parent to the URDF's wrist_link.

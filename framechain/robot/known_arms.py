@@ -56,8 +56,9 @@ class KnownArm:
     bases: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = field(default_factory=dict)
     #: The robot always has two of these arms (ALOHA), whatever its ``robot_type`` says.
     pair: bool = False
-    #: Where the arm stands on its mobile base (LeKiwi): xyz (m) and rpy (rad) in the base's frame (x forward).
-    on_base: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    #: Where the arm stands on its mobile base in the robot's drawing (LeKiwi): xyz (m) and rpy (rad) in the base's
+    #: frame, x forward (None: not known, guessed at the base's centre).
+    on_base: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
 
     def arms_in(self, robot_type: str) -> int:
         """How many of these arms a robot of ``robot_type`` has: two for LeRobot's ``bi_...`` robots and a pair's."""

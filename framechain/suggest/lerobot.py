@@ -174,7 +174,7 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
     lines.append(f"state_feature: {state or 'STATE_FEATURE'}")
     lines += _arm_lines(arms, urdf, arm.bases if arm is not None else {})
     one_arm = len(arms) == 1 and not arms[0].prefix
-    base = _mobile_base_lines(names, arm.on_base if arm is not None and one_arm else None)
+    base = _mobile_base_lines(names, one_arm, arm.on_base if arm is not None else None)
     lines += base
     link = arm.camera_link if arm is not None and arms else "gripper_link"
     lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms),
@@ -314,16 +314,18 @@ def _yaml_name(name: str) -> str:
     return name if re.fullmatch(r"[A-Za-z_][\w.-]*", name) else f"'{name}'"
 
 
-def _mobile_base_lines(names: Sequence[str], on_base: tuple[tuple[float, ...], tuple[float, ...]] | None
-                       ) -> list[str]:
+def _mobile_base_lines(names: Sequence[str], one_arm: bool,
+                       on_base: tuple[tuple[float, ...], tuple[float, ...]] | None) -> list[str]:
     """``mobile_base`` when the state holds LeRobot's base velocities (LeKiwi's ``x.vel``, ``y.vel``,
     ``theta.vel``): the base's turns move every camera, and forward kinematics of the arm alone leaves them out.
-    One known arm's place on the base is its design's (``on_base``; several arms': their ``world_from_base``)."""
+    One arm stands where its robot's drawing puts it (``on_base``), else at the base's centre; several arms: their
+    ``world_from_base``."""
     if not set(BASE_VELOCITIES.values()) <= set(names):
         return []
-    place = [] if on_base is None else [
-        f"world_from_base: {{xyz: [{', '.join(repr(float(v)) for v in on_base[0])}], "
-        f"rpy: [{', '.join(repr(float(v)) for v in on_base[1])}]}}  # GUESSED (the design's): the arm on the base"]
+    xyz, rpy = on_base or ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    said = "GUESSED (the robot's drawing)" if on_base is not None else "GUESSED: measure it"
+    pose = f"{{xyz: [{', '.join(repr(float(v)) for v in xyz)}], rpy: [{', '.join(repr(float(v)) for v in rpy)}]}}"
+    place = [f"world_from_base: {pose}  # {said}: the arm on the mobile base"] if one_arm else []
     return [*place, "mobile_base:  # the base's recorded velocities move the arm in the world",
             "  frame: mobile_base",
             *(f"  {key}: {name}" for key, name in BASE_VELOCITIES.items()),

@@ -158,6 +158,7 @@ def test_info_puts_lekiwis_base_under_its_arm_and_its_front_camera(tmp_path: Pat
     ({"yaw_rate": "omega.vel"}, "state names ['omega.vel'] are not in observation.state"),
     ({"yaw_rate": "theta.vel", "yaw_rate_unit": "rpm"}, "mobile_base.yaw_rate_unit is an unknown unit 'rpm'"),
     ({"frame": "world", "yaw_rate": "theta.vel"}, "mobile_base.frame is the world frame 'world'"),
+    ({"frame": "base_link", "yaw_rate": "theta.vel"}, "mobile_base.frame 'base_link' is a link of the URDF already"),
     ({"frame": "mobile_base"}, "mobile_base: names none of x_vel, y_vel, yaw_rate"),
     ({"yaw_rate": "theta.vel", "odom": "x"}, "mobile_base: unknown keys ['odom']"),
 ])
