@@ -39,16 +39,15 @@ def test_a_constant_turn_at_a_constant_speed_is_a_circle() -> None:
 
 
 def test_sideways_speed_is_to_the_left_of_the_heading() -> None:
-    """Turned a quarter turn to the left (in 1 s at 90 deg/s, then held), 0.1 m/s to the left of the base is -x in
-    the world."""
+    """A quarter turn to the left in the first second (a turn rate of (pi/2)(1 - cos 2 pi t), smooth to rest), then
+    0.1 m/s to the left of the base for 2 s: -x in the world, 0.2 m."""
     t = np.arange(0, 3.001, 0.01)
-    rate = np.where(t < 1.0, np.pi / 2, 0.0)
-    rate[100] = np.pi / 4  # the step at 1 s, as the trapezoid sees a rate sampled there
-    left = np.where(t >= 1.0, 0.1, 0.0)
+    rate = np.where(t <= 1.0, np.pi / 2 * (1.0 - np.cos(2 * np.pi * t)), 0.0)
+    left = np.where(t > 1.0, 0.1, 0.0)
     xyz, quat = base_poses((t * 1e9).astype(np.int64), np.zeros(t.size), left, rate)
     heading = Rotation.from_quat(quat[-1]).as_euler("xyz")[2]
-    assert heading == pytest.approx(np.pi / 2, abs=0.01)
-    np.testing.assert_allclose(xyz[-1], [-0.2, 0.0, 0.0], atol=0.002)
+    assert heading == pytest.approx(np.pi / 2, abs=1e-4)
+    np.testing.assert_allclose(xyz[-1], [-0.2, 0.0, 0.0], atol=1e-3)  # the speed starts within a row: 0.5 mm
 
 
 @pytest.fixture(scope="module")
