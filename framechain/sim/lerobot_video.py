@@ -150,6 +150,10 @@ class VideoDatasetSpec:
     #: ``theta.vel`` recorded too); 0: the arm stands in the world.
     base_turn_deg: float = 0.0
 
+    def __post_init__(self) -> None:
+        if self.base_turn_deg and self.bimanual:
+            raise ValueError("base_turn_deg: the generated mobile base (LeKiwi's) carries one arm")
+
     @property
     def prefix(self) -> str:
         """What comes before a joint in a one-arm state name (LeKiwi's ``arm_``)."""
@@ -310,8 +314,6 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     rng = np.random.default_rng(spec.seed)
     kind = ARMS[spec.arm]
     arms = ("left_", "right_") if spec.bimanual else ("",)
-    if spec.base_turn_deg and spec.bimanual:
-        raise ValueError("base_turn_deg: the generated mobile base (LeKiwi's) carries one arm")
     if not spec.camera_per_arm and (spec.camera_arm not in arms or spec.declared_arm not in (None, *arms)):
         raise ValueError(f"camera arm {spec.camera_arm!r} / declared {spec.declared_arm!r}: arms are {arms}")
     layout = _camera_layout(spec, arms)
