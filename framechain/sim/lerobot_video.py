@@ -45,15 +45,22 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from framechain.adapters.lerobot.video import encode_video
 from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 from framechain.arrays import FloatArray
-from framechain.sim.mobile_base import ARM_ON_BASE, BASE_STATE_NAMES, BaseMotion, base_motion
+from framechain.sim.lerobot_encoding import frames_feature, realtime_stamps, write_videos
+from framechain.sim.mobile_base import (
+    ARM_ON_BASE,
+    BASE_FRAME,
+    BASE_STATE_NAMES,
+    FRONT_ON_BASE,
+    BaseMotion,
+    base_motion,
+)
 from framechain.sim.urdf_chain import UrdfChain, rpy_matrix
 from framechain.sim.video_scene import PadRegion, TexturedScene, pixel_rays, png_bytes
 
 __all__ = ["ARMS", "ARM_JOINTS", "ArmKind", "CameraTruth", "VideoDatasetSpec", "VideoDatasetTruth",
-           "generate_video_dataset", "gripper_pads", "realtime_stamps", "write_robot_yaml"]
+           "generate_video_dataset", "gripper_pads", "write_robot_yaml"]
 
 ARM_JOINTS = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll")
 
@@ -149,10 +156,14 @@ class VideoDatasetSpec:
     #: A mobile base turning up to this many degrees either way (LeKiwi: ``arm_`` names, ``x.vel``, ``y.vel``,
     #: ``theta.vel`` recorded too); 0: the arm stands in the world.
     base_turn_deg: float = 0.0
+    #: LeKiwi's front camera on the mobile base too (after the wrist camera; needs ``base_turn_deg``).
+    front_camera: bool = False
 
     def __post_init__(self) -> None:
         if self.base_turn_deg and self.bimanual:
             raise ValueError("base_turn_deg: the generated mobile base (LeKiwi's) carries one arm")
+        if self.front_camera and not self.base_turn_deg:
+            raise ValueError("front_camera rides the mobile base: give base_turn_deg")
 
     @property
     def prefix(self) -> str:
@@ -181,6 +192,8 @@ class CameraTruth:
     #: Per episode: how late its frames are (s); framechain's offset is minus this.
     delays_s: tuple[float, ...]
     black_episodes: tuple[int, ...] = ()
+    #: Where it is on its link (None: the wrist camera's ``spec.mount_xyz``).
+    xyz_link_cam: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -220,21 +233,6 @@ class VideoDatasetTruth:
 
     def camera(self, name: str) -> CameraTruth:
         return next(c for c in self.cameras if c.name == name)
-
-
-def realtime_stamps(rng: np.random.Generator, duration_s: float, rate_hz: float) -> FloatArray:
-    """Capture times (s, from 0) of a recorder whose loop runs at a variable ``rate_hz`` on average.
-
-    Intervals jitter by about 15% around the mean, and one in thirty takes twice as long (a late loop),
-    as the rows of a real SO-101 recording do (about 18.6 Hz where 20 fps was asked).
-    """
-    mean = 1.0 / rate_hz
-    count = max(2, round(duration_s * rate_hz))
-    intervals = mean * np.clip(1.0 + 0.15 * rng.standard_normal(count - 1), 0.6, 1.6)
-    intervals[rng.random(count - 1) < 1.0 / 30.0] *= 2.0
-    intervals *= (count - 1) * mean / intervals.sum()  # keep the average rate
-    out: FloatArray = np.concatenate([[0.0], np.cumsum(intervals)])
-    return out
 
 
 def _trajectory(rng: np.random.Generator, kind: ArmKind, *, still: bool = False,
@@ -297,7 +295,7 @@ def _camera_layout(spec: VideoDatasetSpec, arms: tuple[str, ...]) -> list[tuple[
         other = {arms[0]: arms[1], arms[1]: arms[0]}
         return [(f"{arm}wrist", arm, other[arm] if spec.swap_cameras else arm) for arm in arms]
     declared = spec.camera_arm if spec.declared_arm is None else spec.declared_arm
-    return [("wrist", spec.camera_arm, declared)]
+    return [("wrist", spec.camera_arm, declared), *([("front", BASE_FRAME, BASE_FRAME)] if spec.front_camera else [])]
 
 
 def _episode_stamps(rng: np.random.Generator, spec: VideoDatasetSpec) -> FloatArray:
@@ -309,6 +307,28 @@ def _episode_stamps(rng: np.random.Generator, spec: VideoDatasetSpec) -> FloatAr
     return out
 
 
+@dataclass(frozen=True)
+class _Rig:
+    """What places a camera in the world: the arms' chains and bases, and the wrist camera's true mount."""
+
+    kind: ArmKind
+    chains: dict[str, UrdfChain]
+    bases: dict[str, FloatArray]
+    mount: FloatArray
+
+    def world_from_cam(self, arm: str, motions: dict[str, tuple[FloatArray, FloatArray, FloatArray]],
+                       base: BaseMotion | None, seen: FloatArray) -> FloatArray:
+        """``T_world_cam`` (T, 4, 4) at the moments ``seen`` of the wrist camera ``arm`` carries, or of the front
+        camera on the mobile base (``arm`` :data:`BASE_FRAME`)."""
+        if arm == BASE_FRAME and base is not None:
+            out: FloatArray = base.world_from_base(seen) @ FRONT_ON_BASE
+        else:
+            joints = dict(zip(self.kind.joints, _joints(self.kind, motions[arm], seen).T, strict=True))
+            stands = self.bases[arm] if base is None else base.world_from_base(seen) @ ARM_ON_BASE
+            out = stands @ self.chains[arm].root_from_link(joints, f"{arm}{self.kind.camera_link}") @ self.mount
+        return out
+
+
 def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDatasetTruth:
     """Render, encode and write the dataset under ``root`` (created); return its truth."""
     rng = np.random.default_rng(spec.seed)
@@ -317,12 +337,12 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
     if not spec.camera_per_arm and (spec.camera_arm not in arms or spec.declared_arm not in (None, *arms)):
         raise ValueError(f"camera arm {spec.camera_arm!r} / declared {spec.declared_arm!r}: arms are {arms}")
     layout = _camera_layout(spec, arms)
-    chains = {arm: UrdfChain(spec.urdf, prefix=arm) for arm in {a for _n, a, _d in layout}}
     scene = TexturedScene(rng, table_style=spec.table)
     cx, cy = (spec.width - 1) / 2.0, (spec.height - 1) / 2.0
     rays = pixel_rays(spec.focal_px, spec.focal_px, cx, cy, spec.width, spec.height)
     mount, declared_mount = _mounts(spec)
-    bases = _base_poses(arms)
+    rig = _Rig(kind, {arm: UrdfChain(spec.urdf, prefix=arm) for arm in {a for _n, a, _d in layout} - {BASE_FRAME}},
+               _base_poses(arms), mount)
     pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
     names = tuple(f"{arm or spec.prefix}{joint}{kind.suffix}" for arm in arms for joint in (*kind.joints, "gripper"))
     names += BASE_STATE_NAMES if spec.base_turn_deg else ()
@@ -343,14 +363,12 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
         repeated.append(tuple(int(k) for k in repeats))
         columns: dict[str, np.ndarray] = {"observation.state": state, "action": np.concatenate([state[1:], state[-1:]])}
         for c, ((name, arm, _declared), key) in enumerate(zip(layout, keys, strict=True)):
-            captured = _joints(kind, motions[arm], t - spec.delay_s(c, e))
-            stands = bases[arm] if base is None else base.world_from_base(t - spec.delay_s(c, e)) @ ARM_ON_BASE
-            world_from_cam = stands @ chains[arm].root_from_link(
-                dict(zip(kind.joints, captured.T, strict=True)), f"{arm}{kind.camera_link}") @ mount
+            world_from_cam = rig.world_from_cam(arm, motions, base, t - spec.delay_s(c, e))
             if e == 0 and c == 0 and spec.marker_size_m > 0:
                 marker = scene.place_marker(world_from_cam, spec.marker_dictionary, spec.marker_id,
                                             spec.marker_size_m)
-            frames = np.stack([scene.render(pose, rays, pads) for pose in world_from_cam])
+            shown = pads if arm != BASE_FRAME else ()
+            frames = np.stack([scene.render(pose, rays, shown) for pose in world_from_cam])
             for k in repeats:  # in order, so runs of repeats all show the frame before the run
                 frames[k] = frames[k - 1]
             if e == 0 and name == spec.black_first_episode:
@@ -365,7 +383,8 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
                           robot_type="lekiwi" if spec.base_turn_deg else kind.robot_types[1 if spec.bimanual else 0])
     if spec.storage == "video":
         for key in keys:
-            _write_videos(out, key, videos[key], spec)
+            write_videos(out, key, videos[key], fps=spec.fps, codec=spec.codec, version=spec.version,
+                         options=spec.codec_options)
     return _truth(out, spec, layout, keys, arms=arms, names=names, mounts=(mount, declared_mount),
                   repeated=tuple(repeated), marker=marker, stamps=tuple(stamps), base_motions=tuple(base_motions))
 
@@ -386,6 +405,7 @@ def _truth(
         declared_link=f"{declared}{ARMS[spec.arm].camera_link}", q_link_cam=q_true, declared_q_link_cam=q_declared,
         delays_s=tuple(spec.delay_s(c, e) for e in range(spec.episodes)),
         black_episodes=(0,) if name == spec.black_first_episode else ())
+        if arm != BASE_FRAME else _front_truth(spec, name, key, c)
         for c, ((name, arm, declared), key) in enumerate(zip(layout, keys, strict=True)))
     first = cameras[0]
     cx, cy = (spec.width - 1) / 2.0, (spec.height - 1) / 2.0
@@ -398,17 +418,20 @@ def _truth(
     )
 
 
+def _front_truth(spec: VideoDatasetSpec, name: str, key: str, c: int) -> CameraTruth:
+    """LeKiwi's front camera: on the mobile base, declared where it is."""
+    q, on = Rotation.from_matrix(FRONT_ON_BASE[:3, :3]).as_quat(), BASE_FRAME
+    return CameraTruth(name, key, on, on, on, on, q, q, xyz_link_cam=FRONT_ON_BASE[:3, 3],
+                       delays_s=tuple(spec.delay_s(c, e) for e in range(spec.episodes)))
+
+
 def _features(spec: VideoDatasetSpec, names: tuple[str, ...], keys: Sequence[str]) -> dict[str, FeatureSpec]:
     out = {
         "observation.state": FeatureSpec("float32", (len(names),), list(names)),
         "action": FeatureSpec("float32", (len(names),), list(names)),
     }
     for key in keys:
-        out[key] = (FeatureSpec("video", (spec.height, spec.width, 3), ["height", "width", "channels"],
-                                {"video.fps": spec.fps, "video.codec": _CODEC_NAMES.get(spec.codec, spec.codec),
-                                 "video.pix_fmt": "yuv420p", "video.is_depth_map": False})
-                    if spec.storage == "video"
-                    else FeatureSpec("image", (spec.height, spec.width, 3), ["height", "width", "channels"]))
+        out[key] = frames_feature(spec.width, spec.height, fps=spec.fps, codec=spec.codec, storage=spec.storage)
     return out
 
 
@@ -416,16 +439,6 @@ def _black_frames(rng: np.random.Generator, shape: tuple[int, ...]) -> np.ndarra
     """A camera that delivered nothing: sensor noise a few grey levels above black."""
     out: np.ndarray = rng.integers(0, 6, size=shape, dtype=np.uint8)
     return out
-
-
-_CODEC_NAMES = {"libx264": "h264", "libsvtav1": "av1", "mpeg4": "mpeg4", "libx265": "hevc"}
-#: Fast encoder presets: generation time, not file size, matters here.
-#: One encoder thread: a threaded libx264 codes the same frames differently from run to run (a test would measure
-#: another video each time).
-_FAST = {"libx264": {"preset": "veryfast", "threads": "1"}, "libx265": {"preset": "veryfast", "threads": "1"},
-         "libsvtav1": {"preset": "10"},
-         # MPEG-4 Part 2 at the quality of a real recording (a frame sent twice decodes within about a grey level).
-         "mpeg4": {"b": "2500000"}}
 
 
 def _state(kind: ArmKind, motion: tuple[FloatArray, FloatArray, FloatArray], t_s: FloatArray) -> FloatArray:
@@ -437,18 +450,6 @@ def _state(kind: ArmKind, motion: tuple[FloatArray, FloatArray, FloatArray], t_s
         gripper = 0.5 + 0.3 * np.sin(0.7 * t_s)
     out: FloatArray = np.concatenate([joints, gripper[:, None]], axis=1)
     return out
-
-
-def _write_videos(root: Path, key: str, videos: list[np.ndarray], spec: VideoDatasetSpec) -> None:
-    """One mp4 per episode (v2.1), or the episodes back to back in one file (v3.0, as the writer's metadata says)."""
-    options = {**_FAST.get(spec.codec, {}), **dict(spec.codec_options)}
-    if spec.version == "v2.1":
-        for e, frames in enumerate(videos):
-            encode_video(root / f"videos/chunk-000/{key}/episode_{e:06d}.mp4", frames, fps=spec.fps, codec=spec.codec,
-                         options=options)
-    else:
-        encode_video(root / f"videos/{key}/chunk-000/file-000.mp4", np.concatenate(videos), fps=spec.fps,
-                     codec=spec.codec, options=options)
 
 
 def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[str, object] | None = None) -> Path:
@@ -472,7 +473,8 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
         return {
             "intrinsics": {"fx": truth.declared_focal_px, "fy": truth.declared_focal_px, "cx": cx, "cy": cy,
                            "width": spec.width, "height": spec.height},
-            "mount": {"parent": cam.declared_link, "xyz": [float(v) for v in truth.xyz_link_cam],
+            "mount": {"parent": cam.declared_link,
+                      "xyz": [float(v) for v in (truth.xyz_link_cam if cam.xyz_link_cam is None else cam.xyz_link_cam)],
                       "quat_xyzw": [float(v) for v in cam.declared_q_link_cam], "optical": True},
             "video_key": cam.video_key,
         }

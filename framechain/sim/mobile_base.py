@@ -13,8 +13,10 @@ import numpy as np
 
 from framechain.arrays import FloatArray
 
-__all__ = ["ARM_ON_BASE", "BASE_STATE_NAMES", "BaseMotion", "base_motion"]
+__all__ = ["ARM_ON_BASE", "BASE_FRAME", "BASE_STATE_NAMES", "FRONT_ON_BASE", "BaseMotion", "base_motion"]
 
+#: The frame of the base (robot.yaml's ``mobile_base.frame`` default), which LeKiwi's front camera rides.
+BASE_FRAME = "mobile_base"
 #: LeRobot's names of LeKiwi's base velocities in its state.
 BASE_STATE_NAMES = ("x.vel", "y.vel", "theta.vel")
 #: Where the arm's base_link stands on the mobile base, facing forward: LeKiwi's design puts it 3.5 cm ahead of the
@@ -62,3 +64,19 @@ def base_motion(rng: np.random.Generator, turn_deg: float) -> BaseMotion:
     return BaseMotion(turn_rad=float(np.deg2rad(turn_deg)), omega=float(rng.uniform(0.9, 1.4)),
                       phase=float(rng.uniform(0.0, 2 * np.pi)), drift_m=rng.uniform(0.03, 0.06, 2),
                       omega_xy=rng.uniform(0.6, 1.1, 2), phase_xy=rng.uniform(0.0, 2 * np.pi, 2))
+
+
+def _front_camera() -> FloatArray:
+    """LeKiwi's front camera on its base: 12 cm ahead, 10 cm up, looking ahead and 30 deg down (optical axes: x right,
+    y down, z along the view)."""
+    down = np.deg2rad(30.0)
+    view = np.array([np.cos(down), 0.0, -np.sin(down)])
+    right = np.array([0.0, -1.0, 0.0])
+    out = np.eye(4)
+    out[:3, :3] = np.column_stack([right, np.cross(view, right), view])
+    out[:3, 3] = (0.12, 0.0, 0.10)
+    return out
+
+
+#: ``T_base_cam`` of LeKiwi's front camera (optical frame).
+FRONT_ON_BASE = _front_camera()

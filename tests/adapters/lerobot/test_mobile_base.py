@@ -53,10 +53,11 @@ def test_sideways_speed_is_to_the_left_of_the_heading() -> None:
 @pytest.fixture(scope="module")
 def lekiwi(tmp_path_factory: pytest.TempPathFactory, so101_urdf: Path) -> tuple[VideoDatasetTruth, Path]:
     """A LeKiwi episode: the base turning up to 25 deg either way and drifting a few cm, the wrist camera 50 ms
-    late."""
+    late, the front camera on the base 80 ms."""
     folder = tmp_path_factory.mktemp("lekiwi")
     truth = generate_video_dataset(folder / "dataset", VideoDatasetSpec(
-        so101_urdf, seed=4, episodes=2, duration_s=8.0, fps=30, video_delay_s=0.05, base_turn_deg=25.0))
+        so101_urdf, seed=4, episodes=2, duration_s=8.0, fps=30, video_delay_s=0.05, base_turn_deg=25.0,
+        front_camera=True, camera_delays_s=(0.0, 0.03)))
     return truth, write_robot_yaml(truth, folder / "robot.yaml")
 
 
@@ -76,9 +77,8 @@ def test_the_base_moves_as_its_closed_form_from_the_first_row(lekiwi: tuple[Vide
     assert np.degrees(np.ptp(Rotation.from_matrix(expected[:, :3, :3]).as_rotvec()[:, 2])) > 30  # it did turn
 
 
-def _camera(attribution: Path) -> dict[str, object]:
-    (entry,) = json.loads(attribution.read_text())["camera_motion"]
-    return dict(entry)
+def _camera(attribution: Path, name: str = "wrist") -> dict[str, object]:
+    return dict(next(e for e in json.loads(attribution.read_text())["camera_motion"] if e["name"] == name))
 
 
 def test_the_wrist_cameras_offset_is_found_with_the_bases_turns_and_not_claimed_without(
@@ -94,13 +94,26 @@ def test_the_wrist_cameras_offset_is_found_with_the_bases_turns_and_not_claimed_
     mount = Rotation.from_quat(found["q_link_cam"]).inv() * Rotation.from_quat(truth.q_link_cam)
     assert np.degrees(mount.magnitude()) < 2.0
     config = yaml.safe_load(robot.read_text())
-    del config["mobile_base"]
+    del config["mobile_base"], config["cameras"]["front"]  # the front camera rides the base
     (tmp_path / "no_base.yaml").write_text(yaml.safe_dump(config))
     assert main(["attribute", str(truth.root), "--episode", "1", "--robot", str(tmp_path / "no_base.yaml"), "--out",
                  str(tmp_path / "without"), "--format", "json", "-q"]) == 0
     blind = json.loads((tmp_path / "without" / "attribution.json").read_text())
     assert _camera(tmp_path / "without" / "attribution.json")["explained"] is False
     assert not blind["findings"]
+
+
+def test_the_front_camera_rides_the_base_and_its_offset_is_found_from_the_bases_turns(
+        lekiwi: tuple[VideoDatasetTruth, Path], tmp_path: Path) -> None:
+    """The front camera turns only as the base does, about one axis: its offset comes from those turns (truth
+    -80 ms), and its focal length is said to be undetermined rather than fitted."""
+    truth, robot = lekiwi
+    assert main(["attribute", str(truth.root), "--episode", "1", "--robot", str(robot), "--out", str(tmp_path),
+                 "--format", "json", "-q"]) == 0
+    front = _camera(tmp_path / "attribution.json", "front")
+    assert (front["explained"], front["link"]) == (True, "mobile_base")
+    assert front["offset_s"] == pytest.approx(-truth.camera("front").delays_s[1], abs=0.006)
+    assert "intrinsics" in front["undetermined"]  # type: ignore[operator]
 
 
 def test_attribute_without_robot_reads_lekiwis_base_and_finds_the_wrist_camera(
