@@ -26,8 +26,10 @@ from dataclasses import dataclass
 
 from framechain.config.schema import Section
 
-__all__ = ["MobileBase", "parse_mobile_base"]
+__all__ = ["DEFAULT_FRAME", "MobileBase", "parse_mobile_base"]
 
+#: The base's frame when robot.yaml names none.
+DEFAULT_FRAME = "mobile_base"
 _KEYS = {"frame", "x_vel", "y_vel", "yaw_rate", "speed_unit", "yaw_rate_unit"}
 #: Per unit, the factor to SI (m/s, rad/s).
 SPEED_UNITS = {"m/s": 1.0, "mm/s": 1e-3}
@@ -38,7 +40,7 @@ YAW_RATE_UNITS = {"deg/s": math.pi / 180.0, "rad/s": 1.0}
 class MobileBase:
     """Which state names hold the base's body-frame velocities, and their units (factors to m/s and rad/s)."""
 
-    frame: str = "mobile_base"
+    frame: str = DEFAULT_FRAME
     x_vel: str | None = None
     y_vel: str | None = None
     yaw_rate: str | None = None
@@ -59,7 +61,7 @@ def parse_mobile_base(top: Section, world_frame: str) -> MobileBase | None:
     names = {key: section.name(key, what="a state name") for key in ("x_vel", "y_vel", "yaw_rate")}
     if not any(names.values()):
         section.fail("names none of x_vel, y_vel, yaw_rate: the state names of the base's velocities")
-    frame = section.frame("frame", "mobile_base") or "mobile_base"
+    frame = section.frame("frame", DEFAULT_FRAME) or DEFAULT_FRAME
     if frame == world_frame:
         section.fail_at(section.path("frame"), f"is the world frame {world_frame!r}: name the base's own frame")
     return MobileBase(frame=frame, **names, speed_scale=_unit(section, "speed_unit", "m/s", SPEED_UNITS),

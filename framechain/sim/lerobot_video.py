@@ -47,11 +47,11 @@ from scipy.spatial.transform import Rotation
 
 from framechain.adapters.lerobot.writer import EpisodeData, FeatureSpec, write_lerobot_dataset
 from framechain.arrays import FloatArray
+from framechain.config.mobile_base import DEFAULT_FRAME as BASE_FRAME
+from framechain.robot.known_arms import BASE_VELOCITIES
 from framechain.sim.lerobot_encoding import frames_feature, realtime_stamps, write_videos
 from framechain.sim.mobile_base import (
     ARM_ON_BASE,
-    BASE_FRAME,
-    BASE_STATE_NAMES,
     FRONT_ON_BASE,
     BaseMotion,
     base_motion,
@@ -319,7 +319,7 @@ class _Rig:
     def world_from_cam(self, arm: str, motions: dict[str, tuple[FloatArray, FloatArray, FloatArray]],
                        base: BaseMotion | None, seen: FloatArray) -> FloatArray:
         """``T_world_cam`` (T, 4, 4) at the moments ``seen`` of the wrist camera ``arm`` carries, or of the front
-        camera on the mobile base (``arm`` :data:`BASE_FRAME`)."""
+        camera on the mobile base (``arm`` the base's frame)."""
         if arm == BASE_FRAME and base is not None:
             out: FloatArray = base.world_from_base(seen) @ FRONT_ON_BASE
         else:
@@ -345,7 +345,7 @@ def generate_video_dataset(root: str | Path, spec: VideoDatasetSpec) -> VideoDat
                _base_poses(arms), mount)
     pads = gripper_pads(spec.width, spec.height) if spec.pads else ()
     names = tuple(f"{arm or spec.prefix}{joint}{kind.suffix}" for arm in arms for joint in (*kind.joints, "gripper"))
-    names += BASE_STATE_NAMES if spec.base_turn_deg else ()
+    names += tuple(BASE_VELOCITIES.values()) if spec.base_turn_deg else ()
     keys = [f"observation.images.{name}" for name, _a, _d in layout]
     episodes, repeated, stamps, base_motions = [], [], [], []
     videos: dict[str, list[np.ndarray]] = {key: [] for key in keys}
@@ -484,7 +484,7 @@ def write_robot_yaml(truth: VideoDatasetTruth, path: str | Path, *, extra: dict[
         config.update(urdf=str(spec.urdf), default_unit=kind.unit, joints=joints(""))
         if spec.base_turn_deg:
             config["world_from_base"] = {"xyz": [float(v) for v in ARM_ON_BASE[:3, 3]], "rpy": [0.0, 0.0, 0.0]}
-            config["mobile_base"] = dict(zip(("x_vel", "y_vel", "yaw_rate"), BASE_STATE_NAMES, strict=True))
+            config["mobile_base"] = dict(BASE_VELOCITIES)
     else:
         bases = _base_poses(truth.arms)
         config["arms"] = {arm.rstrip("_"): {"urdf": str(spec.urdf), "prefix": arm, "default_unit": kind.unit,

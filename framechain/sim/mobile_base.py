@@ -13,12 +13,8 @@ import numpy as np
 
 from framechain.arrays import FloatArray
 
-__all__ = ["ARM_ON_BASE", "BASE_FRAME", "BASE_STATE_NAMES", "FRONT_ON_BASE", "BaseMotion", "base_motion"]
+__all__ = ["ARM_ON_BASE", "FRONT_ON_BASE", "BaseMotion", "base_motion"]
 
-#: The frame of the base (robot.yaml's ``mobile_base.frame`` default), which LeKiwi's front camera rides.
-BASE_FRAME = "mobile_base"
-#: LeRobot's names of LeKiwi's base velocities in its state.
-BASE_STATE_NAMES = ("x.vel", "y.vel", "theta.vel")
 #: Where the arm's base_link stands on the mobile base, facing forward: LeKiwi's design puts it 3.5 cm ahead of the
 #: wheels' centre and 9 cm up (SIGRobotics-UIUC/LeKiwi's URDF); this one is built 1 cm further forward and 1 cm to the
 #: left, as a built robot departs from its drawing.

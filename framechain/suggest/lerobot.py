@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from framechain.adapters.lerobot.reader import DatasetError, DatasetReader, FeatureInfo
+from framechain.config.mobile_base import DEFAULT_FRAME
 from framechain.config.robot import GeneratedRobot
 from framechain.geometry.camera import ASSUMED_FOV_DEG, focal_of_fov
 from framechain.robot.kinematics import RobotModel
@@ -178,7 +179,7 @@ def _skeleton(reader: DatasetReader, path: Path, episode: int) -> tuple[str, str
     lines += base
     link = arm.camera_link if arm is not None and arms else "gripper_link"
     lines += _camera_lines(reader, arms, link, known=arm is not None and bool(arms),
-                           fixed="mobile_base" if base else "world")
+                           fixed=DEFAULT_FRAME if base else "world")
     text = "\n".join(lines) + "\n"
     if arm is None or not arms:
         return text, ""
@@ -327,7 +328,7 @@ def _mobile_base_lines(names: Sequence[str], one_arm: bool,
     pose = f"{{xyz: [{', '.join(repr(float(v)) for v in xyz)}], rpy: [{', '.join(repr(float(v)) for v in rpy)}]}}"
     place = [f"world_from_base: {pose}  # {said}: the arm on the mobile base"] if one_arm else []
     return [*place, "mobile_base:  # the base's recorded velocities move the arm in the world",
-            "  frame: mobile_base",
+            f"  frame: {DEFAULT_FRAME}",
             *(f"  {key}: {name}" for key, name in BASE_VELOCITIES.items()),
             "  speed_unit: m/s", "  yaw_rate_unit: deg/s  # LeRobot's"]
 

@@ -25,7 +25,9 @@ def base_poses(stamps_ns: IntArray, vx: FloatArray, vy: FloatArray, yaw_rate: Fl
                ) -> tuple[FloatArray, FloatArray]:
     """``world <- base`` at each stamp: translations (N, 3) and quaternions xyzw (N, 4), from the body-frame
     velocities ``vx``, ``vy`` (m/s) and the counter-clockwise turn rate ``yaw_rate`` (rad/s) at the stamps."""
-    t = (np.asarray(stamps_ns, dtype=np.int64) - int(stamps_ns[0])) * 1e-9 if len(stamps_ns) else np.zeros(0)
+    if not len(stamps_ns):
+        return np.zeros((0, 3)), np.zeros((0, 4))
+    t = (np.asarray(stamps_ns, dtype=np.int64) - int(stamps_ns[0])) * 1e-9
     dt = np.diff(t)
     heading = np.concatenate([[0.0], np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]) * dt)])
     cos, sin = np.cos(heading), np.sin(heading)
