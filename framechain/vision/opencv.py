@@ -44,9 +44,9 @@ def require_cv2() -> ModuleType:
 def opencv_threads(count: int) -> Iterator[None]:
     """OpenCV's own worker threads set to ``count`` within the block, as they were after it (nothing without OpenCV).
 
-    Cameras measured on threads of their own each call Lucas-Kanade, whose loop over the points runs on every core:
-    two cameras would put four threads on two cores (a generated two-camera episode tracked in 0.55 s with one
-    OpenCV thread each, 0.65 s with OpenCV's own)."""
+    Cameras measured at once (each in a process or on a thread of its own) each call Lucas-Kanade, whose loop over the
+    points runs on every core: two cameras would put four threads on two cores (a generated two-camera episode
+    tracked in 0.55 s with one OpenCV thread each, 0.65 s with OpenCV's own)."""
     try:
         cv2 = require_cv2()
     except MissingOpenCVError:

@@ -45,7 +45,7 @@ from framechain.replay import TransformBuffer
 from framechain.timeline import EgoMotionTable, TranslationPrior
 from framechain.vision.egomotion import FramePairCounts
 from framechain.vision.opencv import opencv_threads
-from framechain.vision.threads import run_threads, sharing_threads
+from framechain.vision.threads import forks, map_forked, run_threads, sharing_threads
 from framechain.vision.two_view import PairBatch
 
 __all__ = ["CameraImages", "CameraMotion", "CameraMotionEvidence", "ImagesOf", "measure_cameras"]
@@ -185,8 +185,9 @@ def measure_cameras(
     opts = options or EgoMotionFitOptions()
     if chain.evidence.camera_offset_window_s is not None:
         opts = replace(opts, max_offset_s=chain.evidence.camera_offset_window_s)
-    # One thread per camera: their fits are independent, and PyAV, OpenCV and NumPy release the interpreter's lock for
-    # most of the work (a log's reader fetches for one thread at a time).
+    # The cameras' fits are independent: each in a process of its own where this process may fork (no lock of the
+    # interpreter's shared), else on a thread of its own (PyAV, OpenCV and NumPy release that lock for most of the
+    # work); a log's reader fetches for one at a time.
     workers = max(1, min(len(order), run_threads()))
     share = max(1, run_threads() // workers)
 
@@ -194,9 +195,12 @@ def measure_cameras(
         with sharing_threads(share):
             return _measure_camera(chain, buffer, camera, images, opts, guessed=camera in guessed)
 
-    with ThreadPoolExecutor(max_workers=workers) as pool, \
-            opencv_threads(1) if workers > 1 else contextlib.nullcontext():
-        out = list(pool.map(measured, order))
+    with opencv_threads(1) if workers > 1 else contextlib.nullcontext():
+        if forks():
+            out = map_forked(measured, order, workers)
+        else:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                out = list(pool.map(measured, order))
     return CameraMotionEvidence(cameras=tuple(out))
 
 

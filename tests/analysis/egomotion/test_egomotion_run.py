@@ -448,3 +448,40 @@ def test_an_offset_window_longer_than_the_episode_is_named(clean: tuple[VideoDat
     assert result["findings"] == []
     assert "(+-10 s, evidence.camera_offset_window_s) inside both ends" in result["verdict"]
     assert not [n for n in result["notes"] if "turned" in n]
+
+
+def test_two_cameras_measured_in_forked_processes_give_what_threads_give(
+        tmp_path_factory: pytest.TempPathFactory, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch, so101_urdf: Path) -> None:
+    import os
+
+    import framechain.analysis.egomotion.run as egomotion_run
+
+    if not egomotion_run.forks():
+        pytest.skip("cameras are measured in forked processes on Linux only")
+    truth, robot = generated(tmp_path_factory, "run_two_cameras", VideoDatasetSpec(
+        so101_urdf, seed=24, duration_s=DURATION_S, bimanual=True, camera_per_arm=True, camera_delays_s=(0.04, 0.07)))
+    pids = tmp_path / "pids"
+    measure = egomotion_run._measure_camera
+
+    def noting(*args: Any, **kwargs: Any) -> Any:
+        with pids.open("a") as f:
+            f.write(f"{os.getpid()}\n")
+        return measure(*args, **kwargs)
+
+    monkeypatch.setattr(egomotion_run, "_measure_camera", noting)
+    monkeypatch.setenv("FRAMECHAIN_CAMERA_THREADS", "2")
+    forked = attribute(truth.root, robot, tmp_path / "forked", capsys)
+    in_children = set(pids.read_text().split())
+    assert len(in_children) == 2
+    assert str(os.getpid()) not in in_children
+    monkeypatch.setattr(egomotion_run, "forks", lambda: False)
+    threaded = attribute(truth.root, robot, tmp_path / "threaded", capsys)
+    assert set(pids.read_text().split()) - in_children == {str(os.getpid())}
+
+    def without_times(result: dict[str, Any]) -> list[dict[str, Any]]:
+        return [{k: v for k, v in entry.items() if k != "seconds"} for entry in result["camera_motion"]]
+
+    assert len(forked["camera_motion"]) == 2
+    assert without_times(forked) == without_times(threaded)  # to the last digit written
+    assert forked["findings"] == threaded["findings"]
