@@ -180,8 +180,8 @@ def test_attribute_starts_its_renderers_once_the_log_is_read(log: tuple[Path, Pa
 
 def test_attribute_of_a_lerobot_episode_starts_one_renderer_at_once(tmp_path: Path, so101_urdf: Path,
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
-    """Its read is one thread and its cameras then take both cores: one renderer, started before the read, is
-    enough for its two figures per camera (the variable unset: the command's own choice)."""
+    """Its read is one thread and its cameras then take both cores: one renderer process, started before the read,
+    and the twin it forks draw its two figures per camera (the variable unset: the command's own choice)."""
     from framechain.adapters.lerobot import adapter
     from framechain.sim.lerobot_video import VideoDatasetSpec, generate_video_dataset, write_robot_yaml
     from framechain.sinks import plots
@@ -195,7 +195,7 @@ def test_attribute_of_a_lerobot_episode_starts_one_renderer_at_once(tmp_path: Pa
 
     def noting_start(pool: Any) -> None:
         if not pool.started:
-            events.append(f"{pool._workers} renderer(s)")
+            events.append(f"{pool._workers} renderer(s), twins {pool._twins}")
         start(pool)
 
     def noting_read(*args: Any, **kwargs: Any) -> Any:
@@ -206,8 +206,8 @@ def test_attribute_of_a_lerobot_episode_starts_one_renderer_at_once(tmp_path: Pa
     monkeypatch.setattr(adapter, "open_dataset", noting_read)
     assert main(["attribute", str(truth.root), "--episode", "0", "--robot", str(robot), "--out", str(tmp_path / "out"),
                  "--bootstrap", "0", "-q"]) == 0
-    assert plots.EPISODE_RENDERERS == 1
-    assert events == ["1 renderer(s)", "read"]
+    assert plots.EPISODE_RENDERERS == 2
+    assert events == ["2 renderer(s), twins True", "read"]
     assert list((tmp_path / "out").glob("rotation_rate_*.png"))
 
 

@@ -9,10 +9,11 @@ another axes, and only then lays the figure out tightly and draws it again.
 A figure is made as a :class:`Sketch`: the matplotlib calls made on it, recorded as plain data, so it
 can be drawn in another process. Drawing a report's figures is matplotlib's Python (about 1.0 s on
 the 10-minute benchmark log) after its import (0.5 s). A command that writes a report runs
-:data:`RENDERERS` renderer processes (:data:`EPISODE_RENDERERS` for a LeRobot episode; :func:`renderers`),
-started once its log is read (:func:`start_renderers`): each imports matplotlib at a low priority while
-the command replays and attributes on one core, then draws the sketches it is sent (pickled over a pipe)
-while the command writes its files, and exits at the end of its input without the interpreter's teardown. Without
+:data:`RENDERERS` renderer processes (:func:`renderers`), started once its log is read (:func:`start_renderers`):
+each imports matplotlib at a low priority while the command replays and attributes on one core, then draws the
+sketches it is sent (pickled over a pipe) while the command writes its files, and exits at the end of its input
+without the interpreter's teardown. A LeRobot episode's command starts one at once, which forks a twin once warm
+(:data:`EPISODE_RENDERERS`). Without
 renderers (a library call, most tests) a figure is drawn here when it is made; a renderer that fails
 or dies has its figures drawn here too, so a report never loses one.
 """
@@ -198,11 +199,14 @@ def figure_html(fig: Figure) -> str:
 #: the other drawing while the command waits for the last figures); FRAMECHAIN_RENDERERS sets it, 0
 #: draws in the command's own process.
 RENDERERS = 2
-#: Renderers for a LeRobot episode's report: its figures are two per camera, each drawn in about 0.05 s, while a
-#: renderer takes about 0.45 s of a core to start and load matplotlib, and the cameras' measurement wants both cores
-#: (a generated two-camera episode: 5% less wall time and 11% less CPU with one than with two, over 8 alternations;
-#: the 10-minute benchmark log's 13 figures, drawn while its analysis takes one core, are 4% faster with two).
-EPISODE_RENDERERS = 1
+#: Renderers for a LeRobot episode's report: one process and a twin it forks once matplotlib is loaded
+#: (:func:`renderers`' ``twins``). Its figures are two per camera, each drawn in about 0.05 s, once the cameras are
+#: measured; a renderer takes about 0.45 s of a core to start and load matplotlib, and the cameras' measurement wants
+#: both cores (a generated two-camera episode: 5% less wall time and 11% less CPU with one process than with two, over
+#: 8 alternations), while a twin costs a fork and draws half the figures (the same episode: 1.94 s against 2.04 s with
+#: one renderer, median of 10 alternations; the 10-minute benchmark log's 13 figures, drawn while its analysis takes
+#: one core, are 4% faster with two processes).
+EPISODE_RENDERERS = 2
 RENDERERS_VARIABLE = "FRAMECHAIN_RENDERERS"
 #: How much lower a renderer's priority is than the command's (it only takes the time a core is idle).
 NICE = 10
@@ -213,12 +217,15 @@ class RenderError(RuntimeError):
 
 
 class _Pool:
-    """Renderer processes fed from one queue, one thread per process writing a sketch and reading its PNG."""
+    """Renderer processes fed from one queue, one thread per channel writing a sketch and reading its PNG: a process's
+    stdin and stdout, and with ``twins`` the pipes of the twin it forks (:func:`serve_renderer`)."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, *, twins: bool = False) -> None:
         self._jobs: queue.Queue[tuple[Sketch, Future[bytes]] | None] = queue.Queue()
         self._workers = workers
+        self._twins = twins
         self._processes: list[subprocess.Popen[bytes]] = []
+        self._channels: list[tuple[IO[bytes], IO[bytes]]] = []
         self._threads: list[threading.Thread] = []
 
     @property
@@ -229,11 +236,22 @@ class _Pool:
         """Start the processes (once; a sketch submitted before starts them)."""
         if self._processes:
             return
-        self._processes = [subprocess.Popen([sys.executable, "-c", _RENDERER_MAIN],
-                                            stdin=subprocess.PIPE, stdout=subprocess.PIPE)
-                           for _ in range(self._workers)]
-        self._threads = [threading.Thread(target=self._serve, args=(p,), daemon=True, name="framechain-renderer")
-                         for p in self._processes]
+        processes = 1 if self._twins else self._workers
+        for number in range(processes):
+            twins = [(os.pipe(), os.pipe()) for _ in range(self._workers - 1 if self._twins and number == 0 else 0)]
+            ends = [str(fd) for sketches, replies in twins for fd in (sketches[0], replies[1])]
+            process = subprocess.Popen([sys.executable, "-c", _RENDERER_MAIN, *ends], stdin=subprocess.PIPE,
+                                       stdout=subprocess.PIPE, pass_fds=[int(fd) for fd in ends])
+            assert process.stdin is not None
+            assert process.stdout is not None
+            self._processes.append(process)
+            self._channels.append((process.stdin, process.stdout))
+            for (sketch_read, sketch_write), (reply_read, reply_write) in twins:
+                os.close(sketch_read)  # the renderer's ends, open in it now
+                os.close(reply_write)
+                self._channels.append((os.fdopen(sketch_write, "wb"), os.fdopen(reply_read, "rb")))
+        self._threads = [threading.Thread(target=self._serve, args=channel, daemon=True, name="framechain-renderer")
+                         for channel in self._channels]
         for thread in self._threads:
             thread.start()
 
@@ -243,15 +261,13 @@ class _Pool:
         self._jobs.put((sketch, future))
         return future
 
-    def _serve(self, process: subprocess.Popen[bytes]) -> None:
-        assert process.stdin is not None
-        assert process.stdout is not None
+    def _serve(self, sketches: IO[bytes], replies: IO[bytes]) -> None:
         while (job := self._jobs.get()) is not None:
             sketch, future = job
             try:
-                pickle.dump(sketch, process.stdin, protocol=pickle.HIGHEST_PROTOCOL)
-                process.stdin.flush()
-                drawn, value = pickle.load(process.stdout)
+                pickle.dump(sketch, sketches, protocol=pickle.HIGHEST_PROTOCOL)
+                sketches.flush()
+                drawn, value = pickle.load(replies)
             except (OSError, EOFError, pickle.PickleError) as err:
                 future.set_exception(RenderError(f"the renderer process ended ({type(err).__name__})"))
                 continue
@@ -264,18 +280,18 @@ class _Pool:
         """Stop the renderers: at once (``kill``, the command failed), else once their queue is done."""
         for _ in self._threads:
             self._jobs.put(None)
-        for process in self._processes:
-            if kill:
+        if kill:
+            for process in self._processes:
                 process.kill()
+        for sketches, _replies in self._channels:
             with contextlib.suppress(OSError):
-                assert process.stdin is not None
-                process.stdin.close()  # end of input: a renderer exits
+                sketches.close()  # end of input: a renderer (or twin) exits
         for thread in self._threads:
             thread.join()
         for process in self._processes:
             process.wait()
-            assert process.stdout is not None
-            process.stdout.close()
+        for _sketches, replies in self._channels:
+            replies.close()
 
 
 #: The renderers of the running command (none, or one pool).
@@ -283,16 +299,18 @@ _running: list[_Pool] = []
 
 
 @contextlib.contextmanager
-def renderers(workers: int | None = None, *, start_now: bool = True, usual: int = RENDERERS) -> Iterator[None]:
-    """Within this block, figures are drawn by ``workers`` renderer processes (None: the FRAMECHAIN_RENDERERS
-    variable, else ``usual``), started now or, with ``start_now`` False, by :func:`start_renderers` (or the first
-    figure, whichever comes first)."""
+def renderers(workers: int | None = None, *, start_now: bool = True, usual: int = RENDERERS, twins: bool = False
+              ) -> Iterator[None]:
+    """Within this block, figures are drawn by ``workers`` renderers (None: the FRAMECHAIN_RENDERERS variable, else
+    ``usual``), started now or, with ``start_now`` False, by :func:`start_renderers` (or the first figure, whichever
+    comes first): as many processes, or with ``twins`` one process and the twins it forks once it has loaded
+    matplotlib (no second load; a twin is ready only after it)."""
     if workers is None:
         workers = _renderers_wanted(usual)
     if _running or workers < 1:
         yield
         return
-    pool = _Pool(workers)
+    pool = _Pool(workers, twins=twins)
     if start_now:
         pool.start()
     _running.append(pool)
@@ -340,10 +358,14 @@ def submit(sketch: Sketch) -> bytes | Callable[[], bytes]:
     return result
 
 
+def _warm_up() -> None:
+    """matplotlib and its fonts loaded, before the first sketch comes."""
+    with contextlib.suppress(Exception):
+        render_png(Sketch(6.4, 3.6, 1, "none", 20, [(0, "set_xlabel", ("loads the fonts",), {})]))
+
+
 def _serve_stdio(source: IO[bytes], sink: IO[bytes]) -> None:
     """A renderer: sketches in from ``source``, (drawn, PNG or the error) out to ``sink``, until end of input."""
-    with contextlib.suppress(Exception):  # matplotlib and its fonts loaded before the first sketch comes
-        render_png(Sketch(6.4, 3.6, 1, "none", 20, [(0, "set_xlabel", ("loads the fonts",), {})]))
     while True:
         try:
             sketch: Any = pickle.load(source)
@@ -365,7 +387,8 @@ _RENDERER_MAIN = ("try:\n    from framechain.sinks.plots import serve_renderer\n
 
 
 def serve_renderer() -> None:
-    """A renderer process (:func:`renderers` starts them): low priority, sketches in on stdin, PNGs out."""
+    """A renderer process (:func:`renderers` starts them): low priority, sketches in on stdin, PNGs out; its arguments,
+    pairs of file descriptors (sketches in, PNGs out), are the channels of the twins it forks once warm."""
     import signal
 
     if hasattr(os, "nice"):
@@ -376,7 +399,27 @@ def serve_renderer() -> None:
     # library's warning) cannot corrupt the replies.
     replies = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
-    _serve_stdio(sys.stdin.buffer, replies)
+    _warm_up()
+    ends = [int(fd) for fd in sys.argv[1:]]
+    twins = list(zip(ends[::2], ends[1::2], strict=True))
+    source, sink = sys.stdin.buffer, replies
+    for number, (sketch_fd, reply_fd) in enumerate(twins):
+        try:
+            child = os.fork()
+        except OSError:  # no twin: the command draws what it sends this channel
+            child = -1
+        if child == 0:  # the twin: its own channel only
+            source.close()
+            sink.close()
+            for other in twins[number + 1:]:
+                for fd in other:
+                    os.close(fd)
+            source, sink = os.fdopen(sketch_fd, "rb"), os.fdopen(reply_fd, "wb")
+            break
+        os.close(sketch_fd)
+        os.close(reply_fd)
+    with contextlib.suppress(OSError):  # the command gone (it failed and stopped reading): end quietly
+        _serve_stdio(source, sink)
     # Every reply is flushed as it is made: nothing is left to save. The interpreter's teardown (matplotlib's
     # modules and font caches, about 0.25 s) would only make the command, which waits for its renderers to
     # end, wait longer.

@@ -143,6 +143,53 @@ def test_renderer_processes_draw_the_same_pngs_as_this_process(monkeypatch: pyte
         assert [f.png for f in figures] == here
 
 
+def test_a_renderer_and_its_twin_draw_the_figures_between_them(monkeypatch: pytest.MonkeyPatch) -> None:
+    here = [figure_png(fig, f"f{i}", "").png for i, fig in enumerate(_sketches() * 3)]
+    monkeypatch.setattr(plots, "render_png", lambda sketch: pytest.fail("drawn in the test's process"))
+    sent: list[int] = []
+    serve = plots._Pool._serve
+
+    class Counted:  # a channel's sketch stream, counting the sketches sent on it
+        def __init__(self, stream: Any) -> None:
+            self.stream = stream
+            sent.append(0)
+            self.number = len(sent) - 1
+
+        def write(self, data: bytes) -> int:
+            return int(self.stream.write(data))
+
+        def flush(self) -> None:
+            sent[self.number] += 1
+            self.stream.flush()
+
+    monkeypatch.setattr(plots._Pool, "_serve", lambda pool, sketches, replies: serve(pool, Counted(sketches), replies))
+    with plots.renderers(2, twins=True):
+        pool = plots._running[0]
+        assert len(pool._processes) == 1  # one process started; its twin is forked from it
+        figures = [figure_png(fig, f"f{i}", "") for i, fig in enumerate(_sketches() * 3)]
+        assert [f.png for f in figures] == here
+    assert len(sent) == 2
+    assert min(sent) >= 1  # both channels drew
+    assert sum(sent) == len(here)
+    assert pool._processes[0].returncode == 0
+
+
+def test_a_twin_that_died_leaves_its_figures_to_this_process() -> None:
+    import os
+    import signal
+
+    fig = _sketches()[0]
+    here = figure_png(fig, "f", "").png
+    with plots.renderers(2, twins=True):
+        pool = plots._running[0]
+        assert figure_png(fig, "f", "").png == here  # the renderer is warm: its twin is forked
+        twin = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(pool._processes[0].pid)], capture_output=True,
+                                                   text=True, check=False).stdout.split()]
+        assert len(twin) == 1
+        os.kill(twin[0], signal.SIGKILL)
+        assert all(figure_png(fig, f"f{i}", "").png == here for i in range(4))
+
+
 def test_a_renderer_ends_at_the_end_of_its_input_without_the_interpreter_s_teardown() -> None:
     # An exit handler registered before the renderer serves stands for the teardown the command would wait for.
     program = ("import atexit, sys\n"
