@@ -1,3 +1,3 @@
-from framechain.cli.main import main
+from framechain.cli.main import entry
 
-raise SystemExit(main())
+entry()

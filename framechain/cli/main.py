@@ -7,7 +7,8 @@ Each command lives in its own module of this package with ``register(subparsers)
 from __future__ import annotations
 
 import argparse
-import gc
+import atexit
+import contextlib
 import importlib
 import os
 import sys
@@ -118,12 +119,19 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def entry() -> NoReturn:
-    """The ``framechain`` console script: :func:`main`, then the process's end. Its objects are set aside
-    from the collector first (``gc.freeze``): the interpreter's last full collection on the way out would
-    otherwise walk every one of them to free nothing the exit does not (0.12 s of a 10-minute log's run)."""
+    """The ``framechain`` console script: :func:`main`, then the process's end without the interpreter's teardown.
+
+    When :func:`main` returns, the command's outputs are written and closed and its workers joined; what libraries
+    keep for the process's end still runs (``atexit``: multiprocessing's, temporary folders' finalizers), the output
+    streams are flushed, and the process exits. The teardown it skips frees every module's objects one by one: 0.13
+    s of a LeRobot episode's 2 s (a generated two-camera 224x224 episode), and on a 10-minute log it would end in a
+    full collection that walks every object to free nothing the exit does not (0.12 s)."""
     code = main()
-    gc.freeze()
-    raise SystemExit(code)
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):  # a reader gone (`| head`), or a stream closed
+            stream.flush()
+    os._exit(code)
 
 
 if __name__ == "__main__":
