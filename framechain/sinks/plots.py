@@ -203,8 +203,8 @@ RENDERERS = 2
 #: (:func:`renderers`' ``twins``). Its figures are two per camera, each drawn in about 0.05 s, once the cameras are
 #: measured; a renderer takes about 0.45 s of a core to start and load matplotlib, and the cameras' measurement wants
 #: both cores (a generated two-camera episode: 5% less wall time and 11% less CPU with one process than with two, over
-#: 8 alternations), while a twin costs a fork and draws half the figures (the same episode: 1.94 s against 2.04 s with
-#: one renderer, median of 10 alternations; the 10-minute benchmark log's 13 figures, drawn while its analysis takes
+#: 8 alternations), while a twin costs a fork and draws half the figures (the same episode: 1.87 s against 1.96 s with
+#: one renderer, median of 12 alternations; the 10-minute benchmark log's 13 figures, drawn while its analysis takes
 #: one core, are 4% faster with two processes).
 EPISODE_RENDERERS = 2
 RENDERERS_VARIABLE = "FRAMECHAIN_RENDERERS"
