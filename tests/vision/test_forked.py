@@ -131,3 +131,12 @@ def test_a_child_s_warnings_are_shown_here() -> None:
         warnings.simplefilter("always")
         assert map_forked(warn, [3, 4], 2) == [3, 4]
     assert sorted(str(w.message) for w in caught) == ["item 3 looks odd", "item 4 looks odd"]
+
+
+def test_an_item_no_child_could_be_forked_for_is_done_here(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_fork() -> int:
+        raise BlockingIOError(11, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", no_fork)
+    here = os.getpid()
+    assert map_forked(lambda x: (os.getpid(), x), [1, 2, 3], 2) == [(here, 1), (here, 2), (here, 3)]
