@@ -57,6 +57,7 @@ __all__ = [
     "FramePairCounts",
     "frame_pair_bearings",
     "frame_pair_counts",
+    "lucas_kanade_window",
     "measure_egomotion",
     "track_features",
 ]
@@ -73,9 +74,12 @@ class EgoMotionOptions:
     max_features: int = 150
     min_distance_px: float = 6.0
     quality: float = 0.005
-    #: Lucas-Kanade window and pyramid levels.
+    #: Lucas-Kanade window and pyramid levels; on frames at most ``small_frame_px`` on their short side the window is
+    #: ``small_window_px`` (:func:`lucas_kanade_window`).
     window_px: int = 15
     pyramid_levels: int = 3
+    small_window_px: int = 11
+    small_frame_px: int = 360
     #: Forward-backward Lucas-Kanade disagreement above which a track is dropped.
     max_track_error_px: float = 0.5
     #: Rotation-only RANSAC inlier threshold (loose: near points move with the translation too).
@@ -409,6 +413,16 @@ def _fixed_region(images: list[GreyImage], opts: EgoMotionOptions) -> BoolArray:
     return np.asarray(widened, dtype=bool)
 
 
+def lucas_kanade_window(shape: tuple[int, ...], opts: EgoMotionOptions) -> int:
+    """``small_window_px`` on frames at most ``small_frame_px`` on their short side, else ``window_px``: a window spans
+    a patch of the view (15 px of a 224-px frame is 43 of a 640-px one of the same lens, over which near points
+    move apart). Generated 224x224 cameras, 11 px against 15: offsets closer to the truth (18 cameras: median error
+    0.95 ms against 1.20, worst 3.3 against 4.4; 8 SO-101 episodes without a robot.yaml: 0.7 against 0.9, worst 1.5
+    against 2.5), mounts as close or closer, tracked in half the time (an episode attributed 12% faster)."""
+    short = min(shape[:2]) if len(shape) >= 2 else 0
+    return opts.small_window_px if 0 < short <= opts.small_frame_px else opts.window_px
+
+
 class _Tracker:
     """The tracks alive, where each was born, and how far the scene has moved since."""
 
@@ -417,7 +431,8 @@ class _Tracker:
         self.opts = opts
         self.shape = shape
         self.fixed_mask = np.full(shape[:2], 255, dtype=np.uint8)
-        self.lk = {"winSize": (opts.window_px, opts.window_px), "maxLevel": opts.pyramid_levels,
+        window = lucas_kanade_window(shape, opts)
+        self.lk = {"winSize": (window, window), "maxLevel": opts.pyramid_levels,
                    "criteria": (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01)}
         self.ids = np.zeros(0, dtype=np.int64)
         self.pts = np.zeros((0, 2), dtype=np.float32)
