@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import weakref
@@ -134,6 +135,16 @@ class _KeptOpenFetcher:
         self._log: McapLog | RosbagsLog | None = None
         self._finalizer: weakref.finalize[Any, Any] | None = None
         self._lock = threading.Lock()
+        _FETCHERS.add(self)
+
+    def forget_reader(self) -> None:
+        """In a process forked from the one that opened the reader: open one of its own when next asked. The
+        inherited reader shares its file position with the parent's and the other children's (a camera measured in
+        each, :func:`framechain.vision.threads.map_forked`), and its lock may have been held by a thread the fork
+        did not copy; it is left to the parent to close."""
+        if self._finalizer is not None:
+            self._finalizer.detach()
+        self._log, self._finalizer, self._lock = None, None, threading.Lock()
 
     def __call__(self, topic: str, log_time_ns: int, ordinal: int) -> Any:
         with self._lock:  # one reader, one file position: cameras measured in threads fetch in turn
@@ -141,6 +152,19 @@ class _KeptOpenFetcher:
                 self._log = _reader(self._fmt, self._target, self._summary)
                 self._finalizer = weakref.finalize(self, self._log.close)
             return self._log.fetch(topic, log_time_ns, ordinal)
+
+
+#: Every fetcher alive, so that a forked child opens its own readers (:meth:`_KeptOpenFetcher.forget_reader`).
+_FETCHERS: weakref.WeakSet[_KeptOpenFetcher] = weakref.WeakSet()
+
+
+def _forget_readers_in_child() -> None:
+    for fetcher in list(_FETCHERS):
+        fetcher.forget_reader()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_readers_in_child)
 
 
 def _fetcher(fmt: str, target: Path, summary: Any = None) -> Callable[[str, int, int], Any]:

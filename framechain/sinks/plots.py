@@ -268,7 +268,7 @@ class _Pool:
                 pickle.dump(sketch, sketches, protocol=pickle.HIGHEST_PROTOCOL)
                 sketches.flush()
                 drawn, value = pickle.load(replies)
-            except (OSError, EOFError, pickle.PickleError) as err:
+            except (OSError, ValueError, EOFError, pickle.PickleError) as err:  # ValueError: closed by close(kill)
                 future.set_exception(RenderError(f"the renderer process ended ({type(err).__name__})"))
                 continue
             if drawn:
@@ -411,6 +411,9 @@ def serve_renderer() -> None:
         if child == 0:  # the twin: its own channel only
             source.close()
             sink.close()
+            # stdin is the renderer's channel: held open here, the command's writes to a renderer that died would
+            # fill the pipe and wait, not fail.
+            os.dup2(os.open(os.devnull, os.O_RDONLY), 0)
             for other in twins[number + 1:]:
                 for fd in other:
                     os.close(fd)

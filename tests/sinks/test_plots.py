@@ -4,6 +4,7 @@ report's own figures fit the fixed margins (the draw that tight_layout costs is 
 from __future__ import annotations
 
 import io
+import os
 import pickle
 import subprocess
 import sys
@@ -172,6 +173,24 @@ def test_a_renderer_and_its_twin_draw_the_figures_between_them(monkeypatch: pyte
     assert min(sent) >= 1  # both channels drew
     assert sum(sent) == len(here)
     assert pool._processes[0].returncode == 0
+
+
+def test_a_twin_does_not_hold_its_renderer_s_input_open() -> None:
+    """Were the twin to keep the renderer's stdin, the command's writes to a renderer that died would fill the pipe
+    and wait instead of failing: its figures are drawn here, and the block ends."""
+    fig = _sketches()[0]
+    here = figure_png(fig, "f", "").png
+    with plots.renderers(2, twins=True):
+        pool = plots._running[0]
+        assert figure_png(fig, "f", "").png == here  # warm: the twin is forked
+        renderer = pool._processes[0]
+        twin = subprocess.run(["pgrep", "-P", str(renderer.pid)], capture_output=True, text=True, check=False)
+        (pid,) = twin.stdout.split()
+        stdin = os.readlink(f"/proc/{renderer.pid}/fd/0")
+        assert os.readlink(f"/proc/{pid}/fd/0") != stdin
+        renderer.kill()
+        renderer.wait()
+        assert all(figure_png(big, f"f{i}", "").png for i, big in enumerate([fig] * 40))
 
 
 def test_a_twin_that_died_leaves_its_figures_to_this_process() -> None:

@@ -139,4 +139,27 @@ def test_an_item_no_child_could_be_forked_for_is_done_here(monkeypatch: pytest.M
 
     monkeypatch.setattr(os, "fork", no_fork)
     here = os.getpid()
+    before = len(os.listdir("/proc/self/fd"))
     assert map_forked(lambda x: (os.getpid(), x), [1, 2, 3], 2) == [(here, 1), (here, 2), (here, 3)]
+    assert len(os.listdir("/proc/self/fd")) == before  # no pipe left open
+
+
+def test_a_bug_in_a_child_says_where_it_happened_there() -> None:
+    def broken(x: int) -> int:
+        return [x][x]  # IndexError for 1
+
+    with pytest.raises(IndexError) as raised:
+        map_forked(broken, [0, 1], 2)
+    (note,) = raised.value.__notes__
+    assert "in broken" in note
+    assert "return [x][x]" in note
+    assert note.endswith("IndexError: list index out of range")
+
+
+def test_a_user_s_mistake_in_a_child_stays_one_line() -> None:
+    def fail(x: int) -> int:
+        raise AdapterError("/logs/run.mcap", "cannot decode its images")
+
+    with pytest.raises(AdapterError) as raised:
+        map_forked(fail, [0, 1], 2)
+    assert not getattr(raised.value, "__notes__", None)

@@ -152,3 +152,43 @@ def test_write_refuses_to_overwrite_and_unknown_container(scene: Timeline, tmp_p
         write_log(scene, tmp_path / "x.mcap", container="mcap-ros2", chain=CHAIN)
     with pytest.raises(AdapterError, match="unknown container"):
         write_log(scene, tmp_path / "y", container="hdf5", chain=CHAIN)
+
+
+@pytest.mark.parametrize("container", ["mcap-ros2", "rosbag1", "rosbag2-sqlite"])
+def test_processes_forked_after_a_frame_was_read_read_their_own(written: dict[str, Path], container: str,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The reader kept open for lazy frames shares its file position with any process forked after it opened (a
+    camera measured in each): every child opens its own, and fetches exactly what the parent fetched."""
+    import os
+
+    from framechain.adapters import api
+    from framechain.vision.threads import forks, map_forked
+
+    if not forks():
+        pytest.skip("map_forked forks on Linux only")
+    fetched: list[tuple[api._KeptOpenFetcher, tuple[str, int, int], object]] = []
+    fetch = api._KeptOpenFetcher.__call__
+
+    def noting(self: api._KeptOpenFetcher, *args: object) -> object:
+        got = fetch(self, *args)  # type: ignore[arg-type]
+        fetched.append((self, args, got))  # type: ignore[arg-type]
+        return got
+
+    monkeypatch.setattr(api._KeptOpenFetcher, "__call__", noting)
+    depth = open_log(written[container], CHAIN).timeline.depth_frames
+    for i in range(len(depth)):
+        depth.load(i)
+    calls = list(fetched)
+    assert calls
+    assert all(fetcher._log is not None for fetcher, _args, _got in calls)  # the parent's readers are open
+
+    def fetch_all(order: int) -> tuple[bool, list[str]]:
+        fresh = all(fetcher._log is None for fetcher, _args, _got in calls)  # none inherited
+        for _round in range(50):
+            for fetcher, args, expected in (calls if order % 2 else calls[::-1]):
+                assert repr(fetch(fetcher, *args)) == repr(expected), f"process {os.getpid()} read other bytes"
+        return fresh, [repr(fetch(fetcher, *args)) for fetcher, args, _got in calls]
+
+    for fresh, got in map_forked(fetch_all, [0, 1, 2, 3], 4):
+        assert fresh
+        assert got == [repr(expected) for _fetcher, _args, expected in calls]
