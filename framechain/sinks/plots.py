@@ -413,7 +413,9 @@ def serve_renderer() -> None:
             sink.close()
             # stdin is the renderer's channel: held open here, the command's writes to a renderer that died would
             # fill the pipe and wait, not fail.
-            os.dup2(os.open(os.devnull, os.O_RDONLY), 0)
+            null = os.open(os.devnull, os.O_RDONLY)
+            os.dup2(null, 0)
+            os.close(null)
             for other in twins[number + 1:]:
                 for fd in other:
                     os.close(fd)

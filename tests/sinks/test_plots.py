@@ -175,6 +175,20 @@ def test_a_renderer_and_its_twin_draw_the_figures_between_them(monkeypatch: pyte
     assert pool._processes[0].returncode == 0
 
 
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is ``pid`` (read from /proc: no procps needed)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:  # ended meanwhile
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry.name))
+    return out
+
+
 def test_a_twin_does_not_hold_its_renderer_s_input_open() -> None:
     """Were the twin to keep the renderer's stdin, the command's writes to a renderer that died would fill the pipe
     and wait instead of failing: its figures are drawn here, and the block ends."""
@@ -184,8 +198,7 @@ def test_a_twin_does_not_hold_its_renderer_s_input_open() -> None:
         pool = plots._running[0]
         assert figure_png(fig, "f", "").png == here  # warm: the twin is forked
         renderer = pool._processes[0]
-        twin = subprocess.run(["pgrep", "-P", str(renderer.pid)], capture_output=True, text=True, check=False)
-        (pid,) = twin.stdout.split()
+        (pid,) = _children(renderer.pid)
         stdin = os.readlink(f"/proc/{renderer.pid}/fd/0")
         assert os.readlink(f"/proc/{pid}/fd/0") != stdin
         renderer.kill()
@@ -194,7 +207,6 @@ def test_a_twin_does_not_hold_its_renderer_s_input_open() -> None:
 
 
 def test_a_twin_that_died_leaves_its_figures_to_this_process() -> None:
-    import os
     import signal
 
     fig = _sketches()[0]
@@ -202,8 +214,7 @@ def test_a_twin_that_died_leaves_its_figures_to_this_process() -> None:
     with plots.renderers(2, twins=True):
         pool = plots._running[0]
         assert figure_png(fig, "f", "").png == here  # the renderer is warm: its twin is forked
-        twin = [int(pid) for pid in subprocess.run(["pgrep", "-P", str(pool._processes[0].pid)], capture_output=True,
-                                                   text=True, check=False).stdout.split()]
+        twin = _children(pool._processes[0].pid)
         assert len(twin) == 1
         os.kill(twin[0], signal.SIGKILL)
         assert all(figure_png(fig, f"f{i}", "").png == here for i in range(4))
